@@ -1,0 +1,25 @@
+# The two set-up commands: `make demo` (main job) and `make test` (whole test suite).
+# Both create .venv and install everything. PyTorch is pinned first so that a machine with a local CPU wheel
+# (or a GPU machine, which gets the regular build) satisfies the package's `torch` requirement without pulling
+# a second build.
+PYTHON ?= python3
+VENV ?= .venv
+TORCH_SPEC ?= torch==2.13.0
+BIN = $(VENV)/bin
+
+.PHONY: demo test install
+
+install: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml Makefile
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
+	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	touch $@
+
+demo: install
+	$(BIN)/foil demo
+
+test: install
+	$(BIN)/python -m pytest -q

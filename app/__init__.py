@@ -1,0 +1,1 @@
+"""The survey server: reads a study bundle and never imports `search` or `torch`."""
