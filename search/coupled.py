@@ -1,0 +1,193 @@
+"""The coupled simulator: N >= 2 robot policies in the same scenario, driven by one shared environment action.
+
+With the robot invisible to humans (the default) every agent's robot lives in the same world and the crowd is
+computed once per step, so every agent sees identical humans. With a visible robot each agent gets its own copy
+of the world (worlds ``k * B + b`` belong to agent ``k``) and the same environment action drives every copy.
+
+The simulator runs ``B`` independent coupled scenarios at once, so a search can roll out many branches in one
+batched call. ``snapshot()`` / ``restore()`` copy plain arrays (world state and every policy's recurrent state),
+so a search branches from any node without replaying from reset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from search import world
+from search.policies import Observation, Policy, PolicyState, observe
+from search.scenarios import Scenario
+from search.world import WorldConfig, WorldState
+
+
+@dataclass
+class Snapshot:
+    """A frozen copy of B coupled scenarios: world state plus each policy's recurrent state."""
+
+    state: WorldState
+    policy_states: list[PolicyState]
+    batch: int
+
+
+@dataclass
+class CoupledStep:
+    """What one coupled step exposes to rewards and recorders; agent axis second: (B, N, ...)."""
+
+    robot_actions: np.ndarray  # (B, N, 2) the actions the policies chose (zero once finished)
+    robot_pos: np.ndarray  # (B, N, 2) after the move
+    robot_vel: np.ndarray  # (B, N, 2)
+    human_pos: np.ndarray  # (B, n, 2) the crowd after the move (agent 0's world when robots are visible)
+    rewards: np.ndarray  # (B, N) each robot's navigation reward
+    done: np.ndarray  # (B, N) bool
+    newly_done: np.ndarray  # (B, N) bool: finished on this step
+    outcome: np.ndarray  # (B, N) int8, see world.OUTCOME_NAMES
+    time: np.ndarray  # (B,)
+
+
+class CoupledSimulator:
+    def __init__(self, policies: list[Policy], scenario: Scenario, config: WorldConfig | None = None,
+                 batch: int = 1):
+        if len(policies) < 2:
+            raise ValueError("a coupled simulator compares at least two policies")
+        if batch < 1:
+            raise ValueError("batch must be at least 1")
+        self.policies = list(policies)
+        self.scenario = scenario
+        self.config = scenario.config(config)
+        self.batch = batch
+        self.reset()
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.policies)
+
+    @property
+    def shared_crowd(self) -> bool:
+        return not self.config.robot_visible
+
+    def reset(self, batch: int | None = None) -> None:
+        """Every one of the B coupled scenarios back to the scenario's initial state."""
+        self.batch = batch or self.batch
+        if self.shared_crowd:
+            self.state = self.scenario.initial_state(self.config, self.batch, self.n_agents)
+        else:
+            self.state = self.scenario.initial_state(self.config, self.batch * self.n_agents, 1)
+        self.policy_states = [p.initial_state(self.batch) for p in self.policies]
+
+    def _where(self, agent: int) -> tuple[slice, int]:
+        """(worlds, robot index) of one agent's robot."""
+        if self.shared_crowd:
+            return slice(None), agent
+        return slice(agent * self.batch, (agent + 1) * self.batch), 0
+
+    def _gather(self, array: np.ndarray) -> np.ndarray:
+        """A per-robot world array (W, R, ...) as (B, N, ...)."""
+        if self.shared_crowd:
+            return array
+        return np.stack([array[self._where(k)] for k in range(self.n_agents)], axis=1)
+
+    def observations(self, env_action: np.ndarray | None = None) -> list[Observation]:
+        noise = env_action if self.config.env_action_mode == "observation" else None
+        result = []
+        for k in range(self.n_agents):
+            worlds, robot = self._where(k)
+            result.append(observe(self.state, self.config, robot, worlds, noise))
+        return result
+
+    def step(self, env_action) -> CoupledStep:
+        """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""
+        env_action = world.check_env_action(env_action, self.batch, self.config)
+        observations = self.observations(env_action)
+        actions = np.zeros((self.batch, self.n_agents, 2))
+        for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
+            action, self.policy_states[k] = policy.act(observation, self.policy_states[k])
+            actions[:, k] = np.where(observation.done[:, None], 0.0, action)
+        was_done = self._gather(self.state.done).copy()
+        if self.shared_crowd:
+            world_action, robot_action = env_action, actions
+        else:
+            world_action = np.tile(env_action, (self.n_agents, 1, 1))
+            robot_action = actions.transpose(1, 0, 2).reshape(-1, 1, 2)
+        crowd_action = None if self.config.env_action_mode == "observation" else world_action
+        reward = world.step(self.state, self.config, robot_action, crowd_action)
+        done = self._gather(self.state.done)
+        return CoupledStep(
+            robot_actions=actions,
+            robot_pos=self._gather(self.state.robot_pos).copy(),
+            robot_vel=self._gather(self.state.robot_vel).copy(),
+            human_pos=self.state.human_pos[: self.batch].copy(),
+            rewards=self._gather(reward),
+            done=done.copy(),
+            newly_done=done & ~was_done,
+            outcome=self._gather(self.state.outcome).copy(),
+            time=self.state.time[: self.batch].copy(),
+        )
+
+    @property
+    def all_done(self) -> np.ndarray:
+        """(B,) every agent has finished."""
+        return self._gather(self.state.done).all(axis=1)
+
+    def snapshot(self, index=None) -> Snapshot:
+        """A copy of the coupled scenarios ``index`` (all by default; indices may repeat to branch one node
+        into several)."""
+        index = np.arange(self.batch) if index is None else np.asarray(index, dtype=np.int64).reshape(-1)
+        if self.shared_crowd:
+            worlds = index
+        else:
+            worlds = np.concatenate([k * self.batch + index for k in range(self.n_agents)])
+        policy_states = [{key: value[index].copy() for key, value in s.items()} for s in self.policy_states]
+        return Snapshot(self.state.take(worlds), policy_states, len(index))
+
+    def restore(self, snapshot: Snapshot) -> None:
+        """Continue from a snapshot; the batch becomes the snapshot's."""
+        self.batch = snapshot.batch
+        self.state = snapshot.state.copy()
+        self.policy_states = [{key: value.copy() for key, value in s.items()} for s in snapshot.policy_states]
+
+
+@dataclass
+class Trajectory:
+    """One coupled scenario, step by step: what a summary records and a replay must reproduce."""
+
+    env_actions: np.ndarray  # (T, n, 2)
+    robot_actions: np.ndarray  # (T, N, 2)
+    robot_pos: np.ndarray  # (T, N, 2)
+    human_pos: np.ndarray  # (T, n, 2)
+    rewards: np.ndarray  # (T, N)
+    outcome: np.ndarray  # (N,) int8
+    event_time: np.ndarray  # (N,)
+    path_length: np.ndarray  # (N,)
+    min_clearance: np.ndarray  # (N,)
+    time: np.ndarray  # (T,)
+
+
+def replay(policies: list[Policy], scenario: Scenario, env_actions, config: WorldConfig | None = None,
+           stop_when_done: bool = True) -> Trajectory:
+    """Run one coupled scenario from its initial state under a sequence of environment actions."""
+    sim = CoupledSimulator(policies, scenario, config, batch=1)
+    env_actions = np.asarray(env_actions, dtype=np.float64)
+    n = sim.config.human_num
+    if env_actions.ndim < 1 or env_actions.size % max(2 * n, 1):
+        raise ValueError(f"environment actions must be a sequence of {2 * n} numbers per step")
+    env_actions = env_actions.reshape(-1, n, 2)
+    steps = []
+    for action in env_actions:
+        steps.append(sim.step(action[None]))
+        if stop_when_done and sim.all_done[0]:
+            break
+    used = env_actions[: len(steps)]
+    state = sim.state
+    return Trajectory(
+        env_actions=used,
+        robot_actions=np.stack([s.robot_actions[0] for s in steps]),
+        robot_pos=np.stack([s.robot_pos[0] for s in steps]),
+        human_pos=np.stack([s.human_pos[0] for s in steps]),
+        rewards=np.stack([s.rewards[0] for s in steps]),
+        outcome=sim._gather(state.outcome)[0].copy(),
+        event_time=sim._gather(state.event_time)[0].copy(),
+        path_length=sim._gather(state.path_length)[0].copy(),
+        min_clearance=sim._gather(state.min_clearance)[0].copy(),
+        time=np.array([s.time[0] for s in steps]),
+    )

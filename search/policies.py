@@ -1,0 +1,157 @@
+"""The policy interface shared by the coupled simulator, evaluation and search, and the scripted policies.
+
+A policy maps a batch of observations to a batch of actions. Its recurrent state is a dict of arrays with the
+batch axis first, returned rather than kept, so the simulator can snapshot and restore it as plain copies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from search.orca import orca_velocities
+from search.social_force import social_force_velocities
+from search.world import WorldConfig, WorldState
+
+PolicyState = dict[str, np.ndarray]
+
+
+@dataclass
+class Observation:
+    """What one robot per world perceives, batch axis first (DS-RNN's observation plus what scripts need)."""
+
+    robot_node: np.ndarray  # (B, 7): px, py, radius, gx, gy, v_pref, theta
+    temporal_edges: np.ndarray  # (B, 2): robot velocity
+    spatial_edges: np.ndarray  # (B, n, 2): human position minus robot position
+    human_velocities: np.ndarray  # (B, n, 2)
+    human_radii: np.ndarray  # (B, n)
+    human_mask: np.ndarray  # (B, n) bool: the human exists (crowds smaller than a policy's maximum are padded)
+    done: np.ndarray  # (B,) bool: this robot has finished (its action is ignored)
+
+    @property
+    def batch(self) -> int:
+        return self.robot_node.shape[0]
+
+
+def observe(state: WorldState, config: WorldConfig, robot: int, worlds=slice(None),
+            position_noise: np.ndarray | None = None) -> Observation:
+    """Robot ``robot``'s observation in the selected worlds; ``position_noise`` (B, n, 2) shifts the humans
+    it sees (the observation mode of the environment action)."""
+    pos = state.robot_pos[worlds, robot]
+    humans = state.human_pos[worlds]
+    if position_noise is not None:
+        humans = humans + position_noise
+    b = pos.shape[0]
+    robot_node = np.concatenate([
+        pos, np.full((b, 1), config.robot_radius), state.robot_goal[worlds, robot],
+        np.full((b, 1), config.robot_v_pref), state.robot_theta[worlds, robot][:, None]], axis=1)
+    return Observation(
+        robot_node=robot_node,
+        temporal_edges=state.robot_vel[worlds, robot].copy(),
+        spatial_edges=humans - pos[:, None, :],
+        human_velocities=state.human_vel[worlds].copy(),
+        human_radii=state.human_radius[worlds].copy(),
+        human_mask=np.ones(humans.shape[:2], dtype=bool),
+        done=state.done[worlds, robot].copy(),
+    )
+
+
+class Policy(Protocol):
+    """Batched observations in, batched actions (B, 2) out; recurrent state passed explicitly."""
+
+    name: str
+
+    def initial_state(self, batch: int) -> PolicyState: ...
+
+    def act(self, observation: Observation, state: PolicyState) -> tuple[np.ndarray, PolicyState]: ...
+
+
+def _toward_goal(observation: Observation, v_pref: np.ndarray) -> np.ndarray:
+    """Velocity straight at the goal at v_pref, slowing so the last step lands on it."""
+    to_goal = observation.robot_node[:, 3:5] - observation.robot_node[:, 0:2]
+    dist = np.linalg.norm(to_goal, axis=1, keepdims=True)
+    return np.where(dist > v_pref, to_goal * (v_pref / np.maximum(dist, 1e-300)), to_goal)
+
+
+class _Stateless:
+    def initial_state(self, batch: int) -> PolicyState:
+        return {}
+
+
+class GoalPolicy(_Stateless):
+    """Straight to the goal at full speed, ignoring the crowd."""
+
+    name = "goal"
+
+    def act(self, observation, state):
+        return _toward_goal(observation, observation.robot_node[:, 5:6]), state
+
+
+class OrcaRobotPolicy(_Stateless):
+    """A robot that steers by ORCA through the humans it observes (as CrowdNav's ORCA robot baseline)."""
+
+    name = "orca"
+
+    def __init__(self, time_horizon: float = 5.0, safety_space: float = 0.15, dt: float = 0.25):
+        self.time_horizon, self.safety_space, self.dt = time_horizon, safety_space, dt
+
+    def act(self, observation, state):
+        b, n = observation.human_mask.shape
+        robot_pos = observation.robot_node[:, 0:2]
+        v_pref = observation.robot_node[:, 5]
+        pad = 0.01 + self.safety_space
+        humans = robot_pos[:, None, :] + observation.spatial_edges
+        far = np.where(observation.human_mask[..., None], humans, 1e6)  # padded humans out of range
+        pos = np.concatenate([robot_pos[:, None, :], far], axis=1)
+        vel = np.concatenate([observation.temporal_edges[:, None, :], observation.human_velocities], axis=1)
+        pref = np.concatenate([_toward_goal(observation, v_pref[:, None])[:, None, :], np.zeros((b, n, 2))],
+                              axis=1)
+        radii = np.concatenate([observation.robot_node[:, 2:3], observation.human_radii], axis=1) + pad
+        speeds = np.concatenate([v_pref[:, None], np.ones((b, n))], axis=1)
+        action = orca_velocities(pos, vel, pref, radii, speeds, max_neighbors=n, time_horizon=self.time_horizon,
+                                 dt=self.dt, n_ego=1)
+        return action[:, 0], state
+
+
+class SocialForceRobotPolicy(_Stateless):
+    """A robot pushed towards its goal and away from humans by social forces (CrowdNav's parameters)."""
+
+    name = "social_force"
+
+    def __init__(self, A: float = 2.0, B: float = 1.0, KI: float = 1.0, dt: float = 0.25):
+        self.A, self.B, self.KI, self.dt = A, B, KI, dt
+
+    def act(self, observation, state):
+        robot_pos = observation.robot_node[:, None, 0:2]
+        humans = robot_pos + observation.spatial_edges
+        far = np.where(observation.human_mask[..., None], humans, 1e6)
+        velocity = social_force_velocities(
+            robot_pos, observation.temporal_edges[:, None, :], observation.robot_node[:, None, 3:5],
+            observation.robot_node[:, None, 2], observation.robot_node[:, None, 5], A=self.A, B=self.B,
+            KI=self.KI, dt=self.dt, others_pos=far, others_radius=observation.human_radii)
+        return velocity[:, 0], state
+
+
+SCRIPTED = {"goal": GoalPolicy, "orca": OrcaRobotPolicy, "social_force": SocialForceRobotPolicy}
+
+
+def load_policy(spec: str) -> Policy:
+    """A policy by name: a scripted one (``goal``, ``orca``, ``social_force``) or ``module:attribute``
+    (an object with the Policy interface, or a zero-argument callable that returns one)."""
+    if spec in SCRIPTED:
+        return SCRIPTED[spec]()
+    if ":" in spec:
+        from importlib import import_module
+
+        module_name, _, attribute = spec.partition(":")
+        try:
+            target = getattr(import_module(module_name), attribute)
+        except (ImportError, AttributeError) as error:
+            raise ValueError(f"cannot load policy {spec!r}: {error}") from None
+        policy = target() if callable(target) and not hasattr(target, "act") else target
+        if not (hasattr(policy, "act") and hasattr(policy, "initial_state")):
+            raise ValueError(f"{spec!r} is not a policy: it needs act() and initial_state()")
+        return policy
+    raise ValueError(f"unknown agent {spec!r}: use one of {sorted(SCRIPTED)} or module:attribute")

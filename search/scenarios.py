@@ -1,0 +1,174 @@
+"""Initial states: fixed scenarios from TOML files, and the random training distribution of CrowdNav_DSRNN.
+
+A scenario file looks like::
+
+    name = "paper-bl-tr"
+    description = "robot from bottom-left to top-right through 10 humans"
+
+    [robot]
+    start = [-5.0, -5.0]
+    goal = [5.0, 5.0]
+    heading = 0.785          # radians, optional (default pi/2)
+
+    [[humans]]
+    position = [-2.0, -1.0]
+    goal = [-1.0, -2.0]      # optional: the antipode of the position by default
+
+    [world]                  # optional WorldConfig settings (e.g. time_limit, human_v_pref)
+    time_limit = 25.0
+
+The number of humans in the file sets ``human_num``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from search.world import WorldConfig, WorldState, new_state
+
+SHIPPED_DIR = Path(__file__).parent / "scenarios"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    robot_start: tuple[float, float]
+    robot_goal: tuple[float, float]
+    human_positions: tuple[tuple[float, float], ...]
+    human_goals: tuple[tuple[float, float], ...]
+    robot_heading: float = math.pi / 2
+    description: str = ""
+    world: dict = field(default_factory=dict)
+
+    def config(self, base: WorldConfig | None = None) -> WorldConfig:
+        """The world config for this scenario: ``base`` with the file's settings and its crowd size."""
+        base = base or WorldConfig()
+        values = base.to_dict() | self.world | {"human_num": len(self.human_positions)}
+        return WorldConfig.from_dict(values)
+
+    def initial_state(self, config: WorldConfig, n_worlds: int = 1, n_robots: int = 1) -> WorldState:
+        """``n_worlds`` identical copies of this initial state with ``n_robots`` robots each."""
+        humans = np.array(self.human_positions, dtype=np.float64).reshape(-1, 2)
+        goals = np.array(self.human_goals, dtype=np.float64).reshape(-1, 2)
+        tile_h = (n_worlds, 1, 1)
+        tile_r = (n_worlds, n_robots, 1)
+        return new_state(np.tile(humans, tile_h), np.tile(goals, tile_h),
+                         np.tile(np.array(self.robot_start, dtype=np.float64), tile_r),
+                         np.tile(np.array(self.robot_goal, dtype=np.float64), tile_r),
+                         self.robot_heading, config)
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "description": self.description,
+            "robot": {"start": list(self.robot_start), "goal": list(self.robot_goal),
+                      "heading": self.robot_heading},
+            "humans": [{"position": list(p), "goal": list(g)}
+                       for p, g in zip(self.human_positions, self.human_goals, strict=True)],
+            "world": dict(self.world),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "scenario") -> Scenario:
+        def fail(message: str):
+            raise ValueError(f"{source}: {message}")
+
+        def point(value, where: str) -> tuple[float, float]:
+            if (not isinstance(value, list | tuple) or len(value) != 2
+                    or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
+                fail(f"{where} must be a pair of numbers [x, y], got {value!r}")
+            if not all(math.isfinite(v) for v in value):
+                fail(f"{where} must be finite, got {value!r}")
+            return float(value[0]), float(value[1])
+
+        unknown = sorted(set(data) - {"name", "description", "robot", "humans", "world"})
+        if unknown:
+            fail(f"unknown key(s) {unknown}; expected name, description, [robot], [[humans]], [world]")
+        robot = data.get("robot")
+        if not isinstance(robot, dict):
+            fail("missing [robot] table with start and goal")
+        for key in ("start", "goal"):
+            if key not in robot:
+                fail(f"[robot] needs '{key}' = [x, y]")
+        heading = robot.get("heading", math.pi / 2)
+        if not isinstance(heading, int | float) or not math.isfinite(heading):
+            fail(f"[robot] heading must be a number of radians, got {heading!r}")
+        humans = data.get("humans", [])
+        if not isinstance(humans, list):
+            fail("humans must be an array of tables [[humans]]")
+        positions, goals = [], []
+        for i, human in enumerate(humans):
+            if not isinstance(human, dict) or "position" not in human:
+                fail(f"human {i} needs 'position' = [x, y]")
+            extra = sorted(set(human) - {"position", "goal"})
+            if extra:
+                fail(f"human {i} has unknown key(s) {extra}; expected position and goal")
+            p = point(human["position"], f"human {i} position")
+            positions.append(p)
+            goals.append(point(human["goal"], f"human {i} goal") if "goal" in human else (-p[0], -p[1]))
+        world = data.get("world", {})
+        if not isinstance(world, dict):
+            fail("[world] must be a table of world settings")
+        scenario = cls(name=str(data.get("name", source)), description=str(data.get("description", "")),
+                       robot_start=point(robot["start"], "[robot] start"),
+                       robot_goal=point(robot["goal"], "[robot] goal"), robot_heading=float(heading),
+                       human_positions=tuple(positions), human_goals=tuple(goals), world=dict(world))
+        try:
+            scenario.config()
+        except (ValueError, TypeError) as error:
+            fail(f"[world]: {error}")
+        return scenario
+
+
+def shipped_scenarios() -> list[str]:
+    return sorted(p.stem for p in SHIPPED_DIR.glob("*.toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A shipped scenario by name (``paper-bl-tr``, ``paper-tl-br``, ``paper-code``) or a TOML file."""
+    path = Path(name_or_path)
+    if not path.suffix and (SHIPPED_DIR / f"{name_or_path}.toml").exists():
+        path = SHIPPED_DIR / f"{name_or_path}.toml"
+    if not path.exists():
+        raise FileNotFoundError(f"no scenario {str(name_or_path)!r}: give a TOML file or one of the shipped "
+                                f"scenarios {shipped_scenarios()}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{path}: not valid TOML: {error}") from None
+    return Scenario.from_dict(data, source=str(path))
+
+
+def sample_training_states(config: WorldConfig, rng: np.random.Generator, n_worlds: int) -> WorldState:
+    """CrowdNav_DSRNN's training distribution: robot start and goal uniform in the square, at least
+    ``min_start_goal_distance`` apart; humans circle-crossing towards their antipodes, kept apart from each
+    other and from the robot's start and goal by their radii plus the discomfort distance."""
+    n, r = config.human_num, config.circle_radius
+    humans = np.zeros((n_worlds, n, 2))
+    robots = np.zeros((n_worlds, 1, 2))
+    goals = np.zeros((n_worlds, 1, 2))
+    for w in range(n_worlds):
+        while True:
+            start, goal = rng.uniform(-r, r, 2), rng.uniform(-r, r, 2)
+            if np.linalg.norm(start - goal) >= config.min_start_goal_distance:
+                break
+        robots[w, 0], goals[w, 0] = start, goal
+        # Placed agents as (position, goal, radius); a human must keep clear of both ends of each.
+        placed = [(start, goal, config.robot_radius)]
+        for i in range(n):
+            while True:
+                angle = rng.random() * 2 * np.pi
+                noise = (rng.random(2) - 0.5) * config.human_v_pref
+                p = np.array([r * np.cos(angle), r * np.sin(angle)]) + noise
+                min_dist = config.human_radius + config.discomfort_dist
+                if all(np.linalg.norm(p - q) >= min_dist + rad and np.linalg.norm(p - g) >= min_dist + rad
+                       for q, g, rad in placed):
+                    break
+            humans[w, i] = p
+            placed.append((p, -p, config.human_radius))
+    return new_state(humans, -humans, robots, goals, np.pi / 2, config)

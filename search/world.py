@@ -1,0 +1,337 @@
+"""The crowd-navigation world: robots crossing a crowd, stepped for a batch of worlds in one vectorised call.
+
+A state holds ``W`` worlds. Each world has ``n`` humans and ``R`` robots. Robots are invisible to humans by
+default (as in the paper), so several robots can share one crowd: the coupled simulator puts every agent under
+comparison into the same world that way. A visible robot changes its crowd, so then each world holds one robot.
+
+Step order (CrowdNav_DSRNN's, except where marked):
+  1. human velocities from the pre-move state (ORCA or social force, plus the environment action),
+  2. robots move, then humans move, time advances,
+  3. collision, success and timeout are judged on the move that just happened (CrowdNav judges the state
+     *before* the move, so it reports every terminal event one step late; we do not copy that),
+  4. reward: -20 collision, +10 success, 0 timeout, discomfort (d - 0.25) * 10 * dt when closer than 0.25 m,
+     otherwise 2 * progress towards the goal.
+A robot that has finished stays where it is; the crowd goes on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from search.orca import orca_velocities
+from search.social_force import social_force_velocities
+
+RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
+OUTCOME_NAMES = ("running", "success", "collision", "timeout")
+
+ENV_ACTION_MODES = ("preferred", "velocity", "observation")
+"""How the environment action (an (x, y) per human) acts on the world:
+
+- ``preferred``: added to each human's preferred velocity before ORCA; humans still avoid each other and keep
+  their speed limit, so the action steers the crowd within its habits.
+- ``velocity``: added to each human's velocity after ORCA (the default): the action pushes humans directly,
+  at up to v_pref + bound, and may make them collide with each other.
+- ``observation``: the crowd is untouched; the action is added to the human positions every robot observes
+  (the paper's OBSERVATION_NOISE mode).
+"""
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Everything that defines a world apart from its initial state. Defaults: the paper's setting."""
+
+    human_num: int = 10
+    human_radius: float = 0.3
+    human_v_pref: float = 0.15
+    human_policy: str = "orca"
+    robot_radius: float = 0.3
+    robot_v_pref: float = 1.0
+    robot_visible: bool = False
+    kinematics: str = "holonomic"
+    dt: float = 0.25
+    time_limit: float = 50.0
+    # ORCA as CrowdNav configures RVO2
+    neighbor_dist: float = 10.0
+    max_neighbors: int = 10
+    time_horizon: float = 5.0
+    safety_space: float = 0.15
+    # social force (CrowdNav)
+    sf_a: float = 2.0
+    sf_b: float = 1.0
+    sf_ki: float = 1.0
+    # unicycle limits per step (CrowdNav_DSRNN)
+    unicycle_max_dv: float = 0.1
+    unicycle_max_dtheta: float = 0.1
+    # reward (CrowdNav_DSRNN)
+    success_reward: float = 10.0
+    collision_penalty: float = -20.0
+    discomfort_dist: float = 0.25
+    discomfort_factor: float = 10.0
+    progress_factor: float = 2.0
+    # environment action
+    env_action_mode: str = "velocity"
+    env_action_bound: float = 0.25
+    clip_env_actions: bool = False
+    # random training distribution
+    circle_radius: float = 6.0
+    min_start_goal_distance: float = 6.0
+
+    def __post_init__(self):
+        checks = [
+            (self.human_num >= 0, "human_num must be >= 0"),
+            (self.human_policy in ("orca", "social_force"), "human_policy must be 'orca' or 'social_force'"),
+            (self.kinematics in ("holonomic", "unicycle"), "kinematics must be 'holonomic' or 'unicycle'"),
+            (self.env_action_mode in ENV_ACTION_MODES, f"env_action_mode must be one of {ENV_ACTION_MODES}"),
+            (self.dt > 0 and self.time_limit > 0, "dt and time_limit must be positive"),
+            (self.env_action_bound >= 0, "env_action_bound must be >= 0"),
+            (self.human_radius > 0 and self.robot_radius > 0, "radii must be positive"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"invalid world config: {message}")
+
+    @classmethod
+    def from_dict(cls, values: dict) -> WorldConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown world setting(s) {unknown}; known settings: {sorted(known)}")
+        return cls(**values)
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def with_(self, **changes) -> WorldConfig:
+        return replace(self, **changes)
+
+
+@dataclass
+class WorldState:
+    """Plain arrays with the world axis first; ``copy()`` is a full snapshot."""
+
+    human_pos: np.ndarray  # (W, n, 2)
+    human_vel: np.ndarray  # (W, n, 2)
+    human_goal: np.ndarray  # (W, n, 2)
+    human_radius: np.ndarray  # (W, n)
+    human_v_pref: np.ndarray  # (W, n)
+    robot_pos: np.ndarray  # (W, R, 2)
+    robot_vel: np.ndarray  # (W, R, 2)
+    robot_theta: np.ndarray  # (W, R) heading
+    robot_speed: np.ndarray  # (W, R) signed forward speed (unicycle)
+    robot_goal: np.ndarray  # (W, R, 2)
+    time: np.ndarray  # (W,)
+    done: np.ndarray  # (W, R) bool
+    outcome: np.ndarray  # (W, R) int8: RUNNING, SUCCESS, COLLISION, TIMEOUT
+    event_time: np.ndarray  # (W, R) time of the terminal event, nan while running
+    path_length: np.ndarray  # (W, R)
+    min_clearance: np.ndarray  # (W, R) smallest surface distance to any human so far
+
+    @property
+    def n_worlds(self) -> int:
+        return self.human_pos.shape[0]
+
+    @property
+    def n_robots(self) -> int:
+        return self.robot_pos.shape[1]
+
+    def copy(self) -> WorldState:
+        return WorldState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    def take(self, worlds) -> WorldState:
+        """A new state made of the given worlds (indices may repeat: one node branched into many)."""
+        index = np.asarray(worlds, dtype=np.int64)
+        return WorldState(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    def assign(self, worlds, other: WorldState) -> None:
+        """Overwrite the given worlds with ``other``'s (e.g. fresh episodes for finished worlds)."""
+        index = np.asarray(worlds, dtype=np.int64)
+        for f in fields(self):
+            getattr(self, f.name)[index] = getattr(other, f.name)
+
+    def equals(self, other: WorldState) -> bool:
+        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name), equal_nan=True)
+                   for f in fields(self))
+
+
+def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig) -> WorldState:
+    """A state at time 0 with resting agents, from (W, n, 2) humans and (W, R, 2) robots."""
+    human_pos = np.array(human_pos, dtype=np.float64)
+    robot_pos = np.array(robot_pos, dtype=np.float64)
+    w, n = human_pos.shape[:2]
+    r = robot_pos.shape[1]
+    if config.robot_visible and r != 1:
+        raise ValueError("a visible robot changes its crowd, so each world can hold only one robot")
+    return WorldState(
+        human_pos=human_pos,
+        human_vel=np.zeros((w, n, 2)),
+        human_goal=np.array(human_goal, dtype=np.float64),
+        human_radius=np.full((w, n), config.human_radius),
+        human_v_pref=np.full((w, n), config.human_v_pref),
+        robot_pos=robot_pos,
+        robot_vel=np.zeros((w, r, 2)),
+        robot_theta=np.array(np.broadcast_to(robot_theta, (w, r)), dtype=np.float64),
+        robot_speed=np.zeros((w, r)),
+        robot_goal=np.array(robot_goal, dtype=np.float64),
+        time=np.zeros(w),
+        done=np.zeros((w, r), dtype=bool),
+        outcome=np.zeros((w, r), dtype=np.int8),
+        event_time=np.full((w, r), np.nan),
+        path_length=np.zeros((w, r)),
+        min_clearance=np.full((w, r), np.inf),
+    )
+
+
+def check_env_action(env_action, n_worlds: int, config: WorldConfig) -> np.ndarray:
+    """The environment action as (W, n, 2), after the checks that keep bad input out of the world."""
+    n = config.human_num
+    action = np.asarray(env_action, dtype=np.float64)
+    if action.shape in ((n_worlds, n * 2), (n_worlds, n, 2)):
+        action = action.reshape(n_worlds, n, 2)
+    else:
+        raise ValueError(f"environment action must have shape ({n_worlds}, {n * 2}) or ({n_worlds}, {n}, 2) "
+                         f"(an (x, y) per human per world), got {action.shape}")
+    if not np.all(np.isfinite(action)):
+        raise ValueError("environment action contains NaN or infinite values")
+    bound = config.env_action_bound
+    if np.any(np.abs(action) > bound):
+        if not config.clip_env_actions:
+            worst = float(np.max(np.abs(action)))
+            raise ValueError(f"environment action {worst:.4g} is outside the bound ±{bound}; pass actions inside "
+                             "the bound, or set clip_env_actions = true to clip them")
+        action = np.clip(action, -bound, bound)
+    return action
+
+
+def preferred_velocities(state: WorldState) -> np.ndarray:
+    """CrowdNav's ORCA preferred velocity: the vector to the goal, normalised only when longer than 1 m."""
+    to_goal = state.human_goal - state.human_pos
+    length = np.linalg.norm(to_goal, axis=-1, keepdims=True)
+    return np.where(length > 1.0, to_goal / np.maximum(length, 1e-300), to_goal)
+
+
+def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndarray | None) -> np.ndarray:
+    """The humans' next velocities (W, n, 2) from the current state and the environment action."""
+    if config.human_num == 0:
+        return np.zeros_like(state.human_vel)
+    mode = config.env_action_mode
+    if config.human_policy == "orca":
+        pref = preferred_velocities(state)
+        if env_action is not None and mode == "preferred":
+            pref = pref + env_action
+        padding = 0.01 + config.safety_space
+        pos, vel, rad, speed = state.human_pos, state.human_vel, state.human_radius + padding, state.human_v_pref
+        if config.robot_visible:
+            pos = np.concatenate([pos, state.robot_pos], axis=1)
+            vel = np.concatenate([vel, state.robot_vel], axis=1)
+            pref = np.concatenate([pref, state.robot_vel], axis=1)
+            rad = np.concatenate([rad, np.full((state.n_worlds, 1), config.robot_radius + padding)], axis=1)
+            speed = np.concatenate([speed, np.full((state.n_worlds, 1), config.robot_v_pref)], axis=1)
+        velocity = orca_velocities(pos, vel, pref, rad, speed, neighbor_dist=config.neighbor_dist,
+                                   max_neighbors=config.max_neighbors, time_horizon=config.time_horizon,
+                                   dt=config.dt, n_ego=config.human_num)
+    else:
+        goals = state.human_goal
+        if env_action is not None and mode == "preferred":
+            goals = state.human_pos + preferred_velocities(state) + env_action
+        others = (state.robot_pos, np.full(state.robot_pos.shape[:2], config.robot_radius)) \
+            if config.robot_visible else (None, None)
+        velocity = social_force_velocities(state.human_pos, state.human_vel, goals, state.human_radius,
+                                           state.human_v_pref, A=config.sf_a, B=config.sf_b, KI=config.sf_ki,
+                                           dt=config.dt, others_pos=others[0], others_radius=others[1])
+    if env_action is not None and mode == "velocity":
+        velocity = velocity + env_action
+    return velocity
+
+
+def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.ndarray) -> np.ndarray:
+    """Apply the robots' kinematics to their actions: the velocities (W, R, 2) they move with this step.
+
+    Holonomic: the action is a velocity, rescaled to at most v_pref. Unicycle: the action is (dv, dtheta),
+    each clipped to its per-step limit; speed accumulates within ±v_pref and the robot turns, then moves.
+    Updates heading and speed in place.
+    """
+    action = np.asarray(robot_action, dtype=np.float64)
+    if action.shape != state.robot_pos.shape:
+        raise ValueError(f"robot action must have shape {state.robot_pos.shape} (W, R, 2), got {action.shape}")
+    if not np.all(np.isfinite(action)):
+        raise ValueError("robot action contains NaN or infinite values")
+    active = ~state.done
+    if config.kinematics == "holonomic":
+        speed = np.linalg.norm(action, axis=-1, keepdims=True)
+        velocity = np.where(speed > config.robot_v_pref, action * (config.robot_v_pref / np.maximum(speed, 1e-300)),
+                            action)
+        theta = np.where(speed[..., 0] > 0, np.arctan2(velocity[..., 1], velocity[..., 0]), state.robot_theta)
+        state.robot_theta = np.where(active, theta, state.robot_theta)
+    else:
+        dv = np.clip(action[..., 0], -config.unicycle_max_dv, config.unicycle_max_dv)
+        dtheta = np.clip(action[..., 1], -config.unicycle_max_dtheta, config.unicycle_max_dtheta)
+        speed = np.clip(state.robot_speed + dv, -config.robot_v_pref, config.robot_v_pref)
+        theta = np.mod(state.robot_theta + dtheta, 2 * np.pi)
+        state.robot_speed = np.where(active, speed, state.robot_speed)
+        state.robot_theta = np.where(active, theta, state.robot_theta)
+        velocity = speed[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+    return np.where(active[..., None], velocity, 0.0)
+
+
+def segment_clearance(rel_start: np.ndarray, rel_end: np.ndarray) -> np.ndarray:
+    """Smallest distance to the origin along straight segments from rel_start to rel_end (..., 2)."""
+    seg = rel_end - rel_start
+    seg_sq = np.sum(seg * seg, axis=-1)
+    t = np.clip(np.divide(-np.sum(rel_start * seg, axis=-1), seg_sq, out=np.zeros_like(seg_sq),
+                          where=seg_sq > 0), 0.0, 1.0)
+    closest = rel_start + t[..., None] * seg
+    return np.linalg.norm(closest, axis=-1)
+
+
+def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) -> np.ndarray:
+    """Advance every world by one step in place and return each robot's reward (W, R).
+
+    ``env_action`` is None (an unperturbed crowd) or (W, n, 2)/(W, 2n) within the configured bound; in
+    ``observation`` mode it does not touch the world (the robots' observation applies it).
+    """
+    w = state.n_worlds
+    action = None if env_action is None else check_env_action(env_action, w, config)
+    new_human_vel = human_velocities(state, config, action)
+    new_robot_vel = robot_velocities(state, config, robot_action)
+
+    rel_start = state.robot_pos[:, :, None, :] - state.human_pos[:, None, :, :]  # (W, R, n, 2)
+    prev_goal_dist = np.linalg.norm(state.robot_goal - state.robot_pos, axis=-1)
+    active = ~state.done
+
+    move = new_robot_vel * config.dt
+    state.robot_pos = state.robot_pos + move
+    state.robot_vel = new_robot_vel
+    state.path_length = state.path_length + np.linalg.norm(move, axis=-1)
+    state.human_pos = state.human_pos + new_human_vel * config.dt
+    state.human_vel = new_human_vel
+    state.time = state.time + config.dt
+
+    # Judge the move itself: closest approach to each human along the relative motion of this step.
+    rel_end = state.robot_pos[:, :, None, :] - state.human_pos[:, None, :, :]
+    if config.human_num:
+        surface = segment_clearance(rel_start, rel_end) - state.human_radius[:, None, :] - config.robot_radius
+        clearance = surface.min(axis=-1)
+    else:
+        clearance = np.full((w, state.n_robots), np.inf)
+    goal_dist = np.linalg.norm(state.robot_goal - state.robot_pos, axis=-1)
+    collision = active & (clearance < 0)
+    success = active & ~collision & (goal_dist < config.robot_radius)
+    timeout = active & ~collision & ~success & (state.time[:, None] >= config.time_limit - 1e-9)
+    discomfort = clearance < config.discomfort_dist
+
+    reward = np.where(discomfort, (clearance - config.discomfort_dist) * config.discomfort_factor * config.dt,
+                      config.progress_factor * (prev_goal_dist - goal_dist))
+    reward = np.where(timeout, 0.0, reward)
+    reward = np.where(success, config.success_reward, reward)
+    reward = np.where(collision, config.collision_penalty, reward)
+    reward = np.where(active, reward, 0.0)
+
+    state.min_clearance = np.where(active, np.minimum(state.min_clearance, clearance), state.min_clearance)
+    finished = collision | success | timeout
+    state.outcome = np.where(collision, COLLISION, np.where(success, SUCCESS, np.where(
+        timeout, TIMEOUT, state.outcome))).astype(np.int8)
+    state.event_time = np.where(finished, state.time[:, None], state.event_time)
+    state.done = state.done | finished
+    return reward
