@@ -222,6 +222,51 @@ def _orca_batch(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_nei
                             inv_horizon, dt, out[w, a], nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy)
 
 
+@numba.njit(cache=True, parallel=True, nogil=True)
+def crowd_orca_kernel(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors,
+                      time_horizon, dt, out):
+    """ORCA for crowds that see only each other, as CrowdNav drives RVO2: float64 state in, float32 solve.
+
+    The preferred velocity is the vector to the goal, normalised only when longer than 1 m, plus
+    ``pref_offset``; radii are padded by ``padding``; each human's speed limit is its v_pref.
+    """
+    n_worlds, n = pos.shape[0], pos.shape[1]
+    inv_horizon = ONE / time_horizon
+    for w in numba.prange(n_worlds):
+        p = np.empty((n, 2), np.float32)
+        v = np.empty((n, 2), np.float32)
+        pref = np.empty((n, 2), np.float32)
+        rad = np.empty(n, np.float32)
+        speed = np.empty(n, np.float32)
+        for i in range(n):
+            gx = goal[w, i, 0] - pos[w, i, 0]
+            gy = goal[w, i, 1] - pos[w, i, 1]
+            length = np.sqrt(gx * gx + gy * gy)
+            if length > 1.0:
+                gx /= length
+                gy /= length
+            pref[i, 0] = gx + pref_offset[w, i, 0]
+            pref[i, 1] = gy + pref_offset[w, i, 1]
+            p[i, 0], p[i, 1] = pos[w, i, 0], pos[w, i, 1]
+            v[i, 0], v[i, 1] = vel[w, i, 0], vel[w, i, 1]
+            rad[i] = radii[w, i] + padding
+            speed[i] = v_pref[w, i]
+        nb_idx = np.empty(n, np.int64)
+        nb_dist = np.empty(n, np.float32)
+        lp = np.empty((n, 2), np.float32)
+        ld_x = np.empty(n, np.float32)
+        ld_y = np.empty(n, np.float32)
+        proj_p = np.empty((n, 2), np.float32)
+        proj_dx = np.empty(n, np.float32)
+        proj_dy = np.empty(n, np.float32)
+        result = np.empty(2, np.float32)
+        for a in range(n):
+            _agent_velocity(p, v, pref, rad, speed, a, neighbor_dist, max_neighbors, inv_horizon, dt, result,
+                            nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy)
+            out[w, a, 0] = result[0]
+            out[w, a, 1] = result[1]
+
+
 def _as_batch(name: str, array, shape_tail: tuple[int, ...], n_worlds: int | None, n: int | None) -> np.ndarray:
     out = np.ascontiguousarray(array, dtype=np.float32)
     expect = "(B, n" + "".join(f", {d}" for d in shape_tail) + ")"

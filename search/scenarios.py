@@ -95,6 +95,9 @@ class Scenario:
         for key in ("start", "goal"):
             if key not in robot:
                 fail(f"[robot] needs '{key}' = [x, y]")
+        extra = sorted(set(robot) - {"start", "goal", "heading"})
+        if extra:
+            fail(f"[robot] has unknown key(s) {extra}; expected start, goal and heading")
         heading = robot.get("heading", math.pi / 2)
         if not isinstance(heading, int | float) or not math.isfinite(heading):
             fail(f"[robot] heading must be a number of radians, got {heading!r}")

@@ -20,7 +20,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from search.orca import orca_velocities
+from search.orca import crowd_orca_kernel, orca_velocities
 from search.social_force import social_force_velocities
 
 RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
@@ -216,19 +216,24 @@ def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndar
     if config.human_num == 0:
         return np.zeros_like(state.human_vel)
     mode = config.env_action_mode
-    if config.human_policy == "orca":
-        pref = preferred_velocities(state)
-        if env_action is not None and mode == "preferred":
-            pref = pref + env_action
-        padding = 0.01 + config.safety_space
-        pos, vel, rad, speed = state.human_pos, state.human_vel, state.human_radius + padding, state.human_v_pref
-        if config.robot_visible:
-            pos = np.concatenate([pos, state.robot_pos], axis=1)
-            vel = np.concatenate([vel, state.robot_vel], axis=1)
-            pref = np.concatenate([pref, state.robot_vel], axis=1)
-            rad = np.concatenate([rad, np.full((state.n_worlds, 1), config.robot_radius + padding)], axis=1)
-            speed = np.concatenate([speed, np.full((state.n_worlds, 1), config.robot_v_pref)], axis=1)
-        velocity = orca_velocities(pos, vel, pref, rad, speed, neighbor_dist=config.neighbor_dist,
+    padding = 0.01 + config.safety_space
+    offset = env_action if env_action is not None and mode == "preferred" else np.zeros_like(state.human_pos)
+    if config.human_policy == "orca" and not config.robot_visible:
+        f32 = np.float32
+        velocity = np.empty(state.human_pos.shape, np.float32)
+        crowd_orca_kernel(state.human_pos, state.human_vel, state.human_goal, state.human_radius,
+                          state.human_v_pref, offset, f32(padding), f32(config.neighbor_dist),
+                          config.max_neighbors, f32(config.time_horizon), f32(config.dt), velocity)
+        velocity = velocity.astype(np.float64)
+    elif config.human_policy == "orca":
+        # The visible robot is one more agent in the humans' ORCA (its own velocity as its preference).
+        pref = preferred_velocities(state) + offset
+        pos = np.concatenate([state.human_pos, state.robot_pos], axis=1)
+        vel = np.concatenate([state.human_vel, state.robot_vel], axis=1)
+        pref = np.concatenate([pref, state.robot_vel], axis=1)
+        rad = np.concatenate([state.human_radius, np.full((state.n_worlds, 1), config.robot_radius)], axis=1)
+        speed = np.concatenate([state.human_v_pref, np.full((state.n_worlds, 1), config.robot_v_pref)], axis=1)
+        velocity = orca_velocities(pos, vel, pref, rad + padding, speed, neighbor_dist=config.neighbor_dist,
                                    max_neighbors=config.max_neighbors, time_horizon=config.time_horizon,
                                    dt=config.dt, n_ego=config.human_num)
     else:

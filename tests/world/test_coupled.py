@@ -1,0 +1,123 @@
+"""The coupled simulator: shared crowd, snapshot/restore, branching, replay."""
+
+import numpy as np
+import pytest
+
+from search.coupled import CoupledSimulator, replay
+from search.policies import load_policy
+from search.scenarios import load_scenario
+from search.world import WorldConfig
+
+
+def make(names=("goal", "orca"), scenario="paper-bl-tr", batch=1, config=None):
+    return CoupledSimulator([load_policy(n) for n in names], load_scenario(scenario), config, batch=batch)
+
+
+def env_actions(steps, batch=1, seed=0, n=10):
+    return np.random.default_rng(seed).uniform(-0.25, 0.25, (steps, batch, n, 2))
+
+
+def test_every_agent_sees_the_same_crowd():
+    sim = make(("goal", "orca", "social_force"))
+    for action in env_actions(20):
+        sim.step(action)
+        observations = sim.observations()
+        humans = [o.robot_node[:, None, 0:2] + o.spatial_edges for o in observations]
+        for other in humans[1:]:
+            np.testing.assert_allclose(other, humans[0], atol=1e-12)
+
+
+def test_invisible_robots_do_not_change_the_crowd():
+    actions = env_actions(30)
+    runs = []
+    for names in (("goal", "orca"), ("social_force", "goal")):
+        sim = make(names)
+        runs.append(np.stack([sim.step(a).human_pos for a in actions]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_visible_robots_each_get_their_own_crowd():
+    sim = make(config=WorldConfig(robot_visible=True, human_v_pref=1.0))
+    for action in env_actions(25):
+        sim.step(action)
+    crowds = [sim.state.human_pos[sim._where(k)[0]] for k in range(2)]
+    assert not np.allclose(crowds[0], crowds[1])
+
+
+def test_snapshot_and_restore_equal_a_straight_run():
+    actions = env_actions(40)
+    straight = make()
+    record = [straight.step(a) for a in actions]
+    branched = make()
+    for a in actions[:15]:
+        branched.step(a)
+    snap = branched.snapshot()
+    for a in actions[15:25]:
+        branched.step(-a)  # wander off
+    branched.restore(snap)
+    for a, expected in zip(actions[15:], record[15:], strict=True):
+        got = branched.step(a)
+        np.testing.assert_array_equal(got.robot_pos, expected.robot_pos)
+        np.testing.assert_array_equal(got.human_pos, expected.human_pos)
+        np.testing.assert_array_equal(got.rewards, expected.rewards)
+    assert branched.state.equals(straight.state)
+
+
+def test_one_node_branched_into_a_batch_matches_single_runs():
+    actions = env_actions(30, batch=1)
+    sim = make()
+    for a in actions[:10]:
+        sim.step(a)
+    node = sim.snapshot([0, 0, 0])
+    futures = env_actions(20, batch=3, seed=5)
+    sim.restore(node)
+    batched = [sim.step(a) for a in futures]
+    for b in range(3):
+        single = make()
+        for a in actions[:10]:
+            single.step(a)
+        for t, a in enumerate(futures):
+            step = single.step(a[[b]])
+            np.testing.assert_array_equal(step.robot_pos[0], batched[t].robot_pos[b])
+
+
+def test_replay_reproduces_a_trajectory_bit_for_bit():
+    actions = env_actions(60)[:, 0]
+    policies = [load_policy("goal"), load_policy("social_force")]
+    scenario = load_scenario("paper-tl-br")
+    sim = CoupledSimulator(policies, scenario)
+    recorded = []
+    for a in actions:
+        recorded.append(sim.step(a[None]))
+        if sim.all_done[0]:
+            break
+    again = replay(policies, scenario, actions)
+    assert len(again.time) == len(recorded)
+    np.testing.assert_array_equal(again.robot_pos, np.stack([s.robot_pos[0] for s in recorded]))
+    np.testing.assert_array_equal(again.human_pos, np.stack([s.human_pos[0] for s in recorded]))
+    np.testing.assert_array_equal(again.robot_actions, np.stack([s.robot_actions[0] for s in recorded]))
+    third = replay(policies, scenario, actions.reshape(len(actions), -1))
+    np.testing.assert_array_equal(third.robot_pos, again.robot_pos)
+
+
+def test_finished_robots_stop_and_report_outcomes():
+    sim = make(("goal", "orca"), scenario="paper-code")
+    finished_earlier = np.zeros((1, 2), dtype=bool)
+    for a in env_actions(200):
+        step = sim.step(a)
+        assert np.all(step.robot_actions[finished_earlier] == 0)  # finished robots get no action
+        finished_earlier = step.done
+        if sim.all_done[0]:
+            break
+    assert sim.all_done[0]
+    assert set(step.outcome[0]) <= {1, 2, 3}
+
+
+def test_needs_two_agents_and_valid_actions():
+    with pytest.raises(ValueError, match="at least two"):
+        CoupledSimulator([load_policy("goal")], load_scenario("paper-bl-tr"))
+    with pytest.raises(ValueError, match="unknown agent"):
+        load_policy("nobody")
+    sim = make()
+    with pytest.raises(ValueError, match="outside the bound"):
+        sim.step(np.ones((1, 10, 2)))
