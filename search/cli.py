@@ -4,12 +4,33 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 
 def _demo(args: argparse.Namespace) -> int:
     from search.demo import run_demo
 
     return run_demo(scenario=args.scenario, seed=args.seed)
+
+
+def _train(args: argparse.Namespace) -> int:
+    from search.train import load_train_config, train
+
+    last = train(load_train_config(args.config), args.out)
+    print(f"last checkpoint: {last}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from search.evaluate import run_eval
+
+    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json)
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from app.serve import serve
+
+    return serve(bundle=args.bundle, study=args.study, database_url=args.db, host=args.host, port=args.port)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -23,6 +44,27 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--scenario", default="paper-bl-tr", help="shipped scenario name or TOML file")
     demo.add_argument("--seed", type=int, default=0, help="seed of the environment actions")
     demo.set_defaults(handler=_demo)
+
+    train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out)")
+    train.add_argument("--config", required=True, help="TOML file of training settings (see docs/agents.md)")
+    train.add_argument("--out", required=True, help="run directory: progress.csv and checkpoints/")
+    train.set_defaults(handler=_train)
+
+    evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
+    evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint or "
+                          "TorchScript file, or module:attribute")
+    evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
+    evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
+    evaluate.add_argument("--json", action="store_true", help="print one JSON object")
+    evaluate.set_defaults(handler=_eval)
+
+    serve = sub.add_parser("serve", help="run the survey server for a study bundle (applies database migrations)")
+    serve.add_argument("--bundle", required=True, type=Path, help="bundle directory holding manifest.json")
+    serve.add_argument("--study", type=Path, help="study TOML file (default: study.toml in the bundle)")
+    serve.add_argument("--db", help="database URL (default: FOIL_DATABASE_URL or sqlite:///foil.sqlite3)")
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    serve.set_defaults(handler=_serve)
     return parser
 
 
