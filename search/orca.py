@@ -6,7 +6,7 @@ ORCA half-plane (velocity obstacle truncated at ``time_horizon``, or the ``dt`` 
 the 2-D incremental linear program finds the velocity closest to the preferred one inside the speed disc, and
 the 3-D linear program minimises the largest violation when the half-planes have no common point.
 
-Everything runs in numba over a batch of worlds: one call steps ``B`` worlds of ``n`` agents in parallel.
+Everything runs in numba over a batch of worlds: one call steps ``B`` worlds of ``n`` agents.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ RVO_EPSILON = np.float32(1e-5)
 HALF = np.float32(0.5)
 ONE = np.float32(1.0)
 
-_jit = numba.njit(cache=True, fastmath=False, nogil=True)
+_jit = numba.njit(cache=True, nogil=True)
 
 
 @_jit
@@ -204,67 +204,76 @@ def _agent_velocity(pos, vel, pref, radii, max_speeds, a, neighbor_dist, max_nei
         _lp3(lp, ld_x, ld_y, count, fail, max_speeds[a], out, proj_p, proj_dx, proj_dy)
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
-def _orca_batch(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_neighbors, time_horizon, dt, out):
-    n_worlds, n = pos.shape[0], pos.shape[1]
+@_jit
+def _solve_world(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_neighbors, time_horizon, dt, out):
+    """New velocities of the first ``n_ego`` agents of one world (float32 arrays) into ``out``."""
+    n = pos.shape[0]
     inv_horizon = ONE / time_horizon
-    for w in numba.prange(n_worlds):
-        nb_idx = np.empty(n, np.int64)
-        nb_dist = np.empty(n, np.float32)
-        lp = np.empty((n, 2), np.float32)
-        ld_x = np.empty(n, np.float32)
-        ld_y = np.empty(n, np.float32)
-        proj_p = np.empty((n, 2), np.float32)
-        proj_dx = np.empty(n, np.float32)
-        proj_dy = np.empty(n, np.float32)
-        for a in range(n_ego):
-            _agent_velocity(pos[w], vel[w], pref[w], radii[w], max_speeds[w], a, neighbor_dist, max_neighbors,
-                            inv_horizon, dt, out[w, a], nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy)
+    nb_idx = np.empty(n, np.int64)
+    nb_dist = np.empty(n, np.float32)
+    lp = np.empty((n, 2), np.float32)
+    ld_x = np.empty(n, np.float32)
+    ld_y = np.empty(n, np.float32)
+    proj_p = np.empty((n, 2), np.float32)
+    proj_dx = np.empty(n, np.float32)
+    proj_dy = np.empty(n, np.float32)
+    for a in range(n_ego):
+        _agent_velocity(pos, vel, pref, radii, max_speeds, a, neighbor_dist, max_neighbors, inv_horizon, dt,
+                        out[a], nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy)
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
-def crowd_orca_kernel(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors,
-                      time_horizon, dt, out):
-    """ORCA for crowds that see only each other, as CrowdNav drives RVO2: float64 state in, float32 solve.
+@_jit
+def _crowd_world(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors,
+                 time_horizon, dt, out):
+    """One crowd as CrowdNav drives RVO2: the preferred velocity is the vector to the goal, normalised only
+    when longer than 1 m, plus ``pref_offset``; radii padded by ``padding``; speed limit v_pref."""
+    n = pos.shape[0]
+    p = np.empty((n, 2), np.float32)
+    v = np.empty((n, 2), np.float32)
+    pref = np.empty((n, 2), np.float32)
+    rad = np.empty(n, np.float32)
+    speed = np.empty(n, np.float32)
+    for i in range(n):
+        gx = goal[i, 0] - pos[i, 0]
+        gy = goal[i, 1] - pos[i, 1]
+        length = np.sqrt(gx * gx + gy * gy)
+        if length > 1.0:
+            gx /= length
+            gy /= length
+        pref[i, 0] = gx + pref_offset[i, 0]
+        pref[i, 1] = gy + pref_offset[i, 1]
+        p[i, 0], p[i, 1] = pos[i, 0], pos[i, 1]
+        v[i, 0], v[i, 1] = vel[i, 0], vel[i, 1]
+        rad[i] = radii[i] + padding
+        speed[i] = v_pref[i]
+    _solve_world(p, v, pref, rad, speed, n, neighbor_dist, max_neighbors, time_horizon, dt, out)
 
-    The preferred velocity is the vector to the goal, normalised only when longer than 1 m, plus
-    ``pref_offset``; radii are padded by ``padding``; each human's speed limit is its v_pref.
-    """
-    n_worlds, n = pos.shape[0], pos.shape[1]
-    inv_horizon = ONE / time_horizon
-    for w in numba.prange(n_worlds):
-        p = np.empty((n, 2), np.float32)
-        v = np.empty((n, 2), np.float32)
-        pref = np.empty((n, 2), np.float32)
-        rad = np.empty(n, np.float32)
-        speed = np.empty(n, np.float32)
-        for i in range(n):
-            gx = goal[w, i, 0] - pos[w, i, 0]
-            gy = goal[w, i, 1] - pos[w, i, 1]
-            length = np.sqrt(gx * gx + gy * gy)
-            if length > 1.0:
-                gx /= length
-                gy /= length
-            pref[i, 0] = gx + pref_offset[w, i, 0]
-            pref[i, 1] = gy + pref_offset[w, i, 1]
-            p[i, 0], p[i, 1] = pos[w, i, 0], pos[w, i, 1]
-            v[i, 0], v[i, 1] = vel[w, i, 0], vel[w, i, 1]
-            rad[i] = radii[w, i] + padding
-            speed[i] = v_pref[w, i]
-        nb_idx = np.empty(n, np.int64)
-        nb_dist = np.empty(n, np.float32)
-        lp = np.empty((n, 2), np.float32)
-        ld_x = np.empty(n, np.float32)
-        ld_y = np.empty(n, np.float32)
-        proj_p = np.empty((n, 2), np.float32)
-        proj_dx = np.empty(n, np.float32)
-        proj_dy = np.empty(n, np.float32)
-        result = np.empty(2, np.float32)
-        for a in range(n):
-            _agent_velocity(p, v, pref, rad, speed, a, neighbor_dist, max_neighbors, inv_horizon, dt, result,
-                            nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy)
-            out[w, a, 0] = result[0]
-            out[w, a, 1] = result[1]
+
+# One thread per call: worlds are independent, but on a 2-core machine threads only pay when nothing else runs;
+# searches and training run the policies in the same process and several searches run side by side.
+@_jit
+def _orca_worlds(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_neighbors, time_horizon, dt, out):
+    for w in range(pos.shape[0]):
+        _solve_world(pos[w], vel[w], pref[w], radii[w], max_speeds[w], n_ego, neighbor_dist, max_neighbors,
+                     time_horizon, dt, out[w])
+
+
+@_jit
+def _crowd_worlds(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors,
+                  time_horizon, dt, out):
+    for w in range(pos.shape[0]):
+        _crowd_world(pos[w], vel[w], goal[w], radii[w], v_pref[w], pref_offset[w], padding, neighbor_dist,
+                     max_neighbors, time_horizon, dt, out[w])
+
+
+def crowd_velocities(pos, vel, goal, radii, v_pref, pref_offset, *, padding, neighbor_dist, max_neighbors,
+                     time_horizon, dt) -> np.ndarray:
+    """New velocities (W, n, 2) of crowds that see only each other; float64 state in, float32 solve."""
+    f32 = np.float32
+    out = np.empty(pos.shape, np.float32)
+    _crowd_worlds(pos, vel, goal, radii, v_pref, pref_offset, f32(padding), f32(neighbor_dist), int(max_neighbors),
+           f32(time_horizon), f32(dt), out)
+    return out.astype(np.float64)
 
 
 def _as_batch(name: str, array, shape_tail: tuple[int, ...], n_worlds: int | None, n: int | None) -> np.ndarray:
@@ -299,8 +308,8 @@ def orca_velocities(positions, velocities, preferred_velocities, radii, max_spee
     n_ego = n if n_ego is None else int(n_ego)
     out = np.zeros((n_worlds, n_ego, 2), np.float32)
     f32 = np.float32
-    _orca_batch(pos, vel, pref, rad, speed, n_ego, f32(neighbor_dist), int(max_neighbors), f32(time_horizon),
-                f32(dt), out)
+    _orca_worlds(pos, vel, pref, rad, speed, n_ego, f32(neighbor_dist), int(max_neighbors), f32(time_horizon),
+                 f32(dt), out)
     return out.astype(np.float64)
 
 

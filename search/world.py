@@ -20,7 +20,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from search.orca import crowd_orca_kernel, orca_velocities
+from search.orca import crowd_velocities, orca_velocities
 from search.social_force import social_force_velocities
 
 RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
@@ -219,12 +219,10 @@ def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndar
     padding = 0.01 + config.safety_space
     offset = env_action if env_action is not None and mode == "preferred" else np.zeros_like(state.human_pos)
     if config.human_policy == "orca" and not config.robot_visible:
-        f32 = np.float32
-        velocity = np.empty(state.human_pos.shape, np.float32)
-        crowd_orca_kernel(state.human_pos, state.human_vel, state.human_goal, state.human_radius,
-                          state.human_v_pref, offset, f32(padding), f32(config.neighbor_dist),
-                          config.max_neighbors, f32(config.time_horizon), f32(config.dt), velocity)
-        velocity = velocity.astype(np.float64)
+        velocity = crowd_velocities(state.human_pos, state.human_vel, state.human_goal, state.human_radius,
+                                    state.human_v_pref, offset, padding=padding,
+                                    neighbor_dist=config.neighbor_dist, max_neighbors=config.max_neighbors,
+                                    time_horizon=config.time_horizon, dt=config.dt)
     elif config.human_policy == "orca":
         # The visible robot is one more agent in the humans' ORCA (its own velocity as its preference).
         pref = preferred_velocities(state) + offset
