@@ -33,6 +33,17 @@ def _serve(args: argparse.Namespace) -> int:
     return serve(bundle=args.bundle, study=args.study, database_url=args.db, host=args.host, port=args.port)
 
 
+def _render(args: argparse.Namespace) -> int:
+    from search.render import RenderOptions, render_file
+
+    options = RenderOptions(fps=args.fps, speed=args.speed, width=args.width, crf=args.crf)
+    numbers = [int(n) for n in args.numbers.split(",")] if args.numbers else None
+    result = render_file(args.summary, args.out, numbers=numbers, options=options)
+    print(f"{result.clip}: {result.frames} frames, {result.seconds:.1f} s, {result.width}x{result.height}, "
+          f"rendered in {result.render_s:.2f} s; poster {result.poster.name}, contact sheet {result.sheet.name}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="foil",
@@ -65,6 +76,17 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     serve.set_defaults(handler=_serve)
+
+    render = sub.add_parser("render", help="render a summary.json as an H.264 clip with a poster and contact sheet")
+    render.add_argument("summary", metavar="SUMMARY.json", help="a summary written by foil search")
+    render.add_argument("--out", required=True, help="the clip to write (.mp4); NAME.poster.png and "
+                        "NAME.sheet.png go next to it")
+    render.add_argument("--speed", type=float, default=1.0, help="simulated seconds per second of video (default 1)")
+    render.add_argument("--fps", type=int, default=24, help="frames per second, at least 20 (default 24)")
+    render.add_argument("--width", type=int, help="width in px (default 720, or 960 side by side)")
+    render.add_argument("--crf", type=int, default=23, help="H.264 constant rate factor (default 23)")
+    render.add_argument("--numbers", help="robot number shown for each summary agent, e.g. 2,1 (default 1,2)")
+    render.set_defaults(handler=_render)
     return parser
 
 

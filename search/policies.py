@@ -7,6 +7,7 @@ batch axis first, returned rather than kept, so the simulator can snapshot and r
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
@@ -137,11 +138,20 @@ class SocialForceRobotPolicy(_Stateless):
 SCRIPTED = {"goal": GoalPolicy, "orca": OrcaRobotPolicy, "social_force": SocialForceRobotPolicy}
 
 
+SHIPPED_AGENTS = ("lo", "med", "hi")
+AGENTS_DIR = Path(__file__).parent / "agents"
+
+
 def load_policy(spec: str) -> Policy:
-    """A policy by name: a scripted one (``goal``, ``orca``, ``social_force``) or ``module:attribute``
-    (an object with the Policy interface, or a zero-argument callable that returns one)."""
+    """A policy by name: a scripted one (``goal``, ``orca``, ``social_force``), a shipped DS-RNN agent (``lo``,
+    ``med``, ``hi``), a checkpoint or TorchScript file, or ``module:attribute`` (an object with the Policy
+    interface, or a zero-argument callable that returns one)."""
     if spec in SCRIPTED:
         return SCRIPTED[spec]()
+    if spec in SHIPPED_AGENTS or Path(spec).suffix or "/" in spec:
+        from search.dsrnn import load_checkpoint_policy  # torch only when a network is asked for
+
+        return load_checkpoint_policy(AGENTS_DIR / f"{spec}.pt" if spec in SHIPPED_AGENTS else spec, name=spec)
     if ":" in spec:
         from importlib import import_module
 
@@ -154,4 +164,5 @@ def load_policy(spec: str) -> Policy:
         if not (hasattr(policy, "act") and hasattr(policy, "initial_state")):
             raise ValueError(f"{spec!r} is not a policy: it needs act() and initial_state()")
         return policy
-    raise ValueError(f"unknown agent {spec!r}: use one of {sorted(SCRIPTED)} or module:attribute")
+    raise ValueError(f"unknown agent {spec!r}: use one of {sorted(SCRIPTED) + list(SHIPPED_AGENTS)}, a checkpoint "
+                     "file or module:attribute")

@@ -1,0 +1,276 @@
+"""DS-RNN (Liu et al. 2021, as in CrowdNav_DSRNN) with masked humans, and the policy that wraps it.
+
+The network: the robot node goes through a 7->3 linear and a 3->embed encoder; the temporal edge (robot
+velocity) and every spatial edge (human minus robot position) go through their own linear + GRU; one attention
+head weighs the spatial edges against the temporal edge; a node GRU takes the robot and edge features; actor and
+critic MLPs (tanh) sit on the node output; the action is a diagonal Gaussian with a learned, state-independent
+log-std, and its mean is the deterministic action.
+
+Unlike the original, every human shares one spatial-edge GRU and absent humans are masked out of the attention
+(and their hidden state held at zero), so one checkpoint works for any crowd of up to ``max_humans``. The
+attention score is divided by sqrt(attention size) rather than multiplied by the number of humans (the
+original's scaling would change the policy with the crowd size).
+
+Checkpoints are ``torch.save`` dicts with ``format`` = ``foil.dsrnn/1``, the ``network`` sizes and the
+``model`` weights (training checkpoints add optimiser and run state).
+"""
+
+from __future__ import annotations
+
+import math
+import zipfile
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from search.policies import Observation, PolicyState
+
+CHECKPOINT_FORMAT = "foil.dsrnn/1"
+HIDDEN_KEYS = ("temporal", "spatial", "node")
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Layer sizes. Defaults: the paper's full-size DS-RNN."""
+
+    max_humans: int = 10
+    edge_hidden: int = 256
+    node_hidden: int = 128
+    embed: int = 64
+    attention: int = 64
+    mlp_hidden: int = 256
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"network setting {f.name} must be a positive integer, got {value!r}")
+
+    @classmethod
+    def from_dict(cls, values: dict) -> NetworkConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown network setting(s) {unknown}; known settings: {sorted(known)}")
+        return cls(**values)
+
+
+def _init(layer: nn.Linear, gain: float = math.sqrt(2)) -> nn.Linear:
+    nn.init.orthogonal_(layer.weight, gain)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+def _gru(inputs: int, hidden: int) -> nn.GRUCell:
+    cell = nn.GRUCell(inputs, hidden)
+    for name, param in cell.named_parameters():
+        (nn.init.orthogonal_ if "weight" in name else nn.init.zeros_)(param)
+    return cell
+
+
+def _mlp(inputs: int, hidden: int) -> nn.Sequential:
+    return nn.Sequential(_init(nn.Linear(inputs, hidden)), nn.Tanh(), _init(nn.Linear(hidden, hidden)), nn.Tanh())
+
+
+class DSRNN(nn.Module):
+    """One step at a time (``step``) for acting, or a sequence with episode starts (``forward``) for PPO."""
+
+    def __init__(self, config: NetworkConfig | None = None):
+        super().__init__()
+        self.config = c = config or NetworkConfig()
+        self.max_humans = c.max_humans
+        self.robot_linear = _init(nn.Linear(7, 3))
+        self.robot_encoder = _init(nn.Linear(3, c.embed))
+        self.temporal_embed = _init(nn.Linear(2, c.embed))
+        self.temporal_gru = _gru(c.embed, c.edge_hidden)
+        self.spatial_embed = _init(nn.Linear(2, c.embed))
+        self.spatial_gru = _gru(c.embed, c.edge_hidden)
+        self.attention_temporal = _init(nn.Linear(c.edge_hidden, c.attention))
+        self.attention_spatial = _init(nn.Linear(c.edge_hidden, c.attention))
+        self.edge_features = _init(nn.Linear(2 * c.edge_hidden, c.embed))
+        self.node_gru = _gru(2 * c.embed, c.node_hidden)
+        self.output_linear = _init(nn.Linear(c.node_hidden, c.mlp_hidden))
+        self.actor = _mlp(c.mlp_hidden, c.mlp_hidden)
+        self.critic = _mlp(c.mlp_hidden, c.mlp_hidden)
+        self.critic_linear = _init(nn.Linear(c.mlp_hidden, 1), 1.0)
+        self.action_mean = _init(nn.Linear(c.mlp_hidden, 2), 0.01)
+        self.action_logstd = nn.Parameter(torch.zeros(2))
+        self.attention_scale = 1.0 / math.sqrt(c.attention)
+
+    @torch.jit.export
+    def initial_state(self, batch: int) -> list[Tensor]:
+        """Zero hidden states: temporal edge (B, He), spatial edges (B, max_humans, He), node (B, Hn)."""
+        edge, node = self.temporal_gru.hidden_size, self.node_gru.hidden_size
+        return [torch.zeros(batch, edge), torch.zeros(batch, self.max_humans, edge), torch.zeros(batch, node)]
+
+    def step(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
+             hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:
+        """One time step for B robots with humans padded to max_humans: the (B, mlp_hidden) features and the
+        new hidden states. ``human_mask`` (B, n) is 1 for a present human, 0 for padding."""
+        b, n = human_mask.shape
+        temporal_h = self.temporal_gru(torch.relu(self.temporal_embed(temporal_edges)), hidden[0])
+        spatial_in = torch.relu(self.spatial_embed(spatial_edges)).reshape(b * n, -1)
+        spatial_h = self.spatial_gru(spatial_in, hidden[1].reshape(b * n, -1)).reshape(b, n, -1)
+        spatial_h = spatial_h * human_mask.unsqueeze(-1)
+
+        query = self.attention_temporal(temporal_h).unsqueeze(1)  # (B, 1, A)
+        keys = self.attention_spatial(spatial_h)  # (B, n, A)
+        scores = (query * keys).sum(-1) * self.attention_scale
+        weights = torch.softmax(scores.masked_fill(human_mask == 0, -1e9), dim=1) * human_mask
+        attended = (weights.unsqueeze(-1) * spatial_h).sum(1)  # (B, He); zero when nobody is there
+
+        edges = torch.relu(self.edge_features(torch.cat([temporal_h, attended], dim=1)))
+        robot = torch.relu(self.robot_encoder(self.robot_linear(robot_node)))
+        node_h = self.node_gru(torch.cat([robot, edges], dim=1), hidden[2])
+        return self.output_linear(node_h), [temporal_h, spatial_h, node_h]
+
+    def forward(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
+                episode_start: Tensor, hidden: list[Tensor]) -> tuple[Tensor, Tensor, list[Tensor]]:
+        """A (T, B, ...) sequence; hidden states are zeroed where ``episode_start`` (T, B) is 1.
+        Returns action means (T, B, 2), values (T, B) and the final hidden states."""
+        features = []
+        for t in range(robot_node.shape[0]):
+            keep = 1.0 - episode_start[t]
+            hidden = [h * keep.reshape((-1,) + (1,) * (h.dim() - 1)) for h in hidden]
+            x, hidden = self.step(robot_node[t], temporal_edges[t], spatial_edges[t], human_mask[t], hidden)
+            features.append(x)
+        x = torch.stack(features)
+        return self.action_mean(self.actor(x)), self.critic_linear(self.critic(x)).squeeze(-1), hidden
+
+    def act_mean(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
+                 hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:
+        """The deterministic action (B, 2) and new hidden states: what evaluation and search use."""
+        x, hidden = self.step(robot_node, temporal_edges, spatial_edges, human_mask, hidden)
+        return self.action_mean(self.actor(x)), hidden
+
+
+class _TorchScriptEntry(nn.Module):
+    """What a TorchScript agent file holds: ``forward`` = the deterministic step, plus ``initial_state``."""
+
+    def __init__(self, net: DSRNN):
+        super().__init__()
+        self.net = net
+        self.max_humans = net.max_humans
+
+    @torch.jit.export
+    def initial_state(self, batch: int) -> list[Tensor]:
+        return self.net.initial_state(batch)
+
+    def forward(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
+                hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:
+        return self.net.act_mean(robot_node, temporal_edges, spatial_edges, human_mask, hidden)
+
+
+def observation_tensors(observation: Observation, max_humans: int | None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """The observation as float32 tensors, humans padded (and masked) up to ``max_humans`` when given."""
+    b, n = observation.human_mask.shape
+    max_humans = n if max_humans is None else max_humans
+    if n > max_humans:
+        raise ValueError(f"this agent handles at most {max_humans} humans, the observation has {n}")
+    spatial = np.zeros((b, max_humans, 2), np.float32)
+    mask = np.zeros((b, max_humans), np.float32)
+    spatial[:, :n] = observation.spatial_edges
+    mask[:, :n] = observation.human_mask
+    return (torch.from_numpy(np.asarray(observation.robot_node, np.float32)),
+            torch.from_numpy(np.asarray(observation.temporal_edges, np.float32)),
+            torch.from_numpy(spatial), torch.from_numpy(mask))
+
+
+class TorchPolicy:
+    """A recurrent torch module behind the Policy interface: the module's ``forward(robot_node, temporal_edges,
+    spatial_edges, human_mask, hidden) -> (action, hidden)`` and ``initial_state(batch) -> hidden`` (hidden: a
+    list of tensors with the batch axis first). The state dict holds them as numpy arrays (h0, h1, ...), so a
+    snapshot is an array copy."""
+
+    def __init__(self, module, name: str, max_humans: int):
+        self.module, self.name, self.max_humans = module, name, max_humans
+
+    def initial_state(self, batch: int) -> PolicyState:
+        with torch.no_grad():
+            return {f"h{i}": h.numpy().copy() for i, h in enumerate(self.module.initial_state(batch))}
+
+    def act(self, observation: Observation, state: PolicyState) -> tuple[np.ndarray, PolicyState]:
+        inputs = observation_tensors(observation, self.max_humans)
+        hidden = [torch.from_numpy(state[f"h{i}"]) for i in range(len(state))]
+        with torch.no_grad():
+            action, hidden = self.module(*inputs, hidden)
+        return action.numpy().astype(np.float64), {f"h{i}": h.numpy() for i, h in enumerate(hidden)}
+
+
+class DSRNNPolicy(TorchPolicy):
+    """A DS-RNN network acting deterministically (its Gaussian's mean)."""
+
+    def __init__(self, net: DSRNN, name: str = "dsrnn"):
+        net.eval()
+        super().__init__(_TorchScriptEntry(net), name, net.max_humans)
+        self.net = net
+
+
+def save_checkpoint(path: str | Path, net: DSRNN, **extra) -> None:
+    """Write a checkpoint that ``load_dsrnn`` reads; ``extra`` holds training state (steps, optimiser, ...)."""
+    path = Path(path)
+    partial = path.with_name(path.name + ".partial")  # a run killed while saving keeps its last good checkpoint
+    torch.save({"format": CHECKPOINT_FORMAT, "network": asdict(net.config), "model": net.state_dict(), **extra},
+               partial)
+    partial.replace(path)
+
+
+def read_checkpoint(path: str | Path) -> dict:
+    """A checkpoint's contents, after checking it is one."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no checkpoint at {str(path)!r}")
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as error:  # torch raises many kinds for a file that is not a checkpoint
+        raise ValueError(f"{path} is not a readable torch checkpoint: {error}") from None
+    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (expected format {CHECKPOINT_FORMAT!r})")
+    return data
+
+
+def load_dsrnn(path: str | Path) -> DSRNN:
+    """The network stored in a checkpoint, with clear errors for wrong sizes."""
+    data = read_checkpoint(path)
+    net = DSRNN(NetworkConfig.from_dict(data["network"]))
+    try:
+        net.load_state_dict(data["model"])
+    except RuntimeError as error:
+        raise ValueError(f"{path}: weights do not fit the network sizes {data['network']}: {error}") from None
+    return net
+
+
+def is_torchscript(path: str | Path) -> bool:
+    """TorchScript archives carry compiled code next to their constants; torch.save files do not."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return any(name.endswith("/constants.pkl") for name in archive.namelist())
+    except (zipfile.BadZipFile, OSError):
+        return False
+
+
+def export_torchscript(net: DSRNN, path: str | Path) -> None:
+    """Save the deterministic policy as a TorchScript file that loads without Foil's code."""
+    net.eval()
+    torch.jit.save(torch.jit.script(_TorchScriptEntry(net)), str(path))
+
+
+def load_torchscript(path: str | Path, name: str) -> TorchPolicy:
+    module = torch.jit.load(str(path), map_location="cpu")
+    if not hasattr(module, "initial_state"):
+        raise ValueError(f"{path}: a TorchScript agent needs an exported initial_state(batch) method")
+    return TorchPolicy(module, name, getattr(module, "max_humans", None))
+
+
+def load_checkpoint_policy(path: str | Path, name: str | None = None) -> TorchPolicy:
+    """A policy from a checkpoint or TorchScript file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no agent file at {str(path)!r}")
+    name = name or path.stem
+    if is_torchscript(path):
+        return load_torchscript(path, name)
+    return DSRNNPolicy(load_dsrnn(path), name)

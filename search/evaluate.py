@@ -1,0 +1,70 @@
+"""`foil eval`: an agent's success, collision and timeout rates and mean episode reward on test episodes.
+
+Test episodes come from the training distribution, drawn from seed sequences that start with ``TEST_STREAM``
+while training's start with ``TRAIN_STREAM``, so no test episode is ever a training episode. All episodes run
+at once as a batch of worlds; the policy acts deterministically, so the same agent, episode count and seed
+always give the same numbers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from search import world
+from search.policies import Policy, load_policy, observe
+from search.scenarios import sample_training_states
+from search.world import WorldConfig
+
+TEST_STREAM = 1
+
+
+def evaluate(policy: Policy, episodes: int = 500, seed: int = 0, config: WorldConfig | None = None) -> dict:
+    """The ``foil eval --json`` object for ``policy`` on ``episodes`` test episodes of ``config``'s world."""
+    if episodes < 2:
+        raise ValueError("evaluation needs at least 2 episodes (for a confidence interval)")
+    config = config or WorldConfig()
+    state = sample_training_states(config, np.random.default_rng([TEST_STREAM, seed]), episodes)
+    policy_state = policy.initial_state(episodes)
+    returns = np.zeros(episodes)
+    while not state.done.all():
+        observation = observe(state, config, robot=0)
+        action, policy_state = policy.act(observation, policy_state)
+        action = np.where(observation.done[:, None], 0.0, action)
+        returns += world.step(state, config, action[:, None, :])[:, 0]
+    outcome = state.outcome[:, 0]
+    success = outcome == world.SUCCESS
+    half_width = 1.96 * returns.std(ddof=1) / math.sqrt(episodes)
+    mean = float(returns.mean())
+    return {
+        "agent": getattr(policy, "name", type(policy).__name__),
+        "episodes": episodes,
+        "success_rate": float(success.mean()),
+        "collision_rate": float((outcome == world.COLLISION).mean()),
+        "timeout_rate": float((outcome == world.TIMEOUT).mean()),
+        "reward_mean": mean,
+        "reward_ci95": [mean - half_width, mean + half_width],
+        "nav_time_mean": float(state.event_time[success, 0].mean()) if success.any() else None,
+    }
+
+
+def format_result(result: dict) -> str:
+    low, high = result["reward_ci95"]
+    nav = "n/a" if result["nav_time_mean"] is None else f"{result['nav_time_mean']:.2f} s"
+    return "\n".join([
+        f"agent            {result['agent']}",
+        f"episodes         {result['episodes']}",
+        f"success rate     {result['success_rate']:.3f}",
+        f"collision rate   {result['collision_rate']:.3f}",
+        f"timeout rate     {result['timeout_rate']:.3f}",
+        f"mean reward      {result['reward_mean']:.2f}  (95% CI {low:.2f} to {high:.2f})",
+        f"mean nav time    {nav}  (successful episodes)",
+    ])
+
+
+def run_eval(agent: str, episodes: int, seed: int, as_json: bool) -> int:
+    result = evaluate(load_policy(agent), episodes=episodes, seed=seed) | {"agent": agent}
+    print(json.dumps(result) if as_json else format_result(result))
+    return 0

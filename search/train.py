@@ -1,0 +1,290 @@
+"""PPO for the DS-RNN robot, in one file that reads top to bottom (after CleanRL's ppo.py).
+
+``num_envs`` worlds step together in one process; finished worlds restart from the training distribution.
+Each update collects ``num_steps`` steps per world, computes GAE advantages, then runs ``epochs`` passes over
+``minibatches`` recurrent minibatches (whole world sequences, so the GRUs see the rollout in order).
+Every ``save_every`` updates a checkpoint holds the network, optimiser, world, hidden states and random
+generators, so a run resumes exactly where it stopped.
+
+Config files are TOML: top-level keys are ``TrainConfig`` fields, ``[network]`` and ``[world]`` tables
+override the network sizes and the world settings.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+import time
+import tomllib
+from collections import deque
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from search import world
+from search.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
+from search.policies import observe
+from search.scenarios import sample_training_states
+from search.world import WorldConfig, WorldState
+
+TRAIN_STREAM = 0  # first word of every training seed sequence; evaluation uses another, so seeds never overlap
+PROGRESS_COLUMNS = ("update", "env_steps", "seconds", "steps_per_s", "episodes", "reward_mean", "success_rate",
+                    "policy_loss", "value_loss", "entropy", "approx_kl")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Every hyperparameter of a run. Defaults: CrowdNav_DSRNN's PPO on the paper's world (DESIGN.md)."""
+
+    seed: int = 0
+    total_steps: int = 10_000_000
+    num_envs: int = 12
+    num_steps: int = 30
+    learning_rate: float = 4e-5
+    adam_eps: float = 1e-5
+    epochs: int = 5
+    minibatches: int = 2
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip: float = 0.2
+    value_coef: float = 0.5
+    entropy_coef: float = 0.0
+    max_grad_norm: float = 0.5
+    save_every: int = 200  # updates between checkpoints
+    threads: int = 1  # torch CPU threads
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    world: WorldConfig = field(default_factory=WorldConfig)
+
+    def __post_init__(self):
+        if self.num_envs % self.minibatches:
+            raise ValueError(f"num_envs ({self.num_envs}) must be a multiple of minibatches ({self.minibatches})")
+        if min(self.total_steps, self.num_envs, self.num_steps, self.epochs, self.minibatches, self.save_every,
+               self.threads) < 1:
+            raise ValueError("total_steps, num_envs, num_steps, epochs, minibatches, save_every and threads "
+                             "must be positive")
+        if self.network.max_humans < self.world.human_num:
+            raise ValueError(f"network.max_humans ({self.network.max_humans}) is smaller than the world's "
+                             f"human_num ({self.world.human_num})")
+
+    @property
+    def steps_per_update(self) -> int:
+        return self.num_envs * self.num_steps
+
+    @classmethod
+    def from_dict(cls, values: dict) -> TrainConfig:
+        values = dict(values)
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown training setting(s) {unknown}; known settings: {sorted(known)}")
+        network = NetworkConfig.from_dict(values.pop("network", {}))
+        world_config = WorldConfig.from_dict(values.pop("world", {}))
+        try:
+            return cls(network=network, world=world_config, **values)
+        except TypeError as error:
+            raise ValueError(f"bad training setting: {error}") from None
+
+    def to_dict(self) -> dict:
+        return asdict(self) | {"world": self.world.to_dict()}
+
+
+def load_train_config(path: str | Path) -> TrainConfig:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no training config at {str(path)!r}")
+    try:
+        return TrainConfig.from_dict(tomllib.loads(path.read_text()))
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{path}: not valid TOML: {error}") from None
+
+
+def gaussian_log_prob(actions, mean, log_std):
+    return (-0.5 * ((actions - mean) / log_std.exp()) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+
+
+def checkpoints(out_dir: Path) -> list[Path]:
+    """The run's checkpoints, oldest first."""
+    return sorted((out_dir / "checkpoints").glob("*.pt"))
+
+
+class Progress:
+    """One status line: a rewritten bar on a terminal, a plain line every ``every`` updates otherwise."""
+
+    def __init__(self, total_updates: int, every: int = 10):
+        self.total, self.every, self.tty = total_updates, every, sys.stderr.isatty()
+
+    def show(self, update: int, steps: int, steps_per_s: float, recent_reward: float) -> None:
+        if not self.tty and update % self.every and update != self.total:
+            return
+        done = update / self.total
+        bar = "#" * int(30 * done) + "-" * (30 - int(30 * done))
+        line = (f"[{bar}] {update}/{self.total} updates  {steps:,} steps  {steps_per_s:,.0f} steps/s  "
+                f"reward(last 100) {recent_reward:6.2f}")
+        print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
+        if self.tty and update == self.total:
+            print(file=sys.stderr)
+
+
+def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
+          stop_after_updates: int | None = None) -> Path:
+    """Run (or resume) PPO into ``out_dir``; returns the last checkpoint. ``stop_after_updates`` ends this
+    sitting early (the run stays resumable)."""
+    out = Path(out_dir)
+    (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(config.threads)
+    wc, nc = config.world, config.network
+    n_envs, n_steps = config.num_envs, config.num_steps
+    total_updates = max(1, config.total_steps // config.steps_per_update)
+
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng([TRAIN_STREAM, config.seed])
+    net = DSRNN(nc)
+    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate, eps=config.adam_eps)
+    state = sample_training_states(wc, rng, n_envs)
+    hidden = net.initial_state(n_envs)
+    episode_start = torch.ones(n_envs)
+    episode_return = np.zeros(n_envs)
+    recent_returns: deque[float] = deque(maxlen=100)
+    recent_success: deque[float] = deque(maxlen=100)
+    episodes, first_update, seconds = 0, 1, 0.0
+
+    saved = checkpoints(out)
+    if saved:  # resume: everything that the next update depends on comes back
+        data = read_checkpoint(saved[-1])
+        if data.get("train_config") != config.to_dict():
+            raise ValueError(f"{out} holds a run with a different config; use a new --out directory")
+        net.load_state_dict(data["model"])
+        optimizer.load_state_dict(data["optimizer"])
+        run = data["run"]
+        state = WorldState(**run["world_state"])
+        hidden, episode_start = run["hidden"], run["episode_start"]
+        episode_return = run["episode_return"]
+        recent_returns.extend(run["recent_returns"])
+        recent_success.extend(run["recent_success"])
+        episodes, seconds = run["episodes"], run["seconds"]
+        rng.bit_generator.state = run["numpy_rng"]
+        torch.set_rng_state(run["torch_rng"])
+        first_update = data["update"] + 1
+    progress_path = out / "progress.csv"
+    rows = []
+    if progress_path.exists() and first_update > 1:  # keep the rows up to the checkpoint we resumed from
+        with progress_path.open() as f:
+            rows = [r for r in csv.DictReader(f) if int(r["update"]) < first_update]
+    with progress_path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, PROGRESS_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    progress = Progress(total_updates)
+    last = saved[-1] if saved else None
+
+    # rollout buffers, (T, N, ...)
+    m = nc.max_humans
+    b_robot = torch.zeros(n_steps, n_envs, 7)
+    b_temporal = torch.zeros(n_steps, n_envs, 2)
+    b_spatial = torch.zeros(n_steps, n_envs, m, 2)
+    b_mask = torch.zeros(n_steps, n_envs, m)
+    b_start = torch.zeros(n_steps, n_envs)
+    b_actions = torch.zeros(n_steps, n_envs, 2)
+    b_logprobs = torch.zeros(n_steps, n_envs)
+    b_rewards = torch.zeros(n_steps, n_envs)
+    b_dones = torch.zeros(n_steps, n_envs)
+    b_values = torch.zeros(n_steps, n_envs)
+
+    for update in range(first_update, total_updates + 1):
+        started = time.perf_counter()
+        initial_hidden = [h.clone() for h in hidden]
+        obs = observation_tensors(observe(state, wc, robot=0), m)
+        for t in range(n_steps):
+            b_robot[t], b_temporal[t], b_spatial[t], b_mask[t] = obs
+            b_start[t] = episode_start
+            with torch.no_grad():
+                mean, value, hidden = net(*(o[None] for o in obs), episode_start[None], hidden)
+                mean, value = mean[0], value[0]
+                action = mean + net.action_logstd.exp() * torch.randn_like(mean)
+                b_logprobs[t] = gaussian_log_prob(action, mean, net.action_logstd)
+            b_actions[t], b_values[t] = action, value
+
+            reward = world.step(state, wc, action.numpy().astype(np.float64)[:, None, :])[:, 0]
+            done = state.done[:, 0].copy()
+            episode_return += reward
+            b_rewards[t], b_dones[t] = torch.from_numpy(reward.astype(np.float32)), torch.from_numpy(
+                done.astype(np.float32))
+            finished = np.flatnonzero(done)
+            if finished.size:
+                for i in finished:
+                    recent_returns.append(float(episode_return[i]))
+                    recent_success.append(float(state.outcome[i, 0] == world.SUCCESS))
+                episodes += finished.size
+                episode_return[finished] = 0.0
+                state.assign(finished, sample_training_states(wc, rng, finished.size))
+            episode_start = torch.from_numpy(done.astype(np.float32))
+            obs = observation_tensors(observe(state, wc, robot=0), m)
+
+        # GAE: a finished step does not bootstrap from the next (fresh) episode
+        with torch.no_grad():
+            next_value = net(*(o[None] for o in obs), episode_start[None], hidden)[1][0]
+            advantages = torch.zeros(n_steps, n_envs)
+            last_gae = torch.zeros(n_envs)
+            for t in reversed(range(n_steps)):
+                following = next_value if t == n_steps - 1 else b_values[t + 1]
+                not_done = 1.0 - b_dones[t]
+                delta = b_rewards[t] + config.gamma * following * not_done - b_values[t]
+                last_gae = delta + config.gamma * config.gae_lambda * not_done * last_gae
+                advantages[t] = last_gae
+            returns = advantages + b_values
+
+        # PPO epochs over recurrent minibatches of whole world sequences
+        per_batch = n_envs // config.minibatches
+        stats = []
+        for _ in range(config.epochs):
+            order = torch.randperm(n_envs)
+            for k in range(config.minibatches):
+                idx = order[k * per_batch:(k + 1) * per_batch]
+                mean, value, _ = net(b_robot[:, idx], b_temporal[:, idx], b_spatial[:, idx], b_mask[:, idx],
+                                     b_start[:, idx], [h[idx] for h in initial_hidden])
+                new_logprob = gaussian_log_prob(b_actions[:, idx], mean, net.action_logstd)
+                log_ratio = new_logprob - b_logprobs[:, idx]
+                ratio = log_ratio.exp()
+                adv = advantages[:, idx]
+                policy_loss = -torch.min(adv * ratio, adv * ratio.clamp(1 - config.clip, 1 + config.clip)).mean()
+                value_loss = 0.5 * (returns[:, idx] - value).pow(2).mean()
+                entropy = (0.5 + 0.5 * math.log(2 * math.pi) + net.action_logstd).sum()
+                loss = policy_loss + config.value_coef * value_loss - config.entropy_coef * entropy
+                optimizer.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(net.parameters(), config.max_grad_norm)
+                optimizer.step()
+                with torch.no_grad():
+                    approx_kl = ((ratio - 1) - log_ratio).mean()
+                stats.append([policy_loss.item(), value_loss.item(), entropy.item(), approx_kl.item()])
+
+        seconds += time.perf_counter() - started
+        steps = update * config.steps_per_update
+        steps_per_s = config.steps_per_update / (time.perf_counter() - started)
+        reward_mean = float(np.mean(recent_returns)) if recent_returns else float("nan")
+        policy_loss, value_loss, entropy, approx_kl = np.mean(stats, axis=0)
+        row = dict(zip(PROGRESS_COLUMNS, (
+            update, steps, round(seconds, 2), round(steps_per_s, 1), episodes, round(reward_mean, 4),
+            round(float(np.mean(recent_success)) if recent_success else float("nan"), 4),
+            round(policy_loss, 6), round(value_loss, 6), round(entropy, 6), round(approx_kl, 6)), strict=True))
+        with progress_path.open("a", newline="") as f:
+            csv.DictWriter(f, PROGRESS_COLUMNS).writerow(row)
+        if show_progress:
+            progress.show(update, steps, steps_per_s, reward_mean)
+
+        stopping = stop_after_updates is not None and update - first_update + 1 >= stop_after_updates
+        if update % config.save_every == 0 or update == total_updates or stopping:
+            last = out / "checkpoints" / f"{update:06d}.pt"
+            run = {"world_state": {f.name: getattr(state, f.name) for f in fields(state)},
+                   "hidden": hidden, "episode_start": episode_start, "episode_return": episode_return,
+                   "recent_returns": list(recent_returns), "recent_success": list(recent_success),
+                   "episodes": episodes, "seconds": seconds, "numpy_rng": rng.bit_generator.state,
+                   "torch_rng": torch.get_rng_state()}
+            save_checkpoint(last, net, update=update, env_steps=steps, train_config=config.to_dict(),
+                            optimizer=optimizer.state_dict(), run=run)
+        if stopping:
+            break
+    return last
