@@ -1,0 +1,127 @@
+"""Admin pages: progress per condition and status, median duration, one participant's answers, the exclusion
+flag and the CSV download. They exist only when FOIL_ADMIN_PASSWORD is set; `disabled_router` says so otherwise."""
+
+from __future__ import annotations
+
+import hmac
+import secrets
+import statistics
+from collections import Counter
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi.responses import RedirectResponse, StreamingResponse
+from sqlalchemy import select
+from starlette.datastructures import FormData
+
+from app.context import Context, ContextDep
+from app.database import as_utc
+from app.export import answer_rows, csv_lines
+from app.models import Participant
+from app.security import checked_form
+
+router = APIRouter(prefix="/admin")
+disabled_router = APIRouter()
+FormDep = Annotated[FormData, Depends(checked_form)]
+STATUSES = ["started", "completed", "returned", "declined"]
+
+
+class LoginRequired(Exception):
+    """Raised by `admin_only`; app.main turns it into a redirect to the login page."""
+
+
+def admin_only(request: Request) -> None:
+    if request.session.get("admin") is not True:
+        raise LoginRequired
+
+
+Admin = Depends(admin_only)
+
+
+@disabled_router.api_route("/admin{rest:path}", methods=["GET", "POST"])
+def admin_disabled(request: Request, ctx: ContextDep):
+    return ctx.message(request, "Admin pages are off",
+                       "Set FOIL_ADMIN_PASSWORD (8 characters or more) and restart the server to use them.",
+                       status_code=404)
+
+
+@router.get("/login")
+def login_page(request: Request, ctx: ContextDep):
+    return ctx.render(request, "admin/login.html", error="")
+
+
+@router.post("/login")
+def login(request: Request, ctx: ContextDep, form: FormDep):
+    typed = form.get("password")
+    expected = ctx.settings.admin_password.get_secret_value()
+    if not isinstance(typed, str) or not hmac.compare_digest(typed.encode(), expected.encode()):
+        return ctx.render(request, "admin/login.html", status_code=401, error="Wrong password.")
+    request.session["admin"] = True
+    request.session["csrf"] = secrets.token_urlsafe(32)  # a new token once logged in
+    return RedirectResponse("/admin", status_code=303)
+
+
+@router.post("/logout", dependencies=[Admin])
+def logout(request: Request, form: FormDep):
+    request.session.pop("admin", None)
+    return RedirectResponse("/admin/login", status_code=303)
+
+
+def _overview(ctx: Context, participants: list[Participant]) -> dict:
+    counts = Counter((p.condition, p.status) for p in participants)
+    rows = [(c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions]
+    unassigned = [counts[(None, s)] for s in STATUSES]
+    if any(unassigned):
+        rows.append(("-", "not assigned yet", unassigned))
+    durations = [(as_utc(p.completed_at) - as_utc(p.created_at)).total_seconds()
+                 for p in participants if p.status == "completed" and p.completed_at]
+    return {"rows": rows, "totals": [sum(row[2][i] for row in rows) for i in range(len(STATUSES))],
+            "median_minutes": statistics.median(durations) / 60 if durations else None,
+            "n_completed": len(durations)}
+
+
+@router.get("", dependencies=[Admin])
+def overview(request: Request, ctx: ContextDep):
+    with ctx.db.reading() as session:
+        participants = list(session.scalars(
+            select(Participant).where(Participant.study == ctx.study.study.id).order_by(Participant.id.desc())))
+    return ctx.render(request, "admin/overview.html", statuses=STATUSES, participants=participants,
+                      **_overview(ctx, participants))
+
+
+def _participant(session, ctx: Context, code: str) -> Participant:
+    participant = session.scalar(
+        select(Participant).where(Participant.study == ctx.study.study.id, Participant.code == code))
+    if participant is None:
+        raise HTTPException(404, "No participant with that code.")
+    return participant
+
+
+@router.get("/participants/{code}", dependencies=[Admin])
+def participant_page(code: str, request: Request, ctx: ContextDep):
+    with ctx.db.reading() as session:
+        participant = _participant(session, ctx, code)
+        rows = [row for response in participant.responses for row in answer_rows(ctx.study, participant, response)]
+    condition = None if participant.condition is None else ctx.conditions[participant.condition]
+    return ctx.render(request, "admin/participant.html", participant=participant, rows=rows,
+                      condition=condition.describe(ctx.study) if condition else "not assigned yet",
+                      steps=len(participant.plan or []))
+
+
+@router.post("/participants/{code}/exclusion", dependencies=[Admin])
+def set_exclusion(code: str, request: Request, ctx: ContextDep, form: FormDep):
+    excluded = form.get("excluded")
+    note = form.get("note") or ""
+    if excluded not in ("0", "1") or not isinstance(note, str) or len(note) > 2000:
+        raise HTTPException(400, "Send excluded as 0 or 1 and a note of at most 2000 characters.")
+    with ctx.db.writing() as session:
+        participant = _participant(session, ctx, code)
+        participant.excluded, participant.exclusion_note = excluded == "1", note
+    return RedirectResponse(f"/admin/participants/{code}", status_code=303)
+
+
+@router.get("/export.csv", dependencies=[Admin])
+def export_csv(ctx: ContextDep):
+    filename = f"{ctx.study.study.id}-answers.csv"
+    return StreamingResponse(csv_lines(ctx.db, ctx.study), media_type="text/csv; charset=utf-8",
+                             headers={"content-disposition": f'attachment; filename="{filename}"'})

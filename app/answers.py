@@ -1,0 +1,111 @@
+"""Server-side validation of a submitted screen. Nothing is saved unless every field is valid."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+from starlette.datastructures import FormData
+
+from app.study import ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
+
+VIDEO_EVENT_TYPES = {"play", "pause", "ended", "error", "stalled", "waiting", "seeking", "loaded", "timeout"}
+MAX_VIDEO_EVENTS = 500
+
+
+@dataclass
+class Checked:
+    answers: dict = field(default_factory=dict)
+    errors: dict[str, str] = field(default_factory=dict)  # form field -> message shown next to it
+    video_events: list[dict] = field(default_factory=list)
+    client_ms: int | None = None
+
+    @property
+    def plays(self) -> int:
+        return sum(1 for event in self.video_events if event["type"] == "play")
+
+
+def _one(form: FormData, name: str) -> str | None:
+    """The field's value; None when it is missing, repeated or a file."""
+    values = form.getlist(name)
+    return values[0] if len(values) == 1 and isinstance(values[0], str) else None
+
+
+def _check_question(name: str, question, screen: dict, form: FormData, out: Checked) -> None:
+    labels = [robot["label"] for robot in screen.get("robots", [])]
+    if isinstance(question, ChooseQuestion):
+        value = _one(form, name)
+        if value not in labels:
+            out.errors[name] = "Choose one of the robots." if not value else "That robot is not in this clip."
+        else:
+            out.answers[name] = value
+    elif isinstance(question, TextQuestion):
+        value = _one(form, name) or ""
+        if len(value.strip()) < question.min_length:
+            out.errors[name] = "Please write an answer." if question.min_length == 1 else (
+                f"Please write at least {question.min_length} characters.")
+        elif len(value) > question.max_length:
+            out.errors[name] = f"Please keep this under {question.max_length} characters (you wrote {len(value)})."
+        else:
+            out.answers[name] = value
+    elif isinstance(question, ScaleQuestion):
+        value = _one(form, name)
+        if not value:
+            out.errors[name] = "Choose one point on the scale."
+        elif not value.isdigit() or not 1 <= int(value) <= question.points:
+            out.errors[name] = f"The answer must be a whole number from 1 to {question.points}."
+        else:
+            out.answers[name] = int(value)
+    elif isinstance(question, RankQuestion):
+        ranking = [_one(form, f"{name}-{place}") for place in range(1, len(labels) + 1)]
+        if any(not value for value in ranking):
+            out.errors[name] = "Put a robot in every place of the ranking."
+        elif any(value not in labels for value in ranking):
+            out.errors[name] = "The ranking names a robot that is not in this study."
+        elif len(set(ranking)) != len(ranking):
+            out.errors[name] = "Each robot can take only one place: the ranking has a robot twice."
+        else:
+            out.answers[name] = ranking
+
+
+def _video_events(raw: str | None) -> list[dict] | None:
+    """The browser's log of clip events, as [{"type": "play", "t": ms}, ...]; None when malformed."""
+    if not raw:
+        return []
+    try:
+        events = json.loads(raw)
+    except ValueError:
+        return None
+    if not isinstance(events, list) or len(events) > MAX_VIDEO_EVENTS:
+        return None
+    clean = []
+    for event in events:
+        if not isinstance(event, dict) or event.get("type") not in VIDEO_EVENT_TYPES:
+            return None
+        t = event.get("t")
+        if not isinstance(t, int | float) or isinstance(t, bool) or not 0 <= t < 1e9:
+            return None
+        clean.append({"type": event["type"], "t": int(t)})
+    return clean
+
+
+def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
+    out = Checked()
+    for name in screen.get("questions", []):
+        _check_question(name, study.questions[name], screen, form, out)
+    if screen["kind"] == "attention":
+        value = _one(form, "attention")
+        if value not in screen["options"]:
+            out.errors["attention"] = "Choose one of the answers."
+        else:
+            out.answers["attention"] = value
+    events = _video_events(_one(form, "video_events"))
+    if events is None:
+        out.errors["video"] = "The page sent a malformed record of the clip's playback; reload the page."
+        events = []
+    out.video_events = events
+    if "media" in screen and study.study.require_full_view and not any(e["type"] == "ended" for e in events):
+        out.errors["video"] = "Please watch the clip to the end before going on."
+    client_ms = _one(form, "time_on_page_ms") or ""
+    out.client_ms = int(client_ms) if client_ms.isdigit() and len(client_ms) < 10 else None
+    return out

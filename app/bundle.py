@@ -1,0 +1,165 @@
+"""The study bundle (manifest.json, format `foil.bundle/1`) and how a study's clips are found in it.
+
+A clip is named by (scheme, scenario, pair of agents); the manifest entries whose scheme and scenario are equal
+and whose `agents` are that pair in any order all match. Everything is checked once at start-up: files inside the
+bundle, checksums, and that every clip the study needs is there.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+
+from app.study import ClipRef, Study
+
+FORMAT = "foil.bundle/1"
+
+
+class BundleError(ValueError):
+    """A bundle the server cannot serve; the message names the problem."""
+
+
+class ManifestClip(BaseModel):
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    id: str
+    file: str
+    sha256: str
+    scheme: str
+    scenario: str
+    agents: list[str]
+    labels: list[str]
+    better: str
+    summary: str = ""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ManifestClip:
+        if len(self.labels) != len(self.agents):
+            raise ValueError("labels and agents must have the same length")
+        if self.better not in self.agents:
+            raise ValueError(f"better {self.better!r} is not one of its agents")
+        if len(set(self.labels)) != len(self.labels):
+            raise ValueError("labels must differ from each other")
+        return self
+
+
+class Manifest(BaseModel):
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    format: str
+    clips: list[ManifestClip]
+    agents: dict[str, dict] = {}
+
+
+@dataclass(frozen=True)
+class Bundle:
+    root: Path
+    clips: dict[str, ManifestClip]  # by id
+    paths: dict[str, Path]  # sha256 -> file, what /clips/{sha256}.mp4 serves
+
+    def matching(self, scheme: str, scenario: str, agents: tuple[str, str]) -> list[ManifestClip]:
+        want = set(agents)
+        return [
+            clip for clip in self.clips.values()
+            if clip.scheme == scheme and clip.scenario == scenario and set(clip.agents) == want
+            and len(clip.agents) == 2
+        ]
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def load_bundle(root: str | Path) -> Bundle:
+    root = Path(root).resolve()
+    manifest_path = root / "manifest.json"
+    try:
+        data = json.loads(manifest_path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise BundleError(f"no manifest.json in bundle {root}") from None
+    except (OSError, json.JSONDecodeError) as error:
+        raise BundleError(f"cannot read {manifest_path}: {error}") from None
+    try:
+        manifest = Manifest.model_validate(data)
+    except ValidationError as error:
+        problems = [f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}" for e in error.errors()]
+        raise BundleError(f"{manifest_path} is not a valid manifest:\n" + "\n".join(problems)) from None
+    if manifest.format != FORMAT:
+        raise BundleError(f"{manifest_path}: format is {manifest.format!r}, this server reads {FORMAT!r}")
+    clips: dict[str, ManifestClip] = {}
+    paths: dict[str, Path] = {}
+    problems = []
+    for clip in manifest.clips:
+        if clip.id in clips:
+            problems.append(f"clip id {clip.id!r} appears twice")
+        clips[clip.id] = clip
+        path = (root / clip.file).resolve()
+        if not path.is_relative_to(root):
+            problems.append(f"clip {clip.id!r}: file {clip.file!r} lies outside the bundle")
+        elif not path.is_file():
+            problems.append(f"clip {clip.id!r}: file {clip.file!r} is missing")
+        elif _sha256(path) != clip.sha256.lower():
+            problems.append(f"clip {clip.id!r}: {clip.file!r} does not match its sha256 (changed after bundling?)")
+        else:
+            paths[clip.sha256.lower()] = path
+    if problems:
+        raise BundleError(f"bundle {root}:\n" + "\n".join(problems))
+    return Bundle(root=root, clips=clips, paths=paths)
+
+
+def _part_scenarios(study: Study, part_index: int) -> list[str]:
+    return list(dict.fromkeys(study.part_scenario(part_index, r) for r in study.rotations()))
+
+
+def required_clips(study: Study) -> list[tuple[ClipRef, str]]:
+    """Every clip the study can show under any condition, each with where the study asks for it."""
+    refs = []
+    if study.example is not None:
+        refs.append((study.example, "[example]"))
+    for p, part in enumerate(study.parts):
+        pairs = part.pairs if part.kind == "pairwise" else list(itertools.combinations(part.agents, 2))
+        for scenario in _part_scenarios(study, p):
+            for scheme in study.design.schemes:
+                for pair in pairs:
+                    refs.append((ClipRef(scheme=scheme, scenario=scenario, agents=tuple(pair)), f"parts[{p}]"))
+    return refs
+
+
+def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
+    """Refuse a bundle that lacks a clip the study needs, or whose ranking clips label one robot two ways."""
+    problems = []
+    for ref, where in required_clips(study):
+        if not bundle.matching(ref.scheme, ref.scenario, ref.agents):
+            problems.append(
+                f"{where} needs a clip of scheme {ref.scheme!r}, scenario {ref.scenario!r}, agents "
+                f"{ref.agents[0]!r} and {ref.agents[1]!r}; the manifest has none"
+            )
+    for p, part in enumerate(study.parts):
+        if part.kind != "ranking":
+            continue
+        for scheme in study.design.schemes:
+            for scenario in _part_scenarios(study, p):
+                labels: dict[str, set[str]] = {}
+                for pair in itertools.combinations(part.agents, 2):
+                    for clip in bundle.matching(scheme, scenario, pair):
+                        for agent, label in zip(clip.agents, clip.labels, strict=True):
+                            labels.setdefault(agent, set()).add(label)
+                if any(len(found) > 1 for found in labels.values()) or len(
+                    {frozenset(found) for found in labels.values()}
+                ) != len(labels):
+                    shown = {agent: sorted(found) for agent, found in labels.items()}
+                    problems.append(
+                        f"parts[{p}]: the ranking clips of scheme {scheme!r}, scenario {scenario!r} label the "
+                        f"robots {shown}; a ranking needs one label per robot and a different label for each"
+                    )
+    if problems:
+        raise BundleError("the bundle does not match the study:\n" + "\n".join(dict.fromkeys(problems)))

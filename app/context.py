@@ -1,0 +1,39 @@
+"""What every request needs, built once per process by app.main.create_app."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, Request
+from fastapi.templating import Jinja2Templates
+
+from app.assignment import Condition
+from app.bundle import Bundle
+from app.database import Database
+from app.settings import Settings
+from app.study import Study
+
+
+@dataclass(frozen=True)
+class Context:
+    settings: Settings
+    study: Study
+    bundle: Bundle
+    conditions: list[Condition]
+    db: Database
+    templates: Jinja2Templates
+
+    def render(self, request: Request, name: str, status_code: int = 200, **context):
+        return self.templates.TemplateResponse(request, name, {"study": self.study, **context},
+                                               status_code=status_code)
+
+    def message(self, request: Request, title: str, text: str, status_code: int = 200, **context):
+        return self.render(request, "message.html", status_code=status_code, title=title, text=text, **context)
+
+
+def get_context(request: Request) -> Context:
+    return request.app.state.context
+
+
+ContextDep = Annotated[Context, Depends(get_context)]

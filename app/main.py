@@ -1,0 +1,96 @@
+"""The FastAPI application: everything is loaded and checked once, at start-up, so a bad study file, a bundle
+that does not match it or an unmigrated database stops the server with a message instead of failing participants."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import RedirectResponse
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+from sqlalchemy.exc import IntegrityError
+from starlette.middleware.sessions import SessionMiddleware
+
+from app import admin_pages, media, participant_pages
+from app.assignment import conditions
+from app.bundle import check_study_against_bundle, load_bundle
+from app.context import Context
+from app.database import Database, check_migrated
+from app.security import BodyLimitMiddleware, SecurityHeadersMiddleware, csrf_token, stored_secret
+from app.settings import Settings
+from app.study import load_study
+
+log = logging.getLogger("foil.server")
+
+
+def _cookie_secret(settings: Settings, db: Database) -> str:
+    if settings.secret_key is not None:
+        return settings.secret_key.get_secret_value()
+    try:
+        with db.writing() as session:
+            return stored_secret(session)
+    except IntegrityError:  # another worker created it at the same moment
+        with db.reading() as session:
+            return stored_secret(session)
+
+
+def _paragraphs(text: str) -> list[str]:
+    return [" ".join(block.split()) for block in text.strip().split("\n\n") if block.strip()]
+
+
+def create_app(settings: Settings) -> FastAPI:
+    """Build the app for an already migrated database (`foil serve` migrates first)."""
+    study = load_study(settings.study_path())
+    bundle = load_bundle(settings.bundle_dir)
+    check_study_against_bundle(study, bundle)
+    db = Database(settings.database_url)
+    check_migrated(db.engine)
+
+    templates = Jinja2Templates(directory=str(settings.templates_dir))
+    templates.env.globals["csrf_token"] = csrf_token
+    templates.env.filters["paragraphs"] = _paragraphs
+    context = Context(settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db,
+                      templates=templates)
+
+    app = FastAPI(title="Foil survey", docs_url=None, redoc_url=None, openapi_url=None)
+    app.state.context = context
+    app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
+    app.include_router(participant_pages.router)
+    app.include_router(media.router)
+    if settings.admin_password is None:
+        log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off")
+        app.include_router(admin_pages.disabled_router)
+    else:
+        app.include_router(admin_pages.router)
+
+    @app.exception_handler(HTTPException)
+    async def _http_error(request: Request, error: HTTPException):
+        titles = {400: "Bad request", 403: "Not allowed", 404: "Page not found", 405: "Not allowed",
+                  409: "Not available yet", 413: "Too large"}
+        text = error.detail if isinstance(error.detail, str) else "The request could not be handled."
+        return context.message(request, titles.get(error.status_code, "Error"), text,
+                               status_code=error.status_code)
+
+    @app.exception_handler(admin_pages.LoginRequired)
+    async def _login_first(request: Request, error: admin_pages.LoginRequired):
+        return RedirectResponse("/admin/login", status_code=303)
+
+    @app.exception_handler(RequestValidationError)
+    async def _bad_request(request: Request, error: RequestValidationError):
+        fields = ", ".join(str(e["loc"][-1]) for e in error.errors())
+        return context.message(request, "Bad request", f"The request is missing or has invalid fields: {fields}.",
+                               status_code=400)
+
+    app.add_middleware(SessionMiddleware, secret_key=_cookie_secret(settings, db), session_cookie="foil_session",
+                       max_age=settings.session_max_age_s, same_site=settings.cookie_samesite,
+                       https_only=settings.cookie_secure)
+    app.add_middleware(SecurityHeadersMiddleware, frame_ancestors=settings.frame_ancestors)
+    app.add_middleware(BodyLimitMiddleware, limit=settings.max_body_bytes)
+    return app
+
+
+def app_from_env() -> FastAPI:
+    """For `uvicorn --factory app.main:app_from_env --workers N` with FOIL_* variables (run migrations first)."""
+    return create_app(Settings())

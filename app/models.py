@@ -1,0 +1,87 @@
+"""Database tables. Every change here comes with an Alembic revision in migrations/versions/."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+
+from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Integer, MetaData, String, Text, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+# Stable constraint names, so migrations can refer to them on SQLite (batch mode) and PostgreSQL alike.
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+
+
+class ServerSetting(Base):
+    """Values the server generates once and every worker shares (the cookie signing key)."""
+
+    __tablename__ = "server_setting"
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[str] = mapped_column(Text)
+
+
+class Participant(Base):
+    """One person taking one study. `step` indexes `plan`, the screens they see, built once at assignment."""
+
+    __tablename__ = "participant"
+    __table_args__ = (
+        # One record per platform identity: coming back resumes it, concurrent first arrivals cannot duplicate it.
+        UniqueConstraint("study", "platform", "external_id", name="uq_participant_identity"),
+        # One arrival per slot: the balanced assignment's counter, safe across processes.
+        UniqueConstraint("study", "slot", name="uq_participant_slot"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    code: Mapped[str] = mapped_column(String(32), unique=True)  # random public id kept in the session cookie
+    study: Mapped[str] = mapped_column(String(64))
+    platform: Mapped[str] = mapped_column(String(16))  # prolific | mturk | none
+    external_id: Mapped[str | None] = mapped_column(String(128))  # PROLIFIC_PID / workerId; none when anonymous
+    platform_study_id: Mapped[str | None] = mapped_column(String(128))  # STUDY_ID / hitId
+    platform_session_id: Mapped[str | None] = mapped_column(String(128))  # SESSION_ID / assignmentId
+    status: Mapped[str] = mapped_column(String(16), default="started")  # started|completed|returned|declined
+    slot: Mapped[int | None] = mapped_column(Integer)  # arrival number for balanced assignment
+    condition: Mapped[int | None] = mapped_column(Integer)  # 0-based index into the study's conditions
+    plan: Mapped[list | None] = mapped_column(JSON)
+    step: Mapped[int] = mapped_column(Integer, default=0)
+    step_started_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    user_agent: Mapped[str] = mapped_column(String(512), default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    completed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    excluded: Mapped[bool] = mapped_column(Boolean, default=False)
+    exclusion_note: Mapped[str] = mapped_column(Text, default="")
+    attention_failures: Mapped[int] = mapped_column(Integer, default=0)
+
+    responses: Mapped[list[Response]] = relationship(back_populates="participant", order_by="Response.step")
+
+
+class Response(Base):
+    """What a participant submitted on one screen; one row per (participant, step) makes resubmits harmless."""
+
+    __tablename__ = "response"
+    __table_args__ = (UniqueConstraint("participant_id", "step", name="uq_response_step"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    participant_id: Mapped[int] = mapped_column(ForeignKey("participant.id", ondelete="CASCADE"), index=True)
+    step: Mapped[int] = mapped_column(Integer)
+    kind: Mapped[str] = mapped_column(String(16))  # instructions | pairwise | watch | ranking | attention
+    answers: Mapped[dict] = mapped_column(JSON, default=dict)  # question name -> value as submitted
+    video_events: Mapped[list] = mapped_column(JSON, default=list)  # [{"type": "play", "t": ms}, ...]
+    plays: Mapped[int] = mapped_column(Integer, default=0)
+    client_ms: Mapped[int | None] = mapped_column(Integer)  # time on page measured by the browser
+    server_ms: Mapped[int] = mapped_column(Integer)  # from the screen becoming current to this submission
+    submitted_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    participant: Mapped[Participant] = relationship(back_populates="responses")

@@ -1,0 +1,272 @@
+"""The participant's pages. State lives on the server (like oTree): `/study` always shows the participant's
+current screen, so a reload, the back button or reopening the link shows the same page, and a screen can be
+answered only when it is the current one."""
+
+from __future__ import annotations
+
+import random
+import re
+import secrets
+from datetime import UTC, datetime
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi.responses import RedirectResponse
+from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+from starlette.datastructures import FormData
+
+from app.answers import check_screen
+from app.assignment import condition_for_slot, next_slot
+from app.context import Context, ContextDep
+from app.database import as_utc
+from app.models import Participant, Response
+from app.plan import build_plan
+from app.security import checked_form
+
+router = APIRouter()
+FormDep = Annotated[FormData, Depends(checked_form)]
+
+MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
+PLATFORM_PARAMS = {  # external id, platform study id, platform session id
+    "prolific": ("PROLIFIC_PID", "STUDY_ID", "SESSION_ID"),
+    "mturk": ("workerId", "hitId", "assignmentId"),
+}
+PLATFORM_NAMES = {"prolific": "Prolific", "mturk": "Amazon Mechanical Turk"}
+ID_VALUE = re.compile(r"^[A-Za-z0-9_.:-]{1,128}$")
+MOBILE = re.compile(r"Mobi|Android|iPhone|iPad|iPod", re.IGNORECASE)
+
+
+def _see_current() -> RedirectResponse:
+    return RedirectResponse("/study", status_code=303)
+
+
+def _platform_identity(platform: str, params) -> dict:
+    names = PLATFORM_PARAMS[platform]
+    values = [params.get(name, "") for name in names]
+    if not values[0]:
+        raise HTTPException(400, f"This link must be opened from {PLATFORM_NAMES[platform]}: it lacks {names[0]}. "
+                                 "Please go back to the study's page there and use its link.")
+    for name, value in zip(names, values, strict=True):
+        if value and not ID_VALUE.match(value):
+            raise HTTPException(400, f"The link's {name} is not a valid identifier.")
+    return {"external_id": values[0], "platform_study_id": values[1] or None,
+            "platform_session_id": values[2] or None}
+
+
+def _find(session: Session, ctx: Context, **where) -> Participant | None:
+    query = select(Participant).where(Participant.study == ctx.study.study.id)
+    for column, value in where.items():
+        query = query.where(getattr(Participant, column) == value)
+    return session.scalar(query)
+
+
+def _current(session: Session, ctx: Context, request: Request) -> Participant:
+    code = request.session.get("participant")
+    participant = _find(session, ctx, code=code) if isinstance(code, str) else None
+    if participant is None:
+        raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
+                                 "expired). Please open the study again from the link you were given.")
+    return participant
+
+
+@router.get("/")
+def landing(request: Request, ctx: ContextDep):
+    info = ctx.study.study
+    if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
+        return ctx.render(request, "consent.html", preview=True)
+    if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
+        return ctx.message(request, "Please use a computer",
+                           "This study needs a laptop or desktop computer. Please open the link there.")
+    with ctx.db.reading() as session:
+        if info.platform != "none":
+            identity = _platform_identity(info.platform, request.query_params)
+            known = _find(session, ctx, platform=info.platform, external_id=identity["external_id"])
+            request.session["identity"] = identity
+        else:
+            code = request.session.get("participant")
+            known = _find(session, ctx, code=code) if isinstance(code, str) else None
+    if known is not None:
+        request.session["participant"] = known.code
+        return _see_current()
+    request.session.pop("participant", None)
+    return ctx.render(request, "consent.html", preview=False)
+
+
+def _enter(ctx: Context, identity: dict, *, agreed: bool, user_agent: str) -> str:
+    """Create the participant (or find the one a concurrent request created) and assign them; returns the code.
+
+    Conflicts on the unique identity or slot make the transaction fail as a whole and the loop tries again."""
+    info = ctx.study.study
+    for _ in range(50):
+        try:
+            with ctx.db.writing() as session:
+                if identity.get("external_id"):
+                    known = _find(session, ctx, platform=info.platform, external_id=identity["external_id"])
+                    if known is not None:
+                        return known.code
+                participant = Participant(
+                    code=secrets.token_urlsafe(16), study=info.id, platform=info.platform,
+                    status="started" if agreed else "declined", user_agent=user_agent[:512], **identity,
+                )
+                if agreed and info.assignment == "balanced":
+                    participant.slot = next_slot(session, study=info.id)
+                    participant.condition = condition_for_slot(
+                        seed=info.seed, n_conditions=len(ctx.conditions), slot=participant.slot)
+                session.add(participant)
+                session.flush()
+                if participant.condition is not None:
+                    _assign_plan(ctx, participant)
+                return participant.code
+        except IntegrityError:
+            continue
+    raise HTTPException(503, "The study is very busy at this moment. Please wait a few seconds and try again.")
+
+
+def _assign_plan(ctx: Context, participant: Participant) -> None:
+    rng = random.Random(f"{ctx.study.study.seed}:participant:{participant.id}")
+    condition = ctx.conditions[participant.condition]
+    participant.plan = build_plan(ctx.study, ctx.bundle, condition, rng)
+    participant.step = 0
+    participant.step_started_at = datetime.now(UTC)
+
+
+@router.post("/consent")
+def consent(request: Request, ctx: ContextDep, form: FormDep):
+    choice = form.get("choice")
+    if choice not in ("agree", "decline"):
+        raise HTTPException(400, "Please choose whether you agree to take part.")
+    identity = {}
+    if ctx.study.study.platform != "none":
+        identity = request.session.get("identity")
+        if not isinstance(identity, dict) or not identity.get("external_id"):
+            raise HTTPException(400, "Please open the study from the link you were given.")
+    code = _enter(ctx, identity, agreed=choice == "agree", user_agent=request.headers.get("user-agent", ""))
+    request.session["participant"] = code
+    request.session.pop("identity", None)
+    return _see_current()
+
+
+def screen_view(ctx: Context, screen: dict) -> dict:
+    """What a page may know about a screen: labels and the clip's address, never agent names or ground truth."""
+    study = ctx.study
+    view = {"kind": screen["kind"], "progress": screen.get("progress", ""),
+            "labels": [robot["label"] for robot in screen.get("robots", [])],
+            "questions": [(name, study.questions[name]) for name in screen.get("questions", [])]}
+    if "part" in screen:
+        part = study.parts[screen["part"] - 1]
+        view["part_title"], view["part_intro"] = part.title, part.intro
+    if "media" in screen:
+        view["clip_url"] = f"/clips/{screen['media']}.mp4"
+    if screen["kind"] == "attention":
+        check = study.attention_checks[screen["check"]]
+        view["attention_text"], view["options"] = check.text, screen["options"]
+    if screen["kind"] == "instructions" and study.example is not None:
+        example = min(ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents),
+                      key=lambda clip: clip.id)
+        view["clip_url"] = f"/clips/{example.sha256.lower()}.mp4"
+    return view
+
+
+def _render_screen(request: Request, ctx: Context, participant: Participant, *, errors=None, values=None,
+                   events: str = "", status_code: int = 200):
+    screen = participant.plan[participant.step]
+    return ctx.render(
+        request, "instructions.html" if screen["kind"] == "instructions" else "screen.html",
+        status_code=status_code, screen=screen_view(ctx, screen), step=participant.step, errors=errors or {},
+        values=values or {}, video_events=events, watched='"ended"' in events,
+    )
+
+
+def _status_page(request: Request, ctx: Context, participant: Participant):
+    texts = ctx.study.texts
+    if participant.status == "declined":
+        return ctx.message(request, "Thank you", texts.declined)
+    if participant.status == "returned":
+        return ctx.message(request, "You have left the study",
+                           "You chose to stop taking part, so the study cannot be taken again from this link. "
+                           "If you came from Prolific, please return your submission there.")
+    return ctx.render(request, "complete.html", completion=ctx.study.completion)
+
+
+@router.get("/study")
+def current_page(request: Request, ctx: ContextDep):
+    with ctx.db.reading() as session:
+        participant = _current(session, ctx, request)
+    if participant.status != "started":
+        return _status_page(request, ctx, participant)
+    if participant.condition is None:
+        return ctx.render(request, "choose.html", n_conditions=len(ctx.conditions), error="")
+    return _render_screen(request, ctx, participant)
+
+
+@router.post("/study")
+def submit(request: Request, ctx: ContextDep, form: FormDep):
+    step = form.get("step")
+    if not isinstance(step, str) or not step.isdigit() or len(step) > 6:
+        raise HTTPException(400, "The form is missing its step number; reload the page and try again.")
+    step = int(step)
+    try:
+        with ctx.db.writing() as session:
+            participant = _current(session, ctx, request)
+            if participant.status != "started" or participant.plan is None or step < participant.step:
+                return _see_current()  # already answered: a double click or the back button; keep the first
+            if step > participant.step:
+                raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
+            screen = participant.plan[step]
+            checked = check_screen(ctx.study, screen, form)
+            if not checked.errors:
+                now = datetime.now(UTC)
+                session.add(Response(
+                    participant_id=participant.id, step=step, kind=screen["kind"], answers=checked.answers,
+                    video_events=checked.video_events, plays=checked.plays, client_ms=checked.client_ms,
+                    server_ms=int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+                    submitted_at=now,
+                ))
+                if screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]:
+                    participant.attention_failures += 1
+                participant.step = step + 1
+                participant.step_started_at = now
+                if participant.step == len(participant.plan):
+                    participant.status, participant.completed_at = "completed", now
+                return _see_current()
+    except IntegrityError:
+        return _see_current()  # the same screen was saved by a concurrent submission
+    values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
+    return _render_screen(request, ctx, participant, errors=checked.errors, values=values,
+                          events=str(form.get("video_events") or "")[:20000], status_code=422)
+
+
+@router.post("/condition")
+def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
+    """The paper's self-selected assignment: the participant picks a number from 1 to N."""
+    number = form.get("number")
+    n = len(ctx.conditions)
+    if not isinstance(number, str) or not number.isdigit() or not 1 <= int(number) <= n:
+        with ctx.db.reading() as session:
+            _current(session, ctx, request)
+        return ctx.render(request, "choose.html", status_code=422, n_conditions=n,
+                          error=f"Please choose a number from 1 to {n}.")
+    with ctx.db.writing() as session:
+        participant = _current(session, ctx, request)
+        if participant.status == "started" and participant.condition is None:
+            participant.condition = int(number) - 1
+            _assign_plan(ctx, participant)
+    return _see_current()
+
+
+@router.get("/leave")
+def leave_confirm(request: Request, ctx: ContextDep):
+    with ctx.db.reading() as session:
+        _current(session, ctx, request)
+    return ctx.render(request, "leave.html")
+
+
+@router.post("/leave")
+def leave(request: Request, ctx: ContextDep, form: FormDep):
+    with ctx.db.writing() as session:
+        participant = _current(session, ctx, request)
+        if participant.status == "started":
+            participant.status = "returned"
+    return _see_current()

@@ -1,0 +1,37 @@
+"""`foil serve`: apply the migrations, check the study and bundle, then run the server with uvicorn."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from app.database import migrate
+from app.settings import Settings
+
+
+def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: str, port: int) -> int:
+    import uvicorn
+
+    from app.main import create_app
+
+    given = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
+    settings = Settings(**{key: value for key, value in given.items() if value is not None})
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
+    migrate(settings.database_url)
+    app = create_app(settings)
+    logging.getLogger("foil.server").info(
+        "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/",
+        app.state.context.study.study.id, settings.study_path(), settings.bundle_dir,
+        _shown(settings.database_url), host, port)
+    uvicorn.run(app, host=host, port=port, proxy_headers=True, server_header=False)
+    return 0
+
+
+def _shown(url: str) -> str:
+    """The database URL without its password, and SQLite files as absolute paths."""
+    from sqlalchemy.engine import make_url
+
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite" and parsed.database:
+        return f"sqlite file {Path(parsed.database).resolve()}"
+    return parsed.render_as_string(hide_password=True)

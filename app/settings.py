@@ -1,0 +1,42 @@
+"""Server settings, read from FOIL_* environment variables (or given directly by `foil serve` and the tests)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, SecretStr, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="FOIL_", extra="ignore")
+
+    bundle_dir: Path
+    study_file: Path | None = None  # default: study.toml inside the bundle
+    database_url: str = "sqlite:///foil.sqlite3"
+    # Without it, the admin pages are off. No default on purpose.
+    admin_password: SecretStr | None = None
+    # Signs the session cookies. Without it, one is generated once and kept in the database.
+    secret_key: SecretStr | None = None
+    cookie_secure: bool = False  # set when serving over HTTPS (required for SameSite=None)
+    cookie_samesite: Literal["lax", "strict", "none"] = "lax"
+    session_max_age_s: int = 7 * 24 * 3600
+    max_body_bytes: int = Field(default=64 * 1024, ge=1024)
+    # Who may show the pages in a frame (Content-Security-Policy frame-ancestors); none by default.
+    frame_ancestors: str = "'none'"
+    templates_dir: Path = REPO_ROOT / "templates"
+    static_dir: Path = REPO_ROOT / "static"
+
+    @model_validator(mode="after")
+    def _sane(self) -> Settings:
+        if self.admin_password is not None and len(self.admin_password.get_secret_value()) < 8:
+            raise ValueError("FOIL_ADMIN_PASSWORD must be at least 8 characters long")
+        if self.cookie_samesite == "none" and not self.cookie_secure:
+            raise ValueError("FOIL_COOKIE_SAMESITE=none needs FOIL_COOKIE_SECURE=1 (browsers refuse it otherwise)")
+        return self
+
+    def study_path(self) -> Path:
+        return self.study_file or self.bundle_dir / "study.toml"

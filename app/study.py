@@ -1,0 +1,318 @@
+"""The study definition: a TOML file validated with pydantic, with errors that name the line and the field.
+
+The file says what participants see (texts, parts, questions), how they are assigned (design), where they come from
+(platform) and where they go at the end (completion). A top-level `[build]` table belongs to `foil bundle` and is
+accepted here without being read.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+
+class StudyError(ValueError):
+    """A study file that cannot be used; the message names the file, line and field."""
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+Text = Annotated[str, Field(min_length=1)]
+
+
+class ClipRef(Strict):
+    """A clip named the way the bundle names it: scheme, scenario and the agents it shows (any on-screen order)."""
+
+    scheme: Text
+    scenario: Text
+    agents: tuple[Text, Text]
+
+
+class StudyInfo(Strict):
+    id: Annotated[str, Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$")]
+    title: Text
+    platform: Literal["prolific", "mturk", "none"]
+    assignment: Literal["balanced", "self-select"] = "balanced"
+    seed: int
+    device: Literal["any", "desktop"] = "any"
+    require_full_view: bool = True
+    preload_timeout_s: Annotated[float, Field(gt=0, le=300)] = 20.0
+    estimated_minutes: Annotated[int, Field(gt=0)] | None = None
+    contact: str = ""
+
+
+class Design(Strict):
+    schemes: Annotated[list[Text], Field(min_length=1)]
+    scheme_factor: Literal["within", "between"] = "within"
+    scenarios: Annotated[list[Text], Field(min_length=1)]
+    counterbalance_scenarios: bool = True
+    counterbalance_scheme_order: bool = True
+
+    @field_validator("schemes", "scenarios")
+    @classmethod
+    def _distinct(cls, values: list[str]) -> list[str]:
+        if len(set(values)) != len(values):
+            raise ValueError("names must not repeat")
+        return values
+
+
+class Texts(Strict):
+    consent: Text
+    instructions: Text
+    agree: Text = "I agree to take part"
+    decline: Text = "I do not agree"
+    declined: Text = "You chose not to take part. Thank you for your time; you can close this page."
+    completion: Text = "Thank you! You have finished the study."
+    preview: Text = "Accept the HIT to start the study."
+    watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
+    example_caption: Text = "An example: two robots (the coloured discs) walk to the same goal through a crowd."
+
+
+class Completion(Strict):
+    code: str = ""
+    redirect_url: Annotated[str, Field(pattern=r"^(https://\S+)?$")] = ""
+
+    @model_validator(mode="after")
+    def _something(self) -> Completion:
+        if not self.code and not self.redirect_url:
+            raise ValueError("give a completion code, a redirect_url (https://...), or both")
+        return self
+
+
+class ChooseQuestion(Strict):
+    """Pick one of the robots shown in the clip."""
+
+    type: Literal["choose"]
+    text: Text
+
+
+class TextQuestion(Strict):
+    type: Literal["text"]
+    text: Text
+    min_length: Annotated[int, Field(ge=1)] = 1
+    max_length: Annotated[int, Field(ge=1, le=10_000)] = 2000
+    rows: Annotated[int, Field(ge=1, le=20)] = 3
+
+
+class ScaleQuestion(Strict):
+    """Points 1..n; `anchors` label both ends, `labels` every point (e.g. a Likert scale)."""
+
+    type: Literal["scale"]
+    text: Text
+    points: Annotated[int, Field(ge=2, le=11)]
+    anchors: tuple[Text, Text] | None = None
+    labels: list[Text] | None = None
+
+    @model_validator(mode="after")
+    def _labelled(self) -> ScaleQuestion:
+        if self.labels is None and self.anchors is None:
+            raise ValueError("label the scale: give anchors = [low, high] or labels = [one per point]")
+        if self.labels is not None and len(self.labels) != self.points:
+            raise ValueError(f"labels has {len(self.labels)} entries but points = {self.points}")
+        return self
+
+    def point_labels(self) -> list[str]:
+        """Text for every point: the given labels, or the anchors at the ends and the number in between."""
+        if self.labels is not None:
+            return list(self.labels)
+        low, high = self.anchors
+        return [low if i == 1 else high if i == self.points else str(i) for i in range(1, self.points + 1)]
+
+
+class RankQuestion(Strict):
+    """Order every robot of a ranking part from best to worst."""
+
+    type: Literal["rank"]
+    text: Text
+
+
+Question = Annotated[
+    ChooseQuestion | TextQuestion | ScaleQuestion | RankQuestion, Field(discriminator="type")
+]
+
+
+class PairwisePart(Strict):
+    """One screen per clip: the clip of each pair under each scheme, answered on its own."""
+
+    kind: Literal["pairwise"]
+    title: Text
+    intro: str = ""
+    pairs: Annotated[list[tuple[Text, Text]], Field(min_length=1)]
+    order: Literal["shuffled", "blocked"] = "shuffled"
+    questions: Annotated[list[Text], Field(min_length=1)]
+
+
+class RankingPart(Strict):
+    """Per scheme: one screen per pairwise clip of `agents`, then one screen ranking them all."""
+
+    kind: Literal["ranking"]
+    title: Text
+    intro: str = ""
+    agents: Annotated[list[Text], Field(min_length=2)]
+    questions: Annotated[list[Text], Field(min_length=1)]
+
+
+Part = Annotated[PairwisePart | RankingPart, Field(discriminator="kind")]
+
+
+class AttentionCheck(Strict):
+    """An instructed-response item shown after screen `after` of part `part` (both counted from 1)."""
+
+    part: Annotated[int, Field(ge=1)]
+    after: Annotated[int, Field(ge=0)]
+    text: Text
+    options: Annotated[list[Text], Field(min_length=2)]
+    expected: Text
+
+    @model_validator(mode="after")
+    def _expected_is_an_option(self) -> AttentionCheck:
+        if self.expected not in self.options:
+            raise ValueError(f"expected {self.expected!r} is not one of the options")
+        return self
+
+
+class Study(Strict):
+    study: StudyInfo
+    design: Design
+    texts: Texts
+    completion: Completion
+    example: ClipRef | None = None
+    parts: Annotated[list[Part], Field(min_length=1)]
+    questions: dict[str, Question]
+    attention_checks: list[AttentionCheck] = []
+    build: dict | None = None  # read by `foil bundle`, not by the server
+
+    def rotations(self) -> range:
+        """How far the scenarios are rotated across parts, one value per scenario counterbalancing level."""
+        counterbalanced = self.design.counterbalance_scenarios
+        return range(len(self.design.scenarios) if counterbalanced else 1)
+
+    def part_scenario(self, part_index: int, rotation: int) -> str:
+        """The scenario feeding a part: parts take the design's scenarios in turn, rotated per condition."""
+        return self.design.scenarios[(part_index + rotation) % len(self.design.scenarios)]
+
+
+def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
+    """Checks across tables that pydantic's per-field validation cannot see, as (location, message)."""
+    problems = []
+    for name in study.questions:
+        if not re.fullmatch(r"[a-z][a-z0-9_]{0,39}", name):
+            problems.append((("questions", name), "question names are lower_snake_case, at most 40 characters"))
+    for p, part in enumerate(study.parts):
+        allowed = {"pairwise": {"choose", "text", "scale"}, "ranking": {"rank", "text", "scale"}}[part.kind]
+        for q, name in enumerate(part.questions):
+            question = study.questions.get(name)
+            if question is None:
+                problems.append((("parts", p, "questions", q), f"no question named {name!r} in [questions]"))
+            elif question.type not in allowed:
+                message = f"a {question.type!r} question cannot be asked in a {part.kind} part"
+                problems.append((("parts", p, "questions", q), message))
+        if part.kind == "ranking":
+            ranks = [n for n in part.questions if getattr(study.questions.get(n), "type", None) == "rank"]
+            if len(ranks) != 1:
+                problems.append((("parts", p, "questions"), "a ranking part asks exactly one 'rank' question"))
+            if len(set(part.agents)) != len(part.agents):
+                problems.append((("parts", p, "agents"), "agents must not repeat"))
+        else:
+            for i, pair in enumerate(part.pairs):
+                if pair[0] == pair[1]:
+                    problems.append((("parts", p, "pairs", i), "a pair needs two different agents"))
+    for c, check in enumerate(study.attention_checks):
+        if check.part > len(study.parts):
+            problems.append((("attention_checks", c, "part"), f"there are only {len(study.parts)} parts"))
+    return problems
+
+
+def _table_path(header: str, arrays: dict[tuple, int]) -> tuple:
+    """Resolve a dotted header to a path with the current index of every array-of-tables along it."""
+    path: tuple = ()
+    for name in header.split("."):
+        path += (name.strip().strip('"'),)
+        if path in arrays:
+            path += (arrays[path],)
+    return path
+
+
+def locate(text: str, loc: tuple) -> int | None:
+    """The line of `text` that best matches a pydantic error location (the deepest key or table defining it)."""
+    want = tuple(str(x) for x in loc)
+    arrays: dict[tuple, int] = {}
+    table: tuple = ()
+    best, best_depth = None, -1
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if line.startswith("[["):
+            names = _table_path(line[2 : line.find("]]")], arrays)
+            arrays[names] = arrays.get(names, -1) + 1
+            table = names + (arrays[names],)
+            path = table
+        elif line.startswith("["):
+            table = _table_path(line[1 : line.find("]")], arrays)
+            path = table
+        elif "=" in line and not line.startswith("#"):
+            key = line.split("=", 1)[0].strip()
+            path = table + tuple(k.strip().strip('"') for k in key.split("."))
+        else:
+            continue
+        path = tuple(str(x) for x in path)
+        if want[: len(path)] == path and len(path) > best_depth:
+            best, best_depth = number, len(path)
+    return best
+
+
+def _field(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def _loc_without_union_tags(loc: tuple) -> tuple:
+    """Pydantic puts the chosen union member (`questions.NAME.scale...`) in the location; the file does not."""
+    tags = {"parts": {"pairwise", "ranking"}, "questions": {"choose", "text", "scale", "rank"}}
+    if len(loc) >= 3 and loc[0] in tags and loc[2] in tags[loc[0]]:
+        return loc[:2] + loc[3:]
+    return loc
+
+
+def parse_study(text: str, source: str = "study file") -> Study:
+    """Parse and validate study TOML; raise StudyError listing every problem with its line and field."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise StudyError(f"{source}: not valid TOML: {error}") from None
+    problems: list[tuple[tuple, str]] = []
+    try:
+        study = Study.model_validate(data)
+    except ValidationError as error:
+        for item in error.errors():
+            loc = _loc_without_union_tags(item["loc"])
+            message = item["msg"].removeprefix("Value error, ")
+            if item["type"] == "extra_forbidden":
+                message = "unknown key (check the spelling; see docs/survey.md for the keys a study file takes)"
+            problems.append((loc, message))
+    else:
+        problems = _reference_problems(study)
+    if problems:
+        lines = []
+        for loc, message in problems:
+            line = locate(text, loc)
+            where = f"line {line}" if line else "no line"
+            lines.append(f"{source}, {where}, {_field(loc)}: {message}")
+        raise StudyError("\n".join(lines))
+    return study
+
+
+def load_study(path: str | Path) -> Study:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as error:
+        raise StudyError(f"cannot read study file {path}: {error.strerror}") from None
+    return parse_study(text, source=str(path))

@@ -1,0 +1,208 @@
+"""Fixtures for the survey server: a real bundle of tiny H.264 clips, the shipped paper study (with names that are
+easy to search for in pages), a real database per test, and a bot that fills in whatever form a page shows."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import os
+import re
+import shutil
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import imageio_ffmpeg
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import create_engine, text
+
+from app.database import migrate
+from app.main import create_app
+from app.settings import Settings
+
+REPO = Path(__file__).resolve().parents[2]
+PAPER_STUDY = REPO / "studies" / "paper.toml"
+# The paper's names, renamed so that a test can assert they never appear in a participant's page.
+SECRET_NAMES = {
+    "lo": "agentlowsecret", "med": "agentmedsecret", "hi": "agenthighsecret",
+    "adaptive": "schemeadaptivesecret", "nfirst": "schemenfirstsecret",
+    "paper-bl-tr": "scenarioonesecret", "paper-tl-br": "scenariotwosecret", "paper-code": "scenarioexamplesecret",
+}
+AGENT_RANK = ["agentlowsecret", "agentmedsecret", "agenthighsecret"]  # worst to best: the ground truth
+ADMIN_PASSWORD = "correct horse battery"
+WATCHED = json.dumps([{"type": "loaded", "t": 5}, {"type": "play", "t": 100}, {"type": "ended", "t": 1100}])
+
+
+def make_clip(path: Path, source: str) -> None:
+    subprocess.run(
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i", f"{source}=size=64x64:rate=10:duration=1",
+         "-c:v", "libx264", "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)],
+        check=True,
+    )
+
+
+def write_bundle(root: Path, clip_files: list[Path], *, schemes, scenarios, agents, example=None) -> Path:
+    """A manifest with one clip per (scheme, scenario, pair); labels Robot 1..3 follow the agents' order."""
+    (root / "clips").mkdir(parents=True, exist_ok=True)
+    label = {agent: f"Robot {i + 1}" for i, agent in enumerate(agents)}
+    entries = []
+    keys = [(s, c, pair) for s in schemes for c in scenarios for pair in itertools.combinations(agents, 2)]
+    if example:
+        keys.append(example)
+    for n, (scheme, scenario, pair) in enumerate(keys):
+        source = clip_files[n % len(clip_files)]
+        name = f"clips/{n:03d}.mp4"
+        shutil.copyfile(source, root / name)
+        shown = list(pair) if n % 2 else list(reversed(pair))  # both on-screen orders occur
+        entries.append({
+            "id": f"{scheme}-{scenario}-{pair[0]}-{pair[1]}", "file": name,
+            "sha256": hashlib.sha256((root / name).read_bytes()).hexdigest(),
+            "scheme": scheme, "scenario": scenario, "agents": shown, "labels": [label[a] for a in shown],
+            "better": max(pair, key=AGENT_RANK.index) if pair[0] in AGENT_RANK else pair[1],
+            "summary": f"summaries/{n:03d}.json",
+        })
+    manifest = {"format": "foil.bundle/1", "clips": entries,
+                "agents": {agent: {"agent": agent, "episodes": 10, "success_rate": 0.5} for agent in agents}}
+    (root / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    return root
+
+
+@pytest.fixture(scope="session")
+def clip_files(tmp_path_factory) -> list[Path]:
+    folder = tmp_path_factory.mktemp("clips")
+    files = [folder / "a.mp4", folder / "b.mp4"]
+    make_clip(files[0], "testsrc")
+    make_clip(files[1], "testsrc2")
+    return files
+
+
+@pytest.fixture(scope="session")
+def bundle_dir(tmp_path_factory, clip_files) -> Path:
+    names = SECRET_NAMES
+    return write_bundle(
+        tmp_path_factory.mktemp("bundle"), clip_files,
+        schemes=[names["adaptive"], names["nfirst"]], scenarios=[names["paper-bl-tr"], names["paper-tl-br"]],
+        agents=AGENT_RANK, example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])),
+    )
+
+
+def study_text(**changes: str) -> str:
+    """The shipped paper study with secret names; `changes` replace whole `key = value` lines (key=new value)."""
+    text_ = PAPER_STUDY.read_text()
+    for old, new in SECRET_NAMES.items():
+        text_ = text_.replace(f'"{old}"', f'"{new}"')
+    for key, value in changes.items():
+        text_, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", text_, count=1, flags=re.MULTILINE)
+        assert n == 1, key
+    return text_
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database_url(request, tmp_path) -> str:
+    """A fresh database per test: a SQLite file, and PostgreSQL too when FOIL_TEST_DATABASE_URL is set."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
+    url = os.environ.get("FOIL_TEST_DATABASE_URL")
+    if not url:
+        pytest.skip("set FOIL_TEST_DATABASE_URL to run the database tests on PostgreSQL too")
+    engine = create_engine(url)
+    with engine.begin() as connection:
+        connection.execute(text("DROP TABLE IF EXISTS response, participant, server_setting, alembic_version"))
+    engine.dispose()
+    return url
+
+
+@pytest.fixture
+def make_client(tmp_path, bundle_dir, database_url):
+    """Build the real app on a migrated database; returns a function taking study-line changes and settings."""
+    apps = []
+
+    def build(changes: dict | None = None, **settings) -> TestClient:
+        study = tmp_path / f"study-{len(apps)}.toml"
+        study.write_text(study_text(**(changes or {})))
+        migrate(database_url)
+        config = {"bundle_dir": bundle_dir, "study_file": study, "database_url": database_url,
+                  "admin_password": ADMIN_PASSWORD, **settings}
+        app = create_app(Settings(**config))
+        apps.append(app)
+        return TestClient(app, follow_redirects=True)
+
+    yield build
+    for app in apps:
+        app.state.context.db.dispose()
+
+
+class FormReader(HTMLParser):
+    """Collects a page's form fields: hidden values, radio groups, selects with their options, textareas."""
+
+    def __init__(self, page: str):
+        super().__init__()
+        self.hidden, self.radios, self.selects, self.textareas = {}, {}, {}, []
+        self.disabled_answers = False
+        self._select = None
+        self.feed(page)
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "input" and a.get("type") == "hidden":
+            self.hidden[a["name"]] = a.get("value", "")
+        elif tag == "input" and a.get("type") == "radio":
+            self.radios.setdefault(a["name"], []).append(a["value"])
+        elif tag == "select":
+            self._select = a["name"]
+            self.selects[self._select] = []
+        elif tag == "option" and self._select and a.get("value"):
+            self.selects[self._select].append(a["value"])
+        elif tag == "textarea":
+            self.textareas.append(a["name"])
+        elif tag == "fieldset" and "data-answers" in a and "disabled" in a:
+            self.disabled_answers = True
+
+    def handle_endtag(self, tag):
+        if tag == "select":
+            self._select = None
+
+
+def answer_for(page: str, choice: int = 0) -> dict:
+    """A complete, valid answer to whatever screen `page` shows: the `choice`-th option of every radio group,
+    a different robot for every ranking place, words in every text box, and a watched clip."""
+    form = FormReader(page)
+    data = dict(form.hidden)
+    for name, values in form.radios.items():
+        data[name] = values[choice % len(values)]
+    for offset, (name, options) in enumerate(sorted(form.selects.items())):
+        data[name] = options[(offset + choice) % len(options)]
+    for name in form.textareas:
+        data[name] = f"Answer to {name}: the robot kept its distance."
+    if "video_events" in data:
+        data["video_events"] = WATCHED
+        data["time_on_page_ms"] = "4321"
+    return data
+
+
+def start(client: TestClient, query: str = "") -> str:
+    """Open the study link and consent; returns the first page after consent."""
+    page = client.get(f"/{query}")
+    assert page.status_code == 200, page.text
+    response = client.post("/consent", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
+                                             "choice": "agree"})
+    assert response.status_code == 200, response.text
+    return response.text
+
+
+def finish(client: TestClient, page: str, choice: int = 0, limit: int = 60) -> str:
+    """Answer every screen until the completion page; returns it."""
+    for _ in range(limit):
+        form = FormReader(page)
+        if "step" not in form.hidden:
+            if "number" in form.radios:  # the paper's self-selected condition
+                page = client.post("/condition", data={"csrf_token": form.hidden["csrf_token"],
+                                                       "number": str(choice % len(form.radios["number"]) + 1)}).text
+                continue
+            return page
+        response = client.post("/study", data=answer_for(page, choice))
+        assert response.status_code == 200, response.text
+        page = response.text
+    raise AssertionError("the study did not end")
