@@ -1,0 +1,185 @@
+"""What a clip shows, read from a summary.json (`foil.summary/1`): positions over time, starts, goals, outcomes.
+
+The renderer needs only this much of a summary, checked here with errors that say which part of the file is
+wrong, so a bad or truncated summary fails before any frame is drawn.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from search.scenarios import Scenario
+from search.world import OUTCOME_NAMES
+
+SUMMARY_FORMAT = "foil.summary/1"
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Positions at ``times`` (the initial state first), one crowd per panel: shared (1) or one per agent."""
+
+    agents: tuple[str, ...]  # real names: for the researcher, never drawn
+    times: np.ndarray  # (T,)
+    robots: np.ndarray  # (T, N, 2)
+    humans: np.ndarray  # (T, P, n, 2)
+    starts: np.ndarray  # (N, 2)
+    goals: np.ndarray  # (N, 2)
+    outcomes: tuple[tuple[str, float], ...]  # (event, time) per agent
+    robot_radius: float
+    human_radius: float
+    dt: float
+
+    @property
+    def n_agents(self) -> int:
+        return self.robots.shape[1]
+
+    @property
+    def n_panels(self) -> int:
+        return self.humans.shape[1]
+
+    @property
+    def n_humans(self) -> int:
+        return self.humans.shape[2]
+
+    @property
+    def end_time(self) -> float:
+        return float(self.times[-1])
+
+    def event_times(self) -> list[float]:
+        return [when for event, when in self.outcomes if event != "running"]
+
+    def extent(self, margin: float = 0.9, minimum: float = 13.0) -> tuple[np.ndarray, np.ndarray]:
+        """A square around everything that is ever shown, at least ``minimum`` metres across (the paper's
+        12 m arena plus a border) so clips of one study share a scale."""
+        points = np.concatenate([self.robots.reshape(-1, 2), self.humans.reshape(-1, 2), self.starts, self.goals])
+        low, high = points.min(axis=0) - margin, points.max(axis=0) + margin
+        centre = (low + high) / 2
+        half = max(float(np.max(high - low)), minimum) / 2
+        return centre - half, centre + half
+
+
+class SummaryError(ValueError):
+    """A summary file that cannot be shown; the message names the file and the part that is wrong."""
+
+
+def _points(value, shape_tail: tuple[int, ...], where: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SummaryError(f"{where} must be a list of [x, y] pairs") from None
+    if array.shape[-len(shape_tail):] != shape_tail or array.ndim < len(shape_tail):
+        raise SummaryError(f"{where} has shape {array.shape}, expected (..., {', '.join(map(str, shape_tail))})")
+    if not np.all(np.isfinite(array)):
+        raise SummaryError(f"{where} contains NaN or infinite numbers")
+    return array
+
+
+def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
+    """The scene of a parsed summary.json, or SummaryError naming what is missing or malformed."""
+    def fail(message: str):
+        raise SummaryError(f"{source}: {message}")
+
+    if not isinstance(summary, dict):
+        fail("expected a JSON object")
+    if summary.get("format") != SUMMARY_FORMAT:
+        fail(f"format is {summary.get('format')!r}, expected {SUMMARY_FORMAT!r} (is this a summary.json?)")
+    missing = [key for key in ("agents", "scenario", "steps", "outcomes") if key not in summary]
+    if missing:
+        fail(f"missing key(s) {missing}")
+    agents = summary["agents"]
+    if not isinstance(agents, list) or len(agents) < 2 or not all(isinstance(a, dict) and "name" in a
+                                                                  for a in agents):
+        fail("agents must be a list of at least two {name, source} objects")
+    n_agents = len(agents)
+    try:
+        scenario = Scenario.from_dict(summary["scenario"], source=f"{source}: scenario")
+        config = scenario.config()
+    except (ValueError, TypeError, AttributeError) as error:
+        fail(f"scenario is not a valid initial state: {error}")
+    n = config.human_num
+    panels = n_agents if config.robot_visible else 1
+
+    steps = summary["steps"]
+    if not isinstance(steps, list) or not steps:
+        fail("steps must be a non-empty list")
+    times = [0.0]
+    robots = [np.tile(np.asarray(scenario.robot_start, dtype=np.float64), (n_agents, 1))]
+    humans = [np.tile(np.asarray(scenario.human_positions, dtype=np.float64).reshape(n, 2), (panels, 1, 1))]
+    for i, step in enumerate(steps):
+        where = f"steps[{i}]"
+        if not isinstance(step, dict) or not {"t", "humans", "robots"} <= set(step):
+            fail(f"{where} must be an object with t, humans and robots")
+        t = step["t"]
+        if not isinstance(t, int | float) or isinstance(t, bool) or not math.isfinite(t):
+            fail(f"{where}.t must be a number, got {t!r}")
+        if i == 0 and t == 0:  # a summary that records the initial state itself: use it instead
+            times, robots, humans = [], [], []
+        elif t <= times[-1]:
+            fail(f"{where}.t = {t} does not come after {times[-1]}; steps must be in time order")
+        try:
+            robot = _points(step["robots"], (2,), f"{where}.robots")
+            crowd = _points(step["humans"], (2,), f"{where}.humans") if n else np.zeros((panels, 0, 2))
+        except SummaryError as error:
+            fail(str(error))
+        if robot.shape != (n_agents, 2):
+            fail(f"{where}.robots has {robot.shape[0] if robot.ndim == 2 else '?'} positions, expected one per "
+                 f"agent ({n_agents})")
+        if n and crowd.shape == (n, 2):
+            crowd = np.tile(crowd, (panels, 1, 1))
+        if crowd.shape != (panels, n, 2):
+            per = f"{n} humans" + (f" for each of the {panels} agents' crowds" if panels > 1 else "")
+            fail(f"{where}.humans has shape {crowd.shape}, expected {per}")
+        times.append(float(t))
+        robots.append(robot)
+        humans.append(crowd)
+    if len(times) < 2:
+        fail("steps must hold at least one step after the initial state")
+
+    outcomes = summary["outcomes"]
+    if not isinstance(outcomes, list) or len(outcomes) != n_agents:
+        fail(f"outcomes must be a list with one entry per agent ({n_agents})")
+    parsed = []
+    for k, outcome in enumerate(outcomes):
+        event = outcome.get("event") if isinstance(outcome, dict) else None
+        if event not in OUTCOME_NAMES:
+            fail(f"outcomes[{k}].event must be one of {list(OUTCOME_NAMES)}, got {event!r}")
+        when = outcome.get("time")
+        if event == "running":
+            when = times[-1]
+        elif not isinstance(when, int | float) or isinstance(when, bool) or not 0 <= when <= times[-1] + 1e-6:
+            fail(f"outcomes[{k}].time must be a time within the steps (0 to {times[-1]} s), got {when!r}")
+        parsed.append((str(event), float(when)))
+
+    return Scene(
+        agents=tuple(str(a["name"]) for a in agents),
+        times=np.asarray(times),
+        robots=np.stack(robots),
+        humans=np.stack(humans),
+        starts=np.tile(np.asarray(scenario.robot_start, dtype=np.float64), (n_agents, 1)),
+        goals=np.tile(np.asarray(scenario.robot_goal, dtype=np.float64), (n_agents, 1)),
+        outcomes=tuple(parsed),
+        robot_radius=config.robot_radius,
+        human_radius=config.human_radius,
+        dt=config.dt,
+    )
+
+
+def load_scene(path: str | os.PathLike) -> Scene:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no summary file {path}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise SummaryError(f"cannot read summary {path}: {error}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise SummaryError(f"{path}: not valid JSON ({error}); is the file complete?") from None
+    return scene_from_summary(data, source=str(path))

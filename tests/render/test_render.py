@@ -1,0 +1,251 @@
+"""The renderer: geometry, names, events, timeline and the encoded file, checked on real frames and real ffmpeg."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+
+import imageio_ffmpeg
+import numpy as np
+import pytest
+
+from search.render import (
+    CRASH,
+    HUMAN_FILL,
+    ROBOT_STYLES,
+    ClipRenderer,
+    Frame,
+    RenderOptions,
+    render,
+    render_file,
+)
+from search.scenarios import load_scenario
+from search.scene import SummaryError, load_scene, scene_from_summary
+from tests.render.conftest import summary_from_simulation, visible
+
+FAST = RenderOptions(speed=4.0, hold_start=0.25, hold_end=0.25, event_hold=0.25)
+
+
+def colour_mask(image, colour, tolerance=6) -> np.ndarray:
+    pixels = np.asarray(image, dtype=np.int16)
+    return np.all(np.abs(pixels - np.array(colour)) <= tolerance, axis=-1)
+
+
+def blob_centre(mask: np.ndarray, around, radius: float):
+    """Centroid (column, row) of the masked pixels within ``radius`` of ``around``, or None."""
+    rows, cols = np.nonzero(mask)
+    near = np.hypot(cols - around[0], rows - around[1]) <= radius
+    if not near.any():
+        return None
+    return np.array([cols[near].mean(), rows[near].mean()])
+
+
+def test_layout_maps_the_arena_with_y_up_and_sizes_in_multiples_of_16(shared_summary):
+    renderer = ClipRenderer(scene_from_summary(shared_summary))
+    lay = renderer.layout
+    assert lay.width % 16 == 0 and lay.height % 16 == 0
+    bottom_left = lay.to_pixel(0, lay.origin)
+    top_right = lay.to_pixel(0, (lay.origin[0] + lay.span, lay.origin[1] + lay.span))
+    np.testing.assert_allclose(bottom_left, [0, lay.header + lay.panel])
+    np.testing.assert_allclose(top_right, [lay.panel, lay.header])
+
+
+def test_every_human_is_drawn_where_the_summary_puts_it(shared_summary):
+    scene = scene_from_summary(shared_summary)
+    renderer = ClipRenderer(scene)
+    r_px = scene.human_radius * renderer.layout.scale
+    for step in (0, 10, 30):
+        t = shared_summary["steps"][step]["t"]
+        image = renderer.draw(Frame(t, math.inf))
+        mask = colour_mask(image, HUMAN_FILL)
+        humans = np.array(shared_summary["steps"][step]["humans"])
+        robots = np.array(shared_summary["steps"][step]["robots"])
+        for h, xy in enumerate(humans):
+            others = np.concatenate([np.delete(humans, h, axis=0), robots])
+            if np.min(np.hypot(*(others - xy).T)) < 3 * scene.human_radius:
+                continue  # a neighbour or a robot would overlap the search window
+            expected = renderer.layout.to_pixel(0, xy)
+            found = blob_centre(mask, expected, 1.2 * r_px)
+            assert found is not None, f"human {h} not drawn at step {step}"
+            found += 0.5  # pixel (c, r) covers [c, c + 1) x [r, r + 1): its centre is at c + 0.5
+            assert np.hypot(*(found - expected)) < 1.5, f"human {h} drawn at {found}, expected {expected}"
+
+
+def test_positions_between_steps_are_interpolated(shared_summary):
+    scene = scene_from_summary(shared_summary)
+    renderer = ClipRenderer(scene)
+    t0, t1 = scene.times[5], scene.times[6]
+    _, robots, humans = renderer._state((t0 + t1) / 2)
+    lay = renderer.layout
+    np.testing.assert_allclose(humans[0], lay.to_pixel(0, (scene.humans[5, 0] + scene.humans[6, 0]) / 2))
+    np.testing.assert_allclose(robots, lay.to_pixel(0, (scene.robots[5] + scene.robots[6]) / 2))
+
+
+def test_timeline_is_smooth_holds_both_ends_and_pauses_on_events(shared_summary):
+    options = RenderOptions(fps=24, speed=1.0, hold_start=1.0, hold_end=1.5, event_hold=0.5)
+    scene = scene_from_summary(shared_summary)
+    frames = ClipRenderer(scene, options=options).timeline()
+    times = np.array([f.time for f in frames])
+    assert np.all(times[:24] == 0) and times[24] == 0
+    assert np.all(times[-36:] == scene.end_time)
+    assert np.all(np.diff(times) >= 0)
+    assert np.max(np.diff(times)) <= options.speed / options.fps + 1e-9
+    for event_time in scene.event_times():
+        assert np.sum(np.isclose(times, event_time)) >= 12
+    faster = ClipRenderer(scene, options=RenderOptions(speed=2.0, hold_start=0, hold_end=0, event_hold=0))
+    assert len(faster.timeline()) < len(frames) / 2
+
+
+def test_labels_never_reveal_agent_names(tmp_path, shared_summary):
+    summary = broken(shared_summary, lambda s: s["agents"][0].update(source="checkpoints/SECRET-SOURCE.pt"))
+    secrets = [a["name"] for a in summary["agents"]] + ["SECRET-SOURCE"]
+    scene = scene_from_summary(summary)
+    renderer = ClipRenderer(scene, numbers=[2, 1], options=FAST)
+    for frame in renderer.timeline():
+        renderer.draw(frame)
+    drawn = " ".join(sorted(renderer.texts))
+    assert "Robot 1" in drawn and "Robot 2" in drawn
+    for secret in secrets:
+        assert secret.lower() not in drawn.lower()
+    result = render(scene, tmp_path / "clip.mp4", numbers=[2, 1], options=FAST)
+    for path in (result.clip, result.poster, result.sheet):
+        data = path.read_bytes().lower()
+        for secret in secrets:
+            assert secret.lower().encode() not in data, f"{secret} in {path.name}"
+
+
+def test_robot_numbers_pick_colour_and_order(shared_summary):
+    scene = scene_from_summary(shared_summary)
+    swapped = ClipRenderer(scene, numbers=[2, 1])
+    assert swapped.order == [1, 0]  # legend and panels list Robot 1 first: the summary's second agent
+    image = swapped.draw(Frame(5.0, math.inf))
+    blue = colour_mask(image, ROBOT_STYLES[0][0], tolerance=3)
+    _, robots, _ = swapped._state(5.0)
+    found = blob_centre(blue, robots[1], 0.3 * swapped.layout.scale)
+    assert found is not None  # Robot 1's colour is drawn at the summary's second robot
+    with pytest.raises(ValueError, match="distinct robot number"):
+        ClipRenderer(scene, numbers=[1, 1])
+
+
+def test_collision_is_marked_where_and_when_it_happens(shared_summary):
+    scene = scene_from_summary(shared_summary)
+    crashed = [k for k, (event, _) in enumerate(scene.outcomes) if event == "collision"]
+    assert crashed, "the fixture's scripted robot is expected to collide"
+    k = crashed[0]
+    when = scene.outcomes[k][1]
+    renderer = ClipRenderer(scene)
+    before = colour_mask(renderer.draw(Frame(when - 0.5, math.inf)), CRASH)
+    after = colour_mask(renderer.draw(Frame(when, 0.0)), CRASH)
+    _, robots, _ = renderer._state(when)
+    assert blob_centre(before, robots[k], 2 * renderer.layout.scale) is None
+    assert blob_centre(after, robots[k], 2 * renderer.layout.scale) is not None
+    assert f"CRASHED · {when:.1f} s" in renderer.texts
+
+
+def test_each_robot_has_its_own_panel_when_robots_are_visible():
+    summary = summary_from_simulation(["goal", "orca"], visible(load_scenario("paper-bl-tr")), steps=20)
+    scene = scene_from_summary(summary)
+    assert scene.n_panels == 2
+    renderer = ClipRenderer(scene, numbers=[2, 1])
+    assert renderer.layout.width % 16 == 0 and renderer.layout.height % 16 == 0
+    image = renderer.draw(Frame(scene.end_time, math.inf))
+    mask = colour_mask(image, HUMAN_FILL)
+    step = summary["steps"][-1]
+    for agent in range(2):
+        panel = renderer.panel_of[agent]
+        assert panel == 1 - agent
+        expected = renderer.layout.to_pixel(panel, step["humans"][agent][0])
+        assert blob_centre(mask, expected, 0.5 * scene.human_radius * renderer.layout.scale) is not None
+
+
+def probe(path) -> str:
+    run = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True,
+                         text=True)
+    return run.stderr
+
+
+def top_level_boxes(path) -> list[str]:
+    data = path.read_bytes()
+    boxes, offset = [], 0
+    while offset + 8 <= len(data):
+        size = int.from_bytes(data[offset: offset + 4], "big")
+        boxes.append(data[offset + 4: offset + 8].decode("latin-1"))
+        if size == 1:
+            size = int.from_bytes(data[offset + 8: offset + 16], "big")
+        if size < 8:
+            break
+        offset += size
+    return boxes
+
+
+def test_clip_is_browser_safe_h264_with_poster_and_contact_sheet(tmp_path, summary_file):
+    result = render_file(summary_file, tmp_path / "out" / "clip.mp4", options=FAST)
+    info = probe(result.clip)
+    video = re.search(r"Video: (\w+).*?, (\w+)(?:\(.*?\))?, (\d+)x(\d+)", info)
+    assert video, info
+    codec, pix_fmt, width, height = video.group(1), video.group(2), int(video.group(3)), int(video.group(4))
+    assert (codec, pix_fmt) == ("h264", "yuv420p")
+    assert (width, height) == (result.width, result.height) and width % 16 == 0 and height % 16 == 0
+    assert "24 fps" in info
+    boxes = top_level_boxes(result.clip)
+    assert "moov" in boxes and "mdat" in boxes and boxes.index("moov") < boxes.index("mdat"), boxes
+    frames, _ = imageio_ffmpeg.count_frames_and_secs(str(result.clip))
+    assert frames == result.frames
+    assert result.poster.name == "clip.poster.png" and result.sheet.name == "clip.sheet.png"
+    from PIL import Image
+
+    with Image.open(result.poster) as poster:
+        assert poster.size == (width, height)
+    with Image.open(result.sheet) as sheet:
+        assert sheet.width > width  # several thumbnails side by side
+    assert not list(result.clip.parent.glob(".*partial*"))
+
+
+def test_rendering_refuses_a_non_mp4_target(tmp_path, summary_file):
+    with pytest.raises(ValueError, match=".mp4"):
+        render_file(summary_file, tmp_path / "clip.webm", options=FAST)
+
+
+def broken(summary: dict, change) -> dict:
+    copy = json.loads(json.dumps(summary))
+    change(copy)
+    return copy
+
+
+BAD = [
+    (lambda s: s.update(format="foil.summary/0"), "format is 'foil.summary/0'"),
+    (lambda s: s.pop("steps"), r"missing key\(s\) \['steps'\]"),
+    (lambda s: s.update(steps=[]), "steps must be a non-empty list"),
+    (lambda s: s["steps"][3].update(robots=[[0, 0]]), r"steps\[3\].robots has 1 positions, expected one per agent"),
+    (lambda s: s["steps"][2]["humans"].pop(), r"steps\[2\].humans has shape"),
+    (lambda s: s["steps"][1]["humans"][0].__setitem__(0, float("nan")), r"steps\[1\].humans contains NaN"),
+    (lambda s: s["steps"][4].update(t=0.5), r"steps\[4\].t = 0.5 does not come after"),
+    (lambda s: s["outcomes"][1].update(event="exploded"), r"outcomes\[1\].event must be one of"),
+    (lambda s: s["outcomes"].pop(), "one entry per agent"),
+    (lambda s: s["scenario"].pop("robot"), "scenario is not a valid initial state"),
+    (lambda s: s.update(agents=[{"name": "only"}]), "at least two"),
+]
+
+
+@pytest.mark.parametrize(("change", "message"), BAD)
+def test_bad_summaries_give_clear_errors(shared_summary, change, message):
+    with pytest.raises(SummaryError, match=message):
+        scene_from_summary(broken(shared_summary, change), source="bad.json")
+
+
+def test_unreadable_summary_files_give_clear_errors(tmp_path, shared_summary):
+    truncated = tmp_path / "cut.json"
+    truncated.write_text(json.dumps(shared_summary)[:500])
+    with pytest.raises(SummaryError, match="not valid JSON.*complete"):
+        load_scene(truncated)
+    with pytest.raises(FileNotFoundError, match="no summary file"):
+        load_scene(tmp_path / "missing.json")
+
+
+def test_render_options_are_checked():
+    with pytest.raises(ValueError, match="fps must be at least 20"):
+        RenderOptions(fps=10)
+    with pytest.raises(ValueError, match="speed"):
+        RenderOptions(speed=0)
