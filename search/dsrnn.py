@@ -18,6 +18,7 @@ Checkpoints are ``torch.save`` dicts with ``format`` = ``foil.dsrnn/1``, the ``n
 from __future__ import annotations
 
 import math
+import warnings
 import zipfile
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -255,11 +256,15 @@ def is_torchscript(path: str | Path) -> bool:
 def export_torchscript(net: DSRNN, path: str | Path) -> None:
     """Save the deterministic policy as a TorchScript file that loads without Foil's code."""
     net.eval()
-    torch.jit.save(torch.jit.script(_TorchScriptEntry(net)), str(path))
+    with warnings.catch_warnings():  # torch marks TorchScript deprecated; it is still the portable format here
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.jit.save(torch.jit.script(_TorchScriptEntry(net)), str(path))
 
 
 def load_torchscript(path: str | Path, name: str) -> TorchPolicy:
-    module = torch.jit.load(str(path), map_location="cpu")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        module = torch.jit.load(str(path), map_location="cpu")
     if not hasattr(module, "initial_state"):
         raise ValueError(f"{path}: a TorchScript agent needs an exported initial_state(batch) method")
     return TorchPolicy(module, name, getattr(module, "max_humans", None))

@@ -45,7 +45,7 @@ def evaluate(policy: Policy, episodes: int = 500, seed: int = 0, config: WorldCo
         "collision_rate": float((outcome == world.COLLISION).mean()),
         "timeout_rate": float((outcome == world.TIMEOUT).mean()),
         "reward_mean": mean,
-        "reward_ci95": [mean - half_width, mean + half_width],
+        "reward_ci95": [float(mean - half_width), float(mean + half_width)],
         "nav_time_mean": float(state.event_time[success, 0].mean()) if success.any() else None,
     }
 

@@ -1,0 +1,82 @@
+"""Loading agents by shipped name, checkpoint, TorchScript file and module:attribute, and the errors."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from search.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
+from search.policies import SHIPPED_AGENTS, load_policy
+from tests.agents.conftest import make_net, random_observation
+
+
+def act_once(policy, humans: int = 3) -> np.ndarray:
+    return policy.act(random_observation(2, humans), policy.initial_state(2))[0]
+
+
+def test_checkpoint_and_torchscript_files_load_the_same_agent(tmp_path):
+    net = make_net()
+    save_checkpoint(tmp_path / "agent.pt", net, env_steps=123)
+    export_torchscript(net, tmp_path / "agent.ts")
+    from_checkpoint = load_policy(str(tmp_path / "agent.pt"))
+    from_script = load_policy(str(tmp_path / "agent.ts"))
+    assert from_checkpoint.name == str(tmp_path / "agent.pt")
+    np.testing.assert_allclose(act_once(from_checkpoint), act_once(DSRNNPolicy(net)), atol=1e-6)
+    np.testing.assert_allclose(act_once(from_script), act_once(DSRNNPolicy(net)), atol=1e-6)
+    assert read_checkpoint(tmp_path / "agent.pt")["env_steps"] == 123
+
+
+def test_module_attribute_loads_your_own_policy(tmp_path, monkeypatch):
+    (tmp_path / "my_robot.py").write_text(
+        "from search.policies import GoalPolicy\n"
+        "class Cautious(GoalPolicy):\n"
+        "    name = 'cautious'\n"
+        "    def act(self, observation, state):\n"
+        "        action, state = super().act(observation, state)\n"
+        "        return 0.5 * action, state\n"
+        "robot = Cautious()\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for spec in ("my_robot:Cautious", "my_robot:robot"):
+        assert load_policy(spec).name == "cautious"
+    with pytest.raises(ValueError, match="cannot load policy"):
+        load_policy("my_robot:nothing")
+
+
+@pytest.mark.parametrize("name", SHIPPED_AGENTS)
+def test_shipped_agents_load_by_name_and_act(name):
+    policy = load_policy(name)
+    assert policy.name == name
+    assert np.isfinite(act_once(policy, humans=10)).all()
+    assert np.isfinite(act_once(policy, humans=4)).all()  # smaller crowds than trained on
+
+
+def test_missing_files_and_unknown_names_are_clear_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no agent file"):
+        load_policy(str(tmp_path / "nope.pt"))
+    with pytest.raises(ValueError, match="unknown agent 'nope'"):
+        load_policy("nope")
+
+
+def test_files_that_are_not_checkpoints_are_clear_errors(tmp_path):
+    text = tmp_path / "notes.pt"
+    text.write_text("not a checkpoint")
+    with pytest.raises(ValueError, match="not a readable torch checkpoint"):
+        load_policy(str(text))
+    other = tmp_path / "other.pt"
+    torch.save({"weights": torch.zeros(3)}, other)
+    with pytest.raises(ValueError, match="not a Foil DS-RNN checkpoint"):
+        load_policy(str(other))
+
+
+def test_weights_that_do_not_fit_their_sizes_are_a_clear_error(tmp_path):
+    net = make_net()
+    path = tmp_path / "agent.pt"
+    save_checkpoint(path, net)
+    data = torch.load(path, weights_only=False)
+    data["network"] = dataclasses.asdict(dataclasses.replace(NetworkConfig(**data["network"]), edge_hidden=32))
+    torch.save(data, path)
+    with pytest.raises(ValueError, match="do not fit the network sizes"):
+        load_policy(str(path))
