@@ -102,10 +102,9 @@ def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
     events = _video_events(_one(form, "video_events"))
     if events is None:
         out.errors["video"] = "The page sent a malformed record of the clip's playback; reload the page."
-        events = []
-    out.video_events = events
-    if "media" in screen and study.study.require_full_view and not any(e["type"] == "ended" for e in events):
+    elif "media" in screen and study.study.require_full_view and not any(e["type"] == "ended" for e in events):
         out.errors["video"] = "Please watch the clip to the end before going on."
+    out.video_events = events or []
     client_ms = _one(form, "time_on_page_ms") or ""
     out.client_ms = int(client_ms) if client_ms.isdigit() and len(client_ms) < 10 else None
     return out

@@ -206,3 +206,11 @@ def finish(client: TestClient, page: str, choice: int = 0, limit: int = 60) -> s
         assert response.status_code == 200, response.text
         page = response.text
     raise AssertionError("the study did not end")
+
+
+def stored(client: TestClient, model) -> list:
+    """Every row of a table, read straight from the app's database."""
+    from sqlalchemy import select
+
+    with client.app.state.context.db.reading() as session:
+        return list(session.scalars(select(model).order_by(model.id)))
