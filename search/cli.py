@@ -44,6 +44,13 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bundle(args: argparse.Namespace) -> int:
+    from search.bundle import build_bundle
+
+    build_bundle(args.study, args.out)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="foil",
@@ -87,6 +94,12 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--crf", type=int, default=23, help="H.264 constant rate factor (default 23)")
     render.add_argument("--numbers", help="robot number shown for each summary agent, e.g. 2,1 (default 1,2)")
     render.set_defaults(handler=_render)
+
+    bundle = sub.add_parser("bundle", help="evaluate, search, render and write manifest.json for a study's clips")
+    bundle.add_argument("study", metavar="STUDY.toml", help="study file with a [build] table (see docs/clips.md)")
+    bundle.add_argument("--out", required=True, help="bundle directory; searches already there are reused while "
+                        "their inputs are unchanged")
+    bundle.set_defaults(handler=_bundle)
     return parser
 
 

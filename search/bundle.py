@@ -1,0 +1,464 @@
+"""`foil bundle STUDY.toml --out DIR`: everything a study serves, built from the study file's `[build]` table.
+
+The table names the agents, scenarios, schemes (a solver with its budget and seed) and sets of clips; each set
+says which survey parts its clips feed. The builder evaluates every agent (the ground truth `better`), runs one
+search per clip (or reuses a cached one whose inputs are unchanged), renders the best summary of each with a
+seeded, recorded mapping of agents to robot numbers, and writes manifest.json (`foil.bundle/1`, a sha256 for
+every file), a copy of the study file and a static index.html gallery for the researcher.
+
+Bundle layout::
+
+    manifest.json  study.toml  index.html
+    clips/ID.mp4  clips/ID.poster.png  clips/ID.sheet.png      what participants see (by checksum, never by ID)
+    summaries/ID.json                                          the summary each clip shows
+    cache/                                                     evaluations and searches, keyed by their inputs
+"""
+
+from __future__ import annotations
+
+import hashlib
+import html
+import itertools
+import json
+import os
+import random
+import shutil
+import time
+import tomllib
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+from search.render import RenderOptions, render, robot_label
+from search.scene import load_scene
+
+MANIFEST_FORMAT = "foil.bundle/1"
+PARTS = ("pairwise", "ranking", "example")
+
+
+class BuildError(ValueError):
+    """A `[build]` table that cannot be built; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class Scheme:
+    """How one scheme's clips are found: a solver of `foil search`, its simulator-step budget and seed."""
+
+    name: str
+    solver: str
+    budget: int
+    seed: int
+    top_k: int
+
+
+@dataclass(frozen=True)
+class ClipSet:
+    """Every pair under every scheme on every scenario; a set that feeds a ranking labels each agent once."""
+
+    parts: tuple[str, ...]
+    schemes: tuple[str, ...]
+    scenarios: tuple[str, ...]
+    pairs: tuple[tuple[str, str], ...]
+    agents: tuple[str, ...]  # every agent of the pairs, in the order given
+
+    @property
+    def ranking(self) -> bool:
+        return "ranking" in self.parts
+
+
+@dataclass(frozen=True)
+class BuildSpec:
+    seed: int  # seeds the agent-to-robot-number mapping of every clip
+    eval_episodes: int
+    eval_seed: int
+    render: RenderOptions
+    schemes: dict[str, Scheme]
+    sets: tuple[ClipSet, ...]
+
+    @property
+    def agents(self) -> list[str]:
+        return list(dict.fromkeys(a for s in self.sets for a in s.agents))
+
+
+def _fail(source: str, where: str, message: str):
+    raise BuildError(f"{source}: [build]{'.' + where if where else ''}: {message}")
+
+
+def _check_keys(table, allowed: set[str], required: set[str], source: str, where: str) -> None:
+    if not isinstance(table, dict):
+        _fail(source, where, "must be a table")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        _fail(source, where, f"unknown key(s) {unknown}; expected some of {sorted(allowed)}")
+    missing = sorted(required - set(table))
+    if missing:
+        _fail(source, where, f"missing key(s) {missing}")
+
+
+def _int(value, source: str, where: str, minimum: int = 0) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
+        _fail(source, where, f"must be a whole number >= {minimum}, got {value!r}")
+    return value
+
+
+def _names(value, source: str, where: str) -> tuple[str, ...]:
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v for v in value):
+        _fail(source, where, f"must be a non-empty list of names, got {value!r}")
+    if len(set(value)) != len(value):
+        _fail(source, where, f"names must not repeat: {value}")
+    return tuple(value)
+
+
+def parse_build(table: dict, source: str = "study file") -> BuildSpec:
+    """The `[build]` table as a BuildSpec, or BuildError naming the file, key and problem."""
+    _check_keys(table, {"seed", "eval", "render", "schemes", "sets"}, {"seed", "schemes", "sets"}, source, "")
+    evaluation = table.get("eval", {})
+    _check_keys(evaluation, {"episodes", "seed"}, set(), source, "eval")
+    render_table = table.get("render", {})
+    _check_keys(render_table, {f.name for f in fields(RenderOptions)}, set(), source, "render")
+    try:
+        options = RenderOptions(**render_table)
+    except (TypeError, ValueError) as error:
+        _fail(source, "render", str(error))
+
+    schemes = {}
+    if not isinstance(table["schemes"], dict) or not table["schemes"]:
+        _fail(source, "schemes", "give at least one scheme, e.g. [build.schemes.adaptive] solver = \"mcts\"")
+    for name, scheme in table["schemes"].items():
+        where = f"schemes.{name}"
+        _check_keys(scheme, {"solver", "budget", "seed", "top_k"}, {"solver", "budget", "seed"}, source, where)
+        if not isinstance(scheme["solver"], str) or not scheme["solver"]:
+            _fail(source, f"{where}.solver", "must name a solver of foil search (mcts, nfirst, random, cem)")
+        schemes[name] = Scheme(name=name, solver=scheme["solver"],
+                               budget=_int(scheme["budget"], source, f"{where}.budget", 1),
+                               seed=_int(scheme["seed"], source, f"{where}.seed"),
+                               top_k=_int(scheme.get("top_k", 1), source, f"{where}.top_k", 1))
+
+    sets = []
+    if not isinstance(table["sets"], list) or not table["sets"]:
+        _fail(source, "sets", "give at least one [[build.sets]] table")
+    for i, entry in enumerate(table["sets"]):
+        where = f"sets[{i}]"
+        _check_keys(entry, {"parts", "schemes", "scenarios", "agents", "pairs"}, {"parts", "schemes", "scenarios"},
+                    source, where)
+        parts = _names(entry["parts"], source, f"{where}.parts")
+        if not set(parts) <= set(PARTS):
+            _fail(source, f"{where}.parts", f"parts are {list(PARTS)}, got {list(parts)}")
+        names = _names(entry["schemes"], source, f"{where}.schemes")
+        for name in names:
+            if name not in schemes:
+                _fail(source, f"{where}.schemes", f"no scheme {name!r}; defined: {sorted(schemes)}")
+        if ("agents" in entry) == ("pairs" in entry):
+            _fail(source, where, "give either agents = [...] (every pair of them) or pairs = [[a, b], ...]")
+        if "agents" in entry:
+            agents = _names(entry["agents"], source, f"{where}.agents")
+            if len(agents) < 2:
+                _fail(source, f"{where}.agents", "needs at least two agents")
+            pairs = tuple(itertools.combinations(agents, 2))
+        else:
+            if "ranking" in parts:
+                _fail(source, where, "a set that feeds a ranking part lists its agents (agents = [...]), so each "
+                      "agent keeps one robot number in all its clips")
+            raw = entry["pairs"]
+            if not isinstance(raw, list) or not raw:
+                _fail(source, f"{where}.pairs", "must be a non-empty list of [a, b] pairs")
+            pairs = tuple(_names(p, source, f"{where}.pairs[{j}]") for j, p in enumerate(raw))
+            if any(len(p) != 2 for p in pairs):
+                _fail(source, f"{where}.pairs", f"every pair has two different agents, got {raw}")
+            agents = tuple(dict.fromkeys(a for p in pairs for a in p))
+        sets.append(ClipSet(parts=parts, schemes=names, scenarios=_names(entry["scenarios"], source,
+                                                                             f"{where}.scenarios"),
+                            pairs=pairs, agents=agents))
+    spec = BuildSpec(seed=_int(table["seed"], source, "seed"),
+                     eval_episodes=_int(evaluation.get("episodes", 500), source, "eval.episodes", 2),
+                     eval_seed=_int(evaluation.get("seed", 0), source, "eval.seed"),
+                     render=options, schemes=schemes, sets=tuple(sets))
+    seen: dict[tuple, int] = {}
+    for i, clip_set in enumerate(spec.sets):
+        for scheme, scenario, pair in itertools.product(clip_set.schemes, clip_set.scenarios, clip_set.pairs):
+            key = (scheme, scenario, frozenset(pair))
+            if key in seen:
+                _fail(source, f"sets[{i}]", f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} is already "
+                      f"in sets[{seen[key]}]; list each clip once, with every part it feeds")
+            seen[key] = i
+    return spec
+
+
+def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
+    """The build spec of a study file, and the file's text (copied into the bundle for the server)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no study file {path}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise BuildError(f"{path}: not valid TOML: {error}") from None
+    if "build" not in data:
+        raise BuildError(f"{path}: no [build] table: it says which clips to search for and render (see "
+                         "docs/clips.md)")
+    return parse_build(data["build"], source=str(path)), text
+
+
+@dataclass(frozen=True)
+class ClipJob:
+    """One clip: the pair in search order (the summary's agents) and each one's robot number on screen."""
+
+    id: str
+    scheme: Scheme
+    scenario: str
+    pair: tuple[str, str]
+    numbers: tuple[int, int]
+    parts: tuple[str, ...]
+
+
+def plan(spec: BuildSpec) -> list[ClipJob]:
+    """Every clip of the study with its robot numbers, drawn from seeded generators named after the clip (or,
+    in a ranking set, after the set's scheme and scenario: one number per agent across those clips)."""
+    jobs = []
+    for i, clip_set in enumerate(spec.sets):
+        for scheme, scenario in itertools.product(clip_set.schemes, clip_set.scenarios):
+            group = random.Random(f"{spec.seed}/{i}/{scheme}/{scenario}")
+            shared = dict(zip(clip_set.agents, group.sample(range(1, len(clip_set.agents) + 1),
+                                                            len(clip_set.agents)), strict=True))
+            for pair in clip_set.pairs:
+                name = f"{spec.seed}/{i}/{scheme}/{scenario}/{pair[0]}/{pair[1]}"
+                numbers = tuple(shared[a] for a in pair) if clip_set.ranking else \
+                    tuple(random.Random(name).sample([1, 2], 2))
+                jobs.append(ClipJob(id="clip-" + hashlib.sha256(name.encode()).hexdigest()[:10],
+                                    scheme=spec.schemes[scheme], scenario=scenario, pair=pair, numbers=numbers,
+                                    parts=clip_set.parts))
+    return jobs
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _key(inputs: dict) -> str:
+    return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def agent_identity(agent: str) -> dict:
+    """What an agent's results depend on: its name and, for a network, the checksum of its file."""
+    from search.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
+
+    if agent in SCRIPTED:
+        return {"agent": agent}
+    path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
+    return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
+
+
+def scenario_identity(scenario: str) -> dict:
+    from search.scenarios import load_scenario
+
+    return load_scenario(scenario).to_dict()
+
+
+class Cache:
+    """Results kept under ``root`` by a hash of their inputs, with the inputs beside them to check on reuse."""
+
+    def __init__(self, root: Path):
+        self.root = root
+
+    def path(self, kind: str, inputs: dict) -> Path:
+        return self.root / kind / _key(inputs)
+
+    def valid(self, kind: str, inputs: dict, *files: str) -> bool:
+        folder = self.path(kind, inputs)
+        try:
+            recorded = json.loads((folder / "inputs.json").read_text())
+        except (OSError, json.JSONDecodeError):
+            return False
+        return recorded == json.loads(json.dumps(inputs)) and all((folder / f).is_file() for f in files)
+
+    def store(self, kind: str, inputs: dict) -> Path:
+        """A fresh, empty folder for a result; write the result, then call ``seal``."""
+        folder = self.path(kind, inputs)
+        shutil.rmtree(folder, ignore_errors=True)
+        folder.mkdir(parents=True)
+        return folder
+
+    def seal(self, kind: str, inputs: dict) -> None:
+        """Record the inputs last, so an interrupted build never leaves a result that looks complete."""
+        (self.path(kind, inputs) / "inputs.json").write_text(json.dumps(inputs, sort_keys=True, indent=1))
+
+
+def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, log) -> dict[str, dict]:
+    """Each agent's `foil eval --json` object (the manifest's ground truth), computed once per input."""
+    from search.evaluate import evaluate
+    from search.policies import load_policy
+
+    results = {}
+    for agent in agents:
+        inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed}
+        folder = cache.path("eval", inputs)
+        if cache.valid("eval", inputs, "eval.json"):
+            log(f"eval {agent}: cached")
+        else:
+            started = time.perf_counter()
+            result = evaluate(load_policy(agent), episodes=episodes, seed=seed) | {"agent": agent}
+            folder = cache.store("eval", inputs)
+            (folder / "eval.json").write_text(json.dumps(result, indent=1))
+            cache.seal("eval", inputs)
+            log(f"eval {agent}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} "
+                f"({time.perf_counter() - started:.1f} s)")
+        results[agent] = json.loads((folder / "eval.json").read_text())
+    return results
+
+
+def search_clip(job: ClipJob, cache: Cache, log) -> tuple[Path, bool]:
+    """The best summary for a clip: from `foil search` (its CLI contract), or the cache when nothing changed.
+    Returns the summary's path and whether it came from the cache."""
+    from search.cli import main as foil
+
+    scheme = job.scheme
+    inputs = {"agents": [agent_identity(a) for a in job.pair], "scenario": scenario_identity(job.scenario),
+              "solver": scheme.solver, "budget": scheme.budget, "seed": scheme.seed, "top_k": scheme.top_k}
+    folder = cache.path("search", inputs)
+    what = f"search {scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
+    if cache.valid("search", inputs, "summary-001.json"):
+        log(f"{what}: cached")
+        return folder / "summary-001.json", True
+    started = time.perf_counter()
+    folder = cache.store("search", inputs)
+    try:
+        code = foil(["search", "--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver",
+                     scheme.solver, "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k",
+                     str(scheme.top_k), "--out", str(folder)])
+    except SystemExit as exit:  # argparse rejected the arguments (and said why)
+        code = exit.code
+    if code != 0 or not (folder / "summary-001.json").is_file():
+        raise BuildError(f"{what} failed (foil search exit status {code}); see its error above")
+    cache.seal("search", inputs)
+    log(f"{what}: {time.perf_counter() - started:.1f} s")
+    return folder / "summary-001.json", False
+
+
+def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
+    """The ground truth: the agent with the higher mean test reward (the paper ranks its agents by it)."""
+    first, second = (evaluations[a]["reward_mean"] for a in pair)
+    if first == second:
+        raise BuildError(f"{pair[0]} and {pair[1]} have the same mean reward ({first}); no better agent to record")
+    return pair[0] if first > second else pair[1]
+
+
+def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
+    """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
+    import search.render
+
+    inputs = {"summary": sha256_file(summary), "numbers": list(job.numbers), "options": asdict(options),
+              "renderer": sha256_file(Path(search.render.__file__)), "clip": out.name}
+    folder = cache.path("render", inputs)
+    if cache.valid("render", inputs, "sha256") and out.is_file() \
+            and (folder / "sha256").read_text() == sha256_file(out):
+        log(f"render {job.id}: cached")
+        return
+    result = render(load_scene(summary), out, list(job.numbers), options)
+    folder = cache.store("render", inputs)
+    (folder / "sha256").write_text(sha256_file(out))
+    cache.seal("render", inputs)
+    log(f"render {job.id}: {result.frames} frames in {result.render_s:.1f} s")
+
+
+def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print) -> dict:
+    """Build (or bring up to date) the bundle of a study file in ``out``; returns the manifest."""
+    spec, text = load_build(study)
+    out = Path(out)
+    for folder in ("clips", "summaries"):
+        (out / folder).mkdir(parents=True, exist_ok=True)
+    cache = Cache(out / "cache")
+    jobs = plan(spec)
+    log(f"{len(jobs)} clips, {len(spec.agents)} agents")
+    evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log)
+    clips = []
+    for job in jobs:
+        found, _ = search_clip(job, cache, log)
+        summary = out / "summaries" / f"{job.id}.json"
+        shutil.copyfile(found, summary)
+        clip = out / "clips" / f"{job.id}.mp4"
+        render_clip(job, summary, clip, spec.render, cache, log)
+        order = sorted(range(2), key=lambda k: job.numbers[k])
+        data = json.loads(summary.read_text())
+        clips.append({
+            "id": job.id,
+            "file": f"clips/{job.id}.mp4",
+            "sha256": sha256_file(clip),
+            "scheme": job.scheme.name,
+            "scenario": job.scenario,
+            "agents": [job.pair[k] for k in order],
+            "labels": [robot_label(job.numbers[k]) for k in order],
+            "better": better_agent(job.pair, evaluations),
+            "summary": f"summaries/{job.id}.json",
+            "poster": f"clips/{job.id}.poster.png",
+            "sheet": f"clips/{job.id}.sheet.png",
+            "parts": list(job.parts),
+            "solver": job.scheme.solver,
+            "reward": data.get("reward"),
+            "outcomes": [data["outcomes"][k] for k in order],
+        })
+    (out / "study.toml").write_text(text, encoding="utf-8")
+    wanted = {c[key] for c in clips for key in ("file", "summary", "poster", "sheet")} | {"study.toml"}
+    for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
+        if str(stale.relative_to(out)) not in wanted:
+            stale.unlink()
+    write_gallery(out, clips, evaluations)
+    manifest = {
+        "format": MANIFEST_FORMAT,
+        "label_seed": spec.seed,
+        "clips": clips,
+        "agents": evaluations,
+        "files": {name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
+    }
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
+    log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
+    return manifest
+
+
+def _outcome(outcome: dict) -> str:
+    when = outcome.get("time")
+    return outcome["event"] + ("" if when is None else f" at {when:.2f} s")
+
+
+GALLERY_STYLE = """
+body { font: 15px/1.4 system-ui, sans-serif; margin: 1.5rem; color: #222; }
+table { border-collapse: collapse; margin-bottom: 1.5rem; }
+td, th { padding: .25rem .6rem; border-bottom: 1px solid #ddd; text-align: left; }
+main { display: grid; grid-template-columns: repeat(auto-fill, minmax(340px, 1fr)); gap: 1.2rem; }
+figure { margin: 0; } video { width: 100%; background: #eee; } ul { margin: .3rem 0; padding-left: 1.2rem; }
+"""
+
+
+def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) -> None:
+    """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward."""
+    esc = html.escape
+    rows = "".join(
+        f"<tr><td>{esc(name)}</td><td>{e['reward_mean']:.2f} [{e['reward_ci95'][0]:.2f}, {e['reward_ci95'][1]:.2f}]"
+        f"</td><td>{e['success_rate']:.2f}</td><td>{e['collision_rate']:.2f}</td><td>{e['timeout_rate']:.2f}</td>"
+        f"<td>{e['episodes']}</td></tr>" for name, e in evaluations.items())
+    cards = []
+    for clip in clips:
+        robots = "".join(
+            f"<li><b>{esc(label)}</b> = {esc(agent)}{' (better)' if agent == clip['better'] else ''}: "
+            f"{esc(_outcome(outcome))}</li>"
+            for label, agent, outcome in zip(clip["labels"], clip["agents"], clip["outcomes"], strict=True))
+        reward = "n/a" if clip["reward"] is None else f"{clip['reward']:.3f}"
+        cards.append(
+            f"<figure><video controls preload=\"none\" poster=\"{esc(clip['poster'])}\" src=\"{esc(clip['file'])}\">"
+            f"</video><figcaption><b>{esc(clip['scheme'])}</b> ({esc(clip['solver'])}) · {esc(clip['scenario'])} · "
+            f"parts: {esc(', '.join(clip['parts']))}<ul>{robots}</ul>divergence reward {reward} · "
+            f"<a href=\"{esc(clip['sheet'])}\">contact sheet</a> · <a href=\"{esc(clip['summary'])}\">summary</a> · "
+            f"<code>{esc(clip['id'])}</code></figcaption></figure>")
+    page = (
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+        f"<title>Study bundle: clips</title><style>{GALLERY_STYLE}</style></head><body>\n<h1>Study bundle</h1>\n"
+        "<p>For the researcher only: this page shows which agent each robot is. Participants see the clips alone."
+        "</p>\n<table><tr><th>agent</th><th>mean reward [95% CI]</th><th>success</th><th>collision</th>"
+        f"<th>timeout</th><th>episodes</th></tr>{rows}</table>\n<main>{''.join(cards)}</main>\n</body></html>\n"
+    )
+    (out / "index.html").write_text(page, encoding="utf-8")

@@ -1,0 +1,108 @@
+"""The study bundle's plan: the [build] table, the clips it asks for and their seeded robot numbers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from search.bundle import BuildError, load_build, parse_build, plan
+
+ROOT = Path(__file__).resolve().parents[2]
+
+BUILD = {
+    "seed": 7,
+    "eval": {"episodes": 4, "seed": 0},
+    "schemes": {"adaptive": {"solver": "mcts", "budget": 300, "seed": 1},
+                "nfirst": {"solver": "nfirst", "budget": 300, "seed": 1}},
+    "sets": [
+        {"parts": ["pairwise", "ranking"], "schemes": ["adaptive", "nfirst"], "scenarios": ["paper-bl-tr"],
+         "agents": ["goal", "orca", "social_force"]},
+        {"parts": ["example"], "schemes": ["nfirst"], "scenarios": ["paper-code"], "pairs": [["goal", "orca"]]},
+    ],
+}
+
+
+def copy(table: dict) -> dict:
+    return json.loads(json.dumps(table))
+
+
+def test_plan_covers_every_pair_scheme_and_scenario():
+    jobs = plan(parse_build(BUILD))
+    assert len(jobs) == 2 * 3 + 1
+    assert len({job.id for job in jobs}) == len(jobs)
+    keys = {(job.scheme.name, job.scenario, frozenset(job.pair)) for job in jobs}
+    assert ("nfirst", "paper-code", frozenset({"goal", "orca"})) in keys
+    assert ("adaptive", "paper-bl-tr", frozenset({"orca", "social_force"})) in keys
+    for job in jobs:
+        assert all(name not in job.id for name in job.pair)  # ids reach browsers
+
+
+def test_a_ranking_set_gives_each_agent_one_number_per_scheme_and_scenario():
+    jobs = [job for job in plan(parse_build(BUILD)) if "ranking" in job.parts]
+    for scheme in ("adaptive", "nfirst"):
+        numbers = {}
+        for job in (j for j in jobs if j.scheme.name == scheme):
+            for agent, number in zip(job.pair, job.numbers, strict=True):
+                numbers.setdefault(agent, set()).add(number)
+        assert all(len(found) == 1 for found in numbers.values())
+        assert sorted(n for found in numbers.values() for n in found) == [1, 2, 3]
+
+
+def test_robot_numbers_are_seeded_and_vary_with_the_seed():
+    first = [job.numbers for job in plan(parse_build(BUILD))]
+    assert first == [job.numbers for job in plan(parse_build(BUILD))]
+    mappings = set()
+    for seed in range(12):
+        table = copy(BUILD) | {"seed": seed}
+        mappings.add(tuple(job.numbers for job in plan(parse_build(table))))
+    assert len(mappings) > 3
+    example = [job for job in plan(parse_build(BUILD)) if job.parts == ("example",)][0]
+    assert sorted(example.numbers) == [1, 2]
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda b: b.pop("schemes"), r"missing key\(s\) \['schemes'\]"),
+    (lambda b: b["schemes"]["adaptive"].update(budget=0), r"schemes.adaptive.budget: must be a whole number >= 1"),
+    (lambda b: b["schemes"]["nfirst"].update(sovler="x"), r"schemes.nfirst: unknown key\(s\) \['sovler'\]"),
+    (lambda b: b["sets"][0].update(schemes=["adaptive", "mcts"]), r"sets\[0\].schemes: no scheme 'mcts'"),
+    (lambda b: b["sets"][1].update(parts=["warmup"]), r"sets\[1\].parts: parts are"),
+    (lambda b: b["sets"][1].update(parts=["ranking"]), r"sets\[1\]: a set that feeds a ranking part lists its agents"),
+    (lambda b: b["sets"][1].update(scenarios=["paper-bl-tr"], schemes=["adaptive"]), r"sets\[1\]: the clip of .*"
+                                                                                    r"already in sets\[0\]"),
+    (lambda b: b["sets"][0].pop("agents"), "give either agents"),
+    (lambda b: b.update(render={"fps": 5}), "fps must be at least 20"),
+])
+def test_bad_build_tables_give_clear_errors(change, message):
+    table = copy(BUILD)
+    change(table)
+    with pytest.raises(BuildError, match=message):
+        parse_build(table, source="study.toml")
+
+
+def test_a_study_file_without_a_build_table_is_refused(tmp_path):
+    study = tmp_path / "study.toml"
+    study.write_text('[study]\nid = "x"\n')
+    with pytest.raises(BuildError, match="no \\[build\\] table"):
+        load_build(study)
+
+
+@pytest.mark.parametrize("name", ["paper.toml", "demo.toml"])
+def test_shipped_study_files_build_and_serve(name):
+    from app.study import load_study
+
+    spec, _ = load_build(ROOT / "studies" / name)
+    assert plan(spec)
+    assert load_study(ROOT / "studies" / name).build is not None  # the server reads the same file
+
+
+def test_paper_build_reproduces_the_papers_clip_set():
+    spec, _ = load_build(ROOT / "studies" / "paper.toml")
+    jobs = plan(spec)
+    main = [job for job in jobs if "example" not in job.parts]
+    assert {job.scheme.solver for job in main} == {"mcts", "nfirst"}
+    for scheme in ("adaptive", "nfirst"):
+        for scenario in ("paper-bl-tr", "paper-tl-br"):
+            pairs = {frozenset(job.pair) for job in main if job.scheme.name == scheme and job.scenario == scenario}
+            assert pairs == {frozenset(p) for p in (("lo", "med"), ("med", "hi"), ("lo", "hi"))}
