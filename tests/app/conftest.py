@@ -37,7 +37,8 @@ WATCHED = json.dumps([{"type": "loaded", "t": 5}, {"type": "play", "t": 100}, {"
 
 def make_clip(path: Path, source: str) -> None:
     subprocess.run(
-        [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i", f"{source}=size=64x64:rate=10:duration=1",
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi",
+         "-i", f"{source}=size=64x64:rate=10:duration=1",
          "-c:v", "libx264", "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)],
         check=True,
     )

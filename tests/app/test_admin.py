@@ -1,0 +1,107 @@
+"""Admin pages: password from the environment, progress, per-participant view, exclusion flag, CSV."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.models import Participant
+from app.settings import Settings
+from tests.app.conftest import ADMIN_PASSWORD, FormReader, answer_for, finish, start, stored
+
+BALANCED = {"platform": '"prolific"', "assignment": '"balanced"'}
+
+
+def log_in(client: TestClient, password: str = ADMIN_PASSWORD):
+    page = client.get("/admin/login")
+    return client.post("/admin/login", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
+                                             "password": password})
+
+
+def test_admin_is_off_without_a_password(make_client):
+    client = make_client(BALANCED, admin_password=None)
+    for path in ("/admin", "/admin/login", "/admin/export.csv"):
+        response = client.get(path)
+        assert response.status_code == 404 and "FOIL_ADMIN_PASSWORD" in response.text
+
+
+def test_short_admin_password_refuses_to_start(bundle_dir):
+    with pytest.raises(ValueError, match="at least 8 characters"):
+        Settings(bundle_dir=bundle_dir, admin_password="short")
+
+
+def test_admin_pages_need_the_password(make_client):
+    client = make_client(BALANCED)
+    for path in ("/admin", "/admin/export.csv", "/admin/participants/abc"):
+        response = client.get(path, follow_redirects=False)
+        assert response.status_code == 303 and response.headers["location"] == "/admin/login"
+    wrong = log_in(client, "not the password")
+    assert wrong.status_code == 401 and "Wrong password" in wrong.text
+    assert client.get("/admin", follow_redirects=False).status_code == 303
+    assert log_in(client).status_code == 200
+    assert client.get("/admin").status_code == 200
+    page = client.get("/admin")
+    client.post("/admin/logout", data={"csrf_token": FormReader(page.text).hidden["csrf_token"]})
+    assert client.get("/admin", follow_redirects=False).status_code == 303
+
+
+def test_progress_median_participant_view_exclusion_and_csv(make_client):
+    client = make_client(BALANCED)
+    finisher = TestClient(client.app)
+    finish(finisher, start(finisher, "?PROLIFIC_PID=done1&STUDY_ID=s&SESSION_ID=a"))
+    halfway = TestClient(client.app)
+    page = start(halfway, "?PROLIFIC_PID=half2&STUDY_ID=s&SESSION_ID=b")
+    page = halfway.post("/study", data=answer_for(page)).text
+    evil = "<script>alert(1)</script>=HYPERLINK(\"http://x\")"
+    halfway.post("/study", data={**answer_for(page), "justification": evil})
+
+    log_in(client)
+    overview = client.get("/admin").text
+    assert "Median duration of the 1 completed" in overview
+    assert "done1" in overview and "half2" in overview
+    finished, started = stored(client, Participant)
+    row = overview.split("<tbody>")[1].split("</tbody>")[0]
+    assert row.count("<tr>") == 4  # one row per condition
+    totals = overview.split("<tfoot>")[1].split("</tfoot>")[0]
+    assert "<td>1</td><td>1</td><td>0</td><td>0</td>" in totals  # started, completed, returned, declined
+
+    detail = client.get(f"/admin/participants/{started.code}").text
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in detail and "<script>alert(1)" not in detail
+    assert "half2" in detail
+    token = FormReader(detail).hidden["csrf_token"]
+    assert client.post(f"/admin/participants/{started.code}/exclusion",
+                       data={"excluded": "1", "note": "too fast"}).status_code == 403
+    saved = client.post(f"/admin/participants/{started.code}/exclusion",
+                        data={"csrf_token": token, "excluded": "1", "note": "too fast"})
+    assert saved.status_code == 200
+    person = stored(client, Participant)[1]
+    assert person.excluded and person.exclusion_note == "too fast"
+    assert client.post(f"/admin/participants/{started.code}/exclusion",
+                       data={"csrf_token": token, "excluded": "maybe"}).status_code == 400
+    assert client.get("/admin/participants/nobody").status_code == 404
+
+    export = client.get("/admin/export.csv")
+    assert export.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(export.text)))
+    mine = [r for r in rows if r["participant"] == finished.code]
+    assert len({r["step"] for r in mine}) == len(finished.plan)
+    choices = [r for r in mine if r["question"] == "better"]
+    assert len(choices) == 6 and all(r["correct"] in ("0", "1") for r in choices)
+    assert all(r["answer_agents"] in r["robots"] for r in choices)
+    rankings = [r for r in mine if r["question"] == "ranking"]
+    assert len(rankings) == 2 and all(r["answer"].count(" > ") == 2 for r in rankings)
+    typed = [r for r in rows if r["participant"] == started.code and r["question"] == "justification"]
+    assert typed[0]["answer"] == evil and typed[0]["excluded"] == "1"
+
+
+def test_csv_neutralises_spreadsheet_formulas(make_client):
+    client = make_client(BALANCED)
+    page = start(client, "?PROLIFIC_PID=f1&STUDY_ID=s&SESSION_ID=a")
+    page = client.post("/study", data=answer_for(page)).text
+    client.post("/study", data={**answer_for(page), "justification": "=1+1"})
+    log_in(client)
+    rows = list(csv.DictReader(io.StringIO(client.get("/admin/export.csv").text)))
+    assert [r["answer"] for r in rows if r["question"] == "justification"] == ["'=1+1"]
