@@ -1,0 +1,347 @@
+"""The study's data as typed rows: one per answer (long), one per participant (wide), read from the database in
+batches of participants so that any study streams through in constant memory.
+
+A row joins what a participant submitted with what their plan says was on the screen: the real agents behind
+the on-screen labels and the ground truth, so answers can be scored without the bundle. Question types, scale
+points and texts come from the study definition, which the database itself does not hold.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+from sqlalchemy import select
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import OperationalError
+
+from app.database import Database, DatabaseError, as_utc, check_migrated
+from app.exclusions import duration_s
+from app.models import Participant, Response
+from app.study import PairwisePart, Study, load_study
+
+LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
+ORDER_SEPARATOR = ">"  # between the places of a ranking, best first
+
+
+@dataclass(frozen=True)
+class Column:
+    name: str
+    dtype: str  # string | Int64 | Float64 | datetime: what pandas should read it as
+    description: str
+
+
+@dataclass
+class ParticipantRecord:
+    participant: Participant  # detached from its session
+    responses: list[Response]  # ordered by step
+
+
+def participant_records(db: Database, study_id: str, batch: int = 500) -> Iterator[ParticipantRecord]:
+    """Every participant of the study with their responses, in id order; at most `batch` in memory at a time.
+
+    Pages by participant id (keyset), so each batch is one query for participants and one for their responses."""
+    last_id = 0
+    while True:
+        with db.reading() as session:
+            participants = list(session.scalars(
+                select(Participant).where(Participant.study == study_id, Participant.id > last_id)
+                .order_by(Participant.id).limit(batch)))
+            if not participants:
+                return
+            responses: dict[int, list[Response]] = {p.id: [] for p in participants}
+            query = (select(Response).where(Response.participant_id.in_(list(responses)))
+                     .order_by(Response.participant_id, Response.step))
+            for response in session.scalars(query):
+                responses[response.participant_id].append(response)
+            session.expunge_all()
+        for participant in participants:
+            yield ParticipantRecord(participant, responses[participant.id])
+        last_id = participants[-1].id
+
+
+def iso_utc(moment: datetime | None) -> str | None:
+    """ISO 8601 in UTC with a Z, to the millisecond: what pandas, R and spreadsheets all parse."""
+    if moment is None:
+        return None
+    return as_utc(moment).astimezone(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def analysis_database(url: str) -> Database:
+    """An existing, migrated survey database; a clear error for a wrong path or an unmigrated file (opening a
+    missing SQLite file would otherwise create an empty one)."""
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "", ":memory:"):
+        if not Path(parsed.database).is_file():
+            raise ValueError(f"no database file {parsed.database} (URL {url!r})")
+    db = Database(url)
+    try:
+        check_migrated(db.engine)
+    except (DatabaseError, OperationalError) as error:
+        db.dispose()
+        raise ValueError(f"{url!r} is not a usable survey database: {error}") from None
+    return db
+
+
+def study_ids(db: Database) -> list[str]:
+    with db.reading() as session:
+        return list(session.scalars(select(Participant.study).distinct().order_by(Participant.study)))
+
+
+def analysis_study(db: Database, study_file: str | Path | None) -> Study:
+    """The study definition for a database: the given file, whose id selects the participants."""
+    if study_file is None:
+        found = study_ids(db)
+        raise ValueError("give the study file the survey was served with (--study FILE): the database does not "
+                         "hold question types and scales" + (f"; it holds studies {found}" if found else ""))
+    return load_study(study_file)
+
+
+# Long format ---------------------------------------------------------------------------------------------------
+
+LONG_COLUMNS = [
+    Column("study", "string", "study id (the [study] id of the study file)"),
+    Column("participant", "string", "participant code, the same in every file"),
+    Column("condition", "Int64", "condition number, 1-based (see `conditions` in the codebook)"),
+    Column("step", "Int64", "index of the screen in the participant's plan (0 is the instructions)"),
+    Column("part", "Int64", "part of the study, 1-based; empty for the instructions"),
+    Column("screen", "string", "kind of screen: instructions, pairwise, watch, ranking or attention"),
+    Column("trial", "Int64", "position of the screen within its part, 1-based, in the order it was shown"),
+    Column("block", "Int64", "in a ranking part: which of the participant's ranking blocks (1 = first shown)"),
+    Column("clip", "string", "clip id in the bundle; on a ranking screen, the clips of its block"),
+    Column("scheme", "string", "scheme that generated the clip (e.g. adaptive, nfirst)"),
+    Column("scenario", "string", "scenario of the clip"),
+    Column("agents", "string", f"real agents on the screen, '{LIST_SEPARATOR}'-separated, in the order the robots "
+                               "were offered as answers"),
+    Column("labels", "string", "their on-screen labels (e.g. Robot 1), in the same order as `agents`"),
+    Column("question", "string", "question name from the study file; 'attention' for an attention check; empty on "
+                                 "a screen without questions"),
+    Column("question_type", "string", "choose, text, scale, rank or attention; empty without a question"),
+    Column("answer", "string", "what was submitted: the robot label chosen, the text, the scale point, or the "
+                               f"ranking's labels best first joined by '{ORDER_SEPARATOR}'"),
+    Column("answer_agent", "string", "the real agent behind a chosen label; for a ranking, the agents best first"),
+    Column("value", "Int64", "the scale point (1 to the number of points) for a scale question"),
+    Column("truth", "string", "the right answer: the better agent, the true order best first, or the expected "
+                              "attention-check option; empty when there is none"),
+    Column("correct", "Int64", "1 when the answer equals `truth`, 0 when not, empty when there is no right answer"),
+    Column("time_on_page_ms", "Int64", "time on the page measured by the browser, in ms"),
+    Column("server_ms", "Int64", "time from the screen becoming current to its submission, measured by the server"),
+    Column("plays", "Int64", "how often the clip was started (1 = watched once, no replay)"),
+    Column("submitted_at", "datetime", "when the screen was submitted (UTC)"),
+]
+
+
+def _agent_of(screen: dict) -> dict[str, str]:
+    return {robot["label"]: robot["agent"] for robot in screen.get("robots", [])}
+
+
+def _scored(question_type: str, value, screen: dict) -> dict:
+    """answer, answer_agent, value, truth and correct of one submitted value."""
+    agent_of = _agent_of(screen)
+    if question_type == "choose":
+        agent = agent_of.get(value)
+        return {"answer": value, "answer_agent": agent, "truth": screen.get("better"),
+                "correct": None if agent is None else int(agent == screen.get("better"))}
+    if question_type == "rank":
+        agents = [agent_of.get(label) for label in value]
+        truth = screen.get("true_order")
+        return {"answer": ORDER_SEPARATOR.join(value),
+                "answer_agent": None if None in agents else ORDER_SEPARATOR.join(agents),
+                "truth": None if truth is None else ORDER_SEPARATOR.join(truth),
+                "correct": None if truth is None or None in agents else int(agents == truth)}
+    if question_type == "scale":
+        return {"answer": str(value), "value": int(value)}
+    if question_type == "attention":
+        return {"answer": value, "truth": screen["expected"], "correct": int(value == screen["expected"])}
+    return {"answer": value if isinstance(value, str) else str(value)}
+
+
+def _trials(plan: list[dict]) -> list[int | None]:
+    """Each screen's 1-based position within its part."""
+    seen: dict[int, int] = {}
+    out = []
+    for screen in plan:
+        part = screen.get("part")
+        if part is None:
+            out.append(None)
+        else:
+            seen[part] = seen.get(part, 0) + 1
+            out.append(seen[part])
+    return out
+
+
+def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
+    """One row per answered question; a screen without questions gives one row with an empty question."""
+    participant = record.participant
+    plan = participant.plan or []
+    trials = _trials(plan)
+    types = {name: question.type for name, question in study.questions.items()} | {"attention": "attention"}
+    for response in record.responses:
+        screen = plan[response.step] if response.step < len(plan) else {"kind": response.kind}
+        robots = screen.get("robots", [])
+        common = {
+            "study": participant.study, "participant": participant.code,
+            "condition": None if participant.condition is None else participant.condition + 1,
+            "step": response.step, "part": screen.get("part"), "screen": response.kind,
+            "trial": trials[response.step] if response.step < len(trials) else None, "block": screen.get("block"),
+            "clip": screen.get("clip") or LIST_SEPARATOR.join(screen.get("clips", [])) or None,
+            "scheme": screen.get("scheme"), "scenario": screen.get("scenario"),
+            "agents": LIST_SEPARATOR.join(r["agent"] for r in robots) or None,
+            "labels": LIST_SEPARATOR.join(r["label"] for r in robots) or None,
+            "time_on_page_ms": response.client_ms, "server_ms": response.server_ms, "plays": response.plays,
+            "submitted_at": iso_utc(response.submitted_at),
+        }
+        answers = response.answers or {}
+        if not answers:
+            yield common
+        for question, value in answers.items():
+            question_type = types.get(question, "unknown")
+            scored = _scored(question_type, value, screen)
+            yield common | {"question": question, "question_type": question_type} | scored
+
+
+# Participants ------------------------------------------------------------------------------------------------
+
+PARTICIPANT_COLUMNS = [
+    Column("study", "string", "study id"),
+    Column("participant", "string", "participant code, the same in every file"),
+    Column("platform", "string", "recruitment platform: prolific, mturk or none"),
+    Column("external_id", "string", "PROLIFIC_PID or MTurk workerId; empty when anonymous"),
+    Column("platform_study_id", "string", "Prolific STUDY_ID or MTurk hitId"),
+    Column("platform_session_id", "string", "Prolific SESSION_ID or MTurk assignmentId"),
+    Column("status", "string", "started, completed, returned (left the study) or declined (no consent)"),
+    Column("condition", "Int64", "condition number, 1-based; empty before assignment"),
+    Column("schemes", "string", f"schemes in the order this participant saw them, '{LIST_SEPARATOR}'-separated"),
+    Column("scenarios", "string", f"scenario of each part, part 1 first, '{LIST_SEPARATOR}'-separated"),
+    Column("slot", "Int64", "arrival number used by balanced assignment; empty when self-selected"),
+    Column("created_at", "datetime", "consent given (UTC)"),
+    Column("completed_at", "datetime", "last screen submitted (UTC); empty when not completed"),
+    Column("duration_s", "Float64", "completed_at - created_at, in seconds"),
+    Column("screens", "Int64", "screens in the participant's plan"),
+    Column("screens_answered", "Int64", "screens submitted"),
+    Column("attention_failures", "Int64", "attention checks answered wrongly"),
+    Column("exclusion_note", "string", "the admin's note on the exclusion flag"),
+    Column("incomplete", "Int64", "1 when the participant did not complete the study"),
+    Column("failed_attention", "Int64", "1 when at least one attention check was failed"),
+    Column("too_fast", "Int64", "1 when completed faster than the threshold (see `exclusion_rules`)"),
+    Column("flagged_by_admin", "Int64", "1 when flagged for exclusion on the admin pages"),
+    Column("excluded", "Int64", "1 when any exclusion rule applies: the report leaves the participant out"),
+    Column("user_agent", "string", "the browser's User-Agent at consent"),
+]
+
+
+def _plan_order(plan: list[dict], key: str) -> list[str]:
+    return list(dict.fromkeys(screen[key] for screen in plan if screen.get(key)))
+
+
+def part_scenarios(plan: list[dict]) -> list[str]:
+    by_part = {screen["part"]: screen["scenario"] for screen in plan if "part" in screen and "scenario" in screen}
+    return [by_part[part] for part in sorted(by_part)]
+
+
+def participant_row(record: ParticipantRecord, flags: dict[str, bool]) -> dict:
+    p = record.participant
+    plan = p.plan or []
+    duration = duration_s(p)
+    return {
+        "study": p.study, "participant": p.code, "platform": p.platform, "external_id": p.external_id,
+        "platform_study_id": p.platform_study_id, "platform_session_id": p.platform_session_id,
+        "status": p.status, "condition": None if p.condition is None else p.condition + 1,
+        "schemes": LIST_SEPARATOR.join(_plan_order(plan, "scheme")) or None,
+        "scenarios": LIST_SEPARATOR.join(part_scenarios(plan)) or None, "slot": p.slot,
+        "created_at": iso_utc(p.created_at), "completed_at": iso_utc(p.completed_at),
+        "duration_s": None if duration is None else round(duration, 3),
+        "screens": len(plan), "screens_answered": len(record.responses),
+        "attention_failures": p.attention_failures, "exclusion_note": p.exclusion_note or None,
+        "user_agent": p.user_agent or None, **{name: int(flag) for name, flag in flags.items()},
+    }
+
+
+# Wide format -------------------------------------------------------------------------------------------------
+
+WIDE_LEAD = ["study", "participant", "condition", "status", "excluded", "duration_s"]
+
+
+def _slug(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_").lower() or "x"
+
+
+def _answer_columns(question: str, kind: str, prefix: str, what: str) -> list[Column]:
+    dtype = {"scale": "Int64"}.get(kind, "string")
+    meaning = {"choose": "the agent chosen", "rank": f"the agents ranked, best first, joined by '{ORDER_SEPARATOR}'",
+               "scale": "the scale point", "text": "the text written"}[kind]
+    columns = [Column(f"{prefix}_{question}", dtype, f"{what}, question {question}: {meaning}")]
+    if kind in ("choose", "rank"):
+        columns.append(Column(f"{prefix}_{question}_correct", "Int64", f"{what}, question {question}: 1 if right"))
+    return columns
+
+
+class WideLayout:
+    """The wide file's columns, fixed by the study definition alone (so every export of a study has the same
+    header), and where each answer goes: pairwise answers by part, scheme and pair; ranking answers by part
+    and scheme; attention checks by number. Screen order and labels, which vary per participant, are not in
+    the names."""
+
+    def __init__(self, study: Study):
+        self.columns: list[Column] = [c for c in PARTICIPANT_COLUMNS if c.name in WIDE_LEAD]
+        self.columns.sort(key=lambda c: WIDE_LEAD.index(c.name))
+        self._pairs: dict[tuple[int, frozenset], str] = {}
+        for p, part in enumerate(study.parts, start=1):
+            self.columns.append(Column(f"p{p}_scenario", "string", f"part {p}: its scenario for this participant"))
+            for scheme in study.design.schemes:
+                if isinstance(part, PairwisePart):
+                    for a, b in part.pairs:
+                        self._pairs[(p, frozenset((a, b)))] = f"{_slug(a)}_{_slug(b)}"
+                        for name in part.questions:
+                            self.columns += _answer_columns(
+                                name, study.questions[name].type, f"p{p}_{_slug(scheme)}_{_slug(a)}_{_slug(b)}",
+                                f"part {p}, scheme {scheme}, clip of {a} and {b}")
+                else:
+                    what = f"part {p}, scheme {scheme}, ranking of {', '.join(part.agents)}"
+                    for name in part.questions:
+                        self.columns += _answer_columns(name, study.questions[name].type, f"p{p}_{_slug(scheme)}", what)
+        for c in range(1, len(study.attention_checks) + 1):
+            self.columns.append(Column(f"attention{c}", "string", f"attention check {c}: the option chosen"))
+            self.columns.append(Column(f"attention{c}_passed", "Int64", f"attention check {c}: 1 if it was right"))
+        names = [c.name for c in self.columns]
+        if len(set(names)) != len(names):
+            clashes = sorted({n for n in names if names.count(n) > 1})
+            raise ValueError(f"scheme, agent or question names give clashing column names {clashes}; rename them")
+        self.names = set(names)
+
+    def row(self, record: ParticipantRecord, long: list[dict], flags: dict[str, bool]) -> dict:
+        p = record.participant
+        duration = duration_s(p)
+        row = {"study": p.study, "participant": p.code, "condition": None if p.condition is None else p.condition + 1,
+               "status": p.status, "excluded": int(flags["excluded"]),
+               "duration_s": None if duration is None else round(duration, 3)}
+        for part, scenario in enumerate(part_scenarios(p.plan or []), start=1):
+            row[f"p{part}_scenario"] = scenario
+        plan = p.plan or []
+        for answer in long:
+            if not answer.get("question"):
+                continue
+            screen = plan[answer["step"]]
+            if answer["question_type"] == "attention":
+                prefix = f"attention{screen['check'] + 1}"
+                row[prefix], row[f"{prefix}_passed"] = answer["answer"], answer["correct"]
+                continue
+            if screen["kind"] == "pairwise":
+                pair = self._pairs.get((screen["part"], frozenset(r["agent"] for r in screen["robots"])), "?")
+                prefix = f"p{screen['part']}_{_slug(screen['scheme'])}_{pair}"
+            else:
+                prefix = f"p{screen['part']}_{_slug(screen['scheme'])}"
+            key = f"{prefix}_{answer['question']}"
+            if key not in self.names:
+                raise ValueError(f"participant {p.code} answered {answer['question']!r} on a {screen['kind']} screen "
+                                 f"of scheme {screen['scheme']!r} that the study file does not define: is it the "
+                                 "study file the survey was served with?")
+            value_key = {"choose": "answer_agent", "rank": "answer_agent", "scale": "value"}.get(
+                answer["question_type"], "answer")
+            row[key] = answer[value_key]
+            if f"{key}_correct" in self.names:
+                row[f"{key}_correct"] = answer["correct"]
+        return row

@@ -1,0 +1,196 @@
+"""`foil export`: long.csv (one row per answer), wide.csv (one row per participant), participants.csv and the
+codebook (codebook.md for people, codebook.json for code), written in one streaming pass over the database.
+
+Every file is plain UTF-8 CSV with a header that pandas, R and spreadsheets read without options. Text that a
+spreadsheet would run as a formula is neutralised (see `neutralise`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from app.answer_table import (
+    LONG_COLUMNS,
+    PARTICIPANT_COLUMNS,
+    Column,
+    WideLayout,
+    analysis_database,
+    analysis_study,
+    long_rows,
+    participant_records,
+    participant_row,
+)
+from app.assignment import conditions
+from app.database import Database
+from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
+from app.study import ScaleQuestion, Study
+
+# A cell starting with one of these is a formula to Excel, LibreOffice or Google Sheets (tab and carriage
+# return too, in some of them); an apostrophe in front makes it text.
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+# Whole cells that pandas (by default) or R read as a missing value, though a participant may type them.
+MISSING_TOKENS = {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN", "<NA>",
+                  "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null"}
+FILES = ("long.csv", "wide.csv", "participants.csv")
+
+
+def neutralise(text: str) -> str:
+    """Put an apostrophe in front of text a spreadsheet would execute or a reader would take for a missing value,
+    and in front of text that already starts with one, so that the rule reverses exactly: drop the first
+    character of any cell starting with an apostrophe to get what was typed."""
+    return "'" + text if text.startswith(FORMULA_START + ("'",)) or text in MISSING_TOKENS else text
+
+
+def _cell(value) -> str | int | float:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, int | float):
+        return value
+    return neutralise(str(value))
+
+
+class _Table:
+    """One CSV file being written, its header first."""
+
+    def __init__(self, path: Path, columns: list[Column]):
+        self.names = [c.name for c in columns]
+        self.handle = path.open("w", encoding="utf-8", newline="")
+        self.writer = csv.writer(self.handle, lineterminator="\r\n")  # RFC 4180; quotes any CR or LF in text
+        self.writer.writerow(self.names)
+        self.rows = 0
+
+    def write(self, row: dict) -> None:
+        self.writer.writerow([_cell(row.get(name)) for name in self.names])
+        self.rows += 1
+
+    def close(self) -> None:
+        self.handle.close()
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    out: Path
+    participants: int
+    answers: int  # rows of long.csv
+    excluded: int
+    seconds: float
+
+
+def _question_codes(study: Study) -> dict:
+    codes = {}
+    for name, question in study.questions.items():
+        entry = {"type": question.type, "text": question.text}
+        if isinstance(question, ScaleQuestion):
+            entry["points"] = question.points
+            entry["point_labels"] = question.point_labels()
+        codes[name] = entry
+    return codes
+
+
+def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None) -> dict:
+    """Everything an analyst needs to read the files: columns with their types, questions with their scales,
+    conditions, exclusion rules, and the arguments that make pandas read each file with exact types."""
+    files = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
+    return {
+        "format": "foil.export/1",
+        "study": {"id": study.study.id, "title": study.study.title, "schemes": list(study.design.schemes),
+                  "scheme_factor": study.design.scheme_factor, "scenarios": list(study.design.scenarios)},
+        "files": {
+            name: {
+                "columns": [asdict(c) for c in columns],
+                "read_csv": {
+                    "dtype": {c.name: c.dtype for c in columns if c.dtype != "datetime"},
+                    "parse_dates": [c.name for c in columns if c.dtype == "datetime"],
+                },
+            }
+            for name, columns in files.items()
+        },
+        "questions": _question_codes(study),
+        "conditions": [{"number": c.index + 1, "schemes": list(c.schemes),
+                        "part_scenarios": [study.part_scenario(p, c.rotation) for p in range(len(study.parts))]}
+                       for c in conditions(study)],
+        "exclusion_rules": {"reasons": REASONS, "too_fast": rules.describe(median_s),
+                            "too_fast_threshold_s": rules.threshold_s(median_s),
+                            "median_duration_s": median_s},
+        "neutralised_cells": "a text cell starting with = + - @ tab, carriage return or an apostrophe, or one "
+                             "that reads as a missing value (NA, null, None, ...), gets an apostrophe in front; "
+                             "drop the first character of a cell starting with an apostrophe to get the text as "
+                             "typed",
+    }
+
+
+def codebook_markdown(book: dict) -> str:
+    study = book["study"]
+    lines = [f"# Codebook: study `{study['id']}`", "", study["title"], "",
+             f"Schemes: {', '.join(study['schemes'])} ({study['scheme_factor']}-subjects). "
+             f"Scenarios: {', '.join(study['scenarios'])}.", "",
+             "All files are UTF-8 CSV with a header row; times are ISO 8601 in UTC; empty cells are missing values. "
+             "`pd.read_csv(path)` reads them; for exact types pass "
+             "`**codebook['files'][name]['read_csv']` from codebook.json.", "",
+             f"Spreadsheet safety: {book['neutralised_cells']}.", ""]
+    for name, spec in book["files"].items():
+        lines += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
+        lines += [f"| `{c['name']}` | {c['dtype']} | {c['description']} |" for c in spec["columns"]]
+        lines.append("")
+    lines += ["## Questions", "", "| question | type | text | points |", "|---|---|---|---|"]
+    for name, q in book["questions"].items():
+        points = "; ".join(f"{i} = {label}" for i, label in enumerate(q.get("point_labels", []), start=1))
+        lines.append(f"| `{name}` | {q['type']} | {q['text']} | {points} |")
+    lines += ["", "## Conditions", "", "| condition | schemes in order | scenario of each part |", "|---|---|---|"]
+    lines += [f"| {c['number']} | {', '.join(c['schemes'])} | {', '.join(c['part_scenarios'])} |"
+              for c in book["conditions"]]
+    rules = book["exclusion_rules"]
+    lines += ["", "## Exclusion flags", ""]
+    lines += [f"- `{reason}`: {text}" for reason, text in rules["reasons"].items()]
+    lines += [f"- time threshold of this export: {rules['too_fast']}", ""]
+    return "\n".join(lines)
+
+
+def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRules | None = None,
+                 batch: int = 500) -> ExportResult:
+    """Write the three CSV files and the codebook into `out`, reading `batch` participants at a time."""
+    started = time.perf_counter()
+    rules = rules or ExclusionRules()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    layout = WideLayout(study)
+    median_s = median_duration_s(db, study.study.id)
+    threshold = rules.threshold_s(median_s)
+    tables = {"long.csv": _Table(out / "long.csv", LONG_COLUMNS), "wide.csv": _Table(out / "wide.csv", layout.columns),
+              "participants.csv": _Table(out / "participants.csv", PARTICIPANT_COLUMNS)}
+    excluded = 0
+    try:
+        for record in participant_records(db, study.study.id, batch=batch):
+            flags = exclusion_flags(record.participant, threshold)
+            excluded += flags["excluded"]
+            long = list(long_rows(study, record))
+            for row in long:
+                tables["long.csv"].write(row)
+            tables["wide.csv"].write(layout.row(record, long, flags))
+            tables["participants.csv"].write(participant_row(record, flags))
+    finally:
+        for table in tables.values():
+            table.close()
+    book = codebook(study, layout, rules, median_s)
+    (out / "codebook.json").write_text(json.dumps(book, indent=1) + "\n", encoding="utf-8")
+    (out / "codebook.md").write_text(codebook_markdown(book), encoding="utf-8")
+    return ExportResult(out=out, participants=tables["participants.csv"].rows, answers=tables["long.csv"].rows,
+                        excluded=excluded, seconds=time.perf_counter() - started)
+
+
+def run_export(*, database_url: str, study_file: str | None, out: str, rules: ExclusionRules) -> int:
+    """`foil export`: prints what was written."""
+    db = analysis_database(database_url)
+    try:
+        result = export_study(db, analysis_study(db, study_file), out, rules)
+    finally:
+        db.dispose()
+    print(f"{result.participants} participants ({result.excluded} excluded by the rules), {result.answers} answer "
+          f"rows in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json in {result.out}")
+    return 0
