@@ -173,3 +173,15 @@ def test_unknown_participant_gets_a_clear_message(make_client):
     client = make_client(BALANCED)
     page = client.get("/study")
     assert page.status_code == 400 and "open the study again" in page.text
+
+
+def test_malformed_requests_get_clear_4xx_pages(make_client):
+    client = make_client(BALANCED)
+    good = answer_for(at_first_clip(client))
+    upload = client.post("/study", data=good, files={"f": ("a.txt", b"x")})
+    assert upload.status_code == 400 and "Too many files" in upload.text
+    crowded = client.post("/study", data={**good, **{f"x{i}": "1" for i in range(80)}})
+    assert crowded.status_code == 400 and "Too many fields" in crowded.text
+    unknown = client.get("/no/such/page")
+    assert unknown.status_code == 404 and "<h1>Page not found</h1>" in unknown.text
+    assert len(stored(client, Response)) == 1
