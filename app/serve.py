@@ -5,6 +5,9 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
+
 from app.database import migrate
 from app.settings import Settings
 
@@ -17,7 +20,10 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
     given = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
     settings = Settings(**{key: value for key, value in given.items() if value is not None})
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
-    migrate(settings.database_url)
+    try:
+        migrate(settings.database_url)
+    except (ArgumentError, OperationalError, NoSuchModuleError) as error:
+        raise ValueError(f"cannot use the database {_shown(settings.database_url)}: {error}") from None
     app = create_app(settings)
     logging.getLogger("foil.server").info(
         "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/",
@@ -29,9 +35,10 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
 
 def _shown(url: str) -> str:
     """The database URL without its password, and SQLite files as absolute paths."""
-    from sqlalchemy.engine import make_url
-
-    parsed = make_url(url)
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        return repr(url)
     if parsed.get_backend_name() == "sqlite" and parsed.database:
         return f"sqlite file {Path(parsed.database).resolve()}"
     return parsed.render_as_string(hide_password=True)
