@@ -289,37 +289,34 @@ class ClipRenderer:
     def timeline(self) -> list[Frame]:
         """Every frame's simulated time: hold, play at ``speed`` with a pause at each event, hold."""
         o, end = self.options, self.scene.end_time
+        step, tick = o.speed / o.fps, 1 / o.fps
+        pause = round(o.event_hold * o.fps)
+        pending = sorted({t for t in self.scene.event_times() if 0 < t <= end})
+        times = [i * step for i in range(int(math.floor(end / step + 1e-9)) + 1)]
+        if times[-1] < end:
+            times.append(end)
         frames = [Frame(0.0, math.inf)] * round(o.hold_start * o.fps)
-        events = sorted({t for t in self.scene.event_times() if 0 < t <= end})
-        step = o.speed / o.fps
-        last_event = -math.inf
-        video_time = 0.0
-        n_play = int(math.floor(end / step + 1e-9)) + 1
-        for i in range(n_play):
-            t = min(i * step, end)
-            for e in [e for e in events if e <= t]:
-                events.remove(e)
-                hold = max(1, round(o.event_hold * o.fps))
-                for h in range(hold):
-                    frames.append(Frame(e, h / o.fps))
-                last_event = video_time + hold / o.fps
-                video_time += hold / o.fps
-            frames.append(Frame(t, video_time - last_event if last_event > -math.inf else math.inf))
-            video_time += 1 / o.fps
-        if frames[-1].time < end:
-            frames.append(Frame(end, frames[-1].since_event + 1 / o.fps))
-        frames += [Frame(end, frames[-1].since_event + (h + 1) / o.fps) for h in range(round(o.hold_end * o.fps))]
+        since = math.inf
+        for t in times:
+            while pending and pending[0] <= t:
+                event, since = pending.pop(0), 0.0
+                for _ in range(pause):
+                    frames.append(Frame(event, since))
+                    since += tick
+            frames.append(Frame(t, since))
+            since += tick
+        frames += [Frame(end, since + h * tick) for h in range(round(o.hold_end * o.fps))]
         return frames
 
     # -- drawing ------------------------------------------------------------------------------------------------
 
-    def _text(self, draw: ImageDraw.ImageDraw, xy, text: str, size: int, fill=INK, anchor: str = "la",
+    def _text(self, image: Image.Image, xy, text: str, size: int, fill=INK, anchor: str = "la",
               bold: bool = False) -> tuple[float, float, float, float]:
         """Draw text from a cache of stamps (text rendering dominates a frame otherwise); returns its box."""
         self.texts.add(text)
         stamp, (x0, y0) = _text_stamp(text, size, fill, anchor, bold)
         left, top = int(round(xy[0] + x0)), int(round(xy[1] + y0))
-        draw._image.paste(stamp, (left, top), stamp)
+        image.paste(stamp, (left, top), stamp)
         return left, top, left + stamp.width, top + stamp.height
 
     def _background(self) -> Image.Image:
@@ -339,12 +336,13 @@ class ClipRenderer:
                     draw.line([(x0, row), (x0 + lay.panel, row)], fill=GRID, width=1)
             draw.rectangle((x0, lay.header, x0 + lay.panel - 1, lay.header + lay.panel - 1), outline=MUTED, width=2)
         for k in range(scene.n_agents):
-            self._draw_start_goal(draw, k)
-        self._draw_scale_bar(draw)
+            self._draw_start_goal(image, k)
+        self._draw_scale_bar(image)
         return image
 
-    def _draw_start_goal(self, draw: ImageDraw.ImageDraw, k: int) -> None:
-        """Start: a hollow ring; goal: a target with a flag. Neutral ink, labelled, so shared ends read once."""
+    def _draw_start_goal(self, image: Image.Image, k: int) -> None:
+        """Start: a hollow ring; goal: a target. Neutral ink and labelled, so ends that robots share read once."""
+        draw = ImageDraw.Draw(image)
         lay = self.layout
         panel = self.panel_of[k]
         r = self.scene.robot_radius * lay.scale
@@ -352,13 +350,14 @@ class ClipRenderer:
         width = max(2, int(r / 6))
         sx, sy = lay.to_pixel(panel, self.scene.starts[k])
         draw.ellipse((sx - r * 1.2, sy - r * 1.2, sx + r * 1.2, sy + r * 1.2), outline=MUTED, width=width)
-        self._text(draw, (sx, sy + r * 1.35), "start", size, fill=MUTED, anchor="mt")
+        self._text(image, (sx, sy + r * 1.35), "start", size, fill=MUTED, anchor="mt")
         gx, gy = lay.to_pixel(panel, self.scene.goals[k])
         for ring, fill in ((1.4, INK), (0.9, ARENA), (0.45, INK)):
             draw.ellipse((gx - r * ring, gy - r * ring, gx + r * ring, gy + r * ring), fill=fill)
-        self._text(draw, (gx, gy + r * 1.6), "goal", size, fill=INK, anchor="mt")
+        self._text(image, (gx, gy + r * 1.6), "goal", size, fill=INK, anchor="mt")
 
-    def _draw_scale_bar(self, draw: ImageDraw.ImageDraw) -> None:
+    def _draw_scale_bar(self, image: Image.Image) -> None:
+        draw = ImageDraw.Draw(image)
         lay = self.layout
         x1 = lay.width - lay.text * 0.6
         x0 = x1 - lay.scale
@@ -366,7 +365,7 @@ class ClipRenderer:
         draw.line([(x0, y), (x1, y)], fill=INK, width=max(2, lay.text // 8))
         for x in (x0, x1):
             draw.line([(x, y - lay.text * 0.25), (x, y + lay.text * 0.25)], fill=INK, width=max(2, lay.text // 8))
-        self._text(draw, (x0 - lay.text * 0.4, y), "1 m", lay.text, fill=INK, anchor="rm")
+        self._text(image, (x0 - lay.text * 0.4, y), "1 m", lay.text, fill=INK, anchor="rm")
 
     def _state(self, t: float):
         """Interpolated positions at simulated time t: robots (N, 2) and humans (P, n, 2) in pixels."""
@@ -424,9 +423,9 @@ class ClipRenderer:
         self._draw_robots(image, robots)
         for k in self.order:
             if happened[k]:
-                self._draw_event(draw, happened[k][0], robots[k], frame)
-        self._draw_header(draw, frame.time)
-        self._draw_legend(draw, frame.time)
+                self._draw_event(image, happened[k][0], robots[k], frame)
+        self._draw_header(image, frame.time)
+        self._draw_legend(image, frame.time)
         return image
 
     def _draw_robots(self, image: Image.Image, robots: np.ndarray) -> None:
@@ -446,35 +445,35 @@ class ClipRenderer:
             x, y = int(round(robots[k][0])) - half + left, int(round(robots[k][1])) - half
             image.paste(piece, (x, y), piece)
 
-    def _tag(self, draw: ImageDraw.ImageDraw, xy, text: str, size: int, anchor: str) -> None:
+    def _tag(self, image: Image.Image, xy, text: str, size: int, anchor: str) -> None:
         """Black text on a yellow box with a black border: the collision colours, readable in greyscale too."""
         stamp, (x0, y0) = _text_stamp(text, size, (0, 0, 0), anchor, True)
         pad = size * 0.25
         left, top = xy[0] + x0, xy[1] + y0
-        draw.rectangle((left - pad, top - pad, left + stamp.width + pad, top + stamp.height + pad), fill=CRASH,
-                       outline=(0, 0, 0), width=max(2, size // 12))
-        self._text(draw, xy, text, size, (0, 0, 0), anchor, bold=True)
+        box = (left - pad, top - pad, left + stamp.width + pad, top + stamp.height + pad)
+        ImageDraw.Draw(image).rectangle(box, fill=CRASH, outline=(0, 0, 0), width=max(2, size // 12))
+        self._text(image, xy, text, size, (0, 0, 0), anchor, bold=True)
 
-    def _draw_event(self, draw, event: str, xy, frame: Frame) -> None:
+    def _draw_event(self, image: Image.Image, event: str, xy, frame: Frame) -> None:
         """An expanding ring while the clip pauses on the event, then a badge (arrival, timeout) or a tag (crash)."""
         r = self.scene.robot_radius * self.layout.scale
         if frame.since_event < self.options.event_hold + 0.3:
             grow = 1.5 + 4.0 * min(1.0, frame.since_event / max(self.options.event_hold, 1e-6))
-            draw.ellipse((xy[0] - r * grow, xy[1] - r * grow, xy[0] + r * grow, xy[1] + r * grow), outline=INK,
-                         width=max(3, int(r / 4)))
+            ring = (xy[0] - r * grow, xy[1] - r * grow, xy[0] + r * grow, xy[1] + r * grow)
+            ImageDraw.Draw(image).ellipse(ring, outline=INK, width=max(3, int(r / 4)))
         if event == "collision":
-            self._tag(draw, (xy[0], xy[1] - r * 3.0), "CRASH", max(12, int(self.layout.text * 0.85)), "mb")
+            self._tag(image, (xy[0], xy[1] - r * 3.0), "CRASH", max(12, int(self.layout.text * 0.85)), "mb")
         else:
-            _paste(draw._image, self.sprites.badges[event], (xy[0] + r * 1.1, xy[1] - r * 1.1))
+            _paste(image, self.sprites.badges[event], (xy[0] + r * 1.1, xy[1] - r * 1.1))
 
-    def _draw_header(self, draw: ImageDraw.ImageDraw, t: float) -> None:
+    def _draw_header(self, image: Image.Image, t: float) -> None:
         lay = self.layout
         y = lay.header / 2
-        self._text(draw, (lay.text * 0.6, y), f"Time {t:4.1f} s", lay.text, INK, "lm")
+        self._text(image, (lay.text * 0.6, y), f"Time {t:4.1f} s", lay.text, INK, "lm")
         if self.options.speed != 1.0:
-            self._text(draw, (lay.width / 2, y), f"playing {self.options.speed:g}x", lay.text, MUTED, "mm")
+            self._text(image, (lay.width / 2, y), f"playing {self.options.speed:g}x", lay.text, MUTED, "mm")
 
-    def _draw_legend(self, draw: ImageDraw.ImageDraw, t: float) -> None:
+    def _draw_legend(self, image: Image.Image, t: float) -> None:
         """One entry per robot: its icon, its name, and what has happened to it in words and a badge."""
         lay = self.layout
         top = lay.header + lay.panel + lay.text * 0.45
@@ -488,21 +487,21 @@ class ClipRenderer:
                 x0, y = self.panel_of[k] * lay.panel + lay.text * 0.6, top + row / 2
                 status_xy, anchor = (x0 + lay.text * 1.8, y + row), "lm"
             icon = self.sprites.icons[number - 1]
-            _paste(draw._image, icon, (x0 + icon[1], y))
-            self._text(draw, (x0 + lay.text * 1.8, y), robot_label(number), lay.text, INK, "lm", bold=True)
+            _paste(image, icon, (x0 + icon[1], y))
+            self._text(image, (x0 + lay.text * 1.8, y), robot_label(number), lay.text, INK, "lm", bold=True)
             event, when = self._event(k, t) or ("", t)
             if not event and t >= self.scene.end_time:
                 event = "running"
             status = status_text(event, when) if event else STATUS_RUNNING
             if event == "collision":
-                self._tag(draw, status_xy, status, lay.text, anchor)
+                self._tag(image, status_xy, status, lay.text, anchor)
                 continue
-            box = self._text(draw, status_xy, status, lay.text, INK if event else MUTED, anchor)
+            box = self._text(image, status_xy, status, lay.text, INK if event else MUTED, anchor)
             badge = self.sprites.small_badges.get(event)
             if badge:
                 gap = lay.text * 0.4 + badge[1]
                 centre = (box[0] - gap, y) if anchor == "rm" else (x0 + badge[1], status_xy[1])
-                _paste(draw._image, badge, centre)
+                _paste(image, badge, centre)
 
 
 @dataclass(frozen=True)
