@@ -1,0 +1,346 @@
+"""`foil report`: the paper's Table 1 and Figures 3-4 for any study, with intervals, tests and exclusions.
+
+One streaming pass over the database tallies what the analysis needs (counts, not rows), so the report of a large
+study costs no more memory than that of a small one. The outputs are report.html (self-contained: figures
+inlined as SVG, styles inline), each figure as PNG and SVG, and every table as CSV.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import textwrap
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from jinja2 import Environment, FileSystemLoader, select_autoescape
+
+from app.answer_table import analysis_database, analysis_study, long_rows, participant_records
+from app.database import Database
+from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
+from app.settings import REPO_ROOT
+from app.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
+from app.study import ScaleQuestion, Study
+
+ALL = "all scenarios"
+TASKS = {"pairwise": "part one: pairwise (which robot is better)",
+         "ranking": "part two: global ranking (all robots in the right order)"}
+# The paper's Figure 4: orange for disagreement, blue for agreement, grey for the middle.
+DISAGREE, NEUTRAL, AGREE = ("#e66101", "#fdb863"), "#d9d9d9", ("#92c5de", "#0571b0")
+
+
+@dataclass
+class Tally:
+    correct: int = 0
+    incorrect: int = 0
+
+    @property
+    def n(self) -> int:
+        return self.correct + self.incorrect
+
+    @property
+    def accuracy(self) -> float | None:
+        return self.correct / self.n if self.n else None
+
+    @property
+    def interval(self) -> tuple[float, float] | None:
+        return wilson_interval(self.correct, self.n)
+
+
+@dataclass
+class Exclusions:
+    before: int = 0
+    after: int = 0
+    per_reason: Counter = field(default_factory=Counter)
+    rule: str = ""
+
+
+@dataclass
+class ReportData:
+    """What the report shows, computed from the database by `tally_study`."""
+
+    study: Study
+    exclusions: Exclusions
+    accuracy: dict[tuple[str, str, str], Tally]  # (task, scope, scheme) -> tally; scope ALL or a scenario
+    unscored_rankings: int  # rankings whose clips gave no strict true order
+    ratings: dict[str, dict[str, Counter]]  # scale question -> scheme -> point -> answers
+
+    @property
+    def schemes(self) -> list[str]:
+        return list(self.study.design.schemes)
+
+    def scopes(self) -> list[str]:
+        seen = {scope for _, scope, _ in self.accuracy}
+        return [ALL] + [s for s in self.study.design.scenarios if s in seen]
+
+    def accuracy_test(self, task: str, scope: str) -> TestResult:
+        return accuracy_difference({s: (self.tally(task, scope, s).correct, self.tally(task, scope, s).incorrect)
+                                    for s in self.schemes})
+
+    def tally(self, task: str, scope: str, scheme: str) -> Tally:
+        return self.accuracy.get((task, scope, scheme), Tally())
+
+    def rating_test(self, question: str) -> TestResult:
+        return ordinal_difference({scheme: sorted(self.ratings[question][scheme].elements())
+                                   for scheme in self.schemes})
+
+    def scale_questions(self) -> list[tuple[str, ScaleQuestion]]:
+        return [(name, q) for name, q in self.study.questions.items() if isinstance(q, ScaleQuestion)]
+
+
+def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None) -> ReportData:
+    rules = rules or ExclusionRules()
+    median_s = median_duration_s(db, study.study.id)
+    threshold = rules.threshold_s(median_s)
+    exclusions = Exclusions(rule=rules.describe(median_s))
+    accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)
+    ratings = {name: {scheme: Counter() for scheme in study.design.schemes}
+               for name, q in study.questions.items() if isinstance(q, ScaleQuestion)}
+    unscored = 0
+    for record in participant_records(db, study.study.id):
+        flags = exclusion_flags(record.participant, threshold)
+        exclusions.before += 1
+        exclusions.per_reason.update(reason for reason in REASONS if flags[reason])
+        if flags["excluded"]:
+            continue
+        exclusions.after += 1
+        for row in long_rows(study, record):
+            kind = row.get("question_type")
+            if kind in ("choose", "rank"):
+                if row["correct"] is None:
+                    unscored += 1
+                    continue
+                task = "pairwise" if kind == "choose" else "ranking"
+                for scope in (ALL, row["scenario"]):
+                    tally = accuracy[(task, scope, row["scheme"])]
+                    tally.correct += row["correct"]
+                    tally.incorrect += 1 - row["correct"]
+            elif kind == "scale" and row["scheme"] in ratings[row["question"]]:
+                ratings[row["question"]][row["scheme"]][row["value"]] += 1
+    return ReportData(study=study, exclusions=exclusions, accuracy=dict(accuracy), unscored_rankings=unscored,
+                      ratings=ratings)
+
+
+# Tables ------------------------------------------------------------------------------------------------------
+
+def _number(value: float | None, digits: int = 4) -> str | float:
+    return "" if value is None else round(value, digits)
+
+
+def table1_rows(data: ReportData) -> list[dict]:
+    rows = []
+    for scope in data.scopes():
+        for scheme in data.schemes:
+            row = {"scope": scope, "scheme": scheme}
+            for task in TASKS:
+                tally = data.tally(task, scope, scheme)
+                low, high = tally.interval or (None, None)
+                row |= {f"{task}_correct": tally.correct, f"{task}_incorrect": tally.incorrect, f"{task}_n": tally.n,
+                        f"{task}_accuracy": _number(tally.accuracy), f"{task}_ci95_low": _number(low),
+                        f"{task}_ci95_high": _number(high)}
+            rows.append(row)
+    return rows
+
+
+def accuracy_test_rows(data: ReportData) -> list[dict]:
+    rows = []
+    for scope in data.scopes():
+        for task in TASKS:
+            result = data.accuracy_test(task, scope)
+            rows.append({"scope": scope, "task": task, "test": result.test, "statistic": _number(result.statistic),
+                         "p_value": _number(result.p_value, 6), "odds_ratio": _number(result.effect)})
+    return rows
+
+
+def rating_rows(data: ReportData) -> list[dict]:
+    rows = []
+    for name, question in data.scale_questions():
+        labels = question.point_labels()
+        for scheme in data.schemes:
+            counts = data.ratings[name][scheme]
+            total = sum(counts.values())
+            for point in range(1, question.points + 1):
+                share = 100 * counts[point] / total if total else None
+                rows.append({"question": name, "scheme": scheme, "point": point, "label": labels[point - 1],
+                             "answers": counts[point], "percent": _number(share, 2)})
+    return rows
+
+
+def rating_test_rows(data: ReportData) -> list[dict]:
+    rows = []
+    for name, _ in data.scale_questions():
+        result = data.rating_test(name)
+        counts = {f"n_{scheme}": sum(data.ratings[name][scheme].values()) for scheme in data.schemes}
+        rows.append({"question": name, "test": result.test, "statistic": _number(result.statistic),
+                     "p_value": _number(result.p_value, 6), "rank_biserial": _number(result.effect), **counts})
+    return rows
+
+
+def exclusion_rows(data: ReportData) -> list[dict]:
+    e = data.exclusions
+    rows = [{"rule": "participants in the database", "participants": e.before}]
+    rows += [{"rule": f"excluded: {text}" + (f" ({e.rule})" if reason == "too_fast" else ""),
+              "participants": e.per_reason[reason]} for reason, text in REASONS.items()]
+    rows.append({"rule": "analysed (no rule applies)", "participants": e.after})
+    return rows
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    with path.open("w", encoding="utf-8", newline="") as handle:
+        if rows:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\r\n")
+            writer.writeheader()
+            writer.writerows(rows)
+
+
+# Figures -----------------------------------------------------------------------------------------------------
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams.update({"svg.hashsalt": "foil", "svg.fonttype": "none", "font.size": 9})
+    return plt
+
+
+def distribution_figure(data: ReportData, name: str, question: ScaleQuestion):
+    """The paper's Figure 3 for any scale question: the share of answers at each point, one bar per scheme."""
+    plt = _pyplot()
+    figure, axes = plt.subplots(figsize=(6.4, 3.2))
+    labels = question.point_labels()
+    width = 0.8 / max(1, len(data.schemes))
+    any_answers = False
+    for k, scheme in enumerate(data.schemes):
+        counts = data.ratings[name][scheme]
+        total = sum(counts.values())
+        any_answers |= total > 0
+        shares = [100 * counts[p] / total if total else 0 for p in range(1, question.points + 1)]
+        positions = [p + (k - (len(data.schemes) - 1) / 2) * width for p in range(1, question.points + 1)]
+        axes.bar(positions, shares, width=width, label=f"{scheme} (n = {total})")
+    axes.set_xticks(range(1, question.points + 1),
+                    [f"{p}\n{label}" if not label.isdigit() else str(p) for p, label in enumerate(labels, 1)])
+    axes.set_ylabel("% of answers")
+    axes.set_title(textwrap.fill(question.text, 80), fontsize=9)
+    if any_answers:
+        axes.legend(frameon=False)
+    else:
+        axes.text(0.5, 0.5, "no answers", transform=axes.transAxes, ha="center", va="center", color="grey")
+    axes.spines[["top", "right"]].set_visible(False)
+    figure.tight_layout()
+    return figure
+
+
+def _likert_colours(points: int) -> list[str]:
+    """Disagreement (orange) below the middle, agreement (blue) above, grey in the middle of an odd scale."""
+    half = points // 2
+    low = [DISAGREE[0]] * (half - 1) + [DISAGREE[1]] if half else []
+    high = [AGREE[0]] + [AGREE[1]] * (half - 1) if half else []
+    return low[:half] + ([NEUTRAL] if points % 2 else []) + high[:half]
+
+
+def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
+    """The paper's Figure 4: per labelled question, one diverging stacked bar per scheme, centred on the middle
+    of the scale (disagreement to the left, agreement to the right)."""
+    plt = _pyplot()
+    n = max(1, len(questions))
+    figure, axes_list = plt.subplots(1, n, figsize=(5.2 * n, 1.5 + 0.6 * len(data.schemes)), squeeze=False)
+    for axes, (name, question) in zip(axes_list[0], questions, strict=False):
+        colours = _likert_colours(question.points)
+        middle = question.points / 2 + 0.5  # the neutral point (odd scales) or the gap between the halves
+        ticks = []
+        for row, scheme in enumerate(data.schemes):
+            counts = data.ratings[name][scheme]
+            total = sum(counts.values())
+            ticks.append(f"{scheme}\n(n = {total})")
+            shares = [100 * counts[p] / total if total else 0 for p in range(1, question.points + 1)]
+            left = -sum(s for p, s in enumerate(shares, 1) if p < middle) - (
+                shares[int(middle) - 1] / 2 if middle == int(middle) else 0)
+            for p, share in enumerate(shares, 1):
+                axes.barh(row, share, left=left, color=colours[p - 1], edgecolor="white",
+                          label=question.point_labels()[p - 1] if row == 0 else None)
+                left += share
+        axes.axvline(0, color="black", linewidth=0.6)
+        axes.set_yticks(range(len(data.schemes)), ticks)
+        axes.set_xlim(-100, 100)
+        axes.set_xlabel("% of answers (disagreement left, agreement right)")
+        axes.set_title(textwrap.fill(question.text, 60), fontsize=9)
+        axes.invert_yaxis()
+        axes.spines[["top", "right", "left"]].set_visible(False)
+    handles, labels = axes_list[0][0].get_legend_handles_labels()
+    if handles:
+        figure.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=8)
+    figure.tight_layout(rect=(0, 0.12, 1, 1))
+    return figure
+
+
+def _save(figure, out: Path, stem: str) -> str:
+    """Write PNG and SVG; return the SVG text for inlining in report.html."""
+    figure.savefig(out / f"{stem}.png", dpi=150, metadata={"Software": None})
+    buffer = io.StringIO()
+    figure.savefig(buffer, format="svg", metadata={"Date": None, "Creator": None})
+    figure.savefig(out / f"{stem}.svg", metadata={"Date": None, "Creator": None})
+    import matplotlib.pyplot as plt
+
+    plt.close(figure)
+    svg = buffer.getvalue()
+    return svg[svg.index("<svg"):]
+
+
+# The report --------------------------------------------------------------------------------------------------
+
+def _template_env() -> Environment:
+    env = Environment(loader=FileSystemLoader(str(REPO_ROOT / "templates")), autoescape=select_autoescape())
+    env.filters["percent"] = lambda value: "–" if value is None else f"{100 * value:.2f}%"
+    env.filters["p"] = lambda value: "–" if value is None else ("< 0.0001" if value < 1e-4 else f"{value:.4f}")
+    env.filters["num"] = lambda value: "–" if value is None else f"{value:.3g}"
+    return env
+
+
+def render_report(data: ReportData, out: Path | None = None) -> str:
+    """report.html as text; with `out`, also write it there with the figures (PNG, SVG) and tables (CSV)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = out or Path(scratch)
+        folder.mkdir(parents=True, exist_ok=True)
+        scales = data.scale_questions()
+        labelled = [(name, q) for name, q in scales if q.labels is not None]
+        figures = [(f"distribution-{name}", f"Answers to “{q.text}” per scheme", name,
+                    _save(distribution_figure(data, name, q), folder, f"distribution-{name}"))
+                   for name, q in scales if q.labels is None]
+        if labelled:
+            figures.append(("likert", "Agreement per scheme (diverging stacked bars)", None,
+                            _save(likert_figure(data, labelled), folder, "likert")))
+        tables = {"table1.csv": table1_rows(data), "accuracy_tests.csv": accuracy_test_rows(data),
+                  "ratings.csv": rating_rows(data), "rating_tests.csv": rating_test_rows(data),
+                  "exclusions.csv": exclusion_rows(data)}
+        if out is not None:
+            for name, rows in tables.items():
+                _write_csv(folder / name, rows)
+        html = _template_env().get_template("report.html").render(
+            data=data, tasks=TASKS, all_scopes=ALL, figures=figures, exclusion_rows=tables["exclusions.csv"],
+            rating_tests=tables["rating_tests.csv"], tables=list(tables) if out is not None else [])
+        if out is not None:
+            (folder / "report.html").write_text(html, encoding="utf-8")
+    return html
+
+
+def run_report(*, database_url: str, study_file: str | None, out: str, rules: ExclusionRules) -> int:
+    """`foil report`: prints Table 1 in short and where the report went."""
+    db = analysis_database(database_url)
+    try:
+        data = tally_study(db, analysis_study(db, study_file), rules)
+    finally:
+        db.dispose()
+    render_report(data, Path(out))
+    e = data.exclusions
+    print(f"{e.before} participants, {e.after} analysed after exclusions")
+    for row in table1_rows(data):
+        if row["scope"] == ALL:
+            print(f"{row['scheme']}: pairwise {row['pairwise_correct']}/{row['pairwise_n']}, "
+                  f"ranking {row['ranking_correct']}/{row['ranking_n']}")
+    print(f"report: {Path(out) / 'report.html'}")
+    return 0

@@ -1,0 +1,122 @@
+"""foil report: Table 1, the rating tests and the figures on hand-built databases whose answers are known."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from app.exclusions import ExclusionRules
+from app.report import ALL, render_report, tally_study
+from app.study import parse_study
+from tests.analysis.conftest import SCENARIOS, SCHEMES, SECRET_NAMES, add_participant, label_of
+from tests.analysis.test_statistics import fisher_two_sided
+from tests.app.conftest import study_text
+
+ADAPTIVE, NFIRST = SCHEMES
+LO = SECRET_NAMES["lo"]
+
+
+def known_answers(wrong: bool = False):
+    """Adaptive: always right, difficulty 1, agreement 5. N-first: right only on the clips with the worst robot
+    (2 of 3 pairs), ranking reversed, difficulty 5, agreement 2. `wrong`: every answer wrong."""
+    def answer(screen: dict) -> dict:
+        if screen["kind"] == "pairwise":
+            good = not wrong and (screen["scheme"] == ADAPTIVE or LO in {r["agent"] for r in screen["robots"]})
+            agents = [r["agent"] for r in screen["robots"]]
+            pick = screen["better"] if good else next(a for a in agents if a != screen["better"])
+            return {"better": label_of(screen, pick), "justification": "seen",
+                    "difficulty": 1 if screen["scheme"] == ADAPTIVE else 5}
+        if screen["kind"] == "ranking":
+            order = screen["true_order"] if screen["scheme"] == ADAPTIVE and not wrong else screen["true_order"][::-1]
+            agree = 5 if screen["scheme"] == ADAPTIVE else 2
+            return {"ranking": [label_of(screen, a) for a in order], "explanation": "seen", "difference": 7,
+                    "easy_worst_middle": agree, "easy_middle_best": agree}
+        return {}
+    return answer
+
+
+@pytest.fixture
+def known_db(survey_db, paper_study, bundle_dir):
+    """Four analysed participants (one per condition) plus three the rules leave out."""
+    _, study = paper_study
+    for condition in range(4):
+        add_participant(survey_db, study, bundle_dir, condition=condition, answer=known_answers(), seed=condition)
+    add_participant(survey_db, study, bundle_dir, condition=0, answer=known_answers(wrong=True), excluded=True)
+    add_participant(survey_db, study, bundle_dir, condition=1, answer=known_answers(wrong=True), status="returned")
+    add_participant(survey_db, study, bundle_dir, condition=2, answer=known_answers(wrong=True), minutes=1.0)
+    return survey_db, study
+
+
+def test_table1_counts_and_tests(known_db):
+    db, study = known_db
+    data = tally_study(db, study, ExclusionRules())
+    e = data.exclusions
+    assert (e.before, e.after) == (7, 4)
+    assert e.per_reason == {"flagged_by_admin": 1, "incomplete": 1, "too_fast": 1}
+    overall = {(task, scheme): (data.tally(task, ALL, scheme).correct, data.tally(task, ALL, scheme).incorrect)
+               for task in ("pairwise", "ranking") for scheme in SCHEMES}
+    assert overall == {("pairwise", ADAPTIVE): (12, 0), ("pairwise", NFIRST): (8, 4),
+                       ("ranking", ADAPTIVE): (4, 0), ("ranking", NFIRST): (0, 4)}
+    # conditions alternate the scenario rotation, so each scenario fed part one for two participants
+    for scenario in SCENARIOS:
+        nfirst = data.tally("pairwise", scenario, NFIRST)
+        assert data.tally("pairwise", scenario, ADAPTIVE).correct == 6 and (nfirst.correct, nfirst.incorrect) == (4, 2)
+        assert data.tally("ranking", scenario, NFIRST).incorrect == data.tally("ranking", scenario, ADAPTIVE).n == 2
+    assert data.scopes() == [ALL, *SCENARIOS]
+    assert data.accuracy_test("pairwise", ALL).p_value == pytest.approx(fisher_two_sided(12, 0, 8, 4))
+    assert data.accuracy_test("ranking", ALL).p_value == pytest.approx(fisher_two_sided(4, 0, 0, 4))
+    difficulty = data.rating_test("difficulty")
+    assert difficulty.statistic == 0 and difficulty.effect == -1
+    assert data.rating_test("easy_middle_best").effect == 1
+    assert sorted(data.ratings["difference"][NFIRST].elements()) == [7] * 4
+
+
+def test_report_files(known_db, tmp_path):
+    db, study = known_db
+    html = render_report(tally_study(db, study), tmp_path / "report")
+    out = tmp_path / "report"
+    for name in ("report.html", "table1.csv", "accuracy_tests.csv", "ratings.csv", "rating_tests.csv",
+                 "exclusions.csv", "likert.png", "likert.svg", "distribution-difficulty.png",
+                 "distribution-difference.svg"):
+        assert (out / name).stat().st_size > 0, name
+    assert "<script" not in html and "<img" not in html and html.count("<svg") == 3  # self-contained
+    assert "Fisher&#39;s exact test, two-sided" in html and "100.00%" in html and "66.67%" in html
+    with (out / "table1.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    first = rows[0]
+    assert (first["scope"], first["scheme"], first["pairwise_correct"], first["ranking_n"]) == (ALL, ADAPTIVE, "12",
+                                                                                                "4")
+    assert float(rows[1]["pairwise_accuracy"]) == pytest.approx(8 / 12, abs=1e-4)
+    assert float(rows[1]["pairwise_ci95_low"]) == pytest.approx(0.3906, abs=1e-4)  # Wilson, 8 of 12
+    with (out / "exclusions.csv").open() as handle:
+        exclusions = {row["rule"].split(":")[0]: int(row["participants"]) for row in csv.DictReader(handle)}
+    assert exclusions["participants in the database"] == 7 and exclusions["analysed (no rule applies)"] == 4
+
+
+def test_absolute_time_threshold_and_rule_off(known_db):
+    db, study = known_db
+    assert tally_study(db, study, ExclusionRules(min_seconds=0)).exclusions.after == 5
+    strict = tally_study(db, study, ExclusionRules(min_seconds=11 * 60)).exclusions
+    assert strict.after == 0 and strict.per_reason["too_fast"] == 6  # every completed one
+
+
+def test_report_with_zero_participants(survey_db, paper_study, tmp_path):
+    _, study = paper_study
+    data = tally_study(survey_db, study)
+    html = render_report(data, tmp_path / "empty")
+    assert data.exclusions.before == 0 and "not tested: fewer than two schemes have answers" in html
+    assert "no answers" in (tmp_path / "empty" / "distribution-difficulty.svg").read_text()
+
+
+def test_report_with_one_scheme_missing(survey_db, bundle_dir, tmp_path):
+    """A between-subjects study where only adaptive participants arrived: the N-first rows are empty."""
+    study = parse_study(study_text(platform='"none"', assignment='"balanced"', scheme_factor='"between"'))
+    adaptive_conditions = [0, 1]  # scheme order (adaptive,) with both scenario rotations
+    for condition in adaptive_conditions:
+        add_participant(survey_db, study, bundle_dir, condition=condition, answer=known_answers(), seed=condition)
+    data = tally_study(survey_db, study)
+    assert data.tally("pairwise", ALL, NFIRST).n == 0 and data.tally("pairwise", ALL, ADAPTIVE).correct == 6
+    html = render_report(data, tmp_path / "one")
+    assert "not tested" in html and "Mann-Whitney" not in html
+    assert (tmp_path / "one" / "likert.png").exists()
