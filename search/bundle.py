@@ -33,6 +33,7 @@ from search.scene import load_scene
 
 MANIFEST_FORMAT = "foil.bundle/1"
 PARTS = ("pairwise", "ranking", "example")
+SETTINGS = {"settings": "--set", "reward": "--reward", "world": "--world"}  # scheme tables -> foil search flags
 
 
 class BuildError(ValueError):
@@ -48,6 +49,10 @@ class Scheme:
     budget: int
     seed: int
     top_k: int
+    settings: tuple[tuple[str, tuple[str, ...]], ...] = ()  # ("--set" | "--reward" | "--world", ("key=value", ...))
+
+    def arguments(self) -> list[str]:
+        return [part for flag, items in self.settings for item in items for part in (flag, item)]
 
 
 @dataclass(frozen=True)
@@ -125,13 +130,23 @@ def parse_build(table: dict, source: str = "study file") -> BuildSpec:
         _fail(source, "schemes", "give at least one scheme, e.g. [build.schemes.adaptive] solver = \"mcts\"")
     for name, scheme in table["schemes"].items():
         where = f"schemes.{name}"
-        _check_keys(scheme, {"solver", "budget", "seed", "top_k"}, {"solver", "budget", "seed"}, source, where)
+        _check_keys(scheme, {"solver", "budget", "seed", "top_k", *SETTINGS}, {"solver", "budget", "seed"}, source,
+                    where)
         if not isinstance(scheme["solver"], str) or not scheme["solver"]:
             _fail(source, f"{where}.solver", "must name a solver of foil search (mcts, nfirst, random, cem)")
+        settings = []
+        for key, flag in SETTINGS.items():
+            values = scheme.get(key, {})
+            if not isinstance(values, dict) or not all(isinstance(v, int | float | str) for v in values.values()):
+                _fail(source, f"{where}.{key}", "must be a table of key = value settings")
+            if values:
+                settings.append((flag, tuple(f"{k}={str(v).lower() if isinstance(v, bool) else v}"
+                                             for k, v in sorted(values.items()))))
         schemes[name] = Scheme(name=name, solver=scheme["solver"],
                                budget=_int(scheme["budget"], source, f"{where}.budget", 1),
                                seed=_int(scheme["seed"], source, f"{where}.seed"),
-                               top_k=_int(scheme.get("top_k", 1), source, f"{where}.top_k", 1))
+                               top_k=_int(scheme.get("top_k", 1), source, f"{where}.top_k", 1),
+                               settings=tuple(settings))
 
     sets = []
     if not isinstance(table["sets"], list) or not table["sets"]:
@@ -311,32 +326,32 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
     return results
 
 
-def search_clip(job: ClipJob, cache: Cache, log) -> tuple[Path, bool]:
-    """The best summary for a clip: from `foil search` (its CLI contract), or the cache when nothing changed.
-    Returns the summary's path and whether it came from the cache."""
+def search_clip(job: ClipJob, cache: Cache, log) -> Path:
+    """The best summary for a clip: from `foil search` (its CLI contract), or the cache when nothing changed."""
     from search.cli import main as foil
 
     scheme = job.scheme
     inputs = {"agents": [agent_identity(a) for a in job.pair], "scenario": scenario_identity(job.scenario),
-              "solver": scheme.solver, "budget": scheme.budget, "seed": scheme.seed, "top_k": scheme.top_k}
+              "solver": scheme.solver, "budget": scheme.budget, "seed": scheme.seed, "top_k": scheme.top_k,
+              "settings": scheme.arguments()}
     folder = cache.path("search", inputs)
     what = f"search {scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
     if cache.valid("search", inputs, "summary-001.json"):
         log(f"{what}: cached")
-        return folder / "summary-001.json", True
+        return folder / "summary-001.json"
     started = time.perf_counter()
     folder = cache.store("search", inputs)
     try:
         code = foil(["search", "--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver",
                      scheme.solver, "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k",
-                     str(scheme.top_k), "--out", str(folder)])
+                     str(scheme.top_k), "--out", str(folder), "--quiet", *scheme.arguments()])
     except SystemExit as exit:  # argparse rejected the arguments (and said why)
         code = exit.code
     if code != 0 or not (folder / "summary-001.json").is_file():
         raise BuildError(f"{what} failed (foil search exit status {code}); see its error above")
     cache.seal("search", inputs)
     log(f"{what}: {time.perf_counter() - started:.1f} s")
-    return folder / "summary-001.json", False
+    return folder / "summary-001.json"
 
 
 def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
@@ -377,7 +392,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print) ->
     evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log)
     clips = []
     for job in jobs:
-        found, _ = search_clip(job, cache, log)
+        found = search_clip(job, cache, log)
         summary = out / "summaries" / f"{job.id}.json"
         shutil.copyfile(found, summary)
         clip = out / "clips" / f"{job.id}.mp4"

@@ -81,6 +81,18 @@ def test_bad_build_tables_give_clear_errors(change, message):
         parse_build(table, source="study.toml")
 
 
+def test_scheme_settings_become_foil_search_flags():
+    table = copy(BUILD)
+    table["schemes"]["adaptive"] |= {"settings": {"exploration": 100, "mode": "receding"}, "reward": {"alpha": 2},
+                                     "world": {"robot_visible": True}}
+    scheme = parse_build(table).schemes["adaptive"]
+    assert scheme.arguments() == ["--set", "exploration=100", "--set", "mode=receding", "--reward", "alpha=2",
+                                  "--world", "robot_visible=true"]
+    table["schemes"]["adaptive"]["settings"] = {"nested": {"x": 1}}
+    with pytest.raises(BuildError, match="schemes.adaptive.settings: must be a table of key = value settings"):
+        parse_build(table)
+
+
 def test_a_study_file_without_a_build_table_is_refused(tmp_path):
     study = tmp_path / "study.toml"
     study.write_text('[study]\nid = "x"\n')
