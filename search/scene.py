@@ -130,8 +130,11 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
         if robot.shape != (n_agents, 2):
             fail(f"{where}.robots has {robot.shape[0] if robot.ndim == 2 else '?'} positions, expected one per "
                  f"agent ({n_agents})")
-        if n and crowd.shape == (n, 2):
-            crowd = np.tile(crowd, (panels, 1, 1))
+        if crowd.shape == (n, 2) and panels == 1:
+            crowd = crowd[None]
+        elif crowd.shape == (n, 2):
+            fail(f"{where}.humans holds one crowd, but the robots are visible (robot_visible = true), so each of the "
+                 f"{panels} agents has its own crowd: the summary must record one crowd per agent")
         if crowd.shape != (panels, n, 2):
             per = f"{n} humans" + (f" for each of the {panels} agents' crowds" if panels > 1 else "")
             fail(f"{where}.humans has shape {crowd.shape}, expected {per}")

@@ -226,6 +226,8 @@ BAD = [
     (lambda s: s["outcomes"].pop(), "one entry per agent"),
     (lambda s: s["scenario"].pop("robot"), "scenario is not a valid initial state"),
     (lambda s: s.update(agents=[{"name": "only"}]), "at least two"),
+    (lambda s: s["scenario"]["world"].update(robot_visible=True), r"steps\[0\].humans holds one crowd, but the robots "
+                                                                   "are visible"),
 ]
 
 
