@@ -33,6 +33,31 @@ def _serve(args: argparse.Namespace) -> int:
     return serve(bundle=args.bundle, study=args.study, database_url=args.db, host=args.host, port=args.port)
 
 
+def _exclusion_rules(args: argparse.Namespace):
+    from app.exclusions import ExclusionRules
+
+    return ExclusionRules(min_seconds=args.min_seconds, median_fraction=args.median_fraction)
+
+
+def _export(args: argparse.Namespace) -> int:
+    from app.export_csv import run_export
+
+    return run_export(database_url=args.db, study_file=args.study, out=args.out, rules=_exclusion_rules(args))
+
+
+def _report(args: argparse.Namespace) -> int:
+    from app.report import run_report
+
+    return run_report(database_url=args.db, study_file=args.study, out=args.out, rules=_exclusion_rules(args))
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from app.bots import run_simulate
+
+    return run_simulate(url=args.url, bundle=args.bundle, participants=args.participants, noise=args.noise,
+                        seed=args.seed, inattentive=args.inattentive, first=args.first)
+
+
 def _render(args: argparse.Namespace) -> int:
     from search.render import RenderOptions, render_file
 
@@ -83,6 +108,31 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     serve.set_defaults(handler=_serve)
+
+    for name, handler, what in (("export", _export, "long.csv, wide.csv, participants.csv and the codebook"),
+                                ("report", _report, "report.html with Table 1, the rating figures and tests")):
+        command = sub.add_parser(name, help=f"the survey's answers as {what}")
+        command.add_argument("--db", required=True, help="the survey's database URL, e.g. sqlite:///foil.sqlite3")
+        command.add_argument("--study", help="the study TOML file the survey was served with")
+        command.add_argument("--out", required=True, help="output directory")
+        command.add_argument("--min-seconds", type=float, help="exclude completions faster than this (default: a "
+                             "fraction of the median, see --median-fraction; 0: no time rule)")
+        command.add_argument("--median-fraction", type=float, default=1 / 3,
+                             help="exclude completions faster than this fraction of the median (default 1/3)")
+        command.set_defaults(handler=handler)
+
+    simulate = sub.add_parser("simulate", help="bot participants take the study through a running server")
+    simulate.add_argument("--url", required=True, help="the server's address, e.g. http://127.0.0.1:8000")
+    simulate.add_argument("--participants", type=int, required=True, help="how many bots")
+    simulate.add_argument("--bundle", help="the bundle the server serves (default FOIL_BUNDLE_DIR): the bots read "
+                          "what each clip shows from its summary.json")
+    simulate.add_argument("--noise", type=float, default=0.5,
+                          help="perception noise (default 0.5; see docs/analysis.md)")
+    simulate.add_argument("--inattentive", type=float, default=0.0,
+                          help="share of bots that answer attention checks at random (default 0)")
+    simulate.add_argument("--seed", type=int, default=0, help="seed of the bots (default 0); bot k is bot-SEED-k")
+    simulate.add_argument("--first", type=int, default=0, help="number of the first bot (default 0)")
+    simulate.set_defaults(handler=_simulate)
 
     render = sub.add_parser("render", help="render a summary.json as an H.264 clip with a poster and contact sheet")
     render.add_argument("summary", metavar="SUMMARY.json", help="a summary written by foil search")

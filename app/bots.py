@@ -1,0 +1,391 @@
+"""`foil simulate`: bot participants that take the real study over HTTP, like oTree's bots, judging each clip the
+way a viewer would.
+
+A bot reads each page's form, fetches the clip the page points to (as a browser would), and answers from what the
+clip visibly shows. It knows a clip by its address (the sha256 in /clips/SHA.mp4), finds it in the bundle and
+reads the clip's summary.json: which robot collided, which reached the goal and when, which timed out, how close
+each came to people. The observer model turns that into a score per robot plus Gaussian perception noise; the
+ground truth (`better` in the manifest, the agents' evaluations) is never read.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import re
+from dataclasses import dataclass, field
+from html.parser import HTMLParser
+from pathlib import Path
+
+SCORE_SUCCESS, SCORE_COLLISION = 2.0, -1.0
+
+
+@dataclass(frozen=True)
+class Observer:
+    """How a viewer judges a robot in a clip: reaching the goal beats timing out beats colliding; sooner is
+    better; coming closer than `comfort_m` to a person counts against it. `noise` is the standard deviation of
+    the perception noise, in the same units (reaching the goal at once versus at the end of the clip is 1)."""
+
+    noise: float = 0.5
+    comfort_m: float = 0.5
+    closeness_weight: float = 2.0
+
+    def visible_score(self, outcome: dict, end_s: float, progress: float) -> float:
+        event = outcome.get("event")
+        if event == "collision":
+            return SCORE_COLLISION
+        if event == "success":
+            score = SCORE_SUCCESS + 1 - min(1.0, float(outcome.get("time") or end_s) / end_s)
+        else:  # timeout, or still running when the clip ends: judged by how far it got
+            score = progress
+        closest = outcome.get("min_human_distance")
+        if closest is not None:
+            score -= self.closeness_weight * max(0.0, self.comfort_m - float(closest))
+        return score
+
+    def perceive(self, clip: VisibleClip, rng: random.Random) -> dict[str, float]:
+        """Each on-screen label's perceived score for one viewing."""
+        return {label: score + rng.gauss(0.0, self.noise) for label, score in clip.scores(self).items()}
+
+
+def contrast(a: float, b: float) -> float:
+    """How different two perceived scores look, from 0 (the same) towards 1."""
+    return 1 - math.exp(-abs(a - b))
+
+
+@dataclass(frozen=True)
+class VisibleClip:
+    """What a clip shows: per on-screen label its outcome and how far it got towards the goal."""
+
+    labels: tuple[str, ...]
+    outcomes: tuple[dict, ...]
+    progress: tuple[float, ...]
+    end_s: float
+
+    def scores(self, observer: Observer) -> dict[str, float]:
+        return {label: observer.visible_score(outcome, self.end_s, progress)
+                for label, outcome, progress in zip(self.labels, self.outcomes, self.progress, strict=True)}
+
+    def describe(self, label: str) -> str:
+        outcome = self.outcomes[self.labels.index(label)]
+        event = outcome.get("event")
+        if event == "success":
+            text = f"{label} reached the goal after {float(outcome.get('time') or self.end_s):.0f} seconds"
+        elif event == "collision":
+            text = f"{label} bumped into a person"
+        else:
+            text = f"{label} did not reach the goal in time"
+        closest = outcome.get("min_human_distance")
+        if closest is not None and event != "collision" and float(closest) < 0.5:
+            text += " and came close to people"
+        return text + "."
+
+
+def _progress(summary: dict, k: int) -> float:
+    """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
+    try:
+        start = summary["scenario"]["robot"]["start"]
+        goal = summary["scenario"]["robot"]["goal"]
+        end = summary["steps"][-1]["robots"][k]
+    except (KeyError, IndexError, TypeError):
+        return 0.0
+    total = math.dist(start, goal)
+    return max(0.0, 1 - math.dist(end, goal) / total) if total > 0 else 1.0
+
+
+class ClipIndex:
+    """The bundle's clips by sha256, each as a VisibleClip read from its summary.json."""
+
+    def __init__(self, bundle_dir: str | Path):
+        root = Path(bundle_dir)
+        try:
+            manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ValueError(f"no manifest.json in bundle {root}") from None
+        self.clips: dict[str, VisibleClip] = {}
+        for entry in manifest.get("clips", []):
+            path = root / entry.get("summary", "")
+            if not entry.get("summary") or not path.is_file():
+                raise ValueError(f"clip {entry.get('id')!r}: no summary file {path}; the bots judge clips from it")
+            summary = json.loads(path.read_text(encoding="utf-8"))
+            names = [agent["name"] for agent in summary["agents"]]
+            order = [names.index(agent) for agent in entry["agents"]]  # the summary's index of each label's robot
+            steps = summary.get("steps") or [{"t": 1.0}]
+            self.clips[entry["sha256"].lower()] = VisibleClip(
+                labels=tuple(entry["labels"]), outcomes=tuple(summary["outcomes"][k] for k in order),
+                progress=tuple(_progress(summary, k) for k in order), end_s=max(float(steps[-1]["t"]), 1e-6))
+
+    def at(self, url: str) -> tuple[str, VisibleClip]:
+        match = re.search(r"/clips/([0-9a-f]{64})\.mp4", url)
+        if not match or match.group(1) not in self.clips:
+            raise ValueError(f"the page shows clip {url!r}, which is not in the bundle given to the bots")
+        return match.group(1), self.clips[match.group(1)]
+
+
+class PageForm(HTMLParser):
+    """The answerable parts of a page: hidden fields, radio groups with their legend and option labels, ranking
+    selects, text boxes, the clip's address and the completion code."""
+
+    def __init__(self, page: str):
+        super().__init__()
+        self.action = ""
+        self.hidden: dict[str, str] = {}
+        self.radios: dict[str, list[tuple[str, str]]] = {}  # name -> [(value, label text)]
+        self.legends: dict[str, str] = {}  # radio group or select prefix -> its question
+        self.selects: dict[str, list[str]] = {}
+        self.textareas: list[str] = []
+        self.video = ""
+        self.answerable = False  # a study screen (not the instructions' example)
+        self.code = ""
+        self._legend: list[str] = []
+        self._in_legend = False
+        self._label: list[str] | None = None
+        self._label_input: tuple[str, str] | None = None
+        self._select: str | None = None
+        self._in_code = False
+        self.feed(page)
+
+    def handle_starttag(self, tag, attrs):
+        a = {key: value or "" for key, value in attrs}
+        if tag == "form":
+            self.action = a.get("action", "")
+        elif tag == "fieldset":
+            self._legend = []
+            self.answerable |= "data-answers" in a
+        elif tag == "legend":
+            self._in_legend = True
+        elif tag == "label":
+            self._label, self._label_input = [], None
+        elif tag == "input" and a.get("type") == "hidden":
+            self.hidden[a["name"]] = a.get("value", "")
+        elif tag == "input" and a.get("type") == "radio":
+            self.radios.setdefault(a["name"], [])
+            self.legends[a["name"]] = " ".join("".join(self._legend).split())
+            self._label_input = (a["name"], a["value"])
+        elif tag == "select":
+            self._select = a["name"]
+            self.selects[self._select] = []
+            self.legends[a["name"].rsplit("-", 1)[0]] = " ".join("".join(self._legend).split())
+        elif tag == "option" and self._select and a.get("value"):
+            self.selects[self._select].append(a["value"])
+        elif tag == "textarea":
+            self.textareas.append(a["name"])
+        elif tag == "video":
+            self.video = a.get("src", "")
+        elif a.get("id") == "completion-code":
+            self._in_code = True
+
+    def handle_endtag(self, tag):
+        if tag == "legend":
+            self._in_legend = False
+        elif tag == "label" and self._label is not None:
+            if self._label_input:
+                name, value = self._label_input
+                self.radios[name].append((value, " ".join("".join(self._label).split())))
+            self._label = None
+        elif tag == "select":
+            self._select = None
+        elif self._in_code:
+            self._in_code = False
+
+    def handle_data(self, data):
+        if self._in_legend:
+            self._legend.append(data)
+        if self._label is not None:
+            self._label.append(data)
+        if self._in_code:
+            self.code += data.strip()
+
+
+class BotError(RuntimeError):
+    """The server answered a bot with something a participant could not go on from."""
+
+
+@dataclass
+class BotRun:
+    """What one bot did: its identity, whether it finished, and every answer with the clip it was about."""
+
+    external_id: str
+    completed: bool = False
+    completion_code: str = ""
+    answers: list[dict] = field(default_factory=list)  # {step, clip (sha256 or None), question, value}
+
+
+class Bot:
+    """One participant: a fresh cookie jar, its own seeded randomness, and memory of the clips of the current
+    ranking block."""
+
+    def __init__(self, client, clips: ClipIndex, observer: Observer, rng: random.Random, *, number: int,
+                 external_id: str, attentive: bool = True):
+        self.client, self.clips, self.observer, self.rng = client, clips, observer, rng
+        self.number, self.attentive = number, attentive
+        self.run = BotRun(external_id=external_id)
+        self.block: list[tuple[str, dict[str, float]]] = []  # (clip, perceived scores) since the last ranking
+
+    def _ok(self, response) -> str:
+        if response.status_code != 200:
+            text = re.sub(r"<[^>]+>", " ", response.text)
+            raise BotError(f"{response.request.method} {response.request.url.path}: HTTP {response.status_code}: "
+                           f"{' '.join(text.split())[:300]}")
+        return response.text
+
+    def take_study(self, max_pages: int = 500) -> BotRun:
+        ids = {"PROLIFIC_PID": self.run.external_id, "STUDY_ID": "simulated", "SESSION_ID": self.run.external_id,
+               "workerId": self.run.external_id, "hitId": "simulated", "assignmentId": self.run.external_id}
+        page = self._ok(self.client.get("/", params=ids))
+        form = PageForm(page)
+        page = self._ok(self.client.post("/consent", data={"csrf_token": form.hidden["csrf_token"],
+                                                           "choice": "agree"}))
+        for _ in range(max_pages):
+            form = PageForm(page)
+            if form.action == "/condition":
+                n = len(form.radios["number"])
+                page = self._ok(self.client.post("/condition", data={"csrf_token": form.hidden["csrf_token"],
+                                                                     "number": str(self.number % n + 1)}))
+            elif "step" in form.hidden:
+                page = self._ok(self.client.post("/study", data=self.answer(form)))
+            else:
+                self.run.completed = bool(form.code) or "Thank you" in page
+                self.run.completion_code = form.code
+                return self.run
+        raise BotError(f"bot {self.run.external_id}: the study did not end after {max_pages} pages")
+
+    def _watch(self, form: PageForm) -> tuple[str, VisibleClip, dict[str, float], int]:
+        """Fetch the start of the clip like a browser (Range request) and look at it."""
+        sha, clip = self.clips.at(form.video)
+        response = self.client.get(form.video, headers={"Range": "bytes=0-1023"})
+        if response.status_code not in (200, 206):
+            raise BotError(f"clip {form.video}: HTTP {response.status_code}")
+        return sha, clip, self.observer.perceive(clip, self.rng), int(clip.end_s * 1000)
+
+    def answer(self, form: PageForm) -> dict:
+        data = {"csrf_token": form.hidden["csrf_token"], "step": form.hidden["step"]}
+        step = int(form.hidden["step"])
+        sha, clip, seen, clip_ms = None, None, {}, 0
+        if form.video:
+            sha, clip, seen, clip_ms = self._watch(form)
+            data["video_events"] = json.dumps([{"type": "loaded", "t": 40}, {"type": "play", "t": 800},
+                                               {"type": "ended", "t": 800 + clip_ms}])
+            if form.answerable and not (form.radios or form.textareas):
+                self.block.append((sha, seen))  # a clip of a ranking block: remember it for the ranking
+        ranked = self._ranking() if form.selects else []
+        for name, options in form.radios.items():
+            data[name] = self._radio(name, options, form.legends.get(name, ""), seen, ranked)
+        for prefix in {name.rsplit("-", 1)[0] for name in form.selects}:
+            for place, label in enumerate(ranked, start=1):
+                data[f"{prefix}-{place}"] = label
+            self.run.answers.append({"step": step, "clip": None, "clips": [sha for sha, _ in self.block],
+                                     "question": prefix, "value": ranked})
+        for name in form.textareas:
+            data[name] = self._explain(clip, seen, ranked)
+        for name in form.radios:
+            self.run.answers.append({"step": step, "clip": sha, "question": name, "value": data[name]})
+        if form.selects:
+            self.block = []
+        data["time_on_page_ms"] = str(clip_ms + 800 + self.rng.randint(3000, 15000))
+        return data
+
+    def _ranking(self) -> list[str]:
+        """Best first: most clips won, then the higher mean perceived score."""
+        wins: dict[str, int] = {}
+        scores: dict[str, list[float]] = {}
+        for _, seen in self.block:
+            best = max(seen, key=seen.get)
+            for label, score in seen.items():
+                wins[label] = wins.get(label, 0) + (label == best)
+                scores.setdefault(label, []).append(score)
+        return sorted(wins, key=lambda label: (-wins[label], -sum(scores[label]) / len(scores[label])))
+
+    def _pair_contrast(self, a: str, b: str) -> float:
+        together = [seen for _, seen in self.block if a in seen and b in seen]
+        if together:
+            return contrast(together[-1][a], together[-1][b])
+        mean = {label: [s[label] for _, s in self.block if label in s] for label in (a, b)}
+        return contrast(*(sum(values) / len(values) if values else 0.0 for values in mean.values()))
+
+    def _radio(self, name: str, options: list[tuple[str, str]], legend: str, seen: dict[str, float],
+               ranked: list[str]) -> str:
+        values = [value for value, _ in options]
+        if seen and set(values) <= set(seen):  # which robot is better
+            return max(values, key=seen.get)
+        if all(value.isdigit() for value in values):
+            return str(self._scale_point(options, legend, seen, ranked))
+        quoted = re.findall(r"['\"‘“]([^'\"’”]+)['\"’”]", legend)
+        asked = [value for value in values if value in quoted]
+        if self.attentive and asked:  # an instructed-response item: do what it says
+            return asked[0]
+        return self.rng.choice(values)
+
+    def _scale_point(self, options: list[tuple[str, str]], legend: str, seen: dict[str, float],
+                     ranked: list[str]) -> int:
+        """Read the scale's ends and the question: 'hard' at the top means high contrast answers low; a statement
+        to agree with ('easy to distinguish between the worst and middle ...') is about the pair it names."""
+        top = options[-1][1].lower()
+        text = legend.lower()
+        if ranked and "worst and middle" in text:
+            x = self._pair_contrast(ranked[-1], ranked[-2])
+        elif ranked and "middle and best" in text:
+            x = self._pair_contrast(ranked[1], ranked[0])
+        elif ranked:
+            x = self._pair_contrast(ranked[-1], ranked[0])
+        elif len(seen) >= 2:
+            low, high = sorted(seen.values())[0], sorted(seen.values())[-1]
+            x = contrast(low, high)
+        else:
+            x = 0.5
+        if "hard" in top:
+            x = 1 - x
+        return 1 + round(x * (len(options) - 1))
+
+    def _explain(self, clip: VisibleClip | None, seen: dict[str, float], ranked: list[str]) -> str:
+        if clip is not None and seen:
+            return clip.describe(max(seen, key=seen.get))
+        if ranked:
+            return f"{ranked[0]} did best in the clips and {ranked[-1]} worst."
+        return "It looked that way in the clips."
+
+
+def simulate(url: str, bundle_dir: str | Path, participants: int, *, noise: float = 0.5, seed: int = 0,
+             inattentive: float = 0.0, first: int = 0) -> list[BotRun]:
+    """Run `participants` bots one after another against the server at `url`; bot k is `bot-SEED-k`.
+
+    `inattentive` is the share of bots that answer attention checks at random; `first` numbers the bots from
+    there, so a second run against the same study adds new participants instead of resuming finished ones."""
+    import httpx
+
+    if participants < 1:
+        raise ValueError(f"--participants must be at least 1, got {participants}")
+    if noise < 0 or not 0 <= inattentive <= 1:
+        raise ValueError("--noise must not be negative and --inattentive must be in [0, 1]")
+    clips = ClipIndex(bundle_dir)
+    observer = Observer(noise=noise)
+    runs = []
+    for k in range(first, first + participants):
+        rng = random.Random(f"{seed}:bot:{k}")
+        attentive = rng.random() >= inattentive
+        with httpx.Client(base_url=url, follow_redirects=True, timeout=60) as client:
+            bot = Bot(client, clips, observer, rng, number=k, external_id=f"bot-{seed}-{k}", attentive=attentive)
+            runs.append(bot.take_study())
+    return runs
+
+
+def run_simulate(*, url: str, bundle: str | None, participants: int, noise: float, seed: int, inattentive: float,
+                 first: int) -> int:
+    """`foil simulate`: prints how many bots finished."""
+    import os
+
+    import httpx
+
+    bundle = bundle or os.environ.get("FOIL_BUNDLE_DIR")
+    if not bundle:
+        raise ValueError("give the study bundle the server serves (--bundle DIR or FOIL_BUNDLE_DIR): the bots "
+                         "look at its clips' summaries")
+    try:
+        runs = simulate(url, bundle, participants, noise=noise, seed=seed, inattentive=inattentive, first=first)
+    except (httpx.HTTPError, BotError) as error:
+        raise ValueError(f"the bots could not take the study at {url}: {error}") from None
+    done = sum(run.completed for run in runs)
+    print(f"{done} of {len(runs)} bots completed the study at {url} (noise {noise}, seed {seed}); "
+          f"now run `foil report` on the server's database")
+    return 0 if done == len(runs) else 1

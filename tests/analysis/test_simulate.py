@@ -1,0 +1,125 @@
+"""foil simulate: bots take the whole paper study through a real server over HTTP, and the report counts exactly
+what they answered."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections import Counter
+
+import pytest
+import uvicorn
+
+from app.answer_table import analysis_database
+from app.bots import Observer, VisibleClip, simulate
+from app.database import migrate
+from app.exclusions import ExclusionRules
+from app.main import create_app
+from app.report import ALL, render_report, tally_study
+from app.settings import Settings
+from app.study import parse_study
+from search.cli import main
+from tests.analysis.conftest import AGENT_RANK, MISLEADING, SCHEMES, SECRET_NAMES
+from tests.analysis.test_export import ATTENTION
+from tests.app.conftest import study_text
+
+
+@pytest.fixture
+def live_server(tmp_path, bundle_dir):
+    """The real app under uvicorn on 127.0.0.1 (a free port) in a thread, with the paper study as shipped
+    (MTurk, self-selected condition) plus an attention check; stopped at the end of the test."""
+    study_file = tmp_path / "study.toml"
+    study_file.write_text(study_text() + ATTENTION)
+    url = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
+    migrate(url)
+    app = create_app(Settings(bundle_dir=bundle_dir, study_file=study_file, database_url=url))
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    for _ in range(500):
+        if server.started:
+            break
+        time.sleep(0.01)
+    port = server.servers[0].sockets[0].getsockname()[1]
+    yield f"http://127.0.0.1:{port}", url, study_file
+    server.should_exit = True
+    thread.join(timeout=10)
+    app.state.context.db.dispose()
+
+
+def test_bots_take_the_study_and_the_report_counts_their_answers(live_server, bundle_dir, tmp_path):
+    url, db_url, study_file = live_server
+    runs = simulate(url, bundle_dir, 8, noise=0.3, seed=1, inattentive=0.5)
+    assert all(run.completed and run.completion_code == "FOIL-PAPER-7Q2K" for run in runs)
+
+    manifest = {clip["sha256"]: clip for clip in json.loads((bundle_dir / "manifest.json").read_text())["clips"]}
+    expected: Counter = Counter()
+    ratings: Counter = Counter()
+    misleading_answers = []
+    analysed = 0
+    for run in runs:
+        answers = {(a["step"], a["question"]): a for a in run.answers}
+        if any(q == "attention" and a["value"] != "Agree" for (_, q), a in answers.items()):
+            continue  # failed the attention check: the report leaves the bot out
+        analysed += 1
+        for (_, question), answer in answers.items():
+            if question == "better":
+                clip = manifest[answer["clip"]]
+                agent = clip["agents"][clip["labels"].index(answer["value"])]
+                expected[("pairwise", clip["scheme"], agent == clip["better"])] += 1
+                if clip["id"] == MISLEADING:
+                    misleading_answers.append(agent)
+            elif question == "ranking":
+                clip = manifest[answer["clips"][0]]
+                agent_of = {label: agent for c in answer["clips"] for label, agent in
+                            zip(manifest[c]["labels"], manifest[c]["agents"], strict=True)}
+                order = [agent_of[label] for label in answer["value"]]
+                expected[("ranking", clip["scheme"], order == AGENT_RANK[::-1])] += 1
+            elif question in ("difficulty", "easy_middle_best"):
+                ratings[question] += 1
+    assert 0 < analysed < len(runs)  # some bots failed the check, some passed
+
+    db = analysis_database(db_url)
+    data = tally_study(db, parse_study(study_file.read_text()), ExclusionRules(min_seconds=0))
+    db.dispose()
+    assert data.exclusions.before == 8 and data.exclusions.after == analysed
+    for task in ("pairwise", "ranking"):
+        for scheme in SCHEMES:
+            tally = data.tally(task, ALL, scheme)
+            assert (tally.correct, tally.incorrect) == (expected[(task, scheme, True)], expected[(task, scheme, False)])
+    assert data.tally("pairwise", ALL, SCHEMES[0]).n == 3 * analysed
+    assert sum(sum(c.values()) for c in data.ratings["difficulty"].values()) == ratings["difficulty"]
+    assert sum(sum(c.values()) for c in data.ratings["easy_middle_best"].values()) == ratings["easy_middle_best"] \
+        == 2 * analysed  # one ranking per scheme
+    # The misleading clip shows the worst robot doing well; bots judge what they see, not the ground truth.
+    assert misleading_answers and set(misleading_answers) == {SECRET_NAMES["lo"]}
+    render_report(data, tmp_path / "report")
+
+
+def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
+    url, db_url, study_file = live_server
+    assert main(["simulate", "--url", url, "--participants", "2", "--bundle", str(bundle_dir), "--seed", "3"]) == 0
+    assert "2 of 2 bots completed" in capsys.readouterr().out
+    assert main(["export", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "export")]) == 0
+    assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "report")]) == 0
+    out = capsys.readouterr().out
+    assert "2 participants" in out and (tmp_path / "report" / "report.html").exists()
+    assert (tmp_path / "export" / "wide.csv").read_text().count("\n") == 3
+    # errors are named, not raised
+    assert main(["report", "--db", f"sqlite:///{tmp_path / 'nope.sqlite3'}", "--study", str(study_file),
+                 "--out", str(tmp_path / "x")]) == 2
+    assert main(["simulate", "--url", url, "--participants", "1"]) == 2
+    assert "--bundle DIR" in capsys.readouterr().err
+
+
+def test_observer_judges_visible_outcomes():
+    observer = Observer(noise=0.0)
+    clip = VisibleClip(labels=("Robot 1", "Robot 2", "Robot 3"), end_s=20.0, progress=(0.0, 0.0, 0.5),
+                       outcomes=({"event": "success", "time": 10.0, "min_human_distance": 1.0},
+                                 {"event": "collision", "time": 3.0},
+                                 {"event": "timeout", "time": 20.0, "min_human_distance": 0.3}))
+    scores = clip.scores(observer)
+    assert scores == {"Robot 1": 2.5, "Robot 2": -1.0, "Robot 3": pytest.approx(0.5 - 2 * 0.2)}
+    assert clip.describe("Robot 2") == "Robot 2 bumped into a person."
+    assert "came close to people" in clip.describe("Robot 3")
