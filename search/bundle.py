@@ -16,8 +16,10 @@ Bundle layout::
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import html
+import io
 import itertools
 import json
 import os
@@ -342,9 +344,10 @@ def search_clip(job: ClipJob, cache: Cache, log) -> Path:
     started = time.perf_counter()
     folder = cache.store("search", inputs)
     try:
-        code = foil(["search", "--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver",
-                     scheme.solver, "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k",
-                     str(scheme.top_k), "--out", str(folder), "--quiet", *scheme.arguments()])
+        with contextlib.redirect_stdout(io.StringIO()):  # its one-line report; errors still reach stderr
+            code = foil(["search", "--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver",
+                         scheme.solver, "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k",
+                         str(scheme.top_k), "--out", str(folder), "--quiet", *scheme.arguments()])
     except SystemExit as exit:  # argparse rejected the arguments (and said why)
         code = exit.code
     if code != 0 or not (folder / "summary-001.json").is_file():
