@@ -8,13 +8,14 @@ points and texts come from the study definition, which the database itself does 
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from sqlalchemy import select
+from sqlalchemy import Row, select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import OperationalError
 
@@ -36,28 +37,29 @@ class Column:
 
 @dataclass
 class ParticipantRecord:
-    participant: Participant  # detached from its session
-    responses: list[Response]  # ordered by step
+    participant: Row  # the participant table's columns, as attributes
+    responses: list[Row]  # the response table's columns, ordered by step
 
 
 def participant_records(db: Database, study_id: str, batch: int = 500) -> Iterator[ParticipantRecord]:
     """Every participant of the study with their responses, in id order; at most `batch` in memory at a time.
 
-    Pages by participant id (keyset), so each batch is one query for participants and one for their responses."""
+    Pages by participant id (keyset), so each batch is one query for participants and one for their responses.
+    Reads plain rows rather than ORM objects: the export is read-only and this is several times faster."""
+    people, answers = Participant.__table__, Response.__table__
     last_id = 0
     while True:
         with db.reading() as session:
-            participants = list(session.scalars(
-                select(Participant).where(Participant.study == study_id, Participant.id > last_id)
-                .order_by(Participant.id).limit(batch)))
+            participants = session.execute(
+                select(people).where(people.c.study == study_id, people.c.id > last_id)
+                .order_by(people.c.id).limit(batch)).all()
             if not participants:
                 return
-            responses: dict[int, list[Response]] = {p.id: [] for p in participants}
-            query = (select(Response).where(Response.participant_id.in_(list(responses)))
-                     .order_by(Response.participant_id, Response.step))
-            for response in session.scalars(query):
+            responses: dict[int, list[Row]] = {p.id: [] for p in participants}
+            query = (select(answers).where(answers.c.participant_id.in_(list(responses)))
+                     .order_by(answers.c.participant_id, answers.c.step))
+            for response in session.execute(query):
                 responses[response.participant_id].append(response)
-            session.expunge_all()
         for participant in participants:
             yield ParticipantRecord(participant, responses[participant.id])
         last_id = participants[-1].id
@@ -265,6 +267,7 @@ def participant_row(record: ParticipantRecord, flags: dict[str, bool]) -> dict:
 WIDE_LEAD = ["study", "participant", "condition", "status", "excluded", "duration_s"]
 
 
+@functools.cache
 def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_").lower() or "x"
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import statistics
 from dataclasses import dataclass
 
-from sqlalchemy import select
+from sqlalchemy import Row, select
 
 from app.database import Database, as_utc
 from app.models import Participant
@@ -50,7 +50,7 @@ class ExclusionRules:
         return f"completion under {self.median_fraction:.3g} of the median ({median_s:.1f} s), i.e. {threshold:.1f} s"
 
 
-def duration_s(participant: Participant) -> float | None:
+def duration_s(participant: Participant | Row) -> float | None:
     if participant.completed_at is None:
         return None
     return (as_utc(participant.completed_at) - as_utc(participant.created_at)).total_seconds()
@@ -65,7 +65,7 @@ def median_duration_s(db: Database, study_id: str) -> float | None:
     return statistics.median(durations) if durations else None
 
 
-def exclusion_flags(participant: Participant, threshold_s: float | None) -> dict[str, bool]:
+def exclusion_flags(participant: Participant | Row, threshold_s: float | None) -> dict[str, bool]:
     """One flag per reason in REASONS, plus `excluded` when any of them holds."""
     duration = duration_s(participant)
     flags = {

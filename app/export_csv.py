@@ -38,20 +38,23 @@ MISSING_TOKENS = {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-na
 FILES = ("long.csv", "wide.csv", "participants.csv")
 
 
+RISKY_FIRST = frozenset(FORMULA_START + ("'",))
+
+
 def neutralise(text: str) -> str:
     """Put an apostrophe in front of text a spreadsheet would execute or a reader would take for a missing value,
     and in front of text that already starts with one, so that the rule reverses exactly: drop the first
     character of any cell starting with an apostrophe to get what was typed."""
-    return "'" + text if text.startswith(FORMULA_START + ("'",)) or text in MISSING_TOKENS else text
+    return "'" + text if text[:1] in RISKY_FIRST or text in MISSING_TOKENS else text
 
 
 def _cell(value) -> str | int | float:
+    if value.__class__ is str:  # the common case first: this runs for every cell
+        return neutralise(value)
     if value is None:
         return ""
-    if isinstance(value, bool):
-        return int(value)
     if isinstance(value, int | float):
-        return value
+        return int(value) if isinstance(value, bool) else value
     return neutralise(str(value))
 
 
