@@ -24,11 +24,12 @@ from PIL import Image, ImageDraw, ImageFont
 
 from search.scene import Scene, load_scene
 
-# Okabe-Ito colours (distinguishable with every common colour-vision deficiency), one shape each.
+# Colours that stay apart under the common colour-vision deficiencies (Okabe-Ito blue, vermillion and bluish green;
+# Paul Tol's purple, darker than Okabe-Ito's pink so its trail shows), and one shape each.
 ROBOT_STYLES = (
     ((0, 114, 178), "circle"),  # blue
     ((213, 94, 0), "square"),  # vermillion
-    ((204, 121, 167), "diamond"),  # reddish purple
+    ((170, 51, 119), "diamond"),  # purple
     ((0, 158, 115), "triangle"),  # bluish green
 )
 BACKGROUND = (255, 255, 255)
