@@ -52,6 +52,13 @@ def test_layout_maps_the_arena_with_y_up_and_sizes_in_multiples_of_16(shared_sum
     np.testing.assert_allclose(top_right, [lay.panel, lay.header])
 
 
+@pytest.mark.parametrize("width", [None, 640, 1280])
+def test_legend_text_stays_readable_on_a_360_px_phone(shared_summary, width):
+    lay = ClipRenderer(scene_from_summary(shared_summary), options=RenderOptions(width=width)).layout
+    assert lay.text * 360 / lay.width >= 13
+    assert lay.header + lay.panel + lay.legend == lay.height  # the legend lies below the arena, not on it
+
+
 def test_every_human_is_drawn_where_the_summary_puts_it(shared_summary):
     scene = scene_from_summary(shared_summary)
     renderer = ClipRenderer(scene)
