@@ -17,12 +17,12 @@ from pathlib import Path
 
 from sqlalchemy import Row, select
 from sqlalchemy.engine import make_url
-from sqlalchemy.exc import OperationalError
+from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.database import Database, DatabaseError, as_utc, check_migrated
 from app.exclusions import duration_s
-from app.models import Participant, Response
-from app.study import PairwisePart, Study, load_study
+from app.models import Participant, Response, ServerSetting
+from app.study import PairwisePart, Study, load_study, parse_study
 
 LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
 ORDER_SEPARATOR = ">"  # between the places of a ranking, best first
@@ -88,18 +88,42 @@ def analysis_database(url: str) -> Database:
     return db
 
 
-def study_ids(db: Database) -> list[str]:
+STUDY_KEY = "study-file:"  # server_setting key prefix: the text of each study file the server was started with
+
+
+def remember_study(db: Database, study_text: str, study: Study) -> None:
+    """Keep the study file's text in the database, so that `foil export` and `foil report` need only the
+    database. The server calls this at start-up; the latest start wins."""
+    key = STUDY_KEY + study.study.id
+    try:
+        with db.writing() as session:
+            row = session.get(ServerSetting, key)
+            if row is None:
+                session.add(ServerSetting(key=key, value=study_text))
+            else:
+                row.value = study_text
+    except IntegrityError:  # another worker stored it at the same moment
+        pass
+
+
+def analysis_study(db: Database, study: str | Path | None) -> Study:
+    """The study definition for a database: a study file, or the id of a study whose file the server stored
+    (`remember_study`); without either, the only study stored."""
+    if study is not None and Path(study).is_file():
+        return load_study(study)
     with db.reading() as session:
-        return list(session.scalars(select(Participant.study).distinct().order_by(Participant.study)))
-
-
-def analysis_study(db: Database, study_file: str | Path | None) -> Study:
-    """The study definition for a database: the given file, whose id selects the participants."""
-    if study_file is None:
-        found = study_ids(db)
-        raise ValueError("give the study file the survey was served with (--study FILE): the database does not "
-                         "hold question types and scales" + (f"; it holds studies {found}" if found else ""))
-    return load_study(study_file)
+        stored = dict(session.execute(
+            select(ServerSetting.key, ServerSetting.value).where(ServerSetting.key.startswith(STUDY_KEY))).all())
+    texts = {key.removeprefix(STUDY_KEY): text for key, text in stored.items()}
+    if study is None and len(texts) == 1:
+        study = next(iter(texts))
+    if study is not None and str(study) in texts:
+        return parse_study(texts[str(study)], source=f"the study file stored in the database for {study!r}")
+    if study is not None:
+        raise ValueError(f"no study file {study} and no study {str(study)!r} stored in the database "
+                         f"(stored: {sorted(texts) or 'none'})")
+    raise ValueError("give the study: --study FILE (the study file the survey was served with) or --study ID of one "
+                     f"stored in the database (stored: {sorted(texts) or 'none'})")
 
 
 # Long format ---------------------------------------------------------------------------------------------------

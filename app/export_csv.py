@@ -187,11 +187,11 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
                         excluded=excluded, seconds=time.perf_counter() - started)
 
 
-def run_export(*, database_url: str, study_file: str | None, out: str, rules: ExclusionRules) -> int:
+def run_export(*, database_url: str, study: str | None, out: str, rules: ExclusionRules) -> int:
     """`foil export`: prints what was written."""
     db = analysis_database(database_url)
     try:
-        result = export_study(db, analysis_study(db, study_file), out, rules)
+        result = export_study(db, analysis_study(db, study), out, rules)
     finally:
         db.dispose()
     print(f"{result.participants} participants ({result.excluded} excluded by the rules), {result.answers} answer "

@@ -328,11 +328,11 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
     return html
 
 
-def run_report(*, database_url: str, study_file: str | None, out: str, rules: ExclusionRules) -> int:
+def run_report(*, database_url: str, study: str | None, out: str, rules: ExclusionRules) -> int:
     """`foil report`: prints Table 1 in short and where the report went."""
     db = analysis_database(database_url)
     try:
-        data = tally_study(db, analysis_study(db, study_file), rules)
+        data = tally_study(db, analysis_study(db, study), rules)
     finally:
         db.dispose()
     render_report(data, Path(out))

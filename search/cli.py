@@ -42,13 +42,13 @@ def _exclusion_rules(args: argparse.Namespace):
 def _export(args: argparse.Namespace) -> int:
     from app.export_csv import run_export
 
-    return run_export(database_url=args.db, study_file=args.study, out=args.out, rules=_exclusion_rules(args))
+    return run_export(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
 
 
 def _report(args: argparse.Namespace) -> int:
     from app.report import run_report
 
-    return run_report(database_url=args.db, study_file=args.study, out=args.out, rules=_exclusion_rules(args))
+    return run_report(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -113,7 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 ("report", _report, "report.html with Table 1, the rating figures and tests")):
         command = sub.add_parser(name, help=f"the survey's answers as {what}")
         command.add_argument("--db", required=True, help="the survey's database URL, e.g. sqlite:///foil.sqlite3")
-        command.add_argument("--study", help="the study TOML file the survey was served with")
+        command.add_argument("--study", help="the study file the survey was served with, or the id of a study "
+                             "whose file the server stored in the database (default: the only one stored)")
         command.add_argument("--out", required=True, help="output directory")
         command.add_argument("--min-seconds", type=float, help="exclude completions faster than this (default: a "
                              "fraction of the median, see --median-fraction; 0: no time rule)")

@@ -211,5 +211,21 @@ def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
     empty.touch()
     with pytest.raises(ValueError, match="not a usable survey database"):
         analysis_database(f"sqlite:///{empty}")
-    with pytest.raises(ValueError, match="--study"):
+    with pytest.raises(ValueError, match="--study FILE"):
         analysis_study(survey_db, None)
+
+
+def test_study_stored_in_the_database(survey_db, paper_study):
+    from app.answer_table import analysis_study, remember_study
+
+    path, study = paper_study
+    remember_study(survey_db, path.read_text(), study)
+    assert analysis_study(survey_db, None) == study == analysis_study(survey_db, "paper")
+    other = parse_study(path.read_text().replace('id = "paper"', 'id = "pilot"'))
+    remember_study(survey_db, path.read_text().replace('id = "paper"', 'id = "pilot"'), other)
+    remember_study(survey_db, path.read_text().replace('id = "paper"', 'id = "pilot"'), other)  # a restart
+    assert analysis_study(survey_db, "pilot").study.id == "pilot"
+    with pytest.raises(ValueError, match=r"stored: \['paper', 'pilot'\]"):
+        analysis_study(survey_db, None)
+    with pytest.raises(ValueError, match="no study file nope"):
+        analysis_study(survey_db, "nope")
