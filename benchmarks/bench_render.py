@@ -63,7 +63,7 @@ def main() -> None:
     scene = horizon_scene()
     options = RenderOptions()
     renderer = ClipRenderer(scene, options=options)
-    frames = renderer.timeline()
+    frames = renderer.frames
     draw_times = []
     for _ in range(REPEATS):
         started = time.perf_counter()

@@ -45,6 +45,7 @@ SUCCESS = (0, 158, 115)
 SUPERSAMPLE = 4
 PHONE_WIDTH = 360  # the narrowest screen a clip must stay readable on
 MIN_PHONE_TEXT = 13  # px of legend text on that screen
+CRASH_TAG_SECONDS = 3.0  # of video after a collision's pause
 
 
 @dataclass(frozen=True)
@@ -256,10 +257,10 @@ def status_text(event: str, when: float) -> str:
 
 @dataclass(frozen=True)
 class Frame:
-    """One frame of the timeline: the simulated time shown and the seconds of video since the last event."""
+    """One frame: the simulated time it shows and where it sits in the video (inf: a still, such as the poster)."""
 
     time: float
-    since_event: float
+    video: float = math.inf
 
 
 class ClipRenderer:
@@ -284,11 +285,13 @@ class ClipRenderer:
                                        for p in range(scene.n_panels)], axis=1)  # (T, P, n, 2)
         self.texts: set[str] = set()  # every string drawn, so tests can check that no real name appears
         self.background = self._background()
+        self.frames, self.event_starts = self._schedule()
 
     # -- timeline -----------------------------------------------------------------------------------------------
 
-    def timeline(self) -> list[Frame]:
-        """Every frame's simulated time: hold, play at ``speed`` with a pause at each event, hold."""
+    def _schedule(self) -> tuple[list[Frame], dict[float, float]]:
+        """Every frame (hold, play at ``speed`` with a pause at each event, hold) and, per event time, the second
+        of video at which its pause starts."""
         o, end = self.options, self.scene.end_time
         step, tick = o.speed / o.fps, 1 / o.fps
         pause = round(o.event_hold * o.fps)
@@ -296,18 +299,20 @@ class ClipRenderer:
         times = [i * step for i in range(int(math.floor(end / step + 1e-9)) + 1)]
         if times[-1] < end:
             times.append(end)
-        frames = [Frame(0.0, math.inf)] * round(o.hold_start * o.fps)
-        since = math.inf
+        frames = [Frame(0.0, h * tick) for h in range(round(o.hold_start * o.fps))]
+        starts = {}
         for t in times:
             while pending and pending[0] <= t:
-                event, since = pending.pop(0), 0.0
-                for _ in range(pause):
-                    frames.append(Frame(event, since))
-                    since += tick
-            frames.append(Frame(t, since))
-            since += tick
-        frames += [Frame(end, since + h * tick) for h in range(round(o.hold_end * o.fps))]
-        return frames
+                event = pending.pop(0)
+                starts[event] = len(frames) * tick
+                frames += [Frame(event, len(frames) * tick + h * tick) for h in range(pause)]
+            frames.append(Frame(t, len(frames) * tick))
+        frames += [Frame(end, (len(frames) + h) * tick) for h in range(round(o.hold_end * o.fps))]
+        return frames, starts
+
+    def _since(self, when: float, frame: Frame) -> float:
+        """Seconds of video since the pause for the event at ``when`` began (inf in a still)."""
+        return frame.video - self.event_starts.get(when, math.inf) if math.isfinite(frame.video) else math.inf
 
     # -- drawing ------------------------------------------------------------------------------------------------
 
@@ -385,12 +390,9 @@ class ClipRenderer:
         shades = np.round((0.25 + 0.75 * np.exp(-ages / self.options.trail_fade)) * 8) / 8
         width = max(3, int(self.scene.robot_radius * self.layout.scale * 0.35))
         start = 0
-        for j in range(1, len(points) + 1):
-            if j == len(points) or shades[j] != shades[start]:
-                run = points[start: j + 1] if j < len(points) else points[start:]
-                if len(run) >= 2:
-                    draw.line(run, fill=_mix(colour, float(shades[min(j, len(points) - 1)])), width=width,
-                              joint="curve")
+        for j in range(1, len(points)):
+            if j == len(points) - 1 or shades[j] != shades[start]:
+                draw.line(points[start: j + 1], fill=_mix(colour, float(shades[start])), width=width, joint="curve")
                 start = j
 
     def _draw_human_tails(self, draw: ImageDraw.ImageDraw, i: int, humans) -> None:
@@ -424,7 +426,7 @@ class ClipRenderer:
         self._draw_robots(image, robots)
         for k in self.order:
             if happened[k]:
-                self._draw_event(image, happened[k][0], robots[k], frame)
+                self._draw_event(image, happened[k], robots[k], frame)
         self._draw_header(image, frame.time)
         self._draw_legend(image, frame.time)
         return image
@@ -455,17 +457,20 @@ class ClipRenderer:
         ImageDraw.Draw(image).rectangle(box, fill=CRASH, outline=(0, 0, 0), width=max(2, size // 12))
         self._text(image, xy, text, size, (0, 0, 0), anchor, bold=True)
 
-    def _draw_event(self, image: Image.Image, event: str, xy, frame: Frame) -> None:
-        """An expanding ring while the clip pauses on the event, then a badge (arrival, timeout) or a tag (crash)."""
+    def _draw_event(self, image: Image.Image, happened: tuple[str, float], xy, frame: Frame) -> None:
+        """An expanding ring while the clip pauses on the event; then a badge (arrival, timeout) on the robot, or
+        a CRASH tag for a few seconds (it would hide the people walking past later)."""
+        event, when = happened
         r = self.scene.robot_radius * self.layout.scale
-        if frame.since_event < self.options.event_hold + 0.3:
-            grow = 1.5 + 4.0 * min(1.0, frame.since_event / max(self.options.event_hold, 1e-6))
+        since = self._since(when, frame)
+        if since < self.options.event_hold + 0.3:
+            grow = 1.5 + 4.0 * min(1.0, since / max(self.options.event_hold, 1e-6))
             ring = (xy[0] - r * grow, xy[1] - r * grow, xy[0] + r * grow, xy[1] + r * grow)
             ImageDraw.Draw(image).ellipse(ring, outline=INK, width=max(3, int(r / 4)))
-        if event == "collision":
-            self._tag(image, (xy[0], xy[1] - r * 3.0), "CRASH", max(12, int(self.layout.text * 0.85)), "mb")
-        else:
+        if event != "collision":
             _paste(image, self.sprites.badges[event], (xy[0] + r * 1.1, xy[1] - r * 1.1))
+        elif since < self.options.event_hold + CRASH_TAG_SECONDS:
+            self._tag(image, (xy[0], xy[1] - r * 3.0), "CRASH", max(12, int(self.layout.text * 0.85)), "mb")
 
     def _draw_header(self, image: Image.Image, t: float) -> None:
         lay = self.layout
@@ -529,7 +534,7 @@ def encoder_args(options: RenderOptions) -> list[str]:
             "-movflags", "+faststart", "-map_metadata", "-1"]
 
 
-def contact_sheet(renderer: ClipRenderer, frames: list[Frame], columns: int = 3) -> Image.Image:
+def contact_sheet(renderer: ClipRenderer, columns: int = 3) -> Image.Image:
     """Key frames (start, every event, the end, evenly spaced in between) in a grid with their times."""
     times = sorted({0.0, renderer.scene.end_time, *renderer.scene.event_times()})
     while len(times) < 2 * columns:
@@ -537,7 +542,7 @@ def contact_sheet(renderer: ClipRenderer, frames: list[Frame], columns: int = 3)
         times.insert(j + 1, (times[j] + times[j + 1]) / 2)
     if len(times) > 3 * columns:
         times = [times[i] for i in np.linspace(0, len(times) - 1, 3 * columns).round().astype(int)]
-    thumbs = [renderer.draw(Frame(t, math.inf)) for t in times]
+    thumbs = [renderer.draw(Frame(t)) for t in times]
     w, h = thumbs[0].width // 2, thumbs[0].height // 2
     rows = math.ceil(len(thumbs) / columns)
     sheet = Image.new("RGB", (w * columns, h * rows), BACKGROUND)
@@ -558,7 +563,7 @@ def render(scene: Scene, out: str | os.PathLike, numbers: list[int] | None = Non
     out.parent.mkdir(parents=True, exist_ok=True)
     renderer = ClipRenderer(scene, numbers, options)
     o, lay = renderer.options, renderer.layout
-    frames = renderer.timeline()
+    frames = renderer.frames
     partial = out.with_name(f".{out.stem}.partial.mp4")
     writer = imageio_ffmpeg.write_frames(str(partial), (lay.width, lay.height), fps=o.fps, codec="libx264",
                                          pix_fmt_out="yuv420p", quality=None, macro_block_size=16,
@@ -579,7 +584,7 @@ def render(scene: Scene, out: str | os.PathLike, numbers: list[int] | None = Non
     partial.replace(out)
     poster_path, sheet_path = side_paths(out)
     poster.save(poster_path, optimize=True)
-    contact_sheet(renderer, frames).save(sheet_path, optimize=True)
+    contact_sheet(renderer).save(sheet_path, optimize=True)
     return RenderResult(clip=out, poster=poster_path, sheet=sheet_path, frames=len(frames),
                         seconds=len(frames) / o.fps, width=lay.width, height=lay.height,
                         render_s=time.perf_counter() - started)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import re
 import subprocess
 
@@ -65,7 +64,7 @@ def test_every_human_is_drawn_where_the_summary_puts_it(shared_summary):
     r_px = scene.human_radius * renderer.layout.scale
     for step in (0, 10, 30):
         t = shared_summary["steps"][step]["t"]
-        image = renderer.draw(Frame(t, math.inf))
+        image = renderer.draw(Frame(t))
         mask = colour_mask(image, HUMAN_FILL)
         humans = np.array(shared_summary["steps"][step]["humans"])
         robots = np.array(shared_summary["steps"][step]["robots"])
@@ -93,7 +92,7 @@ def test_positions_between_steps_are_interpolated(shared_summary):
 def test_timeline_is_smooth_holds_both_ends_and_pauses_on_events(shared_summary):
     options = RenderOptions(fps=24, speed=1.0, hold_start=1.0, hold_end=1.5, event_hold=0.5)
     scene = scene_from_summary(shared_summary)
-    frames = ClipRenderer(scene, options=options).timeline()
+    frames = ClipRenderer(scene, options=options).frames
     times = np.array([f.time for f in frames])
     assert np.all(times[:24] == 0) and times[24] == 0
     assert np.all(times[-36:] == scene.end_time)
@@ -102,7 +101,7 @@ def test_timeline_is_smooth_holds_both_ends_and_pauses_on_events(shared_summary)
     for event_time in scene.event_times():
         assert np.sum(np.isclose(times, event_time)) >= 12
     faster = ClipRenderer(scene, options=RenderOptions(speed=2.0, hold_start=0, hold_end=0, event_hold=0))
-    assert len(faster.timeline()) < len(frames) / 2
+    assert len(faster.frames) < len(frames) / 2
 
 
 def test_labels_never_reveal_agent_names(tmp_path, shared_summary):
@@ -110,7 +109,7 @@ def test_labels_never_reveal_agent_names(tmp_path, shared_summary):
     secrets = [a["name"] for a in summary["agents"]] + ["SECRET-SOURCE"]
     scene = scene_from_summary(summary)
     renderer = ClipRenderer(scene, numbers=[2, 1], options=FAST)
-    for frame in renderer.timeline():
+    for frame in renderer.frames:
         renderer.draw(frame)
     drawn = " ".join(sorted(renderer.texts))
     assert "Robot 1" in drawn and "Robot 2" in drawn
@@ -127,7 +126,7 @@ def test_robot_numbers_pick_colour_and_order(shared_summary):
     scene = scene_from_summary(shared_summary)
     swapped = ClipRenderer(scene, numbers=[2, 1])
     assert swapped.order == [1, 0]  # legend and panels list Robot 1 first: the summary's second agent
-    image = swapped.draw(Frame(5.0, math.inf))
+    image = swapped.draw(Frame(5.0))
     blue = colour_mask(image, ROBOT_STYLES[0][0], tolerance=3)
     _, robots, _ = swapped._state(5.0)
     found = blob_centre(blue, robots[1], 0.3 * swapped.layout.scale)
@@ -143,12 +142,19 @@ def test_collision_is_marked_where_and_when_it_happens(shared_summary):
     k = crashed[0]
     when = scene.outcomes[k][1]
     renderer = ClipRenderer(scene)
-    before = colour_mask(renderer.draw(Frame(when - 0.5, math.inf)), CRASH)
-    after = colour_mask(renderer.draw(Frame(when, 0.0)), CRASH)
+    start = renderer.event_starts[when]
+    before = colour_mask(renderer.draw(Frame(when - 0.5)), CRASH)
+    after = colour_mask(renderer.draw(Frame(when, start)), CRASH)
+    later = colour_mask(renderer.draw(Frame(scene.end_time, start + 10.0)), CRASH)
     _, robots, _ = renderer._state(when)
-    assert blob_centre(before, robots[k], 2 * renderer.layout.scale) is None
-    assert blob_centre(after, robots[k], 2 * renderer.layout.scale) is not None
-    assert f"CRASHED · {when:.1f} s" in renderer.texts
+    near = 4 * renderer.layout.scale
+    assert blob_centre(before, robots[k], near) is None
+    assert blob_centre(after, robots[k], near) is not None
+    assert blob_centre(later, robots[k], near) is not None  # the burst stays where it happened
+    window = (slice(max(0, int(robots[k][1] - near)), int(robots[k][1] + near)),
+              slice(max(0, int(robots[k][0] - near)), int(robots[k][0] + near)))
+    assert after[window].sum() > later[window].sum()  # the CRASH tag goes after a while, not to hide people
+    assert f"CRASHED · {when:.1f} s" in renderer.texts and "CRASH" in renderer.texts
 
 
 def test_each_robot_has_its_own_panel_when_robots_are_visible():
@@ -157,7 +163,7 @@ def test_each_robot_has_its_own_panel_when_robots_are_visible():
     assert scene.n_panels == 2
     renderer = ClipRenderer(scene, numbers=[2, 1])
     assert renderer.layout.width % 16 == 0 and renderer.layout.height % 16 == 0
-    image = renderer.draw(Frame(scene.end_time, math.inf))
+    image = renderer.draw(Frame(scene.end_time))
     mask = colour_mask(image, HUMAN_FILL)
     step = summary["steps"][-1]
     for agent in range(2):
