@@ -44,8 +44,8 @@ def accuracy_difference(counts: dict[str, tuple[int, int]]) -> TestResult:
         return TestResult("not tested: fewer than two schemes have answers")
     if len(table) == 2:
         odds, p = stats.fisher_exact(table, alternative="two-sided")
-        return TestResult("Fisher's exact test, two-sided", statistic=float(odds), p_value=float(p),
-                          effect=float(odds))
+        odds = None if math.isnan(odds) else float(odds)  # 0/0: every answer in one column
+        return TestResult("Fisher's exact test, two-sided", statistic=odds, p_value=float(p), effect=odds)
     if all(c == 0 for c, _ in table) or all(i == 0 for _, i in table):
         return TestResult("Pearson's chi-square test: every answer is in one column, so no difference", 0.0, 1.0)
     chi2, p, dof, _ = stats.chi2_contingency(table, correction=False)

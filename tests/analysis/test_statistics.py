@@ -52,6 +52,8 @@ def test_chi_square_for_three_schemes():
 
 def test_accuracy_difference_needs_two_schemes_with_answers():
     assert accuracy_difference({"a": (5, 5), "b": (0, 0)}).p_value is None
+    all_wrong = accuracy_difference({"a": (0, 20), "b": (0, 20)})
+    assert all_wrong.p_value == 1 and all_wrong.effect is None
     assert accuracy_difference({}).test.startswith("not tested")
 
 
