@@ -1,0 +1,104 @@
+"""What a solver searches: a batched, branchable, deterministic environment with a reward.
+
+Solvers see only the ``Problem`` protocol, so the same MCTS runs on the coupled crowd simulator and on small
+synthetic problems with a known optimum (the tests use one). ``CoupledProblem`` is the paper's: a coupled
+simulator of the agents under comparison, scored by the divergence reward.
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from typing import Any, Protocol
+
+import numpy as np
+
+from search.coupled import CoupledSimulator, Snapshot
+from search.policies import Policy
+from search.prior import ActionPrior
+from search.reward import DivergenceReward, RewardConfig
+from search.scenarios import Scenario
+from search.world import WorldConfig, WorldState
+
+
+class Problem(Protocol):
+    """B rows stepped together; each row is one trajectory from the problem's fixed initial state."""
+
+    action_shape: tuple[int, ...]
+    horizon: int  # no trajectory is longer
+    prior: ActionPrior
+
+    @property
+    def batch(self) -> int: ...
+
+    def reset(self, batch: int) -> None: ...
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance every row by one action (B, *action_shape); return (reward (B,), terminal (B,))."""
+
+    def snapshot(self, index=None) -> Any:
+        """A copy of rows ``index`` (all by default; indices may repeat)."""
+
+    def restore(self, snapshot) -> None:
+        """Continue from a snapshot; the batch becomes its rows."""
+
+    def concat(self, snapshots: list) -> Any:
+        """One snapshot holding the rows of several, in order."""
+
+
+class CoupledProblem:
+    """The agents under comparison in one coupled simulator, scored by the divergence reward."""
+
+    def __init__(self, policies: list[Policy], scenario: Scenario, world: WorldConfig | None = None,
+                 reward: RewardConfig | None = None):
+        self.sim = CoupledSimulator(policies, scenario, world, batch=1)
+        self.reward_config = reward or RewardConfig()
+        config = self.sim.config
+        self.action_shape = (config.human_num, 2)
+        self.horizon = self.reward_config.horizon
+        self.prior = ActionPrior(self.action_shape, config.env_action_bound, self.reward_config.prior,
+                                 self.reward_config.prior_sigma)
+        self.reward = DivergenceReward(self.reward_config, self.prior)
+
+    @property
+    def batch(self) -> int:
+        return self.sim.batch
+
+    def reset(self, batch: int) -> None:
+        self.sim.reset(batch)
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        result = self.sim.step(actions)
+        t = np.rint(result.time / self.sim.config.dt).astype(np.int64)
+        goal, end = self.reward.events(result.newly_done, result.outcome, result.done.all(axis=1), t)
+        reward = self.reward.step(result.robot_actions, result.robot_pos, result.human_pos, actions, goal, end)
+        return reward, goal | end
+
+    def snapshot(self, index=None) -> Snapshot:
+        return self.sim.snapshot(index)
+
+    def restore(self, snapshot: Snapshot) -> None:
+        self.sim.restore(snapshot)
+
+    def concat(self, snapshots: list[Snapshot]) -> Snapshot:
+        return concat_snapshots(snapshots)
+
+
+def concat_snapshots(snapshots: list[Snapshot]) -> Snapshot:
+    """Rows of several coupled snapshots as one. A snapshot of B rows holds ``copies * B`` worlds, copy-major
+    (one world copy per agent when robots are visible), so worlds are joined copy by copy."""
+    if len(snapshots) == 1:
+        return snapshots[0]
+    copies = snapshots[0].state.n_worlds // snapshots[0].batch
+
+    def join(arrays: list[np.ndarray], batches: list[int]) -> np.ndarray:
+        parts = [a.reshape(copies, b, *a.shape[1:]) for a, b in zip(arrays, batches, strict=True)]
+        joined = np.concatenate(parts, axis=1)
+        return joined.reshape(-1, *joined.shape[2:])
+
+    batches = [s.batch for s in snapshots]
+    state = WorldState(**{f.name: join([getattr(s.state, f.name) for s in snapshots], batches)
+                          for f in fields(WorldState)})
+    policy_states = [{key: np.concatenate([s.policy_states[k][key] for s in snapshots])
+                      for key in snapshots[0].policy_states[k]}
+                     for k in range(len(snapshots[0].policy_states))]
+    return Snapshot(state, policy_states, sum(batches))

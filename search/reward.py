@@ -1,0 +1,172 @@
+"""The divergence reward of the paper's adaptive scenario search, for N >= 2 agents in one coupled simulator.
+
+Per step (step t = 1, 2, ... counts steps from the scenario's initial state):
+
+- a **goal** step (some agent reached its goal on this step; with ``collision_is_goal`` a collision counts too)
+  ends the trajectory with ``goal_bonus + alpha * d_s``, d_s the divergence of the agents' positions;
+- an **end** step without a goal (t reached the horizon T, or every agent has finished otherwise) ends it with
+  ``horizon_offset + beta * h``, h a heuristic (default: d_s again);
+- any other step gives the action divergence d_a of the agents' actions;
+- every step adds ``plausibility * log p(a_env)`` under the environment action prior (0 by default).
+
+A divergence is the norm of a difference, plain (the paper's code) or squared (the paper's text), combined over
+all agent pairs by their mean or their minimum (the pair that differs least decides). The paper's code amounts to
+``alpha = 1, goal_bonus = 100`` and ``beta = 1e4, horizon_offset = -1e5``; the defaults here are the plain
+``alpha = beta = 1`` of the paper's formula.
+
+The same per-step function scores a batch of search rollouts and a replayed trajectory, step by step, so a
+summary's numbers are exactly the search's for the same simulated steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from functools import cache
+from importlib import import_module
+
+import numpy as np
+
+from search.prior import PRIOR_KINDS, ActionPrior
+from search.world import COLLISION, SUCCESS
+
+TERMS = ("action_divergence", "goal", "horizon", "plausibility")
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Everything that defines the search objective. Defaults: the paper's formula with plain norms and T = 100."""
+
+    horizon: int = 100
+    norm: str = "plain"  # "plain" ||x|| (paper code) or "squared" ||x||^2 (paper text)
+    combine: str = "mean"  # how pairwise divergences of N > 2 agents combine: "mean" or "min"
+    alpha: float = 1.0
+    goal_bonus: float = 0.0
+    beta: float = 1.0
+    horizon_offset: float = 0.0
+    heuristic: str = "state_divergence"  # a name in HEURISTICS or module:attribute
+    collision_is_goal: bool = False
+    plausibility: float = 0.0
+    prior: str = "uniform"  # environment action prior: "uniform" or "gaussian"
+    prior_sigma: float = 0.1
+
+    def __post_init__(self):
+        checks = [
+            (isinstance(self.horizon, int) and self.horizon >= 1, "horizon must be a whole number of steps >= 1"),
+            (self.norm in ("plain", "squared"), "norm must be 'plain' or 'squared'"),
+            (self.combine in ("mean", "min"), "combine must be 'mean' or 'min'"),
+            (self.prior in PRIOR_KINDS, f"prior must be one of {PRIOR_KINDS}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"invalid reward config: {message}")
+        heuristic_function(self.heuristic)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> RewardConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown reward setting(s) {unknown}; known settings: {sorted(known)}")
+        return cls(**values)
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@cache
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(n, k=1)
+
+
+def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarray:
+    """Divergence of per-agent vectors (..., N, D) over all agent pairs, as (...)."""
+    i, j = _pairs(values.shape[-2])
+    diff = values[..., i, :] - values[..., j, :]
+    squared = np.sum(diff * diff, axis=-1)
+    pairs = squared if norm == "squared" else np.sqrt(squared)
+    return pairs.mean(axis=-1) if combine == "mean" else pairs.min(axis=-1)
+
+
+def state_divergence(robot_pos: np.ndarray, human_pos: np.ndarray, config: RewardConfig) -> np.ndarray:
+    """The default horizon heuristic: how far apart the robots ended up."""
+    return pairwise_divergence(robot_pos, config.norm, config.combine)
+
+
+HEURISTICS = {"state_divergence": state_divergence}
+
+
+def heuristic_function(spec: str):
+    """A heuristic ``h(robot_pos (..., N, 2), human_pos (..., n, 2), config) -> (...)`` by name or
+    ``module:attribute``."""
+    if spec in HEURISTICS:
+        return HEURISTICS[spec]
+    if ":" in spec:
+        module_name, _, attribute = spec.partition(":")
+        try:
+            return getattr(import_module(module_name), attribute)
+        except (ImportError, AttributeError) as error:
+            raise ValueError(f"cannot load heuristic {spec!r}: {error}") from None
+    raise ValueError(f"unknown heuristic {spec!r}: use one of {sorted(HEURISTICS)} or module:attribute")
+
+
+class DivergenceReward:
+    def __init__(self, config: RewardConfig, prior: ActionPrior):
+        self.config = config
+        self.prior = prior
+        self.heuristic = heuristic_function(config.heuristic)
+
+    def events(self, newly_done: np.ndarray, outcome: np.ndarray, all_done: np.ndarray, t: np.ndarray):
+        """(goal, end) flags (...) of a step from per-agent flags (..., N) and the step number t (...)."""
+        goal_outcome = outcome == SUCCESS
+        if self.config.collision_is_goal:
+            goal_outcome = goal_outcome | (outcome == COLLISION)
+        goal = np.any(newly_done & goal_outcome, axis=-1)
+        end = ~goal & ((t >= self.config.horizon) | all_done)
+        return goal, end
+
+    def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:
+        """Each reward term of one step (...), from agent arrays (..., N, 2), humans (..., n, 2), the environment
+        action (..., n, 2) and the step's events."""
+        c = self.config
+        running = ~goal & ~end
+        d_a = pairwise_divergence(robot_actions, c.norm, c.combine)
+        d_s = pairwise_divergence(robot_pos, c.norm, c.combine)
+        h = self.heuristic(robot_pos, human_pos, c)
+        zero = np.zeros_like(d_a)
+        plausibility = c.plausibility * self.prior.log_prob(env_action) if c.plausibility else zero
+        return {
+            "action_divergence": np.where(running, d_a, zero),
+            "goal": np.where(goal, c.goal_bonus + c.alpha * d_s, zero),
+            "horizon": np.where(end, c.horizon_offset + c.beta * h, zero),
+            "plausibility": plausibility,
+        }
+
+    def step(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> np.ndarray:
+        """One step's reward (...): the sum of its terms, always added in the same order."""
+        terms = self.step_terms(robot_actions, robot_pos, human_pos, env_action, goal, end)
+        return terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
+
+    def trajectory(self, trajectory, dt: float) -> tuple[float, dict[str, float], np.ndarray]:
+        """Total reward, per-term totals and per-step terminal flags of a replayed ``coupled.Trajectory``.
+
+        Totals are summed step by step in order, exactly as a search accumulates them.
+        """
+        steps = len(trajectory.time)
+        t = np.arange(1, steps + 1)
+        event_step = np.where(np.isnan(trajectory.event_time), np.inf, np.rint(trajectory.event_time / dt))
+        newly_done = event_step[None, :] == t[:, None]
+        outcome = np.where(event_step[None, :] <= t[:, None], trajectory.outcome[None, :], 0)
+        all_done = np.all(event_step[None, :] <= t[:, None], axis=1)
+        goal, end = self.events(newly_done, outcome, all_done, t)
+        terms = self.step_terms(trajectory.robot_actions, trajectory.robot_pos, trajectory.human_pos,
+                                trajectory.env_actions, goal, end)
+        per_step = terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
+        return sequential_sum(per_step), {k: sequential_sum(v) for k, v in terms.items()}, goal | end
+
+
+def sequential_sum(values: np.ndarray) -> float:
+    """Left-to-right float sum (numpy's pairwise sum would differ from a step-by-step total in the last bits)."""
+    total = 0.0
+    for value in np.asarray(values, dtype=np.float64).tolist():
+        total += value
+    return total

@@ -1,0 +1,246 @@
+"""Running searches: one comparison (``foil search``), or every agent pair on every scenario (``foil search-all``)
+in parallel processes on this machine or as tasks on a Ray cluster.
+
+A job returns its output files as text and the caller writes them, so a Ray worker on another machine needs no
+shared file system. Every job of a study uses the same seed, so ``foil search`` with that seed reproduces any one
+of them exactly.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import re
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from search.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
+from search.mcts import MCTSConfig, mcts
+from search.problem import CoupledProblem
+from search.reward import RewardConfig
+from search.rollout import Tracker
+from search.summary import build_summary, dumps, frozen_scenario
+
+SOLVERS = {
+    "mcts": (mcts, MCTSConfig),
+    "nfirst": (n_first, SamplingConfig),
+    "random": (random_search, SamplingConfig),
+    "cem": (cem, CEMConfig),
+}
+
+
+@dataclass(frozen=True)
+class SearchJob:
+    """One search: agents compared in one coupled simulator on one scenario. Settings override defaults."""
+
+    agents: tuple[str, ...]
+    scenario: str
+    solver: str = "mcts"
+    budget: int = 20_000
+    seed: int = 0
+    top_k: int = 30
+    solver_settings: dict = field(default_factory=dict)
+    reward_settings: dict = field(default_factory=dict)
+    world_settings: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if len(self.agents) < 2:
+            raise ValueError("a search compares at least two agents: give --agents A,B[,C...]")
+        solver_config_class(self.solver)
+        if self.budget < 1 or self.top_k < 1:
+            raise ValueError("--budget and --top-k must be at least 1")
+
+    @property
+    def label(self) -> str:
+        return f"{'-vs-'.join(map(_slug, self.agents))}/{_slug(self.scenario)}"
+
+
+def solver_config_class(name: str):
+    if name not in SOLVERS:
+        raise ValueError(f"unknown solver {name!r}: use one of {sorted(SOLVERS)}")
+    return SOLVERS[name][1]
+
+
+def _slug(name: str) -> str:
+    """A file-name-safe form of an agent or scenario name (a checkpoint path becomes its stem)."""
+    stem = Path(name).stem if ("/" in name or name.endswith((".pt", ".toml"))) else name
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", stem)
+
+
+def parse_settings(cls, items: list[str], what: str) -> dict:
+    """``key=value`` strings as a dict for dataclass ``cls``, each value converted to its field's type."""
+    types = {f.name: type(f.default) for f in fields(cls)}
+    settings = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or key not in types:
+            raise ValueError(f"bad {what} setting {item!r}: use key=value with a key among {sorted(types)}")
+        kind = types[key]
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError
+                settings[key] = text.lower() in ("true", "1")
+            else:
+                settings[key] = kind(text)
+        except ValueError:
+            raise ValueError(f"bad {what} setting {item!r}: {key} takes a {kind.__name__}") from None
+    return settings
+
+
+def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
+    """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
+    ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
+    from search.policies import load_policy
+    from search.scenarios import load_scenario
+
+    started = time.perf_counter()
+    policies = [load_policy(spec) for spec in job.agents]
+    scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
+    reward_config = RewardConfig.from_dict(job.reward_settings)
+    solve, config_class = SOLVERS[job.solver]
+    solver_config = config_class(**job.solver_settings)
+    problem = CoupledProblem(policies, scenario, reward=reward_config)
+    tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
+    try:
+        solve(problem, tracker, np.random.default_rng(job.seed), solver_config)
+    finally:
+        tracker.close()
+    search_time = time.perf_counter() - started
+
+    solver = {"name": job.solver, "parameters": asdict(solver_config), "seed": job.seed, "budget": job.budget,
+              "budget_used": tracker.steps}
+    summaries = []
+    for found in tracker.queue.ranked():
+        summary = build_summary(list(job.agents), policies, scenario, reward_config, found.actions,
+                                solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
+        summaries.append(summary)
+    summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
+    files = {}
+    for rank, summary in enumerate(summaries, start=1):
+        summary["solver"]["rank"] = rank
+        files[f"summary-{rank:03d}.json"] = dumps(summary)
+    record = {
+        "format": "foil.run/1",
+        "agents": list(job.agents),
+        "scenario": scenario.name,
+        "solver": solver,
+        "reward_parameters": reward_config.to_dict(),
+        "top_k": job.top_k,
+        "trajectories": tracker.trajectories,
+        "sim_steps": tracker.steps,
+        "search_wall_s": search_time,
+        "wall_s": time.perf_counter() - started,
+        "steps_per_s": tracker.steps / max(search_time, 1e-9),
+        "best_reward": summaries[0]["reward"] if summaries else None,
+        "curve": [[steps, reward] for steps, reward in tracker.curve],
+        "summaries": [{"file": name, "reward": s["reward"], "search_reward": s["solver"]["search_reward"]}
+                      for name, s in zip(files, summaries, strict=True)],
+    }
+    files["run.json"] = json.dumps(record, indent=1) + "\n"
+    return files
+
+
+def write_outputs(out: str | Path, files: dict[str, str]) -> Path:
+    """Write a search's files into ``out``, removing summaries left there by an earlier run."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in out.glob("summary-[0-9][0-9][0-9].json"):
+        stale.unlink()
+    for name, text in files.items():
+        (out / name).write_text(text)
+    return out
+
+
+def study_jobs(agents: list[str], scenarios: list[str], solvers: list[str], joint: bool = False,
+               **common) -> list[SearchJob]:
+    """Every pair of agents (or, with ``joint``, all agents together) on every scenario with every solver."""
+    groups = [tuple(agents)] if joint else list(itertools.combinations(agents, 2))
+    return [SearchJob(agents=group, scenario=scenario, solver=solver, **common)
+            for solver in solvers for group in groups for scenario in scenarios]
+
+
+def _limit_threads() -> None:
+    """One search per core: keep libraries inside a worker from starting a thread per core each."""
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
+
+
+def _job_in_worker(job: SearchJob) -> dict[str, str]:
+    _limit_threads()
+    return run_search(job)
+
+
+def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, backend: str = "process",
+            ray_address: str | None = None, progress: bool = True) -> dict:
+    """Run jobs in parallel and write each one's files to ``out/<solver>/<agents>/<scenario>/``; also writes
+    ``out/study.json`` with every job's record. Returns that record."""
+    from tqdm import tqdm
+
+    started = time.perf_counter()
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    bar = tqdm(total=len(jobs), unit="search", disable=not progress)
+    results: dict[int, dict[str, str]] = {}
+    if backend == "ray":
+        for index, files in _run_ray(jobs, ray_address, workers):
+            results[index] = files
+            bar.update()
+    elif backend == "process":
+        if workers == 1:
+            for index, job in enumerate(jobs):
+                results[index] = run_search(job)
+                bar.update()
+        else:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
+            with ProcessPoolExecutor(workers, mp_context=context, initializer=_limit_threads) as pool:
+                futures = {pool.submit(_job_in_worker, job): index for index, job in enumerate(jobs)}
+                for future in as_completed(futures):
+                    results[futures[future]] = future.result()
+                    bar.update()
+    else:
+        raise ValueError(f"unknown backend {backend!r}: use 'process' or 'ray'")
+    bar.close()
+
+    records = []
+    for index, job in enumerate(jobs):
+        where = write_outputs(Path(out) / job.solver / job.label, results[index])
+        record = json.loads(results[index]["run.json"])
+        records.append({"dir": str(where.relative_to(out)), "agents": list(job.agents), "scenario": job.scenario,
+                        "solver": job.solver, "best_reward": record["best_reward"], "wall_s": record["wall_s"],
+                        "sim_steps": record["sim_steps"]})
+    study = {"format": "foil.study-search/1", "backend": backend, "workers": workers,
+             "wall_s": time.perf_counter() - started, "jobs": records}
+    (Path(out) / "study.json").write_text(json.dumps(study, indent=1) + "\n")
+    return study
+
+
+def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
+    """Yield (index, files) as Ray tasks finish; a local Ray instance when no address is given."""
+    try:
+        import ray
+    except ImportError:
+        raise ValueError("the ray backend needs Ray: pip install 'foil[ray]'") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        if address:
+            ray.init(address=address)
+        else:
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    try:
+        task = ray.remote(num_cpus=1)(_job_in_worker)
+        pending = {task.remote(job): index for index, job in enumerate(jobs)}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                yield pending.pop(ref), ray.get(ref)
+    finally:
+        if started_here:
+            ray.shutdown()

@@ -1,0 +1,144 @@
+"""summary.json (format ``foil.summary/1``): one kept trajectory, replayable and checkable.
+
+A summary is built from a replay of its environment actions at batch size 1, never from a search's batched
+numbers (neural policies may differ in the last bits between batch sizes). ``verify`` builds it again from the
+file's own inputs (agents, scenario with its full world config, reward parameters, environment actions) and
+compares every number exactly.
+
+``steps`` holds the state after each step (the initial state is ``scenario``); ``min_human_distance`` is the
+smallest surface-to-surface distance between the robot and any human (negative after a collision).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from search.coupled import replay
+from search.policies import SCRIPTED, load_policy
+from search.prior import ActionPrior
+from search.reward import DivergenceReward, RewardConfig
+from search.scenarios import Scenario
+from search.world import OUTCOME_NAMES
+
+FORMAT = "foil.summary/1"
+
+
+def agent_entry(spec: str, policy) -> dict:
+    return {"name": spec, "source": "scripted" if spec in SCRIPTED else str(getattr(policy, "source", spec))}
+
+
+def frozen_scenario(scenario: Scenario, world: dict) -> Scenario:
+    """The scenario with its complete world config (plus ``world`` overrides) written in, so a summary does not
+    depend on defaults."""
+    return replace(scenario, world=scenario.config().to_dict() | world)
+
+
+def _number(value: float) -> float | None:
+    """JSON has no NaN or infinity: an event that has not happened has no time (null)."""
+    return float(value) if math.isfinite(value) else None
+
+
+def _pairs(array: np.ndarray) -> list[list[float]]:
+    return np.asarray(array, dtype=np.float64).tolist()
+
+
+def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_config: RewardConfig,
+                  env_actions: np.ndarray, solver: dict) -> dict:
+    """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs."""
+    config = scenario.config()
+    trajectory = replay(policies, scenario, env_actions, stop_when_done=False)
+    prior = ActionPrior((config.human_num, 2), config.env_action_bound, reward_config.prior, reward_config.prior_sigma)
+    total, terms, terminal = DivergenceReward(reward_config, prior).trajectory(trajectory, config.dt)
+    ends = np.flatnonzero(terminal)
+    if ends.size == 0 or ends[0] != len(terminal) - 1:
+        where = "never ends" if ends.size == 0 else f"ends at step {ends[0] + 1} of {len(terminal)}"
+        raise ValueError(f"the trajectory {where}: a summary holds exactly one complete trajectory")
+    return {
+        "format": FORMAT,
+        "agents": [agent_entry(spec, policy) for spec, policy in zip(agents, policies, strict=True)],
+        "scenario": scenario.to_dict(),
+        "solver": solver,
+        "reward_parameters": reward_config.to_dict(),
+        "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist() for a in trajectory.env_actions],
+        "steps": [{"t": float(trajectory.time[i]), "humans": _pairs(trajectory.human_pos[i]),
+                   "robots": _pairs(trajectory.robot_pos[i]), "robot_actions": _pairs(trajectory.robot_actions[i])}
+                  for i in range(len(trajectory.time))],
+        "outcomes": [{"event": OUTCOME_NAMES[int(trajectory.outcome[k])],
+                      "time": _number(trajectory.event_time[k]),
+                      "path_length": float(trajectory.path_length[k]),
+                      "min_human_distance": _number(trajectory.min_clearance[k])}
+                     for k in range(len(agents))],
+        "reward": total,
+        "reward_terms": terms,
+    }
+
+
+def dumps(summary: dict) -> str:
+    return json.dumps(summary, indent=1, allow_nan=False) + "\n"
+
+
+def load_summary(path: str | Path) -> dict:
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no summary file {str(path)!r}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON: {error}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        found = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise ValueError(f"{path}: not a summary (format {found!r}, expected {FORMAT!r})")
+    missing = [key for key in ("agents", "scenario", "solver", "reward_parameters", "env_actions") if key not in data]
+    if missing:
+        raise ValueError(f"{path}: summary lacks {missing}; write it again with `foil search`")
+    return data
+
+
+def rebuild(data: dict) -> dict:
+    """The summary that the file's own inputs produce now."""
+    agents = [entry["name"] for entry in data["agents"]]
+    scenario = Scenario.from_dict(data["scenario"], source="summary scenario")
+    reward_config = RewardConfig.from_dict(data["reward_parameters"])
+    env_actions = np.array(data["env_actions"], dtype=np.float64)
+    return build_summary(agents, [load_policy(a) for a in agents], scenario, reward_config, env_actions,
+                         data["solver"])
+
+
+def differences(expected, found, where: str = "", limit: int = 10) -> list[str]:
+    """Paths at which two JSON values differ (floats compared exactly), at most ``limit``."""
+    out: list[str] = []
+
+    def walk(a, b, path):
+        if len(out) >= limit:
+            return
+        if isinstance(a, dict) and isinstance(b, dict):
+            for key in sorted(set(a) | set(b)):
+                if key not in a or key not in b:
+                    out.append(f"{path}.{key}: {'missing' if key not in b else 'unexpected'}")
+                else:
+                    walk(a[key], b[key], f"{path}.{key}")
+        elif isinstance(a, list) and isinstance(b, list):
+            if len(a) != len(b):
+                out.append(f"{path}: length {len(b)}, re-simulation gives {len(a)}")
+            for i, (x, y) in enumerate(zip(a, b, strict=False)):
+                walk(x, y, f"{path}[{i}]")
+        elif a != b or type(a) is not type(b) and not (isinstance(a, int | float) and isinstance(b, int | float)):
+            out.append(f"{path}: file has {b!r}, re-simulation gives {a!r}")
+
+    walk(expected, found, where)
+    return out
+
+
+def verify(path: str | Path) -> list[str]:
+    """Re-simulate a summary; the list of differences is empty when every number is reproduced exactly."""
+    data = load_summary(path)
+    try:
+        expected = json.loads(dumps(rebuild(data)))
+    except (ValueError, KeyError, TypeError) as error:
+        return [f"cannot re-simulate: {error}"]
+    return differences(expected, data)

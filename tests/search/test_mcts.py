@@ -1,0 +1,116 @@
+import numpy as np
+import pytest
+
+from search.baselines import random_search
+from search.coupled import replay
+from search.mcts import MCTSConfig, StateNode, mcts
+from search.problem import CoupledProblem
+from search.policies import load_policy
+from search.reward import RewardConfig
+from search.rollout import Tracker
+from search.scenarios import load_scenario
+from tests.search.synthetic import LockProblem
+
+SEEDS = range(5)
+
+
+def coupled(horizon: int = 40) -> CoupledProblem:
+    return CoupledProblem([load_policy("goal"), load_policy("orca")], load_scenario("paper-bl-tr"),
+                          reward=RewardConfig(horizon=horizon))
+
+
+def nodes(root: StateNode):
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        yield node
+        stack.extend(a.child for a in node.children if a.child is not None)
+
+
+def test_mcts_finds_the_lock_optimum_that_random_search_misses():
+    for seed in SEEDS:
+        tracker = Tracker(2000, 5)
+        mcts(LockProblem(), tracker, np.random.default_rng(seed))
+        assert tracker.best == 8.0, seed
+        random = Tracker(2000, 5)
+        random_search(LockProblem(), random, np.random.default_rng(seed))
+        assert random.best < 8.0, seed
+        best = tracker.queue.ranked()[0].actions
+        assert best.shape == (8, 1) and np.all(best > 0.6)
+
+
+@pytest.mark.parametrize("problem, budget", [(LockProblem, 1500), (coupled, 1500)])
+def test_widening_rule(problem, budget):
+    config = MCTSConfig(k=0.5, alpha=0.5, batch=8)
+    search = mcts(problem(), Tracker(budget, 5), np.random.default_rng(1), config)
+    checked = 0
+    for node in nodes(search.root):
+        limit = config.k * node.visits ** config.alpha
+        terminal = sum(a.child is not None and a.child.terminal for a in node.children)
+        assert limit <= len(node.children), "a node visited n times holds at least k * n**alpha actions"
+        # beyond the limit only when every action so far ended the trajectory (then it must widen to go on)
+        assert len(node.children) < limit + 1 + terminal
+        checked += node.visits > 0
+    assert checked >= 5
+
+
+def test_search_rewards_equal_replays_from_reset():
+    problem = coupled()
+    tracker = Tracker(2500, 10)
+    mcts(problem, tracker, np.random.default_rng(0), MCTSConfig(batch=8, repeat=3))
+    assert len(tracker.queue) == 10
+    for found in tracker.queue.ranked():
+        trajectory = replay(problem.sim.policies, problem.sim.scenario, found.actions)
+        total, _, terminal = problem.reward.trajectory(trajectory, problem.sim.config.dt)
+        assert total == found.reward  # exactly: branching from snapshots is the same simulation
+        assert terminal[-1] and not terminal[:-1].any()
+
+
+def test_snapshot_branching_matches_the_toolbox_replay_from_reset():
+    curves = {}
+    for branch in ("snapshot", "replay"):
+        tracker = Tracker(1200, 5)
+        mcts(coupled(horizon=20), tracker, np.random.default_rng(3), MCTSConfig(batch=1, branch=branch))
+        curves[branch] = [reward for _, reward in tracker.curve]
+    # replaying costs simulator steps, so the same budget gets fewer iterations, along the same search
+    assert len(curves["replay"]) >= 2
+    assert curves["snapshot"][: len(curves["replay"])] == curves["replay"]
+
+
+def test_same_seed_same_search_and_another_seed_another():
+    def run(seed):
+        tracker = Tracker(800, 5)
+        mcts(coupled(horizon=20), tracker, np.random.default_rng(seed), MCTSConfig(batch=4))
+        return [(f.reward, f.actions.tobytes()) for f in tracker.queue.ranked()]
+
+    assert run(7) == run(7)
+    assert run(7) != run(8)
+
+
+def test_repeat_holds_each_action_for_its_steps():
+    tracker = Tracker(1500, 10)
+    search = mcts(coupled(), tracker, np.random.default_rng(0), MCTSConfig(repeat=4, batch=8))
+    for found in tracker.queue.ranked():
+        steps = np.arange(len(found.actions))
+        assert np.array_equal(found.actions, found.actions[steps - steps % 4])
+    depths = {node.depth for node in nodes(search.root) if not node.terminal}
+    assert depths and all(depth % 4 == 0 for depth in depths)
+
+
+def test_receding_horizon_commits_step_by_step_and_drops_other_branches():
+    tracker = Tracker(2000, 5)
+    search = mcts(coupled(horizon=20), tracker, np.random.default_rng(0),
+                  MCTSConfig(mode="receding", batch=8, repeat=2))
+    assert search.root.depth >= 4
+    node = search.root
+    while node.parent is not None:  # every committed state kept only the action it committed
+        node = node.parent.parent
+        assert len(node.children) == 1
+    assert tracker.steps >= tracker.budget or search.root.terminal
+
+
+def test_bad_settings_say_what_is_wrong():
+    with pytest.raises(ValueError, match="mode"):
+        MCTSConfig(mode="sideways")
+    with pytest.raises(ValueError, match="alpha"):
+        MCTSConfig(alpha=0.0)

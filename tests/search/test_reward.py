@@ -1,0 +1,87 @@
+import math
+
+import numpy as np
+import pytest
+
+from search.prior import ActionPrior
+from search.reward import DivergenceReward, RewardConfig, pairwise_divergence
+from search.world import COLLISION, RUNNING, SUCCESS
+
+PRIOR = ActionPrior((1, 2), 0.25)
+
+
+def reward(**settings) -> DivergenceReward:
+    return DivergenceReward(RewardConfig(**settings), PRIOR)
+
+
+def test_pairwise_divergence_plain_squared_mean_min():
+    # three agents at (0,0), (3,4), (6,8): pair distances 5, 10, 5
+    points = np.array([[[0.0, 0.0], [3.0, 4.0], [6.0, 8.0]]])
+    assert pairwise_divergence(points, "plain", "mean")[0] == pytest.approx(20 / 3)
+    assert pairwise_divergence(points, "plain", "min")[0] == 5.0
+    assert pairwise_divergence(points, "squared", "mean")[0] == pytest.approx((25 + 100 + 25) / 3)
+    assert pairwise_divergence(points[:, :2], "squared", "min")[0] == 25.0
+
+
+def test_events_goal_collision_flag_horizon_and_all_done():
+    r = reward(horizon=10)
+    newly = np.array([[True, False], [True, False], [False, False], [False, False]])
+    outcome = np.array([[SUCCESS, RUNNING], [COLLISION, RUNNING], [RUNNING, RUNNING], [COLLISION, COLLISION]])
+    all_done = np.array([False, False, False, True])
+    t = np.array([3, 3, 10, 4])
+    goal, end = r.events(newly, outcome, all_done, t)
+    assert goal.tolist() == [True, False, False, False]
+    assert end.tolist() == [False, False, True, True]
+    goal, end = reward(horizon=10, collision_is_goal=True).events(newly, outcome, all_done, t)
+    assert goal.tolist() == [True, True, False, False]
+
+
+def test_step_terms_by_hand():
+    r = reward(alpha=2.0, goal_bonus=100.0, beta=3.0, horizon_offset=-50.0)
+    actions = np.array([[[1.0, 0.0], [0.0, 0.0]]] * 3)  # action divergence 1 (plain)
+    positions = np.array([[[0.0, 0.0], [0.0, 2.0]]] * 3)  # state divergence 2 (plain)
+    humans = np.zeros((3, 1, 2))
+    env = np.zeros((3, 1, 2))
+    goal = np.array([False, True, False])
+    end = np.array([False, False, True])
+    terms = r.step_terms(actions, positions, humans, env, goal, end)
+    assert terms["action_divergence"].tolist() == [1.0, 0.0, 0.0]
+    assert terms["goal"].tolist() == [0.0, 100.0 + 2.0 * 2.0, 0.0]
+    assert terms["horizon"].tolist() == [0.0, 0.0, -50.0 + 3.0 * 2.0]
+    assert terms["plausibility"].tolist() == [0.0, 0.0, 0.0]
+    assert r.step(actions, positions, humans, env, goal, end).tolist() == [1.0, 104.0, -44.0]
+    squared = reward(norm="squared").step(actions * 3, positions, humans, env, goal, end)
+    assert squared.tolist() == [9.0, 4.0, 4.0]
+
+
+def test_plausibility_is_the_prior_log_likelihood():
+    action = np.array([[[0.1, -0.2]]])
+    uniform = reward(plausibility=0.5).step_terms(np.zeros((1, 2, 2)), np.zeros((1, 2, 2)), np.zeros((1, 1, 2)),
+                                                  action, np.array([False]), np.array([False]))
+    assert uniform["plausibility"][0] == pytest.approx(0.5 * -2 * math.log(0.5))
+    sigma, bound = 0.1, 0.25
+    gaussian = DivergenceReward(RewardConfig(plausibility=1.0, prior="gaussian", prior_sigma=sigma),
+                                ActionPrior((1, 2), bound, "gaussian", sigma))
+    terms = gaussian.step_terms(np.zeros((1, 2, 2)), np.zeros((1, 2, 2)), np.zeros((1, 1, 2)), action,
+                                np.array([False]), np.array([False]))
+    mass = math.erf(bound / (sigma * math.sqrt(2)))
+    expected = sum(-0.5 * (x / sigma) ** 2 - math.log(sigma * math.sqrt(2 * math.pi) * mass) for x in (0.1, -0.2))
+    assert terms["plausibility"][0] == pytest.approx(expected)
+
+
+def test_gaussian_prior_samples_stay_in_bound():
+    prior = ActionPrior((10, 2), 0.25, "gaussian", sigma=0.3)
+    samples = prior.sample(np.random.default_rng(0), 500)
+    assert samples.shape == (500, 10, 2)
+    assert np.abs(samples).max() <= 0.25
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"norm": "cubed"}, "norm"), ({"combine": "max"}, "combine"), ({"horizon": 0}, "horizon"),
+    ({"heuristic": "nope"}, "unknown heuristic"), ({"prior": "beta"}, "prior"),
+])
+def test_bad_reward_settings_say_what_is_wrong(settings, message):
+    with pytest.raises(ValueError, match=message):
+        RewardConfig(**settings)
+    with pytest.raises(ValueError, match="unknown reward setting"):
+        RewardConfig.from_dict({"alpah": 1.0})
