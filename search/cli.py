@@ -76,6 +76,56 @@ def _bundle(args: argparse.Namespace) -> int:
     return 0
 
 
+def _search_job_settings(args: argparse.Namespace) -> dict:
+    from search.reward import RewardConfig
+    from search.runner import parse_settings, solver_config_class
+    from search.world import WorldConfig
+
+    return {"budget": args.budget, "seed": args.seed, "top_k": args.top_k,
+            "solver_settings": parse_settings(solver_config_class(args.solver), args.set, "solver"),
+            "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
+            "world_settings": parse_settings(WorldConfig, args.world, "world")}
+
+
+def _search(args: argparse.Namespace) -> int:
+    from search.runner import SearchJob, run_search, write_outputs
+
+    job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
+                    **_search_job_settings(args))
+    out = write_outputs(args.out, run_search(job, progress=not args.quiet))
+    print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
+    return 0
+
+
+def _search_all(args: argparse.Namespace) -> int:
+    from search.runner import run_all, study_jobs
+
+    solvers = _names(args.solvers)
+    settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0]}))
+    if len(solvers) > 1 and args.set:
+        raise ValueError("--set applies to one solver: give a single --solvers with it")
+    jobs = study_jobs(_names(args.agents), _names(args.scenarios), solvers, joint=args.joint, **settings)
+    study = run_all(jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address,
+                    progress=not args.quiet)
+    print(f"{args.out}: {len(jobs)} searches in {study['wall_s']:.1f} s; study.json lists them")
+    return 0
+
+
+def _verify(args: argparse.Namespace) -> int:
+    from search.summary import verify
+
+    failed = 0
+    for path in args.summaries:
+        problems = verify(path)
+        failed += bool(problems)
+        print(f"{path}: " + ("reproduced exactly" if not problems else "DIFFERS\n  " + "\n  ".join(problems)))
+    return 1 if failed else 0
+
+
+def _names(text: str) -> list[str]:
+    return [name.strip() for name in text.split(",") if name.strip()]
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="foil",
@@ -151,7 +201,45 @@ def build_parser() -> argparse.ArgumentParser:
     bundle.add_argument("--out", required=True, help="bundle directory; searches already there are reused while "
                         "their inputs are unchanged")
     bundle.set_defaults(handler=_bundle)
+
+    search = sub.add_parser("search", help="search the scenarios in which agents differ most; write summaries")
+    _search_arguments(search)
+    search.add_argument("--agents", required=True, help="two or more agents, comma-separated: A,B[,C] (more "
+                        "than two are searched jointly, their pairwise divergences combined)")
+    search.add_argument("--scenario", required=True, help="shipped scenario name or TOML file")
+    search.add_argument("--solver", default="mcts", help="mcts (default), nfirst, random or cem")
+    search.set_defaults(handler=_search)
+
+    search_all = sub.add_parser("search-all", help="search every agent pair on every scenario, in parallel")
+    _search_arguments(search_all)
+    search_all.add_argument("--agents", required=True, help="agents, comma-separated; every pair is searched")
+    search_all.add_argument("--scenarios", required=True, help="scenario names or TOML files, comma-separated")
+    search_all.add_argument("--solvers", default="mcts", help="solvers, comma-separated (default mcts)")
+    search_all.add_argument("--joint", action="store_true", help="search all agents together, not pair by pair")
+    search_all.add_argument("--jobs", type=int, help="parallel searches (default: one per core)")
+    search_all.add_argument("--backend", choices=("process", "ray"), default="process",
+                            help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]')")
+    search_all.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray instance)")
+    search_all.set_defaults(handler=_search_all)
+
+    verify = sub.add_parser("verify", help="re-simulate summaries; exit status 1 if any number differs")
+    verify.add_argument("summaries", nargs="+", metavar="SUMMARY.json")
+    verify.set_defaults(handler=_verify)
     return parser
+
+
+def _search_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--budget", type=int, default=20_000, help="simulator steps to spend (default 20000)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
+    parser.add_argument("--top-k", type=int, default=30, help="trajectories to keep (default 30; for nfirst: N)")
+    parser.add_argument("--out", required=True, help="output directory: summary-001.json ... and run.json")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="solver setting, e.g. exploration=10 or mode=receding (see docs/search.md)")
+    parser.add_argument("--reward", action="append", default=[], metavar="KEY=VALUE",
+                        help="reward setting, e.g. norm=squared, alpha=2, horizon=100")
+    parser.add_argument("--world", action="append", default=[], metavar="KEY=VALUE",
+                        help="world setting over the scenario's, e.g. env_action_mode=preferred")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def main(argv: list[str] | None = None) -> int:
