@@ -1,5 +1,6 @@
-"""Admin pages: progress per condition and status, median duration, one participant's answers, the exclusion
-flag and the CSV download. They exist only when FOIL_ADMIN_PASSWORD is set; `disabled_router` says so otherwise."""
+"""Admin pages: progress per condition and status, median duration, one participant's answers and the exclusion
+flag (the report and downloads are in app.analysis_pages). They exist only when FOIL_ADMIN_PASSWORD is set;
+`disabled_router` says so otherwise."""
 
 from __future__ import annotations
 
@@ -10,13 +11,13 @@ from collections import Counter
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Request
-from fastapi.responses import RedirectResponse, StreamingResponse
+from fastapi.responses import RedirectResponse
 from sqlalchemy import select
 from starlette.datastructures import FormData
 
+from app.answer_table import ParticipantRecord, long_rows
 from app.context import Context, ContextDep
 from app.database import as_utc
-from app.export import answer_rows, csv_lines
 from app.models import Participant
 from app.security import checked_form
 
@@ -101,7 +102,7 @@ def _participant(session, ctx: Context, code: str) -> Participant:
 def participant_page(code: str, request: Request, ctx: ContextDep):
     with ctx.db.reading() as session:
         participant = _participant(session, ctx, code)
-        rows = [row for response in participant.responses for row in answer_rows(ctx.study, participant, response)]
+        rows = list(long_rows(ctx.study, ParticipantRecord(participant, list(participant.responses))))
     condition = None if participant.condition is None else ctx.conditions[participant.condition]
     return ctx.render(request, "admin/participant.html", participant=participant, rows=rows,
                       condition=condition.describe(ctx.study) if condition else "not assigned yet",
@@ -118,10 +119,3 @@ def set_exclusion(code: str, request: Request, ctx: ContextDep, form: FormDep):
         participant = _participant(session, ctx, code)
         participant.excluded, participant.exclusion_note = excluded == "1", note
     return RedirectResponse(f"/admin/participants/{code}", status_code=303)
-
-
-@router.get("/export.csv", dependencies=[Admin])
-def export_csv(ctx: ContextDep):
-    filename = f"{ctx.study.study.id}-answers.csv"
-    return StreamingResponse(csv_lines(ctx.db, ctx.study), media_type="text/csv; charset=utf-8",
-                             headers={"content-disposition": f'attachment; filename="{filename}"'})

@@ -8,10 +8,13 @@ spreadsheet would run as a formula is neutralised (see `neutralise`).
 from __future__ import annotations
 
 import csv
+import io
 import json
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TextIO
 
 from app.answer_table import (
     LONG_COLUMNS,
@@ -59,11 +62,11 @@ def _cell(value) -> str | int | float:
 
 
 class _Table:
-    """One CSV file being written, its header first."""
+    """One CSV table being written to a text handle, its header first."""
 
-    def __init__(self, path: Path, columns: list[Column]):
+    def __init__(self, handle: TextIO, columns: list[Column]):
         self.names = [c.name for c in columns]
-        self.handle = path.open("w", encoding="utf-8", newline="")
+        self.handle = handle
         self.writer = csv.writer(self.handle, lineterminator="\r\n")  # RFC 4180; quotes any CR or LF in text
         self.writer.writerow(self.names)
         self.rows = 0
@@ -74,6 +77,19 @@ class _Table:
 
     def close(self) -> None:
         self.handle.close()
+
+
+def long_csv_chunks(db: Database, study: Study) -> Iterator[str]:
+    """long.csv as text, one participant at a time, for a download that starts at once and streams."""
+    buffer = io.StringIO()
+    table = _Table(buffer, LONG_COLUMNS)
+    for record in participant_records(db, study.study.id):
+        for row in long_rows(study, record):
+            table.write(row)
+        yield buffer.getvalue()
+        buffer.seek(0)
+        buffer.truncate()
+    yield buffer.getvalue()  # the header alone when there is nobody yet
 
 
 @dataclass(frozen=True)
@@ -165,8 +181,9 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     layout = WideLayout(study)
     median_s = median_duration_s(db, study.study.id)
     threshold = rules.threshold_s(median_s)
-    tables = {"long.csv": _Table(out / "long.csv", LONG_COLUMNS), "wide.csv": _Table(out / "wide.csv", layout.columns),
-              "participants.csv": _Table(out / "participants.csv", PARTICIPANT_COLUMNS)}
+    columns = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
+    tables = {name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols)
+              for name, cols in columns.items()}
     excluded = 0
     try:
         for record in participant_records(db, study.study.id, batch=batch):

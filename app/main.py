@@ -14,7 +14,8 @@ from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
 from starlette.middleware.sessions import SessionMiddleware
 
-from app import admin_pages, media, participant_pages
+from app import admin_pages, analysis_pages, media, participant_pages
+from app.answer_table import remember_study
 from app.assignment import conditions
 from app.bundle import check_study_against_bundle, load_bundle
 from app.context import Context
@@ -48,6 +49,7 @@ def create_app(settings: Settings) -> FastAPI:
     check_study_against_bundle(study, bundle)
     db = Database(settings.database_url)
     check_migrated(db.engine)
+    remember_study(db, settings.study_path().read_text(encoding="utf-8"), study)  # for foil export/report
 
     templates = Jinja2Templates(directory=str(settings.templates_dir))
     templates.env.globals["csrf_token"] = csrf_token
@@ -65,6 +67,7 @@ def create_app(settings: Settings) -> FastAPI:
         app.include_router(admin_pages.disabled_router)
     else:
         app.include_router(admin_pages.router)
+        app.include_router(analysis_pages.router)
 
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, error: HTTPException):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import zipfile
 
 import pytest
 from fastapi.testclient import TestClient
@@ -23,7 +24,7 @@ def log_in(client: TestClient, password: str = ADMIN_PASSWORD):
 
 def test_admin_is_off_without_a_password(make_client):
     client = make_client(BALANCED, admin_password=None)
-    for path in ("/admin", "/admin/login", "/admin/export.csv"):
+    for path in ("/admin", "/admin/login", "/admin/export.csv", "/admin/report", "/admin/export.zip"):
         response = client.get(path)
         assert response.status_code == 404 and "FOIL_ADMIN_PASSWORD" in response.text
 
@@ -35,7 +36,7 @@ def test_short_admin_password_refuses_to_start(bundle_dir):
 
 def test_admin_pages_need_the_password(make_client):
     client = make_client(BALANCED)
-    for path in ("/admin", "/admin/export.csv", "/admin/participants/abc"):
+    for path in ("/admin", "/admin/export.csv", "/admin/participants/abc", "/admin/report", "/admin/export.zip"):
         response = client.get(path, follow_redirects=False)
         assert response.status_code == 303 and response.headers["location"] == "/admin/login"
     wrong = log_in(client, "not the password")
@@ -86,15 +87,31 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
     export = client.get("/admin/export.csv")
     assert export.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(export.text)))
+    for row in rows:  # a code may start with "-", which the export neutralises with an apostrophe
+        row["participant"] = row["participant"].removeprefix("'")
     mine = [r for r in rows if r["participant"] == finished.code]
     assert len({r["step"] for r in mine}) == len(finished.plan)
     choices = [r for r in mine if r["question"] == "better"]
     assert len(choices) == 6 and all(r["correct"] in ("0", "1") for r in choices)
-    assert all(r["answer_agents"] in r["robots"] for r in choices)
+    assert all(r["answer_agent"] in r["agents"].split(";") for r in choices)
     rankings = [r for r in mine if r["question"] == "ranking"]
-    assert len(rankings) == 2 and all(r["answer"].count(" > ") == 2 for r in rankings)
+    assert len(rankings) == 2 and all(r["answer"].count(">") == 2 for r in rankings)
     typed = [r for r in rows if r["participant"] == started.code and r["question"] == "justification"]
-    assert typed[0]["answer"] == evil and typed[0]["excluded"] == "1"
+    assert typed[0]["answer"] == evil
+
+    archive = client.get("/admin/export.zip")
+    assert archive.headers["content-type"] == "application/zip"
+    with zipfile.ZipFile(io.BytesIO(archive.content)) as zipped:
+        names = sorted(name.split("/")[1] for name in zipped.namelist())
+        people = list(csv.DictReader(io.StringIO(zipped.read("paper-export/participants.csv").decode())))
+    assert names == ["codebook.json", "codebook.md", "long.csv", "participants.csv", "wide.csv"]
+    assert [(p["participant"].removeprefix("'"), p["flagged_by_admin"], p["excluded"]) for p in people] == [
+        (finished.code, "0", "0"), (started.code, "1", "1")]
+
+    report = client.get("/admin/report")
+    assert report.status_code == 200 and "Table 1" in report.text and "<script" not in report.text
+    assert "style-src 'unsafe-inline'" in report.headers["content-security-policy"]
+    assert "uses the 1 analysed participants only" in report.text  # the other one is flagged and incomplete
 
 
 def test_csv_neutralises_spreadsheet_formulas(make_client):
