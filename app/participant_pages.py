@@ -107,7 +107,7 @@ def _enter(ctx: Context, identity: dict, *, agreed: bool, user_agent: str) -> st
                     if known is not None:
                         return known.code
                 participant = Participant(
-                    code=secrets.token_urlsafe(16), study=info.id, platform=info.platform,
+                    code=secrets.token_hex(16), study=info.id, platform=info.platform,
                     status="started" if agreed else "declined", user_agent=user_agent[:512], **identity,
                 )
                 if agreed and info.assignment == "balanced":
