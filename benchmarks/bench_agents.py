@@ -37,7 +37,7 @@ def rate(run_once, items_per_call: int, seconds: float) -> float:
     return calls * items_per_call / (time.perf_counter() - start)
 
 
-def best_of_alternating(a, b, rounds: int = 3) -> tuple[float, float]:
+def best_of_alternating(a, b, rounds: int = 5) -> tuple[float, float]:
     """Best rate of each side over alternating rounds (the least disturbed measurement of each)."""
     results = [(a(), b()) for _ in range(rounds)]
     return max(r[0] for r in results), max(r[1] for r in results)
@@ -103,7 +103,7 @@ def training(config: TrainConfig, updates: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=2.0, help="seconds per inference measurement")
+    parser.add_argument("--seconds", type=float, default=1.0, help="seconds per inference measurement")
     parser.add_argument("--updates", type=int, default=6, help="training updates per measurement")
     args = parser.parse_args()
     torch.set_num_threads(min(2, os.cpu_count() or 1))
