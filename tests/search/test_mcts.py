@@ -4,8 +4,8 @@ import pytest
 from search.baselines import random_search
 from search.coupled import replay
 from search.mcts import MCTSConfig, StateNode, mcts
-from search.problem import CoupledProblem
 from search.policies import load_policy
+from search.problem import CoupledProblem
 from search.reward import RewardConfig
 from search.rollout import Tracker
 from search.scenarios import load_scenario
@@ -30,7 +30,7 @@ def nodes(root: StateNode):
 def test_mcts_finds_the_lock_optimum_that_random_search_misses():
     for seed in SEEDS:
         tracker = Tracker(2000, 5)
-        mcts(LockProblem(), tracker, np.random.default_rng(seed))
+        mcts(LockProblem(), tracker, np.random.default_rng(seed), MCTSConfig(repeat=1))
         assert tracker.best == 8.0, seed
         random = Tracker(2000, 5)
         random_search(LockProblem(), random, np.random.default_rng(seed))
@@ -41,7 +41,7 @@ def test_mcts_finds_the_lock_optimum_that_random_search_misses():
 
 @pytest.mark.parametrize("problem, budget", [(LockProblem, 1500), (coupled, 1500)])
 def test_widening_rule(problem, budget):
-    config = MCTSConfig(k=0.5, alpha=0.5, batch=8)
+    config = MCTSConfig(k=0.5, alpha=0.5, batch=8, repeat=1)
     search = mcts(problem(), Tracker(budget, 5), np.random.default_rng(1), config)
     checked = 0
     for node in nodes(search.root):

@@ -1,0 +1,218 @@
+"""Search benchmarks: speed of the search loop and quality of the solvers at equal budgets.
+
+    .venv/bin/python benchmarks/bench_search.py                 # both parts (a few minutes on 2 cores)
+    .venv/bin/python benchmarks/bench_search.py --part speed
+    .venv/bin/python benchmarks/bench_search.py --part quality --seeds 10 --budget 40000
+
+Speed: coupled steps per second of the whole MCTS loop (selection, snapshot branching, batched rollouts,
+reward, top-K) against the policy-only bound (the agents' act() alone on batches of the same size, measured in
+the same run) and against the AST toolbox's way (replay every branch from reset, one at a time). Run for a
+scripted pair and for a pair of DS-RNN networks (untrained weights: the same cost as trained ones).
+
+Quality: best reward found against simulator steps for MCTS, N-first (the first trajectory, as the paper's
+baseline clip), random search and CEM on every pair of scripted agents and both paper scenarios; mean and 95%
+confidence interval over seeds, and the area under the best-so-far curve (its mean over the budget). Writes
+benchmarks/search_quality.png and prints Markdown tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from search.baselines import cem, n_first, random_search  # noqa: E402
+from search.coupled import CoupledSimulator  # noqa: E402
+from search.mcts import MCTSConfig, mcts  # noqa: E402
+from search.policies import load_policy  # noqa: E402
+from search.problem import CoupledProblem  # noqa: E402
+from search.rollout import Tracker  # noqa: E402
+from search.scenarios import load_scenario  # noqa: E402
+
+SCRIPTED = ["goal", "orca", "social_force"]
+SCENARIOS = ["paper-bl-tr", "paper-tl-br"]
+SOLVERS = {
+    "mcts": lambda problem, tracker, rng: mcts(problem, tracker, rng),
+    "nfirst": lambda problem, tracker, rng: n_first(problem, tracker, rng),
+    "random": lambda problem, tracker, rng: random_search(problem, tracker, rng),
+    "cem": lambda problem, tracker, rng: cem(problem, tracker, rng),
+}
+
+
+def dsrnn_pair():
+    import torch
+
+    from search.dsrnn import DSRNN, DSRNNPolicy
+
+    torch.set_num_threads(1)
+    policies = []
+    for seed in (1, 2):
+        torch.manual_seed(seed)
+        policies.append(DSRNNPolicy(DSRNN().eval(), name=f"dsrnn-{seed}"))
+    return policies
+
+
+def policy_bound(policies, scenario, batch: int, repeats: int) -> float:
+    """Coupled steps/s if the world and the search cost nothing: every agent's act() on a batch of observations."""
+    sim = CoupledSimulator(policies, scenario, batch=batch)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        sim.step(rng.uniform(-0.25, 0.25, (batch, sim.config.human_num, 2)))
+    observations = sim.observations()
+    states = [s.copy() for s in sim.policy_states]
+    for policy, observation, state in zip(policies, observations, states, strict=True):
+        policy.act(observation, state)  # warm-up
+    started = time.perf_counter()
+    for _ in range(repeats):
+        for policy, observation, state in zip(policies, observations, states, strict=True):
+            policy.act(observation, state)
+    return batch * repeats / (time.perf_counter() - started)
+
+
+def timed_search(policies, scenario, budget: int, config: MCTSConfig) -> tuple[float, float]:
+    """(new simulator steps/s, all simulator steps/s) of one MCTS run."""
+    problem = CoupledProblem(policies, scenario)
+    tracker = Tracker(budget, 30)
+    started = time.perf_counter()
+    search = mcts(problem, tracker, np.random.default_rng(0), config)
+    elapsed = time.perf_counter() - started
+    return (tracker.steps - search.replayed) / elapsed, tracker.steps / elapsed
+
+
+def speed(budget: int) -> None:
+    scenario = load_scenario("paper-bl-tr")
+    pairs = {"goal vs orca (scripted)": [load_policy("goal"), load_policy("orca")],
+             "DS-RNN vs DS-RNN (untrained weights)": dsrnn_pair()}
+    runs = [  # (label, config, share of the budget)
+        ("MCTS tree, snapshots, batch 32 (default)", MCTSConfig(batch=32), 1.0),
+        ("MCTS tree, snapshots, batch 1", MCTSConfig(batch=1), 0.25),
+        ("MCTS tree, replay from reset, batch 1", MCTSConfig(batch=1, branch="replay"), 0.25),
+        ("MCTS receding, snapshots, batch 1", MCTSConfig(batch=1, mode="receding", repeat=1), 0.25),
+        ("MCTS receding, replay from reset, batch 1 (the AST toolbox's way)",
+         MCTSConfig(batch=1, mode="receding", repeat=1, branch="replay"), 0.25),
+    ]
+    print(f"\n### Throughput (coupled steps/s, paper-bl-tr, T = 100, budget {budget:,} steps)\n")
+    print("New simulator steps per second (replayed prefixes not counted; in brackets with them). The bound is "
+          "every agent's act() alone on batches of 32 observations.\n")
+    print("| agents | search loop | steps/s | share of policy-only bound |")
+    print("|---|---|---|---|")
+    for label, policies in pairs.items():
+        timed_search(policies, scenario, 2000, MCTSConfig())  # warm-up: numba compilation, first torch calls
+        bound = policy_bound(policies, scenario, 32, repeats=50)
+        print(f"| {label} | policy-only bound, batch 32 | {bound:,.0f} | 100% |")
+        for name, config, share in runs:
+            new, total = timed_search(policies, scenario, int(budget * share), config)
+            extra = f" ({total:,.0f})" if config.branch == "replay" else ""
+            print(f"| {label} | {name} | {new:,.0f}{extra} | {new / bound:.0%} |", flush=True)
+
+
+def best_at(curve: list[tuple[int, float]], grid: np.ndarray) -> np.ndarray:
+    """Best reward found by each grid point of simulator steps (NaN before the first trajectory)."""
+    steps = np.array([s for s, _ in curve])
+    rewards = np.array([r for _, r in curve])
+    index = np.searchsorted(steps, grid, side="right") - 1
+    return np.where(index >= 0, rewards[np.maximum(index, 0)], np.nan)
+
+
+def ci95(values: np.ndarray) -> float:
+    from scipy import stats
+
+    values = values[~np.isnan(values)]
+    if len(values) < 2:
+        return float("nan")
+    return float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values)))
+
+
+def quality(budget: int, seeds: int, plot: Path) -> None:
+    grid = np.linspace(budget / 10, budget, 10).astype(int)
+    results = {}  # (pair, scenario, solver) -> (seeds, grid) best-so-far
+    started = time.perf_counter()
+    pairs = list(itertools.combinations(SCRIPTED, 2))
+    for pair, scenario_name in itertools.product(pairs, SCENARIOS):
+        scenario = load_scenario(scenario_name)
+        for solver, solve in SOLVERS.items():
+            rows = []
+            for seed in range(seeds):
+                problem = CoupledProblem([load_policy(a) for a in pair], scenario)
+                tracker = Tracker(budget, 1 if solver == "nfirst" else 30)
+                solve(problem, tracker, np.random.default_rng(seed))
+                curve = tracker.curve if solver != "nfirst" else [(0, tracker.best)]  # its one clip, shown as is
+                rows.append(best_at(curve, grid))
+            results[pair, scenario_name, solver] = np.array(rows)
+        print(f"  {'-'.join(pair)} {scenario_name}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
+
+    print(f"\n### Search quality (scripted agents, budget {budget:,} simulator steps, {seeds} seeds)\n")
+    print("Best reward at the full budget, mean ± 95% CI; AUC = mean best-so-far over the budget "
+          "(grid of 10 points from 10% to 100%).\n")
+    print("| pair | scenario | " + " | ".join(f"{s} best | {s} AUC" for s in SOLVERS) + " |")
+    print("|---|---|" + "---|---|" * len(SOLVERS))
+    wins = {s: 0 for s in SOLVERS if s != "mcts"}
+    for pair, scenario_name in itertools.product(pairs, SCENARIOS):
+        cells = []
+        for solver in SOLVERS:
+            values = results[pair, scenario_name, solver]
+            final = values[:, -1]
+            cells.append(f"{np.nanmean(final):.1f} ± {ci95(final):.1f} | {np.nanmean(values):.1f}")
+        print(f"| {' vs '.join(pair)} | {scenario_name} | " + " | ".join(cells) + " |")
+        mcts_final = results[pair, scenario_name, "mcts"][:, -1]
+        for other in wins:
+            wins[other] += bool(np.nanmean(mcts_final) - ci95(mcts_final)
+                                > np.nanmean(results[pair, scenario_name, other][:, -1]))
+    cases = len(pairs) * len(SCENARIOS)
+    print("\nMCTS's lower 95% bound above the other's mean: "
+          + ", ".join(f"{other} in {n}/{cases}" for other, n in wins.items()))
+    draw(results, grid, pairs, plot)
+
+
+def draw(results, grid, pairs, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(SCENARIOS), len(pairs), figsize=(4.2 * len(pairs), 3.4 * len(SCENARIOS)),
+                             sharex=True, squeeze=False)
+    for (row, scenario_name), (col, pair) in itertools.product(enumerate(SCENARIOS), enumerate(pairs)):
+        ax = axes[row, col]
+        for solver in SOLVERS:
+            values = results[pair, scenario_name, solver]
+            mean = np.nanmean(values, axis=0)
+            half = np.array([ci95(values[:, i]) for i in range(values.shape[1])])
+            ax.plot(grid, mean, label=solver, marker="o", markersize=3)
+            ax.fill_between(grid, mean - half, mean + half, alpha=0.2)
+        ax.set_title(f"{' vs '.join(pair)}, {scenario_name}", fontsize=9)
+        ax.grid(alpha=0.3)
+        if row == len(SCENARIOS) - 1:
+            ax.set_xlabel("simulator steps")
+        if col == 0:
+            ax.set_ylabel("best reward found")
+    axes[0, 0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"\nplot: {path}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--part", choices=("speed", "quality", "both"), default="both")
+    parser.add_argument("--budget", type=int, default=30_000, help="simulator steps per search (quality)")
+    parser.add_argument("--speed-budget", type=int, default=20_000, help="simulator steps per timed search")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--plot", type=Path, default=Path(__file__).with_name("search_quality.png"))
+    args = parser.parse_args()
+    print(f"machine: {os.cpu_count()} cores; numpy {np.__version__}")
+    if args.part in ("speed", "both"):
+        speed(args.speed_budget)
+    if args.part in ("quality", "both"):
+        quality(args.budget, args.seeds, args.plot)
+
+
+if __name__ == "__main__":
+    main()
