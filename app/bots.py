@@ -231,20 +231,24 @@ class Bot:
         return response.text
 
     def take_study(self, max_pages: int = 500) -> BotRun:
+        """Open the study link and answer every page to the end. Calling it again (after a lost connection, say)
+        reopens the link, which resumes where the server says this participant is."""
         ids = {"PROLIFIC_PID": self.run.external_id, "STUDY_ID": "simulated", "SESSION_ID": self.run.external_id,
                "workerId": self.run.external_id, "hitId": "simulated", "assignmentId": self.run.external_id}
         page = self._ok(self.client.get("/", params=ids))
-        form = PageForm(page)
-        page = self._ok(self.client.post("/consent", data={"csrf_token": form.hidden["csrf_token"],
-                                                           "choice": "agree"}))
         for _ in range(max_pages):
             form = PageForm(page)
-            if form.action == "/condition":
+            if form.action == "/consent":
+                page = self._ok(self.client.post("/consent", data={"csrf_token": form.hidden["csrf_token"],
+                                                                   "choice": "agree"}))
+            elif form.action == "/condition":
                 n = len(form.radios["number"])
                 page = self._ok(self.client.post("/condition", data={"csrf_token": form.hidden["csrf_token"],
                                                                      "number": str(self.number % n + 1)}))
             elif "step" in form.hidden:
                 page = self._ok(self.client.post("/study", data=self.answer(form)))
+                if form.selects:  # the ranking is saved; forget its clips only now, so a lost reply can be retried
+                    self.block = []
             else:
                 self.run.completed = bool(form.code) or "Thank you" in page
                 self.run.completion_code = form.code
@@ -281,8 +285,6 @@ class Bot:
             data[name] = self._explain(clip, seen, ranked)
         for name in form.radios:
             self.run.answers.append({"step": step, "clip": sha, "question": name, "value": data[name]})
-        if form.selects:
-            self.block = []
         data["time_on_page_ms"] = str(clip_ms + 800 + self.rng.randint(3000, 15000))
         return data
 

@@ -32,7 +32,8 @@ class Context:
         return self.render(request, "message.html", status_code=status_code, title=title, text=text, **context)
 
 
-def get_context(request: Request) -> Context:
+async def get_context(request: Request) -> Context:
+    """Async on purpose: FastAPI runs plain functions in its thread pool, a hop that costs more than this does."""
     return request.app.state.context
 
 

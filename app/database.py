@@ -2,13 +2,16 @@
 
 Writes on SQLite start with BEGIN IMMEDIATE so that two requests never both read, then both try to write (which
 SQLite answers with "database is locked" instead of waiting); on PostgreSQL the unique constraints plus a retry
-do the same job. Reads start a plain deferred transaction and never block writers under WAL.
+do the same job. Reads start a plain deferred transaction and never block writers under WAL. Within one process,
+SQLite writers also queue on a lock: SQLite's own busy handler polls with sleeps of up to 100 ms, which under
+hundreds of concurrent participants turned into second-long waits for a write that takes a few milliseconds.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -59,6 +62,7 @@ class Database:
         self.engine = make_engine(url)
         self._read = sessionmaker(self.engine, expire_on_commit=False)
         self._write = sessionmaker(self.engine.execution_options(foil_write=True), expire_on_commit=False)
+        self._write_turn = threading.Lock() if self.engine.dialect.name == "sqlite" else nullcontext()
 
     @contextmanager
     def reading(self) -> Iterator[Session]:
@@ -68,7 +72,7 @@ class Database:
     @contextmanager
     def writing(self) -> Iterator[Session]:
         """A transaction that commits when the block ends without an exception, and rolls back otherwise."""
-        with self._write() as session, session.begin():
+        with self._write_turn, self._write() as session, session.begin():
             yield session
 
     def dispose(self) -> None:

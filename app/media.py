@@ -19,7 +19,7 @@ CACHE = "public, max-age=31536000, immutable"  # the name is the content's hash:
 
 
 @router.api_route("/clips/{name}", methods=["GET", "HEAD"])
-def clip(name: str, request: Request, ctx: ContextDep):
+async def clip(name: str, request: Request, ctx: ContextDep):  # no blocking call: no thread pool needed
     match = CLIP_NAME.match(name)
     path = ctx.bundle.paths.get(match.group(1)) if match else None
     if path is None:

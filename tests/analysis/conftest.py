@@ -56,10 +56,9 @@ def summary_for(agents: list[str], misleading: bool) -> dict:
             "outcomes": outcomes, "reward": 1.0, "reward_terms": {}}
 
 
-@pytest.fixture(scope="session")
-def bundle_dir(tmp_path_factory) -> Path:
-    """The paper study's bundle with a distinct clip file (same picture, different metadata) per entry."""
-    folder = tmp_path_factory.mktemp("analysis-clips")
+def write_bot_bundle(folder: Path, root: Path) -> Path:
+    """The paper study's bundle in `root` with a distinct clip file (same picture, different metadata) per entry,
+    each with its summary; `folder` holds the clips made on the way."""
     base = folder / "base.mp4"
     make_clip(base, "testsrc")
     n_clips = len(SCHEMES) * len(SCENARIOS) * 3 + 1
@@ -68,13 +67,17 @@ def bundle_dir(tmp_path_factory) -> Path:
         files.append(folder / f"{n:03d}.mp4")
         subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(base), "-c", "copy",
                         "-metadata", f"comment=clip {n}", str(files[-1])], check=True)
-    root = write_bundle(tmp_path_factory.mktemp("analysis-bundle"), files, schemes=SCHEMES, scenarios=SCENARIOS,
-                        agents=AGENT_RANK, example=EXAMPLE)
+    root = write_bundle(root, files, schemes=SCHEMES, scenarios=SCENARIOS, agents=AGENT_RANK, example=EXAMPLE)
     manifest = json.loads((root / "manifest.json").read_text())
     (root / "summaries").mkdir()
     for clip in manifest["clips"]:
         (root / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], clip["id"] == MISLEADING)))
     return root
+
+
+@pytest.fixture(scope="session")
+def bundle_dir(tmp_path_factory) -> Path:
+    return write_bot_bundle(tmp_path_factory.mktemp("analysis-clips"), tmp_path_factory.mktemp("analysis-bundle"))
 
 
 @pytest.fixture

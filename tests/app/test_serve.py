@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import socket
 import subprocess
 import sys
 import time
@@ -11,20 +9,7 @@ import time
 import httpx
 
 from tests.app.conftest import REPO, study_text
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def foil(*args: str, cwd, env_extra: dict | None = None, **kwargs):
-    env = {key: value for key, value in os.environ.items() if not key.startswith("FOIL_")}
-    env |= {"PYTHONPATH": str(REPO), **(env_extra or {})}
-    command = [sys.executable, "-c", "import sys; from search.cli import main; sys.exit(main())", *args]
-    return subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, **kwargs)
+from tests.live_server import foil, free_port
 
 
 def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):

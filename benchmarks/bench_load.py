@@ -1,0 +1,246 @@
+"""Survey server under load: `foil simulate`'s bots (app.bots.Bot, threads in this process, through the lean
+keep-alive client of tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback,
+clips included, on the same machine as the server.
+
+Four runs, each bounded in time and count:
+  ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves (uvicorn, one
+           process, access log on), hammered by --concurrency clients for --seconds;
+  burst    --concurrency bots with no pauses, new ones taking the place of those finished, for --seconds: page
+           throughput (every non-video request: pages and form submissions) and its ratio to the ceiling;
+  paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
+           completed sessions per minute, p50/p95/p99 latency per page type, errors;
+  crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
+           the bots reopen their links and finish; then the database is audited.
+
+    .venv/bin/python benchmarks/bench_load.py [--participants 300] [--write]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import defaultdict
+from datetime import date
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from app.assignment import conditions  # noqa: E402
+from app.bots import ClipIndex  # noqa: E402
+from app.study import parse_study  # noqa: E402
+from tests.analysis.conftest import write_bot_bundle  # noqa: E402
+from tests.app.conftest import study_text  # noqa: E402
+from tests.live_server import LiveServer, free_port  # noqa: E402
+from tests.robustness.crowd import Crowd, LoopbackClient, audit  # noqa: E402
+
+CONSTANT_SERVER = """
+import sys, uvicorn
+from fastapi import FastAPI
+app = FastAPI()
+@app.get("/")
+async def constant():
+    return {"ok": True}
+uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, server_header=False)
+"""
+ORDER = ["landing", "consent", "study page", "answer", "clip"]
+
+
+def quantile(values: list[float], q: float) -> float:
+    values = sorted(values)
+    return values[min(len(values) - 1, int(q * len(values)))] if values else float("nan")
+
+
+def ceiling(concurrency: int, seconds: float, workdir: Path) -> float:
+    """Requests per second of the constant endpoint, `concurrency` clients in a closed loop."""
+    port = free_port()
+    with (workdir / "constant.log").open("w") as log:
+        server = subprocess.Popen([sys.executable, "-c", CONSTANT_SERVER, str(port)], stdout=log,
+                                  stderr=subprocess.STDOUT)
+    try:
+        probe = LoopbackClient(f"http://127.0.0.1:{port}")
+        for _ in range(100):
+            try:
+                probe.get("/")
+                break
+            except OSError:
+                time.sleep(0.1)
+        counts = [0] * concurrency
+        stop = time.monotonic() + seconds
+
+        def hammer(k: int) -> None:
+            client = LoopbackClient(f"http://127.0.0.1:{port}")
+            while time.monotonic() < stop:
+                client.get("/")
+                counts[k] += 1
+            client.close()
+
+        threads = [threading.Thread(target=hammer, args=(k,)) for k in range(concurrency)]
+        started = time.monotonic()
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        return sum(counts) / (time.monotonic() - started)
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+
+
+def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
+    workdir.mkdir()
+    return LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{workdir / 'survey.sqlite3'}",
+                      workdir=workdir)
+
+
+def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float) -> dict:
+    """Bots without pauses in `concurrency` lanes; each lane starts a new bot when its bot finishes."""
+    with serve(bundle, study, workdir) as server:
+        stop = time.monotonic() + seconds
+        crowds: list[Crowd] = []
+        clips = ClipIndex(bundle)
+
+        def lane(k: int) -> None:
+            n = 0
+            while time.monotonic() < stop:
+                crowd = Crowd(server.url, str(bundle), 1, seed=1000 * k + n, clips=clips)
+                crowds.append(crowd)
+                crowd.run()
+                n += 1
+
+        threads = [threading.Thread(target=lane, args=(k,)) for k in range(concurrency)]
+        started = time.monotonic()
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        wall = time.monotonic() - started
+    log = [exchange for crowd in crowds for exchange in crowd.log]
+    pages = sum(exchange.kind != "clip" for exchange in log)
+    return {"pages_per_s": pages / wall, "sessions_per_min": sum(c.completed for c in crowds) / wall * 60,
+            "errors": sum(len(c.errors) for c in crowds), "requests": len(log)}
+
+
+def paced(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float) -> dict:
+    with serve(bundle, study, workdir) as server:
+        crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=1)
+        wall = crowd.run()
+    return {"crowd": crowd, "wall": wall}
+
+
+def crash(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float) -> dict:
+    with serve(bundle, study, workdir) as server:
+        crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=2, outage_s=120)
+        runner = threading.Thread(target=crowd.run)
+        runner.start()
+        expected = participants * 15  # screens of the paper study
+        while sum(len(p.client.acknowledged) for p in crowd.people) < expected // 2 and runner.is_alive():
+            time.sleep(0.05)
+        server.kill()
+        killed_at = sum(len(p.client.acknowledged) for p in crowd.people)
+        down = time.monotonic()
+        server.start()
+        restart_s = time.monotonic() - down
+        runner.join()
+    parsed = parse_study(study.read_text())
+    result = audit(server.database_url, crowd, seed=parsed.study.seed, n_conditions=len(conditions(parsed)))
+    return {"crowd": crowd, "audit": result, "killed_at": killed_at, "restart_s": restart_s}
+
+
+def latency_table(crowd: Crowd) -> list[str]:
+    by_kind: dict[str, list[float]] = defaultdict(list)
+    for exchange in crowd.log:
+        by_kind[exchange.kind].append(exchange.seconds * 1000)
+    rows = ["| request | count | p50 ms | p95 ms | p99 ms | max ms |", "|---|---:|---:|---:|---:|---:|"]
+    for kind in sorted(by_kind, key=lambda k: ORDER.index(k) if k in ORDER else len(ORDER)):
+        v = by_kind[kind]
+        rows.append(f"| {kind} | {len(v):,} | {quantile(v, .5):.1f} | {quantile(v, .95):.1f} | "
+                    f"{quantile(v, .99):.1f} | {max(v):.1f} |")
+    non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
+    rows.append(f"| all non-video | {len(non_video):,} | {quantile(non_video, .5):.1f} | "
+                f"{quantile(non_video, .95):.1f} | {quantile(non_video, .99):.1f} | {max(non_video):.1f} |")
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--participants", type=int, default=300)
+    parser.add_argument("--pause", type=float, default=2.0, help="seconds before every form (default 2)")
+    parser.add_argument("--ramp", type=float, default=10.0, help="arrivals spread over this many seconds")
+    parser.add_argument("--concurrency", type=int, default=32, help="clients of the ceiling and burst runs")
+    parser.add_argument("--seconds", type=float, default=20.0, help="length of the ceiling and burst runs")
+    parser.add_argument("--crash-participants", type=int, default=100)
+    parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
+    args = parser.parse_args()
+
+    with tempfile.TemporaryDirectory(prefix="foil-load-") as tmp:
+        work = Path(tmp)
+        (work / "clips").mkdir()
+        (work / "bundle").mkdir()
+        bundle = write_bot_bundle(work / "clips", work / "bundle")
+        study = work / "study.toml"
+        study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
+
+        print("ceiling ...", flush=True)
+        constant = ceiling(args.concurrency, args.seconds, work)
+        print("burst ...", flush=True)
+        fast = burst(bundle, study, work / "burst", args.concurrency, args.seconds)
+        print("paced ...", flush=True)
+        load_before = os.getloadavg()[0]
+        slow = paced(bundle, study, work / "paced", args.participants, args.pause, args.ramp)
+        print("crash ...", flush=True)
+        killed = crash(bundle, study, work / "crash", args.crash_participants, args.pause, args.ramp)
+
+    crowd, wall = slow["crowd"], slow["wall"]
+    non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
+    bad_status = sum(e.status >= 400 for e in crowd.log)
+    result = killed["audit"]
+    lines = [
+        f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, load average {load_before:.1f} before the "
+        "paced run (other work running); server and bots on the same machine.",
+        "",
+        f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s before every form "
+        f"(the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests per participant): "
+        f"{crowd.completed} of {args.participants} completed in {wall:.0f} s "
+        f"({crowd.completed / wall * 60:.0f} completed sessions/min), {len(crowd.errors)} bot errors, "
+        f"{bad_status} HTTP errors; p95 of non-video requests {quantile(non_video, .95):.0f} ms.",
+        "",
+        *latency_table(crowd),
+        "",
+        f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
+        f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed sessions/min, "
+        f"{fast['errors']} errors); the constant FastAPI endpoint under the same client: {constant:.0f} requests/s; "
+        f"ratio **{fast['pages_per_s'] / constant:.2f}**.",
+        "",
+        f"Crash: {args.crash_participants} paced bots; SIGKILL after {killed['killed_at']} acknowledged answers, "
+        f"restarted in {killed['restart_s']:.1f} s; {killed['crowd'].completed} of {args.crash_participants} "
+        f"completed ({sum(p.interruptions for p in killed['crowd'].people)} bot interruptions, "
+        f"{len(killed['crowd'].errors)} errors); {result.acknowledged} acknowledged answers, "
+        f"{len(result.missing)} missing from the database; {result.participants} participants, "
+        f"{len(result.duplicated)} duplicated; per condition {result.conditions} "
+        f"({'balanced' if not result.balance_problems else '; '.join(result.balance_problems)}).",
+    ]
+    text = "\n".join(lines)
+    print(text)
+    for error in (crowd.errors + killed["crowd"].errors)[:10]:
+        print("error:", error)
+    if args.write:
+        path = REPO / "BENCHMARKS.md"
+        current = path.read_text()
+        heading = "## Survey server under load (`bench_load.py`)"
+        intro = (f"{heading}\n\n{__doc__.split(chr(10) + chr(10))[1].strip()}\n\n" if heading not in current
+                 else "")
+        path.write_text(current.rstrip("\n") + "\n\n" + intro + text + "\n")
+    ok = (crowd.completed == args.participants and not crowd.errors and not bad_status and result.ok
+          and killed["crowd"].completed == args.crash_participants)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
