@@ -1,0 +1,106 @@
+"""A real bundle build: evaluations, `foil search`, rendering, manifest and gallery, then a rebuild from cache."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from search.bundle import build_bundle, sha256_file
+
+pytestmark = pytest.mark.slow
+
+SMALL_STUDY = """
+# the survey server's tables, which the builder copies without reading
+[study]
+id = "t"
+
+[build]
+seed = 7
+
+[build.eval]
+episodes = 4
+seed = 0
+
+[build.render]
+speed = 6.0
+hold_start = 0.2
+hold_end = 0.2
+event_hold = 0.2
+
+[build.schemes.adaptive]
+solver = "mcts"
+budget = 300
+seed = 1
+
+[build.schemes.nfirst]
+solver = "nfirst"
+budget = 300
+seed = 1
+
+[[build.sets]]
+parts = ["pairwise", "ranking"]
+schemes = ["adaptive", "nfirst"]
+scenarios = ["paper-bl-tr"]
+agents = ["goal", "orca"]
+
+[[build.sets]]
+parts = ["example"]
+schemes = ["nfirst"]
+scenarios = ["paper-code"]
+pairs = [["goal", "orca"]]
+"""
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bundle")
+    study = root / "study.toml"
+    study.write_text(SMALL_STUDY)
+    log = []
+    manifest = build_bundle(study, root / "out", log=log.append)
+    return root / "out", manifest, log, study
+
+
+def test_manifest_matches_files_and_checksums(built):
+    out, manifest, _, _ = built
+    assert manifest == json.loads((out / "manifest.json").read_text())
+    assert manifest["format"] == "foil.bundle/1"
+    assert len(manifest["clips"]) == 3
+    for clip in manifest["clips"]:
+        assert sha256_file(out / clip["file"]) == clip["sha256"]
+        assert set(clip["labels"]) == {"Robot 1", "Robot 2"}
+        assert clip["better"] in clip["agents"]
+        summary = json.loads((out / clip["summary"]).read_text())
+        assert summary["format"] == "foil.summary/1"
+        assert sorted(a["name"] for a in summary["agents"]) == sorted(clip["agents"])
+        for key in ("poster", "sheet"):
+            assert (out / clip[key]).is_file()
+        assert not any(agent in clip["file"] or agent in clip["id"] for agent in clip["agents"])
+    assert set(manifest["agents"]) == {"goal", "orca"}
+    assert manifest["agents"]["goal"]["episodes"] == 4
+    for name, digest in manifest["files"].items():
+        assert sha256_file(out / name) == digest, name
+    listed = set(manifest["files"])
+    on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.parts[len(out.parts)] != "cache"}
+    assert on_disk - {"manifest.json"} == listed
+    gallery = (out / "index.html").read_text()
+    assert all(clip["id"] in gallery for clip in manifest["clips"])
+
+
+def test_the_survey_server_accepts_the_bundle(built):
+    from app.bundle import load_bundle
+
+    out, manifest, _, _ = built
+    bundle = load_bundle(out)
+    assert set(bundle.clips) == {clip["id"] for clip in manifest["clips"]}
+
+
+def test_a_rebuild_reuses_cached_searches_and_clips(built):
+    out, manifest, log, study = built
+    assert not any(line.endswith(": cached") for line in log)
+    again = []
+    assert build_bundle(study, out, log=again.append) == manifest
+    searches = [line for line in again if line.startswith("search ")]
+    assert len(searches) == 3 and all(line.endswith(": cached") for line in searches)
+    assert all(line.endswith(": cached") for line in again if line.startswith(("render ", "eval ")))
