@@ -281,8 +281,9 @@ class ClipRenderer:
         self.panel_of = [self.order.index(k) if scene.n_panels > 1 else 0 for k in range(scene.n_agents)]
         self.pixels_robots = np.stack([self.layout.to_pixel(self.panel_of[k], scene.robots[:, k])
                                        for k in range(scene.n_agents)], axis=1)  # (T, N, 2)
-        self.pixels_humans = np.stack([self.layout.to_pixel(p, scene.humans[:, p])
-                                       for p in range(scene.n_panels)], axis=1)  # (T, P, n, 2)
+        crowd_of_panel = self.order if scene.n_panels > 1 else [0]
+        self.pixels_humans = np.stack([self.layout.to_pixel(p, scene.humans[:, crowd])
+                                       for p, crowd in enumerate(crowd_of_panel)], axis=1)  # (T, P, n, 2)
         self.texts: set[str] = set()  # every string drawn, so tests can check that no real name appears
         self.background = self._background()
         self.frames, self.event_starts = self._schedule()
@@ -463,7 +464,7 @@ class ClipRenderer:
         event, when = happened
         r = self.scene.robot_radius * self.layout.scale
         since = self._since(when, frame)
-        if since < self.options.event_hold + 0.3:
+        if 0 <= since < self.options.event_hold + 0.3:
             grow = 1.5 + 4.0 * min(1.0, since / max(self.options.event_hold, 1e-6))
             ring = (xy[0] - r * grow, xy[1] - r * grow, xy[0] + r * grow, xy[1] + r * grow)
             ImageDraw.Draw(image).ellipse(ring, outline=INK, width=max(3, int(r / 4)))

@@ -6,11 +6,9 @@ wrong, so a bad or truncated summary fails before any frame is drawn.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -174,15 +172,7 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
 
 
 def load_scene(path: str | os.PathLike) -> Scene:
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileNotFoundError(f"no summary file {path}") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise SummaryError(f"cannot read summary {path}: {error}") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise SummaryError(f"{path}: not valid JSON ({error}); is the file complete?") from None
-    return scene_from_summary(data, source=str(path))
+    """The scene of a summary file, read by the search's own summary reader."""
+    from search.summary import load_summary
+
+    return scene_from_summary(load_summary(path), source=str(path))

@@ -1,4 +1,4 @@
-"""Summaries for the renderer's tests, made by stepping scripted robots through the coupled simulator."""
+"""Summaries for the renderer's tests, written by the search's own summary writer from scripted robots."""
 
 from __future__ import annotations
 
@@ -8,45 +8,39 @@ import json
 import numpy as np
 import pytest
 
-from search.coupled import CoupledSimulator
+from search.coupled import CoupledSimulator, replay
 from search.policies import load_policy
+from search.reward import RewardConfig
 from search.scenarios import Scenario, load_scenario
-from search.world import OUTCOME_NAMES
+from search.summary import build_summary, frozen_scenario
 
 
-def summary_from_simulation(agents: list[str], scenario: Scenario, seed: int = 0, steps: int = 40,
+def summary_from_simulation(agents: list[str], scenario: Scenario, seed: int = 0,
                             names: list[str] | None = None) -> dict:
-    """A foil.summary/1 object of scripted robots under seeded random environment actions; with a visible
-    robot each step records every agent's own crowd."""
-    sim = CoupledSimulator([load_policy(a) for a in agents], scenario)
-    config = sim.config
+    """The foil.summary/1 object `foil search` would write for scripted robots under seeded random environment
+    actions, cut where the trajectory ends (every robot done, or the 100-step horizon)."""
+    scenario = frozen_scenario(scenario, {})
+    config, reward = scenario.config(), RewardConfig()
+    policies = [load_policy(a) for a in agents]
     rng = np.random.default_rng(seed)
-    records, actions = [], []
-    for _ in range(steps):
-        action = rng.uniform(-config.env_action_bound, config.env_action_bound, (1, config.human_num * 2))
-        step = sim.step(action)
-        crowd = sim.state.human_pos[0] if sim.shared_crowd else sim.state.human_pos
-        records.append({"t": float(step.time[0]), "humans": crowd.tolist(), "robots": step.robot_pos[0].tolist(),
-                        "robot_actions": step.robot_actions[0].tolist()})
-        actions.append(action[0].tolist())
-        if sim.all_done[0]:
-            break
-    state = sim.state
-    outcome, when = sim._gather(state.outcome)[0], sim._gather(state.event_time)[0]
-    return {
-        "format": "foil.summary/1",
-        "agents": [{"name": n, "source": a} for n, a in zip(names or agents, agents, strict=True)],
-        "scenario": scenario.to_dict() | {"world": config.to_dict()},
-        "solver": {"name": "random", "parameters": {}, "seed": seed, "budget": len(records)},
-        "env_actions": actions,
-        "steps": records,
-        "outcomes": [{"event": OUTCOME_NAMES[outcome[k]], "time": float(when[k]) if np.isfinite(when[k]) else None,
-                      "path_length": float(sim._gather(state.path_length)[0, k]),
-                      "min_human_distance": float(sim._gather(state.min_clearance)[0, k])}
-                     for k in range(len(agents))],
-        "reward": 0.0,
-        "reward_terms": {},
-    }
+    actions = rng.uniform(-config.env_action_bound, config.env_action_bound, (reward.horizon, config.human_num, 2))
+    length = len(replay(policies, scenario, actions).time)
+    summary = build_summary(agents, policies, scenario, reward, actions[:length], {"name": "random", "seed": seed})
+    for entry, name in zip(summary["agents"], names or agents, strict=True):
+        entry["name"] = name
+    if config.robot_visible:
+        summary = with_every_crowd(summary, policies, scenario, actions[:length])
+    return summary
+
+
+def with_every_crowd(summary: dict, policies, scenario: Scenario, actions: np.ndarray) -> dict:
+    """With visible robots each agent changes its own crowd; the summary writer records the first agent's only,
+    so record every agent's crowd per step, as a side-by-side clip needs."""
+    sim = CoupledSimulator(policies, scenario)
+    for step, action in zip(summary["steps"], actions, strict=True):
+        sim.step(action[None])
+        step["humans"] = sim.state.human_pos.tolist()
+    return summary
 
 
 def visible(scenario: Scenario) -> Scenario:
@@ -55,7 +49,7 @@ def visible(scenario: Scenario) -> Scenario:
 
 @pytest.fixture(scope="session")
 def shared_summary() -> dict:
-    return summary_from_simulation(["goal", "orca"], load_scenario("paper-bl-tr"), steps=60,
+    return summary_from_simulation(["goal", "orca"], load_scenario("paper-bl-tr"),
                                    names=["SECRET-ALPHA", "SECRET-BETA"])
 
 
