@@ -6,10 +6,12 @@ PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
 BIN = $(VENV)/bin
+AXE = .cache/axe/node_modules/axe-core/axe.min.js
 
 .PHONY: demo test install
 
-install: $(VENV)/.installed
+install: $(VENV)/.installed $(AXE)
+	@command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium)
 
 $(VENV)/.installed: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -17,6 +19,11 @@ $(VENV)/.installed: pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $@
+
+# axe-core for the browser tests' accessibility checks (Debian's chromium, above, runs them; Playwright's own
+# browser downloads are never used)
+$(AXE):
+	npm install --silent --no-audit --no-fund --prefix .cache/axe axe-core@4
 
 demo: install
 	$(BIN)/foil demo

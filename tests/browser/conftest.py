@@ -1,0 +1,67 @@
+"""Browser tests: Debian's Chromium driven by Playwright against `foil serve` running as a real process on the
+paper study (MTurk links, self-selected condition) with the survey tests' bundle of real H.264 clips.
+
+Screenshots of every page go to test-artifacts/browser/. axe-core (installed from npm by `make install` into
+.cache/axe) is added to every page to check its accessibility."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.app.conftest import ADMIN_PASSWORD, bundle_dir, clip_files, study_text  # noqa: F401  (fixtures)
+from tests.live_server import REPO, LiveServer
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+AXE = REPO / ".cache" / "axe" / "node_modules" / "axe-core" / "axe.min.js"
+ARTIFACTS = REPO / "test-artifacts" / "browser"
+DESKTOP = {"width": 1280, "height": 900}
+PHONE = {"width": 360, "height": 740}
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory, bundle_dir):  # noqa: F811
+    """One `foil serve` for the browser tests; each test uses its own MTurk worker ids."""
+    work = tmp_path_factory.mktemp("browser-server")
+    study = work / "study.toml"
+    study.write_text(study_text())
+    with LiveServer(bundle=bundle_dir, study=study, database_url=f"sqlite:///{work / 'survey.sqlite3'}",
+                    workdir=work, admin_password=ADMIN_PASSWORD) as live:
+        yield live
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """Headless Chromium from Debian with a fresh profile (Playwright launches it on a new user-data dir)."""
+    try:
+        from playwright import sync_api
+    except ImportError:
+        pytest.fail("the playwright package is missing: run `make install`")
+    if not CHROMIUM.exists():
+        pytest.fail(f"{CHROMIUM} is missing: run `make install` (it installs Debian's chromium)")
+    if not AXE.exists():
+        pytest.fail(f"{AXE} is missing: run `make install` (it installs axe-core from npm)")
+    with sync_api.sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def new_context(browser):
+    """Browser contexts (each a separate cookie jar) with axe-core on every page; closed after the test."""
+    contexts = []
+
+    def make(viewport: dict = DESKTOP, **options):
+        context = browser.new_context(viewport=viewport, accept_downloads=True, **options)
+        context.add_init_script(path=str(AXE))  # added by the browser itself: the pages' CSP does not apply
+        context.set_default_timeout(15_000)
+        contexts.append(context)
+        return context
+
+    yield make
+    for context in contexts:
+        context.close()
