@@ -104,3 +104,15 @@ def test_a_rebuild_reuses_cached_searches_and_clips(built):
     searches = [line for line in again if line.startswith("search ")]
     assert len(searches) == 3 and all(line.endswith(": cached") for line in searches)
     assert all(line.endswith(": cached") for line in again if line.startswith(("render ", "eval ")))
+
+
+def test_a_changed_input_reruns_only_the_searches_it_touches(built):
+    out, _, _, study = built
+    changed = study.with_name("changed.toml")
+    changed.write_text(study.read_text().replace('solver = "mcts"\nbudget = 300', 'solver = "mcts"\nbudget = 400'))
+    log = []
+    manifest = build_bundle(changed, out, log=log.append)
+    searches = [line for line in log if line.startswith("search ")]
+    assert sorted(line.endswith(": cached") for line in searches) == [False, True, True]
+    assert [line for line in searches if not line.endswith(": cached")][0].startswith("search adaptive")
+    assert json.loads((out / "manifest.json").read_text()) == manifest
