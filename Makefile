@@ -7,6 +7,7 @@ VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
 BIN = $(VENV)/bin
 AXE = .cache/axe/node_modules/axe-core/axe.min.js
+DEMO_BUNDLE ?= bundles/demo
 
 .PHONY: demo test install
 
@@ -25,8 +26,11 @@ $(VENV)/.installed: pyproject.toml Makefile
 $(AXE):
 	npm install --silent --no-audit --no-fund --prefix .cache/axe axe-core@4
 
+# The demo: build the demo study's bundle from the shipped agents (small search budgets; searches and clips
+# already built are reused), then serve it at http://127.0.0.1:8000/.
 demo: install
-	$(BIN)/foil demo
+	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE)
+	$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
 
 test: install
 	$(BIN)/python -m pytest -q
