@@ -270,10 +270,25 @@ def agent_identity(agent: str) -> dict:
     return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
 
 
-def scenario_identity(scenario: str) -> dict:
+def search_inputs(job: ClipJob) -> dict:
+    """Everything a clip's search depends on, with every default resolved (solver, reward and world settings as
+    `foil search` would apply them), so a changed default is a changed input."""
+    from search.reward import RewardConfig
+    from search.runner import parse_settings, solver_config_class
     from search.scenarios import load_scenario
+    from search.summary import frozen_scenario
+    from search.world import WorldConfig
 
-    return load_scenario(scenario).to_dict()
+    scheme = job.scheme
+    given = dict(scheme.settings)
+    solver_class = solver_config_class(scheme.solver)
+    solver = solver_class(**parse_settings(solver_class, list(given.get("--set", ())), "solver"))
+    reward = RewardConfig(**parse_settings(RewardConfig, list(given.get("--reward", ())), "reward"))
+    world = parse_settings(WorldConfig, list(given.get("--world", ())), "world")
+    return {"agents": [agent_identity(a) for a in job.pair],
+            "scenario": frozen_scenario(load_scenario(job.scenario), world).to_dict(),
+            "solver": scheme.solver, "solver_settings": asdict(solver), "reward": reward.to_dict(),
+            "budget": scheme.budget, "seed": scheme.seed, "top_k": scheme.top_k}
 
 
 class Cache:
@@ -328,19 +343,21 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
     return results
 
 
-def search_clip(job: ClipJob, cache: Cache, log) -> Path:
-    """The best summary for a clip: from `foil search` (its CLI contract), or the cache when nothing changed."""
+def search_clip(job: ClipJob, inputs: dict, cache: Cache, log) -> Path:
+    """The best summary for a clip: from `foil search` (its CLI contract), or the cache while its inputs are
+    unchanged and its summary still re-simulates exactly (`foil verify`), so code changes are caught too."""
     from search.cli import main as foil
+    from search.summary import verify
 
     scheme = job.scheme
-    inputs = {"agents": [agent_identity(a) for a in job.pair], "scenario": scenario_identity(job.scenario),
-              "solver": scheme.solver, "budget": scheme.budget, "seed": scheme.seed, "top_k": scheme.top_k,
-              "settings": scheme.arguments()}
     folder = cache.path("search", inputs)
     what = f"search {scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
     if cache.valid("search", inputs, "summary-001.json"):
-        log(f"{what}: cached")
-        return folder / "summary-001.json"
+        problems = verify(folder / "summary-001.json")
+        if not problems:
+            log(f"{what}: cached")
+            return folder / "summary-001.json"
+        log(f"{what}: the cached summary no longer re-simulates exactly ({problems[0]}); searching again")
     started = time.perf_counter()
     folder = cache.store("search", inputs)
     try:
@@ -386,16 +403,20 @@ def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, 
 def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print) -> dict:
     """Build (or bring up to date) the bundle of a study file in ``out``; returns the manifest."""
     spec, text = load_build(study)
+    jobs = plan(spec)
+    try:
+        inputs = [search_inputs(job) for job in jobs]  # bad settings or scenarios fail here, before any work
+    except (ValueError, FileNotFoundError) as error:
+        raise BuildError(f"{study}: [build]: {error}") from None
     out = Path(out)
     for folder in ("clips", "summaries"):
         (out / folder).mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache")
-    jobs = plan(spec)
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log)
     clips = []
-    for job in jobs:
-        found = search_clip(job, cache, log)
+    for job, search in zip(jobs, inputs, strict=True):
+        found = search_clip(job, search, cache, log)
         summary = out / "summaries" / f"{job.id}.json"
         shutil.copyfile(found, summary)
         clip = out / "clips" / f"{job.id}.mp4"

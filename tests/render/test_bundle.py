@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from search.bundle import BuildError, load_build, parse_build, plan
+from search.bundle import BuildError, build_bundle, load_build, parse_build, plan
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -91,6 +91,16 @@ def test_scheme_settings_become_foil_search_flags():
     table["schemes"]["adaptive"]["settings"] = {"nested": {"x": 1}}
     with pytest.raises(BuildError, match="schemes.adaptive.settings: must be a table of key = value settings"):
         parse_build(table)
+
+
+def test_bad_search_settings_are_refused_before_any_work(tmp_path):
+    study = tmp_path / "study.toml"
+    study.write_text('[build]\nseed = 1\n[build.schemes.a]\nsolver = "mcts"\nbudget = 10\nseed = 0\n'
+                     '[build.schemes.a.settings]\nexplorashun = 3\n[[build.sets]]\nparts = ["pairwise"]\n'
+                     'schemes = ["a"]\nscenarios = ["paper-bl-tr"]\npairs = [["goal", "orca"]]\n')
+    with pytest.raises(BuildError, match="bad solver setting 'explorashun=3'"):
+        build_bundle(study, tmp_path / "out", log=lambda line: None)
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_study_file_without_a_build_table_is_refused(tmp_path):

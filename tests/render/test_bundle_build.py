@@ -116,3 +116,16 @@ def test_a_changed_input_reruns_only_the_searches_it_touches(built):
     assert sorted(line.endswith(": cached") for line in searches) == [False, True, True]
     assert [line for line in searches if not line.endswith(": cached")][0].startswith("search adaptive")
     assert json.loads((out / "manifest.json").read_text()) == manifest
+
+
+def test_a_cached_search_that_no_longer_reproduces_is_run_again(built):
+    out, _, _, study = built
+    cached = sorted((out / "cache" / "search").glob("*/summary-001.json"))[0]
+    summary = json.loads(cached.read_text())
+    summary["steps"][3]["robots"][0][0] += 0.5  # as if the simulator had changed since
+    cached.write_text(json.dumps(summary))
+    log = []
+    build_bundle(study, out, log=log.append)
+    again = [line for line in log if "no longer re-simulates exactly" in line]
+    assert len(again) == 1 and "steps[3].robots[0][0]" in again[0]
+    assert json.loads(cached.read_text())["steps"][3]["robots"][0][0] != summary["steps"][3]["robots"][0][0]
