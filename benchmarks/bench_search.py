@@ -189,6 +189,7 @@ def draw(results, grid, pairs, path: Path) -> None:
             ax.plot(grid, mean, label=solver, marker="o", markersize=3)
             ax.fill_between(grid, mean - half, mean + half, alpha=0.2)
         ax.set_title(f"{' vs '.join(pair)}, {scenario_name}", fontsize=9)
+        ax.xaxis.set_major_formatter(lambda x, _: f"{x / 1000:.0f}k")
         ax.grid(alpha=0.3)
         if row == len(SCENARIOS) - 1:
             ax.set_xlabel("simulator steps")
