@@ -343,35 +343,72 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
     return results
 
 
-def search_clip(job: ClipJob, inputs: dict, cache: Cache, log) -> Path:
-    """The best summary for a clip: from `foil search` (its CLI contract), or the cache while its inputs are
-    unchanged and its summary still re-simulates exactly (`foil verify`), so code changes are caught too."""
-    from search.cli import main as foil
+def _describe(job: ClipJob) -> str:
+    return f"search {job.scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
+
+
+def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
+    """A cached search is reused while its inputs are unchanged and its summary still re-simulates exactly
+    (`foil verify`), so changes to the simulator or the policies' code are caught too."""
     from search.summary import verify
 
-    scheme = job.scheme
-    folder = cache.path("search", inputs)
-    what = f"search {scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
-    if cache.valid("search", inputs, "summary-001.json"):
-        problems = verify(folder / "summary-001.json")
-        if not problems:
-            log(f"{what}: cached")
-            return folder / "summary-001.json"
-        log(f"{what}: the cached summary no longer re-simulates exactly ({problems[0]}); searching again")
+    if not cache.valid("search", inputs, "summary-001.json"):
+        return False
+    problems = verify(cache.path("search", inputs) / "summary-001.json")
+    if problems:
+        log(f"{_describe(job)}: the cached summary no longer re-simulates exactly ({problems[0]}); searching again")
+        return False
+    log(f"{_describe(job)}: cached")
+    return True
+
+
+def _foil_search(arguments: list[str]) -> tuple[int, float]:
+    """`foil search` with these arguments (its CLI contract), in this process: exit status and seconds taken."""
+    from search.cli import main as foil
+
     started = time.perf_counter()
-    folder = cache.store("search", inputs)
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # its one-line report; errors still reach stderr
-            code = foil(["search", "--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver",
-                         scheme.solver, "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k",
-                         str(scheme.top_k), "--out", str(folder), "--quiet", *scheme.arguments()])
+            code = foil(["search", *arguments])
     except SystemExit as exit:  # argparse rejected the arguments (and said why)
         code = exit.code
-    if code != 0 or not (folder / "summary-001.json").is_file():
-        raise BuildError(f"{what} failed (foil search exit status {code}); see its error above")
-    cache.seal("search", inputs)
-    log(f"{what}: {time.perf_counter() - started:.1f} s")
-    return folder / "summary-001.json"
+    return code, time.perf_counter() - started
+
+
+def run_searches(jobs: list[tuple[ClipJob, dict]], cache: Cache, log, workers: int = 1) -> None:
+    """Run every search the cache cannot supply, ``workers`` at a time in separate processes; each result is
+    sealed in the cache as soon as it is complete, so an interrupted build keeps the finished ones."""
+    todo = {}
+    for job, inputs in jobs:
+        if _key(inputs) not in todo and not _reusable(job, inputs, cache, log):
+            todo[_key(inputs)] = (job, inputs)
+    calls = []
+    for job, inputs in todo.values():
+        scheme, folder = job.scheme, cache.store("search", inputs)
+        calls.append(["--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver", scheme.solver,
+                      "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k", str(scheme.top_k),
+                      "--out", str(folder), "--quiet", *scheme.arguments()])
+
+    def finished(job: ClipJob, inputs: dict, code: int, seconds: float) -> None:
+        if code != 0 or not (cache.path("search", inputs) / "summary-001.json").is_file():
+            raise BuildError(f"{_describe(job)} failed (foil search exit status {code}); see its error above")
+        cache.seal("search", inputs)
+        log(f"{_describe(job)}: {seconds:.1f} s")
+
+    if workers <= 1 or len(calls) <= 1:
+        for (job, inputs), arguments in zip(todo.values(), calls, strict=True):
+            finished(job, inputs, *_foil_search(arguments))
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from search.runner import _limit_threads
+
+    context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
+    with ProcessPoolExecutor(min(workers, len(calls)), mp_context=context, initializer=_limit_threads) as pool:
+        futures = {pool.submit(_foil_search, arguments): key for key, arguments in zip(todo, calls, strict=True)}
+        for future in as_completed(futures):
+            finished(*todo[futures[future]], *future.result())
 
 
 def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
@@ -400,8 +437,9 @@ def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, 
     log(f"render {job.id}: {result.frames} frames in {result.render_s:.1f} s")
 
 
-def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print) -> dict:
-    """Build (or bring up to date) the bundle of a study file in ``out``; returns the manifest."""
+def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, workers: int = 1) -> dict:
+    """Build (or bring up to date) the bundle of a study file in ``out``, running up to ``workers`` searches at
+    once; returns the manifest."""
     spec, text = load_build(study)
     jobs = plan(spec)
     try:
@@ -414,11 +452,11 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print) ->
     cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log)
+    run_searches(list(zip(jobs, inputs, strict=True)), cache, log, workers)
     clips = []
     for job, search in zip(jobs, inputs, strict=True):
-        found = search_clip(job, search, cache, log)
         summary = out / "summaries" / f"{job.id}.json"
-        shutil.copyfile(found, summary)
+        shutil.copyfile(cache.path("search", search) / "summary-001.json", summary)
         clip = out / "clips" / f"{job.id}.mp4"
         render_clip(job, summary, clip, spec.render, cache, log)
         order = sorted(range(2), key=lambda k: job.numbers[k])

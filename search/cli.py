@@ -72,7 +72,7 @@ def _render(args: argparse.Namespace) -> int:
 def _bundle(args: argparse.Namespace) -> int:
     from search.bundle import build_bundle
 
-    build_bundle(args.study, args.out)
+    build_bundle(args.study, args.out, workers=args.jobs)
     return 0
 
 
@@ -200,6 +200,8 @@ def build_parser() -> argparse.ArgumentParser:
     bundle.add_argument("study", metavar="STUDY.toml", help="study file with a [build] table (see docs/clips.md)")
     bundle.add_argument("--out", required=True, help="bundle directory; searches already there are reused while "
                         "their inputs are unchanged")
+    bundle.add_argument("--jobs", type=int, default=1, help="searches to run at once, each in its own process "
+                        "(default 1)")
     bundle.set_defaults(handler=_bundle)
 
     search = sub.add_parser("search", help="search the scenarios in which agents differ most; write summaries")

@@ -88,6 +88,13 @@ def test_manifest_matches_files_and_checksums(built):
     assert all(clip["id"] in gallery for clip in manifest["clips"])
 
 
+def test_searches_in_parallel_give_the_same_bundle(built, tmp_path):
+    _, manifest, _, study = built
+    log = []
+    assert build_bundle(study, tmp_path / "parallel", log=log.append, workers=2) == manifest
+    assert len([line for line in log if line.startswith("search ") and not line.endswith("cached")]) == 3
+
+
 def test_the_survey_server_accepts_the_bundle(built):
     from app.bundle import load_bundle
 
