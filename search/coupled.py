@@ -38,6 +38,7 @@ class CoupledStep:
     robot_pos: np.ndarray  # (B, N, 2) after the move
     robot_vel: np.ndarray  # (B, N, 2)
     human_pos: np.ndarray  # (B, n, 2) the crowd after the move (agent 0's world when robots are visible)
+    crowds: np.ndarray  # (B, C, n, 2) every crowd: C = 1 when shared, one per agent (C = N) when robots are visible
     rewards: np.ndarray  # (B, N) each robot's navigation reward
     done: np.ndarray  # (B, N) bool
     newly_done: np.ndarray  # (B, N) bool: finished on this step
@@ -117,12 +118,19 @@ class CoupledSimulator:
             robot_pos=self._gather(self.state.robot_pos).copy(),
             robot_vel=self._gather(self.state.robot_vel).copy(),
             human_pos=self.state.human_pos[: self.batch].copy(),
+            crowds=self.crowds(),
             rewards=self._gather(reward),
             done=done.copy(),
             newly_done=done & ~was_done,
             outcome=self._gather(self.state.outcome).copy(),
             time=self.state.time[: self.batch].copy(),
         )
+
+    def crowds(self) -> np.ndarray:
+        """(B, C, n, 2) the humans of every crowd: one shared crowd, or each agent's own."""
+        if self.shared_crowd:
+            return self.state.human_pos[:, None].copy()
+        return np.stack([self.state.human_pos[self._where(k)[0]] for k in range(self.n_agents)], axis=1)
 
     @property
     def all_done(self) -> np.ndarray:
@@ -154,7 +162,8 @@ class Trajectory:
     env_actions: np.ndarray  # (T, n, 2)
     robot_actions: np.ndarray  # (T, N, 2)
     robot_pos: np.ndarray  # (T, N, 2)
-    human_pos: np.ndarray  # (T, n, 2)
+    human_pos: np.ndarray  # (T, n, 2) the shared crowd (agent 0's when robots are visible)
+    crowds: np.ndarray  # (T, C, n, 2) every crowd, see CoupledStep
     rewards: np.ndarray  # (T, N)
     outcome: np.ndarray  # (N,) int8
     event_time: np.ndarray  # (N,)
@@ -184,6 +193,7 @@ def replay(policies: list[Policy], scenario: Scenario, env_actions, config: Worl
         robot_actions=np.stack([s.robot_actions[0] for s in steps]),
         robot_pos=np.stack([s.robot_pos[0] for s in steps]),
         human_pos=np.stack([s.human_pos[0] for s in steps]),
+        crowds=np.stack([s.crowds[0] for s in steps]),
         rewards=np.stack([s.rewards[0] for s in steps]),
         outcome=sim._gather(state.outcome)[0].copy(),
         event_time=sim._gather(state.event_time)[0].copy(),

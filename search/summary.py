@@ -47,6 +47,11 @@ def _pairs(array: np.ndarray) -> list[list[float]]:
     return np.asarray(array, dtype=np.float64).tolist()
 
 
+def _humans(crowds: np.ndarray) -> list:
+    """One crowd as [[x, y], ...]; with visible robots, one such list per agent's crowd."""
+    return _pairs(crowds[0]) if len(crowds) == 1 else _pairs(crowds)
+
+
 def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_config: RewardConfig,
                   env_actions: np.ndarray, solver: dict) -> dict:
     """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs."""
@@ -65,7 +70,7 @@ def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
         "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist() for a in trajectory.env_actions],
-        "steps": [{"t": float(trajectory.time[i]), "humans": _pairs(trajectory.human_pos[i]),
+        "steps": [{"t": float(trajectory.time[i]), "humans": _humans(trajectory.crowds[i]),
                    "robots": _pairs(trajectory.robot_pos[i]), "robot_actions": _pairs(trajectory.robot_actions[i])}
                   for i in range(len(trajectory.time))],
         "outcomes": [{"event": OUTCOME_NAMES[int(trajectory.outcome[k])],

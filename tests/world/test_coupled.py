@@ -121,3 +121,16 @@ def test_needs_two_agents_and_valid_actions():
     sim = make()
     with pytest.raises(ValueError, match="outside the bound"):
         sim.step(np.ones((1, 10, 2)))
+
+
+def test_crowds_are_shared_or_one_per_agent():
+    shared = make()
+    step = shared.step(env_actions(1)[0])
+    assert step.crowds.shape == (1, 1, 10, 2)
+    np.testing.assert_array_equal(step.crowds[:, 0], step.human_pos)
+    visible = make(config=WorldConfig(robot_visible=True, human_v_pref=1.0))
+    for action in env_actions(20):
+        step = visible.step(action)
+    assert step.crowds.shape == (1, 2, 10, 2)
+    np.testing.assert_array_equal(step.crowds[:, 0], step.human_pos)
+    assert not np.allclose(step.crowds[:, 0], step.crowds[:, 1])
