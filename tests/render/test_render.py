@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import subprocess
@@ -14,6 +15,7 @@ from search.render import (
     CRASH,
     HUMAN_FILL,
     ROBOT_STYLES,
+    SUCCESS,
     ClipRenderer,
     Frame,
     RenderOptions,
@@ -155,6 +157,25 @@ def test_collision_is_marked_where_and_when_it_happens(shared_summary):
               slice(max(0, int(robots[k][0] - near)), int(robots[k][0] + near)))
     assert after[window].sum() > later[window].sum()  # the CRASH tag goes after a while, not to hide people
     assert f"CRASHED · {when:.1f} s" in renderer.texts and "CRASH" in renderer.texts
+
+
+def test_arrival_and_timeout_are_marked(shared_summary):
+    scene = scene_from_summary(shared_summary)
+    k = [k for k, (event, _) in enumerate(scene.outcomes) if event == "success"][0]
+    when = scene.outcomes[k][1]
+    renderer = ClipRenderer(scene)
+    _, robots, _ = renderer._state(when)
+    near = 1.5 * renderer.layout.scale
+    assert blob_centre(colour_mask(renderer.draw(Frame(when - 0.25)), SUCCESS), robots[k], near) is None
+    assert blob_centre(colour_mask(renderer.draw(Frame(when)), SUCCESS), robots[k], near) is not None
+    assert f"reached goal · {when:.1f} s" in renderer.texts
+
+    short = dataclasses.replace(load_scenario("paper-bl-tr"), world={"time_limit": 5.0})
+    timed_out = ClipRenderer(scene_from_summary(summary_from_simulation(["orca", "social_force"], short)))
+    assert {event for event, _ in timed_out.scene.outcomes} == {"timeout"}
+    for frame in timed_out.frames:
+        timed_out.draw(frame)
+    assert "out of time · 5.0 s" in timed_out.texts
 
 
 def test_each_robot_has_its_own_panel_when_robots_are_visible():
