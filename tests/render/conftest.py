@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from search.coupled import CoupledSimulator, replay
+from search.coupled import replay
 from search.policies import load_policy
 from search.reward import RewardConfig
 from search.scenarios import Scenario, load_scenario
@@ -18,7 +18,7 @@ from search.summary import build_summary, frozen_scenario
 def summary_from_simulation(agents: list[str], scenario: Scenario, seed: int = 0,
                             names: list[str] | None = None) -> dict:
     """The foil.summary/1 object `foil search` would write for scripted robots under seeded random environment
-    actions, cut where the trajectory ends (every robot done, or the 100-step horizon)."""
+    actions, cut where the trajectory ends; with visible robots it records every agent's crowd."""
     scenario = frozen_scenario(scenario, {})
     config, reward = scenario.config(), RewardConfig()
     policies = [load_policy(a) for a in agents]
@@ -28,18 +28,6 @@ def summary_from_simulation(agents: list[str], scenario: Scenario, seed: int = 0
     summary = build_summary(agents, policies, scenario, reward, actions[:length], {"name": "random", "seed": seed})
     for entry, name in zip(summary["agents"], names or agents, strict=True):
         entry["name"] = name
-    if config.robot_visible:
-        summary = with_every_crowd(summary, policies, scenario, actions[:length])
-    return summary
-
-
-def with_every_crowd(summary: dict, policies, scenario: Scenario, actions: np.ndarray) -> dict:
-    """With visible robots each agent changes its own crowd; the summary writer records the first agent's only,
-    so record every agent's crowd per step, as a side-by-side clip needs."""
-    sim = CoupledSimulator(policies, scenario)
-    for step, action in zip(summary["steps"], actions, strict=True):
-        sim.step(action[None])
-        step["humans"] = sim.state.human_pos.tolist()
     return summary
 
 
