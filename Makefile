@@ -9,9 +9,13 @@ BIN = $(VENV)/bin
 AXE = .cache/axe/node_modules/axe-core/axe.min.js
 DEMO_BUNDLE ?= bundles/demo
 
-.PHONY: demo test install
+.PHONY: demo test install browser
 
-install: $(VENV)/.installed $(AXE)
+install: $(VENV)/.installed
+
+# What only the browser tests need: Debian's chromium (Playwright's own browser downloads are never used) and
+# axe-core for the accessibility checks.
+browser: $(AXE)
 	@command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium)
 
 $(VENV)/.installed: pyproject.toml Makefile
@@ -21,8 +25,6 @@ $(VENV)/.installed: pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $@
 
-# axe-core for the browser tests' accessibility checks (Debian's chromium, above, runs them; Playwright's own
-# browser downloads are never used)
 $(AXE):
 	npm install --silent --no-audit --no-fund --prefix .cache/axe axe-core@4
 
@@ -32,5 +34,5 @@ demo: install
 	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE)
 	$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
 
-test: install
+test: install browser
 	$(BIN)/python -m pytest -q
