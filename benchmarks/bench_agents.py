@@ -1,8 +1,8 @@
 """DS-RNN speed: policy inference against a bare run of its layers, and PPO training against the bound its
-forward and backward passes set. Both comparisons are measured in the same run, alternating, so load from
+forward and backward passes set. Both comparisons are measured in the same run, interleaved, so load from
 other work affects both sides alike.
 
-    .venv/bin/python benchmarks/bench_agents.py [--seconds 2] [--updates 6]
+    .venv/bin/python benchmarks/bench_agents.py [--seconds 4] [--updates 2] [--rounds 3] [--threads 1]
 """
 
 from __future__ import annotations
@@ -28,19 +28,18 @@ from search.world import WorldConfig
 SHIPPED = NetworkConfig(edge_hidden=64, node_hidden=64, embed=32, attention=32, mlp_hidden=64)
 
 
-def rate(run_once, items_per_call: int, seconds: float) -> float:
-    run_once()  # warm up
-    calls, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        run_once()
+def interleaved(a, b, items_per_call: int, seconds: float) -> tuple[float, float]:
+    """Rates of two calls timed one call each in turn, so that load from other work falls on both alike."""
+    a(), b()  # warm up
+    spent = [0.0, 0.0]
+    calls = 0
+    while sum(spent) < seconds:
+        for i, call in enumerate((a, b)):
+            start = time.perf_counter()
+            call()
+            spent[i] += time.perf_counter() - start
         calls += 1
-    return calls * items_per_call / (time.perf_counter() - start)
-
-
-def best_of_alternating(a, b, rounds: int = 5) -> tuple[float, float]:
-    """Best rate of each side over alternating rounds (the least disturbed measurement of each)."""
-    results = [(a(), b()) for _ in range(rounds)]
-    return max(r[0] for r in results), max(r[1] for r in results)
+    return calls * items_per_call / spent[0], calls * items_per_call / spent[1]
 
 
 def inference(config: NetworkConfig, batch: int, seconds: float) -> tuple[float, float]:
@@ -57,11 +56,10 @@ def inference(config: NetworkConfig, batch: int, seconds: float) -> tuple[float,
         with torch.no_grad():
             net.act_mean(*tensors, hidden)
 
-    return best_of_alternating(lambda: rate(lambda: policy.act(obs, policy_state), batch, seconds),
-                               lambda: rate(bare, batch, seconds))
+    return interleaved(lambda: policy.act(obs, policy_state), bare, batch, seconds)
 
 
-def network_bound(config: TrainConfig, repeats: int) -> float:
+def network_bound(config: TrainConfig, updates: int) -> float:
     """Env-steps/s if an update were nothing but its network passes: one forward per rollout step (plus the
     bootstrap value), then every epoch's forward and backward over every recurrent minibatch."""
     torch.manual_seed(0)
@@ -84,29 +82,37 @@ def network_bound(config: TrainConfig, repeats: int) -> float:
                 net.zero_grad()
                 (mean.square().mean() + value.square().mean()).backward()
 
-    update()
     start = time.perf_counter()
-    for _ in range(repeats):
+    for _ in range(updates):
         update()
-    return repeats * config.steps_per_update / (time.perf_counter() - start)
+    return updates * config.steps_per_update / (time.perf_counter() - start)
 
 
-def training(config: TrainConfig, updates: int) -> float:
-    """The trainer's env-steps/s over ``updates`` updates after a warm-up update."""
+def training_against_bound(config: TrainConfig, updates: int, rounds: int) -> tuple[float, float, float]:
+    """(trainer env-steps/s, bound env-steps/s, median of the per-round fractions): each round runs ``updates``
+    more updates of one real run, then as many bare updates, so both see the same load."""
+    trained, bound = [], []
     with tempfile.TemporaryDirectory() as out:
-        train(config, out, show_progress=False, stop_after_updates=updates + 1)
-        with open(os.path.join(out, "progress.csv")) as f:
-            rows = list(csv.DictReader(f))[1:]
-    return config.steps_per_update * len(rows) / sum(config.steps_per_update / float(r["steps_per_s"])
-                                                     for r in rows)
+        train(config, out, show_progress=False, stop_after_updates=1)  # warm up (compiles the world's kernels)
+        network_bound(config, 1)
+        for _ in range(rounds):
+            train(config, out, show_progress=False, stop_after_updates=updates)
+            with open(os.path.join(out, "progress.csv")) as f:
+                rows = list(csv.DictReader(f))[-updates:]
+            trained.append(len(rows) / sum(1 / float(r["steps_per_s"]) for r in rows))
+            bound.append(network_bound(config, updates))
+    fractions = [t / b for t, b in zip(trained, bound, strict=True)]
+    return float(np.median(trained)), float(np.median(bound)), float(np.median(fractions))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=1.0, help="seconds per inference measurement")
-    parser.add_argument("--updates", type=int, default=6, help="training updates per measurement")
+    parser.add_argument("--seconds", type=float, default=4.0, help="seconds per inference measurement")
+    parser.add_argument("--updates", type=int, default=2, help="training updates per round")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds per training measurement")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads for inference")
     args = parser.parse_args()
-    torch.set_num_threads(min(2, os.cpu_count() or 1))
+    torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
     print(f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, torch {torch.__version__}, "
           f"load average {load:.1f}\n")
@@ -126,10 +132,9 @@ def main() -> None:
                           ("shipped (small)", shipped_run)):
         config = replace(config, save_every=10_000)
         torch.set_num_threads(config.threads)
-        trained, bound = best_of_alternating(lambda c=config: training(c, args.updates),
-                                             lambda c=config: network_bound(c, args.updates), rounds=2)
+        trained, bound, fraction = training_against_bound(config, args.updates, args.rounds)
         print(f"| {label} | {config.num_envs} x {config.num_steps} | {config.threads} | {trained:,.0f} | "
-              f"{bound:,.0f} | {trained / bound:.2f} |", flush=True)
+              f"{bound:,.0f} | {fraction:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -171,23 +171,26 @@ def observation_tensors(observation: Observation, max_humans: int | None) -> tup
     max_humans = n if max_humans is None else max_humans
     if n > max_humans:
         raise ValueError(f"this agent handles at most {max_humans} humans, the observation has {n}")
-    spatial = np.zeros((b, max_humans, 2), np.float32)
-    mask = np.zeros((b, max_humans), np.float32)
-    spatial[:, :n] = observation.spatial_edges
-    mask[:, :n] = observation.human_mask
+    spatial = np.asarray(observation.spatial_edges, np.float32)
+    mask = np.asarray(observation.human_mask, np.float32)
+    if n < max_humans:
+        spatial = np.concatenate([spatial, np.zeros((b, max_humans - n, 2), np.float32)], axis=1)
+        mask = np.concatenate([mask, np.zeros((b, max_humans - n), np.float32)], axis=1)
     return (torch.from_numpy(np.asarray(observation.robot_node, np.float32)),
             torch.from_numpy(np.asarray(observation.temporal_edges, np.float32)),
-            torch.from_numpy(spatial), torch.from_numpy(mask))
+            torch.from_numpy(np.ascontiguousarray(spatial)), torch.from_numpy(np.ascontiguousarray(mask)))
 
 
 class TorchPolicy:
     """A recurrent torch module behind the Policy interface: the module's ``forward(robot_node, temporal_edges,
     spatial_edges, human_mask, hidden) -> (action, hidden)`` and ``initial_state(batch) -> hidden`` (hidden: a
-    list of tensors with the batch axis first). The state dict holds them as numpy arrays (h0, h1, ...), so a
-    snapshot is an array copy."""
+    list of tensors with the batch axis first). Humans are padded up to ``max_humans`` when the module has a
+    fixed maximum. The state dict holds the hidden tensors as numpy arrays (h0, h1, ...), so a snapshot is an
+    array copy."""
 
-    def __init__(self, module, name: str, max_humans: int):
+    def __init__(self, module, name: str, max_humans: int | None):
         self.module, self.name, self.max_humans = module, name, max_humans
+        self.forward = module  # DSRNNPolicy calls the network's method directly, skipping one module call
 
     def initial_state(self, batch: int) -> PolicyState:
         with torch.no_grad():
@@ -197,7 +200,7 @@ class TorchPolicy:
         inputs = observation_tensors(observation, self.max_humans)
         hidden = [torch.from_numpy(state[f"h{i}"]) for i in range(len(state))]
         with torch.no_grad():
-            action, hidden = self.module(*inputs, hidden)
+            action, hidden = self.forward(*inputs, hidden)
         return action.numpy().astype(np.float64), {f"h{i}": h.numpy() for i, h in enumerate(hidden)}
 
 
@@ -206,7 +209,8 @@ class DSRNNPolicy(TorchPolicy):
 
     def __init__(self, net: DSRNN, name: str = "dsrnn"):
         net.eval()
-        super().__init__(_TorchScriptEntry(net), name, net.max_humans)
+        super().__init__(net, name, net.max_humans)
+        self.forward = net.act_mean
         self.net = net
 
 

@@ -69,34 +69,45 @@ def choose(rows: list[dict]) -> dict[str, dict]:
     return {name: chosen[name] for name in TARGETS}
 
 
-def model_card(name: str, data: dict, result: dict, validation: dict) -> str:
+def training_minutes(run_dir: Path, update: int) -> float:
+    """Minutes of training the run had spent when it reached ``update`` (from its progress.csv)."""
+    with (run_dir / "progress.csv").open() as f:
+        return next(float(r["seconds"]) for r in csv.DictReader(f) if int(r["update"]) == update) / 60
+
+
+def model_card(name: str, data: dict, result: dict, validation: dict, minutes: float,
+               run: tuple[int, float]) -> str:
     config = data["train_config"]
     low, high = result["reward_ci95"]
     network = ", ".join(f"{k} {v}" for k, v in data["network"].items())
     rates = " | ".join(f"{result[k]:.3f}" for k in ("success_rate", "collision_rate", "timeout_rate"))
     return f"""# Agent `{name}`
 
-A DS-RNN crowd-navigation policy: a snapshot of one PPO run after **{data['env_steps']:,} environment steps**
-({data['update']} updates), chosen as the snapshot whose validation reward was closest to the paper's
-{TARGETS[name]} (validation: 500 episodes, evaluation seed {VALIDATION_SEED}, every fifth checkpoint; it scored
-{float(validation['reward_mean']):.2f}).
+A DS-RNN crowd-navigation policy: a snapshot of one PPO run after **{data['env_steps']:,} environment steps** \
+({data['update']} updates, {minutes:.0f} minutes of training on a shared 2-core CPU). It is the snapshot whose \
+validation reward was closest to the paper's {TARGETS[name]} (validation: 500 episodes, evaluation seed \
+{VALIDATION_SEED}, every fifth checkpoint; it scored {float(validation['reward_mean']):.2f}).
 
-Network: the DS-RNN architecture at a **smaller size than the paper's** ({network}; the paper's is edge GRU 256,
-node GRU 128, embeddings and attention 64, actor and critic 256), so that the run trains on a 2-core CPU.
-Training: PPO, {config['num_envs']} worlds x {config['num_steps']} steps per update, learning rate
-{config['learning_rate']} (the paper's 4e-5 is slower), other settings as in DESIGN.md; the paper's world
-(10 humans at 0.15 m/s, invisible robot, random training distribution, time limit 50 s); seed {config['seed']}.
+**Smaller than the paper's network.** Same DS-RNN architecture, narrower layers ({network}; the paper's: edge \
+GRUs 256, node GRU 128, embeddings and attention 64, actor and critic 256), so that the run trains on a CPU.
+
+Training: PPO with {config['num_envs']} worlds x {config['num_steps']} steps per update and learning rate \
+{config['learning_rate']} (the paper: 12 x 30 and 4e-5); other settings as in DESIGN.md. The paper's world: 10 \
+humans at 0.15 m/s, invisible robot, random training distribution, time limit 50 s. Seed {config['seed']}.
 
 ## Test evaluation
 
-`foil eval {name} --episodes {result['episodes']} --seed {TEST_SEED}` (test episodes, disjoint from training
-and validation episodes; deterministic action):
+`foil eval {name} --episodes {result['episodes']} --seed {TEST_SEED}`: test episodes, disjoint from training and \
+validation episodes; deterministic action.
 
-| success | collision | timeout | mean reward (95% CI) | mean navigation time |
+| success | collision | timeout | mean reward (95% CI) | mean navigation time (successes) |
 |---:|---:|---:|---|---:|
 | {rates} | {result['reward_mean']:.2f} ({low:.2f} to {high:.2f}) | {result['nav_time_mean']:.2f} s |
 
 ## Reproduce
+
+The whole run ({run[0]:,} steps) took {run[1]:.0f} minutes here; the second command \
+validates the snapshots and writes all three agents and their cards.
 
 ```
 {REPRODUCE}
@@ -118,13 +129,16 @@ def main() -> None:
     if not rows:
         raise SystemExit(f"no checkpoints in {args.run_dir / 'checkpoints'}")
     summary = {}
+    last = read_checkpoint(checkpoints(args.run_dir)[-1])
+    run = last["env_steps"], training_minutes(args.run_dir, last["update"])
     for name, row in choose(rows).items():
         data = read_checkpoint(args.run_dir / "checkpoints" / row["checkpoint"])
         policy = policy_from(data, name)
         result = evaluate(policy, args.episodes, seed=TEST_SEED) | {"agent": name}
         save_checkpoint(args.out / f"{name}.pt", policy.net, env_steps=data["env_steps"], update=data["update"],
                         train_config=data["train_config"])
-        (args.out / f"{name}.md").write_text(model_card(name, data, result, row))
+        minutes = training_minutes(args.run_dir, data["update"])
+        (args.out / f"{name}.md").write_text(model_card(name, data, result, row, minutes, run))
         summary[name] = {"checkpoint": row["checkpoint"], **result}
     print(json.dumps(summary, indent=1))
 

@@ -4,7 +4,7 @@
 Each update collects ``num_steps`` steps per world, computes GAE advantages, then runs ``epochs`` passes over
 ``minibatches`` recurrent minibatches (whole world sequences, so the GRUs see the rollout in order).
 Every ``save_every`` updates a checkpoint holds the network, optimiser, world, hidden states and random
-generators, so a run resumes exactly where it stopped.
+generators, so a run resumes exactly where it stopped; raising ``total_steps`` trains a finished run longer.
 
 Config files are TOML: top-level keys are ``TrainConfig`` fields, ``[network]`` and ``[world]`` tables
 override the network sizes and the world settings.
@@ -101,6 +101,10 @@ def load_train_config(path: str | Path) -> TrainConfig:
         raise ValueError(f"{path}: not valid TOML: {error}") from None
 
 
+def _without_length(config: dict | None) -> dict | None:
+    return None if config is None else {k: v for k, v in config.items() if k != "total_steps"}
+
+
 def gaussian_log_prob(actions, mean, log_std):
     return (-0.5 * ((actions - mean) / log_std.exp()) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
 
@@ -154,8 +158,9 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
     saved = checkpoints(out)
     if saved:  # resume: everything that the next update depends on comes back
         data = read_checkpoint(saved[-1])
-        if data.get("train_config") != config.to_dict():
-            raise ValueError(f"{out} holds a run with a different config; use a new --out directory")
+        if _without_length(data.get("train_config")) != _without_length(config.to_dict()):
+            raise ValueError(f"{out} holds a run with a different config (only total_steps may change, to train "
+                             "a run longer); use a new --out directory")
         net.load_state_dict(data["model"])
         optimizer.load_state_dict(data["optimizer"])
         run = data["run"]

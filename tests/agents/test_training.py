@@ -50,11 +50,14 @@ def test_a_resumed_run_matches_an_uninterrupted_one(tmp_path):
            [{k: v for k, v in r.items() if k not in drop} for r in rows(tmp_path / "parts")]
 
 
-def test_resuming_with_another_config_is_refused(tmp_path):
+def test_a_run_can_go_longer_but_not_change_its_config(tmp_path):
     config = TrainConfig.from_dict(TINY.to_dict() | {"total_steps": 16 * 20})
     train(config, tmp_path, show_progress=False)
     with pytest.raises(ValueError, match="different config"):
         train(TrainConfig.from_dict(config.to_dict() | {"learning_rate": 1e-4}), tmp_path, show_progress=False)
+    longer = train(TrainConfig.from_dict(config.to_dict() | {"total_steps": 16 * 20 * 2}), tmp_path,
+                   show_progress=False)
+    assert read_checkpoint(longer)["update"] == 2 and len(rows(tmp_path)) == 2
 
 
 def test_config_files_are_checked(tmp_path):
