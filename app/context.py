@@ -6,7 +6,8 @@ from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Request
-from fastapi.templating import Jinja2Templates
+from fastapi.responses import HTMLResponse
+from jinja2 import Environment
 
 from app.assignment import Condition
 from app.bundle import Bundle
@@ -22,11 +23,11 @@ class Context:
     bundle: Bundle
     conditions: list[Condition]
     db: Database
-    templates: Jinja2Templates
+    templates: Environment
 
-    def render(self, request: Request, name: str, status_code: int = 200, **context):
-        return self.templates.TemplateResponse(request, name, {"study": self.study, **context},
-                                               status_code=status_code)
+    def render(self, request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
+        html = self.templates.get_template(name).render(request=request, study=self.study, **context)
+        return HTMLResponse(html, status_code=status_code)
 
     def message(self, request: Request, title: str, text: str, status_code: int = 200, **context):
         return self.render(request, "message.html", status_code=status_code, title=title, text=text, **context)

@@ -5,33 +5,43 @@ SQLite answers with "database is locked" instead of waiting); on PostgreSQL the 
 do the same job. Reads start a plain deferred transaction and never block writers under WAL. Within one process,
 SQLite writers also queue on a lock: SQLite's own busy handler polls with sleeps of up to 100 ms, which under
 hundreds of concurrent participants turned into second-long waits for a write that takes a few milliseconds.
+
+SQLite runs with synchronous=NORMAL unless FOIL_SQLITE_SYNCHRONOUS=full: in WAL mode a commit is then written to
+the WAL (the operating system's file cache) before the reply, which a crash of the server process cannot undo;
+only an operating-system crash or power loss can lose the last commits (docs/survey.md explains the choice). Such
+a transaction never waits for the disk, so `Database.run` runs it right on the event loop: a thread-pool hop costs
+more CPU than the transaction itself.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TypeVar
 
 from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
 
 import migrations
 
 MIGRATIONS_DIR = Path(migrations.__file__).resolve().parent
+T = TypeVar("T")
+SYNCHRONOUS = {"normal": "NORMAL", "full": "FULL"}
 
 
 class DatabaseError(RuntimeError):
     """The database cannot be used as it is (for example, it needs migrating)."""
 
 
-def make_engine(url: str) -> Engine:
+def make_engine(url: str, *, synchronous: str = "normal") -> Engine:
     if url.startswith("sqlite"):
         engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30})
 
@@ -40,7 +50,7 @@ def make_engine(url: str) -> Engine:
             dbapi_connection.isolation_level = None  # we emit BEGIN ourselves, below
             cursor = dbapi_connection.cursor()
             cursor.execute("PRAGMA journal_mode=WAL")
-            cursor.execute("PRAGMA synchronous=FULL")  # a reply is sent only after the answer is on disk
+            cursor.execute(f"PRAGMA synchronous={SYNCHRONOUS[synchronous]}")
             cursor.execute("PRAGMA foreign_keys=ON")
             cursor.execute("PRAGMA busy_timeout=30000")
             cursor.close()
@@ -57,12 +67,30 @@ def make_engine(url: str) -> Engine:
 class Database:
     """Session factories for reading and for writing, over one connection pool."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str, *, synchronous: str = "normal"):
         self.url = url
-        self.engine = make_engine(url)
+        self.engine = make_engine(url, synchronous=synchronous)
         self._read = sessionmaker(self.engine, expire_on_commit=False)
-        self._write = sessionmaker(self.engine.execution_options(foil_write=True), expire_on_commit=False)
-        self._write_turn = threading.Lock() if self.engine.dialect.name == "sqlite" else nullcontext()
+        self._write_engine = self.engine.execution_options(foil_write=True)
+        self._write = sessionmaker(self._write_engine, expire_on_commit=False)
+        sqlite = self.engine.dialect.name == "sqlite"
+        self._write_turn = threading.Lock() if sqlite else nullcontext()
+        # Work that never waits on a disk or a network runs on the event loop; the rest in the thread pool.
+        self.inline = sqlite and synchronous == "normal"
+
+    async def run(self, work: Callable[..., T], *args) -> T:
+        """`work(*args)`, a function that reads or writes through this database, from an async endpoint."""
+        if self.inline:
+            return work(*args)
+        return await run_in_threadpool(work, *args)
+
+    @contextmanager
+    def connection(self, *, write: bool = False) -> Iterator[Connection]:
+        """A Core connection in a transaction, as `reading()` or `writing()` but without the ORM's session (whose
+        bookkeeping costs more than the few statements of a participant's request)."""
+        engine = self._write_engine if write else self.engine
+        with self._write_turn if write else nullcontext(), engine.begin() as connection:
+            yield connection
 
     @contextmanager
     def reading(self) -> Iterator[Session]:

@@ -9,7 +9,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import RedirectResponse
 from fastapi.staticfiles import StaticFiles
-from fastapi.templating import Jinja2Templates
+from jinja2 import Environment, FileSystemLoader
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
 from starlette.middleware.sessions import SessionMiddleware
@@ -47,13 +47,14 @@ def create_app(settings: Settings) -> FastAPI:
     study = load_study(settings.study_path())
     bundle = load_bundle(settings.bundle_dir)
     check_study_against_bundle(study, bundle)
-    db = Database(settings.database_url)
+    db = Database(settings.database_url, synchronous=settings.sqlite_synchronous)
     check_migrated(db.engine)
     remember_study(db, settings.study_path().read_text(encoding="utf-8"), study)  # for foil export/report
 
-    templates = Jinja2Templates(directory=str(settings.templates_dir))
-    templates.env.globals["csrf_token"] = csrf_token
-    templates.env.filters["paragraphs"] = _paragraphs
+    # Templates are compiled once per process: no check for changed files on every page.
+    templates = Environment(loader=FileSystemLoader(settings.templates_dir), autoescape=True, auto_reload=False)
+    templates.globals["csrf_token"] = csrf_token
+    templates.filters["paragraphs"] = _paragraphs
     context = Context(settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db,
                       templates=templates)
 

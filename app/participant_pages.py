@@ -12,12 +12,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import select
+from sqlalchemy import Connection, Row, bindparam, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
 
-from app.answers import check_screen
+from app.answers import Checked, check_screen
 from app.assignment import condition_for_slot, next_slot
 from app.context import Context, ContextDep
 from app.database import as_utc
@@ -27,6 +27,17 @@ from app.security import checked_form
 
 router = APIRouter()
 FormDep = Annotated[FormData, Depends(checked_form)]
+# The hot path reads and writes with Core statements built once: the ORM's unit of work costs more than the SQL.
+PARTICIPANT, RESPONSE = Participant.__table__, Response.__table__
+_SHOWN = select(PARTICIPANT.c["id", "code", "status", "condition", "plan", "step", "step_started_at"]).where(
+    PARTICIPANT.c.study == bindparam("study"))
+BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
+BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
+                           PARTICIPANT.c.external_id == bindparam("external_id"))
+SAVE_RESPONSE = insert(RESPONSE)
+NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
+    step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
+    completed_at=bindparam("completed"), attention_failures=PARTICIPANT.c.attention_failures + bindparam("failed"))
 
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 PLATFORM_PARAMS = {  # external id, platform study id, platform session id
@@ -55,38 +66,45 @@ def _platform_identity(platform: str, params) -> dict:
             "platform_session_id": values[2] or None}
 
 
-def _find(session: Session, ctx: Context, **where) -> Participant | None:
-    query = select(Participant).where(Participant.study == ctx.study.study.id)
-    for column, value in where.items():
-        query = query.where(getattr(Participant, column) == value)
-    return session.scalar(query)
+def _by_code(session: Session | Connection, ctx: Context, code) -> Row | None:
+    return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first() if isinstance(
+        code, str) else None
 
 
-def _current(session: Session, ctx: Context, request: Request) -> Participant:
-    code = request.session.get("participant")
-    participant = _find(session, ctx, code=code) if isinstance(code, str) else None
+def _by_identity(session: Session | Connection, ctx: Context, external_id: str) -> Row | None:
+    info = ctx.study.study
+    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform,
+                                         "external_id": external_id}).first()
+
+
+def _current(session: Session | Connection, ctx: Context, request: Request) -> Row:
+    participant = _by_code(session, ctx, request.session.get("participant"))
     if participant is None:
         raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
                                  "expired). Please open the study again from the link you were given.")
     return participant
 
 
+def _read(find, ctx: Context, *args):
+    """`find(session, ctx, *args)` in a read transaction (for `Database.run`)."""
+    with ctx.db.connection() as connection:
+        return find(connection, ctx, *args)
+
+
 @router.get("/")
-def landing(request: Request, ctx: ContextDep):
+async def landing(request: Request, ctx: ContextDep):
     info = ctx.study.study
     if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return ctx.render(request, "consent.html", preview=True)
     if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
         return ctx.message(request, "Please use a computer",
                            "This study needs a laptop or desktop computer. Please open the link there.")
-    with ctx.db.reading() as session:
-        if info.platform != "none":
-            identity = _platform_identity(info.platform, request.query_params)
-            known = _find(session, ctx, platform=info.platform, external_id=identity["external_id"])
-            request.session["identity"] = identity
-        else:
-            code = request.session.get("participant")
-            known = _find(session, ctx, code=code) if isinstance(code, str) else None
+    if info.platform != "none":
+        identity = _platform_identity(info.platform, request.query_params)
+        known = await ctx.db.run(_read, _by_identity, ctx, identity["external_id"])
+        request.session["identity"] = identity
+    else:
+        known = await ctx.db.run(_read, _by_code, ctx, request.session.get("participant"))
     if known is not None:
         request.session["participant"] = known.code
         return _see_current()
@@ -94,7 +112,7 @@ def landing(request: Request, ctx: ContextDep):
     return ctx.render(request, "consent.html", preview=False)
 
 
-def _enter(ctx: Context, identity: dict, *, agreed: bool, user_agent: str) -> str:
+def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
     """Create the participant (or find the one a concurrent request created) and assign them; returns the code.
 
     Conflicts on the unique identity or slot make the transaction fail as a whole and the loop tries again."""
@@ -103,7 +121,7 @@ def _enter(ctx: Context, identity: dict, *, agreed: bool, user_agent: str) -> st
         try:
             with ctx.db.writing() as session:
                 if identity.get("external_id"):
-                    known = _find(session, ctx, platform=info.platform, external_id=identity["external_id"])
+                    known = _by_identity(session, ctx, identity["external_id"])
                     if known is not None:
                         return known.code
                 participant = Participant(
@@ -133,7 +151,7 @@ def _assign_plan(ctx: Context, participant: Participant) -> None:
 
 
 @router.post("/consent")
-def consent(request: Request, ctx: ContextDep, form: FormDep):
+async def consent(request: Request, ctx: ContextDep, form: FormDep):
     choice = form.get("choice")
     if choice not in ("agree", "decline"):
         raise HTTPException(400, "Please choose whether you agree to take part.")
@@ -142,7 +160,7 @@ def consent(request: Request, ctx: ContextDep, form: FormDep):
         identity = request.session.get("identity")
         if not isinstance(identity, dict) or not identity.get("external_id"):
             raise HTTPException(400, "Please open the study from the link you were given.")
-    code = _enter(ctx, identity, agreed=choice == "agree", user_agent=request.headers.get("user-agent", ""))
+    code = await ctx.db.run(_enter, ctx, identity, choice == "agree", request.headers.get("user-agent", ""))
     request.session["participant"] = code
     request.session.pop("identity", None)
     return _see_current()
@@ -169,7 +187,7 @@ def screen_view(ctx: Context, screen: dict) -> dict:
     return view
 
 
-def _render_screen(request: Request, ctx: Context, participant: Participant, *, errors=None, values=None,
+def _render_screen(request: Request, ctx: Context, participant: Row, *, errors=None, values=None,
                    events: str = "", status_code: int = 200):
     screen = participant.plan[participant.step]
     return ctx.render(
@@ -179,7 +197,7 @@ def _render_screen(request: Request, ctx: Context, participant: Participant, *, 
     )
 
 
-def _status_page(request: Request, ctx: Context, participant: Participant):
+def _status_page(request: Request, ctx: Context, participant: Row):
     texts = ctx.study.texts
     if participant.status == "declined":
         return ctx.message(request, "Thank you", texts.declined)
@@ -191,9 +209,8 @@ def _status_page(request: Request, ctx: Context, participant: Participant):
 
 
 @router.get("/study")
-def current_page(request: Request, ctx: ContextDep):
-    with ctx.db.reading() as session:
-        participant = _current(session, ctx, request)
+async def current_page(request: Request, ctx: ContextDep):
+    participant = await ctx.db.run(_read, _current, ctx, request)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
     if participant.condition is None:
@@ -201,38 +218,46 @@ def current_page(request: Request, ctx: ContextDep):
     return _render_screen(request, ctx, participant)
 
 
-@router.post("/study")
-def submit(request: Request, ctx: ContextDep, form: FormDep):
-    step = form.get("step")
-    if not isinstance(step, str) or not step.isdigit() or len(step) > 6:
-        raise HTTPException(400, "The form is missing its step number; reload the page and try again.")
-    step = int(step)
+def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Row, Checked] | None:
+    """Save the answers to screen `step`: None when saved or nothing is left to save, else what to show again."""
     try:
-        with ctx.db.writing() as session:
-            participant = _current(session, ctx, request)
+        with ctx.db.connection(write=True) as connection:
+            participant = _current(connection, ctx, request)
             if participant.status != "started" or participant.plan is None or step < participant.step:
-                return _see_current()  # already answered: a double click or the back button; keep the first
+                return None  # already answered: a double click or the back button; keep the first
             if step > participant.step:
                 raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
             screen = participant.plan[step]
             checked = check_screen(ctx.study, screen, form)
-            if not checked.errors:
-                now = datetime.now(UTC)
-                session.add(Response(
-                    participant_id=participant.id, step=step, kind=screen["kind"], answers=checked.answers,
-                    video_events=checked.video_events, plays=checked.plays, client_ms=checked.client_ms,
-                    server_ms=int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
-                    submitted_at=now,
-                ))
-                if screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]:
-                    participant.attention_failures += 1
-                participant.step = step + 1
-                participant.step_started_at = now
-                if participant.step == len(participant.plan):
-                    participant.status, participant.completed_at = "completed", now
-                return _see_current()
+            if checked.errors:
+                return participant, checked
+            now = datetime.now(UTC)
+            connection.execute(SAVE_RESPONSE, {
+                "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,
+                "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
+                "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+                "submitted_at": now,
+            })
+            done = step + 1 == len(participant.plan)
+            failed = screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]
+            connection.execute(NEXT_STEP, {
+                "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
+                "to_status": "completed" if done else "started", "completed": now if done else None,
+            })
     except IntegrityError:
-        return _see_current()  # the same screen was saved by a concurrent submission
+        pass  # the same screen was saved by a concurrent submission
+    return None
+
+
+@router.post("/study")
+async def submit(request: Request, ctx: ContextDep, form: FormDep):
+    step = form.get("step")
+    if not isinstance(step, str) or not step.isdigit() or len(step) > 6:
+        raise HTTPException(400, "The form is missing its step number; reload the page and try again.")
+    refused = await ctx.db.run(_save, ctx, request, int(step), form)
+    if refused is None:
+        return _see_current()
+    participant, checked = refused
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
     return _render_screen(request, ctx, participant, errors=checked.errors, values=values,
                           events=str(form.get("video_events") or "")[:20000], status_code=422)
@@ -249,7 +274,7 @@ def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
         return ctx.render(request, "choose.html", status_code=422, n_conditions=n,
                           error=f"Please choose a number from 1 to {n}.")
     with ctx.db.writing() as session:
-        participant = _current(session, ctx, request)
+        participant = session.get(Participant, _current(session, ctx, request).id)
         if participant.status == "started" and participant.condition is None:
             participant.condition = int(number) - 1
             _assign_plan(ctx, participant)
@@ -266,7 +291,7 @@ def leave_confirm(request: Request, ctx: ContextDep):
 @router.post("/leave")
 def leave(request: Request, ctx: ContextDep, form: FormDep):
     with ctx.db.writing() as session:
-        participant = _current(session, ctx, request)
+        participant = session.get(Participant, _current(session, ctx, request).id)
         if participant.status == "started":
             participant.status = "returned"
     return _see_current()

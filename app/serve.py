@@ -29,7 +29,7 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
         "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/",
         app.state.context.study.study.id, settings.study_path(), settings.bundle_dir,
         _shown(settings.database_url), host, port)
-    uvicorn.run(app, host=host, port=port, proxy_headers=True, server_header=False)
+    uvicorn.run(app, host=host, port=port, proxy_headers=True, server_header=False, access_log=settings.access_log)
     return 0
 
 

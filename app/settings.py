@@ -27,6 +27,9 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=64 * 1024, ge=1024)
     # Who may show the pages in a frame (Content-Security-Policy frame-ancestors); none by default.
     frame_ancestors: str = "'none'"
+    # SQLite only: "normal" commits survive a crash of the server process, "full" also a power loss (docs/survey.md).
+    sqlite_synchronous: Literal["normal", "full"] = "normal"
+    access_log: bool = True  # uvicorn's line per request, from `foil serve`
     templates_dir: Path = REPO_ROOT / "templates"
     static_dir: Path = REPO_ROOT / "static"
 

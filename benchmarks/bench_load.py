@@ -3,8 +3,8 @@ keep-alive client of tests/robustness/crowd.py) take the paper study at once aga
 clips included, on the same machine as the server.
 
 Four runs, each bounded in time and count:
-  ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves (uvicorn, one
-           process, access log on), hammered by --concurrency clients for --seconds;
+  ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves here (uvicorn, one
+           process, httptools and uvloop, no access log), hammered by --concurrency clients for --seconds;
   burst    --concurrency bots with no pauses, new ones taking the place of those finished, for --seconds: page
            throughput (every non-video request: pages and form submissions) and its ratio to the ceiling;
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
@@ -47,8 +47,10 @@ app = FastAPI()
 @app.get("/")
 async def constant():
     return {"ok": True}
-uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, server_header=False)
+uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, server_header=False,
+            access_log=False)
 """
+SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0"}  # as the constant server: a reverse proxy keeps the access log
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
 
 
@@ -96,7 +98,7 @@ def ceiling(concurrency: int, seconds: float, workdir: Path) -> float:
 def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
     workdir.mkdir()
     return LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{workdir / 'survey.sqlite3'}",
-                      workdir=workdir)
+                      workdir=workdir, env=SURVEY_SETTINGS)
 
 
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float) -> dict:
@@ -187,6 +189,7 @@ def main() -> int:
         study = work / "study.toml"
         study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
 
+        load_burst = os.getloadavg()[0]
         print("ceiling ...", flush=True)
         constant = ceiling(args.concurrency, args.seconds, work)
         print("burst ...", flush=True)
@@ -216,7 +219,7 @@ def main() -> int:
         f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
         f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed sessions/min, "
         f"{fast['errors']} errors); the constant FastAPI endpoint under the same client: {constant:.0f} requests/s; "
-        f"ratio **{fast['pages_per_s'] / constant:.2f}**.",
+        f"ratio **{fast['pages_per_s'] / constant:.2f}** (load average {load_burst:.1f} before the ceiling run).",
         "",
         f"Crash: {args.crash_participants} paced bots; SIGKILL after {killed['killed_at']} acknowledged answers, "
         f"restarted in {killed['restart_s']:.1f} s; {killed['crowd'].completed} of {args.crash_participants} "

@@ -37,9 +37,11 @@ class LiveServer:
     `start` waits until it answers HTTP; `kill` is SIGKILL (a crash: no shutdown, nothing flushed); `stop` asks it
     to shut down. As a context manager it is sure to stop."""
 
-    def __init__(self, *, bundle: Path, study: Path, database_url: str, workdir: Path, admin_password: str = ""):
+    def __init__(self, *, bundle: Path, study: Path, database_url: str, workdir: Path, admin_password: str = "",
+                 env: dict[str, str] | None = None):
         self.bundle, self.study, self.database_url, self.workdir = bundle, study, database_url, Path(workdir)
         self.admin_password = admin_password
+        self.env = env or {}  # FOIL_* settings
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.process: subprocess.Popen | None = None
@@ -47,6 +49,7 @@ class LiveServer:
 
     def start(self, timeout_s: float = 60) -> LiveServer:
         env = {"FOIL_ADMIN_PASSWORD": self.admin_password} if self.admin_password else {}
+        env |= self.env
         with self.log.open("a") as log:
             self.process = foil("serve", "--bundle", str(self.bundle), "--study", str(self.study), "--db",
                                 self.database_url, "--host", "127.0.0.1", "--port", str(self.port),

@@ -182,3 +182,17 @@ expected = "Agree"'''})
     assert kinds[1:5] == ["pairwise", "pairwise", "attention", "pairwise"]
     assert any("Part 1 of 2, a check question" in p for p in seen)
     assert person.attention_failures == 1  # the bot chose the first option, "Disagree"
+
+
+def test_sqlite_synchronous_full_takes_the_thread_pool_path(make_client):
+    client = make_client({"platform": '"mturk"'}, sqlite_synchronous="full")
+    db = client.app.state.context.db
+    if db.engine.dialect.name != "sqlite":
+        return
+    with db.engine.connect() as connection:
+        assert connection.exec_driver_sql("PRAGMA synchronous").scalar() == 2  # FULL
+    assert not db.inline
+    seen = walk(client, start(client, "?workerId=W1&assignmentId=A1&hitId=H1"))
+    assert "FOIL-PAPER-7Q2K" in seen[-1]
+    (person,) = stored(client, Participant)
+    assert person.status == "completed" and len(stored(client, Response)) == len(person.plan)
