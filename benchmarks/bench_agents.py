@@ -2,7 +2,7 @@
 forward and backward passes set. Both comparisons are measured in the same run, interleaved, so load from
 other work affects both sides alike.
 
-    .venv/bin/python benchmarks/bench_agents.py [--seconds 4] [--updates 2] [--rounds 3] [--threads 1]
+    .venv/bin/python benchmarks/bench_agents.py [--seconds 4] [--updates 1] [--rounds 7] [--threads 1]
 """
 
 from __future__ import annotations
@@ -108,8 +108,8 @@ def training_against_bound(config: TrainConfig, updates: int, rounds: int) -> tu
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=4.0, help="seconds per inference measurement")
-    parser.add_argument("--updates", type=int, default=2, help="training updates per round")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds per training measurement")
+    parser.add_argument("--updates", type=int, default=1, help="training updates per round")
+    parser.add_argument("--rounds", type=int, default=7, help="rounds per training measurement")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for inference")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
