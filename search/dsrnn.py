@@ -30,7 +30,6 @@ from torch import Tensor, nn
 from search.policies import Observation, PolicyState
 
 CHECKPOINT_FORMAT = "foil.dsrnn/1"
-HIDDEN_KEYS = ("temporal", "spatial", "node")
 
 
 @dataclass(frozen=True)

@@ -74,3 +74,16 @@ def test_config_files_are_checked(tmp_path):
             load_train_config(path)
     with pytest.raises(FileNotFoundError):
         load_train_config(tmp_path / "missing.toml")
+
+
+def test_foil_train_command_writes_a_run(tmp_path, capsys):
+    from search.cli import main
+
+    config = tmp_path / "train.toml"
+    config.write_text("total_steps = 64\nnum_envs = 4\nnum_steps = 16\n"
+                      "[network]\nmax_humans = 2\nedge_hidden = 8\nnode_hidden = 8\nembed = 4\nattention = 4\n"
+                      "mlp_hidden = 8\n[world]\nhuman_num = 2\n")
+    assert main(["train", "--config", str(config), "--out", str(tmp_path / "run")]) == 0
+    assert "000001.pt" in capsys.readouterr().out
+    assert len(rows(tmp_path / "run")) == 1
+    assert main(["train", "--config", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "run")]) == 2
