@@ -71,7 +71,7 @@ class Bundle:
         ]
 
 
-def _sha256(path: Path) -> str:
+def sha256_file(path: Path) -> str:
     digest = hashlib.sha256()
     with path.open("rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
@@ -107,7 +107,7 @@ def load_bundle(root: str | Path) -> Bundle:
             problems.append(f"clip {clip.id!r}: file {clip.file!r} lies outside the bundle")
         elif not path.is_file():
             problems.append(f"clip {clip.id!r}: file {clip.file!r} is missing")
-        elif _sha256(path) != clip.sha256.lower():
+        elif sha256_file(path) != clip.sha256.lower():
             problems.append(f"clip {clip.id!r}: {clip.file!r} does not match its sha256 (changed after bundling?)")
         else:
             paths[clip.sha256.lower()] = path

@@ -30,6 +30,7 @@ import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from app.bundle import sha256_file
 from search.render import RenderOptions, render, robot_label
 from search.scene import load_scene
 
@@ -246,14 +247,6 @@ def plan(spec: BuildSpec) -> list[ClipJob]:
                                     scheme=spec.schemes[scheme], scenario=scenario, pair=pair, numbers=numbers,
                                     parts=clip_set.parts))
     return jobs
-
-
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _key(inputs: dict) -> str:
