@@ -40,7 +40,7 @@ def crowdnav_reference(config: WorldConfig, seconds: float) -> float:
     for _ in range(n):
         sim = pyrvo.RVOSimulator(config.dt, config.neighbor_dist, config.max_neighbors, config.time_horizon,
                                  config.time_horizon, radius, 1.0)
-        for j in range(n):
+        for _ in range(n):
             sim.add_agent((0.0, 0.0), config.neighbor_dist, config.max_neighbors, config.time_horizon,
                           config.time_horizon, radius, 1.0, (0.0, 0.0))
         sims.append(sim)
