@@ -3,14 +3,17 @@
     .venv/bin/python benchmarks/bench_search.py                 # both parts (a few minutes on 2 cores)
     .venv/bin/python benchmarks/bench_search.py --part speed
     .venv/bin/python benchmarks/bench_search.py --part quality --seeds 10 --budget 40000
+    .venv/bin/python benchmarks/bench_search.py --agents lo,med,hi --budget 100000 --jobs 2   # shipped DS-RNN agents
 
 Speed: coupled steps per second of the whole MCTS loop (selection, snapshot branching, batched rollouts,
 reward, top-K) against the policy-only bound (the agents' act() alone on batches of the same size, measured in
 the same run) and against the AST toolbox's way (replay every branch from reset, one at a time). Run for a
-scripted pair and for a pair of DS-RNN networks (untrained weights: the same cost as trained ones).
+scripted pair and for a pair of DS-RNN agents (`--speed-agents`, default the shipped lo and med; `untrained` for
+two untrained networks of the default size).
 
 Quality: best reward found against simulator steps for MCTS, N-first (the first trajectory, as the paper's
-baseline clip), random search and CEM on every pair of scripted agents and both paper scenarios; mean and 95%
+baseline clip), random search and CEM on every pair of `--agents` (default: the scripted agents) and both paper
+scenarios, in `--jobs` processes (torch at one thread each); MCTS settings with `--set key=value`; mean and 95%
 confidence interval over seeds, and the area under the best-so-far curve (its mean from 20% to 100% of the
 budget). Writes
 benchmarks/search_quality.png and prints Markdown tables.
@@ -19,6 +22,7 @@ benchmarks/search_quality.png and prints Markdown tables.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import os
 import sys
@@ -35,24 +39,36 @@ from search.mcts import MCTSConfig, mcts  # noqa: E402
 from search.policies import load_policy  # noqa: E402
 from search.problem import CoupledProblem  # noqa: E402
 from search.rollout import Tracker  # noqa: E402
+from search.runner import parse_settings  # noqa: E402
 from search.scenarios import load_scenario  # noqa: E402
 
 SCRIPTED = ["goal", "orca", "social_force"]
 SCENARIOS = ["paper-bl-tr", "paper-tl-br"]
+MCTS_CONFIG = MCTSConfig()  # replaced by --set in main() and in every worker process
 SOLVERS = {
-    "mcts": lambda problem, tracker, rng: mcts(problem, tracker, rng),
+    "mcts": lambda problem, tracker, rng: mcts(problem, tracker, rng, MCTS_CONFIG),
     "nfirst": lambda problem, tracker, rng: n_first(problem, tracker, rng),
     "random": lambda problem, tracker, rng: random_search(problem, tracker, rng),
     "cem": lambda problem, tracker, rng: cem(problem, tracker, rng),
 }
 
 
-def dsrnn_pair():
+def one_thread() -> None:
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.set_num_threads(1)
+
+
+def dsrnn_pair(names: str):
+    one_thread()
+    if names != "untrained":
+        return [load_policy(name) for name in names.split(",")]
     import torch
 
     from search.dsrnn import DSRNN, DSRNNPolicy
 
-    torch.set_num_threads(1)
     policies = []
     for seed in (1, 2):
         torch.manual_seed(seed)
@@ -87,10 +103,11 @@ def timed_search(policies, scenario, budget: int, config: MCTSConfig) -> tuple[f
     return (tracker.steps - search.replayed) / elapsed, tracker.steps / elapsed
 
 
-def speed(budget: int) -> None:
+def speed(budget: int, speed_agents: str) -> None:
     scenario = load_scenario("paper-bl-tr")
-    pairs = {"goal vs orca (scripted)": [load_policy("goal"), load_policy("orca")],
-             "DS-RNN vs DS-RNN (untrained weights)": dsrnn_pair()}
+    label = ("DS-RNN vs DS-RNN (untrained weights)" if speed_agents == "untrained"
+             else f"{' vs '.join(speed_agents.split(','))} (DS-RNN)")
+    pairs = {"goal vs orca (scripted)": [load_policy("goal"), load_policy("orca")], label: dsrnn_pair(speed_agents)}
     runs = [  # (label, config, share of the budget)
         ("MCTS tree, snapshots, batch 32 (default)", MCTSConfig(batch=32), 1.0),
         ("MCTS tree, snapshots, batch 1", MCTSConfig(batch=1), 0.25),
@@ -131,25 +148,43 @@ def ci95(values: np.ndarray) -> float:
     return float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values)))
 
 
-def quality(budget: int, seeds: int, plot: Path) -> None:
+def init_worker(settings: dict) -> None:
+    global MCTS_CONFIG
+    one_thread()
+    MCTS_CONFIG = MCTSConfig(**settings)
+
+
+def one_search(pair, scenario_name: str, solver: str, seed: int, budget: int, grid: np.ndarray) -> np.ndarray:
+    problem = CoupledProblem([load_policy(a) for a in pair], load_scenario(scenario_name))
+    tracker = Tracker(budget, 1 if solver == "nfirst" else 30)
+    SOLVERS[solver](problem, tracker, np.random.default_rng(seed))
+    curve = tracker.curve if solver != "nfirst" else [(0, tracker.best)]  # its one clip, shown as is
+    return best_at(curve, grid)
+
+
+def quality(agents: list[str], budget: int, seeds: int, plot: Path, jobs: int) -> None:
+    from concurrent.futures import ProcessPoolExecutor
+
     grid = np.linspace(budget / 5, budget, 9).astype(int)  # batched solvers report nothing before 10% or so
     results = {}  # (pair, scenario, solver) -> (seeds, grid) best-so-far
     started = time.perf_counter()
-    pairs = list(itertools.combinations(SCRIPTED, 2))
-    for pair, scenario_name in itertools.product(pairs, SCENARIOS):
-        scenario = load_scenario(scenario_name)
-        for solver, solve in SOLVERS.items():
-            rows = []
-            for seed in range(seeds):
-                problem = CoupledProblem([load_policy(a) for a in pair], scenario)
-                tracker = Tracker(budget, 1 if solver == "nfirst" else 30)
-                solve(problem, tracker, np.random.default_rng(seed))
-                curve = tracker.curve if solver != "nfirst" else [(0, tracker.best)]  # its one clip, shown as is
-                rows.append(best_at(curve, grid))
-            results[pair, scenario_name, solver] = np.array(rows)
-        print(f"  {'-'.join(pair)} {scenario_name}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
+    pairs = list(itertools.combinations(agents, 2))
+    cases = list(itertools.product(pairs, SCENARIOS))
+    settings = dataclasses.asdict(MCTS_CONFIG)
+    with ProcessPoolExecutor(jobs, initializer=init_worker, initargs=(settings,)) as pool:
+        futures = {(pair, scenario_name, solver, seed):
+                   pool.submit(one_search, pair, scenario_name, solver, seed, budget, grid)
+                   for pair, scenario_name in cases for solver in SOLVERS for seed in range(seeds)}
+        for pair, scenario_name in cases:
+            for solver in SOLVERS:
+                results[pair, scenario_name, solver] = np.array(
+                    [futures[pair, scenario_name, solver, seed].result() for seed in range(seeds)])
+            print(f"  {'-'.join(pair)} {scenario_name}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
 
-    print(f"\n### Search quality (scripted agents, budget {budget:,} simulator steps, {seeds} seeds)\n")
+    changed = {k: v for k, v in settings.items() if v != getattr(MCTSConfig(), k)}
+    print(f"\n### Search quality ({', '.join(agents)}, budget {budget:,} simulator steps, {seeds} seeds"
+          f"{', MCTS ' + str(changed) if changed else ''}; {time.perf_counter() - started:.0f} s on {jobs} "
+          f"processes)\n")
     print("Best reward at the full budget, mean ± 95% CI; AUC = mean best-so-far over the budget "
           "(9 points from 20% to 100% of the budget).\n")
     print("| pair | scenario | " + " | ".join(f"{s} best | {s} AUC" for s in SOLVERS) + " |")
@@ -207,13 +242,21 @@ def main() -> None:
     parser.add_argument("--budget", type=int, default=40_000, help="simulator steps per search (quality)")
     parser.add_argument("--speed-budget", type=int, default=20_000, help="simulator steps per timed search")
     parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--agents", default=",".join(SCRIPTED), help="agents whose every pair is searched (quality)")
+    parser.add_argument("--speed-agents", default="lo,med", help="DS-RNN pair timed (speed), or 'untrained'")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (quality)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="MCTS setting (quality)")
     parser.add_argument("--plot", type=Path, default=Path(__file__).with_name("search_quality.png"))
     args = parser.parse_args()
-    print(f"machine: {os.cpu_count()} cores; numpy {np.__version__}")
+    global MCTS_CONFIG
+    MCTS_CONFIG = MCTSConfig(**parse_settings(MCTSConfig, args.set, "MCTS"))
+    print(f"machine: {os.cpu_count()} cores; numpy {np.__version__}; load average "
+          + " ".join(f"{x:.2f}" for x in os.getloadavg()))
     if args.part in ("speed", "both"):
-        speed(args.speed_budget)
+        speed(args.speed_budget, args.speed_agents)
     if args.part in ("quality", "both"):
-        quality(args.budget, args.seeds, args.plot)
+        quality(args.agents.split(","), args.budget, args.seeds, args.plot, args.jobs)
+        print("load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()))
 
 
 if __name__ == "__main__":
