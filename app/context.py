@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import secrets
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -12,8 +13,11 @@ from jinja2 import Environment
 from app.assignment import Condition
 from app.bundle import Bundle
 from app.database import Database
+from app.security import csrf_token
 from app.settings import Settings
 from app.study import Study
+
+MAX_PAGES = 4096  # distinct cached pages: a study's screens times their orders of answers, well under this
 
 
 @dataclass(frozen=True)
@@ -24,10 +28,25 @@ class Context:
     conditions: list[Condition]
     db: Database
     templates: Environment
+    # Form pages as rendered for any participant, with a placeholder for the session's CSRF token.
+    pages: dict[tuple, list[str]] = field(default_factory=dict, compare=False)
+    csrf_slot: str = field(default_factory=lambda: f"csrf-slot-{secrets.token_hex(16)}", compare=False)
 
     def render(self, request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
         html = self.templates.get_template(name).render(request=request, study=self.study, **context)
         return HTMLResponse(html, status_code=status_code)
+
+    def render_form(self, request: Request, key: tuple, name: str, **context) -> HTMLResponse:
+        """`render` for a page that is the same for everyone who sees it (`key` says which) but for the CSRF token of
+        its form: it is rendered once and then only the session's token is filled in."""
+        pieces = self.pages.get(key)
+        if pieces is None:
+            html = self.templates.get_template(name).render(
+                request=None, study=self.study, csrf_token=lambda _request: self.csrf_slot, **context)
+            if len(self.pages) >= MAX_PAGES:
+                self.pages.clear()
+            pieces = self.pages[key] = html.split(self.csrf_slot)
+        return HTMLResponse(csrf_token(request).join(pieces) if len(pieces) > 1 else pieces[0])
 
     def message(self, request: Request, title: str, text: str, status_code: int = 200, **context):
         return self.render(request, "message.html", status_code=status_code, title=title, text=text, **context)

@@ -57,8 +57,11 @@ def make_engine(url: str, *, synchronous: str = "normal") -> Engine:
 
         @event.listens_for(engine, "begin")
         def _sqlite_begin(connection):
-            immediate = connection.get_execution_options().get("foil_write", False)
-            connection.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
+            options = connection.get_execution_options()
+            if options.get("foil_one_read"):
+                return  # a single statement reads one consistent snapshot by itself
+            # Straight to the driver: a statement through SQLAlchemy costs more than SQLite's work for it.
+            connection.connection.dbapi_connection.execute("BEGIN IMMEDIATE" if options.get("foil_write") else "BEGIN")
 
         return engine
     return create_engine(url, pool_pre_ping=True)
@@ -72,6 +75,7 @@ class Database:
         self.engine = make_engine(url, synchronous=synchronous)
         self._read = sessionmaker(self.engine, expire_on_commit=False)
         self._write_engine = self.engine.execution_options(foil_write=True)
+        self._one_read_engine = self.engine.execution_options(foil_one_read=True)
         self._write = sessionmaker(self._write_engine, expire_on_commit=False)
         sqlite = self.engine.dialect.name == "sqlite"
         self._write_turn = threading.Lock() if sqlite else nullcontext()
@@ -87,8 +91,11 @@ class Database:
     @contextmanager
     def connection(self, *, write: bool = False) -> Iterator[Connection]:
         """A Core connection in a transaction, as `reading()` or `writing()` but without the ORM's session (whose
-        bookkeeping costs more than the few statements of a participant's request)."""
-        engine = self._write_engine if write else self.engine
+        bookkeeping costs more than the few statements of a participant's request).
+
+        Without `write`, the block must run a single statement: on SQLite no transaction is begun for it, since
+        one statement always reads one consistent snapshot (use `reading()` for several)."""
+        engine = self._write_engine if write else self._one_read_engine
         with self._write_turn if write else nullcontext(), engine.begin() as connection:
             yield connection
 

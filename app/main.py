@@ -60,9 +60,8 @@ def create_app(settings: Settings) -> FastAPI:
 
     app = FastAPI(title="Foil survey", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.context = context
+    app.router.routes.extend([*participant_pages.ROUTES, *media.ROUTES])  # first: the pages asked most often
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
-    app.include_router(participant_pages.router)
-    app.include_router(media.router)
     if settings.admin_password is None:
         log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off")
         app.include_router(admin_pages.disabled_router)

@@ -11,12 +11,10 @@ from __future__ import annotations
 import os
 import re
 
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import HTTPException, Request
 from fastapi.responses import FileResponse, Response
+from starlette.routing import Route
 
-from app.context import ContextDep
-
-router = APIRouter()
 CLIP_NAME = re.compile(r"^([0-9a-f]{64})\.mp4$")
 CACHE = "public, max-age=31536000, immutable"  # the name is the content's hash: it never changes
 SIMPLE_RANGE = re.compile(r"^bytes=(\d{1,15})-(\d{0,15})$")
@@ -41,13 +39,15 @@ def _small_range(path, request: Request, headers: dict) -> Response | None:
         **headers, "accept-ranges": "bytes", "content-range": f"bytes {start}-{start + len(body) - 1}/{size}"})
 
 
-@router.api_route("/clips/{name}", methods=["GET", "HEAD"])
-async def clip(name: str, request: Request, ctx: ContextDep):  # no blocking call: no thread pool needed
-    match = CLIP_NAME.match(name)
-    path = ctx.bundle.paths.get(match.group(1)) if match else None
+async def clip(request: Request):  # no blocking call: no thread pool needed
+    match = CLIP_NAME.match(request.path_params["name"])
+    path = request.app.state.context.bundle.paths.get(match.group(1)) if match else None
     if path is None:
         raise HTTPException(404, "No such clip.")
     headers = {"cache-control": CACHE, "etag": f'"{match.group(1)}"'}
     if request.headers.get("if-none-match") == headers["etag"]:
         return Response(status_code=304, headers=headers)
     return _small_range(path, request, headers) or FileResponse(path, media_type="video/mp4", headers=headers)
+
+
+ROUTES = [Route("/clips/{name}", clip, methods=["GET", "HEAD"])]

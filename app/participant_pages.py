@@ -1,32 +1,36 @@
 """The participant's pages. State lives on the server (like oTree): `/study` always shows the participant's
 current screen, so a reload, the back button or reopening the link shows the same page, and a screen can be
-answered only when it is the current one."""
+answered only when it is the current one.
+
+These are plain Starlette routes (`ROUTES`, added first to the app), each taking the request: FastAPI's routing
+and dependency solving cost more per request than most of these pages' own work.
+"""
 
 from __future__ import annotations
 
+import json
 import random
 import re
 import secrets
 from datetime import UTC, datetime
-from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi import HTTPException, Request
 from fastapi.responses import RedirectResponse
 from sqlalchemy import Connection, Row, bindparam, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import FormData
+from starlette.routing import Route
 
 from app.answers import Checked, check_screen
 from app.assignment import condition_for_slot, next_slot
-from app.context import Context, ContextDep
+from app.context import Context
 from app.database import as_utc
 from app.models import Participant, Response
 from app.plan import build_plan
 from app.security import checked_form
 
-router = APIRouter()
-FormDep = Annotated[FormData, Depends(checked_form)]
 # The hot path reads and writes with Core statements built once: the ORM's unit of work costs more than the SQL.
 PARTICIPANT, RESPONSE = Participant.__table__, Response.__table__
 _SHOWN = select(PARTICIPANT.c["id", "code", "status", "condition", "plan", "step", "step_started_at"]).where(
@@ -91,11 +95,11 @@ def _read(find, ctx: Context, *args):
         return find(connection, ctx, *args)
 
 
-@router.get("/")
-async def landing(request: Request, ctx: ContextDep):
+async def landing(request: Request):
+    ctx: Context = request.app.state.context
     info = ctx.study.study
     if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
-        return ctx.render(request, "consent.html", preview=True)
+        return ctx.render_form(request, ("consent.html", True), "consent.html", preview=True)
     if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
         return ctx.message(request, "Please use a computer",
                            "This study needs a laptop or desktop computer. Please open the link there.")
@@ -109,7 +113,7 @@ async def landing(request: Request, ctx: ContextDep):
         request.session["participant"] = known.code
         return _see_current()
     request.session.pop("participant", None)
-    return ctx.render(request, "consent.html", preview=False)
+    return ctx.render_form(request, ("consent.html", False), "consent.html", preview=False)
 
 
 def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
@@ -150,8 +154,9 @@ def _assign_plan(ctx: Context, participant: Participant) -> None:
     participant.step_started_at = datetime.now(UTC)
 
 
-@router.post("/consent")
-async def consent(request: Request, ctx: ContextDep, form: FormDep):
+async def consent(request: Request):
+    ctx: Context = request.app.state.context
+    form = await checked_form(request)
     choice = form.get("choice")
     if choice not in ("agree", "decline"):
         raise HTTPException(400, "Please choose whether you agree to take part.")
@@ -190,10 +195,14 @@ def screen_view(ctx: Context, screen: dict) -> dict:
 def _render_screen(request: Request, ctx: Context, participant: Row, *, errors=None, values=None,
                    events: str = "", status_code: int = 200):
     screen = participant.plan[participant.step]
+    name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
+    if not (errors or values or events):  # as first shown: the same page for everyone at this step of this screen
+        return ctx.render_form(request, (name, participant.step, json.dumps(screen, sort_keys=True)), name,
+                               screen=screen_view(ctx, screen), step=participant.step, errors={}, values={},
+                               video_events="", watched=False)
     return ctx.render(
-        request, "instructions.html" if screen["kind"] == "instructions" else "screen.html",
-        status_code=status_code, screen=screen_view(ctx, screen), step=participant.step, errors=errors or {},
-        values=values or {}, video_events=events, watched='"ended"' in events,
+        request, name, status_code=status_code, screen=screen_view(ctx, screen), step=participant.step,
+        errors=errors or {}, values=values or {}, video_events=events, watched='"ended"' in events,
     )
 
 
@@ -208,8 +217,8 @@ def _status_page(request: Request, ctx: Context, participant: Row):
     return ctx.render(request, "complete.html", completion=ctx.study.completion)
 
 
-@router.get("/study")
-async def current_page(request: Request, ctx: ContextDep):
+async def current_page(request: Request):
+    ctx: Context = request.app.state.context
     participant = await ctx.db.run(_read, _current, ctx, request)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
@@ -249,8 +258,9 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Ro
     return None
 
 
-@router.post("/study")
-async def submit(request: Request, ctx: ContextDep, form: FormDep):
+async def submit(request: Request):
+    ctx: Context = request.app.state.context
+    form = await checked_form(request)
     step = form.get("step")
     if not isinstance(step, str) or not step.isdigit() or len(step) > 6:
         raise HTTPException(400, "The form is missing its step number; reload the page and try again.")
@@ -263,9 +273,13 @@ async def submit(request: Request, ctx: ContextDep, form: FormDep):
                           events=str(form.get("video_events") or "")[:20000], status_code=422)
 
 
-@router.post("/condition")
-def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
+async def choose_condition(request: Request):
     """The paper's self-selected assignment: the participant picks a number from 1 to N."""
+    form = await checked_form(request)
+    return await run_in_threadpool(_choose_condition, request, request.app.state.context, form)
+
+
+def _choose_condition(request: Request, ctx: Context, form: FormData):
     number = form.get("number")
     n = len(ctx.conditions)
     if not isinstance(number, str) or not number.isdigit() or not 1 <= int(number) <= n:
@@ -281,17 +295,32 @@ def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
     return _see_current()
 
 
-@router.get("/leave")
-def leave_confirm(request: Request, ctx: ContextDep):
+def leave_confirm(request: Request):
+    ctx: Context = request.app.state.context
     with ctx.db.reading() as session:
         _current(session, ctx, request)
     return ctx.render(request, "leave.html")
 
 
-@router.post("/leave")
-def leave(request: Request, ctx: ContextDep, form: FormDep):
+async def leave(request: Request):
+    await checked_form(request)
+    return await run_in_threadpool(_leave, request, request.app.state.context)
+
+
+def _leave(request: Request, ctx: Context):
     with ctx.db.writing() as session:
         participant = session.get(Participant, _current(session, ctx, request).id)
         if participant.status == "started":
             participant.status = "returned"
     return _see_current()
+
+
+ROUTES = [
+    Route("/", landing, methods=["GET"]),
+    Route("/consent", consent, methods=["POST"]),
+    Route("/study", current_page, methods=["GET"]),
+    Route("/study", submit, methods=["POST"]),
+    Route("/condition", choose_condition, methods=["POST"]),
+    Route("/leave", leave_confirm, methods=["GET"]),  # a plain function: Starlette runs it in the thread pool
+    Route("/leave", leave, methods=["POST"]),
+]
