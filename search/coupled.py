@@ -154,6 +154,20 @@ class CoupledSimulator:
         self.state = snapshot.state.copy()
         self.policy_states = [{key: value.copy() for key, value in s.items()} for s in snapshot.policy_states]
 
+    def assign(self, index, snapshot: Snapshot) -> None:
+        """Overwrite the coupled scenarios ``index`` with a snapshot's (as many rows; the batch keeps its size)."""
+        index = np.asarray(index, dtype=np.int64).reshape(-1)
+        if index.size != snapshot.batch:
+            raise ValueError(f"{index.size} rows to overwrite, but the snapshot holds {snapshot.batch}")
+        if self.shared_crowd:
+            worlds = index
+        else:
+            worlds = np.concatenate([k * self.batch + index for k in range(self.n_agents)])
+        self.state.assign(worlds, snapshot.state)
+        for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
+            for key, value in new.items():
+                state[key][index] = value
+
 
 @dataclass
 class Trajectory:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from search.problem import Problem
-from search.rollout import Tracker, rollout
+from search.rollout import Tracker
 
 
 @dataclass(frozen=True)
@@ -112,19 +112,18 @@ class MCTS:
         snapshot = problem.snapshot() if config.branch == "snapshot" else None
         self.root = self.start = StateNode(None, 0, 0.0, False, snapshot)
         self.replayed = 0  # simulator steps spent replaying prefixes from reset (branch="replay")
+        self.rollouts = 0  # iterations finished (backed up)
+        self.rollout_steps = 0  # simulator steps they took
+        self.batch_rows = 0  # rows stepped, summed over batched steps (batch_rows / batch_steps: mean batch)
+        self.batch_steps = 0
 
     def run(self) -> None:
-        if self.config.mode == "tree":
-            while not self.tracker.exhausted:
-                self.iterate()
-            return
-        while not self.root.terminal:
-            until = self.tracker.steps + self.tracker.remaining / max(self._expected_steps_left(), 1)
-            while self.tracker.steps < until and not self.tracker.exhausted:
-                self.iterate()
-            if self.tracker.exhausted:
-                return
-            self.commit()
+        self.until = self._commit_point() if self.config.mode == "receding" else math.inf
+        Rollouts(self).run()
+
+    def _commit_point(self) -> float:
+        """Receding mode: the step count after which the root commits (its share of the remaining budget)."""
+        return self.tracker.steps + self.tracker.remaining / max(self._expected_steps_left(), 1)
 
     def _expected_steps_left(self) -> int:
         """Steps from the root to the end of the best trajectory so far (the horizon if none yet)."""
@@ -132,12 +131,24 @@ class MCTS:
         length = ranked[0].actions.shape[0] if ranked else self.problem.horizon
         return length - self.root.depth
 
-    def commit(self) -> None:
-        """Move the root to the child of its best action and forget the other branches."""
-        done = [a for a in self.root.children if a.child is not None]
+    def maybe_commit(self) -> None:
+        """Receding mode: once the root's share of the budget is spent and one of its actions has a value, move
+        the root to the child of its best action and forget the other branches (iterations still running in
+        them finish and count, but no longer steer the search)."""
+        if self.tracker.steps < self.until or self.root.terminal:
+            return
+        done = [a for a in self.root.children if a.child is not None and a.completed]
+        if not done:
+            return
         best = max(done, key=lambda a: a.q(self.config.backup))
         self.root.children = [best]
         self.root = best.child
+        self.until = self._commit_point()
+
+    @property
+    def open(self) -> bool:
+        """Whether new iterations may start: budget left, and (receding) a root that does not end the search."""
+        return not self.tracker.exhausted and not self.root.terminal
 
     def select(self) -> list[ActionNode]:
         """Descend from the root to an action whose child is new or in flight, counting visits."""
@@ -158,9 +169,13 @@ class MCTS:
             node = action.child
 
     def _uct(self, node: StateNode, actions: list[ActionNode]) -> ActionNode:
-        log_n = math.log(node.visits)
-        scores = [a.q(self.config.backup) + self.config.exploration * math.sqrt(log_n / a.visits) for a in actions]
-        return actions[int(np.argmax(scores))]
+        log_n, c, backup = math.log(node.visits), self.config.exploration, self.config.backup
+        best, best_score = actions[0], -math.inf
+        for action in actions:  # the first of equal scores wins
+            score = action.q(backup) + c * math.sqrt(log_n / action.visits)
+            if score > best_score:
+                best, best_score = action, score
+        return best
 
     @staticmethod
     def backup(path: list[ActionNode], value: float) -> None:
@@ -169,46 +184,9 @@ class MCTS:
             action.total += value
             action.best = max(action.best, value)
 
-    def iterate(self) -> None:
-        """One batch of iterations: select leaves, expand them with one batched step, roll them out together."""
-        paths = [self.select() for _ in range(self.tracker.affordable(self.config.batch))]
-        parents = [path[-1].parent for path in paths]
-        self.problem.restore(self.problem.concat([self._state_of(node) for node in parents]))
-
-        count, repeat = len(paths), self.config.repeat
-        actions = np.zeros((count, self.problem.horizon, *self.problem.action_shape))
-        for i, node in enumerate(parents):
-            if node.depth:
-                actions[i, : node.depth] = actions_to(node)
-        lengths = np.array([node.depth for node in parents], dtype=np.int64)
-        returns = np.array([node.value for node in parents])
-        start = lengths.copy()
-        held = np.array([path[-1].action for path in paths])  # the new edges' actions, then the rollouts'
-
-        def choose(rows: np.ndarray, depth: np.ndarray) -> np.ndarray:
-            renew = rows[(depth - start[rows] >= repeat) & ((depth - start[rows]) % repeat == 0)]
-            held[renew] = self.problem.prior.sample(self.rng, renew.size)
-            return held[rows]
-
-        def add_children(taken: int, rows: np.ndarray, terminal: np.ndarray) -> None:
-            if taken > repeat:
-                return
-            for i, row in enumerate(rows.tolist()):
-                action = paths[row][-1]
-                if action.child is None and (terminal[i] or taken == repeat):
-                    keep = self.config.branch == "snapshot" and not terminal[i]
-                    snapshot = self.problem.snapshot([i]) if keep else None
-                    action.child = StateNode(action, int(lengths[row]), float(returns[row]), bool(terminal[i]),
-                                             snapshot)
-
-        rollout(self.problem, self.tracker, actions, lengths, returns, choose,
-                max_steps=repeat + self.config.rollout_depth if self.config.rollout_depth else None,
-                on_step=add_children)
-        for path, value in zip(paths, returns.tolist(), strict=True):
-            self.backup(path, value)
-
-    def _state_of(self, node: StateNode):
-        """The node's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset."""
+    def state_of(self, node: StateNode):
+        """The node's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
+        which leaves the problem holding that one row."""
         if node.snapshot is not None:
             return node.snapshot
         self.problem.reset(1)
@@ -218,6 +196,116 @@ class MCTS:
             self.replayed += 1
         return self.problem.snapshot()
 
+
+class Rollouts:
+    """The iterations in flight: up to ``batch`` rows stepped together. Each row expands its new edge (the edge's
+    action held ``repeat`` steps, then a tree node with its snapshot) and rolls out with prior actions renewed
+    every ``repeat`` steps. When rows end, their values are backed up at once and new iterations are selected
+    into the freed rows, so the policies keep seeing a full batch until the budget runs out."""
+
+    def __init__(self, search: MCTS):
+        self.search = search
+        problem, width = search.problem, search.config.batch
+        self.actions = np.zeros((width, problem.horizon, *problem.action_shape))  # from the initial state
+        self.lengths = np.zeros(width, dtype=np.int64)
+        self.returns = np.zeros(width)
+        self.start = np.zeros(width, dtype=np.int64)  # depth of the node each iteration expands
+        self.held = np.zeros((width, *problem.action_shape))  # the new edge's action, then the rollout's
+        self.paths: list[list[ActionNode]] = [[] for _ in range(width)]
+        self.rows = np.zeros(0, dtype=np.int64)  # the slot of each simulator row, in row order
+        self.free = list(range(width))  # slots without an iteration, lowest first
+
+    def run(self) -> None:
+        search = self.search
+        self._fill(np.zeros(0, dtype=np.int64))
+        while self.rows.size:
+            terminal, ended = self._step()
+            if not ended.any():
+                continue
+            ended = np.flatnonzero(ended)
+            for i in ended.tolist():
+                slot = int(self.rows[i])
+                if terminal[i]:
+                    search.tracker.finish(self.returns[slot], self.actions[slot, : self.lengths[slot]])
+                search.backup(self.paths[slot], float(self.returns[slot]))
+                search.rollouts += 1
+                search.rollout_steps += int(self.lengths[slot] - self.start[slot])
+                self.free.append(slot)
+            self.free.sort()
+            search.maybe_commit()
+            self._fill(ended)
+
+    def _step(self) -> tuple[np.ndarray, np.ndarray]:
+        """One batched step of every row; new tree nodes at the end of their edge. Returns (terminal, ended)."""
+        search = self.search
+        config, problem, rows = search.config, search.problem, self.rows
+        depth = self.lengths[rows]
+        taken = depth - self.start[rows]
+        renew = (taken >= config.repeat) & (taken % config.repeat == 0)
+        if renew.any():
+            self.held[rows[renew]] = problem.prior.sample(search.rng, int(renew.sum()))
+        step_actions = self.held[rows]
+        reward, terminal = problem.step(step_actions)
+        search.tracker.count(rows.size)
+        search.batch_rows += rows.size
+        search.batch_steps += 1
+        self.actions[rows, depth] = step_actions
+        self.lengths[rows] = depth + 1
+        self.returns[rows] += reward
+        taken += 1
+        for i in np.flatnonzero((taken <= config.repeat) & (terminal | (taken == config.repeat))).tolist():
+            slot = int(rows[i])
+            action = self.paths[slot][-1]
+            if action.child is None:  # another row may have expanded the same edge first
+                keep = config.branch == "snapshot" and not terminal[i]
+                action.child = StateNode(action, int(self.lengths[slot]), float(self.returns[slot]),
+                                         bool(terminal[i]), problem.snapshot([i]) if keep else None)
+        ended = terminal | (taken >= config.repeat + config.rollout_depth) if config.rollout_depth else terminal
+        return terminal, ended
+
+    def _fill(self, ended: np.ndarray) -> None:
+        """Start new iterations in the simulator rows ``ended`` (their iterations are over) while the budget is
+        expected to allow them (at the mean iteration length so far; a full batch at the start); drop the rest."""
+        search, problem = self.search, self.search.problem
+        running = np.ones(self.rows.size, dtype=bool)
+        running[ended] = False
+        if search.rollouts:
+            mean = search.rollout_steps / search.rollouts
+            rows = self.rows[running]
+            spare = search.tracker.remaining - np.maximum(mean - (self.lengths[rows] - self.start[rows]), 1).sum()
+        else:
+            mean, spare = 1.0, math.inf
+        saved = problem.snapshot() if self.rows.size and search.config.branch == "replay" else None
+        new, snapshots = [], []
+        while self.free and spare > 0 and search.open:
+            path = search.select()
+            node = path[-1].parent
+            snapshots.append(search.state_of(node))  # a replay from reset replaces the batch (saved above)
+            slot = self.free.pop(0)
+            self.paths[slot] = path
+            if node.depth:
+                self.actions[slot, : node.depth] = actions_to(node)
+            self.lengths[slot] = self.start[slot] = node.depth
+            self.returns[slot] = node.value
+            self.held[slot] = path[-1].action
+            new.append(slot)
+            spare -= max(mean, 1.0)
+        if saved is not None:
+            problem.restore(saved)
+        if not self.rows.size:  # the first batch
+            self.rows = np.array(new, dtype=np.int64)
+            problem.restore(problem.concat(snapshots))
+            return
+        reuse = ended[: len(new)]  # new iterations take the ended rows' places, in order
+        if new:
+            problem.assign(reuse, problem.concat(snapshots))
+            self.rows[reuse] = new
+        if len(new) < ended.size:  # near the end of the budget: the batch shrinks
+            running[reuse] = True
+            keep = np.flatnonzero(running)
+            self.rows = self.rows[keep]
+            if keep.size:
+                problem.restore(problem.snapshot(keep))
 
 def mcts(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: MCTSConfig | None = None) -> MCTS:
     """Search until the tracker's budget is spent; returns the search (its tree, for inspection)."""

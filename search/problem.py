@@ -44,6 +44,9 @@ class Problem(Protocol):
     def concat(self, snapshots: list) -> Any:
         """One snapshot holding the rows of several, in order."""
 
+    def assign(self, index, snapshot) -> None:
+        """Overwrite rows ``index`` with a snapshot's rows (as many); the other rows go on untouched."""
+
 
 class CoupledProblem:
     """The agents under comparison in one coupled simulator, scored by the divergence reward."""
@@ -78,6 +81,9 @@ class CoupledProblem:
 
     def restore(self, snapshot: Snapshot) -> None:
         self.sim.restore(snapshot)
+
+    def assign(self, index, snapshot: Snapshot) -> None:
+        self.sim.assign(index, snapshot)
 
     def concat(self, snapshots: list[Snapshot]) -> Snapshot:
         return concat_snapshots(snapshots)

@@ -40,3 +40,6 @@ class LockProblem:
 
     def concat(self, snapshots):
         return np.concatenate(snapshots)
+
+    def assign(self, index, snapshot) -> None:
+        self.depth[np.asarray(index)] = snapshot
