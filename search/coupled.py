@@ -111,7 +111,7 @@ class CoupledSimulator:
             world_action = np.tile(env_action, (self.n_agents, 1, 1))
             robot_action = actions.transpose(1, 0, 2).reshape(-1, 1, 2)
         crowd_action = None if self.config.env_action_mode == "observation" else world_action
-        reward = world.step(self.state, self.config, robot_action, crowd_action)
+        reward = world.advance(self.state, self.config, robot_action, crowd_action)  # checked above
         done = self._gather(self.state.done)
         return CoupledStep(
             robot_actions=actions,

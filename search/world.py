@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 
+import numba
 import numpy as np
 
 from search.orca import crowd_velocities, orca_velocities
@@ -278,63 +279,95 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
     return np.where(active[..., None], velocity, 0.0)
 
 
-def segment_clearance(rel_start: np.ndarray, rel_end: np.ndarray) -> np.ndarray:
-    """Smallest distance to the origin along straight segments from rel_start to rel_end (..., 2)."""
-    seg = rel_end - rel_start
-    seg_sq = np.sum(seg * seg, axis=-1)
-    t = np.clip(np.divide(-np.sum(rel_start * seg, axis=-1), seg_sq, out=np.zeros_like(seg_sq),
-                          where=seg_sq > 0), 0.0, 1.0)
-    closest = rel_start + t[..., None] * seg
-    return np.linalg.norm(closest, axis=-1)
-
-
 def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) -> np.ndarray:
     """Advance every world by one step in place and return each robot's reward (W, R).
 
     ``env_action`` is None (an unperturbed crowd) or (W, n, 2)/(W, 2n) within the configured bound; in
     ``observation`` mode it does not touch the world (the robots' observation applies it).
     """
-    w = state.n_worlds
-    action = None if env_action is None else check_env_action(env_action, w, config)
-    new_human_vel = human_velocities(state, config, action)
+    action = None if env_action is None else check_env_action(env_action, state.n_worlds, config)
+    return advance(state, config, robot_action, action)
+
+
+def advance(state: WorldState, config: WorldConfig, robot_action, env_action: np.ndarray | None) -> np.ndarray:
+    """``step`` for an environment action that ``check_env_action`` has already returned (or None)."""
+    new_human_vel = human_velocities(state, config, env_action)
     new_robot_vel = robot_velocities(state, config, robot_action)
-
-    rel_start = state.robot_pos[:, :, None, :] - state.human_pos[:, None, :, :]  # (W, R, n, 2)
-    prev_goal_dist = np.linalg.norm(state.robot_goal - state.robot_pos, axis=-1)
-    active = ~state.done
-
-    move = new_robot_vel * config.dt
-    state.robot_pos = state.robot_pos + move
+    fresh = {name: np.empty_like(getattr(state, name)) for name in _MOVED}
+    reward = np.empty(state.done.shape)
+    _move_and_judge(state.robot_pos, state.robot_goal, state.human_pos, state.human_radius, new_robot_vel,
+                    new_human_vel, state.time, state.done, state.outcome, state.event_time, state.path_length,
+                    state.min_clearance, float(config.dt), float(config.robot_radius), float(config.time_limit),
+                    float(config.discomfort_dist), float(config.discomfort_factor), float(config.progress_factor),
+                    float(config.success_reward), float(config.collision_penalty), *fresh.values(), reward)
+    for name, array in fresh.items():  # new arrays, as numpy arithmetic would give: nobody's view changes
+        setattr(state, name, array)
     state.robot_vel = new_robot_vel
-    state.path_length = state.path_length + np.linalg.norm(move, axis=-1)
-    state.human_pos = state.human_pos + new_human_vel * config.dt
     state.human_vel = new_human_vel
-    state.time = state.time + config.dt
-
-    # Judge the move itself: closest approach to each human along the relative motion of this step.
-    rel_end = state.robot_pos[:, :, None, :] - state.human_pos[:, None, :, :]
-    if config.human_num:
-        surface = segment_clearance(rel_start, rel_end) - state.human_radius[:, None, :] - config.robot_radius
-        clearance = surface.min(axis=-1)
-    else:
-        clearance = np.full((w, state.n_robots), np.inf)
-    goal_dist = np.linalg.norm(state.robot_goal - state.robot_pos, axis=-1)
-    collision = active & (clearance < 0)
-    success = active & ~collision & (goal_dist < config.robot_radius)
-    timeout = active & ~collision & ~success & (state.time[:, None] >= config.time_limit - 1e-9)
-    discomfort = clearance < config.discomfort_dist
-
-    reward = np.where(discomfort, (clearance - config.discomfort_dist) * config.discomfort_factor * config.dt,
-                      config.progress_factor * (prev_goal_dist - goal_dist))
-    reward = np.where(timeout, 0.0, reward)
-    reward = np.where(success, config.success_reward, reward)
-    reward = np.where(collision, config.collision_penalty, reward)
-    reward = np.where(active, reward, 0.0)
-
-    state.min_clearance = np.where(active, np.minimum(state.min_clearance, clearance), state.min_clearance)
-    finished = collision | success | timeout
-    state.outcome = np.where(collision, COLLISION, np.where(success, SUCCESS, np.where(
-        timeout, TIMEOUT, state.outcome))).astype(np.int8)
-    state.event_time = np.where(finished, state.time[:, None], state.event_time)
-    state.done = state.done | finished
     return reward
+
+
+_MOVED = ("robot_pos", "human_pos", "time", "done", "outcome", "event_time", "path_length", "min_clearance")
+
+
+@numba.njit(cache=True, nogil=True)
+def _move_and_judge(robot_pos, robot_goal, human_pos, human_radius, robot_vel, human_vel, time, done, outcome,
+                    event_time, path_length, min_clearance, dt, robot_radius, time_limit, discomfort_dist,
+                    discomfort_factor, progress_factor, success_reward, collision_penalty, new_robot_pos,
+                    new_human_pos, new_time, new_done, new_outcome, new_event_time, new_path_length,
+                    new_min_clearance, reward):
+    """Robots move, then humans, time advances; each robot's move is judged (collision, success, timeout) and
+    rewarded. Every float operation is numpy's ``step`` of the same formulas, in the same order, so the
+    results are bit-identical to it: closest approach along the relative motion of this step, surface distance,
+    discomfort below ``discomfort_dist``, otherwise progress towards the goal."""
+    worlds, robots, humans = robot_pos.shape[0], robot_pos.shape[1], human_pos.shape[1]
+    threshold = time_limit - 1e-9
+    for w in range(worlds):
+        for h in range(humans):
+            new_human_pos[w, h, 0] = human_pos[w, h, 0] + human_vel[w, h, 0] * dt
+            new_human_pos[w, h, 1] = human_pos[w, h, 1] + human_vel[w, h, 1] * dt
+        now = time[w] + dt
+        new_time[w] = now
+        for r in range(robots):
+            x, y = robot_pos[w, r, 0], robot_pos[w, r, 1]
+            gx, gy = robot_goal[w, r, 0] - x, robot_goal[w, r, 1] - y
+            prev_goal_dist = np.sqrt(gx * gx + gy * gy)
+            mx, my = robot_vel[w, r, 0] * dt, robot_vel[w, r, 1] * dt
+            nx, ny = x + mx, y + my
+            new_robot_pos[w, r, 0], new_robot_pos[w, r, 1] = nx, ny
+            new_path_length[w, r] = path_length[w, r] + np.sqrt(mx * mx + my * my)
+            clearance = np.inf
+            for h in range(humans):
+                ax, ay = x - human_pos[w, h, 0], y - human_pos[w, h, 1]
+                sx, sy = (nx - new_human_pos[w, h, 0]) - ax, (ny - new_human_pos[w, h, 1]) - ay
+                seg_sq = sx * sx + sy * sy
+                t = 0.0
+                if seg_sq > 0:
+                    t = min(max(-(ax * sx + ay * sy) / seg_sq, 0.0), 1.0)
+                cx, cy = ax + t * sx, ay + t * sy
+                surface = np.sqrt(cx * cx + cy * cy) - human_radius[w, h] - robot_radius
+                clearance = min(clearance, surface)
+            gx, gy = robot_goal[w, r, 0] - nx, robot_goal[w, r, 1] - ny
+            goal_dist = np.sqrt(gx * gx + gy * gy)
+            active = not done[w, r]
+            collision = active and clearance < 0
+            success = active and not collision and goal_dist < robot_radius
+            timeout = active and not collision and not success and now >= threshold
+            if not active:
+                value = 0.0
+            elif collision:
+                value = collision_penalty
+            elif success:
+                value = success_reward
+            elif timeout:
+                value = 0.0
+            elif clearance < discomfort_dist:
+                value = (clearance - discomfort_dist) * discomfort_factor * dt
+            else:
+                value = progress_factor * (prev_goal_dist - goal_dist)
+            reward[w, r] = value
+            new_min_clearance[w, r] = min(min_clearance[w, r], clearance) if active else min_clearance[w, r]
+            finished = collision or success or timeout
+            new_outcome[w, r] = 2 if collision else 1 if success else 3 if timeout else outcome[w, r]
+            new_event_time[w, r] = now if finished else event_time[w, r]
+            new_done[w, r] = done[w, r] or finished

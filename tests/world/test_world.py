@@ -203,3 +203,65 @@ def test_invalid_config_is_explained():
         WorldConfig(env_action_mode="push")
     with pytest.raises(ValueError, match="unknown world setting"):
         WorldConfig.from_dict({"humans": 3})
+
+
+def numpy_move_and_judge(state, config, robot_vel, human_vel):
+    """The move and its judgement written with numpy arrays (the formulas world.step implements): the reference
+    the compiled loop must match bit for bit."""
+    rel_start = state.robot_pos[:, :, None, :] - state.human_pos[:, None, :, :]
+    prev_goal_dist = np.linalg.norm(state.robot_goal - state.robot_pos, axis=-1)
+    active = ~state.done
+    move = robot_vel * config.dt
+    robot_pos = state.robot_pos + move
+    path_length = state.path_length + np.linalg.norm(move, axis=-1)
+    human_pos = state.human_pos + human_vel * config.dt
+    time = state.time + config.dt
+    rel_end = robot_pos[:, :, None, :] - human_pos[:, None, :, :]
+    seg = rel_end - rel_start
+    seg_sq = np.sum(seg * seg, axis=-1)
+    t = np.clip(np.divide(-np.sum(rel_start * seg, axis=-1), seg_sq, out=np.zeros_like(seg_sq), where=seg_sq > 0),
+                0.0, 1.0)
+    surface = np.linalg.norm(rel_start + t[..., None] * seg, axis=-1) - state.human_radius[:, None, :] \
+        - config.robot_radius
+    clearance = surface.min(axis=-1)
+    goal_dist = np.linalg.norm(state.robot_goal - robot_pos, axis=-1)
+    collision = active & (clearance < 0)
+    success = active & ~collision & (goal_dist < config.robot_radius)
+    timeout = active & ~collision & ~success & (time[:, None] >= config.time_limit - 1e-9)
+    reward = np.where(clearance < config.discomfort_dist,
+                      (clearance - config.discomfort_dist) * config.discomfort_factor * config.dt,
+                      config.progress_factor * (prev_goal_dist - goal_dist))
+    reward = np.where(timeout, 0.0, reward)
+    reward = np.where(success, config.success_reward, reward)
+    reward = np.where(collision, config.collision_penalty, reward)
+    reward = np.where(active, reward, 0.0)
+    finished = collision | success | timeout
+    return {
+        "reward": reward, "robot_pos": robot_pos, "human_pos": human_pos, "time": time, "path_length": path_length,
+        "min_clearance": np.where(active, np.minimum(state.min_clearance, clearance), state.min_clearance),
+        "outcome": np.where(collision, COLLISION, np.where(success, SUCCESS, np.where(timeout, TIMEOUT,
+                                                                                       state.outcome))),
+        "event_time": np.where(finished, time[:, None], state.event_time), "done": state.done | finished,
+    }
+
+
+@pytest.mark.parametrize("kinematics, visible", [("holonomic", False), ("unicycle", False), ("holonomic", True)])
+def test_the_compiled_step_equals_the_numpy_formulas_bit_for_bit(kinematics, visible):
+    config = WorldConfig(kinematics=kinematics, robot_visible=visible, time_limit=8.0)
+    rng = np.random.default_rng(11)
+    state = sample_training_states(config, rng, 24)
+    outcomes = set()
+    for _ in range(40):
+        toward_goal = (state.robot_goal - state.robot_pos) * rng.uniform(0.2, 2.0, state.robot_pos.shape[:2])[..., None]
+        action = toward_goal + rng.normal(0.0, 0.3, state.robot_pos.shape)
+        env_action = rng.uniform(-0.25, 0.25, (24, config.human_num, 2))
+        before = state.copy()
+        human_vel = world.human_velocities(before, config, env_action)
+        robot_vel = world.robot_velocities(before, config, action)
+        expected = numpy_move_and_judge(before, config, robot_vel, human_vel)
+        reward = world.step(state, config, action, env_action)
+        assert np.array_equal(reward, expected.pop("reward"))
+        for name, value in expected.items():
+            assert np.array_equal(getattr(state, name), value, equal_nan=True), name
+        outcomes.update(state.outcome.ravel().tolist())
+    assert {RUNNING, COLLISION, TIMEOUT} <= outcomes and (SUCCESS in outcomes or kinematics == "unicycle")
