@@ -12,7 +12,6 @@ from fastapi.staticfiles import StaticFiles
 from jinja2 import Environment, FileSystemLoader
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
-from starlette.middleware.sessions import SessionMiddleware
 
 from app import admin_pages, analysis_pages, media, participant_pages
 from app.answer_table import remember_study
@@ -20,7 +19,13 @@ from app.assignment import conditions
 from app.bundle import check_study_against_bundle, load_bundle
 from app.context import Context
 from app.database import Database, check_migrated
-from app.security import BodyLimitMiddleware, SecurityHeadersMiddleware, csrf_token, stored_secret
+from app.security import (
+    BodyLimitMiddleware,
+    SecurityHeadersMiddleware,
+    SessionMiddleware,
+    csrf_token,
+    stored_secret,
+)
 from app.settings import Settings
 from app.study import load_study
 
