@@ -25,6 +25,7 @@ from search.scenarios import sample_training_states
 from search.train import TrainConfig, train
 from search.world import WorldConfig
 
+CROWDNAV_ENV_STEPS = 922  # CrowdNav_DSRNN's logged training speed: 12 processes and a GPU
 SHIPPED = NetworkConfig(edge_hidden=64, node_hidden=64, embed=32, attention=32, mlp_hidden=64)
 
 
@@ -71,14 +72,15 @@ def network_bound(config: TrainConfig, updates: int) -> float:
 
     def update():
         hidden = net.initial_state(n)
-        with torch.no_grad():
+        with torch.no_grad(), config.autocast():
             for i in range(t + 1):
                 _, _, hidden = net(*(x[i % t: i % t + 1] for x in sequence), starts[:1], hidden)
         for _ in range(config.epochs):
             for k in range(config.minibatches):
                 idx = slice(k * per_batch, (k + 1) * per_batch)
-                mean, value, _ = net(*(x[:, idx] for x in sequence), starts[:, idx],
-                                     [h[idx] for h in net.initial_state(n)])
+                with config.autocast():
+                    mean, value, _ = net(*(x[:, idx] for x in sequence), starts[:, idx],
+                                         [h[idx] for h in net.initial_state(n)])
                 net.zero_grad()
                 (mean.square().mean() + value.square().mean()).backward()
 
@@ -111,30 +113,33 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=1, help="training updates per round")
     parser.add_argument("--rounds", type=int, default=7, help="rounds per training measurement")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for inference")
+    parser.add_argument("--skip-inference", action="store_true", help="measure training only")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
     print(f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, torch {torch.__version__}, "
           f"load average {load:.1f}\n")
 
-    print(f"Inference (torch threads {torch.get_num_threads()}), agent-steps/s:\n")
-    print("| network | batch | policy.act | bare layers | fraction |\n|---|---:|---:|---:|---:|")
-    for label, config in (("full size", NetworkConfig()), ("shipped (small)", SHIPPED)):
-        for batch in (1, 64, 256):
-            policy, bare = inference(config, batch, args.seconds)
-            print(f"| {label} | {batch} | {policy:,.0f} | {bare:,.0f} | {policy / bare:.2f} |", flush=True)
+    if not args.skip_inference:
+        print(f"Inference (torch threads {torch.get_num_threads()}), agent-steps/s:\n")
+        print("| network | batch | policy.act | bare layers | fraction |\n|---|---:|---:|---:|---:|")
+        for label, config in (("full size", NetworkConfig()), ("shipped (small)", SHIPPED)):
+            for batch in (1, 64, 256):
+                policy, bare = inference(config, batch, args.seconds)
+                print(f"| {label} | {batch} | {policy:,.0f} | {bare:,.0f} | {policy / bare:.2f} |", flush=True)
 
     print("\nTraining, env-steps/s:\n")
-    print("| network | worlds x steps | threads | trainer | network-pass bound | fraction |\n"
-          "|---|---|---:|---:|---:|---:|")
-    shipped_run = TrainConfig(num_envs=32, learning_rate=3e-4, network=SHIPPED)
-    for label, config in (("full size", TrainConfig()), ("full size", TrainConfig(threads=2)),
-                          ("shipped (small)", shipped_run)):
+    print("| network | worlds x steps | precision | threads | trainer | network-pass bound | fraction | "
+          "trainer / 922 |\n|---|---|---|---:|---:|---:|---:|---:|")
+    shipped_run = TrainConfig(num_envs=32, learning_rate=3e-4, network=SHIPPED, precision="float32")
+    runs = [("full size", TrainConfig(precision=precision, threads=threads))
+            for precision in ("bfloat16", "float32") for threads in (1, 2)] + [("shipped (small)", shipped_run)]
+    for label, config in runs:
         config = replace(config, save_every=10_000)
         torch.set_num_threads(config.threads)
         trained, bound, fraction = training_against_bound(config, args.updates, args.rounds)
-        print(f"| {label} | {config.num_envs} x {config.num_steps} | {config.threads} | {trained:,.0f} | "
-              f"{bound:,.0f} | {fraction:.2f} |", flush=True)
+        print(f"| {label} | {config.num_envs} x {config.num_steps} | {config.precision} | {config.threads} | "
+              f"{trained:,.0f} | {bound:,.0f} | {fraction:.2f} | {trained / CROWDNAV_ENV_STEPS:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

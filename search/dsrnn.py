@@ -75,6 +75,77 @@ def _mlp(inputs: int, hidden: int) -> nn.Sequential:
     return nn.Sequential(_init(nn.Linear(inputs, hidden)), nn.Tanh(), _init(nn.Linear(hidden, hidden)), nn.Tanh())
 
 
+class _GRUSequence(torch.autograd.Function):
+    """The recurrent half of a GRU cell (same equations as ``nn.GRUCell``) over a whole sequence.
+
+    ``gates_in`` (T, R, 3H) are the input projections, computed outside as one product for all steps. Before
+    each step the previous hidden state is multiplied by ``keep`` (T, R), 0 at an episode start, and each new
+    state by ``out_mask`` (T, R) when given (absent humans keep a zero state). Per step, forward and backward
+    do one product with W_hh each and a few elementwise operations; the weight gradient and the gates'
+    derivatives are whole-sequence operations. ``dtype`` is the products' precision; the state and the gate
+    arithmetic stay float32."""
+
+    @staticmethod
+    def forward(ctx, gates_in, h0, weight_hh, bias_hh, keep, out_mask, dtype):
+        steps, (rows, hidden) = gates_in.shape[0], h0.shape
+        ctx.dtype, ctx.input_dtype = dtype, gates_in.dtype
+        gates_in = gates_in.float()
+        weight_t = weight_hh.t().to(dtype)
+        previous = gates_in.new_empty(steps, rows, hidden)  # each step's h_prev
+        outputs = torch.empty_like(previous)
+        rz = gates_in.new_empty(steps, rows, 2 * hidden)  # reset and update gates
+        n = torch.empty_like(previous)  # candidate state
+        gh = torch.empty_like(gates_in)  # W_hh h_prev + b_hh
+        h = h0.float()
+        for t in range(steps):
+            torch.mul(h, keep[t, :, None], out=previous[t])
+            gh[t].copy_(torch.mm(previous[t].to(dtype), weight_t)).add_(bias_hh)
+            torch.sigmoid(gates_in[t, :, :2 * hidden] + gh[t, :, :2 * hidden], out=rz[t])
+            torch.tanh(torch.addcmul(gates_in[t, :, 2 * hidden:], rz[t, :, :hidden], gh[t, :, 2 * hidden:]), out=n[t])
+            h = torch.lerp(n[t], previous[t], rz[t, :, hidden:], out=outputs[t])  # (1 - z) n + z h_prev
+            if out_mask is not None:
+                h.mul_(out_mask[t, :, None])
+        ctx.save_for_backward(weight_hh, keep, out_mask, previous, rz, n, gh[..., 2 * hidden:])
+        return outputs
+
+    @staticmethod
+    def backward(ctx, grad_outputs):
+        weight_hh, keep, out_mask, previous, rz, n, gh_n = ctx.saved_tensors
+        steps, rows, hidden = previous.shape
+        weight = weight_hh.to(ctx.dtype)
+        r, z = rz[..., :hidden], rz[..., hidden:]
+        # d(pre-activation)/dh for the candidate, update and reset gates, with the mask folded in
+        mask = 1.0 if out_mask is None else out_mask[..., None]
+        dn_dh = (1 - z) * (1 - n * n) * mask
+        dz_dh = (previous - n) * z * (1 - z) * mask
+        dr_dn = gh_n * r * (1 - r)
+        z_masked = z * mask
+        grad_gh = previous.new_empty(steps, rows, 3 * hidden)  # gradient at W_hh h_prev + b_hh
+        grad_n = torch.empty_like(previous)  # gradient at the candidate's input pre-activation
+        carry = previous.new_zeros(rows, hidden)
+        for t in reversed(range(steps)):
+            dh = grad_outputs[t] + carry
+            torch.mul(dh, dn_dh[t], out=grad_n[t])
+            torch.mul(grad_n[t], dr_dn[t], out=grad_gh[t, :, :hidden])
+            torch.mul(dh, dz_dh[t], out=grad_gh[t, :, hidden:2 * hidden])
+            torch.mul(grad_n[t], r[t], out=grad_gh[t, :, 2 * hidden:])
+            carry = torch.mm(grad_gh[t].to(ctx.dtype), weight).float().addcmul_(dh, z_masked[t])
+            carry.mul_(keep[t, :, None])
+        flat = grad_gh.reshape(steps * rows, 3 * hidden)
+        grad_weight = torch.mm(flat.t().to(ctx.dtype), previous.reshape(steps * rows, hidden).to(ctx.dtype))
+        grad_gates_in = torch.cat([grad_gh[..., :2 * hidden], grad_n], dim=-1)
+        return grad_gates_in.to(ctx.input_dtype), carry, grad_weight.float(), flat.sum(0), None, None, None
+
+
+def gru_sequence(cell: nn.GRUCell, inputs: Tensor, h0: Tensor, keep: Tensor, out_mask: Tensor | None = None) -> Tensor:
+    """``cell`` run over ``inputs`` (T, R, I) from ``h0`` (R, H), as described in ``_GRUSequence``: (T, R, H)."""
+    autocast = torch.is_autocast_enabled("cpu")
+    dtype = torch.get_autocast_dtype("cpu") if autocast else torch.float32
+    gates_in = nn.functional.linear(inputs, cell.weight_ih, cell.bias_ih)
+    with torch.autocast("cpu", enabled=False):
+        return _GRUSequence.apply(gates_in, h0, cell.weight_hh, cell.bias_hh, keep, out_mask, dtype)
+
+
 class DSRNN(nn.Module):
     """One step at a time (``step``) for acting, or a sequence with episode starts (``forward``) for PPO."""
 
@@ -127,18 +198,36 @@ class DSRNN(nn.Module):
         node_h = self.node_gru(torch.cat([robot, edges], dim=1), hidden[2])
         return self.output_linear(node_h), [temporal_h, spatial_h, node_h]
 
+    @torch.jit.unused  # training only; a TorchScript agent file holds the acting step
     def forward(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
                 episode_start: Tensor, hidden: list[Tensor]) -> tuple[Tensor, Tensor, list[Tensor]]:
         """A (T, B, ...) sequence; hidden states are zeroed where ``episode_start`` (T, B) is 1.
-        Returns action means (T, B, 2), values (T, B) and the final hidden states."""
-        features = []
-        for t in range(robot_node.shape[0]):
-            keep = 1.0 - episode_start[t]
-            hidden = [h * keep.reshape((-1,) + (1,) * (h.dim() - 1)) for h in hidden]
-            x, hidden = self.step(robot_node[t], temporal_edges[t], spatial_edges[t], human_mask[t], hidden)
-            features.append(x)
-        x = torch.stack(features)
-        return self.action_mean(self.actor(x)), self.critic_linear(self.critic(x)).squeeze(-1), hidden
+        Returns action means (T, B, 2), values (T, B) and the final hidden states.
+
+        The same function as ``step`` applied T times, arranged for training speed: everything but the GRUs'
+        recurrences (none of which feeds back into the edges or the attention) runs once over all T steps.
+        Inside a CPU ``torch.autocast`` region the matrix products run in its lower precision (bfloat16) while
+        hidden states, gate arithmetic and outputs stay float32."""
+        t, b, n = human_mask.shape
+        keep = 1.0 - episode_start
+        temporal_h = gru_sequence(self.temporal_gru, torch.relu(self.temporal_embed(temporal_edges)), hidden[0],
+                                  keep)
+        spatial_in = torch.relu(self.spatial_embed(spatial_edges)).reshape(t, b * n, -1)
+        spatial_h = gru_sequence(self.spatial_gru, spatial_in, hidden[1].reshape(b * n, -1),
+                                 keep.repeat_interleave(n, dim=1), human_mask.reshape(t, b * n)).reshape(t, b, n, -1)
+
+        query = self.attention_temporal(temporal_h).unsqueeze(2)  # (T, B, 1, A)
+        keys = self.attention_spatial(spatial_h)  # (T, B, n, A)
+        scores = (query * keys).sum(-1).float() * self.attention_scale
+        weights = torch.softmax(scores.masked_fill(human_mask == 0, -1e9), dim=2) * human_mask
+        attended = (weights.unsqueeze(-1) * spatial_h).sum(2)  # (T, B, He)
+
+        edges = torch.relu(self.edge_features(torch.cat([temporal_h, attended], dim=2)))
+        robot = torch.relu(self.robot_encoder(self.robot_linear(robot_node)))
+        node_h = gru_sequence(self.node_gru, torch.cat([robot, edges.to(robot.dtype)], dim=2), hidden[2], keep)
+        x = self.output_linear(node_h)
+        return (self.action_mean(self.actor(x)).float(), self.critic_linear(self.critic(x)).squeeze(-1).float(),
+                [temporal_h[-1], spatial_h[-1], node_h[-1]])
 
     def act_mean(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
                  hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:

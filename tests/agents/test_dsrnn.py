@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from search.coupled import CoupledSimulator
-from search.dsrnn import DSRNNPolicy, export_torchscript, load_torchscript
+from search.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
 from search.scenarios import Scenario
 from tests.agents.conftest import SMALL, make_net, random_observation
 
@@ -89,6 +89,51 @@ def test_sequence_forward_matches_stepping_with_resets(net):
     assert values.shape == (t, b)
     for a, b_ in zip(last, h, strict=True):
         torch.testing.assert_close(a, b_)
+
+
+def sequence_with_absent_humans_and_resets(net: DSRNN, t: int = 6, b: int = 3):
+    n = net.max_humans
+    torch.manual_seed(2)
+    mask = (torch.rand(t, b, n) > 0.3).float()
+    inputs = (torch.randn(t, b, 7), torch.randn(t, b, 2), torch.randn(t, b, n, 2), mask)
+    starts = torch.zeros(t, b)
+    starts[3, 0] = starts[1, 2] = 1.0
+    hidden = [torch.randn_like(h) for h in net.initial_state(b)]
+    hidden[1] = hidden[1] * mask[0, :, :, None]
+    return inputs, starts, hidden
+
+
+def test_sequence_gradients_match_stepping(net):
+    """PPO's gradients through the sequence pass equal autograd's through the acting step, with absent humans
+    and episode starts in the sequence."""
+    inputs, starts, hidden = sequence_with_absent_humans_and_resets(net)
+    params = [p for name, p in net.named_parameters() if name != "action_logstd"]
+    weights = torch.randn(inputs[0].shape[0], inputs[0].shape[1], 2)
+
+    means, values, _ = net(*inputs, starts, hidden)
+    sequence_grads = torch.autograd.grad((means * weights).sum() + values.square().sum(), params)
+
+    h, loss = hidden, 0.0
+    for i in range(inputs[0].shape[0]):
+        h = [x * (1 - starts[i]).reshape((-1,) + (1,) * (x.dim() - 1)) for x in h]
+        features, h = net.step(*(x[i] for x in inputs), h)
+        loss = loss + (net.action_mean(net.actor(features)) * weights[i]).sum()
+        loss = loss + net.critic_linear(net.critic(features)).square().sum()
+    step_grads = torch.autograd.grad(loss, params)
+    for name, a, b in zip([n for n, _ in net.named_parameters() if n != "action_logstd"], sequence_grads,
+                          step_grads, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5, msg=name)
+
+
+def test_bfloat16_products_keep_float32_state_and_outputs(net):
+    inputs, starts, hidden = sequence_with_absent_humans_and_resets(net)
+    exact = net(*inputs, starts, hidden)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        low = net(*inputs, starts, hidden)
+    assert all(x.dtype == torch.float32 for x in (low[0], low[1], *low[2]))
+    torch.testing.assert_close(low[0], exact[0], rtol=0.05, atol=0.05)
+    torch.testing.assert_close(low[1], exact[1], rtol=0.05, atol=0.05)
+    assert not torch.equal(low[0], exact[0])  # the products did run in bfloat16
 
 
 def test_snapshot_and_restore_in_the_coupled_simulator():

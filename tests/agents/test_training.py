@@ -25,10 +25,11 @@ def rows(out) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def test_a_few_updates_improve_the_deterministic_return(tmp_path):
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_a_few_updates_improve_the_deterministic_return(tmp_path, precision):
     torch.manual_seed(TINY.seed)
     before = evaluate(DSRNNPolicy(DSRNN(TINY.network)), 100, seed=0, config=TINY_WORLD)
-    last = train(TINY, tmp_path, show_progress=False)
+    last = train(TrainConfig.from_dict(TINY.to_dict() | {"precision": precision}), tmp_path, show_progress=False)
     after = evaluate(load_checkpoint_policy(last), 100, seed=0, config=TINY_WORLD)
     assert after["reward_mean"] > before["reward_mean"] + 1.0
     progress = rows(tmp_path)
@@ -68,7 +69,7 @@ def test_config_files_are_checked(tmp_path):
     assert config.network.node_hidden == 128 and config.epochs == 5  # the rest keeps DESIGN.md's defaults
     for text, message in [("lr = 1\n", "unknown training setting"), ("[network]\nwidth = 3\n", "unknown network"),
                           ("num_envs = 3\n", "multiple of minibatches"), ("[world]\nhuman_num = 11\n", "max_humans"),
-                          ("num_envs = \n", "not valid TOML")]:
+                          ("num_envs = \n", "not valid TOML"), ("precision = 'half'\n", "precision must be")]:
         path.write_text(text)
         with pytest.raises(ValueError, match=message):
             load_train_config(path)
