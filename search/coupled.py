@@ -145,7 +145,7 @@ class CoupledSimulator:
             worlds = index
         else:
             worlds = np.concatenate([k * self.batch + index for k in range(self.n_agents)])
-        policy_states = [{key: value[index].copy() for key, value in s.items()} for s in self.policy_states]
+        policy_states = [{key: value.take(index, axis=0) for key, value in s.items()} for s in self.policy_states]
         return Snapshot(self.state.take(worlds), policy_states, len(index))
 
     def restore(self, snapshot: Snapshot) -> None:
@@ -164,9 +164,15 @@ class CoupledSimulator:
         else:
             worlds = np.concatenate([k * self.batch + index for k in range(self.n_agents)])
         self.state.assign(worlds, snapshot.state)
+        rows = index.tolist() if index.size <= 4 else None
         for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
             for key, value in new.items():
-                state[key][index] = value
+                if rows is None:
+                    state[key][index] = value
+                else:
+                    target = state[key]
+                    for j, row in enumerate(rows):
+                        target[row] = value[j]
 
 
 @dataclass

@@ -95,6 +95,14 @@ class ActionNode:
         return self.best if backup == "max" else self.total / self.completed
 
 
+def write_actions_to(node: StateNode, out: np.ndarray) -> None:
+    """Write the environment actions from the initial state to ``node`` into ``out[: node.depth]``."""
+    while node.parent is not None:
+        edge = node.parent
+        out[edge.parent.depth : node.depth] = edge.action
+        node = edge.parent
+
+
 def actions_to(node: StateNode) -> np.ndarray:
     """The environment actions from the initial state to ``node``, step by step, (depth, *shape)."""
     path = []
@@ -113,7 +121,7 @@ class MCTS:
         self.root = self.start = StateNode(None, 0, 0.0, False, snapshot)
         self.replayed = 0  # simulator steps spent replaying prefixes from reset (branch="replay")
         self.rollouts = 0  # iterations finished (backed up)
-        self.rollout_steps = 0  # simulator steps they took
+        self.rollout_ends = 0  # their lengths from the initial state, summed
         self.batch_rows = 0  # rows stepped, summed over batched steps (batch_rows / batch_steps: mean batch)
         self.batch_steps = 0
 
@@ -156,24 +164,33 @@ class MCTS:
         node, path = self.root, []
         while True:
             node.visits += 1
-            open_actions = [a for a in node.children if a.child is None or not a.child.terminal]
-            if len(node.children) < c.k * node.visits ** c.alpha or not open_actions:
+            action = None
+            if len(node.children) >= c.k * node.visits ** c.alpha:
+                action = self._uct(node)  # None when every action ends the trajectory: widen then
+            if action is None:
                 action = ActionNode(node, self.problem.prior.sample(self.rng, 1)[0])
                 node.children.append(action)
-            else:
-                action = self._uct(node, open_actions)
             action.visits += 1
             path.append(action)
             if action.child is None:
                 return path
             node = action.child
 
-    def _uct(self, node: StateNode, actions: list[ActionNode]) -> ActionNode:
-        log_n, c, backup = math.log(node.visits), self.config.exploration, self.config.backup
-        best, best_score = actions[0], -math.inf
-        for action in actions:  # the first of equal scores wins
-            score = action.q(backup) + c * math.sqrt(log_n / action.visits)
-            if score > best_score:
+    def _uct(self, node: StateNode) -> ActionNode | None:
+        """The action with the best upper confidence bound among those that do not end the trajectory (the
+        first of equal scores); ``ActionNode.q`` written out, as this loop is the tree's hot spot."""
+        log_n, c, mean = math.log(node.visits), self.config.exploration, self.config.backup == "mean"
+        sqrt, best, best_score = math.sqrt, None, -math.inf
+        for action in node.children:
+            child = action.child
+            if child is not None and child.terminal:
+                continue
+            if action.completed:
+                q = action.total / action.completed if mean else action.best
+            else:
+                q = -math.inf
+            score = q + c * sqrt(log_n / action.visits)
+            if best is None or score > best_score:
                 best, best_score = action, score
         return best
 
@@ -201,111 +218,114 @@ class Rollouts:
     """The iterations in flight: up to ``batch`` rows stepped together. Each row expands its new edge (the edge's
     action held ``repeat`` steps, then a tree node with its snapshot) and rolls out with prior actions renewed
     every ``repeat`` steps. When rows end, their values are backed up at once and new iterations are selected
-    into the freed rows, so the policies keep seeing a full batch until the budget runs out."""
+    into their places, so the policies keep seeing a full batch until the budget runs out.
+
+    Row i of the simulator is row i of every array here (the first ``n`` rows are in use)."""
 
     def __init__(self, search: MCTS):
         self.search = search
         problem, width = search.problem, search.config.batch
+        self.n = 0
         self.actions = np.zeros((width, problem.horizon, *problem.action_shape))  # from the initial state
         self.lengths = np.zeros(width, dtype=np.int64)
         self.returns = np.zeros(width)
         self.start = np.zeros(width, dtype=np.int64)  # depth of the node each iteration expands
         self.held = np.zeros((width, *problem.action_shape))  # the new edge's action, then the rollout's
         self.paths: list[list[ActionNode]] = [[] for _ in range(width)]
-        self.rows = np.zeros(0, dtype=np.int64)  # the slot of each simulator row, in row order
-        self.free = list(range(width))  # slots without an iteration, lowest first
 
     def run(self) -> None:
         search = self.search
         self._fill(np.zeros(0, dtype=np.int64))
-        while self.rows.size:
+        while self.n:
             terminal, ended = self._step()
             if not ended.any():
                 continue
             ended = np.flatnonzero(ended)
             for i in ended.tolist():
-                slot = int(self.rows[i])
                 if terminal[i]:
-                    search.tracker.finish(self.returns[slot], self.actions[slot, : self.lengths[slot]])
-                search.backup(self.paths[slot], float(self.returns[slot]))
+                    search.tracker.finish(self.returns[i], self.actions[i, : self.lengths[i]])
+                search.backup(self.paths[i], float(self.returns[i]))
                 search.rollouts += 1
-                search.rollout_steps += int(self.lengths[slot] - self.start[slot])
-                self.free.append(slot)
-            self.free.sort()
+                search.rollout_ends += int(self.lengths[i])
             search.maybe_commit()
             self._fill(ended)
 
     def _step(self) -> tuple[np.ndarray, np.ndarray]:
         """One batched step of every row; new tree nodes at the end of their edge. Returns (terminal, ended)."""
-        search = self.search
-        config, problem, rows = search.config, search.problem, self.rows
-        depth = self.lengths[rows]
-        taken = depth - self.start[rows]
-        renew = (taken >= config.repeat) & (taken % config.repeat == 0)
-        if renew.any():
-            self.held[rows[renew]] = problem.prior.sample(search.rng, int(renew.sum()))
-        step_actions = self.held[rows]
+        search, n = self.search, self.n
+        config, problem = search.config, search.problem
+        depth = self.lengths[:n]
+        taken = depth - self.start[:n]
+        renew = np.flatnonzero((taken >= config.repeat) & (taken % config.repeat == 0))
+        if renew.size:
+            self.held[renew] = problem.prior.sample(search.rng, renew.size)
+        step_actions = self.held[:n]
         reward, terminal = problem.step(step_actions)
-        search.tracker.count(rows.size)
-        search.batch_rows += rows.size
+        search.tracker.count(n)
+        search.batch_rows += n
         search.batch_steps += 1
-        self.actions[rows, depth] = step_actions
-        self.lengths[rows] = depth + 1
-        self.returns[rows] += reward
+        self.actions[np.arange(n), depth] = step_actions
+        depth += 1
+        self.returns[:n] += reward
         taken += 1
         for i in np.flatnonzero((taken <= config.repeat) & (terminal | (taken == config.repeat))).tolist():
-            slot = int(rows[i])
-            action = self.paths[slot][-1]
+            action = self.paths[i][-1]
             if action.child is None:  # another row may have expanded the same edge first
                 keep = config.branch == "snapshot" and not terminal[i]
-                action.child = StateNode(action, int(self.lengths[slot]), float(self.returns[slot]),
-                                         bool(terminal[i]), problem.snapshot([i]) if keep else None)
+                action.child = StateNode(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
+                                         problem.snapshot([i]) if keep else None)
         ended = terminal | (taken >= config.repeat + config.rollout_depth) if config.rollout_depth else terminal
         return terminal, ended
 
     def _fill(self, ended: np.ndarray) -> None:
-        """Start new iterations in the simulator rows ``ended`` (their iterations are over) while the budget is
-        expected to allow them (at the mean iteration length so far; a full batch at the start); drop the rest."""
-        search, problem = self.search, self.search.problem
-        running = np.ones(self.rows.size, dtype=bool)
+        """Start new iterations in the rows ``ended`` (their iterations are over), and in unused rows, while the
+        budget is expected to allow them; drop the ended rows left over. The budget estimate: every iteration in
+        flight or started runs to the mean length of those finished so far (all ``batch`` at the start)."""
+        search, problem, n = self.search, self.search.problem, self.n
+        running = np.ones(n, dtype=bool)
         running[ended] = False
-        if search.rollouts:
-            mean = search.rollout_steps / search.rollouts
-            rows = self.rows[running]
-            spare = search.tracker.remaining - np.maximum(mean - (self.lengths[rows] - self.start[rows]), 1).sum()
+        if search.rollouts:  # iterations tend to end near the same depth
+            end = search.rollout_ends / search.rollouts
+            spare = search.tracker.remaining - np.maximum(end - self.lengths[:n][running], 1.0).sum()
         else:
-            mean, spare = 1.0, math.inf
-        saved = problem.snapshot() if self.rows.size and search.config.branch == "replay" else None
-        new, snapshots = [], []
-        while self.free and spare > 0 and search.open:
+            end, spare = 0.0, math.inf
+        places = ended.tolist() + list(range(n, self.actions.shape[0]))  # ended rows first, then unused ones
+        saved = problem.snapshot() if n and search.config.branch == "replay" else None
+        snapshots = []
+        while len(snapshots) < len(places) and spare > 0 and search.open:
             path = search.select()
             node = path[-1].parent
             snapshots.append(search.state_of(node))  # a replay from reset replaces the batch (saved above)
-            slot = self.free.pop(0)
-            self.paths[slot] = path
-            if node.depth:
-                self.actions[slot, : node.depth] = actions_to(node)
-            self.lengths[slot] = self.start[slot] = node.depth
-            self.returns[slot] = node.value
-            self.held[slot] = path[-1].action
-            new.append(slot)
-            spare -= max(mean, 1.0)
+            i = places[len(snapshots) - 1]
+            self.paths[i] = path
+            write_actions_to(node, self.actions[i])
+            self.lengths[i] = self.start[i] = node.depth
+            self.returns[i] = node.value
+            self.held[i] = path[-1].action
+            spare -= max(end - node.depth, 1.0)
         if saved is not None:
             problem.restore(saved)
-        if not self.rows.size:  # the first batch
-            self.rows = np.array(new, dtype=np.int64)
-            problem.restore(problem.concat(snapshots))
-            return
-        reuse = ended[: len(new)]  # new iterations take the ended rows' places, in order
-        if new:
-            problem.assign(reuse, problem.concat(snapshots))
-            self.rows[reuse] = new
-        if len(new) < ended.size:  # near the end of the budget: the batch shrinks
-            running[reuse] = True
-            keep = np.flatnonzero(running)
-            self.rows = self.rows[keep]
+        reused = min(len(snapshots), ended.size)
+        for i, snapshot in zip(places[:reused], snapshots, strict=False):
+            problem.assign([i], snapshot)
+        if len(snapshots) > reused:  # more rows than before: the new ones go after the others
+            grown = snapshots[reused:]
+            problem.restore(problem.concat(([problem.snapshot()] if n else []) + grown))
+            self.n = n + len(grown)
+        elif reused < ended.size:  # near the end of the budget: the batch shrinks
+            keep = np.flatnonzero(np.isin(np.arange(n), ended[reused:], invert=True))
+            self._compact(keep)
             if keep.size:
                 problem.restore(problem.snapshot(keep))
+
+    def _compact(self, keep: np.ndarray) -> None:
+        """Keep rows ``keep`` (in order) as rows 0, 1, ..."""
+        count = keep.size
+        for array in (self.actions, self.lengths, self.returns, self.start, self.held):
+            array[:count] = array[keep]
+        self.paths[:count] = [self.paths[i] for i in keep.tolist()]
+        self.n = count
+
 
 def mcts(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: MCTSConfig | None = None) -> MCTS:
     """Search until the tracker's budget is spent; returns the search (its tree, for inspection)."""

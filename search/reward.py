@@ -80,6 +80,10 @@ def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarray:
     """Divergence of per-agent vectors (..., N, D) over all agent pairs, as (...)."""
+    if values.shape[-2] == 2:  # one pair (the mean or min of one number is that number): fewer array operations
+        diff = values[..., 0, :] - values[..., 1, :]
+        squared = np.sum(diff * diff, axis=-1)
+        return squared if norm == "squared" else np.sqrt(squared)
     i, j = _pairs(values.shape[-2])
     diff = values[..., i, :] - values[..., j, :]
     squared = np.sum(diff * diff, axis=-1)
@@ -131,13 +135,12 @@ class DivergenceReward:
         running = ~goal & ~end
         d_a = pairwise_divergence(robot_actions, c.norm, c.combine)
         d_s = pairwise_divergence(robot_pos, c.norm, c.combine)
-        h = self.heuristic(robot_pos, human_pos, c)
-        zero = np.zeros_like(d_a)
-        plausibility = c.plausibility * self.prior.log_prob(env_action) if c.plausibility else zero
+        h = d_s if self.heuristic is state_divergence else self.heuristic(robot_pos, human_pos, c)
+        plausibility = c.plausibility * self.prior.log_prob(env_action) if c.plausibility else np.zeros_like(d_a)
         return {
-            "action_divergence": np.where(running, d_a, zero),
-            "goal": np.where(goal, c.goal_bonus + c.alpha * d_s, zero),
-            "horizon": np.where(end, c.horizon_offset + c.beta * h, zero),
+            "action_divergence": np.where(running, d_a, 0.0),
+            "goal": np.where(goal, c.goal_bonus + c.alpha * d_s, 0.0),
+            "horizon": np.where(end, c.horizon_offset + c.beta * h, 0.0),
             "plausibility": plausibility,
         }
 

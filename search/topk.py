@@ -38,6 +38,8 @@ class TopK:
 
     def push(self, reward: float, actions: np.ndarray, sim_steps: int = 0) -> bool:
         """Offer a trajectory; True if it was kept."""
+        if len(self._heap) >= self.k and reward <= self._heap[0].reward:
+            return False  # no better than the worst kept: it would lose to it (equal rewards: first found wins)
         actions = np.ascontiguousarray(actions, dtype=np.float64)
         key = _key(actions)
         if key in self._keys:

@@ -138,22 +138,30 @@ class WorldState:
         return self.robot_pos.shape[1]
 
     def copy(self) -> WorldState:
-        return WorldState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+        return WorldState(*[getattr(self, name).copy() for name in STATE_FIELDS])
 
     def take(self, worlds) -> WorldState:
         """A new state made of the given worlds (indices may repeat: one node branched into many)."""
         index = np.asarray(worlds, dtype=np.int64)
-        return WorldState(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+        return WorldState(*[getattr(self, name).take(index, axis=0) for name in STATE_FIELDS])
 
     def assign(self, worlds, other: WorldState) -> None:
         """Overwrite the given worlds with ``other``'s (e.g. fresh episodes for finished worlds)."""
-        index = np.asarray(worlds, dtype=np.int64)
-        for f in fields(self):
-            getattr(self, f.name)[index] = getattr(other, f.name)
+        index = np.asarray(worlds, dtype=np.int64).reshape(-1)
+        if index.size <= 4:  # a few rows: plain row assignment costs far less than fancy indexing
+            for j, w in enumerate(index.tolist()):
+                for name in STATE_FIELDS:
+                    getattr(self, name)[w] = getattr(other, name)[j]
+            return
+        for name in STATE_FIELDS:
+            getattr(self, name)[index] = getattr(other, name)
 
     def equals(self, other: WorldState) -> bool:
-        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name), equal_nan=True)
-                   for f in fields(self))
+        return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)
+                   for name in STATE_FIELDS)
+
+
+STATE_FIELDS = tuple(f.name for f in fields(WorldState))  # in declaration order, as the constructor takes them
 
 
 def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig) -> WorldState:
