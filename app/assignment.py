@@ -12,7 +12,7 @@ import itertools
 import random
 from dataclasses import dataclass
 
-from sqlalchemy import func, select
+from sqlalchemy import Connection, bindparam, func, select
 from sqlalchemy.orm import Session
 
 from app.models import Participant
@@ -53,8 +53,11 @@ def condition_for_slot(*, seed: int, n_conditions: int, slot: int) -> int:
     return order[place]
 
 
-def next_slot(session: Session, *, study: str) -> int:
+HIGHEST_SLOT = select(func.max(Participant.slot)).where(Participant.study == bindparam("study"))
+
+
+def next_slot(session: Session | Connection, *, study: str) -> int:
     """The next free arrival slot. Two concurrent callers may get the same number; the unique constraint on
     (study, slot) lets only one of them commit and the other retries."""
-    highest = session.scalar(select(func.max(Participant.slot)).where(Participant.study == study))
+    highest = session.scalar(HIGHEST_SLOT, {"study": study})
     return 0 if highest is None else highest + 1

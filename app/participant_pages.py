@@ -39,6 +39,9 @@ BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
 BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
                            PARTICIPANT.c.external_id == bindparam("external_id"))
 SAVE_RESPONSE = insert(RESPONSE)
+ENTER = insert(PARTICIPANT)
+SET_PLAN = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
+    plan=bindparam("plan"), step=0, step_started_at=bindparam("now"))
 NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
     step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
     completed_at=bindparam("completed"), attention_failures=PARTICIPANT.c.attention_failures + bindparam("failed"))
@@ -123,33 +126,34 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
     info = ctx.study.study
     for _ in range(50):
         try:
-            with ctx.db.writing() as session:
+            with ctx.db.connection(write=True) as connection:
                 if identity.get("external_id"):
-                    known = _by_identity(session, ctx, identity["external_id"])
+                    known = _by_identity(connection, ctx, identity["external_id"])
                     if known is not None:
                         return known.code
-                participant = Participant(
-                    code=secrets.token_hex(16), study=info.id, platform=info.platform,
-                    status="started" if agreed else "declined", user_agent=user_agent[:512], **identity,
-                )
+                values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
+                          "status": "started" if agreed else "declined", "user_agent": user_agent[:512], **identity}
                 if agreed and info.assignment == "balanced":
-                    participant.slot = next_slot(session, study=info.id)
-                    participant.condition = condition_for_slot(
-                        seed=info.seed, n_conditions=len(ctx.conditions), slot=participant.slot)
-                session.add(participant)
-                session.flush()
-                if participant.condition is not None:
-                    _assign_plan(ctx, participant)
-                return participant.code
+                    values["slot"] = next_slot(connection, study=info.id)
+                    values["condition"] = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
+                                                             slot=values["slot"])
+                participant_id = connection.execute(ENTER, values).inserted_primary_key[0]
+                if values.get("condition") is not None:
+                    connection.execute(SET_PLAN, {"participant": participant_id, "now": datetime.now(UTC),
+                                                  "plan": _plan(ctx, participant_id, values["condition"])})
+                return values["code"]
         except IntegrityError:
             continue
     raise HTTPException(503, "The study is very busy at this moment. Please wait a few seconds and try again.")
 
 
+def _plan(ctx: Context, participant_id: int, condition: int) -> list[dict]:
+    rng = random.Random(f"{ctx.study.study.seed}:participant:{participant_id}")
+    return build_plan(ctx.study, ctx.bundle, ctx.conditions[condition], rng)
+
+
 def _assign_plan(ctx: Context, participant: Participant) -> None:
-    rng = random.Random(f"{ctx.study.study.seed}:participant:{participant.id}")
-    condition = ctx.conditions[participant.condition]
-    participant.plan = build_plan(ctx.study, ctx.bundle, condition, rng)
+    participant.plan = _plan(ctx, participant.id, participant.condition)
     participant.step = 0
     participant.step_started_at = datetime.now(UTC)
 
