@@ -148,13 +148,14 @@ class WorldState:
     def assign(self, worlds, other: WorldState) -> None:
         """Overwrite the given worlds with ``other``'s (e.g. fresh episodes for finished worlds)."""
         index = np.asarray(worlds, dtype=np.int64).reshape(-1)
+        mine, theirs = vars(self), vars(other)
         if index.size <= 4:  # a few rows: plain row assignment costs far less than fancy indexing
             for j, w in enumerate(index.tolist()):
                 for name in STATE_FIELDS:
-                    getattr(self, name)[w] = getattr(other, name)[j]
+                    mine[name][w] = theirs[name][j]
             return
         for name in STATE_FIELDS:
-            getattr(self, name)[index] = getattr(other, name)
+            mine[name][index] = theirs[name]
 
     def equals(self, other: WorldState) -> bool:
         return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)
