@@ -210,6 +210,10 @@ class DSRNN(nn.Module):
         hidden states, gate arithmetic and outputs stay float32."""
         t, b, n = human_mask.shape
         keep = 1.0 - episode_start
+        if t == 1:  # a rollout step: the acting step costs less than the sequence machinery
+            hidden = [h * keep[0].reshape((-1,) + (1,) * (h.dim() - 1)) for h in hidden]
+            x, hidden = self.step(robot_node[0], temporal_edges[0], spatial_edges[0], human_mask[0], hidden)
+            return self._heads(x[None]) + (hidden,)
         temporal_h = gru_sequence(self.temporal_gru, torch.relu(self.temporal_embed(temporal_edges)), hidden[0],
                                   keep)
         spatial_in = torch.relu(self.spatial_embed(spatial_edges)).reshape(t, b * n, -1)
@@ -225,9 +229,11 @@ class DSRNN(nn.Module):
         edges = torch.relu(self.edge_features(torch.cat([temporal_h, attended], dim=2)))
         robot = torch.relu(self.robot_encoder(self.robot_linear(robot_node)))
         node_h = gru_sequence(self.node_gru, torch.cat([robot, edges.to(robot.dtype)], dim=2), hidden[2], keep)
-        x = self.output_linear(node_h)
-        return (self.action_mean(self.actor(x)).float(), self.critic_linear(self.critic(x)).squeeze(-1).float(),
-                [temporal_h[-1], spatial_h[-1], node_h[-1]])
+        return self._heads(self.output_linear(node_h)) + ([temporal_h[-1], spatial_h[-1], node_h[-1]],)
+
+    def _heads(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        """Action means and values from node features, in float32 whatever the products' precision."""
+        return self.action_mean(self.actor(x)).float(), self.critic_linear(self.critic(x)).squeeze(-1).float()
 
     def act_mean(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
                  hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:

@@ -174,7 +174,7 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
     torch.manual_seed(config.seed)
     rng = np.random.default_rng([TRAIN_STREAM, config.seed])
     net = DSRNN(nc)
-    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate, eps=config.adam_eps)
+    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate, eps=config.adam_eps, fused=True)
     state = sample_training_states(wc, rng, n_envs)
     hidden = net.initial_state(n_envs)
     episode_start = torch.ones(n_envs)
