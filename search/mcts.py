@@ -4,20 +4,26 @@ runs it (the AST toolbox's ``MCTSdpw``), with two changes that make it fast:
 - **branching by snapshot**: every tree node keeps a snapshot of its simulator rows, so an iteration restores its
   leaf's parent instead of replaying the action prefix from reset (``branch="replay"`` keeps the toolbox's way,
   as the reference the benchmarks compare against);
-- **batched iterations**: ``batch`` selections are made one after another (each counts its visits at once, so
-  the next one sees them and widening stays exact), then their leaves are expanded and rolled out together, so
-  the agents' policies run on batches.
+- **a full batch of iterations in flight**: up to ``batch`` iterations are expanded and rolled out together, one
+  simulator row each, so the agents' policies run on batches. When an iteration ends (its trajectory ends, or
+  ``rollout_depth`` cuts it), its value is backed up at once and the next iteration is selected into its row,
+  so the batch stays full until the budget runs out. Each selection counts its visits at once, so the next one
+  sees them and widening stays exact; actions still in flight have no value yet and their siblings go first.
 
 Widening: a state node visited n times gets a new action, sampled from the environment action prior, while it has
 fewer than ``k * n**alpha`` actions; otherwise UCT picks ``argmax Q + c * sqrt(ln n / n_a)`` among the actions
 that do not end the trajectory. The simulator is deterministic, so each action has one child state (no state
 widening), and an action that ends the trajectory has an exact value: choosing it again would teach nothing and,
 with snapshots, cost nothing, so a node whose every action ends the trajectory widens instead. An action chosen
-again while its child is still being computed in the same batch gets another rollout from that child.
+again while its child is still being computed gets another iteration through the same edge (the same child
+state, another rollout).
 
 Modes: ``tree`` grows one tree from the initial state for the whole budget; ``receding`` (the toolbox's
 ``stress_test`` mode, the one the paper ran) searches from a root, commits the root's best action after the
-root's share of the budget, drops the other branches, and goes on from the new root.
+root's share of the budget (once one of its actions has a value), drops the other branches, and goes on from the
+new root; iterations still in flight in dropped branches finish and count.
+
+The same seed gives the same search: selections, prior samples and backups happen in a fixed order.
 """
 
 from __future__ import annotations
@@ -45,7 +51,7 @@ class MCTSConfig:
     repeat: int = 8  # steps each tree action (and each rollout action) is held for
     mode: str = "tree"  # "tree" or "receding"
     backup: str = "max"  # Q of an action: "mean" return through it (the toolbox) or its "max"
-    batch: int = 32  # iterations expanded and rolled out together
+    batch: int = 32  # iterations in flight together (rows of the batched rollouts)
     branch: str = "snapshot"  # "snapshot", or "replay" from reset as the AST toolbox does
 
     def __post_init__(self):

@@ -114,3 +114,50 @@ def test_bad_settings_say_what_is_wrong():
         MCTSConfig(mode="sideways")
     with pytest.raises(ValueError, match="alpha"):
         MCTSConfig(alpha=0.0)
+
+
+class Recording:
+    """A problem that records the batch size of every step."""
+
+    def __init__(self, problem):
+        self.problem, self.sizes = problem, []
+
+    def __getattr__(self, name):
+        return getattr(self.problem, name)
+
+    def step(self, actions):
+        self.sizes.append(len(actions))
+        return self.problem.step(actions)
+
+
+@pytest.mark.parametrize("problem", [LockProblem, coupled])
+def test_rows_whose_iteration_ended_take_the_next_iteration(problem):
+    recording = Recording(problem())
+    tracker = Tracker(3000, 5)
+    search = mcts(recording, tracker, np.random.default_rng(2), MCTSConfig(batch=16, repeat=2))
+    sizes = np.array(recording.sizes)
+    assert search.rollouts > 3 * 16  # iterations ended and were replaced many times over
+    full = np.flatnonzero(sizes == 16)
+    # full until the budget is nearly spent; then the rows in flight finish without successors
+    assert full.size > 0.8 * sizes.size and np.all(sizes[: full[-1]] == 16)
+    assert np.all(np.diff(sizes[full[-1]:]) <= 0)
+    assert tracker.steps >= tracker.budget and sizes.sum() == tracker.steps
+
+
+def test_replay_from_reset_with_a_full_batch_matches_replays():
+    problem = coupled(horizon=30)
+    tracker = Tracker(2000, 8)
+    search = mcts(problem, tracker, np.random.default_rng(4), MCTSConfig(batch=4, branch="replay", repeat=2))
+    assert search.replayed > 0
+    for found in tracker.queue.ranked():
+        trajectory = replay(problem.sim.policies, problem.sim.scenario, found.actions)
+        assert problem.reward.trajectory(trajectory, problem.sim.config.dt)[0] == found.reward
+
+
+def test_rollout_depth_cuts_iterations_after_their_new_edge():
+    problem = LockProblem(horizon=30, threshold=-0.9)  # 95% of actions are right: long trajectories
+    tracker = Tracker(600, 5)
+    search = mcts(problem, tracker, np.random.default_rng(0), MCTSConfig(batch=4, repeat=1, rollout_depth=3))
+    assert tracker.steps <= 4 * search.rollouts  # every iteration: its new edge and at most 3 more steps
+    assert tracker.trajectories < search.rollouts  # cut iterations back up without a finished trajectory
+    assert max(node.depth for node in nodes(search.root)) >= 5
