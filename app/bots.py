@@ -123,23 +123,29 @@ class ClipIndex:
         return match.group(1), self.clips[match.group(1)]
 
 
-# A page as tags and text: comments and declarations, a start or end tag (name, attributes), or text. The server's
-# pages are well-formed and have no inline scripts, so this is all a bot needs (html.parser costs several times
-# as much, and bots share the machine with the server under load).
-HTML_TOKEN = re.compile(r"<!--.*?-->|<![^>]*>|<(/?)([A-Za-z][A-Za-z0-9-]*)((?:[^>\"']|\"[^\"]*\"|'[^']*')*)>|([^<]+)",
-                        re.DOTALL)
+# The tags of a page that a form is made of (name, attributes), and one attribute (name, value in double quotes,
+# single quotes or none). The server's pages are well-formed and have no inline scripts, so a bot need not parse
+# the rest: html.parser, which reads every tag and text, costs several times as much, and under load the bots share
+# the machine with the server.
+FORM_TAG = re.compile(r"<(/?)(form|fieldset|legend|label|input|select|option|textarea|video)\b"
+                      r"((?:[^>\"']|\"[^\"]*\"|'[^']*')*)>", re.IGNORECASE)
 HTML_ATTRIBUTE = re.compile(r"""([^\s=/>"']+)(?:\s*=\s*(?:"([^"]*)"|'([^']*)'|([^\s>"']+)))?""")
+ANY_TAG = re.compile(r"<[^>]*>")
+COMPLETION_CODE = re.compile(r"""\sid=["']?completion-code\b[^>]*>""")  # the rest of the tag with this id
 
-FORM_TAGS = {"form", "fieldset", "legend", "label", "input", "select", "option", "textarea", "video"}
 
-
-def _attributes(text: str) -> list[tuple[str, str]]:
-    pairs = []
+def _attributes(text: str) -> dict[str, str]:
+    pairs = {}
     for match in HTML_ATTRIBUTE.finditer(text):
         name, double, single, bare = match.groups()
         value = double if double is not None else single if single is not None else bare or ""
-        pairs.append((name.lower(), html.unescape(value) if "&" in value else value))
+        pairs[name.lower()] = html.unescape(value) if "&" in value else value
     return pairs
+
+
+def _text(fragment: str) -> str:
+    """The text of a piece of a page, without its tags, spaces collapsed."""
+    return " ".join(html.unescape(ANY_TAG.sub("", fragment)).split())
 
 
 class PageForm:
@@ -155,75 +161,52 @@ class PageForm:
         self.textareas: list[str] = []
         self.video = ""
         self.answerable = False  # a study screen (not the instructions' example)
-        self.code = ""
-        self._legend: list[str] = []
-        self._in_legend = False
-        self._label: list[str] | None = None
-        self._label_input: tuple[str, str] | None = None
-        self._select: str | None = None
-        self._in_code = False
-        for match in HTML_TOKEN.finditer(page):
-            closing, tag, attributes, text = match.groups()
-            if text is not None:
-                if self._in_legend or self._in_code or self._label is not None:
-                    self.handle_data(html.unescape(text) if "&" in text else text)
-            elif tag is None:
-                continue  # a comment or <!doctype>
-            elif closing:
-                self.handle_endtag(tag.lower())
-            elif tag.lower() in FORM_TAGS or "completion-code" in attributes:  # the others need no attributes
-                self.handle_starttag(tag.lower(), _attributes(attributes))
-
-    def handle_starttag(self, tag, attrs):
-        a = {key: value or "" for key, value in attrs}
-        if tag == "form":
-            self.action = a.get("action", "")
-        elif tag == "fieldset":
-            self._legend = []
-            self.answerable |= "data-answers" in a
-        elif tag == "legend":
-            self._in_legend = True
-        elif tag == "label":
-            self._label, self._label_input = [], None
-        elif tag == "input" and a.get("type") == "hidden":
-            self.hidden[a["name"]] = a.get("value", "")
-        elif tag == "input" and a.get("type") == "radio":
-            self.radios.setdefault(a["name"], [])
-            self.legends[a["name"]] = " ".join("".join(self._legend).split())
-            self._label_input = (a["name"], a["value"])
-        elif tag == "select":
-            self._select = a["name"]
-            self.selects[self._select] = []
-            self.legends[a["name"].rsplit("-", 1)[0]] = " ".join("".join(self._legend).split())
-        elif tag == "option" and self._select and a.get("value"):
-            self.selects[self._select].append(a["value"])
-        elif tag == "textarea":
-            self.textareas.append(a["name"])
-        elif tag == "video":
-            self.video = a.get("src", "")
-        elif a.get("id") == "completion-code":
-            self._in_code = True
-
-    def handle_endtag(self, tag):
-        if tag == "legend":
-            self._in_legend = False
-        elif tag == "label" and self._label is not None:
-            if self._label_input:
-                name, value = self._label_input
-                self.radios[name].append((value, " ".join("".join(self._label).split())))
-            self._label = None
-        elif tag == "select":
-            self._select = None
-        elif self._in_code:
-            self._in_code = False
-
-    def handle_data(self, data):
-        if self._in_legend:
-            self._legend.append(data)
-        if self._label is not None:
-            self._label.append(data)
-        if self._in_code:
-            self.code += data.strip()
+        legend = ""  # the legend of the innermost fieldset begun so far
+        legend_at = label_at = -1  # where the legend or label being read begins
+        radio: tuple[str, str] | None = None  # the radio button of the label being read
+        select: str | None = None
+        for match in FORM_TAG.finditer(page):
+            closing, tag, attributes = match.groups()
+            tag = tag.lower()
+            if closing:
+                if tag == "legend" and legend_at >= 0:
+                    legend, legend_at = _text(page[legend_at:match.start()]), -1
+                elif tag == "label" and label_at >= 0:
+                    if radio:
+                        self.radios[radio[0]].append((radio[1], _text(page[label_at:match.start()])))
+                    label_at = -1
+                elif tag == "select":
+                    select = None
+                continue
+            a = _attributes(attributes)
+            if tag == "form":
+                self.action = a.get("action", "")
+            elif tag == "fieldset":
+                legend = ""
+                self.answerable |= "data-answers" in a
+            elif tag == "legend":
+                legend_at = match.end()
+            elif tag == "label":
+                label_at, radio = match.end(), None
+            elif tag == "input" and a.get("type") == "hidden":
+                self.hidden[a["name"]] = a.get("value", "")
+            elif tag == "input" and a.get("type") == "radio":
+                self.radios.setdefault(a["name"], [])
+                self.legends[a["name"]] = legend
+                radio = (a["name"], a["value"])
+            elif tag == "select":
+                select = a["name"]
+                self.selects[select] = []
+                self.legends[select.rsplit("-", 1)[0]] = legend
+            elif tag == "option" and select and a.get("value"):
+                self.selects[select].append(a["value"])
+            elif tag == "textarea":
+                self.textareas.append(a["name"])
+            elif tag == "video":
+                self.video = a.get("src", "")
+        code = COMPLETION_CODE.search(page)
+        self.code = "".join(html.unescape(piece).strip() for piece in ANY_TAG.split(
+            page[code.end():page.find("</", code.end())])) if code else ""
 
 
 class BotError(RuntimeError):

@@ -50,6 +50,19 @@ class Reply:
         self.request = SimpleNamespace(method=method, url=SimpleNamespace(path=path))
 
 
+class OneWriteConnection(http.client.HTTPConnection):
+    """An HTTPConnection that sends a request's head and body in one write, as browsers send a small form
+    (http.client writes them apart, so the server would read every form in two pieces)."""
+
+    def _send_output(self, message_body=None, encode_chunked=False):
+        if not isinstance(message_body, bytes) or encode_chunked:
+            return super()._send_output(message_body, encode_chunked)
+        self._buffer.extend((b"", b""))
+        request = b"\r\n".join(self._buffer) + message_body
+        del self._buffer[:]
+        self.send(request)
+
+
 class LoopbackClient:
     """get/post like httpx.Client for one participant: one keep-alive connection, its cookie, redirects."""
 
@@ -60,7 +73,7 @@ class LoopbackClient:
         self.log = log if log is not None else []
         self.cookies: dict[str, str] = {}
         self.acknowledged: list[dict] = []  # every /study form the server answered with success
-        self.connection: http.client.HTTPConnection | None = None
+        self.connection: OneWriteConnection | None = None
 
     def get(self, path: str, params: dict | None = None, headers: dict | None = None) -> Reply:
         return self._follow("GET", path + ("?" + urlencode(params) if params else ""), None, headers or {})
@@ -92,7 +105,7 @@ class LoopbackClient:
         for attempt in (1, 2):
             reused = self.connection is not None
             if self.connection is None:
-                self.connection = http.client.HTTPConnection(self.host, self.port, timeout=120)
+                self.connection = OneWriteConnection(self.host, self.port, timeout=120)
             started = time.monotonic()
             try:
                 self.connection.request(method, target, body=body, headers=headers)
