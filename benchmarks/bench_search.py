@@ -93,23 +93,25 @@ def policy_bound(policies, scenario, batch: int, repeats: int) -> float:
     return batch * repeats / (time.perf_counter() - started)
 
 
-def timed_search(policies, scenario, budget: int, config: MCTSConfig) -> tuple[float, float]:
-    """(new simulator steps/s, all simulator steps/s) of one MCTS run."""
+def timed_search(policies, scenario, budget: int, config: MCTSConfig) -> tuple[float, float, float]:
+    """(new simulator steps/s, all simulator steps/s, mean rows per batched step) of one MCTS run."""
     problem = CoupledProblem(policies, scenario)
     tracker = Tracker(budget, 30)
     started = time.perf_counter()
     search = mcts(problem, tracker, np.random.default_rng(0), config)
     elapsed = time.perf_counter() - started
-    return (tracker.steps - search.replayed) / elapsed, tracker.steps / elapsed
+    rows = search.batch_rows / max(search.batch_steps, 1)
+    return (tracker.steps - search.replayed) / elapsed, tracker.steps / elapsed, rows
 
 
-def speed(budget: int, speed_agents: str) -> None:
+def speed(budget: int, speed_agents: str, batch: int, repeats: int = 3) -> None:
     scenario = load_scenario("paper-bl-tr")
     label = ("DS-RNN vs DS-RNN (untrained weights)" if speed_agents == "untrained"
              else f"{' vs '.join(speed_agents.split(','))} (DS-RNN)")
     pairs = {"goal vs orca (scripted)": [load_policy("goal"), load_policy("orca")], label: dsrnn_pair(speed_agents)}
+    loop_config = MCTSConfig(batch=batch)
+    loop_name = f"batch {batch}" + (" (default" if batch == MCTSConfig().batch else " (not the default")
     runs = [  # (label, config, share of the budget)
-        ("MCTS tree, snapshots, batch 32 (default)", MCTSConfig(batch=32), 1.0),
         ("MCTS tree, snapshots, batch 1", MCTSConfig(batch=1), 0.25),
         ("MCTS tree, replay from reset, batch 1", MCTSConfig(batch=1, branch="replay"), 0.25),
         ("MCTS receding, snapshots, batch 1", MCTSConfig(batch=1, mode="receding", repeat=1), 0.25),
@@ -117,16 +119,26 @@ def speed(budget: int, speed_agents: str) -> None:
          MCTSConfig(batch=1, mode="receding", repeat=1, branch="replay"), 0.25),
     ]
     print(f"\n### Throughput (coupled steps/s, paper-bl-tr, T = 100, budget {budget:,} steps)\n")
-    print("New simulator steps per second (replayed prefixes not counted; in brackets with them). The bound is "
-          "every agent's act() alone on batches of 32 observations.\n")
+    print(f"New simulator steps per second (replayed prefixes not counted; in brackets with them). The bound is "
+          f"every agent's act() alone on batches of {batch} observations, the loop's batch; the bound and the "
+          f"loop are each measured {repeats} times, alternately, and their medians are shown.\n")
     print("| agents | search loop | steps/s | share of policy-only bound |")
     print("|---|---|---|---|")
     for label, policies in pairs.items():
         timed_search(policies, scenario, 2000, MCTSConfig())  # warm-up: numba compilation, first torch calls
-        bound = policy_bound(policies, scenario, 32, repeats=50)
-        print(f"| {label} | policy-only bound, batch 32 | {bound:,.0f} | 100% |")
+        bounds, loops, rows = [], [], []
+        for _ in range(repeats):
+            bounds.append(policy_bound(policies, scenario, batch, repeats=50))
+            new, _, mean_rows = timed_search(policies, scenario, budget, loop_config)
+            loops.append(new)
+            rows.append(mean_rows)
+        bound, loop = float(np.median(bounds)), float(np.median(loops))
+        shares = [f"{share:.0%}" for share in sorted(np.array(loops) / np.array(bounds))]
+        print(f"| {label} | policy-only bound, batch {batch} | {bound:,.0f} | 100% |")
+        print(f"| {label} | MCTS tree, snapshots, {loop_name}; {np.mean(rows):.1f} rows per step on average) "
+              f"| {loop:,.0f} | {loop / bound:.0%} (runs: {', '.join(shares)}) |", flush=True)
         for name, config, share in runs:
-            new, total = timed_search(policies, scenario, int(budget * share), config)
+            new, total, _ = timed_search(policies, scenario, int(budget * share), config)
             extra = f" ({total:,.0f})" if config.branch == "replay" else ""
             print(f"| {label} | {name} | {new:,.0f}{extra} | {new / bound:.0%} |", flush=True)
 
@@ -244,6 +256,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--agents", default=",".join(SCRIPTED), help="agents whose every pair is searched (quality)")
     parser.add_argument("--speed-agents", default="lo,med", help="DS-RNN pair timed (speed), or 'untrained'")
+    parser.add_argument("--speed-batch", type=int, default=MCTSConfig().batch,
+                        help="MCTS batch of the timed default loop and of the policy-only bound (speed)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (quality)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="MCTS setting (quality)")
     parser.add_argument("--plot", type=Path, default=Path(__file__).with_name("search_quality.png"))
@@ -253,7 +267,7 @@ def main() -> None:
     print(f"machine: {os.cpu_count()} cores; numpy {np.__version__}; load average "
           + " ".join(f"{x:.2f}" for x in os.getloadavg()))
     if args.part in ("speed", "both"):
-        speed(args.speed_budget, args.speed_agents)
+        speed(args.speed_budget, args.speed_agents, args.speed_batch)
     if args.part in ("quality", "both"):
         quality(args.agents.split(","), args.budget, args.seeds, args.plot, args.jobs)
         print("load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()))
