@@ -19,11 +19,15 @@ import sys
 import time
 import tomllib
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, fields
+from functools import partial
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
+from torch import Tensor
 
 from search import world
 from search.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
@@ -58,7 +62,7 @@ class TrainConfig:
     entropy_coef: float = 0.0
     max_grad_norm: float = 0.5
     save_every: int = 200  # updates between checkpoints
-    threads: int = 1  # torch CPU threads
+    threads: int = 1  # each PPO minibatch is split across this many threads (torch itself runs on one)
     # "bfloat16": the network's matrix products in bfloat16 (sums, hidden states and the loss stay float32);
     # "auto" picks it where the CPU multiplies bfloat16 natively (about 4x float32 here), else "float32"
     precision: str = "auto"
@@ -120,8 +124,47 @@ def _without_length(config: dict | None) -> dict | None:
     return None if config is None else {k: v for k, v in config.items() if k != "total_steps"}
 
 
+def gaussian_entropy(log_std: Tensor) -> Tensor:
+    """Of the diagonal Gaussian policy."""
+    return (0.5 + 0.5 * math.log(2 * math.pi) + log_std).sum()
+
+
 def gaussian_log_prob(actions, mean, log_std):
     return (-0.5 * ((actions - mean) / log_std.exp()) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+
+
+class Rollout(NamedTuple):
+    """One update's rollout, (T, N, ...) tensors, with the hidden states it started from."""
+
+    robot: Tensor
+    temporal: Tensor
+    spatial: Tensor
+    mask: Tensor
+    start: Tensor
+    actions: Tensor
+    logprobs: Tensor
+    advantages: Tensor
+    returns: Tensor
+    initial_hidden: list[Tensor]
+
+
+def minibatch_gradients(net: DSRNN, params: list[Tensor], config: TrainConfig, rollout: Rollout, samples: int,
+                        part: Tensor, with_entropy: bool) -> tuple[list[Tensor], Tensor]:
+    """The PPO loss's gradients from the worlds ``part`` of a minibatch of ``samples`` samples (the parts'
+    gradients add up to the minibatch's), and the part's sums of policy loss, value loss and approximate KL."""
+    r = rollout
+    with config.autocast():
+        mean, value, _ = net(r.robot[:, part], r.temporal[:, part], r.spatial[:, part], r.mask[:, part],
+                             r.start[:, part], [h[part] for h in r.initial_hidden])
+    log_ratio = gaussian_log_prob(r.actions[:, part], mean, net.action_logstd) - r.logprobs[:, part]
+    ratio = log_ratio.exp()
+    adv = r.advantages[:, part]
+    sums = torch.stack([-torch.min(adv * ratio, adv * ratio.clamp(1 - config.clip, 1 + config.clip)).sum(),
+                        0.5 * (r.returns[:, part] - value).pow(2).sum(), ((ratio - 1) - log_ratio).detach().sum()])
+    loss = (sums[0] + config.value_coef * sums[1]) / samples
+    if with_entropy:
+        loss = loss - config.entropy_coef * gaussian_entropy(net.action_logstd)
+    return torch.autograd.grad(loss, params), sums.detach()
 
 
 def checkpoints(out_dir: Path) -> list[Path]:
@@ -165,7 +208,7 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
     sitting early (the run stays resumable)."""
     out = Path(out_dir)
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
-    torch.set_num_threads(config.threads)
+    torch.set_num_threads(1)
     keep_freed_memory()
     wc, nc = config.world, config.network
     n_envs, n_steps = config.num_envs, config.num_steps
@@ -174,7 +217,10 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
     torch.manual_seed(config.seed)
     rng = np.random.default_rng([TRAIN_STREAM, config.seed])
     net = DSRNN(nc)
-    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate, eps=config.adam_eps, fused=True)
+    params = list(net.parameters())
+    optimizer = torch.optim.Adam(params, lr=config.learning_rate, eps=config.adam_eps, fused=True)
+    pool = ThreadPoolExecutor(config.threads) if config.threads > 1 else None
+    parallel_map = pool.map if pool else map
     state = sample_training_states(wc, rng, n_envs)
     hidden = net.initial_state(n_envs)
     episode_start = torch.ones(n_envs)
@@ -270,31 +316,24 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
                 advantages[t] = last_gae
             returns = advantages + b_values
 
-        # PPO epochs over recurrent minibatches of whole world sequences
+        # PPO epochs over recurrent minibatches of whole world sequences; each minibatch is split into one part
+        # per thread, whose gradients add up (in a fixed order) to the minibatch's
         per_batch = n_envs // config.minibatches
+        rollout = Rollout(b_robot, b_temporal, b_spatial, b_mask, b_start, b_actions, b_logprobs, advantages, returns,
+                          initial_hidden)
         stats = []
         for _ in range(config.epochs):
             order = torch.randperm(n_envs)
             for k in range(config.minibatches):
-                idx = order[k * per_batch:(k + 1) * per_batch]
-                with config.autocast():
-                    mean, value, _ = net(b_robot[:, idx], b_temporal[:, idx], b_spatial[:, idx], b_mask[:, idx],
-                                         b_start[:, idx], [h[idx] for h in initial_hidden])
-                new_logprob = gaussian_log_prob(b_actions[:, idx], mean, net.action_logstd)
-                log_ratio = new_logprob - b_logprobs[:, idx]
-                ratio = log_ratio.exp()
-                adv = advantages[:, idx]
-                policy_loss = -torch.min(adv * ratio, adv * ratio.clamp(1 - config.clip, 1 + config.clip)).mean()
-                value_loss = 0.5 * (returns[:, idx] - value).pow(2).mean()
-                entropy = (0.5 + 0.5 * math.log(2 * math.pi) + net.action_logstd).sum()
-                loss = policy_loss + config.value_coef * value_loss - config.entropy_coef * entropy
-                optimizer.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(net.parameters(), config.max_grad_norm)
+                parts = order[k * per_batch:(k + 1) * per_batch].tensor_split(min(config.threads, per_batch))
+                gradients = partial(minibatch_gradients, net, params, config, rollout, n_steps * per_batch)
+                results = list(parallel_map(gradients, parts, [i == 0 for i in range(len(parts))]))
+                for param, *grads in zip(params, *(r[0] for r in results), strict=True):
+                    param.grad = sum(grads)
+                torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
                 optimizer.step()
-                with torch.no_grad():
-                    approx_kl = ((ratio - 1) - log_ratio).mean()
-                stats.append([policy_loss.item(), value_loss.item(), entropy.item(), approx_kl.item()])
+                policy_sum, value_sum, kl_sum = (sum(r[1] for r in results) / (n_steps * per_batch)).tolist()
+                stats.append([policy_sum, value_sum, gaussian_entropy(net.action_logstd).item(), kl_sum])
 
         seconds += time.perf_counter() - started
         steps = update * config.steps_per_update
@@ -322,4 +361,6 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
                             optimizer=optimizer.state_dict(), run=run)
         if stopping:
             break
+    if pool:
+        pool.shutdown()
     return last

@@ -51,6 +51,18 @@ def test_a_resumed_run_matches_an_uninterrupted_one(tmp_path):
            [{k: v for k, v in r.items() if k not in drop} for r in rows(tmp_path / "parts")]
 
 
+def test_minibatches_split_across_threads_give_the_same_run_up_to_rounding(tmp_path):
+    config = TrainConfig.from_dict(TINY.to_dict() | {"total_steps": 16 * 20 * 3, "precision": "float32"})
+    one = read_checkpoint(train(config, tmp_path / "one", show_progress=False))["model"]
+    split = TrainConfig.from_dict(config.to_dict() | {"threads": 2})
+    two = read_checkpoint(train(split, tmp_path / "two", show_progress=False))["model"]
+    again = read_checkpoint(train(split, tmp_path / "again", show_progress=False))["model"]
+    assert all(torch.equal(two[k], again[k]) for k in two)  # threads add up their gradients in a fixed order
+    for k in one:
+        torch.testing.assert_close(two[k], one[k], rtol=1e-4, atol=1e-5)
+    assert not all(torch.equal(two[k], one[k]) for k in one)  # really another summation order
+
+
 def test_a_run_can_go_longer_but_not_change_its_config(tmp_path):
     config = TrainConfig.from_dict(TINY.to_dict() | {"total_steps": 16 * 20})
     train(config, tmp_path, show_progress=False)
