@@ -13,10 +13,11 @@ import random
 import re
 import secrets
 from datetime import UTC, datetime
+from functools import lru_cache
 
 from fastapi import HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import Connection, Row, bindparam, insert, select, update
+from sqlalchemy import Connection, Row, Text, bindparam, cast, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
@@ -33,8 +34,9 @@ from app.security import checked_form
 
 # The hot path reads and writes with Core statements built once: the ORM's unit of work costs more than the SQL.
 PARTICIPANT, RESPONSE = Participant.__table__, Response.__table__
-_SHOWN = select(PARTICIPANT.c["id", "code", "status", "condition", "plan", "step", "step_started_at"]).where(
-    PARTICIPANT.c.study == bindparam("study"))
+# The plan comes as its JSON text, decoded by `_plan` (once per plan).
+_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition"], cast(PARTICIPANT.c.plan, Text).label("plan"),
+                *PARTICIPANT.c["step", "step_started_at"]).where(PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
 BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
                            PARTICIPANT.c.external_id == bindparam("external_id"))
@@ -54,6 +56,13 @@ PLATFORM_PARAMS = {  # external id, platform study id, platform session id
 PLATFORM_NAMES = {"prolific": "Prolific", "mturk": "Amazon Mechanical Turk"}
 ID_VALUE = re.compile(r"^[A-Za-z0-9_.:-]{1,128}$")
 MOBILE = re.compile(r"Mobi|Android|iPhone|iPad|iPod", re.IGNORECASE)
+
+
+@lru_cache(maxsize=4096)
+def _plan(text: str | None) -> list[dict] | None:
+    """A participant's plan from its JSON text (read with the participant on every request). A plan never changes
+    once assigned, so each is decoded once, and then only read."""
+    return None if text is None else json.loads(text)
 
 
 def _see_current() -> RedirectResponse:
@@ -140,20 +149,20 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
                 participant_id = connection.execute(ENTER, values).inserted_primary_key[0]
                 if values.get("condition") is not None:
                     connection.execute(SET_PLAN, {"participant": participant_id, "now": datetime.now(UTC),
-                                                  "plan": _plan(ctx, participant_id, values["condition"])})
+                                                  "plan": _new_plan(ctx, participant_id, values["condition"])})
                 return values["code"]
         except IntegrityError:
             continue
     raise HTTPException(503, "The study is very busy at this moment. Please wait a few seconds and try again.")
 
 
-def _plan(ctx: Context, participant_id: int, condition: int) -> list[dict]:
+def _new_plan(ctx: Context, participant_id: int, condition: int) -> list[dict]:
     rng = random.Random(f"{ctx.study.study.seed}:participant:{participant_id}")
     return build_plan(ctx.study, ctx.bundle, ctx.conditions[condition], rng)
 
 
 def _assign_plan(ctx: Context, participant: Participant) -> None:
-    participant.plan = _plan(ctx, participant.id, participant.condition)
+    participant.plan = _new_plan(ctx, participant.id, participant.condition)
     participant.step = 0
     participant.step_started_at = datetime.now(UTC)
 
@@ -198,7 +207,7 @@ def screen_view(ctx: Context, screen: dict) -> dict:
 
 def _render_screen(request: Request, ctx: Context, participant: Row, *, errors=None, values=None,
                    events: str = "", status_code: int = 200):
-    screen = participant.plan[participant.step]
+    screen = _plan(participant.plan)[participant.step]
     name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
     if not (errors or values or events):  # as first shown: the same page for everyone at this step of this screen
         return ctx.render_form(request, (name, participant.step, json.dumps(screen, sort_keys=True)), name,
@@ -236,11 +245,12 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Ro
     try:
         with ctx.db.connection(write=True) as connection:
             participant = _current(connection, ctx, request)
-            if participant.status != "started" or participant.plan is None or step < participant.step:
+            plan = _plan(participant.plan)
+            if participant.status != "started" or plan is None or step < participant.step:
                 return None  # already answered: a double click or the back button; keep the first
             if step > participant.step:
                 raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
-            screen = participant.plan[step]
+            screen = plan[step]
             checked = check_screen(ctx.study, screen, form)
             if checked.errors:
                 return participant, checked
@@ -251,7 +261,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Ro
                 "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
                 "submitted_at": now,
             })
-            done = step + 1 == len(participant.plan)
+            done = step + 1 == len(plan)
             failed = screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]
             connection.execute(NEXT_STEP, {
                 "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),

@@ -26,12 +26,15 @@ from app.bots import Bot, ClipIndex, Observer
 CONNECTION_ERRORS = (OSError, http.client.HTTPException)
 
 
+PAGE_TYPES = {("GET", "/"): "landing", ("POST", "/consent"): "consent", ("GET", "/study"): "study page",
+              ("POST", "/study"): "answer", ("POST", "/condition"): "condition"}
+
+
 def page_type(method: str, path: str) -> str:
     """The kind of request, for latency per page type."""
     if path.startswith("/clips/"):
         return "clip"
-    return {("GET", "/"): "landing", ("POST", "/consent"): "consent", ("GET", "/study"): "study page",
-            ("POST", "/study"): "answer", ("POST", "/condition"): "condition"}.get((method, path), f"{method} {path}")
+    return PAGE_TYPES.get((method, path), f"{method} {path}")
 
 
 @dataclass
