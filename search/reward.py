@@ -145,9 +145,24 @@ class DivergenceReward:
         }
 
     def step(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> np.ndarray:
-        """One step's reward (...): the sum of its terms, always added in the same order."""
-        terms = self.step_terms(robot_actions, robot_pos, human_pos, env_action, goal, end)
-        return terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
+        """One step's reward (...): the sum of its terms in the order ``trajectory`` adds them. A step is either a
+        goal, an end or neither, so only one of the first three terms is nonzero: each row gets that one (plus
+        the plausibility term), the same number as the full sum, with the state divergence and the heuristic
+        computed only when some row needs them."""
+        c = self.config
+        reward = np.where(goal | end, 0.0, pairwise_divergence(robot_actions, c.norm, c.combine))
+        if goal.any():
+            d_s = pairwise_divergence(robot_pos, c.norm, c.combine)
+            reward = np.where(goal, c.goal_bonus + c.alpha * d_s, reward)
+        if end.any():
+            if self.heuristic is state_divergence:
+                h = pairwise_divergence(robot_pos, c.norm, c.combine)
+            else:
+                h = self.heuristic(robot_pos, human_pos, c)
+            reward = np.where(end, c.horizon_offset + c.beta * h, reward)
+        if c.plausibility:
+            reward = reward + c.plausibility * self.prior.log_prob(env_action)
+        return reward
 
     def trajectory(self, trajectory, dt: float) -> tuple[float, dict[str, float], np.ndarray]:
         """Total reward, per-term totals and per-step terminal flags of a replayed ``coupled.Trajectory``.

@@ -202,9 +202,11 @@ def check_env_action(env_action, n_worlds: int, config: WorldConfig) -> np.ndarr
     else:
         raise ValueError(f"environment action must have shape ({n_worlds}, {n * 2}) or ({n_worlds}, {n}, 2) "
                          f"(an (x, y) per human per world), got {action.shape}")
+    bound = config.env_action_bound
+    if np.abs(action).max(initial=0.0) <= bound:  # the usual case, in two array operations
+        return action
     if not np.all(np.isfinite(action)):
         raise ValueError("environment action contains NaN or infinite values")
-    bound = config.env_action_bound
     if np.any(np.abs(action) > bound):
         if not config.clip_env_actions:
             worst = float(np.max(np.abs(action)))
@@ -272,7 +274,7 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
         raise ValueError("robot action contains NaN or infinite values")
     active = ~state.done
     if config.kinematics == "holonomic":
-        speed = np.linalg.norm(action, axis=-1, keepdims=True)
+        speed = np.sqrt(np.sum(action * action, axis=-1, keepdims=True))  # np.linalg.norm's numbers
         velocity = np.where(speed > config.robot_v_pref, action * (config.robot_v_pref / np.maximum(speed, 1e-300)),
                             action)
         theta = np.where(speed[..., 0] > 0, np.arctan2(velocity[..., 1], velocity[..., 0]), state.robot_theta)

@@ -85,3 +85,28 @@ def test_bad_reward_settings_say_what_is_wrong(settings, message):
         RewardConfig(**settings)
     with pytest.raises(ValueError, match="unknown reward setting"):
         RewardConfig.from_dict({"alpah": 1.0})
+
+
+def far_humans(robot_pos, human_pos, config):
+    """A heuristic other than the default one: mean distance of the humans from the first robot."""
+    return np.linalg.norm(human_pos - robot_pos[..., :1, :], axis=-1).mean(axis=-1)
+
+
+@pytest.mark.parametrize("agents", [2, 3])
+@pytest.mark.parametrize("settings", [
+    {}, {"norm": "squared", "combine": "min", "goal_bonus": 100.0, "beta": 1e4, "horizon_offset": -1e5},
+    {"plausibility": 0.3, "prior": "gaussian", "heuristic": "tests.search.test_reward:far_humans"},
+])
+def test_a_step_is_the_sum_of_its_terms_bit_for_bit(agents, settings):
+    config = RewardConfig(**settings)
+    r = DivergenceReward(config, ActionPrior((4, 2), 0.25, config.prior, config.prior_sigma))
+    rng = np.random.default_rng(agents)
+    rows = 200
+    actions, positions = rng.normal(size=(rows, agents, 2)), rng.normal(size=(rows, agents, 2)) * 5
+    humans, env = rng.normal(size=(rows, 4, 2)), rng.uniform(-0.25, 0.25, (rows, 4, 2))
+    goal = rng.random(rows) < 0.1
+    end = ~goal & (rng.random(rows) < 0.1)
+    for g, e in [(goal, end), (goal & False, end & False), (goal, end & False), (goal & False, end)]:
+        terms = r.step_terms(actions, positions, humans, env, g, e)
+        total = terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
+        assert np.array_equal(r.step(actions, positions, humans, env, g, e), total)
