@@ -13,6 +13,7 @@ import os
 import platform
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from datetime import date
 
@@ -62,31 +63,37 @@ def inference(config: NetworkConfig, batch: int, seconds: float) -> tuple[float,
 
 def network_bound(config: TrainConfig, updates: int) -> float:
     """Env-steps/s if an update were nothing but its network passes: one forward per rollout step (plus the
-    bootstrap value), then every epoch's forward and backward over every recurrent minibatch."""
+    bootstrap value), then every epoch's forward and backward over every recurrent minibatch, split across
+    ``config.threads`` threads as the trainer splits it."""
     torch.manual_seed(0)
     net = DSRNN(config.network)
+    params = [p for name, p in net.named_parameters() if name != "action_logstd"]  # the loss below skips it
     n, t, m = config.num_envs, config.num_steps, config.network.max_humans
     sequence = (torch.randn(t, n, 7), torch.randn(t, n, 2), torch.randn(t, n, m, 2), torch.ones(t, n, m))
     starts = torch.zeros(t, n)
     per_batch = n // config.minibatches
+    initial = net.initial_state(n)
+    pool = ThreadPoolExecutor(config.threads)
+
+    def passes(part: torch.Tensor) -> None:
+        with config.autocast():
+            mean, value, _ = net(*(x[:, part] for x in sequence), starts[:, part], [h[part] for h in initial])
+        torch.autograd.grad(mean.square().sum() + value.square().sum(), params)
 
     def update():
-        hidden = net.initial_state(n)
+        hidden = initial
         with torch.no_grad(), config.autocast():
             for i in range(t + 1):
                 _, _, hidden = net(*(x[i % t: i % t + 1] for x in sequence), starts[:1], hidden)
         for _ in range(config.epochs):
             for k in range(config.minibatches):
-                idx = slice(k * per_batch, (k + 1) * per_batch)
-                with config.autocast():
-                    mean, value, _ = net(*(x[:, idx] for x in sequence), starts[:, idx],
-                                         [h[idx] for h in net.initial_state(n)])
-                net.zero_grad()
-                (mean.square().mean() + value.square().mean()).backward()
+                parts = torch.arange(k * per_batch, (k + 1) * per_batch).tensor_split(min(config.threads, per_batch))
+                list(pool.map(passes, parts))
 
     start = time.perf_counter()
     for _ in range(updates):
         update()
+    pool.shutdown()
     return updates * config.steps_per_update / (time.perf_counter() - start)
 
 
@@ -136,7 +143,6 @@ def main() -> None:
             for precision in ("bfloat16", "float32") for threads in (1, 2)] + [("shipped (small)", shipped_run)]
     for label, config in runs:
         config = replace(config, save_every=10_000)
-        torch.set_num_threads(config.threads)
         trained, bound, fraction = training_against_bound(config, args.updates, args.rounds)
         print(f"| {label} | {config.num_envs} x {config.num_steps} | {config.precision} | {config.threads} | "
               f"{trained:,.0f} | {bound:,.0f} | {fraction:.2f} | {trained / CROWDNAV_ENV_STEPS:.2f} |", flush=True)
