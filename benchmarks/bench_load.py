@@ -2,7 +2,7 @@
 keep-alive client of tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback,
 clips included, on the same machine as the server.
 
-Four runs, each bounded in time and count:
+Five runs, each bounded in time and count (--runs picks some):
   ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves here (uvicorn, one
            process, httptools and uvloop, no access log), hammered by --concurrency clients for --seconds;
   burst    --concurrency bots with no pauses, new ones taking the place of those finished, for --seconds: page
@@ -10,16 +10,22 @@ Four runs, each bounded in time and count:
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
            completed sessions per minute, p50/p95/p99 latency per page type, errors;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
-           the bots reopen their links and finish; then the database is audited.
+           the bots reopen their links and finish; then the database is audited;
+  cpu      server CPU per request, by kind: --cpu-sessions bots one at a time against `foil serve` (with its
+           access log, as deployed) and 2,000 requests to the constant endpoint, reading the CPU time of all the
+           server's threads from /proc/PID/task/*/schedstat around every request (Linux only; much less
+           sensitive to the machine's load than latency is).
 
-    .venv/bin/python benchmarks/bench_load.py [--participants 300] [--write]
+    .venv/bin/python benchmarks/bench_load.py [--participants 300] [--runs ceiling,burst] [--write]
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
 import os
 import platform
+import random
 import subprocess
 import sys
 import tempfile
@@ -33,12 +39,12 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from app.assignment import conditions  # noqa: E402
-from app.bots import ClipIndex  # noqa: E402
+from app.bots import Bot, ClipIndex, Observer  # noqa: E402
 from app.study import parse_study  # noqa: E402
 from tests.analysis.conftest import write_bot_bundle  # noqa: E402
 from tests.app.conftest import study_text  # noqa: E402
 from tests.live_server import LiveServer, free_port  # noqa: E402
-from tests.robustness.crowd import Crowd, LoopbackClient, audit  # noqa: E402
+from tests.robustness.crowd import Crowd, LoopbackClient, audit, page_type  # noqa: E402
 
 CONSTANT_SERVER = """
 import sys, uvicorn
@@ -52,6 +58,7 @@ uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, se
 """
 SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0"}  # as the constant server: a reverse proxy keeps the access log
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
+RUNS = ["ceiling", "burst", "paced", "crash", "cpu"]
 
 
 def quantile(values: list[float], q: float) -> float:
@@ -59,20 +66,26 @@ def quantile(values: list[float], q: float) -> float:
     return values[min(len(values) - 1, int(q * len(values)))] if values else float("nan")
 
 
-def ceiling(concurrency: int, seconds: float, workdir: Path) -> float:
-    """Requests per second of the constant endpoint, `concurrency` clients in a closed loop."""
+def start_constant_server(workdir: Path) -> tuple[subprocess.Popen, int]:
     port = free_port()
     with (workdir / "constant.log").open("w") as log:
         server = subprocess.Popen([sys.executable, "-c", CONSTANT_SERVER, str(port)], stdout=log,
                                   stderr=subprocess.STDOUT)
+    probe = LoopbackClient(f"http://127.0.0.1:{port}")
+    for _ in range(100):
+        try:
+            probe.get("/")
+            break
+        except OSError:
+            time.sleep(0.1)
+    probe.close()
+    return server, port
+
+
+def ceiling(concurrency: int, seconds: float, workdir: Path) -> float:
+    """Requests per second of the constant endpoint, `concurrency` clients in a closed loop."""
+    server, port = start_constant_server(workdir)
     try:
-        probe = LoopbackClient(f"http://127.0.0.1:{port}")
-        for _ in range(100):
-            try:
-                probe.get("/")
-                break
-            except OSError:
-                time.sleep(0.1)
         counts = [0] * concurrency
         stop = time.monotonic() + seconds
 
@@ -155,6 +168,57 @@ def crash(bundle: Path, study: Path, workdir: Path, participants: int, pause: fl
     return {"crowd": crowd, "audit": result, "killed_at": killed_at, "restart_s": restart_s}
 
 
+def thread_cpu_s(pid: int) -> float:
+    """CPU time of all the threads of process `pid` so far, in seconds."""
+    total = 0
+    for path in glob.glob(f"/proc/{pid}/task/*/schedstat"):
+        try:
+            with open(path) as stat:
+                total += int(stat.read().split()[0])
+        except OSError:  # a thread that ended
+            pass
+    return total / 1e9
+
+
+class MeteredClient(LoopbackClient):
+    """A bot's client that records the server's CPU time for every request, by kind."""
+
+    def __init__(self, url: str, pid: int, cpu: dict[str, list[float]]):
+        super().__init__(url)
+        self.pid, self.cpu = pid, cpu
+
+    def _exchange(self, method: str, target: str, body: str | None, headers: dict) -> tuple[int, str, str]:
+        before = thread_cpu_s(self.pid)
+        reply = super()._exchange(method, target, body, headers)
+        time.sleep(0.001)  # what the server does after its reply (logging, closing the request) counts too
+        self.cpu[page_type(method, target.split("?")[0])].append(thread_cpu_s(self.pid) - before)
+        return reply
+
+
+def cpu_per_request(bundle: Path, study: Path, workdir: Path, sessions: int) -> dict[str, tuple[int, float]]:
+    """Server CPU (count, mean ms) per kind of request: bots one at a time, then the constant endpoint."""
+    cpu: dict[str, list[float]] = defaultdict(list)
+    clips = ClipIndex(bundle)
+    workdir.mkdir()
+    with LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{workdir / 'cpu.sqlite3'}",
+                    workdir=workdir) as server:  # the access log on, as `foil serve` runs by default
+        for k in range(sessions + 3):  # the first three warm the server up
+            client = MeteredClient(server.url, server.process.pid, cpu if k >= 3 else defaultdict(list))
+            Bot(client, clips, Observer(), random.Random(k), number=k, external_id=f"cpu-{k}").take_study()
+            client.close()
+    server, port = start_constant_server(workdir)
+    try:
+        client = MeteredClient(f"http://127.0.0.1:{port}", server.pid, defaultdict(list))
+        for _ in range(2000):
+            client.get("/")
+        cpu["constant endpoint"] = client.cpu["landing"]
+        client.close()
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    return {kind: (len(v), sum(v) / len(v) * 1000) for kind, v in cpu.items()}
+
+
 def latency_table(crowd: Crowd) -> list[str]:
     by_kind: dict[str, list[float]] = defaultdict(list)
     for exchange in crowd.log:
@@ -172,15 +236,23 @@ def latency_table(crowd: Crowd) -> list[str]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", default=",".join(RUNS), help="which runs, comma-separated (default: all)")
     parser.add_argument("--participants", type=int, default=300)
     parser.add_argument("--pause", type=float, default=2.0, help="seconds before every form (default 2)")
     parser.add_argument("--ramp", type=float, default=10.0, help="arrivals spread over this many seconds")
     parser.add_argument("--concurrency", type=int, default=32, help="clients of the ceiling and burst runs")
     parser.add_argument("--seconds", type=float, default=20.0, help="length of the ceiling and burst runs")
     parser.add_argument("--crash-participants", type=int, default=100)
+    parser.add_argument("--cpu-sessions", type=int, default=30, help="bots of the cpu run")
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
     args = parser.parse_args()
+    runs = set(args.runs.split(","))
+    if not runs <= set(RUNS) or {"ceiling", "burst"} & runs and not {"ceiling", "burst"} <= runs:
+        parser.error(f"--runs takes some of {', '.join(RUNS)}; ceiling and burst go together (their ratio)")
 
+    lines = [f"{date.today()}, {os.cpu_count()} cores {platform.machine()}; server and bots on the same machine "
+             "(other work running; load averages from os.getloadavg() before each run)."]
+    ok = True
     with tempfile.TemporaryDirectory(prefix="foil-load-") as tmp:
         work = Path(tmp)
         (work / "clips").mkdir()
@@ -189,50 +261,59 @@ def main() -> int:
         study = work / "study.toml"
         study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
 
-        load_burst = os.getloadavg()[0]
-        print("ceiling ...", flush=True)
-        constant = ceiling(args.concurrency, args.seconds, work)
-        print("burst ...", flush=True)
-        fast = burst(bundle, study, work / "burst", args.concurrency, args.seconds)
-        print("paced ...", flush=True)
-        load_before = os.getloadavg()[0]
-        slow = paced(bundle, study, work / "paced", args.participants, args.pause, args.ramp)
-        print("crash ...", flush=True)
-        killed = crash(bundle, study, work / "crash", args.crash_participants, args.pause, args.ramp)
+        if "ceiling" in runs:
+            load = os.getloadavg()[0]
+            print("ceiling ...", flush=True)
+            constant = ceiling(args.concurrency, args.seconds, work)
+            print("burst ...", flush=True)
+            fast = burst(bundle, study, work / "burst", args.concurrency, args.seconds)
+            ok &= not fast["errors"]
+            lines += ["", f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
+                      f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed "
+                      f"sessions/min, {fast['errors']} errors); the constant FastAPI endpoint under the same client: "
+                      f"{constant:.0f} requests/s; ratio **{fast['pages_per_s'] / constant:.2f}** (load average "
+                      f"{load:.1f} before the ceiling run)."]
+        if "paced" in runs:
+            load = os.getloadavg()[0]
+            print("paced ...", flush=True)
+            slow = paced(bundle, study, work / "paced", args.participants, args.pause, args.ramp)
+            crowd, wall = slow["crowd"], slow["wall"]
+            non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
+            bad_status = sum(e.status >= 400 for e in crowd.log)
+            ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
+            lines += ["", f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
+                      f"before every form (the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests "
+                      f"per participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
+                      f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min), "
+                      f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "
+                      f"{quantile(non_video, .95):.0f} ms.", "", *latency_table(crowd)]
+            for error in crowd.errors[:10]:
+                print("error:", error)
+        if "crash" in runs:
+            print("crash ...", flush=True)
+            killed = crash(bundle, study, work / "crash", args.crash_participants, args.pause, args.ramp)
+            result = killed["audit"]
+            ok &= result.ok and killed["crowd"].completed == args.crash_participants
+            lines += ["", f"Crash: {args.crash_participants} paced bots; SIGKILL after {killed['killed_at']} "
+                      f"acknowledged answers, restarted in {killed['restart_s']:.1f} s; {killed['crowd'].completed} "
+                      f"of {args.crash_participants} completed ({sum(p.interruptions for p in killed['crowd'].people)} "
+                      f"bot interruptions, {len(killed['crowd'].errors)} errors); {result.acknowledged} acknowledged "
+                      f"answers, {len(result.missing)} missing from the database; {result.participants} participants, "
+                      f"{len(result.duplicated)} duplicated; per condition {result.conditions} "
+                      f"({'balanced' if not result.balance_problems else '; '.join(result.balance_problems)})."]
+            for error in killed["crowd"].errors[:10]:
+                print("error:", error)
+        if "cpu" in runs:
+            load = os.getloadavg()[0]
+            print("cpu ...", flush=True)
+            cpu = cpu_per_request(bundle, study, work / "cpu", args.cpu_sessions)
+            lines += ["", f"Server CPU per request ({args.cpu_sessions} bots one at a time, load average {load:.1f} "
+                      "before):", "", "| request | count | CPU ms |", "|---|---:|---:|"]
+            lines += [f"| {kind} | {n:,} | {ms:.2f} |" for kind, (n, ms) in sorted(
+                cpu.items(), key=lambda item: ORDER.index(item[0]) if item[0] in ORDER else len(ORDER))]
 
-    crowd, wall = slow["crowd"], slow["wall"]
-    non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
-    bad_status = sum(e.status >= 400 for e in crowd.log)
-    result = killed["audit"]
-    lines = [
-        f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, load average {load_before:.1f} before the "
-        "paced run (other work running); server and bots on the same machine.",
-        "",
-        f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s before every form "
-        f"(the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests per participant): "
-        f"{crowd.completed} of {args.participants} completed in {wall:.0f} s "
-        f"({crowd.completed / wall * 60:.0f} completed sessions/min), {len(crowd.errors)} bot errors, "
-        f"{bad_status} HTTP errors; p95 of non-video requests {quantile(non_video, .95):.0f} ms.",
-        "",
-        *latency_table(crowd),
-        "",
-        f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
-        f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed sessions/min, "
-        f"{fast['errors']} errors); the constant FastAPI endpoint under the same client: {constant:.0f} requests/s; "
-        f"ratio **{fast['pages_per_s'] / constant:.2f}** (load average {load_burst:.1f} before the ceiling run).",
-        "",
-        f"Crash: {args.crash_participants} paced bots; SIGKILL after {killed['killed_at']} acknowledged answers, "
-        f"restarted in {killed['restart_s']:.1f} s; {killed['crowd'].completed} of {args.crash_participants} "
-        f"completed ({sum(p.interruptions for p in killed['crowd'].people)} bot interruptions, "
-        f"{len(killed['crowd'].errors)} errors); {result.acknowledged} acknowledged answers, "
-        f"{len(result.missing)} missing from the database; {result.participants} participants, "
-        f"{len(result.duplicated)} duplicated; per condition {result.conditions} "
-        f"({'balanced' if not result.balance_problems else '; '.join(result.balance_problems)}).",
-    ]
     text = "\n".join(lines)
     print(text)
-    for error in (crowd.errors + killed["crowd"].errors)[:10]:
-        print("error:", error)
     if args.write:
         path = REPO / "BENCHMARKS.md"
         current = path.read_text()
@@ -240,8 +321,6 @@ def main() -> int:
         intro = (f"{heading}\n\n{__doc__.split(chr(10) + chr(10))[1].strip()}\n\n" if heading not in current
                  else "")
         path.write_text(current.rstrip("\n") + "\n\n" + intro + text + "\n")
-    ok = (crowd.completed == args.participants and not crowd.errors and not bad_status and result.ok
-          and killed["crowd"].completed == args.crash_participants)
     return 0 if ok else 1
 
 
