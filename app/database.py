@@ -47,21 +47,13 @@ def make_engine(url: str, *, synchronous: str = "normal") -> Engine:
 
         @event.listens_for(engine, "connect")
         def _sqlite_setup(dbapi_connection, _record):
-            dbapi_connection.isolation_level = None  # we emit BEGIN ourselves, below
+            dbapi_connection.isolation_level = None  # Database emits BEGIN itself
             cursor = dbapi_connection.cursor()
             cursor.execute("PRAGMA journal_mode=WAL")
             cursor.execute(f"PRAGMA synchronous={SYNCHRONOUS[synchronous]}")
             cursor.execute("PRAGMA foreign_keys=ON")
             cursor.execute("PRAGMA busy_timeout=30000")
             cursor.close()
-
-        @event.listens_for(engine, "begin")
-        def _sqlite_begin(connection):
-            options = connection.get_execution_options()
-            if options.get("foil_one_read"):
-                return  # a single statement reads one consistent snapshot by itself
-            # Straight to the driver: a statement through SQLAlchemy costs more than SQLite's work for it.
-            connection.connection.dbapi_connection.execute("BEGIN IMMEDIATE" if options.get("foil_write") else "BEGIN")
 
         return engine
     return create_engine(url, pool_pre_ping=True)
@@ -73,11 +65,8 @@ class Database:
     def __init__(self, url: str, *, synchronous: str = "normal"):
         self.url = url
         self.engine = make_engine(url, synchronous=synchronous)
-        self._read = sessionmaker(self.engine, expire_on_commit=False)
-        self._write_engine = self.engine.execution_options(foil_write=True)
-        self._one_read_engine = self.engine.execution_options(foil_one_read=True)
-        self._write = sessionmaker(self._write_engine, expire_on_commit=False)
-        sqlite = self.engine.dialect.name == "sqlite"
+        self._sessions = sessionmaker(self.engine, expire_on_commit=False)
+        sqlite = self.sqlite = self.engine.dialect.name == "sqlite"
         self._write_turn = threading.Lock() if sqlite else nullcontext()
         # Work that never waits on a disk or a network runs on the event loop; the rest in the thread pool.
         self.inline = sqlite and synchronous == "normal"
@@ -95,20 +84,29 @@ class Database:
 
         Without `write`, the block must run a single statement: on SQLite no transaction is begun for it, since
         one statement always reads one consistent snapshot (use `reading()` for several)."""
-        engine = self._write_engine if write else self._one_read_engine
-        with self._write_turn if write else nullcontext(), engine.begin() as connection:
+        with self._write_turn if write else nullcontext(), self.engine.begin() as connection:
+            if write:
+                self._begin(connection, "BEGIN IMMEDIATE")
             yield connection
 
     @contextmanager
     def reading(self) -> Iterator[Session]:
-        with self._read() as session, session.begin():
+        with self._sessions() as session, session.begin():
+            self._begin(session.connection(), "BEGIN")
             yield session
 
     @contextmanager
     def writing(self) -> Iterator[Session]:
         """A transaction that commits when the block ends without an exception, and rolls back otherwise."""
-        with self._write_turn, self._write() as session, session.begin():
+        with self._write_turn, self._sessions() as session, session.begin():
+            self._begin(session.connection(), "BEGIN IMMEDIATE")
             yield session
+
+    def _begin(self, connection: Connection, begin: str) -> None:
+        """SQLite: begin the transaction that SQLAlchemy has just opened (the driver is told not to). Straight to
+        the driver, not through an SQLAlchemy event and statement, which cost more than SQLite's work here."""
+        if self.sqlite:
+            connection.connection.driver_connection.execute(begin)
 
     def dispose(self) -> None:
         self.engine.dispose()
