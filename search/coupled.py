@@ -156,23 +156,24 @@ class CoupledSimulator:
 
     def assign(self, index, snapshot: Snapshot) -> None:
         """Overwrite the coupled scenarios ``index`` with a snapshot's (as many rows; the batch keeps its size)."""
-        index = np.asarray(index, dtype=np.int64).reshape(-1)
-        if index.size != snapshot.batch:
-            raise ValueError(f"{index.size} rows to overwrite, but the snapshot holds {snapshot.batch}")
-        if self.shared_crowd:
-            worlds = index
-        else:
-            worlds = np.concatenate([k * self.batch + index for k in range(self.n_agents)])
-        self.state.assign(worlds, snapshot.state)
-        rows = index.tolist() if index.size <= 4 else None
+        rows = np.asarray(index, dtype=np.int64).reshape(-1).tolist()
+        if len(rows) != snapshot.batch:
+            raise ValueError(f"{len(rows)} rows to overwrite, but the snapshot holds {snapshot.batch}")
+        if len(rows) > 4:  # many rows: fancy indexing
+            worlds = np.array(rows if self.shared_crowd else
+                              [k * self.batch + row for k in range(self.n_agents) for row in rows])
+            self.state.assign(worlds, snapshot.state)
+            for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
+                for key, value in new.items():
+                    state[key][rows] = value
+            return
+        self.state.assign(rows if self.shared_crowd else
+                          [k * self.batch + row for k in range(self.n_agents) for row in rows], snapshot.state)
         for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
             for key, value in new.items():
-                if rows is None:
-                    state[key][index] = value
-                else:
-                    target = state[key]
-                    for j, row in enumerate(rows):
-                        target[row] = value[j]
+                target = state[key]
+                for j, row in enumerate(rows):
+                    target[row] = value[j]
 
 
 @dataclass

@@ -84,7 +84,7 @@ class StateNode:
 
 
 class ActionNode:
-    __slots__ = ("parent", "action", "visits", "completed", "total", "best", "child")
+    __slots__ = ("parent", "action", "visits", "completed", "total", "best", "value", "child", "closed")
 
     def __init__(self, parent: StateNode, action: np.ndarray):
         self.parent = parent
@@ -93,7 +93,9 @@ class ActionNode:
         self.completed = 0  # returns backed up so far
         self.total = 0.0
         self.best = -math.inf
+        self.value = -math.inf  # q, kept up to date by backups: -inf while none is back (its siblings go first)
         self.child: StateNode | None = None
+        self.closed = False  # its child ends the trajectory
 
     def q(self, backup: str) -> float:
         if not self.completed:
@@ -184,28 +186,24 @@ class MCTS:
 
     def _uct(self, node: StateNode) -> ActionNode | None:
         """The action with the best upper confidence bound among those that do not end the trajectory (the
-        first of equal scores); ``ActionNode.q`` written out, as this loop is the tree's hot spot."""
-        log_n, c, mean = math.log(node.visits), self.config.exploration, self.config.backup == "mean"
-        sqrt, best, best_score = math.sqrt, None, -math.inf
+        first of equal scores)."""
+        log_n, c, sqrt = math.log(node.visits), self.config.exploration, math.sqrt
+        best, best_score = None, -math.inf
         for action in node.children:
-            child = action.child
-            if child is not None and child.terminal:
+            if action.closed:
                 continue
-            if action.completed:
-                q = action.total / action.completed if mean else action.best
-            else:
-                q = -math.inf
-            score = q + c * sqrt(log_n / action.visits)
+            score = action.value + c * sqrt(log_n / action.visits)
             if best is None or score > best_score:
                 best, best_score = action, score
         return best
 
-    @staticmethod
-    def backup(path: list[ActionNode], value: float) -> None:
+    def backup(self, path: list[ActionNode], value: float) -> None:
+        mean = self.config.backup == "mean"
         for action in path:
             action.completed += 1
             action.total += value
             action.best = max(action.best, value)
+            action.value = action.total / action.completed if mean else action.best
 
     def state_of(self, node: StateNode):
         """The node's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
@@ -280,6 +278,7 @@ class Rollouts:
                 keep = config.branch == "snapshot" and not terminal[i]
                 action.child = StateNode(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
                                          problem.snapshot([i]) if keep else None)
+                action.closed = bool(terminal[i])
         ended = terminal | (taken >= config.repeat + config.rollout_depth) if config.rollout_depth else terminal
         return terminal, ended
 

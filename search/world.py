@@ -146,16 +146,19 @@ class WorldState:
         return WorldState(*[getattr(self, name).take(index, axis=0) for name in STATE_FIELDS])
 
     def assign(self, worlds, other: WorldState) -> None:
-        """Overwrite the given worlds with ``other``'s (e.g. fresh episodes for finished worlds)."""
-        index = np.asarray(worlds, dtype=np.int64).reshape(-1)
+        """Overwrite the given worlds (an index array, or a list of a few) with ``other``'s (e.g. fresh episodes
+        for finished worlds)."""
         mine, theirs = vars(self), vars(other)
-        if index.size <= 4:  # a few rows: plain row assignment costs far less than fancy indexing
-            for j, w in enumerate(index.tolist()):
+        if not isinstance(worlds, list):
+            worlds = np.asarray(worlds, dtype=np.int64).reshape(-1)
+            if worlds.size > 4:
                 for name in STATE_FIELDS:
-                    mine[name][w] = theirs[name][j]
-            return
-        for name in STATE_FIELDS:
-            mine[name][index] = theirs[name]
+                    mine[name][worlds] = theirs[name]
+                return
+            worlds = worlds.tolist()
+        for j, w in enumerate(worlds):  # a few rows: plain row assignment costs far less than fancy indexing
+            for name in STATE_FIELDS:
+                mine[name][w] = theirs[name][j]
 
     def equals(self, other: WorldState) -> bool:
         return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)

@@ -134,3 +134,34 @@ def test_crowds_are_shared_or_one_per_agent():
     assert step.crowds.shape == (1, 2, 10, 2)
     np.testing.assert_array_equal(step.crowds[:, 0], step.human_pos)
     assert not np.allclose(step.crowds[:, 0], step.crowds[:, 1])
+
+
+
+@pytest.mark.parametrize("visible", [False, True])
+@pytest.mark.parametrize("rows", [[2], [4, 1], [0, 1, 3, 4, 5]])
+def test_assign_overwrites_some_rows_with_a_snapshot_and_leaves_the_others(visible, rows):
+    config = WorldConfig(robot_visible=visible)
+    names = ("goal", "med")  # a recurrent agent: its hidden state must travel with the rows too
+    source, target = make(names, batch=len(rows), config=config), make(names, batch=6, config=config)
+    for a in env_actions(12, batch=len(rows), seed=1):
+        source.step(a)
+    for a in env_actions(7, batch=6, seed=2):
+        target.step(a)
+    others = [b for b in range(6) if b not in rows]
+    untouched = target.snapshot(others)
+    target.assign(rows, source.snapshot())
+    for j, row in enumerate(rows):
+        mine, theirs = target.snapshot([row]), source.snapshot([j])
+        assert mine.state.equals(theirs.state)
+        for a, b in zip(mine.policy_states, theirs.policy_states, strict=True):
+            assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    after = target.snapshot(others)
+    assert after.state.equals(untouched.state)
+    for a, b in zip(after.policy_states, untouched.policy_states, strict=True):
+        assert all(np.array_equal(a[k], b[k]) for k in a)
+    for a in env_actions(10, batch=6, seed=3):  # the assigned rows go on as the source's (torch's numbers may
+        got, expected = target.step(a), source.step(a[rows])  # differ in the last bits between batch sizes)
+        np.testing.assert_allclose(got.robot_pos[rows], expected.robot_pos, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(got.crowds[rows], expected.crowds, rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="rows to overwrite"):
+        target.assign([0, 1], source.snapshot([0]))
