@@ -1,8 +1,9 @@
 """A crowd of `foil simulate` bots (app.bots.Bot) taking a study at once against a real server, each in its own
 thread, for the crash test and the load benchmark.
 
-Each bot talks through a `LoopbackClient`: a lean keep-alive HTTP/1.1 client on http.client (httpx costs about
-four times as much CPU per request, which on a 2-core machine the load generator cannot spare). It follows
+Each bot talks through a `LoopbackClient`: a lean keep-alive HTTP/1.1 client on a plain socket (httpx costs about
+four times as much CPU per request as http.client, and http.client's header parsing, through the email package,
+costs more than the rest of a request; on a 2-core machine the load generator cannot spare it). It follows
 redirects, keeps the session cookie, times every exchange, pauses before each form it sends (a person reading the
 page), and remembers every answer the server acknowledged. A bot whose server goes away waits for it to come back
 and reopens its link, which resumes its record, as a person would.
@@ -16,7 +17,6 @@ import socket
 import threading
 import time
 from dataclasses import dataclass, field
-from http.cookies import SimpleCookie
 from types import SimpleNamespace
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
@@ -53,21 +53,11 @@ class Reply:
         self.request = SimpleNamespace(method=method, url=SimpleNamespace(path=path))
 
 
-class OneWriteConnection(http.client.HTTPConnection):
-    """An HTTPConnection that sends a request's head and body in one write, as browsers send a small form
-    (http.client writes them apart, so the server would read every form in two pieces)."""
-
-    def _send_output(self, message_body=None, encode_chunked=False):
-        if not isinstance(message_body, bytes) or encode_chunked:
-            return super()._send_output(message_body, encode_chunked)
-        self._buffer.extend((b"", b""))
-        request = b"\r\n".join(self._buffer) + message_body
-        del self._buffer[:]
-        self.send(request)
-
-
 class LoopbackClient:
-    """get/post like httpx.Client for one participant: one keep-alive connection, its cookie, redirects."""
+    """get/post like httpx.Client for one participant: one keep-alive connection, its cookie, redirects.
+
+    HTTP/1.1 as the survey server speaks it: every request goes out in one write (head and form together, as
+    browsers send a small form), every reply has a Content-Length."""
 
     def __init__(self, base_url: str, *, pause_s: float = 0.0, log: list[Exchange] | None = None):
         parts = urlsplit(base_url)
@@ -76,7 +66,7 @@ class LoopbackClient:
         self.log = log if log is not None else []
         self.cookies: dict[str, str] = {}
         self.acknowledged: list[dict] = []  # every /study form the server answered with success
-        self.connection: OneWriteConnection | None = None
+        self.connection: socket.socket | None = None
 
     def get(self, path: str, params: dict | None = None, headers: dict | None = None) -> Reply:
         return self._follow("GET", path + ("?" + urlencode(params) if params else ""), None, headers or {})
@@ -84,7 +74,7 @@ class LoopbackClient:
     def post(self, path: str, data: dict) -> Reply:
         if self.pause_s:
             time.sleep(self.pause_s)  # reading the page and answering it
-        return self._follow("POST", path, urlencode(data), {"content-type": "application/x-www-form-urlencoded"})
+        return self._follow("POST", path, urlencode(data), {"Content-Type": "application/x-www-form-urlencoded"})
 
     def close(self) -> None:
         if self.connection is not None:
@@ -102,18 +92,22 @@ class LoopbackClient:
         raise http.client.HTTPException(f"too many redirects from {target}")
 
     def _exchange(self, method: str, target: str, body: str | None, headers: dict) -> tuple[int, str, str]:
-        headers = dict(headers)
+        head = [f"{method} {target} HTTP/1.1", f"Host: {self.host}:{self.port}"]
+        head += [f"{name}: {value}" for name, value in headers.items()]
         if self.cookies:
-            headers["cookie"] = "; ".join(f"{name}={value}" for name, value in self.cookies.items())
+            head.append("Cookie: " + "; ".join(f"{name}={value}" for name, value in self.cookies.items()))
+        content = body.encode() if body is not None else b""
+        if body is not None:
+            head.append(f"Content-Length: {len(content)}")
+        request = "\r\n".join(head).encode("latin-1") + b"\r\n\r\n" + content
         for attempt in (1, 2):
             reused = self.connection is not None
             if self.connection is None:
-                self.connection = OneWriteConnection(self.host, self.port, timeout=120)
+                self.connection = socket.create_connection((self.host, self.port), timeout=120)
             started = time.monotonic()
             try:
-                self.connection.request(method, target, body=body, headers=headers)
-                response = self.connection.getresponse()
-                data = response.read()
+                self.connection.sendall(request)
+                status, fields, data = self._reply(method)
             except CONNECTION_ERRORS:
                 self.close()
                 # A kept-alive connection the server had closed: send again on a new one, as browsers do.
@@ -121,12 +115,45 @@ class LoopbackClient:
                     continue
                 raise
             done = time.monotonic()
-            self.log.append(Exchange(page_type(method, target.split("?")[0]), response.status, done - started, done))
-            for header in response.headers.get_all("set-cookie") or []:
-                for name, morsel in SimpleCookie(header).items():
-                    self.cookies[name] = morsel.value
-            return response.status, response.headers.get("location", ""), data.decode("utf-8", "replace")
+            self.log.append(Exchange(page_type(method, target.split("?")[0]), status, done - started, done))
+            location = ""
+            for name, value in fields:
+                if name == "set-cookie":
+                    cookie, _, _ = value.partition(";")
+                    key, _, text = cookie.partition("=")
+                    self.cookies[key.strip()] = text.strip()
+                elif name == "location":
+                    location = value
+                elif name == "connection" and value.lower() == "close":
+                    self.close()
+            return status, location, data.decode("utf-8", "replace")
         raise AssertionError("unreachable")
+
+    def _reply(self, method: str) -> tuple[int, list[tuple[str, str]], bytes]:
+        """Status, header fields (names in lower case) and body of the next reply on the connection."""
+        received = bytearray()
+        while (end := received.find(b"\r\n\r\n")) < 0:
+            received += self._receive(65536)
+        status_line, *lines = received[:end].decode("latin-1").split("\r\n")
+        status = int(status_line.split(" ", 2)[1])
+        fields = []
+        for line in lines:
+            name, _, value = line.partition(":")
+            fields.append((name.strip().lower(), value.strip()))
+        names = dict(fields)
+        if "chunked" in names.get("transfer-encoding", ""):
+            raise http.client.HTTPException("a chunked reply: the survey server sends a Content-Length")
+        length = 0 if method == "HEAD" or status in (204, 304) else int(names.get("content-length", 0))
+        body = received[end + 4:]
+        while len(body) < length:
+            body += self._receive(length - len(body))
+        return status, fields, bytes(body[:length])
+
+    def _receive(self, size: int) -> bytes:
+        data = self.connection.recv(size)
+        if not data:
+            raise http.client.RemoteDisconnected("the server closed the connection")
+        return data
 
 
 @dataclass
