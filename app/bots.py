@@ -178,16 +178,19 @@ class PageForm:
                 elif tag == "select":
                     select = None
                 continue
+            if tag == "fieldset":
+                legend = ""
+                self.answerable |= "data-answers" in _attributes(attributes)
+                continue
+            if tag == "legend":
+                legend_at = match.end()
+                continue
+            if tag == "label":
+                label_at, radio = match.end(), None
+                continue
             a = _attributes(attributes)
             if tag == "form":
                 self.action = a.get("action", "")
-            elif tag == "fieldset":
-                legend = ""
-                self.answerable |= "data-answers" in a
-            elif tag == "legend":
-                legend_at = match.end()
-            elif tag == "label":
-                label_at, radio = match.end(), None
             elif tag == "input" and a.get("type") == "hidden":
                 self.hidden[a["name"]] = a.get("value", "")
             elif tag == "input" and a.get("type") == "radio":

@@ -18,7 +18,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from urllib.parse import parse_qsl, urlencode, urlsplit
+from urllib.parse import urlencode, urlsplit
 
 from app.bots import Bot, ClipIndex, Observer
 
@@ -74,18 +74,19 @@ class LoopbackClient:
     def post(self, path: str, data: dict) -> Reply:
         if self.pause_s:
             time.sleep(self.pause_s)  # reading the page and answering it
-        return self._follow("POST", path, urlencode(data), {"Content-Type": "application/x-www-form-urlencoded"})
+        return self._follow("POST", path, urlencode(data), {"Content-Type": "application/x-www-form-urlencoded"},
+                            sent={name: str(value) for name, value in data.items()})
 
     def close(self) -> None:
         if self.connection is not None:
             self.connection.close()
             self.connection = None
 
-    def _follow(self, method: str, target: str, body: str | None, headers: dict) -> Reply:
+    def _follow(self, method: str, target: str, body: str | None, headers: dict, sent: dict | None = None) -> Reply:
         for _ in range(5):
             status, location, text = self._exchange(method, target, body, headers)
             if method == "POST" and target == "/study" and status == 303:
-                self.acknowledged.append(dict(parse_qsl(body, keep_blank_values=True)))
+                self.acknowledged.append(sent)
             if status not in (301, 302, 303, 307, 308):
                 return Reply(method, target.split("?")[0], status, text)
             method, target, body, headers = "GET", location, None, {}
