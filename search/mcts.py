@@ -233,7 +233,9 @@ class Rollouts:
         self.actions = np.zeros((width, problem.horizon, *problem.action_shape))  # from the initial state
         self.lengths = np.zeros(width, dtype=np.int64)
         self.returns = np.zeros(width)
-        self.start = np.zeros(width, dtype=np.int64)  # depth of the node each iteration expands
+        self.taken = np.zeros(width, dtype=np.int64)  # steps each iteration has taken
+        self.countdown = np.zeros(width, dtype=np.int64)  # steps until its held action is renewed
+        self.index = np.arange(width)
         self.held = np.zeros((width, *problem.action_shape))  # the new edge's action, then the rollout's
         self.paths: list[list[ActionNode]] = [[] for _ in range(width)]
 
@@ -258,23 +260,25 @@ class Rollouts:
         """One batched step of every row; new tree nodes at the end of their edge. Returns (terminal, ended)."""
         search, n = self.search, self.n
         config, problem = search.config, search.problem
-        depth = self.lengths[:n]
-        taken = depth - self.start[:n]
-        renew = np.flatnonzero((taken >= config.repeat) & (taken % config.repeat == 0))
+        countdown = self.countdown[:n]
+        renew = np.flatnonzero(countdown == 0)
         if renew.size:
             self.held[renew] = problem.prior.sample(search.rng, renew.size)
+            countdown[renew] = config.repeat
         step_actions = self.held[:n]
         reward, terminal = problem.step(step_actions)
         search.tracker.count(n)
         search.batch_rows += n
         search.batch_steps += 1
-        self.actions[np.arange(n), depth] = step_actions
-        depth += 1
+        self.actions[self.index[:n], self.lengths[:n]] = step_actions
+        self.lengths[:n] += 1
         self.returns[:n] += reward
+        countdown -= 1
+        taken = self.taken[:n]
         taken += 1
-        for i in np.flatnonzero((taken <= config.repeat) & (terminal | (taken == config.repeat))).tolist():
+        for i in np.flatnonzero(terminal | (taken == config.repeat)).tolist():
             action = self.paths[i][-1]
-            if action.child is None:  # another row may have expanded the same edge first
+            if action.child is None and taken[i] <= config.repeat:  # another row may have expanded it first
                 keep = config.branch == "snapshot" and not terminal[i]
                 action.child = StateNode(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
                                          problem.snapshot([i]) if keep else None)
@@ -287,13 +291,13 @@ class Rollouts:
         budget is expected to allow them; drop the ended rows left over. The budget estimate: every iteration in
         flight or started runs to the mean length of those finished so far (all ``batch`` at the start)."""
         search, problem, n = self.search, self.search.problem, self.n
-        running = np.ones(n, dtype=bool)
-        running[ended] = False
-        if search.rollouts:  # iterations tend to end near the same depth
-            end = search.rollout_ends / search.rollouts
-            spare = search.tracker.remaining - np.maximum(end - self.lengths[:n][running], 1.0).sum()
+        end = search.rollout_ends / search.rollouts if search.rollouts else 0.0  # iterations end near one depth
+        if not search.rollouts or search.tracker.remaining > self.actions.shape[0] * problem.horizon:
+            spare = math.inf  # the first batch, or far from the end of the budget: no estimate needed
         else:
-            end, spare = 0.0, math.inf
+            running = np.ones(n, dtype=bool)
+            running[ended] = False
+            spare = search.tracker.remaining - np.maximum(end - self.lengths[:n][running], 1.0).sum()
         places = ended.tolist() + list(range(n, self.actions.shape[0]))  # ended rows first, then unused ones
         saved = problem.snapshot() if n and search.config.branch == "replay" else None
         snapshots = []
@@ -304,7 +308,9 @@ class Rollouts:
             i = places[len(snapshots) - 1]
             self.paths[i] = path
             write_actions_to(node, self.actions[i])
-            self.lengths[i] = self.start[i] = node.depth
+            self.lengths[i] = node.depth
+            self.taken[i] = 0
+            self.countdown[i] = search.config.repeat
             self.returns[i] = node.value
             self.held[i] = path[-1].action
             spare -= max(end - node.depth, 1.0)
@@ -326,7 +332,7 @@ class Rollouts:
     def _compact(self, keep: np.ndarray) -> None:
         """Keep rows ``keep`` (in order) as rows 0, 1, ..."""
         count = keep.size
-        for array in (self.actions, self.lengths, self.returns, self.start, self.held):
+        for array in (self.actions, self.lengths, self.returns, self.taken, self.countdown, self.held):
             array[:count] = array[keep]
         self.paths[:count] = [self.paths[i] for i in keep.tolist()]
         self.n = count
