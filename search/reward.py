@@ -124,7 +124,7 @@ class DivergenceReward:
         goal_outcome = outcome == SUCCESS
         if self.config.collision_is_goal:
             goal_outcome = goal_outcome | (outcome == COLLISION)
-        goal = np.any(newly_done & goal_outcome, axis=-1)
+        goal = (newly_done & goal_outcome).any(axis=-1)
         end = ~goal & ((t >= self.config.horizon) | all_done)
         return goal, end
 

@@ -273,7 +273,7 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
     action = np.asarray(robot_action, dtype=np.float64)
     if action.shape != state.robot_pos.shape:
         raise ValueError(f"robot action must have shape {state.robot_pos.shape} (W, R, 2), got {action.shape}")
-    if not np.all(np.isfinite(action)):
+    if not np.isfinite(action).all():
         raise ValueError("robot action contains NaN or infinite values")
     active = ~state.done
     if config.kinematics == "holonomic":
