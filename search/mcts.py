@@ -317,8 +317,13 @@ class Rollouts:
         if saved is not None:
             problem.restore(saved)
         reused = min(len(snapshots), ended.size)
-        for i, snapshot in zip(places[:reused], snapshots, strict=False):
-            problem.assign([i], snapshot)
+        if reused and hasattr(problem, "assign"):
+            for i, snapshot in zip(places[:reused], snapshots, strict=False):
+                problem.assign([i], snapshot)
+        elif reused:  # a problem without assign: rebuild the batch row by row
+            new_rows = dict(zip(places[:reused], snapshots, strict=False))
+            problem.restore(problem.concat([new_rows[i] if i in new_rows else problem.snapshot([i])
+                                            for i in range(n)]))
         if len(snapshots) > reused:  # more rows than before: the new ones go after the others
             grown = snapshots[reused:]
             problem.restore(problem.concat(([problem.snapshot()] if n else []) + grown))

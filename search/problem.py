@@ -45,7 +45,8 @@ class Problem(Protocol):
         """One snapshot holding the rows of several, in order."""
 
     def assign(self, index, snapshot) -> None:
-        """Overwrite rows ``index`` with a snapshot's rows (as many); the other rows go on untouched."""
+        """Overwrite rows ``index`` with a snapshot's rows (as many); the other rows go on untouched. Optional:
+        MCTS rebuilds the batch with snapshot/concat/restore where a problem lacks it (more slowly)."""
 
 
 class CoupledProblem:

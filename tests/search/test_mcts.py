@@ -161,3 +161,22 @@ def test_rollout_depth_cuts_iterations_after_their_new_edge():
     assert tracker.steps <= 4 * search.rollouts  # every iteration: its new edge and at most 3 more steps
     assert tracker.trajectories < search.rollouts  # cut iterations back up without a finished trajectory
     assert max(node.depth for node in nodes(search.root)) >= 5
+
+
+class WithoutAssign(LockProblem):
+    """The combination lock as a problem written before ``assign`` joined the interface."""
+
+    def __getattribute__(self, name):
+        if name == "assign":
+            raise AttributeError(name)
+        return super().__getattribute__(name)
+
+
+def test_a_problem_without_assign_gets_the_same_search():
+    def run(problem):
+        tracker = Tracker(1500, 5)
+        search = mcts(problem, tracker, np.random.default_rng(6), MCTSConfig(batch=8, repeat=1))
+        return [(f.reward, f.actions.tobytes()) for f in tracker.queue.ranked()], search.rollouts
+
+    assert not hasattr(WithoutAssign(), "assign")
+    assert run(WithoutAssign()) == run(LockProblem())
