@@ -25,6 +25,11 @@ class Checked:
         return sum(1 for event in self.video_events if event["type"] == "play")
 
 
+def digits(value: str) -> bool:
+    """Whether `value` is a whole number in ASCII digits: str.isdigit alone also takes '²', which int() refuses."""
+    return value.isascii() and value.isdigit()
+
+
 def _one(form: FormData, name: str) -> str | None:
     """The field's value; None when it is missing, repeated or a file."""
     values = form.getlist(name)
@@ -52,7 +57,7 @@ def _check_question(name: str, question, screen: dict, form: FormData, out: Chec
         value = _one(form, name)
         if not value:
             out.errors[name] = "Choose one point on the scale."
-        elif not value.isdigit() or not 1 <= int(value) <= question.points:
+        elif not digits(value) or not 1 <= int(value) <= question.points:
             out.errors[name] = f"The answer must be a whole number from 1 to {question.points}."
         else:
             out.answers[name] = int(value)
@@ -106,5 +111,5 @@ def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
         out.errors["video"] = "Please watch the clip to the end before going on."
     out.video_events = events or []
     client_ms = _one(form, "time_on_page_ms") or ""
-    out.client_ms = int(client_ms) if client_ms.isdigit() and len(client_ms) < 10 else None
+    out.client_ms = int(client_ms) if digits(client_ms) and len(client_ms) < 10 else None
     return out

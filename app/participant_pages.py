@@ -24,7 +24,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import FormData
 from starlette.routing import Route
 
-from app.answers import Checked, check_screen
+from app.answers import Checked, check_screen, digits
 from app.assignment import condition_for_slot, next_slot
 from app.context import Context
 from app.database import as_utc
@@ -276,7 +276,7 @@ async def submit(request: Request):
     ctx: Context = request.app.state.context
     form = await checked_form(request)
     step = form.get("step")
-    if not isinstance(step, str) or not step.isdigit() or len(step) > 6:
+    if not isinstance(step, str) or not digits(step) or len(step) > 6:
         raise HTTPException(400, "The form is missing its step number; reload the page and try again.")
     refused = await ctx.db.run(_save, ctx, request, int(step), form)
     if refused is None:
@@ -296,7 +296,7 @@ async def choose_condition(request: Request):
 def _choose_condition(request: Request, ctx: Context, form: FormData):
     number = form.get("number")
     n = len(ctx.conditions)
-    if not isinstance(number, str) or not number.isdigit() or not 1 <= int(number) <= n:
+    if not isinstance(number, str) or not digits(number) or not 1 <= int(number) <= n:
         with ctx.db.reading() as session:
             _current(session, ctx, request)
         return ctx.render(request, "choose.html", status_code=422, n_conditions=n,
