@@ -104,7 +104,7 @@ def timed_search(policies, scenario, budget: int, config: MCTSConfig) -> tuple[f
     return (tracker.steps - search.replayed) / elapsed, tracker.steps / elapsed, rows
 
 
-def speed(budget: int, speed_agents: str, batch: int, repeats: int = 3) -> None:
+def speed(budget: int, speed_agents: str, batch: int, repeats: int = 5) -> None:
     scenario = load_scenario("paper-bl-tr")
     label = ("DS-RNN vs DS-RNN (untrained weights)" if speed_agents == "untrained"
              else f"{' vs '.join(speed_agents.split(','))} (DS-RNN)")
@@ -121,22 +121,24 @@ def speed(budget: int, speed_agents: str, batch: int, repeats: int = 3) -> None:
     print(f"\n### Throughput (coupled steps/s, paper-bl-tr, T = 100, budget {budget:,} steps)\n")
     print(f"New simulator steps per second (replayed prefixes not counted; in brackets with them). The bound is "
           f"every agent's act() alone on batches of {batch} observations, the loop's batch; the bound and the "
-          f"loop are each measured {repeats} times, alternately, and their medians are shown.\n")
+          f"loop are each measured {repeats} times, alternately (about a second each), and the share is the median "
+          f"of the {repeats} pairs' shares.\n")
     print("| agents | search loop | steps/s | share of policy-only bound |")
     print("|---|---|---|---|")
     for label, policies in pairs.items():
         timed_search(policies, scenario, 2000, MCTSConfig())  # warm-up: numba compilation, first torch calls
         bounds, loops, rows = [], [], []
         for _ in range(repeats):
-            bounds.append(policy_bound(policies, scenario, batch, repeats=50))
+            bounds.append(policy_bound(policies, scenario, batch, repeats=400))
             new, _, mean_rows = timed_search(policies, scenario, budget, loop_config)
             loops.append(new)
             rows.append(mean_rows)
         bound, loop = float(np.median(bounds)), float(np.median(loops))
-        shares = [f"{share:.0%}" for share in sorted(np.array(loops) / np.array(bounds))]
+        pair_shares = np.array(loops) / np.array(bounds)
+        shares = [f"{share:.0%}" for share in sorted(pair_shares)]
         print(f"| {label} | policy-only bound, batch {batch} | {bound:,.0f} | 100% |")
         print(f"| {label} | MCTS tree, snapshots, {loop_name}; {np.mean(rows):.1f} rows per step on average) "
-              f"| {loop:,.0f} | {loop / bound:.0%} (runs: {', '.join(shares)}) |", flush=True)
+              f"| {loop:,.0f} | {np.median(pair_shares):.0%} (runs: {', '.join(shares)}) |", flush=True)
         for name, config, share in runs:
             new, total, _ = timed_search(policies, scenario, int(budget * share), config)
             extra = f" ({total:,.0f})" if config.branch == "replay" else ""
