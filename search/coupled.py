@@ -11,10 +11,7 @@ so a search branches from any node without replaying from reset.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from functools import cache
 
 import numpy as np
 
@@ -22,15 +19,6 @@ from search import world
 from search.policies import Observation, Policy, PolicyState, observe
 from search.scenarios import Scenario
 from search.world import WorldConfig, WorldState
-
-
-@cache
-def _crowd_worker() -> ThreadPoolExecutor:
-    """One thread per process that moves crowds while the policies act."""
-    return ThreadPoolExecutor(1, thread_name_prefix="foil-crowd")
-
-
-os.register_at_fork(after_in_child=_crowd_worker.cache_clear)  # a forked child does not inherit the thread
 
 
 @dataclass
@@ -112,18 +100,18 @@ class CoupledSimulator:
         """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""
         env_action = world.check_env_action(env_action, self.batch, self.config)
         observations = self.observations(env_action)
-        world_action = env_action if self.shared_crowd else np.tile(env_action, (self.n_agents, 1, 1))
-        crowd_action = None if self.config.env_action_mode == "observation" else world_action
-        # the humans' next move depends on the state and the environment action, not on the robots' actions:
-        # it is computed on a second core while the policies act
-        crowd = _crowd_worker().submit(world.human_velocities, self.state, self.config, crowd_action)
         actions = np.zeros((self.batch, self.n_agents, 2))
         for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
             action, self.policy_states[k] = policy.act(observation, self.policy_states[k])
             actions[:, k] = np.where(observation.done[:, None], 0.0, action)
         was_done = self._gather(self.state.done).copy()
-        robot_action = actions if self.shared_crowd else actions.transpose(1, 0, 2).reshape(-1, 1, 2)
-        reward = world.advance(self.state, self.config, robot_action, crowd_action, crowd.result())
+        if self.shared_crowd:
+            world_action, robot_action = env_action, actions
+        else:
+            world_action = np.tile(env_action, (self.n_agents, 1, 1))
+            robot_action = actions.transpose(1, 0, 2).reshape(-1, 1, 2)
+        crowd_action = None if self.config.env_action_mode == "observation" else world_action
+        reward = world.advance(self.state, self.config, robot_action, crowd_action)  # checked above
         done = self._gather(self.state.done)
         return CoupledStep(
             robot_actions=actions,

@@ -304,12 +304,9 @@ def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) 
     return advance(state, config, robot_action, action)
 
 
-def advance(state: WorldState, config: WorldConfig, robot_action, env_action: np.ndarray | None,
-            new_human_vel: np.ndarray | None = None) -> np.ndarray:
-    """``step`` for an environment action that ``check_env_action`` has already returned (or None), and the
-    humans' velocities when they are already known (``human_velocities`` of this state and action)."""
-    if new_human_vel is None:
-        new_human_vel = human_velocities(state, config, env_action)
+def advance(state: WorldState, config: WorldConfig, robot_action, env_action: np.ndarray | None) -> np.ndarray:
+    """``step`` for an environment action that ``check_env_action`` has already returned (or None)."""
+    new_human_vel = human_velocities(state, config, env_action)
     new_robot_vel = robot_velocities(state, config, robot_action)
     fresh = {name: np.empty_like(getattr(state, name)) for name in _MOVED}
     reward = np.empty(state.done.shape)
