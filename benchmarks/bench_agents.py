@@ -90,6 +90,7 @@ def network_bound(config: TrainConfig, updates: int) -> float:
                 parts = torch.arange(k * per_batch, (k + 1) * per_batch).tensor_split(min(config.threads, per_batch))
                 list(pool.map(passes, parts))
 
+    update()  # warm-up
     start = time.perf_counter()
     for _ in range(updates):
         update()
@@ -98,14 +99,15 @@ def network_bound(config: TrainConfig, updates: int) -> float:
 
 
 def training_against_bound(config: TrainConfig, updates: int, rounds: int) -> tuple[float, float, float]:
-    """(trainer env-steps/s, bound env-steps/s, median of the per-round fractions): each round runs ``updates``
-    more updates of one real run, then as many bare updates, so both see the same load."""
+    """(trainer env-steps/s, bound env-steps/s, median of the per-round fractions): each round resumes one
+    real run for ``updates`` more updates after one that warms it up (the run is rebuilt from its checkpoint
+    on every resume), then times as many bare updates after one warm-up, so both see the same load."""
     trained, bound = [], []
     with tempfile.TemporaryDirectory() as out:
         train(config, out, show_progress=False, stop_after_updates=1)  # warm up (compiles the world's kernels)
         network_bound(config, 1)
         for _ in range(rounds):
-            train(config, out, show_progress=False, stop_after_updates=updates)
+            train(config, out, show_progress=False, stop_after_updates=updates + 1)
             with open(os.path.join(out, "progress.csv")) as f:
                 rows = list(csv.DictReader(f))[-updates:]
             trained.append(len(rows) / sum(1 / float(r["steps_per_s"]) for r in rows))
