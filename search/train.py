@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import ctypes
+import functools
 import math
 import sys
 import time
@@ -21,7 +22,6 @@ import tomllib
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, fields
-from functools import partial
 from pathlib import Path
 from typing import NamedTuple
 
@@ -326,10 +326,10 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
             order = torch.randperm(n_envs)
             for k in range(config.minibatches):
                 parts = order[k * per_batch:(k + 1) * per_batch].tensor_split(min(config.threads, per_batch))
-                gradients = partial(minibatch_gradients, net, params, config, rollout, n_steps * per_batch)
+                gradients = functools.partial(minibatch_gradients, net, params, config, rollout, n_steps * per_batch)
                 results = list(parallel_map(gradients, parts, [i == 0 for i in range(len(parts))]))
                 for param, *grads in zip(params, *(r[0] for r in results), strict=True):
-                    param.grad = sum(grads)
+                    param.grad = functools.reduce(torch.add, grads)
                 torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
                 optimizer.step()
                 policy_sum, value_sum, kl_sum = (sum(r[1] for r in results) / (n_steps * per_batch)).tolist()
