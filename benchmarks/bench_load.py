@@ -96,16 +96,22 @@ def ceiling(concurrency: int, seconds: float, workdir: Path) -> float:
                 counts[k] += 1
             client.close()
 
-        threads = [threading.Thread(target=hammer, args=(k,)) for k in range(concurrency)]
-        started = time.monotonic()
-        for thread in threads:
-            thread.start()
-        for thread in threads:
-            thread.join()
-        return sum(counts) / (time.monotonic() - started)
+        wall = run_in_threads(hammer, concurrency)
+        return sum(counts) / wall
     finally:
         server.terminate()
         server.wait(timeout=30)
+
+
+def run_in_threads(target, count: int) -> float:
+    """Run ``target(k)`` for k in range(count), each in its own thread; the seconds until all have ended."""
+    threads = [threading.Thread(target=target, args=(k,)) for k in range(count)]
+    started = time.monotonic()
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    return time.monotonic() - started
 
 
 def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
@@ -129,13 +135,7 @@ def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: f
                 crowd.run()
                 n += 1
 
-        threads = [threading.Thread(target=lane, args=(k,)) for k in range(concurrency)]
-        started = time.monotonic()
-        for thread in threads:
-            thread.start()
-        for thread in threads:
-            thread.join()
-        wall = time.monotonic() - started
+        wall = run_in_threads(lane, concurrency)
     log = [exchange for crowd in crowds for exchange in crowd.log]
     pages = sum(exchange.kind != "clip" for exchange in log)
     return {"pages_per_s": pages / wall, "sessions_per_min": sum(c.completed for c in crowds) / wall * 60,
