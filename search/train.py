@@ -43,6 +43,12 @@ PROGRESS_COLUMNS = ("update", "env_steps", "seconds", "steps_per_s", "episodes",
 PRECISIONS = ("auto", "float32", "bfloat16")
 
 
+@functools.cache
+def native_bfloat16() -> bool:
+    """Whether this CPU multiplies bfloat16 natively (asked once: the answer does not change)."""
+    return torch.ops.mkldnn._is_mkldnn_bf16_supported()
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Every hyperparameter of a run. Defaults: CrowdNav_DSRNN's PPO on the paper's world (DESIGN.md)."""
@@ -88,8 +94,7 @@ class TrainConfig:
 
     def autocast(self) -> torch.autocast:
         """The precision of the network's passes, as a context."""
-        native = torch.ops.mkldnn._is_mkldnn_bf16_supported()
-        low = self.precision == "bfloat16" or (self.precision == "auto" and native)
+        low = self.precision == "bfloat16" or (self.precision == "auto" and native_bfloat16())
         return torch.autocast("cpu", dtype=torch.bfloat16, enabled=low)
 
     @classmethod
@@ -303,18 +308,19 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
                 episode_start = torch.from_numpy(done.astype(np.float32))
                 obs = observation_tensors(observe(state, wc, robot=0), m)
 
-            # GAE: a finished step does not bootstrap from the next (fresh) episode
             with torch.no_grad():
                 next_value = net(*(o[None] for o in obs), episode_start[None], hidden)[1][0]
-            advantages = torch.zeros(n_steps, n_envs)
-            last_gae = torch.zeros(n_envs)
-            for t in reversed(range(n_steps)):
-                following = next_value if t == n_steps - 1 else b_values[t + 1]
-                not_done = 1.0 - b_dones[t]
-                delta = b_rewards[t] + config.gamma * following * not_done - b_values[t]
-                last_gae = delta + config.gamma * config.gae_lambda * not_done * last_gae
-                advantages[t] = last_gae
-            returns = advantages + b_values
+
+        # GAE: a finished step does not bootstrap from the next (fresh) episode
+        advantages = torch.zeros(n_steps, n_envs)
+        last_gae = torch.zeros(n_envs)
+        for t in reversed(range(n_steps)):
+            following = next_value if t == n_steps - 1 else b_values[t + 1]
+            not_done = 1.0 - b_dones[t]
+            delta = b_rewards[t] + config.gamma * following * not_done - b_values[t]
+            last_gae = delta + config.gamma * config.gae_lambda * not_done * last_gae
+            advantages[t] = last_gae
+        returns = advantages + b_values
 
         # PPO epochs over recurrent minibatches of whole world sequences; each minibatch is split into one part
         # per thread, whose gradients add up (in a fixed order) to the minibatch's
@@ -330,10 +336,10 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
                 results = list(parallel_map(gradients, parts, [i == 0 for i in range(len(parts))]))
                 for param, *grads in zip(params, *(r[0] for r in results), strict=True):
                     param.grad = functools.reduce(torch.add, grads)
+                policy_loss, value_loss, approx_kl = (sum(r[1] for r in results) / (n_steps * per_batch)).tolist()
+                stats.append([policy_loss, value_loss, gaussian_entropy(net.action_logstd).item(), approx_kl])
                 torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
                 optimizer.step()
-                policy_sum, value_sum, kl_sum = (sum(r[1] for r in results) / (n_steps * per_batch)).tolist()
-                stats.append([policy_sum, value_sum, gaussian_entropy(net.action_logstd).item(), kl_sum])
 
         seconds += time.perf_counter() - started
         steps = update * config.steps_per_update
