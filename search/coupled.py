@@ -159,21 +159,11 @@ class CoupledSimulator:
         rows = np.asarray(index, dtype=np.int64).reshape(-1).tolist()
         if len(rows) != snapshot.batch:
             raise ValueError(f"{len(rows)} rows to overwrite, but the snapshot holds {snapshot.batch}")
-        if len(rows) > 4:  # many rows: fancy indexing
-            worlds = np.array(rows if self.shared_crowd else
-                              [k * self.batch + row for k in range(self.n_agents) for row in rows])
-            self.state.assign(worlds, snapshot.state)
-            for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
-                for key, value in new.items():
-                    state[key][rows] = value
-            return
         self.state.assign(rows if self.shared_crowd else
                           [k * self.batch + row for k in range(self.n_agents) for row in rows], snapshot.state)
         for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
             for key, value in new.items():
-                target = state[key]
-                for j, row in enumerate(rows):
-                    target[row] = value[j]
+                world.assign_rows(state[key], rows, value)
 
 
 @dataclass

@@ -146,19 +146,13 @@ class WorldState:
         return WorldState(*[getattr(self, name).take(index, axis=0) for name in STATE_FIELDS])
 
     def assign(self, worlds, other: WorldState) -> None:
-        """Overwrite the given worlds (an index array, or a list of a few) with ``other``'s (e.g. fresh episodes
-        for finished worlds)."""
-        mine, theirs = vars(self), vars(other)
+        """Overwrite the given worlds (an index array or list) with ``other``'s (e.g. fresh episodes for
+        finished worlds)."""
         if not isinstance(worlds, list):
-            worlds = np.asarray(worlds, dtype=np.int64).reshape(-1)
-            if worlds.size > 4:
-                for name in STATE_FIELDS:
-                    mine[name][worlds] = theirs[name]
-                return
-            worlds = worlds.tolist()
-        for j, w in enumerate(worlds):  # a few rows: plain row assignment costs far less than fancy indexing
-            for name in STATE_FIELDS:
-                mine[name][w] = theirs[name][j]
+            worlds = np.asarray(worlds, dtype=np.int64).reshape(-1).tolist()
+        mine, theirs = vars(self), vars(other)
+        for name in STATE_FIELDS:
+            assign_rows(mine[name], worlds, theirs[name])
 
     def equals(self, other: WorldState) -> bool:
         return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)
@@ -166,6 +160,15 @@ class WorldState:
 
 
 STATE_FIELDS = tuple(f.name for f in fields(WorldState))  # in declaration order, as the constructor takes them
+
+
+def assign_rows(target: np.ndarray, rows: list[int], values: np.ndarray) -> None:
+    """``target[rows] = values``; a few rows by plain row assignment, which costs far less than fancy indexing."""
+    if len(rows) > 4:
+        target[rows] = values
+    else:
+        for j, row in enumerate(rows):
+            target[row] = values[j]
 
 
 def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig) -> WorldState:
