@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from sqlalchemy import Connection, bindparam, func, select
 from sqlalchemy.orm import Session
 
+from app.database import Statements
 from app.models import Participant
 from app.study import Study
 
@@ -56,7 +57,7 @@ def condition_for_slot(*, seed: int, n_conditions: int, slot: int) -> int:
 HIGHEST_SLOT = select(func.max(Participant.slot)).where(Participant.study == bindparam("study"))
 
 
-def next_slot(session: Session | Connection, *, study: str) -> int:
+def next_slot(session: Session | Connection | Statements, *, study: str) -> int:
     """The next free arrival slot. Two concurrent callers may get the same number; the unique constraint on
     (study, slot) lets only one of them commit and the other retries."""
     highest = session.scalar(HIGHEST_SLOT, {"study": study})

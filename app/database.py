@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Callable, Iterator
+from collections import namedtuple
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 from datetime import UTC, datetime
 from pathlib import Path
@@ -27,7 +28,8 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import Connection, Engine, create_engine, event
+from sqlalchemy import Connection, Dialect, Engine, Executable, create_engine, event
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
@@ -71,7 +73,8 @@ class Database:
         self._write_turn = threading.Lock() if sqlite else nullcontext()
         # Work that never waits on a disk or a network runs on the event loop; the rest in the thread pool.
         self.inline = sqlite and synchronous == "normal"
-        self._kept = threading.local()  # the event loop thread's connection for `connection()` (see _checked_out)
+        self._kept = threading.local()  # the event loop thread's connection for `statements()` (see _checked_out)
+        self._prepared: dict[Executable, Prepared] = {}
 
     async def run(self, work: Callable[..., T], *args) -> T:
         """`work(*args)`, a function that reads or writes through this database, from an async endpoint."""
@@ -80,16 +83,26 @@ class Database:
         return await run_in_threadpool(work, *args)
 
     @contextmanager
-    def connection(self, *, write: bool = False) -> Iterator[Connection]:
-        """A Core connection in a transaction, as `reading()` or `writing()` but without the ORM's session (whose
-        bookkeeping costs more than the few statements of a participant's request).
+    def statements(self, *, write: bool = False) -> Iterator[Statements]:
+        """Core statements run straight on the driver (`Statements`) in one transaction, which commits when the
+        block ends without an exception and rolls back otherwise: for a participant's request, whose few
+        statements cost SQLAlchemy's execution machinery several times what they cost the database.
 
         Without `write`, the block must run a single statement: on SQLite no transaction is begun for it, since
         one statement always reads one consistent snapshot (use `reading()` for several)."""
-        with self._write_turn if write else nullcontext(), self._checked_out() as connection, connection.begin():
-            if write:
-                self._begin(connection, "BEGIN IMMEDIATE")
-            yield connection
+        with self._write_turn if write else nullcontext(), self._checked_out() as connection:
+            driver = connection.connection  # the pool's DBAPI connection
+            cursor = driver.cursor()
+            try:
+                if write and self.sqlite:
+                    cursor.execute("BEGIN IMMEDIATE")
+                yield Statements(cursor, self._prepared, self.engine.dialect)
+                driver.commit()
+            except BaseException:
+                driver.rollback()
+                raise
+            finally:
+                cursor.close()
 
     @contextmanager
     def _checked_out(self) -> Iterator[Connection]:
@@ -129,6 +142,62 @@ class Database:
         if kept is not None:
             kept.close()
         self.engine.dispose()
+
+
+class Prepared:
+    """A Core statement compiled once for a dialect, with the dialect's own conversions of the values it takes and
+    the columns it returns: run on a driver cursor, it stores and reads rows exactly as SQLAlchemy does. It does
+    not apply Python-side column defaults: an INSERT must be given every column it names."""
+
+    def __init__(self, statement: Executable, dialect: Dialect):
+        compiled = statement.compile(dialect=dialect)
+        self.sql = str(compiled)
+        self.order = compiled.positiontup if compiled.positional else None  # the values' order, for "?" styles
+        self.fixed = {name: bind.effective_value for bind, name in compiled.bind_names.items() if not bind.required}
+        self.convert_in = [(name, convert) for bind, name in compiled.bind_names.items()
+                           if (convert := bind.type.dialect_impl(dialect).bind_processor(dialect)) is not None]
+        columns = list(getattr(statement, "exported_columns", ()))
+        self.row = namedtuple("Row", [str(column.key) for column in columns], rename=True)
+        self.convert_out = [column.type.dialect_impl(dialect).result_processor(dialect, None) for column in columns]
+
+    def parameters(self, values: dict) -> tuple | dict:
+        values = {**self.fixed, **values}
+        for name, convert in self.convert_in:
+            values[name] = convert(values[name])
+        return values if self.order is None else tuple(values[name] for name in self.order)
+
+    def row_from(self, raw: Sequence) -> tuple:
+        return self.row._make(value if convert is None else convert(value)
+                              for convert, value in zip(self.convert_out, raw, strict=True))
+
+
+class Statements:
+    """Runs Core statements on a driver cursor (see `Database.statements`), with the calls of a Session that the
+    participant's pages use. The driver's IntegrityError comes out as SQLAlchemy's, as from a Session."""
+
+    def __init__(self, cursor, prepared: dict[Executable, Prepared], dialect: Dialect):
+        self.cursor, self._prepared, self._dialect = cursor, prepared, dialect
+
+    def execute(self, statement: Executable, values: dict) -> Prepared:
+        prepared = self._prepared.get(statement)
+        if prepared is None:
+            prepared = self._prepared[statement] = Prepared(statement, self._dialect)
+        parameters = prepared.parameters(values)
+        try:
+            self.cursor.execute(prepared.sql, parameters)
+        except self._dialect.dbapi.IntegrityError as error:
+            raise IntegrityError(prepared.sql, parameters, error) from error
+        return prepared
+
+    def first(self, statement: Executable, values: dict) -> tuple | None:
+        """The first row the statement returns (a named tuple), or None."""
+        prepared = self.execute(statement, values)
+        raw = self.cursor.fetchone()
+        return None if raw is None else prepared.row_from(raw)
+
+    def scalar(self, statement: Executable, values: dict):
+        row = self.first(statement, values)
+        return None if row is None else row[0]
 
 
 def _on_event_loop() -> bool:

@@ -17,9 +17,8 @@ from functools import lru_cache
 
 from fastapi import HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import Connection, Row, Text, bindparam, cast, insert, select, update
+from sqlalchemy import Text, bindparam, cast, insert, select, update
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import FormData
 from starlette.routing import Route
@@ -27,12 +26,13 @@ from starlette.routing import Route
 from app.answers import Checked, check_screen, digits
 from app.assignment import condition_for_slot, next_slot
 from app.context import Context
-from app.database import as_utc
+from app.database import Statements, as_utc
 from app.models import Participant, Response
 from app.plan import build_plan
 from app.security import checked_form
 
-# The hot path reads and writes with Core statements built once: the ORM's unit of work costs more than the SQL.
+# The hot path reads and writes with Core statements built once and run on the driver (`Database.statements`):
+# the ORM's unit of work, and even Core's execution, cost more than the SQL. The INSERTs name every column.
 PARTICIPANT, RESPONSE = Participant.__table__, Response.__table__
 # The plan comes as its JSON text, decoded by `_plan` (once per plan).
 _SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition"], cast(PARTICIPANT.c.plan, Text).label("plan"),
@@ -40,8 +40,9 @@ _SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition"], cast(PARTIC
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
 BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
                            PARTICIPANT.c.external_id == bindparam("external_id"))
-SAVE_RESPONSE = insert(RESPONSE)
-ENTER = insert(PARTICIPANT)
+SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
+ENTER = insert(PARTICIPANT).values(
+    {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
 SET_PLAN = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
     plan=bindparam("plan"), step=0, step_started_at=bindparam("now"))
 NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
@@ -82,19 +83,17 @@ def _platform_identity(platform: str, params) -> dict:
             "platform_session_id": values[2] or None}
 
 
-def _by_code(session: Session | Connection, ctx: Context, code) -> Row | None:
-    return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first() if isinstance(
-        code, str) else None
+def _by_code(sql: Statements, ctx: Context, code) -> tuple | None:
+    return sql.first(BY_CODE, {"study": ctx.study.study.id, "code": code}) if isinstance(code, str) else None
 
 
-def _by_identity(session: Session | Connection, ctx: Context, external_id: str) -> Row | None:
+def _by_identity(sql: Statements, ctx: Context, external_id: str) -> tuple | None:
     info = ctx.study.study
-    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform,
-                                         "external_id": external_id}).first()
+    return sql.first(BY_IDENTITY, {"study": info.id, "platform": info.platform, "external_id": external_id})
 
 
-def _current(session: Session | Connection, ctx: Context, request: Request) -> Row:
-    participant = _by_code(session, ctx, request.session.get("participant"))
+def _current(sql: Statements, ctx: Context, request: Request) -> tuple:
+    participant = _by_code(sql, ctx, request.session.get("participant"))
     if participant is None:
         raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
                                  "expired). Please open the study again from the link you were given.")
@@ -102,9 +101,9 @@ def _current(session: Session | Connection, ctx: Context, request: Request) -> R
 
 
 def _read(find, ctx: Context, *args):
-    """`find(session, ctx, *args)` in a read transaction (for `Database.run`)."""
-    with ctx.db.connection() as connection:
-        return find(connection, ctx, *args)
+    """`find(sql, ctx, *args)`, a single read (for `Database.run`)."""
+    with ctx.db.statements() as sql:
+        return find(sql, ctx, *args)
 
 
 async def landing(request: Request):
@@ -135,21 +134,26 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
     info = ctx.study.study
     for _ in range(50):
         try:
-            with ctx.db.connection(write=True) as connection:
+            with ctx.db.statements(write=True) as sql:
                 if identity.get("external_id"):
-                    known = _by_identity(connection, ctx, identity["external_id"])
+                    known = _by_identity(sql, ctx, identity["external_id"])
                     if known is not None:
                         return known.code
+                now = datetime.now(UTC)
                 values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
-                          "status": "started" if agreed else "declined", "user_agent": user_agent[:512], **identity}
+                          "external_id": None, "platform_study_id": None, "platform_session_id": None,
+                          "status": "started" if agreed else "declined", "slot": None, "condition": None,
+                          "plan": None, "step": 0, "step_started_at": now, "user_agent": user_agent[:512],
+                          "created_at": now, "completed_at": None, "excluded": False, "exclusion_note": "",
+                          "attention_failures": 0, **identity}
                 if agreed and info.assignment == "balanced":
-                    values["slot"] = next_slot(connection, study=info.id)
+                    values["slot"] = next_slot(sql, study=info.id)
                     values["condition"] = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
                                                              slot=values["slot"])
-                participant_id = connection.execute(ENTER, values).inserted_primary_key[0]
-                if values.get("condition") is not None:
-                    connection.execute(SET_PLAN, {"participant": participant_id, "now": datetime.now(UTC),
-                                                  "plan": _new_plan(ctx, participant_id, values["condition"])})
+                participant_id = sql.scalar(ENTER, values)
+                if values["condition"] is not None:
+                    sql.execute(SET_PLAN, {"participant": participant_id, "now": now,
+                                           "plan": _new_plan(ctx, participant_id, values["condition"])})
                 return values["code"]
         except IntegrityError:
             continue
@@ -205,7 +209,7 @@ def screen_view(ctx: Context, screen: dict) -> dict:
     return view
 
 
-def _render_screen(request: Request, ctx: Context, participant: Row, *, errors=None, values=None,
+def _render_screen(request: Request, ctx: Context, participant: tuple, *, errors=None, values=None,
                    events: str = "", status_code: int = 200):
     screen = _plan(participant.plan)[participant.step]
     name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
@@ -219,7 +223,7 @@ def _render_screen(request: Request, ctx: Context, participant: Row, *, errors=N
     )
 
 
-def _status_page(request: Request, ctx: Context, participant: Row):
+def _status_page(request: Request, ctx: Context, participant: tuple):
     texts = ctx.study.texts
     if participant.status == "declined":
         return ctx.message(request, "Thank you", texts.declined)
@@ -240,11 +244,11 @@ async def current_page(request: Request):
     return _render_screen(request, ctx, participant)
 
 
-def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Row, Checked] | None:
+def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[tuple, Checked] | None:
     """Save the answers to screen `step`: None when saved or nothing is left to save, else what to show again."""
     try:
-        with ctx.db.connection(write=True) as connection:
-            participant = _current(connection, ctx, request)
+        with ctx.db.statements(write=True) as sql:
+            participant = _current(sql, ctx, request)
             plan = _plan(participant.plan)
             if participant.status != "started" or plan is None or step < participant.step:
                 return None  # already answered: a double click or the back button; keep the first
@@ -255,7 +259,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Ro
             if checked.errors:
                 return participant, checked
             now = datetime.now(UTC)
-            connection.execute(SAVE_RESPONSE, {
+            sql.execute(SAVE_RESPONSE, {
                 "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,
                 "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
                 "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
@@ -263,7 +267,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Ro
             })
             done = step + 1 == len(plan)
             failed = screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]
-            connection.execute(NEXT_STEP, {
+            sql.execute(NEXT_STEP, {
                 "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
                 "to_status": "completed" if done else "started", "completed": now if done else None,
             })
@@ -296,13 +300,12 @@ async def choose_condition(request: Request):
 def _choose_condition(request: Request, ctx: Context, form: FormData):
     number = form.get("number")
     n = len(ctx.conditions)
+    participant_id = _read(_current, ctx, request).id
     if not isinstance(number, str) or not digits(number) or not 1 <= int(number) <= n:
-        with ctx.db.reading() as session:
-            _current(session, ctx, request)
         return ctx.render(request, "choose.html", status_code=422, n_conditions=n,
                           error=f"Please choose a number from 1 to {n}.")
     with ctx.db.writing() as session:
-        participant = session.get(Participant, _current(session, ctx, request).id)
+        participant = session.get(Participant, participant_id)
         if participant.status == "started" and participant.condition is None:
             participant.condition = int(number) - 1
             _assign_plan(ctx, participant)
@@ -311,8 +314,7 @@ def _choose_condition(request: Request, ctx: Context, form: FormData):
 
 def leave_confirm(request: Request):
     ctx: Context = request.app.state.context
-    with ctx.db.reading() as session:
-        _current(session, ctx, request)
+    _read(_current, ctx, request)
     return ctx.render(request, "leave.html")
 
 
@@ -322,8 +324,9 @@ async def leave(request: Request):
 
 
 def _leave(request: Request, ctx: Context):
+    participant_id = _read(_current, ctx, request).id
     with ctx.db.writing() as session:
-        participant = session.get(Participant, _current(session, ctx, request).id)
+        participant = session.get(Participant, participant_id)
         if participant.status == "started":
             participant.status = "returned"
     return _see_current()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+import multiprocessing
 import os
 import platform
 import random
@@ -82,25 +83,55 @@ def start_constant_server(workdir: Path) -> tuple[subprocess.Popen, int]:
     return server, port
 
 
-def ceiling(concurrency: int, seconds: float, workdir: Path) -> float:
+def ceiling(concurrency: int, seconds: float, workdir: Path, processes: int) -> float:
     """Requests per second of the constant endpoint, `concurrency` clients in a closed loop."""
     server, port = start_constant_server(workdir)
     try:
-        counts = [0] * concurrency
-        stop = time.monotonic() + seconds
-
-        def hammer(k: int) -> None:
-            client = LoopbackClient(f"http://127.0.0.1:{port}")
-            while time.monotonic() < stop:
-                client.get("/")
-                counts[k] += 1
-            client.close()
-
-        wall = run_in_threads(hammer, concurrency)
-        return sum(counts) / wall
+        parts, wall = in_processes(_hammer, processes, concurrency, seconds, f"http://127.0.0.1:{port}")
+        return sum(parts) / wall
     finally:
         server.terminate()
         server.wait(timeout=30)
+
+
+def _hammer(part: int, processes: int, concurrency: int, seconds: float, url: str) -> int:
+    """This process's share of the ceiling's clients; the requests they made."""
+    counts = [0] * len(range(part, concurrency, processes))
+    stop = time.monotonic() + seconds
+
+    def client(k: int) -> None:
+        loopback = LoopbackClient(url)
+        while time.monotonic() < stop:
+            loopback.get("/")
+            counts[k] += 1
+        loopback.close()
+
+    run_in_threads(client, len(counts))
+    return sum(counts)
+
+
+def in_processes(work, processes: int, *args) -> tuple[list, float]:
+    """`work(part, processes, *args)` in `processes` fresh processes (one GIL each: the load generator's threads
+    would queue on a single one), started together once all are ready; their results and the seconds until all
+    had returned."""
+    context = multiprocessing.get_context("spawn")
+    ready, results = context.Barrier(processes + 1), context.Queue()
+    workers = [context.Process(target=_work_in_process, args=(work, part, processes, args, ready, results))
+               for part in range(processes)]
+    for worker in workers:
+        worker.start()
+    ready.wait(timeout=120)
+    started = time.monotonic()
+    parts = dict(results.get(timeout=3600) for _ in workers)
+    wall = time.monotonic() - started
+    for worker in workers:
+        worker.join(timeout=60)
+    return [parts[part] for part in range(processes)], wall
+
+
+def _work_in_process(work, part: int, processes: int, args: tuple, ready, results) -> None:
+    ready.wait(timeout=120)
+    results.put((part, work(part, processes, *args)))
 
 
 def run_in_threads(target, count: int) -> float:
@@ -120,26 +151,34 @@ def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
                       workdir=workdir, env=SURVEY_SETTINGS)
 
 
-def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float) -> dict:
+def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
     """Bots without pauses in `concurrency` lanes; each lane starts a new bot when its bot finishes."""
     with serve(bundle, study, workdir) as server:
-        stop = time.monotonic() + seconds
-        crowds: list[Crowd] = []
-        clips = ClipIndex(bundle)
+        parts, wall = in_processes(_burst_lanes, processes, concurrency, seconds, server.url, str(bundle))
+    return {"pages_per_s": sum(part["pages"] for part in parts) / wall,
+            "sessions_per_min": sum(part["completed"] for part in parts) / wall * 60,
+            "errors": sum(part["errors"] for part in parts), "requests": sum(part["requests"] for part in parts)}
 
-        def lane(k: int) -> None:
-            n = 0
-            while time.monotonic() < stop:
-                crowd = Crowd(server.url, str(bundle), 1, seed=1000 * k + n, clips=clips)
-                crowds.append(crowd)
-                crowd.run()
-                n += 1
 
-        wall = run_in_threads(lane, concurrency)
+def _burst_lanes(part: int, processes: int, concurrency: int, seconds: float, url: str, bundle: str) -> dict:
+    """This process's share of the burst's lanes: what their bots did."""
+    stop = time.monotonic() + seconds
+    crowds: list[Crowd] = []
+    clips = ClipIndex(bundle)
+    lanes = range(part, concurrency, processes)
+
+    def lane(k: int) -> None:
+        n = 0
+        while time.monotonic() < stop:
+            crowd = Crowd(url, bundle, 1, seed=1000 * lanes[k] + n, clips=clips)
+            crowds.append(crowd)
+            crowd.run()
+            n += 1
+
+    run_in_threads(lane, len(lanes))
     log = [exchange for crowd in crowds for exchange in crowd.log]
-    pages = sum(exchange.kind != "clip" for exchange in log)
-    return {"pages_per_s": pages / wall, "sessions_per_min": sum(c.completed for c in crowds) / wall * 60,
-            "errors": sum(len(c.errors) for c in crowds), "requests": len(log)}
+    return {"pages": sum(exchange.kind != "clip" for exchange in log), "requests": len(log),
+            "completed": sum(crowd.completed for crowd in crowds), "errors": sum(len(c.errors) for c in crowds)}
 
 
 def paced(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float) -> dict:
@@ -242,6 +281,8 @@ def main() -> int:
     parser.add_argument("--ramp", type=float, default=10.0, help="arrivals spread over this many seconds")
     parser.add_argument("--concurrency", type=int, default=32, help="clients of the ceiling and burst runs")
     parser.add_argument("--seconds", type=float, default=20.0, help="length of the ceiling and burst runs")
+    parser.add_argument("--processes", type=int, default=os.cpu_count(),
+                        help="load generator processes of the ceiling and burst runs, sharing the clients")
     parser.add_argument("--crash-participants", type=int, default=100)
     parser.add_argument("--cpu-sessions", type=int, default=30, help="bots of the cpu run")
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
@@ -264,9 +305,9 @@ def main() -> int:
         if "ceiling" in runs:
             load = os.getloadavg()[0]
             print("ceiling ...", flush=True)
-            constant = ceiling(args.concurrency, args.seconds, work)
+            constant = ceiling(args.concurrency, args.seconds, work, args.processes)
             print("burst ...", flush=True)
-            fast = burst(bundle, study, work / "burst", args.concurrency, args.seconds)
+            fast = burst(bundle, study, work / "burst", args.concurrency, args.seconds, args.processes)
             ok &= not fast["errors"]
             lines += ["", f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
                       f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed "
