@@ -13,6 +13,7 @@ from jinja2 import Environment
 from app.assignment import Condition
 from app.bundle import Bundle
 from app.database import Database
+from app.media import KeptClips
 from app.security import csrf_token
 from app.settings import Settings
 from app.study import Study
@@ -31,6 +32,7 @@ class Context:
     # Form pages as rendered for any participant, with a placeholder for the session's CSRF token.
     pages: dict[tuple, list[str]] = field(default_factory=dict, compare=False)
     csrf_slot: str = field(default_factory=lambda: f"csrf-slot-{secrets.token_hex(16)}", compare=False)
+    kept_clips: KeptClips = field(default_factory=KeptClips, compare=False)
 
     def render(self, request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
         html = self.templates.get_template(name).render(request=request, study=self.study, **context)

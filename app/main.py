@@ -94,7 +94,7 @@ def create_app(settings: Settings) -> FastAPI:
 
     app.add_middleware(SessionMiddleware, secret_key=_cookie_secret(settings, db), session_cookie="foil_session",
                        max_age=settings.session_max_age_s, same_site=settings.cookie_samesite,
-                       https_only=settings.cookie_secure)
+                       https_only=settings.cookie_secure, sessionless=("/clips/", "/static/"))
     app.add_middleware(SecurityHeadersMiddleware, frame_ancestors=settings.frame_ancestors)
     app.add_middleware(BodyLimitMiddleware, limit=settings.max_body_bytes)
     return app

@@ -121,11 +121,13 @@ class SessionMiddleware:
     JSON, then the time it was signed, then an HMAC-SHA1 of both (itsdangerous's TimestampSigner with its default
     key derivation). The key is derived once here instead of on every request, and the HMAC is one call into
     hashlib. A cookie with a wrong signature, older than `max_age` or signed in the future is ignored: the request
-    starts an empty session. The cookie is sent again only when the session changed."""
+    starts an empty session. The cookie is sent again only when the session changed. Paths that start with one of
+    `sessionless` (files that are the same for everyone) have no session."""
 
     def __init__(self, app: ASGIApp, secret_key: str, session_cookie: str = "session", max_age: int = 14 * 24 * 3600,
-                 same_site: str = "lax", https_only: bool = False):
+                 same_site: str = "lax", https_only: bool = False, sessionless: tuple[str, ...] = ()):
         self.app = app
+        self.sessionless = sessionless
         self.key = hashlib.sha1(b"itsdangerous.Signer" + b"signer" + secret_key.encode()).digest()
         self.cookie = session_cookie
         self.max_age = max_age
@@ -163,7 +165,7 @@ class SessionMiddleware:
         return self.load(cookie) if cookie else None
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
+        if scope["type"] != "http" or scope["path"].startswith(self.sessionless):
             await self.app(scope, receive, send)
             return
         loaded = self._from_headers(scope)

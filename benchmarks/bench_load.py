@@ -83,12 +83,14 @@ def start_constant_server(workdir: Path) -> tuple[subprocess.Popen, int]:
     return server, port
 
 
-def ceiling(concurrency: int, seconds: float, workdir: Path, processes: int) -> float:
-    """Requests per second of the constant endpoint, `concurrency` clients in a closed loop."""
+def ceiling(concurrency: int, seconds: float, workdir: Path, processes: int) -> dict:
+    """Requests per second of the constant endpoint, `concurrency` clients in a closed loop, and the server's CPU
+    time per request."""
     server, port = start_constant_server(workdir)
     try:
+        before = thread_cpu_s(server.pid)
         parts, wall = in_processes(_hammer, processes, concurrency, seconds, f"http://127.0.0.1:{port}")
-        return sum(parts) / wall
+        return {"per_s": sum(parts) / wall, "cpu_ms": (thread_cpu_s(server.pid) - before) / sum(parts) * 1000}
     finally:
         server.terminate()
         server.wait(timeout=30)
@@ -154,8 +156,11 @@ def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
     """Bots without pauses in `concurrency` lanes; each lane starts a new bot when its bot finishes."""
     with serve(bundle, study, workdir) as server:
+        before = thread_cpu_s(server.process.pid)
         parts, wall = in_processes(_burst_lanes, processes, concurrency, seconds, server.url, str(bundle))
-    return {"pages_per_s": sum(part["pages"] for part in parts) / wall,
+        cpu_s = thread_cpu_s(server.process.pid) - before
+    pages = sum(part["pages"] for part in parts)
+    return {"pages_per_s": pages / wall, "cpu_ms": cpu_s / pages * 1000,
             "sessions_per_min": sum(part["completed"] for part in parts) / wall * 60,
             "errors": sum(part["errors"] for part in parts), "requests": sum(part["requests"] for part in parts)}
 
@@ -311,9 +316,11 @@ def main() -> int:
             ok &= not fast["errors"]
             lines += ["", f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
                       f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed "
-                      f"sessions/min, {fast['errors']} errors); the constant FastAPI endpoint under the same client: "
-                      f"{constant:.0f} requests/s; ratio **{fast['pages_per_s'] / constant:.2f}** (load average "
-                      f"{load:.1f} before the ceiling run)."]
+                      f"sessions/min, {fast['errors']} errors; server CPU {fast['cpu_ms']:.3f} ms per non-video "
+                      f"request, clips included); the constant FastAPI endpoint under the same client: "
+                      f"{constant['per_s']:.0f} requests/s (server CPU {constant['cpu_ms']:.3f} ms per request); "
+                      f"ratio **{fast['pages_per_s'] / constant['per_s']:.2f}** (load average {load:.1f} before the "
+                      "ceiling run)."]
         if "paced" in runs:
             load = os.getloadavg()[0]
             print("paced ...", flush=True)

@@ -36,6 +36,26 @@ def test_range_requests_get_206(client_and_clip):
     assert client.get(url, headers={"range": f"bytes={len(data) + 10}-"}).status_code == 416
 
 
+@pytest.mark.parametrize("kept_bytes", [0, 1 << 20], ids=["from the file", "kept in memory"])
+def test_ranges_are_the_same_from_memory_and_from_the_file(client_and_clip, kept_bytes):
+    client, url, data = client_and_clip
+    client.app.state.context.kept_clips.limit = kept_bytes
+    for asked, first, last in [("0-1023", 0, 1023), ("0-", 0, len(data) - 1), ("100-199", 100, 199),
+                               (f"10-{len(data) + 50}", 10, len(data) - 1)]:
+        part = client.get(url, headers={"range": f"bytes={asked}"})
+        assert part.status_code == 206 and part.content == data[first:last + 1]
+        assert part.headers["content-range"] == f"bytes {first}-{last}/{len(data)}"
+    assert client.get(url, headers={"range": f"bytes={len(data)}-"}).status_code == 416
+    assert bool(client.app.state.context.kept_clips.clips) == bool(kept_bytes)
+
+
+def test_clips_carry_no_session(client_and_clip):
+    client, url, _ = client_and_clip
+    client.get("/")  # a participant with a session cookie
+    response = client.get(url, headers={"range": "bytes=0-9"})
+    assert "set-cookie" not in response.headers and "cookie" not in response.headers.get("vary", "").lower()
+
+
 @pytest.mark.parametrize("path", [
     "/clips/../manifest.json", "/clips/..%2Fmanifest.json", "/clips/%2e%2e%2fmanifest.json",
     "/clips/" + "0" * 64 + ".mp4", "/clips/manifest.json", "/clips/000.mp4", "/static/../app/settings.py",
