@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Annotated
 
@@ -38,13 +39,14 @@ class Context:
         html = self.templates.get_template(name).render(request=request, study=self.study, **context)
         return HTMLResponse(html, status_code=status_code)
 
-    def render_form(self, request: Request, key: tuple, name: str, **context) -> HTMLResponse:
+    def render_form(self, request: Request, key: tuple, name: str, context: Callable[[], dict]) -> HTMLResponse:
         """`render` for a page that is the same for everyone who sees it (`key` says which) but for the CSRF token of
-        its form: it is rendered once and then only the session's token is filled in."""
+        its form: it is rendered once and then only the session's token is filled in. `context()` gives the
+        template's variables, and is called only to render."""
         pieces = self.pages.get(key)
         if pieces is None:
             html = self.templates.get_template(name).render(
-                request=None, study=self.study, csrf_token=lambda _request: self.csrf_slot, **context)
+                request=None, study=self.study, csrf_token=lambda _request: self.csrf_slot, **context())
             if len(self.pages) >= MAX_PAGES:
                 self.pages.clear()
             pieces = self.pages[key] = html.split(self.csrf_slot)

@@ -110,7 +110,7 @@ async def landing(request: Request):
     ctx: Context = request.app.state.context
     info = ctx.study.study
     if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
-        return ctx.render_form(request, ("consent.html", True), "consent.html", preview=True)
+        return ctx.render_form(request, ("consent.html", True), "consent.html", lambda: {"preview": True})
     if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
         return ctx.message(request, "Please use a computer",
                            "This study needs a laptop or desktop computer. Please open the link there.")
@@ -124,7 +124,7 @@ async def landing(request: Request):
         request.session["participant"] = known.code
         return _see_current()
     request.session.pop("participant", None)
-    return ctx.render_form(request, ("consent.html", False), "consent.html", preview=False)
+    return ctx.render_form(request, ("consent.html", False), "consent.html", lambda: {"preview": False})
 
 
 def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
@@ -214,9 +214,9 @@ def _render_screen(request: Request, ctx: Context, participant: tuple, *, errors
     screen = _plan(participant.plan)[participant.step]
     name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
     if not (errors or values or events):  # as first shown: the same page for everyone at this step of this screen
-        return ctx.render_form(request, (name, participant.step, json.dumps(screen, sort_keys=True)), name,
-                               screen=screen_view(ctx, screen), step=participant.step, errors={}, values={},
-                               video_events="", watched=False)
+        return ctx.render_form(request, (name, participant.step, json.dumps(screen, sort_keys=True)), name, lambda: {
+            "screen": screen_view(ctx, screen), "step": participant.step, "errors": {}, "values": {},
+            "video_events": "", "watched": False})
     return ctx.render(
         request, name, status_code=status_code, screen=screen_view(ctx, screen), step=participant.step,
         errors=errors or {}, values=values or {}, video_events=events, watched='"ended"' in events,
