@@ -21,7 +21,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.database import Database, DatabaseError, as_utc, check_migrated
 from app.exclusions import duration_s
-from app.models import Participant, Response, ServerSetting
+from app.models import Participant, ParticipantPlan, Response, ServerSetting
 from app.study import PairwisePart, Study, load_study, parse_study
 
 LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
@@ -37,7 +37,7 @@ class Column:
 
 @dataclass
 class ParticipantRecord:
-    participant: Row  # the participant table's columns, as attributes
+    participant: Row  # the participant table's columns and the plan, as attributes
     responses: list[Row]  # the response table's columns, ordered by step
 
 
@@ -46,13 +46,13 @@ def participant_records(db: Database, study_id: str, batch: int = 500) -> Iterat
 
     Pages by participant id (keyset), so each batch is one query for participants and one for their responses.
     Reads plain rows rather than ORM objects: the export is read-only and this is several times faster."""
-    people, answers = Participant.__table__, Response.__table__
+    people, answers, plans = Participant.__table__, Response.__table__, ParticipantPlan.__table__
     last_id = 0
     while True:
         with db.reading() as session:
             participants = session.execute(
-                select(people).where(people.c.study == study_id, people.c.id > last_id)
-                .order_by(people.c.id).limit(batch)).all()
+                select(people, plans.c.plan).outerjoin(plans, plans.c.participant_id == people.c.id)
+                .where(people.c.study == study_id, people.c.id > last_id).order_by(people.c.id).limit(batch)).all()
             if not participants:
                 return
             responses: dict[int, list[Row]] = {p.id: [] for p in participants}

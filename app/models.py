@@ -5,6 +5,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 
 from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Integer, MetaData, String, Text, UniqueConstraint
+from sqlalchemy.ext.associationproxy import AssociationProxy, association_proxy
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 # Stable constraint names, so migrations can refer to them on SQLite (batch mode) and PostgreSQL alike.
@@ -34,7 +35,7 @@ class ServerSetting(Base):
 
 
 class Participant(Base):
-    """One person taking one study. `step` indexes `plan`, the screens they see, built once at assignment."""
+    """One person taking one study. `step` indexes `plan`, the screens they see (a ParticipantPlan)."""
 
     __tablename__ = "participant"
     __table_args__ = (
@@ -54,7 +55,6 @@ class Participant(Base):
     status: Mapped[str] = mapped_column(String(16), default="started")  # started|completed|returned|declined
     slot: Mapped[int | None] = mapped_column(Integer)  # arrival number for balanced assignment
     condition: Mapped[int | None] = mapped_column(Integer)  # 0-based index into the study's conditions
-    plan: Mapped[list | None] = mapped_column(JSON)
     step: Mapped[int] = mapped_column(Integer, default=0)
     step_started_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     user_agent: Mapped[str] = mapped_column(String(512), default="")
@@ -65,16 +65,31 @@ class Participant(Base):
     attention_failures: Mapped[int] = mapped_column(Integer, default=0)
 
     responses: Mapped[list[Response]] = relationship(back_populates="participant", order_by="Response.step")
+    plan_row: Mapped[ParticipantPlan | None] = relationship(lazy="selectin", cascade="all, delete-orphan",
+                                                            passive_deletes=True)
+    plan: AssociationProxy[list | None] = association_proxy(
+        "plan_row", "plan", creator=lambda plan: ParticipantPlan(plan=plan))
+
+
+class ParticipantPlan(Base):
+    """The screens a participant sees, built once at assignment and never changed. Apart from the participant's
+    row, which every answer updates: SQLite rewrites a row's whole record, and a plan is several kilobytes."""
+
+    __tablename__ = "participant_plan"
+
+    participant_id: Mapped[int] = mapped_column(ForeignKey("participant.id", ondelete="CASCADE"), primary_key=True)
+    plan: Mapped[list] = mapped_column(JSON)
 
 
 class Response(Base):
     """What a participant submitted on one screen; one row per (participant, step) makes resubmits harmless."""
 
     __tablename__ = "response"
+    # Also the index of a participant's responses (its leading column).
     __table_args__ = (UniqueConstraint("participant_id", "step", name="uq_response_step"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    participant_id: Mapped[int] = mapped_column(ForeignKey("participant.id", ondelete="CASCADE"), index=True)
+    participant_id: Mapped[int] = mapped_column(ForeignKey("participant.id", ondelete="CASCADE"))
     step: Mapped[int] = mapped_column(Integer)
     kind: Mapped[str] = mapped_column(String(16))  # instructions | pairwise | watch | ranking | attention
     answers: Mapped[dict] = mapped_column(JSON, default=dict)  # question name -> value as submitted

@@ -13,11 +13,10 @@ import random
 import re
 import secrets
 from datetime import UTC, datetime
-from functools import lru_cache
 
 from fastapi import HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import Text, bindparam, cast, insert, select, update
+from sqlalchemy import bindparam, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import FormData
@@ -25,26 +24,25 @@ from starlette.routing import Route
 
 from app.answers import Checked, check_screen, digits
 from app.assignment import condition_for_slot, next_slot
-from app.context import Context
+from app.context import MAX_PLANS, Context
 from app.database import Statements, as_utc
-from app.models import Participant, Response
+from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
 from app.security import checked_form
 
 # The hot path reads and writes with Core statements built once and run on the driver (`Database.statements`):
 # the ORM's unit of work, and even Core's execution, cost more than the SQL. The INSERTs name every column.
-PARTICIPANT, RESPONSE = Participant.__table__, Response.__table__
-# The plan comes as its JSON text, decoded by `_plan` (once per plan).
-_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition"], cast(PARTICIPANT.c.plan, Text).label("plan"),
-                *PARTICIPANT.c["step", "step_started_at"]).where(PARTICIPANT.c.study == bindparam("study"))
+PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
+_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at"]).where(
+    PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
 BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
                            PARTICIPANT.c.external_id == bindparam("external_id"))
 SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
 ENTER = insert(PARTICIPANT).values(
     {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
-SET_PLAN = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
-    plan=bindparam("plan"), step=0, step_started_at=bindparam("now"))
+PLAN = select(PLANS.c.plan).where(PLANS.c.participant_id == bindparam("participant"))
+SAVE_PLAN = insert(PLANS).values(participant_id=bindparam("participant"), plan=bindparam("plan"))
 NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
     step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
     completed_at=bindparam("completed"), attention_failures=PARTICIPANT.c.attention_failures + bindparam("failed"))
@@ -59,11 +57,23 @@ ID_VALUE = re.compile(r"^[A-Za-z0-9_.:-]{1,128}$")
 MOBILE = re.compile(r"Mobi|Android|iPhone|iPad|iPod", re.IGNORECASE)
 
 
-@lru_cache(maxsize=1024)  # about 35 KB each (the paper study's plan, its text and the decoded lists and dicts)
-def _plan(text: str | None) -> list[dict] | None:
-    """A participant's plan from its JSON text (read with the participant on every request). A plan never changes
-    once assigned, so each is decoded once for the participants at work at any time, and then only read."""
-    return None if text is None else json.loads(text)
+def _plan(sql: Statements, ctx: Context, participant: tuple) -> list[dict] | None:
+    """The participant's screens (None before a condition is assigned). A plan never changes once assigned, so each
+    is read once for the participants at work at any time (`Context.plans`), and then only looked up; for the same
+    reason it may be read apart from the participant's row, outside its transaction."""
+    plan = ctx.plans.get(participant.id)
+    if plan is None and participant.condition is not None:
+        plan = sql.scalar(PLAN, {"participant": participant.id})
+        if plan is not None:
+            if len(ctx.plans) >= MAX_PLANS:
+                ctx.plans.clear()
+            ctx.plans[participant.id] = plan
+    return plan
+
+
+def _current_screens(sql: Statements, ctx: Context, request: Request) -> tuple[tuple, list[dict] | None]:
+    participant = _current(sql, ctx, request)
+    return participant, _plan(sql, ctx, participant) if participant.status == "started" else None
 
 
 def _see_current() -> RedirectResponse:
@@ -143,7 +153,7 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
                 values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
                           "external_id": None, "platform_study_id": None, "platform_session_id": None,
                           "status": "started" if agreed else "declined", "slot": None, "condition": None,
-                          "plan": None, "step": 0, "step_started_at": now, "user_agent": user_agent[:512],
+                          "step": 0, "step_started_at": now, "user_agent": user_agent[:512],
                           "created_at": now, "completed_at": None, "excluded": False, "exclusion_note": "",
                           "attention_failures": 0, **identity}
                 if agreed and info.assignment == "balanced":
@@ -152,8 +162,8 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
                                                              slot=values["slot"])
                 participant_id = sql.scalar(ENTER, values)
                 if values["condition"] is not None:
-                    sql.execute(SET_PLAN, {"participant": participant_id, "now": now,
-                                           "plan": _new_plan(ctx, participant_id, values["condition"])})
+                    sql.execute(SAVE_PLAN, {"participant": participant_id,
+                                            "plan": _new_plan(ctx, participant_id, values["condition"])})
                 return values["code"]
         except IntegrityError:
             continue
@@ -209,16 +219,15 @@ def screen_view(ctx: Context, screen: dict) -> dict:
     return view
 
 
-def _render_screen(request: Request, ctx: Context, participant: tuple, *, errors=None, values=None,
+def _render_screen(request: Request, ctx: Context, screen: dict, step: int, *, errors=None, values=None,
                    events: str = "", status_code: int = 200):
-    screen = _plan(participant.plan)[participant.step]
     name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
     if not (errors or values or events):  # as first shown: the same page for everyone at this step of this screen
-        return ctx.render_form(request, (name, participant.step, json.dumps(screen, sort_keys=True)), name, lambda: {
-            "screen": screen_view(ctx, screen), "step": participant.step, "errors": {}, "values": {},
-            "video_events": "", "watched": False})
+        return ctx.render_form(request, (name, step, json.dumps(screen, sort_keys=True)), name, lambda: {
+            "screen": screen_view(ctx, screen), "step": step, "errors": {}, "values": {}, "video_events": "",
+            "watched": False})
     return ctx.render(
-        request, name, status_code=status_code, screen=screen_view(ctx, screen), step=participant.step,
+        request, name, status_code=status_code, screen=screen_view(ctx, screen), step=step,
         errors=errors or {}, values=values or {}, video_events=events, watched='"ended"' in events,
     )
 
@@ -236,20 +245,21 @@ def _status_page(request: Request, ctx: Context, participant: tuple):
 
 async def current_page(request: Request):
     ctx: Context = request.app.state.context
-    participant = await ctx.db.run(_read, _current, ctx, request)
+    participant, plan = await ctx.db.run(_read, _current_screens, ctx, request)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
     if participant.condition is None:
         return ctx.render(request, "choose.html", n_conditions=len(ctx.conditions), error="")
-    return _render_screen(request, ctx, participant)
+    return _render_screen(request, ctx, plan[participant.step], participant.step)
 
 
-def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[tuple, Checked] | None:
-    """Save the answers to screen `step`: None when saved or nothing is left to save, else what to show again."""
+def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[dict, Checked] | None:
+    """Save the answers to screen `step`: None when saved or nothing is left to save, else the screen to show
+    again and why."""
     try:
         with ctx.db.statements(write=True) as sql:
             participant = _current(sql, ctx, request)
-            plan = _plan(participant.plan)
+            plan = _plan(sql, ctx, participant)
             if participant.status != "started" or plan is None or step < participant.step:
                 return None  # already answered: a double click or the back button; keep the first
             if step > participant.step:
@@ -257,7 +267,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[tu
             screen = plan[step]
             checked = check_screen(ctx.study, screen, form)
             if checked.errors:
-                return participant, checked
+                return screen, checked
             now = datetime.now(UTC)
             sql.execute(SAVE_RESPONSE, {
                 "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,
@@ -285,9 +295,9 @@ async def submit(request: Request):
     refused = await ctx.db.run(_save, ctx, request, int(step), form)
     if refused is None:
         return _see_current()
-    participant, checked = refused
+    screen, checked = refused
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
-    return _render_screen(request, ctx, participant, errors=checked.errors, values=values,
+    return _render_screen(request, ctx, screen, int(step), errors=checked.errors, values=values,
                           events=str(form.get("video_events") or "")[:20000], status_code=422)
 
 

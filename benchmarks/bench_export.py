@@ -29,7 +29,7 @@ from sqlalchemy import insert  # noqa: E402
 from app.assignment import conditions  # noqa: E402
 from app.bundle import Bundle, ManifestClip  # noqa: E402
 from app.database import Database, migrate  # noqa: E402
-from app.models import Participant, Response  # noqa: E402
+from app.models import Participant, ParticipantPlan, Response  # noqa: E402
 from app.plan import build_plan  # noqa: E402
 from app.study import load_study  # noqa: E402
 
@@ -77,15 +77,16 @@ def fill(url: str, n: int, seed: int = 0, chunk: int = 500) -> None:
     db = Database(url)
     start = datetime(2024, 5, 1, tzinfo=UTC)
     for first in range(0, n, chunk):
-        people, responses = [], []
+        people, plans, responses = [], [], []
         for pid in range(first + 1, min(n, first + chunk) + 1):
             condition = pid % len(options)
             plan = build_plan(study, bundle, options[condition], random.Random(f"{seed}:{pid}"))
             created = start + timedelta(minutes=pid)
             people.append({"id": pid, "code": f"p{pid:06d}", "study": study.study.id, "platform": "mturk",
-                           "external_id": f"W{pid}", "status": "completed", "condition": condition, "plan": plan,
+                           "external_id": f"W{pid}", "status": "completed", "condition": condition,
                            "step": len(plan), "created_at": created,
                            "completed_at": created + timedelta(seconds=rng.randint(300, 1500))})
+            plans.append({"participant_id": pid, "plan": plan})
             for step, screen in enumerate(plan):
                 responses.append({"participant_id": pid, "step": step, "kind": screen["kind"],
                                   "answers": random_answers(screen, rng), "video_events": [],
@@ -94,6 +95,7 @@ def fill(url: str, n: int, seed: int = 0, chunk: int = 500) -> None:
                                   "submitted_at": created + timedelta(seconds=30 * step)})
         with db.writing() as session:
             session.execute(insert(Participant), people)
+            session.execute(insert(ParticipantPlan), plans)
             session.execute(insert(Response), responses)
     db.dispose()
 

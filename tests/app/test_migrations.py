@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
 
 import pytest
+from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
 from sqlalchemy import create_engine, text
+from sqlalchemy.orm import Session
 
-from app.database import DatabaseError, check_migrated, migrate
-from app.models import Base
+from app.database import DatabaseError, alembic_config, check_migrated, migrate
+from app.models import Base, Participant
 from tests.app.conftest import REPO
 
 
@@ -31,7 +34,11 @@ def test_upgrade_from_the_first_revision_keeps_data(database_url):
     with engine.begin() as connection:
         connection.execute(text(
             "INSERT INTO participant (id, code, study, platform, external_id, status, step, step_started_at, "
-            "user_agent, created_at) VALUES (1, 'abc', 'paper', 'prolific', 'P1', 'started', 0, "
+            "user_agent, created_at, \"plan\") VALUES (1, 'abc', 'paper', 'prolific', 'P1', 'started', 0, "
+            "'2024-01-01 00:00:00', '', '2024-01-01 00:00:00', '[{\"kind\": \"instructions\"}]')"))
+        connection.execute(text(  # declined: no plan
+            "INSERT INTO participant (id, code, study, platform, external_id, status, step, step_started_at, "
+            "user_agent, created_at) VALUES (2, 'def', 'paper', 'prolific', 'P2', 'declined', 0, "
             "'2024-01-01 00:00:00', '', '2024-01-01 00:00:00')"))
         connection.execute(text(
             "INSERT INTO response (participant_id, step, kind, answers, video_events, plays, server_ms, "
@@ -41,10 +48,17 @@ def test_upgrade_from_the_first_revision_keeps_data(database_url):
     migrate(database_url)
     check_migrated(engine)
     with engine.connect() as connection:
-        row = connection.execute(text(
-            "SELECT code, excluded, exclusion_note, attention_failures FROM participant")).one()
-        assert tuple(row) == ("abc", False, "", 0)
+        rows = connection.execute(text(
+            "SELECT code, excluded, exclusion_note, attention_failures FROM participant ORDER BY id")).all()
+        assert [tuple(row) for row in rows] == [("abc", False, "", 0), ("def", False, "", 0)]
         assert connection.execute(text("SELECT count(*) FROM response")).scalar() == 1
+    with Session(engine) as session:
+        assert session.get(Participant, 1).plan == [{"kind": "instructions"}]
+        assert session.get(Participant, 2).plan is None
+    command.downgrade(alembic_config(database_url), "0002")  # and back: the plan returns to the participant's row
+    with engine.connect() as connection:
+        plans = connection.execute(text('SELECT "plan" FROM participant ORDER BY id')).scalars().all()
+        assert [json.loads(plan) if plan is not None else None for plan in plans] == [[{"kind": "instructions"}], None]
     engine.dispose()
 
 
@@ -62,5 +76,5 @@ def test_migrations_run_from_any_working_directory(tmp_path):
     subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, check=True, capture_output=True)
     engine = create_engine(url)
     with engine.connect() as connection:
-        assert connection.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0002"
+        assert connection.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003"
     engine.dispose()
