@@ -15,7 +15,6 @@ more CPU than the transaction itself.
 
 from __future__ import annotations
 
-import asyncio
 import threading
 from collections import namedtuple
 from collections.abc import Callable, Iterator, Sequence
@@ -74,11 +73,13 @@ class Database:
         # Work that never waits on a disk or a network runs on the event loop; the rest in the thread pool.
         self.inline = sqlite and synchronous == "normal"
         self._kept = threading.local()  # the event loop thread's connection for `statements()` (see _checked_out)
+        self._loop_thread: int | None = None  # the thread whose work `run` runs inline
         self._prepared: dict[Executable, Prepared] = {}
 
     async def run(self, work: Callable[..., T], *args) -> T:
         """`work(*args)`, a function that reads or writes through this database, from an async endpoint."""
         if self.inline:
+            self._loop_thread = threading.get_ident()
             return work(*args)
         return await run_in_threadpool(work, *args)
 
@@ -109,7 +110,7 @@ class Database:
         """A connection from the pool for the block; or, for work run on the event loop (one request at a time),
         the loop thread's own connection, kept checked out between requests: taking it from the pool and giving
         it back costs more than a participant's read."""
-        if not (self.inline and _on_event_loop()):
+        if threading.get_ident() != self._loop_thread:
             with self.engine.connect() as connection:
                 yield connection
             return
@@ -198,14 +199,6 @@ class Statements:
     def scalar(self, statement: Executable, values: dict):
         row = self.first(statement, values)
         return None if row is None else row[0]
-
-
-def _on_event_loop() -> bool:
-    try:
-        asyncio.get_running_loop()
-    except RuntimeError:
-        return False
-    return True
 
 
 def alembic_config(url: str) -> Config:

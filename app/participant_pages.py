@@ -15,7 +15,7 @@ import secrets
 from datetime import UTC, datetime
 
 from fastapi import HTTPException, Request
-from fastapi.responses import RedirectResponse
+from fastapi.responses import Response as HTTPResponse
 from sqlalchemy import bindparam, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from starlette.concurrency import run_in_threadpool
@@ -76,8 +76,9 @@ def _current_screens(sql: Statements, ctx: Context, request: Request) -> tuple[t
     return participant, _plan(sql, ctx, participant) if participant.status == "started" else None
 
 
-def _see_current() -> RedirectResponse:
-    return RedirectResponse("/study", status_code=303)
+def _see_current() -> HTTPResponse:
+    """303 to /study (a plain Response: RedirectResponse quotes its URL on every call)."""
+    return HTTPResponse(status_code=303, headers={"location": "/study"})
 
 
 def _platform_identity(platform: str, params) -> dict:

@@ -58,6 +58,10 @@ uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, se
             access_log=False)
 """
 SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0"}  # as the constant server: a reverse proxy keeps the access log
+# The ceiling's and the burst's server on one core, their load generator on the others: the way a load test keeps
+# its generator from taking the CPU of the system under test when both must share one machine.
+CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+SERVER_CPUS, CLIENT_CPUS = (set(CPUS[:1]), set(CPUS[1:])) if len(CPUS) > 1 else (set(), set())
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
 RUNS = ["ceiling", "burst", "paced", "crash", "cpu"]
 
@@ -88,6 +92,7 @@ def ceiling(concurrency: int, seconds: float, workdir: Path, processes: int) -> 
     time per request."""
     server, port = start_constant_server(workdir)
     try:
+        pin(server.pid, SERVER_CPUS)
         before = thread_cpu_s(server.pid)
         parts, wall = in_processes(_hammer, processes, concurrency, seconds, f"http://127.0.0.1:{port}")
         return {"per_s": sum(parts) / wall, "cpu_ms": (thread_cpu_s(server.pid) - before) / sum(parts) * 1000}
@@ -132,8 +137,16 @@ def in_processes(work, processes: int, *args) -> tuple[list, float]:
 
 
 def _work_in_process(work, part: int, processes: int, args: tuple, ready, results) -> None:
+    pin(os.getpid(), CLIENT_CPUS)
     ready.wait(timeout=120)
     results.put((part, work(part, processes, *args)))
+
+
+def pin(pid: int, cpus: set[int]) -> None:
+    """Keep every thread of process `pid` (and those it starts later) on `cpus`."""
+    if cpus:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            os.sched_setaffinity(int(task), cpus)
 
 
 def run_in_threads(target, count: int) -> float:
@@ -156,6 +169,7 @@ def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
     """Bots without pauses in `concurrency` lanes; each lane starts a new bot when its bot finishes."""
     with serve(bundle, study, workdir) as server:
+        pin(server.process.pid, SERVER_CPUS)
         before = thread_cpu_s(server.process.pid)
         parts, wall = in_processes(_burst_lanes, processes, concurrency, seconds, server.url, str(bundle))
         cpu_s = thread_cpu_s(server.process.pid) - before
