@@ -30,7 +30,11 @@ class BodyLimitMiddleware:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        declared = dict(scope["headers"]).get(b"content-length")
+        headers = dict(scope["headers"])
+        declared = headers.get(b"content-length")
+        if declared is None and b"transfer-encoding" not in headers:  # no body to limit
+            await self.app(scope, receive, send)
+            return
         if declared is not None and (not declared.isdigit() or int(declared) > self.limit):
             await _too_large(send, self.limit)
             return
@@ -88,6 +92,8 @@ class SecurityHeadersMiddleware:
         ]
         if frame_ancestors == "'none'":
             self.headers.append((b"x-frame-options", b"DENY"))
+        self.headers.append((b"cache-control", b"no-store"))  # pages show private state; clips set their own
+        self.names = {name for name, _ in self.headers}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -96,11 +102,11 @@ class SecurityHeadersMiddleware:
 
         async def with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":
-                names = {name.lower() for name, _ in message.get("headers", [])}
-                extra = [(name, value) for name, value in self.headers if name not in names]
-                if b"cache-control" not in names:
-                    extra.append((b"cache-control", b"no-store"))  # pages show private state; clips set their own
-                message = {**message, "headers": list(message.get("headers", [])) + extra}
+                headers = message.get("headers", [])
+                names = {name.lower() for name, _ in headers}  # a response's own headers win
+                extra = self.headers if names.isdisjoint(self.names) else [
+                    (name, value) for name, value in self.headers if name not in names]
+                message = {**message, "headers": [*headers, *extra]}
             await send(message)
 
         await self.app(scope, receive, with_headers)
