@@ -27,6 +27,7 @@ import multiprocessing
 import os
 import platform
 import random
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -300,6 +301,7 @@ def main() -> int:
     parser.add_argument("--ramp", type=float, default=10.0, help="arrivals spread over this many seconds")
     parser.add_argument("--concurrency", type=int, default=32, help="clients of the ceiling and burst runs")
     parser.add_argument("--seconds", type=float, default=20.0, help="length of the ceiling and burst runs")
+    parser.add_argument("--rounds", type=int, default=3, help="ceiling-then-burst rounds (default 3)")
     parser.add_argument("--processes", type=int, default=os.cpu_count(),
                         help="load generator processes of the ceiling and burst runs, sharing the clients")
     parser.add_argument("--crash-participants", type=int, default=100)
@@ -322,19 +324,26 @@ def main() -> int:
         study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
 
         if "ceiling" in runs:
-            load = os.getloadavg()[0]
-            print("ceiling ...", flush=True)
-            constant = ceiling(args.concurrency, args.seconds, work, args.processes)
-            print("burst ...", flush=True)
-            fast = burst(bundle, study, work / "burst", args.concurrency, args.seconds, args.processes)
-            ok &= not fast["errors"]
-            lines += ["", f"Burst, no pauses, {args.concurrency} bots at a time for {args.seconds:.0f} s: "
-                      f"{fast['pages_per_s']:.0f} non-video requests/s ({fast['sessions_per_min']:.0f} completed "
-                      f"sessions/min, {fast['errors']} errors; server CPU {fast['cpu_ms']:.3f} ms per non-video "
-                      f"request, clips included); the constant FastAPI endpoint under the same client: "
-                      f"{constant['per_s']:.0f} requests/s (server CPU {constant['cpu_ms']:.3f} ms per request); "
-                      f"ratio **{fast['pages_per_s'] / constant['per_s']:.2f}** (load average {load:.1f} before the "
-                      "ceiling run)."]
+            lines += ["", f"Burst against ceiling, no pauses, {args.concurrency} bots or clients at a time, "
+                      f"{args.seconds:.0f} s each, alternating ({args.rounds} rounds; the machine's speed drifts, so "
+                      "each burst is compared with the ceiling measured just before it):", "",
+                      "| round | load average | constant endpoint req/s | its server CPU ms/req | burst non-video "
+                      "req/s | completed sessions/min | its server CPU ms/req | errors | ratio |",
+                      "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+            ratios = []
+            for round_ in range(1, args.rounds + 1):
+                load = os.getloadavg()[0]
+                print(f"round {round_}: ceiling ...", flush=True)
+                constant = ceiling(args.concurrency, args.seconds, work, args.processes)
+                print(f"round {round_}: burst ...", flush=True)
+                fast = burst(bundle, study, work / f"burst{round_}", args.concurrency, args.seconds, args.processes)
+                ok &= not fast["errors"]
+                ratios.append(fast["pages_per_s"] / constant["per_s"])
+                lines.append(f"| {round_} | {load:.1f} | {constant['per_s']:,.0f} | {constant['cpu_ms']:.3f} | "
+                             f"{fast['pages_per_s']:,.0f} | {fast['sessions_per_min']:,.0f} | {fast['cpu_ms']:.3f} | "
+                             f"{fast['errors']} | {ratios[-1]:.2f} |")
+            lines += ["", f"Ratio, median of the rounds: **{statistics.median(ratios):.2f}** (range "
+                      f"{min(ratios):.2f}-{max(ratios):.2f})."]
         if "paced" in runs:
             load = os.getloadavg()[0]
             print("paced ...", flush=True)
