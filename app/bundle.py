@@ -10,7 +10,9 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+from collections import defaultdict
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
@@ -63,12 +65,18 @@ class Bundle:
     paths: dict[str, Path]  # sha256 -> file, what /clips/{sha256}.mp4 serves
 
     def matching(self, scheme: str, scenario: str, agents: tuple[str, str]) -> list[ManifestClip]:
-        want = set(agents)
-        return [
-            clip for clip in self.clips.values()
-            if clip.scheme == scheme and clip.scenario == scenario and set(clip.agents) == want
-            and len(clip.agents) == 2
-        ]
+        """The two-agent clips of a scheme, scenario and pair (in either order), in id order."""
+        return list(self._pairs.get((scheme, scenario, frozenset(agents)), ()))
+
+    @cached_property
+    def _pairs(self) -> dict[tuple, list[ManifestClip]]:
+        """Two-agent clips by (scheme, scenario, set of agents), each list in id order: a plan looks up a clip
+        for every screen it builds."""
+        index = defaultdict(list)
+        for clip in sorted(self.clips.values(), key=lambda clip: clip.id):
+            if len(clip.agents) == 2:
+                index[(clip.scheme, clip.scenario, frozenset(clip.agents))].append(clip)
+        return dict(index)
 
 
 def sha256_file(path: Path) -> str:

@@ -8,7 +8,6 @@ and dependency solving cost more per request than most of these pages' own work.
 
 from __future__ import annotations
 
-import json
 import random
 import re
 import secrets
@@ -214,8 +213,7 @@ def screen_view(ctx: Context, screen: dict) -> dict:
         check = study.attention_checks[screen["check"]]
         view["attention_text"], view["options"] = check.text, screen["options"]
     if screen["kind"] == "instructions" and study.example is not None:
-        example = min(ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents),
-                      key=lambda clip: clip.id)
+        example = ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
         view["clip_url"] = f"/clips/{example.sha256.lower()}.mp4"
     return view
 
@@ -224,7 +222,7 @@ def _render_screen(request: Request, ctx: Context, screen: dict, step: int, *, e
                    events: str = "", status_code: int = 200):
     name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
     if not (errors or values or events):  # as first shown: the same page for everyone at this step of this screen
-        return ctx.render_form(request, (name, step, json.dumps(screen, sort_keys=True)), name, lambda: {
+        return ctx.render_form(request, (name, step, repr(screen)), name, lambda: {
             "screen": screen_view(ctx, screen), "step": step, "errors": {}, "values": {}, "video_events": "",
             "watched": False})
     return ctx.render(

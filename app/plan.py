@@ -16,7 +16,7 @@ from app.study import RankingPart, Study
 
 
 def _pick(bundle: Bundle, scheme: str, scenario: str, pair: tuple[str, str], rng: random.Random) -> ManifestClip:
-    return rng.choice(sorted(bundle.matching(scheme, scenario, pair), key=lambda clip: clip.id))
+    return rng.choice(bundle.matching(scheme, scenario, pair))  # in id order
 
 
 def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[dict]:

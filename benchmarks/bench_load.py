@@ -1,12 +1,14 @@
-"""Survey server under load: `foil simulate`'s bots (app.bots.Bot, threads in this process, through the lean
-keep-alive client of tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback,
-clips included, on the same machine as the server.
+"""Survey server under load: `foil simulate`'s bots (app.bots.Bot, threads, through the lean keep-alive client of
+tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback, clips included, on the
+same machine as the server.
 
 Five runs, each bounded in time and count (--runs picks some):
   ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves here (uvicorn, one
            process, httptools and uvloop, no access log), hammered by --concurrency clients for --seconds;
   burst    --concurrency bots with no pauses, new ones taking the place of those finished, for --seconds: page
-           throughput (every non-video request: pages and form submissions) and its ratio to the ceiling;
+           throughput (every non-video request: pages and form submissions) and its ratio to the ceiling.
+           Ceiling and burst alternate for --rounds; in both the clients run in --processes processes (one
+           interpreter lock each) pinned to all cores but the first, and the server is pinned to the first;
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
            completed sessions per minute, p50/p95/p99 latency per page type, errors;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
