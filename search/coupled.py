@@ -11,7 +11,10 @@ so a search branches from any node without replaying from reset.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 
@@ -97,21 +100,25 @@ class CoupledSimulator:
         return result
 
     def step(self, env_action) -> CoupledStep:
-        """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""
+        """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n).
+
+        The humans' next velocities depend on the state and the environment action only (a visible robot is
+        seen at its last velocity), so on a machine with a second core they are computed there, by compiled
+        code that leaves the interpreter free, while the policies act."""
         env_action = world.check_env_action(env_action, self.batch, self.config)
+        world_action = env_action if self.shared_crowd else np.tile(env_action, (self.n_agents, 1, 1))
+        crowd_action = None if self.config.env_action_mode == "observation" else world_action
+        humans = _crowd_worker().submit(world.human_velocities, self.state, self.config, crowd_action) \
+            if _crowd_worker() else None
         observations = self.observations(env_action)
         actions = np.zeros((self.batch, self.n_agents, 2))
         for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
             action, self.policy_states[k] = policy.act(observation, self.policy_states[k])
             actions[:, k] = np.where(observation.done[:, None], 0.0, action)
         was_done = self._gather(self.state.done).copy()
-        if self.shared_crowd:
-            world_action, robot_action = env_action, actions
-        else:
-            world_action = np.tile(env_action, (self.n_agents, 1, 1))
-            robot_action = actions.transpose(1, 0, 2).reshape(-1, 1, 2)
-        crowd_action = None if self.config.env_action_mode == "observation" else world_action
-        reward = world.advance(self.state, self.config, robot_action, crowd_action)  # checked above
+        robot_action = actions if self.shared_crowd else actions.transpose(1, 0, 2).reshape(-1, 1, 2)
+        human_vel = humans.result() if humans else world.human_velocities(self.state, self.config, crowd_action)
+        reward = world.advance(self.state, self.config, robot_action, human_vel)  # checked above
         done = self._gather(self.state.done)
         return CoupledStep(
             robot_actions=actions,
@@ -181,6 +188,13 @@ class Trajectory:
     path_length: np.ndarray  # (N,)
     min_clearance: np.ndarray  # (N,)
     time: np.ndarray  # (T,)
+
+
+@cache
+def _crowd_worker() -> ThreadPoolExecutor | None:
+    """The thread that computes crowds while policies act; None on a single core."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return ThreadPoolExecutor(1, thread_name_prefix="foil-crowd") if cores > 1 else None
 
 
 def replay(policies: list[Policy], scenario: Scenario, env_actions, config: WorldConfig | None = None,

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from search.problem import Problem
@@ -71,7 +72,11 @@ class MCTSConfig:
 
 
 class StateNode:
-    __slots__ = ("parent", "depth", "value", "terminal", "visits", "children", "snapshot")
+    """A state of the tree. What UCT reads of its actions (their q, selections and whether they end the
+    trajectory) lives here in arrays, row ``action.index`` each, so that one compiled loop picks among them: a
+    search descends through a dozen nodes of dozens of actions for every iteration of a few steps."""
+
+    __slots__ = ("parent", "depth", "value", "terminal", "visits", "children", "snapshot", "q", "selections", "open")
 
     def __init__(self, parent: ActionNode | None, depth: int, value: float, terminal: bool, snapshot=None):
         self.parent = parent  # the action that led here
@@ -81,26 +86,52 @@ class StateNode:
         self.visits = 0
         self.children: list[ActionNode] = []
         self.snapshot = snapshot  # this state's simulator row; None when branching by replay or terminal
+        # Per action: q, kept up to date by backups (-inf while none is back: its siblings go first); selections,
+        # counted when selected; whether its child does not end the trajectory. Rows beyond len(children) unused.
+        self.q = np.empty(4)
+        self.selections = np.empty(4)
+        self.open = np.empty(4, dtype=np.bool_)
+
+    def add(self, action: np.ndarray) -> ActionNode:
+        """A new action of this state, not yet selected."""
+        index = len(self.children)
+        if index == self.q.size:
+            self.q, self.selections, self.open = (np.resize(array, 2 * index)
+                                                  for array in (self.q, self.selections, self.open))
+        self.q[index], self.selections[index], self.open[index] = -math.inf, 0.0, True
+        self.children.append(ActionNode(self, index, action))
+        return self.children[-1]
 
 
 class ActionNode:
-    __slots__ = ("parent", "action", "visits", "completed", "total", "best", "value", "child", "closed")
+    __slots__ = ("parent", "index", "action", "completed", "total", "best", "child")
 
-    def __init__(self, parent: StateNode, action: np.ndarray):
+    def __init__(self, parent: StateNode, index: int, action: np.ndarray):
         self.parent = parent
+        self.index = index  # its row in the parent's arrays
         self.action = action
-        self.visits = 0  # selections, counted when selected
         self.completed = 0  # returns backed up so far
         self.total = 0.0
         self.best = -math.inf
-        self.value = -math.inf  # q, kept up to date by backups: -inf while none is back (its siblings go first)
         self.child: StateNode | None = None
-        self.closed = False  # its child ends the trajectory
 
     def q(self, backup: str) -> float:
         if not self.completed:
             return -math.inf  # still in flight: its siblings go first
         return self.best if backup == "max" else self.total / self.completed
+
+
+@numba.njit(cache=True)
+def _best_bound(q, selections, open_, count, log_n, exploration):
+    """Index of the largest ``q + exploration * sqrt(log_n / selections)`` among the first ``count`` actions that
+    are open (the first of equal scores); -1 when none is."""
+    best, best_score = -1, -math.inf
+    for i in range(count):
+        if open_[i]:
+            score = q[i] + exploration * math.sqrt(log_n / selections[i])
+            if best < 0 or score > best_score:
+                best, best_score = i, score
+    return best
 
 
 def write_actions_to(node: StateNode, out: np.ndarray) -> None:
@@ -176,9 +207,8 @@ class MCTS:
             if len(node.children) >= c.k * node.visits ** c.alpha:
                 action = self._uct(node)  # None when every action ends the trajectory: widen then
             if action is None:
-                action = ActionNode(node, self.problem.prior.sample(self.rng, 1)[0])
-                node.children.append(action)
-            action.visits += 1
+                action = node.add(self.problem.prior.sample(self.rng, 1)[0])
+            node.selections[action.index] += 1
             path.append(action)
             if action.child is None:
                 return path
@@ -187,15 +217,9 @@ class MCTS:
     def _uct(self, node: StateNode) -> ActionNode | None:
         """The action with the best upper confidence bound among those that do not end the trajectory (the
         first of equal scores)."""
-        log_n, c, sqrt = math.log(node.visits), self.config.exploration, math.sqrt
-        best, best_score = None, -math.inf
-        for action in node.children:
-            if action.closed:
-                continue
-            score = action.value + c * sqrt(log_n / action.visits)
-            if best is None or score > best_score:
-                best, best_score = action, score
-        return best
+        best = _best_bound(node.q, node.selections, node.open, len(node.children), math.log(node.visits),
+                           self.config.exploration)
+        return None if best < 0 else node.children[best]
 
     def backup(self, path: list[ActionNode], value: float) -> None:
         mean = self.config.backup == "mean"
@@ -203,7 +227,7 @@ class MCTS:
             action.completed += 1
             action.total += value
             action.best = max(action.best, value)
-            action.value = action.total / action.completed if mean else action.best
+            action.parent.q[action.index] = action.total / action.completed if mean else action.best
 
     def state_of(self, node: StateNode):
         """The node's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
@@ -282,7 +306,7 @@ class Rollouts:
                 keep = config.branch == "snapshot" and not terminal[i]
                 action.child = StateNode(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
                                          problem.snapshot([i]) if keep else None)
-                action.closed = bool(terminal[i])
+                action.parent.open[action.index] = not terminal[i]
         ended = terminal | (taken >= config.repeat + config.rollout_depth) if config.rollout_depth else terminal
         return terminal, ended
 

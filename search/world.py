@@ -304,12 +304,11 @@ def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) 
     ``observation`` mode it does not touch the world (the robots' observation applies it).
     """
     action = None if env_action is None else check_env_action(env_action, state.n_worlds, config)
-    return advance(state, config, robot_action, action)
+    return advance(state, config, robot_action, human_velocities(state, config, action))
 
 
-def advance(state: WorldState, config: WorldConfig, robot_action, env_action: np.ndarray | None) -> np.ndarray:
-    """``step`` for an environment action that ``check_env_action`` has already returned (or None)."""
-    new_human_vel = human_velocities(state, config, env_action)
+def advance(state: WorldState, config: WorldConfig, robot_action, new_human_vel: np.ndarray) -> np.ndarray:
+    """``step`` with the humans' new velocities already computed (``human_velocities``)."""
     new_robot_vel = robot_velocities(state, config, robot_action)
     fresh = {name: np.empty_like(getattr(state, name)) for name in _MOVED}
     reward = np.empty(state.done.shape)
