@@ -44,10 +44,12 @@ def observe(state: WorldState, config: WorldConfig, robot: int, worlds=slice(Non
     humans = state.human_pos[worlds]
     if position_noise is not None:
         humans = humans + position_noise
-    b = pos.shape[0]
-    robot_node = np.concatenate([
-        pos, np.full((b, 1), config.robot_radius), state.robot_goal[worlds, robot],
-        np.full((b, 1), config.robot_v_pref), state.robot_theta[worlds, robot][:, None]], axis=1)
+    robot_node = np.empty((pos.shape[0], 7))  # filled column by column: fewer temporary arrays than joining them
+    robot_node[:, 0:2] = pos
+    robot_node[:, 2] = config.robot_radius
+    robot_node[:, 3:5] = state.robot_goal[worlds, robot]
+    robot_node[:, 5] = config.robot_v_pref
+    robot_node[:, 6] = state.robot_theta[worlds, robot]
     return Observation(
         robot_node=robot_node,
         temporal_edges=state.robot_vel[worlds, robot].copy(),
