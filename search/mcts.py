@@ -43,7 +43,8 @@ class MCTSConfig:
     """Widening (k = alpha = 0.5) and rollouts to the end are the paper's. The paper ran exploration 100, mean
     backup, one step per action and receding mode; the defaults here won clearly in BENCHMARKS.md ("Search"):
     exploration 10 (in reward units), max backup (the simulator is deterministic: an action is as good as the
-    best trajectory through it) and actions held for 8 steps (2 s), which moves humans coherently."""
+    best trajectory through it) and actions held for 8 steps (2 s), which moves humans coherently. 64 iterations
+    in flight find as much as 32 at equal budget and run the policies on batches twice as large."""
 
     exploration: float = 10.0
     k: float = 0.5
@@ -52,7 +53,7 @@ class MCTSConfig:
     repeat: int = 8  # steps each tree action (and each rollout action) is held for
     mode: str = "tree"  # "tree" or "receding"
     backup: str = "max"  # Q of an action: "mean" return through it (the toolbox) or its "max"
-    batch: int = 32  # iterations in flight together (rows of the batched rollouts)
+    batch: int = 64  # iterations in flight together (rows of the batched rollouts)
     branch: str = "snapshot"  # "snapshot", or "replay" from reset as the AST toolbox does
 
     def __post_init__(self):
@@ -341,9 +342,8 @@ class Rollouts:
         if saved is not None:
             problem.restore(saved)
         reused = min(len(snapshots), ended.size)
-        if reused and hasattr(problem, "assign"):
-            for i, snapshot in zip(places[:reused], snapshots, strict=False):
-                problem.assign([i], snapshot)
+        if reused and hasattr(problem, "assign"):  # all new rows in one call: one copy per array, not per row
+            problem.assign(places[:reused], problem.concat(snapshots[:reused]))
         elif reused:  # a problem without assign: rebuild the batch row by row
             new_rows = dict(zip(places[:reused], snapshots, strict=False))
             problem.restore(problem.concat([new_rows[i] if i in new_rows else problem.snapshot([i])
