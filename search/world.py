@@ -280,11 +280,9 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
         raise ValueError("robot action contains NaN or infinite values")
     active = ~state.done
     if config.kinematics == "holonomic":
-        x, y = action[..., 0:1], action[..., 1:2]
-        speed = np.sqrt(x * x + y * y)  # np.linalg.norm's numbers, without its reduction machinery
-        velocity = np.where(speed > config.robot_v_pref, action * (config.robot_v_pref / np.maximum(speed, 1e-300)),
-                            action)
-        theta = np.where(speed[..., 0] > 0, np.arctan2(velocity[..., 1], velocity[..., 0]), state.robot_theta)
+        velocity, moving = np.empty_like(action), np.empty(state.done.shape, dtype=np.bool_)
+        _holonomic(action, float(config.robot_v_pref), velocity, moving)
+        theta = np.where(moving, np.arctan2(velocity[..., 1], velocity[..., 0]), state.robot_theta)
         state.robot_theta = np.where(active, theta, state.robot_theta)
     else:
         dv = np.clip(action[..., 0], -config.unicycle_max_dv, config.unicycle_max_dv)
@@ -295,6 +293,19 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
         state.robot_theta = np.where(active, theta, state.robot_theta)
         velocity = speed[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
     return np.where(active[..., None], velocity, 0.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _holonomic(action, v_pref, velocity, moving):
+    """Each action as a velocity rescaled to at most ``v_pref`` (numpy's ``action * (v_pref / max(speed,
+    1e-300))`` where the speed is over it, bit for bit), and whether it moves at all."""
+    for w in range(action.shape[0]):
+        for r in range(action.shape[1]):
+            x, y = action[w, r, 0], action[w, r, 1]
+            speed = np.sqrt(x * x + y * y)
+            scale = v_pref / max(speed, 1e-300) if speed > v_pref else 1.0
+            velocity[w, r, 0], velocity[w, r, 1] = (x * scale, y * scale) if speed > v_pref else (x, y)
+            moving[w, r] = speed > 0
 
 
 def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) -> np.ndarray:

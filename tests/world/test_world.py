@@ -162,6 +162,26 @@ def test_holonomic_speed_is_limited():
     np.testing.assert_allclose(state.robot_vel[0, 0], [0.6, 0.8])
 
 
+def test_holonomic_velocities_equal_the_numpy_formula_bit_for_bit():
+    config = WorldConfig(human_num=0)
+    rng = np.random.default_rng(5)
+    state = sample_training_states(config, rng, 64)
+    state.done[:8] = True
+    action = rng.normal(0.0, 1.5, state.robot_pos.shape)
+    action[8:12] = 0.0  # standing still keeps the heading
+    before = state.copy()
+    velocity = world.robot_velocities(state, config, action)
+    speed = np.sqrt(action[..., 0:1] ** 2 + action[..., 1:2] ** 2)
+    clipped = np.where(speed > config.robot_v_pref, action * (config.robot_v_pref / np.maximum(speed, 1e-300)),
+                       action)
+    active = ~before.done
+    theta = np.where(speed[..., 0] > 0, np.arctan2(clipped[..., 1], clipped[..., 0]), before.robot_theta)
+    assert np.array_equal(velocity, np.where(active[..., None], clipped, 0.0))
+    assert np.array_equal(state.robot_theta, np.where(active, theta, before.robot_theta))
+    assert (speed > config.robot_v_pref).any()
+    assert np.array_equal(state.robot_theta[8:12], before.robot_theta[8:12])
+
+
 def test_unicycle_accumulates_clipped_speed_and_turns():
     config = WorldConfig(human_num=0, kinematics="unicycle")
     state = one_robot_world(config, [0.0, 0.0], [10.0, 0.0])
