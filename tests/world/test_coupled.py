@@ -1,5 +1,7 @@
 """The coupled simulator: shared crowd, snapshot/restore, branching, replay."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -165,3 +167,21 @@ def test_assign_overwrites_some_rows_with_a_snapshot_and_leaves_the_others(visib
         np.testing.assert_allclose(got.crowds[rows], expected.crowds, rtol=0, atol=1e-5)
     with pytest.raises(ValueError, match="rows to overwrite"):
         target.assign([0, 1], source.snapshot([0]))
+
+
+@pytest.mark.parametrize("config", [None, WorldConfig(robot_visible=True), WorldConfig(env_action_mode="preferred")],
+                         ids=["shared crowd", "visible robots", "preferred mode"])
+def test_the_crowd_helper_thread_changes_nothing(monkeypatch, config):
+    """Crowds computed on the helper thread while the policies act equal crowds computed in line, bit for bit."""
+    from search import coupled
+
+    assert coupled._crowd_worker() is not None or len(os.sched_getaffinity(0)) == 1
+    runs = []
+    for helper in (True, False):
+        if not helper:
+            monkeypatch.setattr(coupled, "_crowd_worker", lambda: None)
+        sim = make(batch=6, config=config)
+        steps = [sim.step(a) for a in env_actions(30, batch=6, seed=3)]
+        runs.append((np.stack([s.crowds for s in steps]), np.stack([s.robot_pos for s in steps]), sim.state.done))
+    for with_helper, in_line in zip(*runs, strict=True):
+        assert np.array_equal(with_helper, in_line)
