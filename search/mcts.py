@@ -88,15 +88,16 @@ class StateNode:
         self.children: list[ActionNode] = []
         self.snapshot = snapshot  # this state's simulator row; None when branching by replay or terminal
         # Per action: q, kept up to date by backups (-inf while none is back: its siblings go first); selections,
-        # counted when selected; whether its child does not end the trajectory. Rows beyond len(children) unused.
-        self.q = np.empty(4)
-        self.selections = np.empty(4)
-        self.open = np.empty(4, dtype=np.bool_)
+        # counted when selected; whether its child does not end the trajectory. Made with the first action (most
+        # nodes are leaves); rows beyond len(children) unused.
+        self.q = self.selections = self.open = None
 
     def add(self, action: np.ndarray) -> ActionNode:
         """A new action of this state, not yet selected."""
         index = len(self.children)
-        if index == self.q.size:
+        if index == 0:
+            self.q, self.selections, self.open = np.empty(4), np.empty(4), np.empty(4, dtype=np.bool_)
+        elif index == self.q.size:
             self.q, self.selections, self.open = (np.resize(array, 2 * index)
                                                   for array in (self.q, self.selections, self.open))
         self.q[index], self.selections[index], self.open[index] = -math.inf, 0.0, True
