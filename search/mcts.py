@@ -343,8 +343,9 @@ class Rollouts:
         if saved is not None:
             problem.restore(saved)
         reused = min(len(snapshots), ended.size)
-        if reused and hasattr(problem, "assign"):  # all new rows in one call: one copy per array, not per row
-            problem.assign(places[:reused], problem.concat(snapshots[:reused]))
+        if reused and hasattr(problem, "assign"):
+            for i, snapshot in zip(places[:reused], snapshots, strict=False):
+                problem.assign([i], snapshot)
         elif reused:  # a problem without assign: rebuild the batch row by row
             new_rows = dict(zip(places[:reused], snapshots, strict=False))
             problem.restore(problem.concat([new_rows[i] if i in new_rows else problem.snapshot([i])

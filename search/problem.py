@@ -98,14 +98,18 @@ def concat_snapshots(snapshots: list[Snapshot]) -> Snapshot:
     copies = snapshots[0].state.n_worlds // snapshots[0].batch
 
     def join(arrays: list[np.ndarray], batches: list[int]) -> np.ndarray:
+        if copies == 1:  # the shared crowd: rows are worlds
+            return np.concatenate(arrays)
         parts = [a.reshape(copies, b, *a.shape[1:]) for a, b in zip(arrays, batches, strict=True)]
         joined = np.concatenate(parts, axis=1)
         return joined.reshape(-1, *joined.shape[2:])
 
     batches = [s.batch for s in snapshots]
-    state = WorldState(**{f.name: join([getattr(s.state, f.name) for s in snapshots], batches)
-                          for f in fields(WorldState)})
+    state = WorldState(**{name: join([getattr(s.state, name) for s in snapshots], batches) for name in _STATE_FIELDS})
     policy_states = [{key: np.concatenate([s.policy_states[k][key] for s in snapshots])
                       for key in snapshots[0].policy_states[k]}
                      for k in range(len(snapshots[0].policy_states))]
     return Snapshot(state, policy_states, sum(batches))
+
+
+_STATE_FIELDS = tuple(f.name for f in fields(WorldState))
