@@ -28,12 +28,16 @@ class KeptClips:
 
     def __init__(self, limit: int = KEPT_BYTES):
         self.limit, self.size, self.clips = limit, 0, {}
+        self.streamed: set[Path] = set()  # too large to keep: asked about once, not on every request
 
     def get(self, path: Path) -> bytes | None:
         data = self.clips.get(path)
-        if data is None and self.size < self.limit and path.stat().st_size <= min(SMALL_CLIP, self.limit - self.size):
-            data = self.clips[path] = path.read_bytes()
-            self.size += len(data)
+        if data is None and path not in self.streamed:
+            if path.stat().st_size <= min(SMALL_CLIP, self.limit - self.size):
+                data = self.clips[path] = path.read_bytes()
+                self.size += len(data)
+            else:
+                self.streamed.add(path)
         return data
 
 
