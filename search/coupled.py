@@ -85,7 +85,7 @@ class CoupledSimulator:
             return slice(None), agent
         return slice(agent * self.batch, (agent + 1) * self.batch), 0
 
-    def _gather(self, array: np.ndarray) -> np.ndarray:
+    def gather(self, array: np.ndarray) -> np.ndarray:
         """A per-robot world array (W, R, ...) as (B, N, ...)."""
         if self.shared_crowd:
             return array
@@ -100,7 +100,26 @@ class CoupledSimulator:
         return result
 
     def step(self, env_action) -> CoupledStep:
-        """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n).
+        """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""
+        was_done = self.gather(self.state.done).copy()
+        actions, reward = self.advance(env_action)
+        done = self.gather(self.state.done)
+        return CoupledStep(
+            robot_actions=actions,
+            robot_pos=self.gather(self.state.robot_pos).copy(),
+            robot_vel=self.gather(self.state.robot_vel).copy(),
+            human_pos=self.state.human_pos[: self.batch].copy(),
+            crowds=self.crowds(),
+            rewards=self.gather(reward),
+            done=done.copy(),
+            newly_done=done & ~was_done,
+            outcome=self.gather(self.state.outcome).copy(),
+            time=self.state.time[: self.batch].copy(),
+        )
+
+    def advance(self, env_action) -> tuple[np.ndarray, np.ndarray]:
+        """``step`` without its record: the robots' actions (B, N, 2) and navigation rewards (W, R); the new state
+        is ``self.state`` (read robots through ``gather``).
 
         The humans' next velocities depend on the state and the environment action only (a visible robot is
         seen at its last velocity), so on a machine with a second core they are computed there, by compiled
@@ -115,23 +134,9 @@ class CoupledSimulator:
         for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
             action, self.policy_states[k] = policy.act(observation, self.policy_states[k])
             actions[:, k] = np.where(observation.done[:, None], 0.0, action)
-        was_done = self._gather(self.state.done).copy()
         robot_action = actions if self.shared_crowd else actions.transpose(1, 0, 2).reshape(-1, 1, 2)
         human_vel = humans.result() if humans else world.human_velocities(self.state, self.config, crowd_action)
-        reward = world.advance(self.state, self.config, robot_action, human_vel)  # checked above
-        done = self._gather(self.state.done)
-        return CoupledStep(
-            robot_actions=actions,
-            robot_pos=self._gather(self.state.robot_pos).copy(),
-            robot_vel=self._gather(self.state.robot_vel).copy(),
-            human_pos=self.state.human_pos[: self.batch].copy(),
-            crowds=self.crowds(),
-            rewards=self._gather(reward),
-            done=done.copy(),
-            newly_done=done & ~was_done,
-            outcome=self._gather(self.state.outcome).copy(),
-            time=self.state.time[: self.batch].copy(),
-        )
+        return actions, world.advance(self.state, self.config, robot_action, human_vel)  # checked above
 
     def crowds(self) -> np.ndarray:
         """(B, C, n, 2) the humans of every crowd: one shared crowd, or each agent's own."""
@@ -142,7 +147,7 @@ class CoupledSimulator:
     @property
     def all_done(self) -> np.ndarray:
         """(B,) every agent has finished."""
-        return self._gather(self.state.done).all(axis=1)
+        return self.gather(self.state.done).all(axis=1)
 
     def snapshot(self, index=None) -> Snapshot:
         """A copy of the coupled scenarios ``index`` (all by default; indices may repeat to branch one node
@@ -166,12 +171,13 @@ class CoupledSimulator:
         rows = np.asarray(index, dtype=np.int64).reshape(-1).tolist()
         if len(rows) != snapshot.batch:
             raise ValueError(f"{len(rows)} rows to overwrite, but the snapshot holds {snapshot.batch}")
-        self.state.assign(rows if self.shared_crowd else
-                          [k * self.batch + row for k in range(self.n_agents) for row in rows], snapshot.state)
-        for state, new in zip(self.policy_states, snapshot.policy_states, strict=True):
-            for key, value in new.items():
-                world.assign_rows(state[key], rows, value)
-
+        pairs = [(state[key], value) for state, new in zip(self.policy_states, snapshot.policy_states, strict=True)
+                 for key, value in new.items()]
+        if self.shared_crowd:  # rows are worlds: one pass over every array
+            world.assign_rows(self.state.row_pairs(snapshot.state) + pairs, rows)
+        else:
+            self.state.assign([k * self.batch + row for k in range(self.n_agents) for row in rows], snapshot.state)
+            world.assign_rows(pairs, rows)
 
 @dataclass
 class Trajectory:
@@ -220,9 +226,9 @@ def replay(policies: list[Policy], scenario: Scenario, env_actions, config: Worl
         human_pos=np.stack([s.human_pos[0] for s in steps]),
         crowds=np.stack([s.crowds[0] for s in steps]),
         rewards=np.stack([s.rewards[0] for s in steps]),
-        outcome=sim._gather(state.outcome)[0].copy(),
-        event_time=sim._gather(state.event_time)[0].copy(),
-        path_length=sim._gather(state.path_length)[0].copy(),
-        min_clearance=sim._gather(state.min_clearance)[0].copy(),
+        outcome=sim.gather(state.outcome)[0].copy(),
+        event_time=sim.gather(state.event_time)[0].copy(),
+        path_length=sim.gather(state.path_length)[0].copy(),
+        min_clearance=sim.gather(state.min_clearance)[0].copy(),
         time=np.array([s.time[0] for s in steps]),
     )

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+import numba
 import numpy as np
 
 from search.orca import orca_velocities
@@ -40,25 +41,38 @@ def observe(state: WorldState, config: WorldConfig, robot: int, worlds=slice(Non
             position_noise: np.ndarray | None = None) -> Observation:
     """Robot ``robot``'s observation in the selected worlds; ``position_noise`` (B, n, 2) shifts the humans
     it sees (the observation mode of the environment action)."""
-    pos = state.robot_pos[worlds, robot]
     humans = state.human_pos[worlds]
-    if position_noise is not None:
-        humans = humans + position_noise
-    robot_node = np.empty((pos.shape[0], 7))  # filled column by column: fewer temporary arrays than joining them
-    robot_node[:, 0:2] = pos
-    robot_node[:, 2] = config.robot_radius
-    robot_node[:, 3:5] = state.robot_goal[worlds, robot]
-    robot_node[:, 5] = config.robot_v_pref
-    robot_node[:, 6] = state.robot_theta[worlds, robot]
-    return Observation(
-        robot_node=robot_node,
-        temporal_edges=state.robot_vel[worlds, robot].copy(),
-        spatial_edges=humans - pos[:, None, :],
-        human_velocities=state.human_vel[worlds].copy(),
-        human_radii=state.human_radius[worlds].copy(),
-        human_mask=np.ones(humans.shape[:2], dtype=bool),
-        done=state.done[worlds, robot].copy(),
-    )
+    b, n = humans.shape[:2]
+    observation = Observation(robot_node=np.empty((b, 7)), temporal_edges=np.empty((b, 2)),
+                              spatial_edges=np.empty((b, n, 2)), human_velocities=np.empty((b, n, 2)),
+                              human_radii=np.empty((b, n)), human_mask=np.ones((b, n), dtype=bool),
+                              done=np.empty(b, dtype=bool))
+    _observe(state.robot_pos[worlds], state.robot_goal[worlds], state.robot_theta[worlds], state.robot_vel[worlds],
+             state.done[worlds], humans, state.human_vel[worlds], state.human_radius[worlds], robot,
+             position_noise, float(config.robot_radius), float(config.robot_v_pref), observation.robot_node,
+             observation.temporal_edges, observation.spatial_edges, observation.human_velocities,
+             observation.human_radii, observation.done)
+    return observation
+
+
+@numba.njit(cache=True)
+def _observe(robot_pos, robot_goal, robot_theta, robot_vel, robot_done, human_pos, human_vel, human_radius, robot,
+             noise, radius, v_pref, robot_node, temporal_edges, spatial_edges, human_velocities, human_radii, done):
+    """Fill an observation's arrays in one pass (a step observes every agent; numpy took a dozen calls each)."""
+    for b in range(robot_pos.shape[0]):
+        x, y = robot_pos[b, robot, 0], robot_pos[b, robot, 1]
+        robot_node[b, 0], robot_node[b, 1], robot_node[b, 2] = x, y, radius
+        robot_node[b, 3], robot_node[b, 4] = robot_goal[b, robot, 0], robot_goal[b, robot, 1]
+        robot_node[b, 5], robot_node[b, 6] = v_pref, robot_theta[b, robot]
+        temporal_edges[b, 0], temporal_edges[b, 1] = robot_vel[b, robot, 0], robot_vel[b, robot, 1]
+        done[b] = robot_done[b, robot]
+        for h in range(human_pos.shape[1]):
+            hx, hy = human_pos[b, h, 0], human_pos[b, h, 1]
+            if noise is not None:
+                hx, hy = hx + noise[b, h, 0], hy + noise[b, h, 1]
+            spatial_edges[b, h, 0], spatial_edges[b, h, 1] = hx - x, hy - y
+            human_velocities[b, h, 0], human_velocities[b, h, 1] = human_vel[b, h, 0], human_vel[b, h, 1]
+            human_radii[b, h] = human_radius[b, h]
 
 
 class Policy(Protocol):

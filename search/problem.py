@@ -71,10 +71,15 @@ class CoupledProblem:
         self.sim.reset(batch)
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        result = self.sim.step(actions)
-        t = np.rint(result.time / self.sim.config.dt).astype(np.int64)
-        goal, end = self.reward.events(result.newly_done, result.outcome, result.done.all(axis=1), t)
-        reward = self.reward.step(result.robot_actions, result.robot_pos, result.human_pos, actions, goal, end)
+        sim = self.sim
+        was_done = sim.gather(sim.state.done).copy()
+        robot_actions, _ = sim.advance(actions)
+        state, batch = sim.state, sim.batch
+        done = sim.gather(state.done)
+        t = np.rint(state.time[:batch] / sim.config.dt).astype(np.int64)
+        goal, end = self.reward.events(done & ~was_done, sim.gather(state.outcome), done.all(axis=1), t)
+        reward = self.reward.step(robot_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal,
+                                  end)
         return reward, goal | end
 
     def snapshot(self, index=None) -> Snapshot:

@@ -150,9 +150,12 @@ class WorldState:
         finished worlds)."""
         if not isinstance(worlds, list):
             worlds = np.asarray(worlds, dtype=np.int64).reshape(-1).tolist()
+        assign_rows(self.row_pairs(other), worlds)
+
+    def row_pairs(self, other: WorldState) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(this state's array, ``other``'s) for every field, as ``assign_rows`` takes them."""
         mine, theirs = vars(self), vars(other)
-        for name in STATE_FIELDS:
-            assign_rows(mine[name], worlds, theirs[name])
+        return [(mine[name], theirs[name]) for name in STATE_FIELDS]
 
     def equals(self, other: WorldState) -> bool:
         return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)
@@ -162,13 +165,20 @@ class WorldState:
 STATE_FIELDS = tuple(f.name for f in fields(WorldState))  # in declaration order, as the constructor takes them
 
 
-def assign_rows(target: np.ndarray, rows: list[int], values: np.ndarray) -> None:
-    """``target[rows] = values``; a few rows by plain row assignment, which costs far less than fancy indexing."""
-    if len(rows) > 4:
-        target[rows] = values
+def assign_rows(pairs: list[tuple[np.ndarray, np.ndarray]], rows: list[int]) -> None:
+    """``target[rows] = values`` for every (target, values) pair; a few rows by plain row assignment, which costs
+    far less than fancy indexing (a search refills one row at a time, in a few dozen arrays)."""
+    if len(rows) == 1:
+        row = rows[0]
+        for target, values in pairs:
+            target[row] = values[0]
+    elif len(rows) <= 4:
+        for target, values in pairs:
+            for j, row in enumerate(rows):
+                target[row] = values[j]
     else:
-        for j, row in enumerate(rows):
-            target[row] = values[j]
+        for target, values in pairs:
+            target[rows] = values
 
 
 def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig) -> WorldState:

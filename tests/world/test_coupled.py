@@ -185,3 +185,31 @@ def test_the_crowd_helper_thread_changes_nothing(monkeypatch, config):
         runs.append((np.stack([s.crowds for s in steps]), np.stack([s.robot_pos for s in steps]), sim.state.done))
     for with_helper, in_line in zip(*runs, strict=True):
         assert np.array_equal(with_helper, in_line)
+
+
+@pytest.mark.parametrize("visible", [False, True])
+def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
+    from search.policies import observe
+
+    sim = CoupledSimulator([load_policy("goal"), load_policy("orca")], load_scenario("paper-bl-tr"),
+                           WorldConfig(robot_visible=visible), batch=3)
+    rng = np.random.default_rng(4)
+    for _ in range(6):
+        sim.step(rng.uniform(-0.25, 0.25, (3, 10, 2)))
+    state, noise = sim.state, rng.uniform(-0.25, 0.25, (3, 10, 2))
+    for k in range(2):
+        worlds = slice(k * 3, (k + 1) * 3) if visible else slice(None)
+        robot = 0 if visible else k
+        for shift in (None, noise):
+            seen = observe(state, sim.config, robot, worlds, shift)
+            pos = state.robot_pos[worlds, robot]
+            humans = state.human_pos[worlds] if shift is None else state.human_pos[worlds] + shift
+            np.testing.assert_array_equal(seen.spatial_edges, humans - pos[:, None, :])
+            np.testing.assert_array_equal(seen.robot_node, np.column_stack([
+                pos, np.full(3, sim.config.robot_radius), state.robot_goal[worlds, robot],
+                np.full(3, sim.config.robot_v_pref), state.robot_theta[worlds, robot]]))
+            np.testing.assert_array_equal(seen.temporal_edges, state.robot_vel[worlds, robot])
+            np.testing.assert_array_equal(seen.human_velocities, state.human_vel[worlds])
+            np.testing.assert_array_equal(seen.human_radii, state.human_radius[worlds])
+            np.testing.assert_array_equal(seen.done, state.done[worlds, robot])
+            assert seen.human_mask.all() and seen.human_mask.shape == (3, 10)
