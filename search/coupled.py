@@ -133,7 +133,9 @@ class CoupledSimulator:
         actions = np.zeros((self.batch, self.n_agents, 2))
         for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
             action, self.policy_states[k] = policy.act(observation, self.policy_states[k])
-            actions[:, k] = np.where(observation.done[:, None], 0.0, action)
+            actions[:, k] = action
+            if observation.done.any():
+                actions[observation.done, k] = 0.0
         robot_action = actions if self.shared_crowd else actions.transpose(1, 0, 2).reshape(-1, 1, 2)
         human_vel = humans.result() if humans else world.human_velocities(self.state, self.config, crowd_action)
         return actions, world.advance(self.state, self.config, robot_action, human_vel)  # checked above
