@@ -256,7 +256,9 @@ class Rollouts:
         self.search = search
         problem, width = search.problem, search.config.batch
         self.n = 0
-        self.actions = np.zeros((width, problem.horizon, *problem.action_shape))  # from the initial state
+        # Each row's actions from the initial state; the part up to its node is written out only when a finished
+        # trajectory may enter the top-K queue (most may not).
+        self.actions = np.zeros((width, problem.horizon, *problem.action_shape))
         self.lengths = np.zeros(width, dtype=np.int64)
         self.returns = np.zeros(width)
         self.taken = np.zeros(width, dtype=np.int64)  # steps each iteration has taken
@@ -275,6 +277,8 @@ class Rollouts:
             ended = np.flatnonzero(ended)
             for i in ended.tolist():
                 if terminal[i]:
+                    if search.tracker.queue.admits(self.returns[i]):  # only then its tree part is written out
+                        write_actions_to(self.paths[i][-1].parent, self.actions[i])
                     search.tracker.finish(self.returns[i], self.actions[i, : self.lengths[i]])
                 search.backup(self.paths[i], float(self.returns[i]))
                 search.rollouts += 1
@@ -333,7 +337,6 @@ class Rollouts:
             snapshots.append(search.state_of(node))  # a replay from reset replaces the batch (saved above)
             i = places[len(snapshots) - 1]
             self.paths[i] = path
-            write_actions_to(node, self.actions[i])
             self.lengths[i] = node.depth
             self.taken[i] = 0
             self.countdown[i] = search.config.repeat

@@ -36,10 +36,15 @@ class TopK:
     def __len__(self) -> int:
         return len(self._heap)
 
+    def admits(self, reward: float) -> bool:
+        """Whether a trajectory of this reward may be kept: there is room, or it beats the worst kept one (equal
+        rewards: the first found wins). A solver can skip assembling the actions of one that may not."""
+        return len(self._heap) < self.k or reward > self._heap[0].reward
+
     def push(self, reward: float, actions: np.ndarray, sim_steps: int = 0) -> bool:
         """Offer a trajectory; True if it was kept."""
-        if len(self._heap) >= self.k and reward <= self._heap[0].reward:
-            return False  # no better than the worst kept: it would lose to it (equal rewards: first found wins)
+        if not self.admits(reward):
+            return False
         actions = np.ascontiguousarray(actions, dtype=np.float64)
         key = _key(actions)
         if key in self._keys:
