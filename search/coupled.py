@@ -170,7 +170,7 @@ class CoupledSimulator:
 
     def assign(self, index, snapshot: Snapshot) -> None:
         """Overwrite the coupled scenarios ``index`` with a snapshot's (as many rows; the batch keeps its size)."""
-        rows = np.asarray(index, dtype=np.int64).reshape(-1).tolist()
+        rows = index if isinstance(index, list) else np.asarray(index, dtype=np.int64).reshape(-1).tolist()
         if len(rows) != snapshot.batch:
             raise ValueError(f"{len(rows)} rows to overwrite, but the snapshot holds {snapshot.batch}")
         pairs = [(state[key], value) for state, new in zip(self.policy_states, snapshot.policy_states, strict=True)
