@@ -181,6 +181,7 @@ class CoupledSimulator:
             self.state.assign([k * self.batch + row for k in range(self.n_agents) for row in rows], snapshot.state)
             world.assign_rows(pairs, rows)
 
+
 @dataclass
 class Trajectory:
     """One coupled scenario, step by step: what a summary records and a replay must reproduce."""
