@@ -151,7 +151,8 @@ class DivergenceReward:
         the plausibility term), the same number as the full sum, with the state divergence and the heuristic
         computed only when some row needs them."""
         c = self.config
-        if robot_actions.ndim == 3 and robot_actions.shape[1:] == (2, 2) and self.heuristic is state_divergence:
+        pair = robot_actions.ndim == 3 and robot_actions.shape[1:] == (2, 2) == robot_pos.shape[1:]
+        if pair and robot_actions.dtype == robot_pos.dtype == np.float64 and self.heuristic is state_divergence:
             reward = np.empty(goal.shape)  # a batch of one pair (the search's case): one compiled pass
             _pair_step(robot_actions, robot_pos, goal, end, c.norm == "squared", c.goal_bonus, c.alpha,
                        c.horizon_offset, c.beta, reward)
