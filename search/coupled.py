@@ -206,6 +206,9 @@ def _crowd_worker() -> ThreadPoolExecutor | None:
     return ThreadPoolExecutor(1, thread_name_prefix="foil-crowd") if cores > 1 else None
 
 
+os.register_at_fork(after_in_child=_crowd_worker.cache_clear)  # a forked child does not inherit the thread
+
+
 def replay(policies: list[Policy], scenario: Scenario, env_actions, config: WorldConfig | None = None,
            stop_when_done: bool = True) -> Trajectory:
     """Run one coupled scenario from its initial state under a sequence of environment actions."""

@@ -187,6 +187,31 @@ def test_the_crowd_helper_thread_changes_nothing(monkeypatch, config):
         assert np.array_equal(with_helper, in_line)
 
 
+def _steps_in_child(queue) -> None:
+    sim = make(batch=2)
+    queue.put(np.stack([sim.step(a).crowds for a in env_actions(5, batch=2, seed=1)]))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_a_forked_child_gets_its_own_crowd_helper():
+    """A child forked after the parent used the helper thread has no such thread: it must make its own, not
+    wait for ever on the parent's."""
+    import multiprocessing
+
+    parent = make(batch=2)
+    expected = np.stack([parent.step(a).crowds for a in env_actions(5, batch=2, seed=1)])
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_steps_in_child, args=(queue,))
+    child.start()
+    try:
+        assert np.array_equal(queue.get(timeout=60), expected)
+    finally:
+        child.join(10)
+        if child.is_alive():
+            child.kill()
+
+
 @pytest.mark.parametrize("visible", [False, True])
 def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
     from search.policies import observe
