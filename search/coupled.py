@@ -101,8 +101,7 @@ class CoupledSimulator:
 
     def step(self, env_action) -> CoupledStep:
         """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""
-        was_done = self.gather(self.state.done).copy()
-        actions, reward = self.advance(env_action)
+        actions, reward, newly_done = self.advance(env_action)
         done = self.gather(self.state.done)
         return CoupledStep(
             robot_actions=actions,
@@ -112,14 +111,14 @@ class CoupledSimulator:
             crowds=self.crowds(),
             rewards=self.gather(reward),
             done=done.copy(),
-            newly_done=done & ~was_done,
+            newly_done=newly_done,
             outcome=self.gather(self.state.outcome).copy(),
             time=self.state.time[: self.batch].copy(),
         )
 
-    def advance(self, env_action) -> tuple[np.ndarray, np.ndarray]:
-        """``step`` without its record: the robots' actions (B, N, 2) and navigation rewards (W, R); the new state
-        is ``self.state`` (read robots through ``gather``).
+    def advance(self, env_action) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``step`` without its record: the robots' actions (B, N, 2), navigation rewards (W, R) and which robots
+        finished on this step (B, N); the new state is ``self.state`` (read robots through ``gather``).
 
         The humans' next velocities depend on the state and the environment action only (a visible robot is
         seen at its last velocity), so on a machine with a second core they are computed there, by compiled
@@ -138,7 +137,9 @@ class CoupledSimulator:
                 actions[observation.done, k] = 0.0
         robot_action = actions if self.shared_crowd else actions.transpose(1, 0, 2).reshape(-1, 1, 2)
         human_vel = humans.result() if humans else world.human_velocities(self.state, self.config, crowd_action)
-        return actions, world.advance(self.state, self.config, robot_action, human_vel)  # checked above
+        was_done = self.gather(self.state.done).copy()
+        reward = world.advance(self.state, self.config, robot_action, human_vel)  # checked above
+        return actions, reward, self.gather(self.state.done) & ~was_done
 
     def crowds(self) -> np.ndarray:
         """(B, C, n, 2) the humans of every crowd: one shared crowd, or each agent's own."""

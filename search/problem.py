@@ -72,12 +72,10 @@ class CoupledProblem:
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sim = self.sim
-        was_done = sim.gather(sim.state.done).copy()
-        robot_actions, _ = sim.advance(actions)
+        robot_actions, _, newly_done = sim.advance(actions)
         state, batch = sim.state, sim.batch
-        done = sim.gather(state.done)
         t = np.rint(state.time[:batch] / sim.config.dt).astype(np.int64)
-        goal, end = self.reward.events(done & ~was_done, sim.gather(state.outcome), done.all(axis=1), t)
+        goal, end = self.reward.events(newly_done, sim.gather(state.outcome), sim.gather(state.done).all(axis=1), t)
         reward = self.reward.step(robot_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal,
                                   end)
         return reward, goal | end
