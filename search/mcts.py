@@ -136,6 +136,26 @@ def _best_bound(q, selections, open_, count, log_n, exploration):
     return best
 
 
+@numba.njit(cache=True)
+def _record_step(held, reward, terminal, actions, lengths, returns, taken, countdown, repeat, rollout_depth):
+    """Record one batched step in every row in use (as many as ``reward``): its action, length, return and step
+    counts. Returns (expanded, ended): the rows whose new edge ends on this step (held ``repeat`` steps, or the
+    trajectory ended first), and the rows whose iteration is over."""
+    n = reward.shape[0]
+    expanded, ended = np.zeros(n, np.bool_), np.zeros(n, np.bool_)
+    for i in range(n):
+        if lengths[i] >= actions.shape[1]:
+            raise ValueError("a trajectory ran past the problem's horizon")
+        actions[i, lengths[i]] = held[i]
+        lengths[i] += 1
+        returns[i] += reward[i]
+        countdown[i] -= 1
+        taken[i] += 1
+        expanded[i] = taken[i] == repeat or (terminal[i] and taken[i] < repeat)
+        ended[i] = terminal[i] or (rollout_depth > 0 and taken[i] >= repeat + rollout_depth)
+    return expanded, ended
+
+
 def write_actions_to(node: StateNode, out: np.ndarray) -> None:
     """Write the environment actions from the initial state to ``node`` into ``out[: node.depth]``."""
     while node.parent is not None:
@@ -263,7 +283,6 @@ class Rollouts:
         self.returns = np.zeros(width)
         self.taken = np.zeros(width, dtype=np.int64)  # steps each iteration has taken
         self.countdown = np.zeros(width, dtype=np.int64)  # steps until its held action is renewed
-        self.index = np.arange(width)
         self.held = np.zeros((width, *problem.action_shape))  # the new edge's action, then the rollout's
         self.paths: list[list[ActionNode]] = [[] for _ in range(width)]
 
@@ -295,25 +314,19 @@ class Rollouts:
         if renew.size:
             self.held[renew] = problem.prior.sample(search.rng, renew.size)
             countdown[renew] = config.repeat
-        step_actions = self.held[:n]
-        reward, terminal = problem.step(step_actions)
+        reward, terminal = problem.step(self.held[:n])
         search.tracker.count(n)
         search.batch_rows += n
         search.batch_steps += 1
-        self.actions[self.index[:n], self.lengths[:n]] = step_actions
-        self.lengths[:n] += 1
-        self.returns[:n] += reward
-        countdown -= 1
-        taken = self.taken[:n]
-        taken += 1
-        for i in np.flatnonzero(terminal | (taken == config.repeat)).tolist():
+        expanded, ended = _record_step(self.held, reward, terminal, self.actions, self.lengths, self.returns,
+                                       self.taken, countdown, config.repeat, config.rollout_depth)
+        for i in np.flatnonzero(expanded).tolist():
             action = self.paths[i][-1]
-            if action.child is None and taken[i] <= config.repeat:  # another row may have expanded it first
+            if action.child is None:  # another row may have expanded it first
                 keep = config.branch == "snapshot" and not terminal[i]
                 action.child = StateNode(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
                                          problem.snapshot([i]) if keep else None)
                 action.parent.open[action.index] = not terminal[i]
-        ended = terminal | (taken >= config.repeat + config.rollout_depth) if config.rollout_depth else terminal
         return terminal, ended
 
     def _fill(self, ended: np.ndarray) -> None:
