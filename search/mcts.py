@@ -72,68 +72,169 @@ class MCTSConfig:
                 raise ValueError(f"invalid MCTS setting: {message}")
 
 
+# Columns of the tree's arrays.
+VISITS, FIRST, LAST, COUNT = range(4)  # Tree.states: a state's visits, its first and last action, how many
+CHILD, NEXT, COMPLETED, OPEN = range(4)  # Tree.links: an action's child state, its state's next action, returns
+Q, SELECTIONS, TOTAL, BEST = range(4)  # Tree.stats: q, selections, sum and best of the returns backed up
+
+
+class Tree:
+    """What selection and backup read and write, in flat arrays (grown by doubling), so that each is one compiled
+    loop: an iteration of a few steps descends through a dozen states of dozens of actions, then backs up through
+    as many. Row ``node.id`` holds a state's or an action's numbers; a state's actions form a list through
+    ``NEXT``, in the order they were added. An action's child is -1 until it is expanded, its q -inf while no
+    return is back (its siblings go first), and it is open while its child does not end the trajectory."""
+
+    def __init__(self):
+        self.states = np.zeros((16, 4), np.int64)
+        self.links = np.zeros((16, 4), np.int64)
+        self.stats = np.zeros((16, 4))
+        self.state_nodes: list[StateNode | None] = []  # by id; None once forgotten
+        self.action_nodes: list[ActionNode | None] = []
+
+    def add_state(self, node: StateNode) -> int:
+        index = len(self.state_nodes)
+        if index == self.states.shape[0]:
+            self.states = _grown(self.states)
+        self.states[index] = (0, -1, -1, 0)
+        self.state_nodes.append(node)
+        return index
+
+    def add_action(self, node: ActionNode, state: int) -> int:
+        index = len(self.action_nodes)
+        if index == self.links.shape[0]:
+            self.links, self.stats = _grown(self.links), _grown(self.stats)
+        self.links[index] = (-1, -1, 0, 1)
+        self.stats[index] = (-math.inf, 0.0, 0.0, -math.inf)
+        last = self.states[state, LAST]
+        if last < 0:
+            self.states[state, FIRST] = index
+        else:
+            self.links[last, NEXT] = index
+        self.states[state, LAST] = index
+        self.states[state, COUNT] += 1
+        self.action_nodes.append(node)
+        return index
+
+
+def _grown(array: np.ndarray) -> np.ndarray:
+    """The array with twice the rows, the new ones uninitialised."""
+    grown = np.empty((2 * array.shape[0], *array.shape[1:]), array.dtype)
+    grown[: array.shape[0]] = array
+    return grown
+
+
 class StateNode:
-    """A state of the tree. What UCT reads of its actions (their q, selections and whether they end the
-    trajectory) lives here in arrays, row ``action.index`` each, so that one compiled loop picks among them: a
-    search descends through a dozen nodes of dozens of actions for every iteration of a few steps."""
+    """A state of the tree; its numbers live in ``tree`` (row ``id``)."""
 
-    __slots__ = ("parent", "depth", "value", "terminal", "visits", "children", "snapshot", "q", "selections", "open")
+    __slots__ = ("tree", "id", "parent", "depth", "value", "terminal", "children", "snapshot")
 
-    def __init__(self, parent: ActionNode | None, depth: int, value: float, terminal: bool, snapshot=None):
+    def __init__(self, tree: Tree, parent: ActionNode | None, depth: int, value: float, terminal: bool,
+                 snapshot=None):
+        self.tree = tree
+        self.id = tree.add_state(self)
         self.parent = parent  # the action that led here
         self.depth = depth  # steps from the initial state
         self.value = value  # reward accumulated from the initial state
         self.terminal = terminal
-        self.visits = 0
         self.children: list[ActionNode] = []
         self.snapshot = snapshot  # this state's simulator row; None when branching by replay or terminal
-        # Per action: q, kept up to date by backups (-inf while none is back: its siblings go first); selections,
-        # counted when selected; whether its child does not end the trajectory. Made with the first action (most
-        # nodes are leaves); rows beyond len(children) unused.
-        self.q = self.selections = self.open = None
+
+    @property
+    def visits(self) -> int:
+        return int(self.tree.states[self.id, VISITS])
 
     def add(self, action: np.ndarray) -> ActionNode:
         """A new action of this state, not yet selected."""
-        index = len(self.children)
-        if index == 0:
-            self.q, self.selections, self.open = np.empty(4), np.empty(4), np.empty(4, dtype=np.bool_)
-        elif index == self.q.size:
-            self.q, self.selections, self.open = (np.resize(array, 2 * index)
-                                                  for array in (self.q, self.selections, self.open))
-        self.q[index], self.selections[index], self.open[index] = -math.inf, 0.0, True
-        self.children.append(ActionNode(self, index, action))
+        self.children.append(ActionNode(self, action))
         return self.children[-1]
+
+    def keep_only(self, action: ActionNode) -> None:
+        """Forget every other action and what lies below it (receding mode's commit), so that their snapshots go
+        once the iterations still running through them have finished."""
+        dropped = [a for a in self.children if a is not action]
+        while dropped:
+            other = dropped.pop()
+            self.tree.action_nodes[other.id] = None
+            if other.child is not None:
+                self.tree.state_nodes[other.child.id] = None
+                dropped.extend(other.child.children)
+        self.children = [action]
+        states = self.tree.states
+        states[self.id, FIRST] = states[self.id, LAST] = action.id
+        states[self.id, COUNT] = 1
+        self.tree.links[action.id, NEXT] = -1
 
 
 class ActionNode:
-    __slots__ = ("parent", "index", "action", "completed", "total", "best", "child")
+    """An action of a state, held for ``repeat`` steps; its numbers live in ``tree`` (row ``id``)."""
 
-    def __init__(self, parent: StateNode, index: int, action: np.ndarray):
+    __slots__ = ("tree", "id", "parent", "action", "child")
+
+    def __init__(self, parent: StateNode, action: np.ndarray):
+        self.tree = parent.tree
+        self.id = self.tree.add_action(self, parent.id)
         self.parent = parent
-        self.index = index  # its row in the parent's arrays
         self.action = action
-        self.completed = 0  # returns backed up so far
-        self.total = 0.0
-        self.best = -math.inf
         self.child: StateNode | None = None
+
+    @property
+    def completed(self) -> int:
+        """Returns backed up so far."""
+        return int(self.tree.links[self.id, COMPLETED])
 
     def q(self, backup: str) -> float:
         if not self.completed:
             return -math.inf  # still in flight: its siblings go first
-        return self.best if backup == "max" else self.total / self.completed
+        stats = self.tree.stats[self.id]
+        return float(stats[BEST] if backup == "max" else stats[TOTAL] / self.completed)
+
+    def expand(self, depth: int, value: float, terminal: bool, snapshot) -> None:
+        """Make the state this action leads to."""
+        self.child = StateNode(self.tree, self, depth, value, terminal, snapshot)
+        self.tree.links[self.id, CHILD] = self.child.id
+        self.tree.links[self.id, OPEN] = not terminal
+        if self.tree.action_nodes[self.id] is None:  # in a branch dropped while this iteration ran
+            self.tree.state_nodes[self.child.id] = None
 
 
 @numba.njit(cache=True)
-def _best_bound(q, selections, open_, count, log_n, exploration):
-    """Index of the largest ``q + exploration * sqrt(log_n / selections)`` among the first ``count`` actions that
-    are open (the first of equal scores); -1 when none is."""
-    best, best_score = -1, -math.inf
-    for i in range(count):
-        if open_[i]:
-            score = q[i] + exploration * math.sqrt(log_n / selections[i])
-            if best < 0 or score > best_score:
-                best, best_score = i, score
-    return best
+def _descend(root, states, links, stats, k, alpha, exploration, path):
+    """Selection's descent from ``root``, counting visits and selections, with the action ids it takes written
+    into ``path``: at each state, while it has at least ``k * visits**alpha`` actions, the open one with the
+    largest ``q + exploration * sqrt(ln visits / selections)`` (the first of equal scores), until an action
+    whose child is not there yet. Returns (path length, the state that must widen instead, or -1)."""
+    state, length = root, 0
+    while True:
+        states[state, VISITS] += 1
+        chosen = -1
+        if states[state, COUNT] >= k * states[state, VISITS] ** alpha:
+            log_n, best_score = math.log(states[state, VISITS]), -math.inf
+            action = states[state, FIRST]
+            while action >= 0:
+                if links[action, OPEN]:
+                    score = stats[action, Q] + exploration * math.sqrt(log_n / stats[action, SELECTIONS])
+                    if chosen < 0 or score > best_score:
+                        chosen, best_score = action, score
+                action = links[action, NEXT]
+        if chosen < 0:  # widening is due, or every action ends the trajectory
+            return length, state
+        stats[chosen, SELECTIONS] += 1
+        path[length] = chosen
+        length += 1
+        if links[chosen, CHILD] < 0:
+            return length, -1
+        state = links[chosen, CHILD]
+
+
+@numba.njit(cache=True)
+def _backup(path, value, mean, links, stats):
+    """Back a return up through the actions ``path``."""
+    for action in path:
+        links[action, COMPLETED] += 1
+        stats[action, TOTAL] += value
+        stats[action, BEST] = max(stats[action, BEST], value)
+        stats[action, Q] = stats[action, TOTAL] / links[action, COMPLETED] if mean else stats[action, BEST]
 
 
 @numba.njit(cache=True)
@@ -179,7 +280,8 @@ class MCTS:
         self.problem, self.tracker, self.rng, self.config = problem, tracker, rng, config
         problem.reset(1)
         snapshot = problem.snapshot() if config.branch == "snapshot" else None
-        self.root = self.start = StateNode(None, 0, 0.0, False, snapshot)
+        self.tree = Tree()
+        self.root = self.start = StateNode(self.tree, None, 0, 0.0, False, snapshot)
         self.replayed = 0  # simulator steps spent replaying prefixes from reset (branch="replay")
         self.rollouts = 0  # iterations finished (backed up)
         self.rollout_ends = 0  # their lengths from the initial state, summed
@@ -210,7 +312,7 @@ class MCTS:
         if not done:
             return
         best = max(done, key=lambda a: a.q(self.config.backup))
-        self.root.children = [best]
+        self.root.keep_only(best)
         self.root = best.child
         self.until = self._commit_point()
 
@@ -219,37 +321,21 @@ class MCTS:
         """Whether new iterations may start: budget left, and (receding) a root that does not end the search."""
         return not self.tracker.exhausted and not self.root.terminal
 
-    def select(self) -> list[ActionNode]:
-        """Descend from the root to an action whose child is new or in flight, counting visits."""
-        c = self.config
-        node, path = self.root, []
-        while True:
-            node.visits += 1
-            action = None
-            if len(node.children) >= c.k * node.visits ** c.alpha:
-                action = self._uct(node)  # None when every action ends the trajectory: widen then
-            if action is None:
-                action = node.add(self.problem.prior.sample(self.rng, 1)[0])
-            node.selections[action.index] += 1
-            path.append(action)
-            if action.child is None:
-                return path
-            node = action.child
+    def select(self, path: np.ndarray) -> tuple[int, ActionNode]:
+        """Descend from the root to an action whose child is new or in flight, counting visits and selections
+        (widening where due); the ids of the actions taken go into ``path``. Returns (their number, the last)."""
+        c, tree = self.config, self.tree
+        length, widen = _descend(self.root.id, tree.states, tree.links, tree.stats, c.k, c.alpha, c.exploration,
+                                 path)
+        if widen < 0:
+            return length, tree.action_nodes[path[length - 1]]
+        action = tree.state_nodes[widen].add(self.problem.prior.sample(self.rng, 1)[0])
+        tree.stats[action.id, SELECTIONS] += 1
+        path[length] = action.id
+        return length + 1, action
 
-    def _uct(self, node: StateNode) -> ActionNode | None:
-        """The action with the best upper confidence bound among those that do not end the trajectory (the
-        first of equal scores)."""
-        best = _best_bound(node.q, node.selections, node.open, len(node.children), math.log(node.visits),
-                           self.config.exploration)
-        return None if best < 0 else node.children[best]
-
-    def backup(self, path: list[ActionNode], value: float) -> None:
-        mean = self.config.backup == "mean"
-        for action in path:
-            action.completed += 1
-            action.total += value
-            action.best = max(action.best, value)
-            action.parent.q[action.index] = action.total / action.completed if mean else action.best
+    def backup(self, path: np.ndarray, value: float) -> None:
+        _backup(path, value, self.config.backup == "mean", self.tree.links, self.tree.stats)
 
     def state_of(self, node: StateNode):
         """The node's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
@@ -284,7 +370,10 @@ class Rollouts:
         self.taken = np.zeros(width, dtype=np.int64)  # steps each iteration has taken
         self.countdown = np.zeros(width, dtype=np.int64)  # steps until its held action is renewed
         self.held = np.zeros((width, *problem.action_shape))  # the new edge's action, then the rollout's
-        self.paths: list[list[ActionNode]] = [[] for _ in range(width)]
+        # Each row's path through the tree (action ids; an action takes at least a step) and its new edge.
+        self.paths = np.zeros((width, problem.horizon + 1), dtype=np.int64)
+        self.path_lengths = np.zeros(width, dtype=np.int64)
+        self.edges: list[ActionNode | None] = [None] * width
 
     def run(self) -> None:
         search = self.search
@@ -297,9 +386,9 @@ class Rollouts:
             for i in ended.tolist():
                 if terminal[i]:
                     if search.tracker.queue.admits(self.returns[i]):  # only then its tree part is written out
-                        write_actions_to(self.paths[i][-1].parent, self.actions[i])
+                        write_actions_to(self.edges[i].parent, self.actions[i])
                     search.tracker.finish(self.returns[i], self.actions[i, : self.lengths[i]])
-                search.backup(self.paths[i], float(self.returns[i]))
+                search.backup(self.paths[i, : self.path_lengths[i]], float(self.returns[i]))
                 search.rollouts += 1
                 search.rollout_ends += int(self.lengths[i])
             search.maybe_commit()
@@ -321,12 +410,11 @@ class Rollouts:
         expanded, ended = _record_step(self.held, reward, terminal, self.actions, self.lengths, self.returns,
                                        self.taken, countdown, config.repeat, config.rollout_depth)
         for i in np.flatnonzero(expanded).tolist():
-            action = self.paths[i][-1]
+            action = self.edges[i]
             if action.child is None:  # another row may have expanded it first
                 keep = config.branch == "snapshot" and not terminal[i]
-                action.child = StateNode(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
-                                         problem.snapshot([i]) if keep else None)
-                action.parent.open[action.index] = not terminal[i]
+                action.expand(int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
+                              problem.snapshot([i]) if keep else None)
         return terminal, ended
 
     def _fill(self, ended: np.ndarray) -> None:
@@ -345,16 +433,16 @@ class Rollouts:
         saved = problem.snapshot() if n and search.config.branch == "replay" else None
         snapshots = []
         while len(snapshots) < len(places) and spare > 0 and search.open:
-            path = search.select()
-            node = path[-1].parent
+            i = places[len(snapshots)]
+            self.path_lengths[i], edge = search.select(self.paths[i])
+            node = edge.parent
             snapshots.append(search.state_of(node))  # a replay from reset replaces the batch (saved above)
-            i = places[len(snapshots) - 1]
-            self.paths[i] = path
+            self.edges[i] = edge
             self.lengths[i] = node.depth
             self.taken[i] = 0
             self.countdown[i] = search.config.repeat
             self.returns[i] = node.value
-            self.held[i] = path[-1].action
+            self.held[i] = edge.action
             spare -= max(end - node.depth, 1.0)
         if saved is not None:
             problem.restore(saved)
@@ -379,9 +467,10 @@ class Rollouts:
     def _compact(self, keep: np.ndarray) -> None:
         """Keep rows ``keep`` (in order) as rows 0, 1, ..."""
         count = keep.size
-        for array in (self.actions, self.lengths, self.returns, self.taken, self.countdown, self.held):
+        for array in (self.actions, self.lengths, self.returns, self.taken, self.countdown, self.held, self.paths,
+                      self.path_lengths):
             array[:count] = array[keep]
-        self.paths[:count] = [self.paths[i] for i in keep.tolist()]
+        self.edges[:count] = [self.edges[i] for i in keep.tolist()]
         self.n = count
 
 

@@ -1,3 +1,5 @@
+import gc
+
 import numpy as np
 import pytest
 
@@ -107,6 +109,9 @@ def test_receding_horizon_commits_step_by_step_and_drops_other_branches():
         node = node.parent.parent
         assert len(node.children) == 1
     assert tracker.steps >= tracker.budget or search.root.terminal
+    gc.collect()  # the dropped branches are gone, snapshots and all: a long search does not keep them
+    alive = {id(o) for o in gc.get_objects() if isinstance(o, StateNode)}
+    assert alive == {id(node) for node in nodes(search.start)}
 
 
 def test_bad_settings_say_what_is_wrong():
