@@ -110,7 +110,7 @@ def test_receding_horizon_commits_step_by_step_and_drops_other_branches():
         assert len(node.children) == 1
     assert tracker.steps >= tracker.budget or search.root.terminal
     gc.collect()  # the dropped branches are gone, snapshots and all: a long search does not keep them
-    alive = {id(o) for o in gc.get_objects() if isinstance(o, StateNode)}
+    alive = {id(o) for o in gc.get_objects() if type(o) is StateNode}
     assert alive == {id(node) for node in nodes(search.start)}
 
 
