@@ -5,7 +5,7 @@ computed once per step, so every agent sees identical humans. With a visible rob
 of the world (worlds ``k * B + b`` belong to agent ``k``) and the same environment action drives every copy.
 
 The simulator runs ``B`` independent coupled scenarios at once, so a search can roll out many branches in one
-batched call. ``snapshot()`` / ``restore()`` copy plain arrays (world state and every policy's recurrent state),
+batched call. ``snapshot()`` / ``restore()`` copy arrays (the world state's rows and every policy's recurrent state),
 so a search branches from any node without replaying from reset.
 """
 

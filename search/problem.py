@@ -7,7 +7,6 @@ simulator of the agents under comparison, scored by the divergence reward.
 
 from __future__ import annotations
 
-from dataclasses import fields
 from typing import Any, Protocol
 
 import numpy as np
@@ -108,11 +107,9 @@ def concat_snapshots(snapshots: list[Snapshot]) -> Snapshot:
         return joined.reshape(-1, *joined.shape[2:])
 
     batches = [s.batch for s in snapshots]
-    state = WorldState(**{name: join([getattr(s.state, name) for s in snapshots], batches) for name in _STATE_FIELDS})
+    state = WorldState.of_rows(join([s.state.rows for s in snapshots], batches), snapshots[0].state.layout)
     policy_states = [{key: np.concatenate([s.policy_states[k][key] for s in snapshots])
                       for key in snapshots[0].policy_states[k]}
                      for k in range(len(snapshots[0].policy_states))]
     return Snapshot(state, policy_states, sum(batches))
 
-
-_STATE_FIELDS = tuple(f.name for f in fields(WorldState))

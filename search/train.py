@@ -358,7 +358,7 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
         stopping = stop_after_updates is not None and update - first_update + 1 >= stop_after_updates
         if update % config.save_every == 0 or update == total_updates or stopping:
             last = out / "checkpoints" / f"{update:06d}.pt"
-            run = {"world_state": {f.name: getattr(state, f.name) for f in fields(state)},
+            run = {"world_state": state.fields(),
                    "hidden": hidden, "episode_start": episode_start, "episode_return": episode_return,
                    "recent_returns": list(recent_returns), "recent_success": list(recent_success),
                    "episodes": episodes, "seconds": seconds, "numpy_rng": rng.bit_generator.state,

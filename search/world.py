@@ -17,6 +17,7 @@ A robot that has finished stays where it is; the crowd goes on.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from functools import cache
 
 import numba
 import numpy as np
@@ -108,42 +109,78 @@ class WorldConfig:
         return replace(self, **changes)
 
 
-@dataclass
-class WorldState:
-    """Plain arrays with the world axis first; ``copy()`` is a full snapshot."""
+STATE_FIELDS = ("human_pos", "human_vel", "human_goal", "human_radius", "human_v_pref", "robot_pos", "robot_vel",
+                "robot_theta", "robot_speed", "robot_goal", "time", "done", "outcome", "event_time", "path_length",
+                "min_clearance")  # in the constructor's order
 
-    human_pos: np.ndarray  # (W, n, 2)
-    human_vel: np.ndarray  # (W, n, 2)
-    human_goal: np.ndarray  # (W, n, 2)
-    human_radius: np.ndarray  # (W, n)
-    human_v_pref: np.ndarray  # (W, n)
-    robot_pos: np.ndarray  # (W, R, 2)
-    robot_vel: np.ndarray  # (W, R, 2)
-    robot_theta: np.ndarray  # (W, R) heading
-    robot_speed: np.ndarray  # (W, R) signed forward speed (unicycle)
-    robot_goal: np.ndarray  # (W, R, 2)
-    time: np.ndarray  # (W,)
-    done: np.ndarray  # (W, R) bool
-    outcome: np.ndarray  # (W, R) int8: RUNNING, SUCCESS, COLLISION, TIMEOUT
-    event_time: np.ndarray  # (W, R) time of the terminal event, nan while running
-    path_length: np.ndarray  # (W, R)
-    min_clearance: np.ndarray  # (W, R) smallest surface distance to any human so far
+
+class WorldState:
+    """The worlds' arrays, world axis first:
+
+    - humans: ``human_pos``, ``human_vel``, ``human_goal`` (W, n, 2); ``human_radius``, ``human_v_pref`` (W, n);
+    - robots: ``robot_pos``, ``robot_vel``, ``robot_goal`` (W, R, 2); ``robot_theta`` (heading) and
+      ``robot_speed`` (signed forward speed, unicycle) (W, R);
+    - ``time`` (W,); ``done`` (W, R) bool; ``outcome`` (W, R) int8: RUNNING, SUCCESS, COLLISION, TIMEOUT;
+      ``event_time`` (W, R), nan while running; ``path_length`` (W, R); ``min_clearance`` (W, R), the smallest
+      surface distance to any human so far.
+
+    Every field is a view into one buffer with a row of bytes per world (``rows``), so copying, taking or
+    overwriting worlds is one array operation, however many fields (a search branches and refills worlds many
+    times per step). Fields are therefore written in place (``state.time[...] = t``); rebinding one is an error.
+    """
+
+    __slots__ = ("rows", "layout", *STATE_FIELDS)
+
+    def __init__(self, human_pos, human_vel, human_goal, human_radius, human_v_pref, robot_pos, robot_vel,
+                 robot_theta, robot_speed, robot_goal, time, done, outcome, event_time, path_length, min_clearance):
+        values = dict(zip(STATE_FIELDS, (human_pos, human_vel, human_goal, human_radius, human_v_pref, robot_pos,
+                                         robot_vel, robot_theta, robot_speed, robot_goal, time, done, outcome,
+                                         event_time, path_length, min_clearance), strict=True))
+        human_pos, robot_pos = np.asarray(human_pos), np.asarray(robot_pos)
+        layout = _layout(human_pos.shape[1], robot_pos.shape[1])
+        object.__setattr__(self, "layout", layout)
+        object.__setattr__(self, "rows", np.zeros((human_pos.shape[0], layout.row_bytes), np.uint8))
+        for name, value in values.items():
+            getattr(self, name)[...] = value
+
+    @classmethod
+    def of_rows(cls, rows: np.ndarray, layout: _Layout) -> WorldState:
+        """A state over a buffer of world rows (used as it is, not copied)."""
+        state = cls.__new__(cls)
+        object.__setattr__(state, "layout", layout)
+        object.__setattr__(state, "rows", rows)
+        return state
+
+    def __getattr__(self, name: str):
+        """The field views, made on first use (a snapshot that is only copied or assigned never needs them)."""
+        if name not in STATE_FIELDS:
+            raise AttributeError(name)
+        for field, (offset, dtype, shape) in self.layout.fields.items():
+            view = self.rows[:, offset : offset + dtype.itemsize * int(np.prod(shape))].view(dtype)
+            object.__setattr__(self, field, view.reshape(self.rows.shape[0], *shape))
+        return object.__getattribute__(self, name)
+
+    def __setattr__(self, name: str, value) -> None:
+        raise AttributeError(f"WorldState fields are views into its rows: write into them in place "
+                             f"(state.{name}[...] = value) instead of rebinding them")
+
+    def __reduce__(self):
+        return _state_of_rows, (self.rows, self.layout.humans, self.layout.robots)
 
     @property
     def n_worlds(self) -> int:
-        return self.human_pos.shape[0]
+        return self.rows.shape[0]
 
     @property
     def n_robots(self) -> int:
-        return self.robot_pos.shape[1]
+        return self.layout.robots
 
     def copy(self) -> WorldState:
-        return WorldState(*[getattr(self, name).copy() for name in STATE_FIELDS])
+        return WorldState.of_rows(self.rows.copy(), self.layout)
 
     def take(self, worlds) -> WorldState:
         """A new state made of the given worlds (indices may repeat: one node branched into many)."""
-        index = np.asarray(worlds, dtype=np.int64)
-        return WorldState(*[getattr(self, name).take(index, axis=0) for name in STATE_FIELDS])
+        return WorldState.of_rows(self.rows.take(np.asarray(worlds, dtype=np.int64), axis=0), self.layout)
 
     def assign(self, worlds, other: WorldState) -> None:
         """Overwrite the given worlds (an index array or list) with ``other``'s (e.g. fresh episodes for
@@ -153,16 +190,49 @@ class WorldState:
         assign_rows(self.row_pairs(other), worlds)
 
     def row_pairs(self, other: WorldState) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(this state's array, ``other``'s) for every field, as ``assign_rows`` takes them."""
-        mine, theirs = vars(self), vars(other)
-        return [(mine[name], theirs[name]) for name in STATE_FIELDS]
+        """(this state's world rows, ``other``'s), as ``assign_rows`` takes them."""
+        if other.layout is not self.layout:
+            raise ValueError(f"worlds of {self.layout.humans} humans and {self.layout.robots} robot(s) cannot be "
+                             f"overwritten by worlds of {other.layout.humans} humans and {other.layout.robots}")
+        return [(self.rows, other.rows)]
+
+    def fields(self) -> dict[str, np.ndarray]:
+        return {name: getattr(self, name) for name in STATE_FIELDS}
 
     def equals(self, other: WorldState) -> bool:
         return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)
                    for name in STATE_FIELDS)
 
 
-STATE_FIELDS = tuple(f.name for f in fields(WorldState))  # in declaration order, as the constructor takes them
+@dataclass(frozen=True)
+class _Layout:
+    """Where each field lies in a world's row: (byte offset, dtype, shape after the world axis)."""
+
+    humans: int
+    robots: int
+    fields: dict
+    row_bytes: int
+
+
+def _state_of_rows(rows: np.ndarray, humans: int, robots: int) -> WorldState:
+    """Unpickling: the state over its rows, with the one layout object of its sizes."""
+    return WorldState.of_rows(rows, _layout(humans, robots))
+
+
+@cache
+def _layout(humans: int, robots: int) -> _Layout:
+    shapes = {"human_pos": (humans, 2), "human_vel": (humans, 2), "human_goal": (humans, 2),
+              "human_radius": (humans,), "human_v_pref": (humans,), "robot_pos": (robots, 2),
+              "robot_vel": (robots, 2), "robot_theta": (robots,), "robot_speed": (robots,),
+              "robot_goal": (robots, 2), "time": (), "done": (robots,), "outcome": (robots,),
+              "event_time": (robots,), "path_length": (robots,), "min_clearance": (robots,)}
+    dtypes = {"done": np.dtype(np.bool_), "outcome": np.dtype(np.int8)}
+    fields, offset = {}, 0
+    for name in sorted(STATE_FIELDS, key=lambda name: -dtypes.get(name, np.dtype(np.float64)).itemsize):
+        dtype = dtypes.get(name, np.dtype(np.float64))  # widest first: every field stays aligned
+        fields[name] = (offset, dtype, shapes[name])
+        offset += dtype.itemsize * int(np.prod(shapes[name]))
+    return _Layout(humans, robots, fields, -(-offset // 8) * 8)
 
 
 def assign_rows(pairs: list[tuple[np.ndarray, np.ndarray]], rows: list[int]) -> None:
@@ -293,14 +363,14 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
         velocity, moving = np.empty_like(action), np.empty(state.done.shape, dtype=np.bool_)
         _holonomic(action, float(config.robot_v_pref), velocity, moving)
         theta = np.where(moving, np.arctan2(velocity[..., 1], velocity[..., 0]), state.robot_theta)
-        state.robot_theta = np.where(active, theta, state.robot_theta)
+        state.robot_theta[...] = np.where(active, theta, state.robot_theta)
     else:
         dv = np.clip(action[..., 0], -config.unicycle_max_dv, config.unicycle_max_dv)
         dtheta = np.clip(action[..., 1], -config.unicycle_max_dtheta, config.unicycle_max_dtheta)
         speed = np.clip(state.robot_speed + dv, -config.robot_v_pref, config.robot_v_pref)
         theta = np.mod(state.robot_theta + dtheta, 2 * np.pi)
-        state.robot_speed = np.where(active, speed, state.robot_speed)
-        state.robot_theta = np.where(active, theta, state.robot_theta)
+        state.robot_speed[...] = np.where(active, speed, state.robot_speed)
+        state.robot_theta[...] = np.where(active, theta, state.robot_theta)
         velocity = speed[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
     return np.where(active[..., None], velocity, 0.0)
 
@@ -331,53 +401,48 @@ def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) 
 def advance(state: WorldState, config: WorldConfig, robot_action, new_human_vel: np.ndarray) -> np.ndarray:
     """``step`` with the humans' new velocities already computed (``human_velocities``)."""
     new_robot_vel = robot_velocities(state, config, robot_action)
-    fresh = {name: np.empty_like(getattr(state, name)) for name in _MOVED}
     reward = np.empty(state.done.shape)
     _move_and_judge(state.robot_pos, state.robot_goal, state.human_pos, state.human_radius, new_robot_vel,
                     new_human_vel, state.time, state.done, state.outcome, state.event_time, state.path_length,
                     state.min_clearance, float(config.dt), float(config.robot_radius), float(config.time_limit),
                     float(config.discomfort_dist), float(config.discomfort_factor), float(config.progress_factor),
-                    float(config.success_reward), float(config.collision_penalty), *fresh.values(), reward)
-    for name, array in fresh.items():  # new arrays, as numpy arithmetic would give: nobody's view changes
-        setattr(state, name, array)
-    state.robot_vel = new_robot_vel
-    state.human_vel = new_human_vel
+                    float(config.success_reward), float(config.collision_penalty), reward)
+    state.robot_vel[...] = new_robot_vel
+    state.human_vel[...] = new_human_vel
     return reward
-
-
-_MOVED = ("robot_pos", "human_pos", "time", "done", "outcome", "event_time", "path_length", "min_clearance")
 
 
 @numba.njit(cache=True, nogil=True)
 def _move_and_judge(robot_pos, robot_goal, human_pos, human_radius, robot_vel, human_vel, time, done, outcome,
                     event_time, path_length, min_clearance, dt, robot_radius, time_limit, discomfort_dist,
-                    discomfort_factor, progress_factor, success_reward, collision_penalty, new_robot_pos,
-                    new_human_pos, new_time, new_done, new_outcome, new_event_time, new_path_length,
-                    new_min_clearance, reward):
+                    discomfort_factor, progress_factor, success_reward, collision_penalty, reward):
     """Robots move, then humans, time advances; each robot's move is judged (collision, success, timeout) and
-    rewarded. Every float operation is numpy's ``step`` of the same formulas, in the same order, so the
-    results are bit-identical to it: closest approach along the relative motion of this step, surface distance,
-    discomfort below ``discomfort_dist``, otherwise progress towards the goal."""
+    rewarded; the state's arrays are updated in place. Every float operation is numpy's ``step`` of the same
+    formulas, in the same order, so the results are bit-identical to it: closest approach along the relative
+    motion of this step, surface distance, discomfort below ``discomfort_dist``, otherwise progress towards the
+    goal."""
     worlds, robots, humans = robot_pos.shape[0], robot_pos.shape[1], human_pos.shape[1]
     threshold = time_limit - 1e-9
+    before = np.empty((humans, 2))  # a world's humans before their move
     for w in range(worlds):
         for h in range(humans):
-            new_human_pos[w, h, 0] = human_pos[w, h, 0] + human_vel[w, h, 0] * dt
-            new_human_pos[w, h, 1] = human_pos[w, h, 1] + human_vel[w, h, 1] * dt
+            before[h, 0], before[h, 1] = human_pos[w, h, 0], human_pos[w, h, 1]
+            human_pos[w, h, 0] = before[h, 0] + human_vel[w, h, 0] * dt
+            human_pos[w, h, 1] = before[h, 1] + human_vel[w, h, 1] * dt
         now = time[w] + dt
-        new_time[w] = now
+        time[w] = now
         for r in range(robots):
             x, y = robot_pos[w, r, 0], robot_pos[w, r, 1]
             gx, gy = robot_goal[w, r, 0] - x, robot_goal[w, r, 1] - y
             prev_goal_dist = np.sqrt(gx * gx + gy * gy)
             mx, my = robot_vel[w, r, 0] * dt, robot_vel[w, r, 1] * dt
             nx, ny = x + mx, y + my
-            new_robot_pos[w, r, 0], new_robot_pos[w, r, 1] = nx, ny
-            new_path_length[w, r] = path_length[w, r] + np.sqrt(mx * mx + my * my)
+            robot_pos[w, r, 0], robot_pos[w, r, 1] = nx, ny
+            path_length[w, r] = path_length[w, r] + np.sqrt(mx * mx + my * my)
             clearance = np.inf
             for h in range(humans):
-                ax, ay = x - human_pos[w, h, 0], y - human_pos[w, h, 1]
-                sx, sy = (nx - new_human_pos[w, h, 0]) - ax, (ny - new_human_pos[w, h, 1]) - ay
+                ax, ay = x - before[h, 0], y - before[h, 1]
+                sx, sy = (nx - human_pos[w, h, 0]) - ax, (ny - human_pos[w, h, 1]) - ay
                 seg_sq = sx * sx + sy * sy
                 t = 0.0
                 if seg_sq > 0:
@@ -404,8 +469,12 @@ def _move_and_judge(robot_pos, robot_goal, human_pos, human_radius, robot_vel, h
             else:
                 value = progress_factor * (prev_goal_dist - goal_dist)
             reward[w, r] = value
-            new_min_clearance[w, r] = min(min_clearance[w, r], clearance) if active else min_clearance[w, r]
+            if active:
+                min_clearance[w, r] = min(min_clearance[w, r], clearance)
             finished = collision or success or timeout
-            new_outcome[w, r] = 2 if collision else 1 if success else 3 if timeout else outcome[w, r]
-            new_event_time[w, r] = now if finished else event_time[w, r]
-            new_done[w, r] = done[w, r] or finished
+            if finished:
+                outcome[w, r] = 2 if collision else 1 if success else 3
+                event_time[w, r] = now
+                done[w, r] = True
+
+

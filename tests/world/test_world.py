@@ -1,11 +1,13 @@
 """The batched world: vectorisation, environment action modes, kinematics, reward and episode ends."""
 
+import pickle
+
 import numpy as np
 import pytest
 
 from search import world
 from search.scenarios import load_scenario, sample_training_states
-from search.world import COLLISION, RUNNING, SUCCESS, TIMEOUT, WorldConfig, new_state
+from search.world import COLLISION, RUNNING, SUCCESS, TIMEOUT, WorldConfig, WorldState, new_state
 
 
 def one_robot_world(config, robot, goal, humans=(), human_goals=None):
@@ -27,6 +29,31 @@ def test_stepping_many_worlds_at_once_equals_stepping_each_alone():
             assert world.step(single, config, action[[w]], env_action[[w]])[0, 0] == rewards[w, 0]
     for w, single in enumerate(singles):
         assert single.equals(batch.take([w]))
+
+
+def test_worlds_are_taken_copied_and_overwritten_whole_and_fields_written_in_place():
+    """Every field lives in the state's world rows: taking, pickling and overwriting worlds carry all of them."""
+    config = WorldConfig()
+    rng = np.random.default_rng(5)
+    state = sample_training_states(config, rng, 4)
+    for _ in range(5):
+        world.step(state, config, rng.uniform(-1, 1, (4, 1, 2)), rng.uniform(-0.25, 0.25, (4, 10, 2)))
+    fields = {name: value.copy() for name, value in state.fields().items()}
+    taken = state.take([2, 2, 0])
+    for name, value in fields.items():
+        assert getattr(taken, name).dtype == value.dtype
+        assert np.array_equal(getattr(taken, name), value[[2, 2, 0]], equal_nan=True), name
+    unpickled = pickle.loads(pickle.dumps(state))
+    unpickled.assign([1], taken.take([0]))  # world 2 into world 1
+    for name, value in fields.items():
+        expected = value.copy()
+        expected[1] = value[2]
+        assert np.array_equal(getattr(unpickled, name), expected, equal_nan=True), name
+    assert state.equals(WorldState(**fields))  # untouched by the copies
+    with pytest.raises(AttributeError, match="in place"):
+        state.time = np.zeros(4)
+    with pytest.raises(ValueError, match="by worlds of 3 humans"):
+        state.assign([0], one_robot_world(config, (0, 0), (1, 1), humans=[(1, 1), (2, 2), (3, 3)]))
 
 
 def test_same_actions_give_bit_identical_states():
