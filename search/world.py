@@ -16,6 +16,7 @@ A robot that has finished stays where it is; the crowd goes on.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 from functools import cache
 
@@ -155,9 +156,10 @@ class WorldState:
         """The field views, made on first use (a snapshot that is only copied or assigned never needs them)."""
         if name not in STATE_FIELDS:
             raise AttributeError(name)
-        for field, (offset, dtype, shape) in self.layout.fields.items():
-            view = self.rows[:, offset : offset + dtype.itemsize * int(np.prod(shape))].view(dtype)
-            object.__setattr__(self, field, view.reshape(self.rows.shape[0], *shape))
+        rows, worlds = self.rows, self.rows.shape[0]
+        for field, (offset, dtype, shape, strides) in self.layout.fields.items():
+            view = np.ndarray((worlds, *shape), dtype, rows, offset, (rows.strides[0], *strides))
+            object.__setattr__(self, field, view)
         return object.__getattribute__(self, name)
 
     def __setattr__(self, name: str, value) -> None:
@@ -206,7 +208,7 @@ class WorldState:
 
 @dataclass(frozen=True)
 class _Layout:
-    """Where each field lies in a world's row: (byte offset, dtype, shape after the world axis)."""
+    """Where each field lies in a world's row: (byte offset, dtype, shape and strides after the world axis)."""
 
     humans: int
     robots: int
@@ -230,8 +232,8 @@ def _layout(humans: int, robots: int) -> _Layout:
     fields, offset = {}, 0
     for name in sorted(STATE_FIELDS, key=lambda name: -dtypes.get(name, np.dtype(np.float64)).itemsize):
         dtype = dtypes.get(name, np.dtype(np.float64))  # widest first: every field stays aligned
-        fields[name] = (offset, dtype, shapes[name])
-        offset += dtype.itemsize * int(np.prod(shapes[name]))
+        fields[name] = (offset, dtype, shapes[name], np.empty(shapes[name], dtype).strides)
+        offset += dtype.itemsize * math.prod(shapes[name])
     return _Layout(humans, robots, fields, -(-offset // 8) * 8)
 
 
