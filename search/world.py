@@ -358,36 +358,43 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
     action = np.asarray(robot_action, dtype=np.float64)
     if action.shape != state.robot_pos.shape:
         raise ValueError(f"robot action must have shape {state.robot_pos.shape} (W, R, 2), got {action.shape}")
+    if config.kinematics == "holonomic":  # one compiled pass, the finiteness check included
+        velocity, turns = np.empty_like(action), np.empty(state.done.shape, dtype=np.bool_)
+        if not _holonomic(action, float(config.robot_v_pref), state.done, velocity, turns):
+            raise ValueError("robot action contains NaN or infinite values")
+        np.copyto(state.robot_theta, np.arctan2(velocity[..., 1], velocity[..., 0]), where=turns)
+        return velocity
     if not np.isfinite(action).all():
         raise ValueError("robot action contains NaN or infinite values")
     active = ~state.done
-    if config.kinematics == "holonomic":
-        velocity, moving = np.empty_like(action), np.empty(state.done.shape, dtype=np.bool_)
-        _holonomic(action, float(config.robot_v_pref), velocity, moving)
-        theta = np.where(moving, np.arctan2(velocity[..., 1], velocity[..., 0]), state.robot_theta)
-        state.robot_theta[...] = np.where(active, theta, state.robot_theta)
-    else:
-        dv = np.clip(action[..., 0], -config.unicycle_max_dv, config.unicycle_max_dv)
-        dtheta = np.clip(action[..., 1], -config.unicycle_max_dtheta, config.unicycle_max_dtheta)
-        speed = np.clip(state.robot_speed + dv, -config.robot_v_pref, config.robot_v_pref)
-        theta = np.mod(state.robot_theta + dtheta, 2 * np.pi)
-        state.robot_speed[...] = np.where(active, speed, state.robot_speed)
-        state.robot_theta[...] = np.where(active, theta, state.robot_theta)
-        velocity = speed[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+    dv = np.clip(action[..., 0], -config.unicycle_max_dv, config.unicycle_max_dv)
+    dtheta = np.clip(action[..., 1], -config.unicycle_max_dtheta, config.unicycle_max_dtheta)
+    speed = np.clip(state.robot_speed + dv, -config.robot_v_pref, config.robot_v_pref)
+    theta = np.mod(state.robot_theta + dtheta, 2 * np.pi)
+    state.robot_speed[...] = np.where(active, speed, state.robot_speed)
+    state.robot_theta[...] = np.where(active, theta, state.robot_theta)
+    velocity = speed[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
     return np.where(active[..., None], velocity, 0.0)
 
 
 @numba.njit(cache=True, nogil=True)
-def _holonomic(action, v_pref, velocity, moving):
+def _holonomic(action, v_pref, done, velocity, turns):
     """Each action as a velocity rescaled to at most ``v_pref`` (numpy's ``action * (v_pref / max(speed,
-    1e-300))`` where the speed is over it, bit for bit), and whether it moves at all."""
+    1e-300))`` where the speed is over it, bit for bit); a robot that has finished stands still, and one that
+    moves turns to its velocity. Returns whether every action was finite."""
+    finite = True
     for w in range(action.shape[0]):
         for r in range(action.shape[1]):
             x, y = action[w, r, 0], action[w, r, 1]
+            finite = finite and math.isfinite(x) and math.isfinite(y)
             speed = np.sqrt(x * x + y * y)
             scale = v_pref / max(speed, 1e-300) if speed > v_pref else 1.0
-            velocity[w, r, 0], velocity[w, r, 1] = (x * scale, y * scale) if speed > v_pref else (x, y)
-            moving[w, r] = speed > 0
+            if done[w, r]:
+                velocity[w, r, 0], velocity[w, r, 1] = 0.0, 0.0
+            else:
+                velocity[w, r, 0], velocity[w, r, 1] = (x * scale, y * scale) if speed > v_pref else (x, y)
+            turns[w, r] = speed > 0 and not done[w, r]
+    return finite
 
 
 def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) -> np.ndarray:
