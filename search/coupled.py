@@ -19,7 +19,7 @@ from functools import cache
 import numpy as np
 
 from search import world
-from search.policies import Observation, Policy, PolicyState, observe
+from search.policies import Observation, Policy, PolicyState, observe_agents
 from search.scenarios import Scenario
 from search.world import WorldConfig, WorldState
 
@@ -93,11 +93,8 @@ class CoupledSimulator:
 
     def observations(self, env_action: np.ndarray | None = None) -> list[Observation]:
         noise = env_action if self.config.env_action_mode == "observation" else None
-        result = []
-        for k in range(self.n_agents):
-            worlds, robot = self._where(k)
-            result.append(observe(self.state, self.config, robot, worlds, noise))
-        return result
+        agents = [(worlds.start or 0, robot) for worlds, robot in map(self._where, range(self.n_agents))]
+        return observe_agents(self.state, self.config, agents, self.batch, noise)
 
     def step(self, env_action) -> CoupledStep:
         """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""

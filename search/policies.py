@@ -37,42 +37,55 @@ class Observation:
         return self.robot_node.shape[0]
 
 
-def observe(state: WorldState, config: WorldConfig, robot: int, worlds=slice(None),
+def observe(state: WorldState, config: WorldConfig, robot: int, worlds: slice = slice(None),
             position_noise: np.ndarray | None = None) -> Observation:
-    """Robot ``robot``'s observation in the selected worlds; ``position_noise`` (B, n, 2) shifts the humans
-    it sees (the observation mode of the environment action)."""
-    humans = state.human_pos[worlds]
-    b, n = humans.shape[:2]
-    observation = Observation(robot_node=np.empty((b, 7)), temporal_edges=np.empty((b, 2)),
-                              spatial_edges=np.empty((b, n, 2)), human_velocities=np.empty((b, n, 2)),
-                              human_radii=np.empty((b, n)), human_mask=np.ones((b, n), dtype=bool),
-                              done=np.empty(b, dtype=bool))
-    _observe(state.robot_pos[worlds], state.robot_goal[worlds], state.robot_theta[worlds], state.robot_vel[worlds],
-             state.done[worlds], humans, state.human_vel[worlds], state.human_radius[worlds], robot,
-             position_noise, float(config.robot_radius), float(config.robot_v_pref), observation.robot_node,
-             observation.temporal_edges, observation.spatial_edges, observation.human_velocities,
-             observation.human_radii, observation.done)
-    return observation
+    """Robot ``robot``'s observation in the worlds ``worlds`` (a slice); ``position_noise`` (B, n, 2) shifts the
+    humans it sees (the observation mode of the environment action)."""
+    start, stop, step = worlds.indices(state.n_worlds)
+    if step != 1:
+        raise ValueError("observe takes a contiguous slice of worlds")
+    return observe_agents(state, config, [(start, robot)], stop - start, position_noise)[0]
+
+
+def observe_agents(state: WorldState, config: WorldConfig, agents: list[tuple[int, int]], batch: int,
+                   position_noise: np.ndarray | None = None) -> list[Observation]:
+    """Several robots' observations in one pass (a coupled step observes every agent): agent ``(first, robot)``
+    is robot ``robot`` in worlds ``first`` to ``first + batch``."""
+    k, n = len(agents), state.human_pos.shape[1]
+    robot_node, temporal_edges = np.empty((k, batch, 7)), np.empty((k, batch, 2))
+    spatial_edges, human_velocities = np.empty((k, batch, n, 2)), np.empty((k, batch, n, 2))
+    human_radii, done = np.empty((k, batch, n)), np.empty((k, batch), dtype=bool)
+    human_mask = np.ones((k, batch, n), dtype=bool)
+    where = np.array(agents, dtype=np.int64).reshape(k, 2)
+    _observe(state.robot_pos, state.robot_goal, state.robot_theta, state.robot_vel, state.done, state.human_pos,
+             state.human_vel, state.human_radius, where, position_noise, float(config.robot_radius),
+             float(config.robot_v_pref), robot_node, temporal_edges, spatial_edges, human_velocities, human_radii,
+             done)
+    return [Observation(robot_node[i], temporal_edges[i], spatial_edges[i], human_velocities[i], human_radii[i],
+                        human_mask[i], done[i]) for i in range(k)]
 
 
 @numba.njit(cache=True)
-def _observe(robot_pos, robot_goal, robot_theta, robot_vel, robot_done, human_pos, human_vel, human_radius, robot,
+def _observe(robot_pos, robot_goal, robot_theta, robot_vel, robot_done, human_pos, human_vel, human_radius, where,
              noise, radius, v_pref, robot_node, temporal_edges, spatial_edges, human_velocities, human_radii, done):
-    """Fill an observation's arrays in one pass (a step observes every agent; numpy took a dozen calls each)."""
-    for b in range(robot_pos.shape[0]):
-        x, y = robot_pos[b, robot, 0], robot_pos[b, robot, 1]
-        robot_node[b, 0], robot_node[b, 1], robot_node[b, 2] = x, y, radius
-        robot_node[b, 3], robot_node[b, 4] = robot_goal[b, robot, 0], robot_goal[b, robot, 1]
-        robot_node[b, 5], robot_node[b, 6] = v_pref, robot_theta[b, robot]
-        temporal_edges[b, 0], temporal_edges[b, 1] = robot_vel[b, robot, 0], robot_vel[b, robot, 1]
-        done[b] = robot_done[b, robot]
-        for h in range(human_pos.shape[1]):
-            hx, hy = human_pos[b, h, 0], human_pos[b, h, 1]
-            if noise is not None:
-                hx, hy = hx + noise[b, h, 0], hy + noise[b, h, 1]
-            spatial_edges[b, h, 0], spatial_edges[b, h, 1] = hx - x, hy - y
-            human_velocities[b, h, 0], human_velocities[b, h, 1] = human_vel[b, h, 0], human_vel[b, h, 1]
-            human_radii[b, h] = human_radius[b, h]
+    """Fill every agent's observation arrays in one pass (numpy took a dozen calls per agent)."""
+    for k in range(where.shape[0]):
+        first, robot = where[k, 0], where[k, 1]
+        for b in range(robot_node.shape[1]):
+            w = first + b
+            x, y = robot_pos[w, robot, 0], robot_pos[w, robot, 1]
+            robot_node[k, b, 0], robot_node[k, b, 1], robot_node[k, b, 2] = x, y, radius
+            robot_node[k, b, 3], robot_node[k, b, 4] = robot_goal[w, robot, 0], robot_goal[w, robot, 1]
+            robot_node[k, b, 5], robot_node[k, b, 6] = v_pref, robot_theta[w, robot]
+            temporal_edges[k, b, 0], temporal_edges[k, b, 1] = robot_vel[w, robot, 0], robot_vel[w, robot, 1]
+            done[k, b] = robot_done[w, robot]
+            for h in range(human_pos.shape[1]):
+                hx, hy = human_pos[w, h, 0], human_pos[w, h, 1]
+                if noise is not None:
+                    hx, hy = hx + noise[b, h, 0], hy + noise[b, h, 1]
+                spatial_edges[k, b, h, 0], spatial_edges[k, b, h, 1] = hx - x, hy - y
+                human_velocities[k, b, h, 0], human_velocities[k, b, h, 1] = human_vel[w, h, 0], human_vel[w, h, 1]
+                human_radii[k, b, h] = human_radius[w, h]
 
 
 class Policy(Protocol):
