@@ -158,7 +158,8 @@ class WorldState:
             raise AttributeError(name)
         rows, worlds = self.rows, self.rows.shape[0]
         for field, (offset, dtype, shape, strides) in self.layout.fields.items():
-            view = np.ndarray((worlds, *shape), dtype, rows, offset, (rows.strides[0], *strides))
+            view = np.ndarray((worlds, *shape), dtype, rows, offset, (rows.strides[0], *strides)) if worlds \
+                else np.empty((0, *shape), dtype)  # no worlds: nothing to share
             object.__setattr__(self, field, view)
         return object.__getattribute__(self, name)
 
