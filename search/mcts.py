@@ -220,6 +220,8 @@ def _descend(root, states, links, stats, k, alpha, exploration, path):
         if chosen < 0:  # widening is due, or every action ends the trajectory
             return length, state
         stats[chosen, SELECTIONS] += 1
+        if length == path.shape[0]:
+            raise ValueError("a path through the tree is longer than the problem's horizon")
         path[length] = chosen
         length += 1
         if links[chosen, CHILD] < 0:
