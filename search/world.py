@@ -207,9 +207,10 @@ class WorldState:
                    for name in STATE_FIELDS)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _Layout:
-    """Where each field lies in a world's row: (byte offset, dtype, shape and strides after the world axis)."""
+    """Where each field lies in a world's row: (byte offset, dtype, shape and strides after the world axis). One
+    object per size of world (``_layout``), so states with the same layout hold the same object."""
 
     humans: int
     robots: int
