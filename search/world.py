@@ -134,9 +134,8 @@ class WorldState:
 
     def __init__(self, human_pos, human_vel, human_goal, human_radius, human_v_pref, robot_pos, robot_vel,
                  robot_theta, robot_speed, robot_goal, time, done, outcome, event_time, path_length, min_clearance):
-        values = dict(zip(STATE_FIELDS, (human_pos, human_vel, human_goal, human_radius, human_v_pref, robot_pos,
-                                         robot_vel, robot_theta, robot_speed, robot_goal, time, done, outcome,
-                                         event_time, path_length, min_clearance), strict=True))
+        arguments = locals()
+        values = {name: arguments[name] for name in STATE_FIELDS}
         human_pos, robot_pos = np.asarray(human_pos), np.asarray(robot_pos)
         layout = _layout(human_pos.shape[1], robot_pos.shape[1])
         object.__setattr__(self, "layout", layout)
