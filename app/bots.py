@@ -12,86 +12,12 @@ from __future__ import annotations
 
 import html
 import json
-import math
 import random
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-SCORE_SUCCESS, SCORE_COLLISION = 2.0, -1.0
-
-
-@dataclass(frozen=True)
-class Observer:
-    """How a viewer judges a robot in a clip: reaching the goal beats timing out beats colliding; sooner is
-    better; coming closer than `comfort_m` to a person counts against it. `noise` is the standard deviation of
-    the perception noise, in the same units (reaching the goal at once versus at the end of the clip is 1)."""
-
-    noise: float = 0.5
-    comfort_m: float = 0.5
-    closeness_weight: float = 2.0
-
-    def visible_score(self, outcome: dict, end_s: float, progress: float) -> float:
-        event = outcome.get("event")
-        if event == "collision":
-            return SCORE_COLLISION
-        if event == "success":
-            score = SCORE_SUCCESS + 1 - min(1.0, float(outcome.get("time") or end_s) / end_s)
-        else:  # timeout, or still running when the clip ends: judged by how far it got
-            score = progress
-        closest = outcome.get("min_human_distance")
-        if closest is not None:
-            score -= self.closeness_weight * max(0.0, self.comfort_m - float(closest))
-        return score
-
-    def perceive(self, clip: VisibleClip, rng: random.Random) -> dict[str, float]:
-        """Each on-screen label's perceived score for one viewing."""
-        return {label: score + rng.gauss(0.0, self.noise) for label, score in clip.scores(self).items()}
-
-
-def contrast(a: float, b: float) -> float:
-    """How different two perceived scores look, from 0 (the same) towards 1."""
-    return 1 - math.exp(-abs(a - b))
-
-
-@dataclass(frozen=True)
-class VisibleClip:
-    """What a clip shows: per on-screen label its outcome and how far it got towards the goal."""
-
-    labels: tuple[str, ...]
-    outcomes: tuple[dict, ...]
-    progress: tuple[float, ...]
-    end_s: float
-
-    def scores(self, observer: Observer) -> dict[str, float]:
-        return {label: observer.visible_score(outcome, self.end_s, progress)
-                for label, outcome, progress in zip(self.labels, self.outcomes, self.progress, strict=True)}
-
-    def describe(self, label: str) -> str:
-        outcome = self.outcomes[self.labels.index(label)]
-        event = outcome.get("event")
-        if event == "success":
-            text = f"{label} reached the goal after {float(outcome.get('time') or self.end_s):.0f} seconds"
-        elif event == "collision":
-            text = f"{label} bumped into a person"
-        else:
-            text = f"{label} did not reach the goal in time"
-        closest = outcome.get("min_human_distance")
-        if closest is not None and event != "collision" and float(closest) < 0.5:
-            text += " and came close to people"
-        return text + "."
-
-
-def _progress(summary: dict, k: int) -> float:
-    """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
-    try:
-        start = summary["scenario"]["robot"]["start"]
-        goal = summary["scenario"]["robot"]["goal"]
-        end = summary["steps"][-1]["robots"][k]
-    except (KeyError, IndexError, TypeError):
-        return 0.0
-    total = math.dist(start, goal)
-    return max(0.0, 1 - math.dist(end, goal) / total) if total > 0 else 1.0
+from app.visible import Observer, VisibleClip, contrast
 
 
 class ClipIndex:
@@ -109,12 +35,7 @@ class ClipIndex:
             if not entry.get("summary") or not path.is_file():
                 raise ValueError(f"clip {entry.get('id')!r}: no summary file {path}; the bots judge clips from it")
             summary = json.loads(path.read_text(encoding="utf-8"))
-            names = [agent["name"] for agent in summary["agents"]]
-            order = [names.index(agent) for agent in entry["agents"]]  # the summary's index of each label's robot
-            steps = summary.get("steps") or [{"t": 1.0}]
-            self.clips[entry["sha256"].lower()] = VisibleClip(
-                labels=tuple(entry["labels"]), outcomes=tuple(summary["outcomes"][k] for k in order),
-                progress=tuple(_progress(summary, k) for k in order), end_s=max(float(steps[-1]["t"]), 1e-6))
+            self.clips[entry["sha256"].lower()] = VisibleClip.of_summary(summary, entry["agents"], entry["labels"])
 
     def at(self, url: str) -> tuple[str, VisibleClip]:
         match = re.search(r"/clips/([0-9a-f]{64})\.mp4", url)
