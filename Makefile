@@ -9,7 +9,7 @@ BIN = $(VENV)/bin
 AXE = .cache/axe/node_modules/axe-core/axe.min.js
 DEMO_BUNDLE ?= bundles/demo
 
-.PHONY: demo test install browser
+.PHONY: demo test install browser postgres
 
 install: $(VENV)/.installed
 
@@ -17,6 +17,12 @@ install: $(VENV)/.installed
 # axe-core for the accessibility checks.
 browser: $(AXE)
 	@command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium)
+
+# What the PostgreSQL variants of the database tests need: Debian's postgresql (its initdb, pg_ctl and server; the
+# tests start a throwaway cluster of their own on a loopback port, and stop it at the end).
+postgres:
+	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || command -v initdb >/dev/null || \
+		(apt-get update && apt-get install -y postgresql)
 
 $(VENV)/.installed: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -34,5 +40,5 @@ demo: install
 	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE)
 	$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
 
-test: install browser
+test: install browser postgres
 	$(BIN)/python -m pytest -q

@@ -4,7 +4,18 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 
-from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Integer, MetaData, String, Text, UniqueConstraint
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    Boolean,
+    DateTime,
+    ForeignKey,
+    Integer,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+)
 from sqlalchemy.ext.associationproxy import AssociationProxy, association_proxy
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
@@ -95,8 +106,9 @@ class Response(Base):
     answers: Mapped[dict] = mapped_column(JSON, default=dict)  # question name -> value as submitted
     video_events: Mapped[list] = mapped_column(JSON, default=list)  # [{"type": "play", "t": ms}, ...]
     plays: Mapped[int] = mapped_column(Integer, default=0)
-    client_ms: Mapped[int | None] = mapped_column(Integer)  # time on page measured by the browser
-    server_ms: Mapped[int] = mapped_column(Integer)  # from the screen becoming current to this submission
+    # 64-bit: a screen left open for weeks (a participant who comes back through their link) overflows 32 bits
+    client_ms: Mapped[int | None] = mapped_column(BigInteger)  # time on page measured by the browser
+    server_ms: Mapped[int] = mapped_column(BigInteger)  # from the screen becoming current to this submission
     submitted_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
     participant: Mapped[Participant] = relationship(back_populates="responses")

@@ -16,11 +16,11 @@ from pathlib import Path
 import imageio_ffmpeg
 import pytest
 from fastapi.testclient import TestClient
-from sqlalchemy import create_engine, text
 
 from app.database import migrate
 from app.main import create_app
 from app.settings import Settings
+from tests.app import postgres
 
 REPO = Path(__file__).resolve().parents[2]
 PAPER_STUDY = REPO / "studies" / "paper.toml"
@@ -100,18 +100,31 @@ def study_text(**changes: str) -> str:
     return text_
 
 
+@pytest.fixture(scope="session")
+def postgres_url() -> str:
+    """A PostgreSQL database for the session: FOIL_TEST_DATABASE_URL's, else a throwaway server of our own (see
+    tests/app/postgres.py); skips when neither is available."""
+    url = os.environ.get(postgres.URL_VARIABLE)
+    if url:
+        yield url
+        return
+    bin_dir = postgres.binaries()
+    if bin_dir is None:
+        pytest.skip("no PostgreSQL binaries (`make test` installs them; or set FOIL_TEST_DATABASE_URL)")
+    server = postgres.ThrowawayServer(bin_dir).start()
+    try:
+        yield server.url
+    finally:
+        server.stop()
+
+
 @pytest.fixture(params=["sqlite", "postgresql"])
 def database_url(request, tmp_path) -> str:
-    """A fresh database per test: a SQLite file, and PostgreSQL too when FOIL_TEST_DATABASE_URL is set."""
+    """A fresh database per test: a SQLite file, and an emptied PostgreSQL database."""
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
-    url = os.environ.get("FOIL_TEST_DATABASE_URL")
-    if not url:
-        pytest.skip("set FOIL_TEST_DATABASE_URL to run the database tests on PostgreSQL too")
-    engine = create_engine(url)
-    with engine.begin() as connection:
-        connection.execute(text("DROP TABLE IF EXISTS response, participant, server_setting, alembic_version"))
-    engine.dispose()
+    url = request.getfixturevalue("postgres_url")
+    postgres.reset(url)
     return url
 
 
