@@ -14,6 +14,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
@@ -24,6 +25,15 @@ FORMAT = "foil.bundle/1"
 
 class BundleError(ValueError):
     """A bundle the server cannot serve; the message names the problem."""
+
+
+class ClipAudit(BaseModel):
+    """What the clip visibly shows against the ground truth (`app.visible.audit`), for researchers only."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    shows: Literal["better", "worse", "tie"]
+    why: str
 
 
 class ManifestClip(BaseModel):
@@ -38,6 +48,7 @@ class ManifestClip(BaseModel):
     labels: list[str]
     better: str
     summary: str = ""
+    audit: ClipAudit | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> ManifestClip:

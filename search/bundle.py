@@ -3,8 +3,10 @@
 The table names the agents, scenarios, schemes (a solver with its budget and seed) and sets of clips; each set
 says which survey parts its clips feed. The builder evaluates every agent (the ground truth `better`), runs one
 search per clip (or reuses a cached one whose inputs are unchanged), renders the best summary of each with a
-seeded, recorded mapping of agents to robot numbers, and writes manifest.json (`foil.bundle/1`, a sha256 for
-every file), a copy of the study file and a static index.html gallery for the researcher.
+seeded, recorded mapping of agents to robot numbers, audits each clip (does it visibly show the better robot as
+better? judged by the bots' observer, `app.visible`; a warning line per misleading clip), and writes manifest.json
+(`foil.bundle/1`, a sha256 for every file, each clip's `audit`), a copy of the study file and a static index.html
+gallery for the researcher, where misleading clips are marked.
 
 Bundle layout::
 
@@ -31,6 +33,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from app.bundle import sha256_file
+from app.visible import VisibleClip, audit
 from search.render import RenderOptions, render, robot_label
 from search.scene import load_scene
 
@@ -454,16 +457,24 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         render_clip(job, summary, clip, spec.render, cache, log)
         order = sorted(range(2), key=lambda k: job.numbers[k])
         data = json.loads(summary.read_text())
+        agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
+        better = better_agent(job.pair, evaluations)
+        clip_audit = audit(VisibleClip.of_summary(data, agents, labels), labels[agents.index(better)])
+        if clip_audit["shows"] != "better":
+            log(f"warning: clip {job.id} is misleading: it shows the better robot {better} "
+                f"({labels[agents.index(better)]}) as {'no better' if clip_audit['shows'] == 'tie' else 'worse'}: "
+                f"{clip_audit['why']}")
         clips.append({
             "id": job.id,
             "file": f"clips/{job.id}.mp4",
             "sha256": sha256_file(clip),
             "scheme": job.scheme.name,
             "scenario": job.scenario,
-            "agents": [job.pair[k] for k in order],
-            "labels": [robot_label(job.numbers[k]) for k in order],
-            "better": better_agent(job.pair, evaluations),
+            "agents": agents,
+            "labels": labels,
+            "better": better,
             "summary": f"summaries/{job.id}.json",
+            "audit": clip_audit,
             "poster": f"clips/{job.id}.poster.png",
             "sheet": f"clips/{job.id}.sheet.png",
             "parts": list(job.parts),
@@ -499,13 +510,16 @@ body { font: 15px/1.4 system-ui, sans-serif; margin: 1.5rem; color: #222; }
 table { border-collapse: collapse; margin-bottom: 1.5rem; }
 td, th { padding: .25rem .6rem; border-bottom: 1px solid #ddd; text-align: left; }
 main { display: grid; grid-template-columns: repeat(auto-fill, minmax(340px, 1fr)); gap: 1.2rem; }
-figure { margin: 0; } video { width: 100%; background: #eee; } ul { margin: .3rem 0; padding-left: 1.2rem; }
+figure { margin: 0; } figure.misleading { outline: 3px solid #b00020; outline-offset: 4px; }
+.audit { margin: 0 0 .3rem; } .misleading .audit { color: #b00020; font-weight: 600; }
+video { width: 100%; background: #eee; } ul { margin: .3rem 0; padding-left: 1.2rem; }
 """
 
 
 def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) -> None:
     """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward."""
     esc = html.escape
+    misleading = sum(clip["audit"]["shows"] != "better" for clip in clips)
     rows = "".join(
         f"<tr><td>{esc(name)}</td><td>{e['reward_mean']:.2f} [{e['reward_ci95'][0]:.2f}, {e['reward_ci95'][1]:.2f}]"
         f"</td><td>{e['success_rate']:.2f}</td><td>{e['collision_rate']:.2f}</td><td>{e['timeout_rate']:.2f}</td>"
@@ -517,8 +531,14 @@ def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) ->
             f"{esc(_outcome(outcome))}</li>"
             for label, agent, outcome in zip(clip["labels"], clip["agents"], clip["outcomes"], strict=True))
         reward = "n/a" if clip["reward"] is None else f"{clip['reward']:.3f}"
+        shows = clip["audit"]["shows"]
+        verdict = ("shows the better robot as better" if shows == "better" else
+                   "MISLEADING: shows no visible difference" if shows == "tie" else
+                   "MISLEADING: shows the better robot as worse")
         cards.append(
-            f"<figure><video controls preload=\"none\" poster=\"{esc(clip['poster'])}\" src=\"{esc(clip['file'])}\">"
+            f"<figure class=\"{'ok' if shows == 'better' else 'misleading'}\"><p class=\"audit\">{esc(verdict)}: "
+            f"{esc(clip['audit']['why'])}</p>\n"
+            f"<video controls preload=\"none\" poster=\"{esc(clip['poster'])}\" src=\"{esc(clip['file'])}\">"
             f"</video><figcaption><b>{esc(clip['scheme'])}</b> ({esc(clip['solver'])}) · {esc(clip['scenario'])} · "
             f"parts: {esc(', '.join(clip['parts']))}<ul>{robots}</ul>divergence reward {reward} · "
             f"<a href=\"{esc(clip['sheet'])}\">contact sheet</a> · <a href=\"{esc(clip['summary'])}\">summary</a> · "
@@ -528,7 +548,9 @@ def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) ->
         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
         f"<title>Study bundle: clips</title><style>{GALLERY_STYLE}</style></head><body>\n<h1>Study bundle</h1>\n"
         "<p>For the researcher only: this page shows which agent each robot is. Participants see the clips alone."
-        "</p>\n<table><tr><th>agent</th><th>mean reward [95% CI]</th><th>success</th><th>collision</th>"
+        f" {misleading} of {len(clips)} clips are misleading: what they visibly show (who bumped into a person, who "
+        "reached the goal and when, how far the others got) does not show the better robot as better.</p>\n"
+        "<table><tr><th>agent</th><th>mean reward [95% CI]</th><th>success</th><th>collision</th>"
         f"<th>timeout</th><th>episodes</th></tr>{rows}</table>\n<main>{''.join(cards)}</main>\n</body></html>\n"
     )
     (out / "index.html").write_text(page, encoding="utf-8")

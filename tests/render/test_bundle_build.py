@@ -88,6 +88,24 @@ def test_manifest_matches_files_and_checksums(built):
     assert all(clip["id"] in gallery for clip in manifest["clips"])
 
 
+def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(built):
+    """The manifest's audit is the observer's verdict on the clip's own summary; the gallery marks each misleading
+    clip and the build prints one warning line for each."""
+    from app.visible import VisibleClip, audit
+
+    out, manifest, log, _ = built
+    gallery = (out / "index.html").read_text()
+    misleading = [clip for clip in manifest["clips"] if clip["audit"]["shows"] != "better"]
+    for clip in manifest["clips"]:
+        summary = json.loads((out / clip["summary"]).read_text())
+        better_label = clip["labels"][clip["agents"].index(clip["better"])]
+        assert clip["audit"] == audit(VisibleClip.of_summary(summary, clip["agents"], clip["labels"]), better_label)
+    warnings = [line for line in log if line.startswith("warning: clip ")]
+    assert len(warnings) == len(misleading) and gallery.count('<figure class="misleading">') == len(misleading)
+    assert all(any(clip["id"] in line for line in warnings) for clip in misleading)
+    assert f"{len(misleading)} of {len(manifest['clips'])} clips are misleading" in gallery
+
+
 def test_searches_in_parallel_give_the_same_bundle(built, tmp_path):
     _, manifest, _, study = built
     log = []
