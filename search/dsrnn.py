@@ -1,6 +1,7 @@
 """DS-RNN (Liu et al. 2021, as in CrowdNav_DSRNN) with masked humans, and the policy that wraps it.
 
-The network: the robot node goes through a 7->3 linear and a 3->embed encoder; the temporal edge (robot
+The network: the robot node (``ROBOT_NODE_FIELDS``: CrowdNav_DSRNN's seven fields plus the goal relative to the
+robot) goes through a linear to 3 and a 3->embed encoder; the temporal edge (robot
 velocity) and every spatial edge (human minus robot position) go through their own linear + GRU; one attention
 head weighs the spatial edges against the temporal edge; a node GRU takes the robot and edge features; actor and
 critic MLPs (tanh) sit on the node output; the action is a diagonal Gaussian with a learned, state-independent
@@ -11,8 +12,9 @@ Unlike the original, every human shares one spatial-edge GRU and absent humans a
 attention score is divided by sqrt(attention size) rather than multiplied by the number of humans (the
 original's scaling would change the policy with the crowd size).
 
-Checkpoints are ``torch.save`` dicts with ``format`` = ``foil.dsrnn/1``, the ``network`` sizes and the
-``model`` weights (training checkpoints add optimiser and run state).
+Checkpoints are ``torch.save`` dicts with ``format`` = ``foil.dsrnn/2``, the ``network`` sizes, the
+``observation`` layout the network reads (its robot-node fields) and the ``model`` weights (training checkpoints
+add optimiser and run state). Format 1 networks read an older observation and are refused with what to do.
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from search.policies import Observation, PolicyState
+from search.policies import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
 
-CHECKPOINT_FORMAT = "foil.dsrnn/1"
+CHECKPOINT_FORMAT = "foil.dsrnn/2"
+OBSERVATION_LAYOUT = {"robot_node": list(ROBOT_NODE_FIELDS)}
 
 
 @dataclass(frozen=True)
@@ -181,7 +184,7 @@ class DSRNN(nn.Module):
         super().__init__()
         self.config = c = config or NetworkConfig()
         self.max_humans = c.max_humans
-        self.robot_linear = _init(nn.Linear(7, 3))
+        self.robot_linear = _init(nn.Linear(ROBOT_NODE_SIZE, 3))
         self.robot_encoder = _init(nn.Linear(3, c.embed))
         self.temporal_embed = _init(nn.Linear(2, c.embed))
         self.temporal_gru = _gru(c.embed, c.edge_hidden)
@@ -340,8 +343,8 @@ def save_checkpoint(path: str | Path, net: DSRNN, **extra) -> None:
     """Write a checkpoint that ``load_dsrnn`` reads; ``extra`` holds training state (steps, optimiser, ...)."""
     path = Path(path)
     partial = path.with_name(path.name + ".partial")  # a run killed while saving keeps its last good checkpoint
-    torch.save({"format": CHECKPOINT_FORMAT, "network": asdict(net.config), "model": net.state_dict(), **extra},
-               partial)
+    torch.save({"format": CHECKPOINT_FORMAT, "network": asdict(net.config), "observation": OBSERVATION_LAYOUT,
+                "model": net.state_dict(), **extra}, partial)
     partial.replace(path)
 
 
@@ -354,8 +357,14 @@ def read_checkpoint(path: str | Path) -> dict:
         data = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as error:  # torch raises many kinds for a file that is not a checkpoint
         raise ValueError(f"{path} is not a readable torch checkpoint: {error}") from None
-    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
+    if not isinstance(data, dict) or not str(data.get("format", "")).startswith("foil.dsrnn/"):
         raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (expected format {CHECKPOINT_FORMAT!r})")
+    if data["format"] != CHECKPOINT_FORMAT or data.get("observation") != OBSERVATION_LAYOUT:
+        raise ValueError(
+            f"{path} is a {data['format']} checkpoint whose network reads an older observation (robot node "
+            f"{data.get('observation', {}).get('robot_node', 'px py radius gx gy v_pref theta')}); this version of "
+            f"Foil observes the goal relative to the robot as well ({' '.join(ROBOT_NODE_FIELDS)}). Retrain it with "
+            "`foil train` (the shipped agents lo, med and hi are already of this version)")
     return data
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from gymnasium import spaces
 
 from search import world
-from search.policies import observe
+from search.policies import ROBOT_NODE_SIZE, observe
 from search.scenarios import Scenario, sample_training_states
 from search.world import OUTCOME_NAMES, WorldConfig
 
@@ -28,7 +28,7 @@ class CrowdNavEnv(gym.Env):
         n = self.config.human_num
         bound = 1e3  # metres and m/s: far beyond any reachable position or speed
         self.observation_space = spaces.Dict({
-            "robot_node": spaces.Box(-bound, bound, (7,), np.float32),
+            "robot_node": spaces.Box(-bound, bound, (ROBOT_NODE_SIZE,), np.float32),
             "temporal_edges": spaces.Box(-bound, bound, (2,), np.float32),
             "spatial_edges": spaces.Box(-bound, bound, (n, 2), np.float32),
         })

@@ -19,12 +19,19 @@ from search.world import WorldConfig, WorldState
 
 PolicyState = dict[str, np.ndarray]
 
+# The robot node's fields, in order. The first seven are CrowdNav_DSRNN's (absolute position and goal); the goal
+# relative to the robot follows, as a deliberate departure: through the absolute coordinates alone a goal offset
+# that is small next to the world's +-12 m reads like a low-gain controller, and trained robots circled their goal.
+ROBOT_NODE_FIELDS = ("px", "py", "radius", "gx", "gy", "v_pref", "theta",
+                     "goal_dx", "goal_dy", "goal_distance", "goal_ux", "goal_uy")
+ROBOT_NODE_SIZE = len(ROBOT_NODE_FIELDS)
+
 
 @dataclass
 class Observation:
     """What one robot per world perceives, batch axis first (DS-RNN's observation plus what scripts need)."""
 
-    robot_node: np.ndarray  # (B, 7): px, py, radius, gx, gy, v_pref, theta
+    robot_node: np.ndarray  # (B, ROBOT_NODE_SIZE): the fields ROBOT_NODE_FIELDS
     temporal_edges: np.ndarray  # (B, 2): robot velocity
     spatial_edges: np.ndarray  # (B, n, 2): human position minus robot position
     human_velocities: np.ndarray  # (B, n, 2)
@@ -52,7 +59,7 @@ def observe_agents(state: WorldState, config: WorldConfig, agents: list[tuple[in
     """Several robots' observations in one pass (a coupled step observes every agent): agent ``(first, robot)``
     is robot ``robot`` in worlds ``first`` to ``first + batch``."""
     k, n = len(agents), state.human_pos.shape[1]
-    robot_node, temporal_edges = np.empty((k, batch, 7)), np.empty((k, batch, 2))
+    robot_node, temporal_edges = np.empty((k, batch, ROBOT_NODE_SIZE)), np.empty((k, batch, 2))
     spatial_edges, human_velocities = np.empty((k, batch, n, 2)), np.empty((k, batch, n, 2))
     human_radii, done = np.empty((k, batch, n)), np.empty((k, batch), dtype=bool)
     human_mask = np.ones((k, batch, n), dtype=bool)
@@ -77,6 +84,13 @@ def _observe(robot_pos, robot_goal, robot_theta, robot_vel, robot_done, human_po
             robot_node[k, b, 0], robot_node[k, b, 1], robot_node[k, b, 2] = x, y, radius
             robot_node[k, b, 3], robot_node[k, b, 4] = robot_goal[w, robot, 0], robot_goal[w, robot, 1]
             robot_node[k, b, 5], robot_node[k, b, 6] = v_pref, robot_theta[w, robot]
+            dx, dy = robot_goal[w, robot, 0] - x, robot_goal[w, robot, 1] - y
+            distance = np.sqrt(dx * dx + dy * dy)
+            robot_node[k, b, 7], robot_node[k, b, 8], robot_node[k, b, 9] = dx, dy, distance
+            if distance > 0.0:
+                robot_node[k, b, 10], robot_node[k, b, 11] = dx / distance, dy / distance
+            else:
+                robot_node[k, b, 10], robot_node[k, b, 11] = 0.0, 0.0
             temporal_edges[k, b, 0], temporal_edges[k, b, 1] = robot_vel[w, robot, 0], robot_vel[w, robot, 1]
             done[k, b] = robot_done[w, robot]
             for h in range(human_pos.shape[1]):

@@ -31,7 +31,7 @@ from torch import Tensor
 
 from search import world
 from search.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
-from search.policies import observe
+from search.policies import ROBOT_NODE_SIZE, observe
 from search.scenarios import sample_training_states
 from search.world import WorldConfig, WorldState
 
@@ -148,7 +148,8 @@ class Rollout(NamedTuple):
     start: Tensor
     actions: Tensor
     logprobs: Tensor
-    advantages: Tensor
+    values: Tensor
+    advantages: Tensor  # normalised over the rollout
     returns: Tensor
     initial_hidden: list[Tensor]
 
@@ -163,9 +164,12 @@ def minibatch_gradients(net: DSRNN, params: list[Tensor], config: TrainConfig, r
                              r.start[:, part], [h[part] for h in r.initial_hidden])
     log_ratio = gaussian_log_prob(r.actions[:, part], mean, net.action_logstd) - r.logprobs[:, part]
     ratio = log_ratio.exp()
-    adv = r.advantages[:, part]
+    adv, returns, old_value = r.advantages[:, part], r.returns[:, part], r.values[:, part]
+    # the value loss clipped around the rollout's values, as CrowdNav_DSRNN's PPO does
+    clipped_value = old_value + (value - old_value).clamp(-config.clip, config.clip)
+    value_loss = torch.max((value - returns).pow(2), (clipped_value - returns).pow(2))
     sums = torch.stack([-torch.min(adv * ratio, adv * ratio.clamp(1 - config.clip, 1 + config.clip)).sum(),
-                        0.5 * (r.returns[:, part] - value).pow(2).sum(), ((ratio - 1) - log_ratio).detach().sum()])
+                        0.5 * value_loss.sum(), ((ratio - 1) - log_ratio).detach().sum()])
     loss = (sums[0] + config.value_coef * sums[1]) / samples
     if with_entropy:
         loss = loss - config.entropy_coef * gaussian_entropy(net.action_logstd)
@@ -266,7 +270,7 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
 
     # rollout buffers, (T, N, ...)
     m = nc.max_humans
-    b_robot = torch.zeros(n_steps, n_envs, 7)
+    b_robot = torch.zeros(n_steps, n_envs, ROBOT_NODE_SIZE)
     b_temporal = torch.zeros(n_steps, n_envs, 2)
     b_spatial = torch.zeros(n_steps, n_envs, m, 2)
     b_mask = torch.zeros(n_steps, n_envs, m)
@@ -321,12 +325,13 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
             last_gae = delta + config.gamma * config.gae_lambda * not_done * last_gae
             advantages[t] = last_gae
         returns = advantages + b_values
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-5)  # as CrowdNav_DSRNN's PPO
 
         # PPO epochs over recurrent minibatches of whole world sequences; each minibatch is split into one part
         # per thread, whose gradients add up (in a fixed order) to the minibatch's
         per_batch = n_envs // config.minibatches
-        rollout = Rollout(b_robot, b_temporal, b_spatial, b_mask, b_start, b_actions, b_logprobs, advantages, returns,
-                          initial_hidden)
+        rollout = Rollout(b_robot, b_temporal, b_spatial, b_mask, b_start, b_actions, b_logprobs, b_values, advantages,
+                          returns, initial_hidden)
         stats = []
         for _ in range(config.epochs):
             order = torch.randperm(n_envs)

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from search.dsrnn import DSRNN, NetworkConfig
-from search.policies import Observation
+from search.policies import ROBOT_NODE_SIZE, Observation
 
 SMALL = NetworkConfig(max_humans=6, edge_hidden=16, node_hidden=12, embed=8, attention=8, mlp_hidden=16)
 
@@ -23,7 +23,7 @@ def make_net(seed: int = 0, config: NetworkConfig = SMALL) -> DSRNN:
 def random_observation(batch: int, humans: int, seed: int = 0) -> Observation:
     rng = np.random.default_rng(seed)
     return Observation(
-        robot_node=rng.uniform(-5, 5, (batch, 7)),
+        robot_node=rng.uniform(-5, 5, (batch, ROBOT_NODE_SIZE)),
         temporal_edges=rng.uniform(-1, 1, (batch, 2)),
         spatial_edges=rng.uniform(-4, 4, (batch, humans, 2)),
         human_velocities=rng.uniform(-0.2, 0.2, (batch, humans, 2)),

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from search.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
-from search.policies import SHIPPED_AGENTS, load_policy
+from search.policies import ROBOT_NODE_FIELDS, SHIPPED_AGENTS, load_policy
 from tests.agents.conftest import make_net, random_observation
 
 
@@ -80,3 +80,28 @@ def test_weights_that_do_not_fit_their_sizes_are_a_clear_error(tmp_path):
     torch.save(data, path)
     with pytest.raises(ValueError, match="do not fit the network sizes"):
         load_policy(str(path))
+
+
+def test_old_observation_checkpoints_are_refused_with_what_to_do(tmp_path):
+    """A format-1 checkpoint's network reads the robot node without the relative goal: loading it would act on
+    the wrong inputs, so it is refused and the message says to retrain."""
+    path = tmp_path / "old.pt"
+    save_checkpoint(path, make_net())
+    data = torch.load(path, weights_only=False)
+    data["format"] = "foil.dsrnn/1"
+    del data["observation"]
+    torch.save(data, path)
+    with pytest.raises(ValueError, match=r"older observation.*Retrain it with `foil train`"):
+        load_policy(str(path))
+    data["format"], data["observation"] = "foil.dsrnn/2", {"robot_node": ["px", "py"]}
+    torch.save(data, path)
+    with pytest.raises(ValueError, match="older observation"):
+        load_policy(str(path))
+
+
+def test_checkpoints_record_the_observation_layout(tmp_path):
+    save_checkpoint(tmp_path / "agent.pt", make_net())
+    data = read_checkpoint(tmp_path / "agent.pt")
+    assert data["format"] == "foil.dsrnn/2"
+    assert data["observation"] == {"robot_node": list(ROBOT_NODE_FIELDS)}
+    assert data["model"]["robot_linear.weight"].shape[1] == len(ROBOT_NODE_FIELDS) == 12

@@ -230,11 +230,33 @@ def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
             pos = state.robot_pos[worlds, robot]
             humans = state.human_pos[worlds] if shift is None else state.human_pos[worlds] + shift
             np.testing.assert_array_equal(seen.spatial_edges, humans - pos[:, None, :])
+            offset = state.robot_goal[worlds, robot] - pos
+            distance = np.sqrt(offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1])
             np.testing.assert_array_equal(seen.robot_node, np.column_stack([
                 pos, np.full(3, sim.config.robot_radius), state.robot_goal[worlds, robot],
-                np.full(3, sim.config.robot_v_pref), state.robot_theta[worlds, robot]]))
+                np.full(3, sim.config.robot_v_pref), state.robot_theta[worlds, robot],
+                offset, distance, offset / distance[:, None]]))
             np.testing.assert_array_equal(seen.temporal_edges, state.robot_vel[worlds, robot])
             np.testing.assert_array_equal(seen.human_velocities, state.human_vel[worlds])
             np.testing.assert_array_equal(seen.human_radii, state.human_radius[worlds])
             np.testing.assert_array_equal(seen.done, state.done[worlds, robot])
             assert seen.human_mask.all() and seen.human_mask.shape == (3, 10)
+
+
+def test_the_robot_node_carries_the_goal_relative_to_the_robot():
+    """Field by field, by name; a robot on its goal has distance 0 and no direction (not NaN)."""
+    from search.policies import ROBOT_NODE_FIELDS, observe
+
+    scenario = load_scenario("paper-bl-tr")
+    config = scenario.config()
+    state = scenario.initial_state(config, 2, 1)
+    state.robot_pos[1, 0] = state.robot_goal[1, 0]
+    node = dict(zip(ROBOT_NODE_FIELDS, observe(state, config, 0).robot_node.T, strict=True))
+    gx, gy = state.robot_goal[0, 0]
+    px, py = state.robot_pos[0, 0]
+    assert (node["goal_dx"][0], node["goal_dy"][0]) == (gx - px, gy - py)
+    assert node["goal_distance"][0] == pytest.approx(np.hypot(gx - px, gy - py))
+    assert np.hypot(node["goal_ux"][0], node["goal_uy"][0]) == pytest.approx(1.0)
+    assert node["goal_ux"][0] * (gx - px) > 0 and node["goal_uy"][0] * (gy - py) > 0
+    assert (node["goal_distance"][1], node["goal_ux"][1], node["goal_uy"][1]) == (0.0, 0.0, 0.0)
+    assert (node["px"][0], node["gx"][0], node["v_pref"][0]) == (px, gx, config.robot_v_pref)
