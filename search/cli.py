@@ -24,7 +24,7 @@ def _train(args: argparse.Namespace) -> int:
 def _eval(args: argparse.Namespace) -> int:
     from search.evaluate import run_eval
 
-    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json)
+    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit)
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -148,6 +148,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "TorchScript file, or module:attribute")
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
+    evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
+                          help="seconds an episode may last (default: the training time limit, 50); 25 judges "
+                          "agents at the horizon of the paper's clips")
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)
 

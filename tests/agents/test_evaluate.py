@@ -14,14 +14,14 @@ from search.train import TRAIN_STREAM
 from search.world import WorldConfig
 
 KEYS = ["agent", "episodes", "success_rate", "collision_rate", "timeout_rate", "reward_mean", "reward_ci95",
-        "nav_time_mean"]
+        "nav_time_mean", "time_limit"]
 
 
 def test_eval_json_has_exactly_the_contract_keys(capsys):
     assert main(["eval", "goal", "--episodes", "30", "--seed", "3", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert list(result) == KEYS
-    assert result["agent"] == "goal" and result["episodes"] == 30
+    assert result["agent"] == "goal" and result["episodes"] == 30 and result["time_limit"] == 50.0
     assert abs(result["success_rate"] + result["collision_rate"] + result["timeout_rate"] - 1) < 1e-9
     low, high = result["reward_ci95"]
     assert low < result["reward_mean"] < high
@@ -49,3 +49,20 @@ def test_human_readable_output_and_bad_input(capsys):
     assert main(["eval", "goal", "--episodes", "1"]) == 2
     assert "at least 2 episodes" in capsys.readouterr().err
     assert main(["eval", "missing.pt"]) == 2
+
+
+def test_time_limit_judges_agents_at_a_shorter_horizon(capsys):
+    """An ORCA robot that needs longer than 8 s in some episodes times out there at --time-limit 8, and no
+    successful episode lasts longer than the limit; the default is the training time limit."""
+    full = evaluate(load_policy("orca"), 40, seed=0)
+    assert main(["eval", "orca", "--episodes", "40", "--time-limit", "8", "--json"]) == 0
+    short = json.loads(capsys.readouterr().out)
+    assert short["time_limit"] == 8.0 and full["time_limit"] == 50.0
+    assert short["timeout_rate"] > full["timeout_rate"]
+    assert short["success_rate"] < full["success_rate"]
+    assert short["nav_time_mean"] <= 8.0
+    assert main(["eval", "orca", "--episodes", "5", "--time-limit", "8"]) == 0
+    assert "8 s each at most" in capsys.readouterr().out
+    for bad in ("0", "-3", "nan", "inf"):
+        assert main(["eval", "orca", "--episodes", "5", "--time-limit", bad]) == 2
+        assert "--time-limit must be a positive, finite number of seconds" in capsys.readouterr().err
