@@ -4,8 +4,11 @@ Per step (step t = 1, 2, ... counts steps from the scenario's initial state):
 
 - a **goal** step (some agent reached its goal on this step; with ``collision_is_goal`` a collision counts too)
   ends the trajectory with ``goal_bonus + alpha * d_s``, d_s the divergence of the agents' positions;
-- an **end** step without a goal (t reached the horizon T, or every agent has finished otherwise) ends it with
-  ``horizon_offset + beta * h``, h a heuristic (default: d_s again);
+- an **end** step without a goal ends it with ``horizon_offset + beta * h``, h a heuristic (default: d_s again):
+  t reached the horizon T, or the agents' episodes ended as ``finish`` says. With ``finish = "all"`` a robot
+  that finished stands still and the trajectory goes on until every robot has finished; with ``finish =
+  "first"`` (the paper's Algorithm 1, CrowdNav's ``done``) it ends as soon as any robot's episode ends, so a
+  collision ends it too, without the goal's reward unless ``collision_is_goal``;
 - any other step gives the action divergence d_a of the agents' actions;
 - every step adds ``plausibility * log p(a_env)`` under the environment action prior (0 by default).
 
@@ -46,6 +49,7 @@ class RewardConfig:
     horizon_offset: float = 0.0
     heuristic: str = "state_divergence"  # a name in HEURISTICS or module:attribute
     collision_is_goal: bool = False
+    finish: str = "all"  # the trajectory ends when "all" robots have finished, or when the "first" one has
     plausibility: float = 0.0
     prior: str = "uniform"  # environment action prior: "uniform" or "gaussian"
     prior_sigma: float = 0.1
@@ -55,6 +59,8 @@ class RewardConfig:
             (isinstance(self.horizon, int) and self.horizon >= 1, "horizon must be a whole number of steps >= 1"),
             (self.norm in ("plain", "squared"), "norm must be 'plain' or 'squared'"),
             (self.combine in ("mean", "min"), "combine must be 'mean' or 'min'"),
+            (self.finish in ("all", "first"), "finish must be 'all' (a finished robot stands still until every "
+                                              "robot has finished) or 'first' (the first finish ends it)"),
             (self.prior in PRIOR_KINDS, f"prior must be one of {PRIOR_KINDS}"),
         ]
         for ok, message in checks:
@@ -126,7 +132,8 @@ class DivergenceReward:
         if self.config.collision_is_goal:
             goal_outcome = goal_outcome | (outcome == COLLISION)
         goal = (newly_done & goal_outcome).any(axis=-1)
-        end = ~goal & ((t >= self.config.horizon) | all_done)
+        finished = all_done if self.config.finish == "all" else newly_done.any(axis=-1)
+        end = ~goal & ((t >= self.config.horizon) | finished)
         return goal, end
 
     def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:

@@ -145,3 +145,23 @@ def test_search_all_on_a_local_ray_instance(tmp_path):
     alone = run_search(jobs[1])
     folder = tmp_path / "random" / "goal-vs-orca" / "paper-tl-br"
     assert (folder / "summary-001.json").read_text() == alone["summary-001.json"]
+
+
+def test_first_finish_ends_every_trajectory_at_the_first_robots_end(tmp_path):
+    """With --reward finish=first a summary ends on the step the first robot collides or arrives (the other is
+    still running), a collision earns no goal term, and replay reproduces every summary exactly."""
+    assert search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "3000",
+                  "--top-k", "5") == 0
+    ends = set()
+    for path in sorted(tmp_path.glob("summary-*.json")):
+        summary = json.loads(path.read_text())
+        assert summary["reward_parameters"]["finish"] == "first"
+        events = [o["event"] for o in summary["outcomes"]]
+        finished = [o for o in summary["outcomes"] if o["event"] != "running"]
+        assert finished and "running" in events  # one robot ended it, the other was still on its way
+        assert summary["steps"][-1]["t"] == min(o["time"] for o in finished)
+        if finished[0]["event"] == "collision":
+            assert summary["reward_terms"]["goal"] == 0.0 and summary["reward_terms"]["horizon"] > 0
+        ends.add(finished[0]["event"])
+        assert main(["verify", str(path)]) == 0
+    assert ends == {"collision", "success"}  # both kinds of end occur among the goal robot's summaries

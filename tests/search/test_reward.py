@@ -36,6 +36,22 @@ def test_events_goal_collision_flag_horizon_and_all_done():
     assert goal.tolist() == [True, True, False, False]
 
 
+def test_first_finish_ends_on_any_robots_end_and_a_collision_is_no_goal():
+    """finish="first": the row where one robot collides while the other runs ends there (with the end term,
+    not the goal's), as does a goal; "all" lets that row run on."""
+    newly = np.array([[True, False], [False, True], [False, False]])
+    outcome = np.array([[COLLISION, RUNNING], [RUNNING, SUCCESS], [RUNNING, RUNNING]])
+    all_done = np.array([False, False, False])
+    t = np.array([3, 3, 3])
+    goal, end = reward(horizon=10, finish="first").events(newly, outcome, all_done, t)
+    assert goal.tolist() == [False, True, False]
+    assert end.tolist() == [True, False, False]
+    goal, end = reward(horizon=10, finish="all").events(newly, outcome, all_done, t)
+    assert goal.tolist() == [False, True, False] and end.tolist() == [False, False, False]
+    goal, end = reward(horizon=10, finish="first", collision_is_goal=True).events(newly, outcome, all_done, t)
+    assert goal.tolist() == [True, True, False] and end.tolist() == [False, False, False]
+
+
 def test_step_terms_by_hand():
     r = reward(alpha=2.0, goal_bonus=100.0, beta=3.0, horizon_offset=-50.0)
     actions = np.array([[[1.0, 0.0], [0.0, 0.0]]] * 3)  # action divergence 1 (plain)
@@ -78,6 +94,7 @@ def test_gaussian_prior_samples_stay_in_bound():
 
 @pytest.mark.parametrize("settings, message", [
     ({"norm": "cubed"}, "norm"), ({"combine": "max"}, "combine"), ({"horizon": 0}, "horizon"),
+    ({"finish": "last"}, "finish must be 'all'"),
     ({"heuristic": "nope"}, "unknown heuristic"), ({"prior": "beta"}, "prior"),
 ])
 def test_bad_reward_settings_say_what_is_wrong(settings, message):
