@@ -19,7 +19,7 @@ from app.answer_table import ParticipantRecord, long_rows
 from app.context import Context, ContextDep
 from app.database import as_utc
 from app.models import Participant
-from app.security import checked_form
+from app.security import checked_form, unstorable
 
 router = APIRouter(prefix="/admin")
 disabled_router = APIRouter()
@@ -115,6 +115,9 @@ def set_exclusion(code: str, request: Request, ctx: ContextDep, form: FormDep):
     note = form.get("note") or ""
     if excluded not in ("0", "1") or not isinstance(note, str) or len(note) > 2000:
         raise HTTPException(400, "Send excluded as 0 or 1 and a note of at most 2000 characters.")
+    if (problem := unstorable(note)) is not None:
+        raise HTTPException(400, f"The note contains {problem}, which cannot be saved: remove it and send the note "
+                                 "again (nothing was changed).")
     with ctx.db.writing() as session:
         participant = _participant(session, ctx, code)
         participant.excluded, participant.exclusion_note = excluded == "1", note

@@ -233,6 +233,18 @@ async def _form(request: Request) -> FormData:
 MAX_FIELDS, MAX_FIELD_CHARS = 64, 32 * 1024
 
 
+def unstorable(text: str) -> str | None:
+    """What in `text` a text column cannot hold on every database (PostgreSQL refuses NUL, and no database takes
+    an unpaired surrogate), in words for a message; None when it can be stored as it is."""
+    if "\x00" in text:
+        return "a NUL character (code 0)"
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return "a character that is not valid Unicode (an unpaired surrogate)"
+    return None
+
+
 def stored_secret(session, key: str = "cookie_secret") -> str:
     """A secret generated once and kept in the database, so every worker and every restart share it."""
     row = session.get(ServerSetting, key)

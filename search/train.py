@@ -1,8 +1,9 @@
 """PPO for the DS-RNN robot, in one file that reads top to bottom (after CleanRL's ppo.py).
 
 ``num_envs`` worlds step together in one process; finished worlds restart from the training distribution.
-Each update collects ``num_steps`` steps per world, computes GAE advantages, then runs ``epochs`` passes over
-``minibatches`` recurrent minibatches (whole world sequences, so the GRUs see the rollout in order).
+Each update collects ``num_steps`` steps per world, computes GAE advantages (normalised over the rollout), then
+runs ``epochs`` passes over ``minibatches`` recurrent minibatches (whole world sequences, so the GRUs see the
+rollout in order) with the clipped policy loss and, as CrowdNav_DSRNN's PPO, the clipped value loss.
 Every ``save_every`` updates a checkpoint holds the network, optimiser, world, hidden states and random
 generators, so a run resumes exactly where it stopped; raising ``total_steps`` trains a finished run longer.
 
