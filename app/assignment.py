@@ -8,6 +8,7 @@ Every complete block of arrivals therefore holds each condition exactly once.
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import random
 from dataclasses import dataclass
@@ -55,10 +56,22 @@ def condition_for_slot(*, seed: int, n_conditions: int, slot: int) -> int:
 
 
 HIGHEST_SLOT = select(func.max(Participant.slot)).where(Participant.study == bindparam("study"))
+ARRIVALS_TURN = select(func.pg_advisory_xact_lock(bindparam("key")))
 
 
 def next_slot(session: Session | Connection | Statements, *, study: str) -> int:
-    """The next free arrival slot. Two concurrent callers may get the same number; the unique constraint on
-    (study, slot) lets only one of them commit and the other retries."""
+    """The next free arrival slot, in a write transaction that then saves the participant with it. Arrivals take
+    turns, so two are never handed the same slot: on PostgreSQL the transaction first takes an advisory lock of
+    the study's arrivals (held until it commits, across processes), on SQLite its BEGIN IMMEDIATE already waits
+    for any other writer. The unique constraint on (study, slot) stays as the last safeguard."""
+    if _dialect(session).name == "postgresql":
+        key = int.from_bytes(hashlib.sha256(f"foil arrivals {study}".encode()).digest()[:8], "big", signed=True)
+        session.scalar(ARRIVALS_TURN, {"key": key})
     highest = session.scalar(HIGHEST_SLOT, {"study": study})
     return 0 if highest is None else highest + 1
+
+
+def _dialect(session: Session | Connection | Statements):
+    if isinstance(session, Statements):
+        return session.dialect
+    return session.get_bind().dialect if isinstance(session, Session) else session.dialect

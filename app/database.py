@@ -179,6 +179,10 @@ class Statements:
     def __init__(self, cursor, prepared: dict[Executable, Prepared], dialect: Dialect):
         self.cursor, self._prepared, self._dialect = cursor, prepared, dialect
 
+    @property
+    def dialect(self) -> Dialect:
+        return self._dialect
+
     def execute(self, statement: Executable, values: dict) -> Prepared:
         prepared = self._prepared.get(statement)
         if prepared is None:

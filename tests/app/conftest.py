@@ -100,30 +100,14 @@ def study_text(**changes: str) -> str:
     return text_
 
 
-@pytest.fixture(scope="session")
-def postgres_url() -> str:
-    """A PostgreSQL database for the session: FOIL_TEST_DATABASE_URL's, else a throwaway server of our own (see
-    tests/app/postgres.py); skips when neither is available."""
-    url = os.environ.get(postgres.URL_VARIABLE)
-    if url:
-        yield url
-        return
-    bin_dir = postgres.binaries()
-    if bin_dir is None:
-        pytest.skip("no PostgreSQL binaries (`make test` installs them; or set FOIL_TEST_DATABASE_URL)")
-    server = postgres.ThrowawayServer(bin_dir).start()
-    try:
-        yield server.url
-    finally:
-        server.stop()
-
-
 @pytest.fixture(params=["sqlite", "postgresql"])
 def database_url(request, tmp_path) -> str:
     """A fresh database per test: a SQLite file, and an emptied PostgreSQL database."""
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
-    url = request.getfixturevalue("postgres_url")
+    url = postgres.session_url(request.config)
+    if url is None:
+        pytest.skip("no PostgreSQL binaries (`make test` installs them; or set FOIL_TEST_DATABASE_URL)")
     postgres.reset(url)
     return url
 

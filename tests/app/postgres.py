@@ -92,6 +92,22 @@ class ThrowawayServer:
             shutil.rmtree(self.folder, ignore_errors=True)
 
 
+_SESSION: dict[str, str | None] = {}
+
+
+def session_url(config) -> str | None:
+    """The database of this test session: FOIL_TEST_DATABASE_URL's, else a throwaway server's, started on first
+    use and stopped when the session ends (whichever conftest's fixture asks first); None without binaries."""
+    if "url" not in _SESSION:
+        url = os.environ.get(URL_VARIABLE)
+        if not url and (bin_dir := binaries()) is not None:
+            server = ThrowawayServer(bin_dir)
+            config.add_cleanup(server.stop)
+            url = server.start().url
+        _SESSION["url"] = url or None
+    return _SESSION["url"]
+
+
 def reset(url: str) -> None:
     """Drop every table and sequence of the database's schema (whatever the migrations made, including tables
     added later), so each test starts from an empty database."""
