@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from search.bundle import BuildError, build_bundle, load_build, parse_build, plan
+from search.bundle import BuildError, build_bundle, load_build, parse_build, plan, search_inputs
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -128,3 +128,10 @@ def test_paper_build_reproduces_the_papers_clip_set():
         for scenario in ("paper-bl-tr", "paper-tl-br"):
             pairs = {frozenset(job.pair) for job in main if job.scheme.name == scheme and job.scenario == scenario}
             assert pairs == {frozenset(p) for p in (("lo", "med"), ("med", "hi"), ("lo", "hi"))}
+    # the paper's reward as its code sets it, ending at the first robot's end (docs/search.md)
+    adaptive = next(search_inputs(job) for job in main if job.scheme.name == "adaptive")
+    assert {k: adaptive["reward"][k] for k in ("finish", "goal_bonus", "alpha", "beta", "horizon_offset",
+                                                 "collision_is_goal")} == {
+        "finish": "first", "goal_bonus": 100.0, "alpha": 1.0, "beta": 1e4, "horizon_offset": -1e5,
+        "collision_is_goal": False}
+    assert all(search_inputs(job)["reward"]["finish"] == "first" for job in main if job.scheme.name == "nfirst")
