@@ -20,7 +20,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.database import Database, DatabaseError, as_utc, check_migrated
-from app.exclusions import duration_s
+from app.exclusions import duration_s, viewing_problems
 from app.models import Participant, ParticipantPlan, Response, ServerSetting
 from app.study import PairwisePart, Study, load_study, parse_study
 
@@ -155,7 +155,16 @@ LONG_COLUMNS = [
     Column("correct", "Int64", "1 when the answer equals `truth`, 0 when not, empty when there is no right answer"),
     Column("time_on_page_ms", "Int64", "time on the page measured by the browser, in ms"),
     Column("server_ms", "Int64", "time from the screen becoming current to its submission, measured by the server"),
-    Column("plays", "Int64", "how often the clip was started (1 = watched once, no replay)"),
+    Column("plays", "Int64", "how often the clip was started (1 = watched once, no replay), across reloads"),
+    Column("clip_ms", "Int64", "the clip's playing time in ms (from its file); time_on_screen_ms should exceed it"),
+    Column("time_on_screen_ms", "Int64", "time the screen was current before it was answered (server clock, ms)"),
+    Column("seeks", "Int64", "seeks within the clip (allowed once it had been watched to the end)"),
+    Column("seeks_blocked", "Int64", "seeks forward on the first viewing, undone by the page"),
+    Column("rate_changes", "Int64", "playback rate changes (undone by the page on a first viewing)"),
+    Column("hidden_ms", "Int64", "time the tab was hidden while the screen was open (browser clock, ms)"),
+    Column("reloads", "Int64", "reloads of the screen (the events before them were kept)"),
+    Column("skipped_viewing", "Int64", "1 when answered sooner than the clip plays, sped up or without its end"),
+    Column("viewport", "string", "the browser window's size when the screen was sent, WIDTHxHEIGHT in CSS px"),
     Column("submitted_at", "datetime", "when the screen was submitted (UTC)"),
 ]
 
@@ -219,7 +228,14 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
             "labels": LIST_SEPARATOR.join(r["label"] for r in robots) or None,
             "time_on_page_ms": response.client_ms, "server_ms": response.server_ms, "plays": response.plays,
             "submitted_at": iso_utc(response.submitted_at),
+            "viewport": (getattr(response, "details", None) or {}).get("viewport"),
         }
+        if "media" in screen:
+            viewing = viewing_problems(response, screen)
+            common |= {"clip_ms": viewing["clip_ms"], "time_on_screen_ms": response.server_ms,
+                       "seeks": viewing["seeks"], "seeks_blocked": viewing["seeks_blocked"],
+                       "rate_changes": viewing["rate_changes"], "hidden_ms": viewing["hidden_ms"],
+                       "reloads": viewing["reloads"], "skipped_viewing": int(viewing["skipped"])}
         answers = response.answers or {}
         if not answers:
             yield common
@@ -235,6 +251,8 @@ PARTICIPANT_COLUMNS = [
     Column("study", "string", "study id"),
     Column("participant", "string", "participant code, the same in every file"),
     Column("platform", "string", "recruitment platform: prolific, mturk or none"),
+    Column("kind", "string", "real, pilot (the admin's preview link) or bot (foil simulate)"),
+    Column("consent_version", "string", "version of the consent text the participant agreed to"),
     Column("external_id", "string", "PROLIFIC_PID or MTurk workerId; empty when anonymous"),
     Column("platform_study_id", "string", "Prolific STUDY_ID or MTurk hitId"),
     Column("platform_session_id", "string", "Prolific SESSION_ID or MTurk assignmentId"),
@@ -250,10 +268,12 @@ PARTICIPANT_COLUMNS = [
     Column("screens_answered", "Int64", "screens submitted"),
     Column("attention_failures", "Int64", "attention checks answered wrongly"),
     Column("exclusion_note", "string", "the admin's note on the exclusion flag"),
+    Column("pilot_or_bot", "Int64", "1 for a pilot or bot (left out of the analysis unless included)"),
     Column("incomplete", "Int64", "1 when the participant did not complete the study"),
     Column("failed_attention", "Int64", "1 when at least one attention check was failed"),
     Column("too_fast", "Int64", "1 when completed faster than the threshold (see `exclusion_rules`)"),
     Column("flagged_by_admin", "Int64", "1 when flagged for exclusion on the admin pages"),
+    Column("skipped_viewing", "Int64", "1 when any clip was answered sooner than it plays, sped up or unfinished"),
     Column("excluded", "Int64", "1 when any exclusion rule applies: the report leaves the participant out"),
     Column("user_agent", "string", "the browser's User-Agent at consent"),
 ]
@@ -274,6 +294,7 @@ def participant_row(record: ParticipantRecord, flags: dict[str, bool]) -> dict:
     duration = duration_s(p)
     return {
         "study": p.study, "participant": p.code, "platform": p.platform, "external_id": p.external_id,
+        "kind": getattr(p, "kind", None) or "real", "consent_version": getattr(p, "consent_version", None) or None,
         "platform_study_id": p.platform_study_id, "platform_session_id": p.platform_session_id,
         "status": p.status, "condition": None if p.condition is None else p.condition + 1,
         "schemes": LIST_SEPARATOR.join(_plan_order(plan, "scheme")) or None,

@@ -9,7 +9,11 @@ from starlette.datastructures import FormData
 
 from app.study import ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
 
-VIDEO_EVENT_TYPES = {"play", "pause", "ended", "error", "stalled", "waiting", "seeking", "loaded", "timeout"}
+# Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
+# seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being
+# hidden or shown again, and `reload` (the page was reloaded; the events before it come from the earlier load).
+VIDEO_EVENT_TYPES = {"play", "pause", "ended", "error", "stalled", "waiting", "seeking", "loaded", "timeout",
+                     "seek", "seek_blocked", "ratechange", "hidden", "visible", "reload"}
 MAX_VIDEO_EVENTS = 500
 
 
@@ -90,7 +94,11 @@ def _video_events(raw: str | None) -> list[dict] | None:
         t = event.get("t")
         if not isinstance(t, int | float) or isinstance(t, bool) or not 0 <= t < 1e9:
             return None
-        clean.append({"type": event["type"], "t": int(t)})
+        item = {"type": event["type"], "t": int(t)}
+        v = event.get("v")
+        if isinstance(v, int | float) and not isinstance(v, bool) and -1e6 < v < 1e6:
+            item["v"] = round(float(v), 3)
+        clean.append(item)
     return clean
 
 

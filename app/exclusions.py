@@ -12,11 +12,14 @@ from app.database import Database, as_utc
 from app.models import Participant
 
 REASONS = {
+    "pilot_or_bot": "a pilot (preview link) or a bot (`foil simulate`), not a real participant",
     "incomplete": "did not complete the study (started, returned or declined)",
     "failed_attention": "failed at least one attention check",
     "too_fast": "completed faster than the time threshold",
     "flagged_by_admin": "flagged for exclusion on the admin pages",
+    "skipped_viewing": "answered a clip sooner than it plays, sped it up, or without it having ended",
 }
+VIEW_TOLERANCE_MS = 1000  # as the server's own check (app.participant_pages)
 
 
 @dataclass(frozen=True)
@@ -26,12 +29,21 @@ class ExclusionRules:
 
     min_seconds: float | None = None
     median_fraction: float = 1 / 3
+    include_kinds: tuple[str, ...] = ()  # "pilot", "bot": analyse them too (left out by default)
 
     def __post_init__(self):
         if self.min_seconds is not None and self.min_seconds < 0:
             raise ValueError(f"the minimum duration must not be negative, got {self.min_seconds}")
         if not 0 <= self.median_fraction < 1:
             raise ValueError(f"the fraction of the median duration must be in [0, 1), got {self.median_fraction}")
+        unknown = set(self.include_kinds) - {"pilot", "bot"}
+        if unknown:
+            raise ValueError(f"participant kinds to include are 'pilot' and 'bot', got {sorted(unknown)}")
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The participant kinds analysed: real participants, and the kinds included on request."""
+        return ("real", *self.include_kinds)
 
     def threshold_s(self, median_s: float | None) -> float | None:
         """The completion time under which a participant counts as too fast; None when the rule is off."""
@@ -56,23 +68,57 @@ def duration_s(participant: Participant | Row) -> float | None:
     return (as_utc(participant.completed_at) - as_utc(participant.created_at)).total_seconds()
 
 
-def median_duration_s(db: Database, study_id: str) -> float | None:
-    """Median completion time of the study's completed participants (one float each in memory)."""
+def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("real",)) -> float | None:
+    """Median completion time of the study's completed participants of these kinds (pilots and bots would drag
+    the "too fast" threshold down), one float each in memory."""
     query = select(Participant.created_at, Participant.completed_at).where(
-        Participant.study == study_id, Participant.status == "completed", Participant.completed_at.is_not(None))
+        Participant.study == study_id, Participant.status == "completed", Participant.completed_at.is_not(None),
+        Participant.kind.in_(kinds))
     with db.reading() as session:
         durations = [(as_utc(done) - as_utc(start)).total_seconds() for start, done in session.execute(query)]
     return statistics.median(durations) if durations else None
 
 
-def exclusion_flags(participant: Participant | Row, threshold_s: float | None) -> dict[str, bool]:
-    """One flag per reason in REASONS, plus `excluded` when any of them holds."""
+def viewing_problems(response, screen: dict) -> dict:
+    """How a clip screen was watched, from its response and the plan's screen: the clip's length, time on screen
+    (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden; `skipped` when the screen was
+    answered sooner than the clip plays, with playback faster than normal, or without the clip having ended."""
+    events = response.video_events or []
+    clip_ms = screen.get("clip_ms")
+    hidden_ms, hidden_at = 0, None
+    for event in events:
+        if event["type"] == "hidden":
+            hidden_at = event["t"]
+        elif event["type"] in ("visible", "reload") and hidden_at is not None:
+            hidden_ms += max(0, event["t"] - hidden_at) if event["type"] == "visible" else 0
+            hidden_at = None
+    first_end = next((i for i, e in enumerate(events) if e["type"] == "ended"), None)
+    before_end = events if first_end is None else events[:first_end]
+    sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
+    skipped = bool("media" in screen and (
+        first_end is None or sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
+    return {"clip_ms": clip_ms, "seeks": sum(e["type"] == "seek" for e in events),
+            "seeks_blocked": sum(e["type"] == "seek_blocked" for e in events),
+            "rate_changes": sum(e["type"] == "ratechange" for e in events),
+            "hidden_ms": hidden_ms, "reloads": sum(e["type"] == "reload" for e in events), "skipped": skipped}
+
+
+def exclusion_flags(participant: Participant | Row, threshold_s: float | None, responses: list | None = None,
+                    rules: ExclusionRules | None = None) -> dict[str, bool]:
+    """One flag per reason in REASONS, plus `excluded` when any of them holds. `responses` (with the
+    participant's plan) give the viewing flag; without them it is not set."""
     duration = duration_s(participant)
+    kinds = (rules or ExclusionRules()).kinds
+    plan = getattr(participant, "plan", None) or []
+    skipped = any(viewing_problems(r, plan[r.step])["skipped"] for r in responses or [] if r.step < len(plan)
+                  and "media" in plan[r.step])
     flags = {
+        "pilot_or_bot": (getattr(participant, "kind", None) or "real") not in kinds,
         "incomplete": participant.status != "completed",
         "failed_attention": participant.attention_failures > 0,
         "too_fast": threshold_s is not None and duration is not None and duration < threshold_s,
         "flagged_by_admin": bool(participant.excluded),
+        "skipped_viewing": skipped,
     }
     flags["excluded"] = any(flags.values())
     return flags

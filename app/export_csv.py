@@ -135,6 +135,7 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
                         "part_scenarios": [study.part_scenario(p, c.rotation) for p in range(len(study.parts))]}
                        for c in conditions(study)],
         "exclusion_rules": {"reasons": REASONS, "too_fast": rules.describe(median_s),
+                            "analysed_kinds": list(rules.kinds),
                             "too_fast_threshold_s": rules.threshold_s(median_s),
                             "median_duration_s": median_s},
         "neutralised_cells": "a text cell starting with = + - @ tab, carriage return or an apostrophe, or one "
@@ -167,7 +168,9 @@ def codebook_markdown(book: dict) -> str:
     rules = book["exclusion_rules"]
     lines += ["", "## Exclusion flags", ""]
     lines += [f"- `{reason}`: {text}" for reason, text in rules["reasons"].items()]
-    lines += [f"- time threshold of this export: {rules['too_fast']}", ""]
+    lines += [f"- time threshold of this export: {rules['too_fast']}",
+              f"- participant kinds analysed (the others are flagged `pilot_or_bot`): "
+              f"{', '.join(rules.get('analysed_kinds', ['real']))}", ""]
     return "\n".join(lines)
 
 
@@ -179,7 +182,7 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     layout = WideLayout(study)
-    median_s = median_duration_s(db, study.study.id)
+    median_s = median_duration_s(db, study.study.id, rules.kinds)
     threshold = rules.threshold_s(median_s)
     columns = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
     tables = {name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols)
@@ -187,7 +190,7 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     excluded = 0
     try:
         for record in participant_records(db, study.study.id, batch=batch):
-            flags = exclusion_flags(record.participant, threshold)
+            flags = exclusion_flags(record.participant, threshold, record.responses, rules)
             excluded += flags["excluded"]
             long = list(long_rows(study, record))
             for row in long:

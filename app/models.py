@@ -74,6 +74,9 @@ class Participant(Base):
     excluded: Mapped[bool] = mapped_column(Boolean, default=False)
     exclusion_note: Mapped[str] = mapped_column(Text, default="")
     attention_failures: Mapped[int] = mapped_column(Integer, default=0)
+    kind: Mapped[str] = mapped_column(String(8), default="real", server_default="real")  # real | pilot | bot
+    consent_version: Mapped[str] = mapped_column(String(64), default="", server_default="")  # consent text shown
+    details: Mapped[dict | None] = mapped_column(JSON)  # comprehension attempts, viewport, ...
 
     responses: Mapped[list[Response]] = relationship(back_populates="participant", order_by="Response.step")
     plan_row: Mapped[ParticipantPlan | None] = relationship(lazy="selectin", cascade="all, delete-orphan",
@@ -110,5 +113,6 @@ class Response(Base):
     client_ms: Mapped[int | None] = mapped_column(BigInteger)  # time on page measured by the browser
     server_ms: Mapped[int] = mapped_column(BigInteger)  # from the screen becoming current to this submission
     submitted_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    details: Mapped[dict | None] = mapped_column(JSON)  # what the browser reported besides the answers (viewport)
 
     participant: Mapped[Participant] = relationship(back_populates="responses")

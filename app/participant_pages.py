@@ -23,8 +23,10 @@ from starlette.routing import Route
 
 from app.answers import Checked, check_screen, digits
 from app.assignment import condition_for_slot, next_slot
+from app.clip_length import clip_shape
 from app.context import MAX_PLANS, Context
 from app.database import Statements, as_utc
+from app.kinds import kind_from_link, pilot_token
 from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
 from app.security import checked_form
@@ -32,7 +34,7 @@ from app.security import checked_form
 # The hot path reads and writes with Core statements built once and run on the driver (`Database.statements`):
 # the ORM's unit of work, and even Core's execution, cost more than the SQL. The INSERTs name every column.
 PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
-_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at"]).where(
+_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind"]).where(
     PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
 BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
@@ -54,6 +56,10 @@ PLATFORM_PARAMS = {  # external id, platform study id, platform session id
 PLATFORM_NAMES = {"prolific": "Prolific", "mturk": "Amazon Mechanical Turk"}
 ID_VALUE = re.compile(r"^[A-Za-z0-9_.:-]{1,128}$")
 MOBILE = re.compile(r"Mobi|Android|iPhone|iPad|iPod", re.IGNORECASE)
+VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
+# How much sooner than the clip's playing time (since the screen became current, by the server's clock) its
+# answers are still accepted: clock granularity and the browser's own rounding, not a way to skip.
+VIEW_TOLERANCE_MS = 1000
 
 
 def _plan(sql: Statements, ctx: Context, participant: tuple) -> list[dict] | None:
@@ -124,6 +130,17 @@ async def landing(request: Request):
     if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
         return ctx.message(request, "Please use a computer",
                            "This study needs a laptop or desktop computer. Please open the link there.")
+    kind, fast = "real", False
+    if "pilot" in request.query_params or "bot" in request.query_params:
+        kind, fast = kind_from_link(request.query_params, await ctx.db.run(pilot_token, ctx.db, info.id))
+        if "pilot" in request.query_params and not fast:
+            raise HTTPException(400, "This preview link is not valid for this study (it may be from an older "
+                                     "server). Copy the pilot link again from the admin overview.")
+    if kind == "real":  # the session holds a kind only for pilots and bots
+        request.session.pop("kind", None)
+        request.session.pop("fast", None)
+    else:
+        request.session["kind"], request.session["fast"] = kind, fast
     if info.platform != "none":
         identity = _platform_identity(info.platform, request.query_params)
         known = await ctx.db.run(_read, _by_identity, ctx, identity["external_id"])
@@ -137,7 +154,7 @@ async def landing(request: Request):
     return ctx.render_form(request, ("consent.html", False), "consent.html", lambda: {"preview": False})
 
 
-def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
+def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: str = "real") -> str:
     """Create the participant (or find the one a concurrent request created) and assign them; returns the code.
 
     Conflicts on the unique identity or slot make the transaction fail as a whole and the loop tries again."""
@@ -155,7 +172,8 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str) -> str:
                           "status": "started" if agreed else "declined", "slot": None, "condition": None,
                           "step": 0, "step_started_at": now, "user_agent": user_agent[:512],
                           "created_at": now, "completed_at": None, "excluded": False, "exclusion_note": "",
-                          "attention_failures": 0, **identity}
+                          "attention_failures": 0, "kind": kind,
+                          "consent_version": ctx.study.consent_version(), "details": None, **identity}
                 if agreed and info.assignment == "balanced":
                     values["slot"] = next_slot(sql, study=info.id)
                     values["condition"] = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
@@ -192,42 +210,59 @@ async def consent(request: Request):
         identity = request.session.get("identity")
         if not isinstance(identity, dict) or not identity.get("external_id"):
             raise HTTPException(400, "Please open the study from the link you were given.")
-    code = await ctx.db.run(_enter, ctx, identity, choice == "agree", request.headers.get("user-agent", ""))
+    kind = request.session.get("kind") if request.session.get("kind") in ("pilot", "bot") else "real"
+    code = await ctx.db.run(_enter, ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
     request.session["participant"] = code
     request.session.pop("identity", None)
     return _see_current()
 
 
+def _clip_view(sha: str, shape: dict | None) -> dict:
+    shape = shape or {}
+    return {"url": f"/clips/{sha}.mp4", "width": shape.get("width") or 720, "height": shape.get("height") or 880,
+            "seconds": round((shape.get("clip_ms") or 0) / 1000, 1)}
+
+
 def screen_view(ctx: Context, screen: dict) -> dict:
     """What a page may know about a screen: labels and the clip's address, never agent names or ground truth."""
     study = ctx.study
-    view = {"kind": screen["kind"], "progress": screen.get("progress", ""),
+    view = {"kind": screen["kind"], "progress": screen.get("progress", ""), "position": screen.get("position"),
             "labels": [robot["label"] for robot in screen.get("robots", [])],
-            "questions": [(name, study.questions[name]) for name in screen.get("questions", [])]}
+            "questions": [(name, study.questions[name]) for name in screen.get("questions", [])],
+            "block": screen.get("block"), "round_start": screen.get("round_start", False)}
     if "part" in screen:
         part = study.parts[screen["part"] - 1]
-        view["part_title"], view["part_intro"] = part.title, part.intro
+        view["part_title"], view["part_intro"], view["part_kind"] = part.title, part.intro, part.kind
     if "media" in screen:
-        view["clip_url"] = f"/clips/{screen['media']}.mp4"
+        view["clip"] = _clip_view(screen["media"], screen)
+        view["clip_url"] = view["clip"]["url"]
+    if screen["kind"] == "ranking" and screen.get("media_list"):
+        shapes = screen.get("shapes") or [None] * len(screen["media_list"])
+        view["round_clips"] = [_clip_view(sha, shape) for sha, shape in zip(screen["media_list"], shapes,
+                                                                              strict=True)]
     if screen["kind"] == "attention":
         check = study.attention_checks[screen["check"]]
         view["attention_text"], view["options"] = check.text, screen["options"]
     if screen["kind"] == "instructions" and study.example is not None:
         example = ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
-        view["clip_url"] = f"/clips/{example.sha256.lower()}.mp4"
+        sha = example.sha256.lower()
+        shape = clip_shape(ctx.bundle.paths[sha])
+        view["clip"] = _clip_view(sha, {"clip_ms": shape.ms, "width": shape.width, "height": shape.height})
+        view["clip_url"] = view["clip"]["url"]
     return view
 
 
 def _render_screen(request: Request, ctx: Context, screen: dict, step: int, *, errors=None, values=None,
-                   events: str = "", status_code: int = 200):
+                   events: str = "", status_code: int = 200, notice: str = "", watched: bool | None = None):
     name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
-    if not (errors or values or events):  # as first shown: the same page for everyone at this step of this screen
+    if not (errors or values or events or notice):  # as first shown: the same page for everyone at this step
         return ctx.render_form(request, (name, step, repr(screen)), name, lambda: {
             "screen": screen_view(ctx, screen), "step": step, "errors": {}, "values": {}, "video_events": "",
-            "watched": False})
+            "watched": False, "notice": ""})
     return ctx.render(
         request, name, status_code=status_code, screen=screen_view(ctx, screen), step=step,
-        errors=errors or {}, values=values or {}, video_events=events, watched='"ended"' in events,
+        errors=errors or {}, values=values or {}, video_events=events,
+        watched=('"ended"' in events) if watched is None else watched, notice=notice,
     )
 
 
@@ -249,30 +284,76 @@ async def current_page(request: Request):
         return _status_page(request, ctx, participant)
     if participant.condition is None:
         return ctx.render(request, "choose.html", n_conditions=len(ctx.conditions), error="")
-    return _render_screen(request, ctx, plan[participant.step], participant.step)
+    notice = request.session.pop("notice", "") if "notice" in request.session else ""
+    return _render_screen(request, ctx, plan[participant.step], participant.step,
+                          notice=notice if isinstance(notice, str) else "")
 
 
-def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[dict, Checked] | None:
-    """Save the answers to screen `step`: None when saved or nothing is left to save, else the screen to show
-    again and why."""
+SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bindparam("participant"),
+                                                 RESPONSE.c.step == bindparam("step"))
+
+
+def _kept_notice(ctx: Context, screen: dict, saved: dict) -> str:
+    """What the participant is told when a screen they had already answered is sent again with other answers."""
+    shown = []
+    for name, value in saved.items():
+        question = ctx.study.questions.get(name)
+        text = question.text if question is not None else "Check question"
+        shown.append(f"{text} {' > '.join(value) if isinstance(value, list) else value}")
+    where = screen.get("progress") or "that screen"
+    kept = (" Your saved answers: " + "; ".join(shown) + ".") if shown else ""
+    return (f"You had already answered {where}. Answers cannot be changed once sent, so your first answers are "
+            f"kept and the new ones were not saved.{kept} Please continue with the screen below.")
+
+
+def _viewing_problem(screen: dict, started_at: datetime, now: datetime) -> str | None:
+    """Why the server cannot accept a clip's answers yet: the screen has not been open as long as the clip plays
+    (by the server's own clock, since the screen became current), so the clip cannot have been watched."""
+    need = screen.get("clip_ms")
+    if not need:
+        return None
+    open_ms = (now - as_utc(started_at)).total_seconds() * 1000
+    if open_ms + VIEW_TOLERANCE_MS >= need:
+        return None
+    return (f"The clip plays for {need / 1000:.0f} seconds, but this page has been open for only "
+            f"{open_ms / 1000:.0f} seconds, so it cannot have been watched to the end at normal speed. Nothing was "
+            "saved. Please play the clip from the start to the end, then answer again.")
+
+
+def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[dict, Checked] | str | None:
+    """Save the answers to screen `step`: None when saved or nothing is left to save, a notice for the next page
+    when the screen had been answered before with other answers, else the screen to show again and why."""
     try:
         with ctx.db.statements(write=True) as sql:
             participant = _current(sql, ctx, request)
             plan = _plan(sql, ctx, participant)
-            if participant.status != "started" or plan is None or step < participant.step:
-                return None  # already answered: a double click or the back button; keep the first
+            if participant.status != "started" or plan is None:
+                return None
+            if step < participant.step:  # already answered: a double click or the back button; keep the first
+                saved = sql.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
+                sent = check_screen(ctx.study, plan[step], form)
+                if saved is not None and not sent.errors and sent.answers != saved:
+                    return _kept_notice(ctx, plan[step], saved)
+                return None
             if step > participant.step:
                 raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
             screen = plan[step]
             checked = check_screen(ctx.study, screen, form)
+            now = datetime.now(UTC)
+            fast = request.session.get("fast") is True and participant.kind in ("pilot", "bot")
+            if "media" in screen and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
+                problem = _viewing_problem(screen, participant.step_started_at, now)
+                if problem:
+                    checked.errors["video"] = problem
             if checked.errors:
                 return screen, checked
-            now = datetime.now(UTC)
+            viewport = _one_value(form, "viewport")
             sql.execute(SAVE_RESPONSE, {
                 "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,
                 "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
                 "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
                 "submitted_at": now,
+                "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
             })
             done = step + 1 == len(plan)
             failed = screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]
@@ -285,6 +366,11 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[di
     return None
 
 
+def _one_value(form: FormData, name: str) -> str:
+    value = form.get(name)
+    return value if isinstance(value, str) else ""
+
+
 async def submit(request: Request):
     ctx: Context = request.app.state.context
     form = await checked_form(request)
@@ -294,10 +380,14 @@ async def submit(request: Request):
     refused = await ctx.db.run(_save, ctx, request, int(step), form)
     if refused is None:
         return _see_current()
+    if isinstance(refused, str):
+        request.session["notice"] = refused
+        return _see_current()
     screen, checked = refused
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
     return _render_screen(request, ctx, screen, int(step), errors=checked.errors, values=values,
-                          events=str(form.get("video_events") or "")[:20000], status_code=422)
+                          events=str(form.get("video_events") or "")[:20000], status_code=422,
+                          watched=False if "video" in checked.errors else None)
 
 
 async def choose_condition(request: Request):

@@ -12,11 +12,26 @@ import random
 
 from app.assignment import Condition
 from app.bundle import Bundle, ManifestClip
+from app.clip_length import clip_shape
 from app.study import RankingPart, Study
 
 
-def _pick(bundle: Bundle, scheme: str, scenario: str, pair: tuple[str, str], rng: random.Random) -> ManifestClip:
-    return rng.choice(bundle.matching(scheme, scenario, pair))  # in id order
+def _pick(bundle: Bundle, scheme: str, scenario: str, pair: tuple[str, str], rng: random.Random,
+          used: dict[str, str] | None = None) -> ManifestClip:
+    """One of the matching clips (in id order), at random; where several match, preferring one whose labels
+    name no other agent than they already named for this participant (`used`: label -> agent)."""
+    options = bundle.matching(scheme, scenario, pair)
+    if used:
+        clean = [c for c in options if all(used.get(label, agent) == agent
+                                           for agent, label in zip(c.agents, c.labels, strict=True))]
+        options = clean or options
+    return rng.choice(options)
+
+
+def _shape(bundle: Bundle, clip: ManifestClip) -> dict:
+    """The clip's playing time and picture size, from its file."""
+    shape = clip_shape(bundle.paths[clip.sha256.lower()])
+    return {"clip_ms": shape.ms, "width": shape.width, "height": shape.height}
 
 
 def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[dict]:
@@ -26,7 +41,8 @@ def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[dict]:
     return robots
 
 
-def _clip_screen(kind: str, part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random) -> dict:
+def _clip_screen(kind: str, part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random,
+                 bundle: Bundle) -> dict:
     return {
         "kind": kind,
         "part": part_no,
@@ -37,6 +53,7 @@ def _clip_screen(kind: str, part_no: int, clip: ManifestClip, questions: list[st
         "robots": _robots(list(zip(clip.agents, clip.labels, strict=True)), rng),
         "better": clip.better,
         "questions": questions,
+        **_shape(bundle, clip),
     }
 
 
@@ -54,7 +71,8 @@ def _ranking_screens(part: RankingPart, part_no: int, scheme: str, scenario: str
                      rng: random.Random, block: int) -> list[dict]:
     clips = [_pick(bundle, scheme, scenario, pair, rng) for pair in itertools.combinations(part.agents, 2)]
     rng.shuffle(clips)
-    screens = [_clip_screen("watch", part_no, clip, [], rng) | {"block": block} for clip in clips]
+    screens = [_clip_screen("watch", part_no, clip, [], rng, bundle) | {"block": block, "round_start": k == 0}
+               for k, clip in enumerate(clips)]
     labels = [(agent, label) for clip in clips for agent, label in zip(clip.agents, clip.labels, strict=True)]
     screens.append({
         "kind": "ranking",
@@ -63,6 +81,8 @@ def _ranking_screens(part: RankingPart, part_no: int, scheme: str, scenario: str
         "scheme": scheme,
         "scenario": scenario,
         "clips": [clip.id for clip in clips],
+        "media_list": [clip.sha256.lower() for clip in clips],
+        "shapes": [_shape(bundle, clip) for clip in clips],
         "robots": _robots(labels, rng),
         "true_order": _true_order(clips, part.agents),
         "questions": list(part.questions),
@@ -71,13 +91,18 @@ def _ranking_screens(part: RankingPart, part_no: int, scheme: str, scenario: str
 
 
 def _label_progress(screens: list[dict], part_no: int, n_parts: int) -> None:
-    clips = [s for s in screens if "media" in s]
-    rankings = [s for s in screens if s["kind"] == "ranking"]
+    """What the page says about where the participant is: clips counted per part, or per round of a ranking
+    part (the round's clips, then its ranking), as the part's introduction counts them."""
+    rounds = sorted({s["block"] for s in screens if "block" in s})
     for screen in screens:
-        if "media" in screen:
+        if "block" in screen:
+            in_round = [s for s in screens if s.get("block") == screen["block"] and "media" in s]
+            what = f"round {rounds.index(screen['block']) + 1} of {len(rounds)}, "
+            what += (f"clip {in_round.index(screen) + 1} of {len(in_round)}" if "media" in screen
+                     else "ranking")
+        elif "media" in screen:
+            clips = [s for s in screens if "media" in s]
             what = f"clip {clips.index(screen) + 1} of {len(clips)}"
-        elif screen["kind"] == "ranking":
-            what = f"ranking {rankings.index(screen) + 1} of {len(rankings)}"
         else:
             what = "a check question"
         screen["progress"] = f"Part {part_no} of {n_parts}, {what}"
@@ -85,14 +110,15 @@ def _label_progress(screens: list[dict], part_no: int, n_parts: int) -> None:
 
 def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.Random) -> list[dict]:
     plan: list[dict] = [{"kind": "instructions"}]
+    used: dict[str, str] = {}  # label -> the first agent it named for this participant
     for p, part in enumerate(study.parts):
         part_no = p + 1
         scenario = study.part_scenario(p, condition.rotation)
         screens: list[dict] = []
         if part.kind == "pairwise":
             blocks = [
-                [_clip_screen("pairwise", part_no, _pick(bundle, scheme, scenario, tuple(pair), rng),
-                              list(part.questions), rng) for pair in part.pairs]
+                [_clip_screen("pairwise", part_no, _pick(bundle, scheme, scenario, tuple(pair), rng, used),
+                              list(part.questions), rng, bundle) for pair in part.pairs]
                 for scheme in condition.schemes
             ]
             if part.order == "shuffled":
@@ -110,5 +136,10 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                     "options": list(check.options), "expected": check.expected,
                 })
         _label_progress(screens, part_no, len(study.parts))
+        for screen in screens:
+            for robot in screen.get("robots", []):
+                used.setdefault(robot["label"], robot["agent"])
         plan += screens
+    for number, screen in enumerate(plan):
+        screen["position"] = [number, len(plan)]
     return plan

@@ -91,7 +91,7 @@ class ReportData:
 
 def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None) -> ReportData:
     rules = rules or ExclusionRules()
-    median_s = median_duration_s(db, study.study.id)
+    median_s = median_duration_s(db, study.study.id, rules.kinds)
     threshold = rules.threshold_s(median_s)
     exclusions = Exclusions(rule=rules.describe(median_s))
     accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)
@@ -99,7 +99,7 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                for name, q in study.questions.items() if isinstance(q, ScaleQuestion)}
     unscored = 0
     for record in participant_records(db, study.study.id):
-        flags = exclusion_flags(record.participant, threshold)
+        flags = exclusion_flags(record.participant, threshold, record.responses, rules)
         exclusions.before += 1
         exclusions.per_reason.update(reason for reason in REASONS if flags[reason])
         if flags["excluded"]:

@@ -45,6 +45,8 @@ class StudyInfo(Strict):
     preload_timeout_s: Annotated[float, Field(gt=0, le=300)] = 20.0
     estimated_minutes: Annotated[int, Field(gt=0)] | None = None
     contact: str = ""
+    consent_version: Annotated[str, Field(max_length=64)] = ""  # recorded per participant; default: text hash
+    progress_bar: bool = True  # a bar with "screen N of M" above every screen
 
 
 class Design(Strict):
@@ -71,7 +73,15 @@ class Texts(Strict):
     completion: Text = "Thank you! You have finished the study."
     preview: Text = "Accept the HIT to start the study."
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
-    example_caption: Text = "An example: two robots (the coloured discs) walk to the same goal through a crowd."
+    watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
+    example_caption: Text = ("An example: two robots, each with its own colour, shape and name, walk through a crowd "
+                             "to the same goal.")
+    robot_names: Text = ("A robot's name, colour and shape only tell apart the robots of one clip (in part two, of "
+                         "one round of three clips). The same name in another clip or round may be a different "
+                         "robot, so judge every clip on its own.")
+    names_in_round: Text = "In this round each name, colour and shape is one robot in all three clips."
+    new_round: Text = ("A new round begins. The names Robot 1, 2 and 3 hold within this round only: judge the robots "
+                       "from this round's clips alone.")
 
 
 class Completion(Strict):
@@ -90,11 +100,13 @@ class ChooseQuestion(Strict):
 
     type: Literal["choose"]
     text: Text
+    help: str = ""  # neutral help text under the question (never an example answer)
 
 
 class TextQuestion(Strict):
     type: Literal["text"]
     text: Text
+    help: str = ""  # neutral help text under the question (never an example answer)
     min_length: Annotated[int, Field(ge=1)] = 1
     max_length: Annotated[int, Field(ge=1, le=10_000)] = 2000
     rows: Annotated[int, Field(ge=1, le=20)] = 3
@@ -105,6 +117,7 @@ class ScaleQuestion(Strict):
 
     type: Literal["scale"]
     text: Text
+    help: str = ""  # neutral help text under the question (never an example answer)
     points: Annotated[int, Field(ge=2, le=11)]
     anchors: tuple[Text, Text] | None = None
     labels: list[Text] | None = None
@@ -130,6 +143,7 @@ class RankQuestion(Strict):
 
     type: Literal["rank"]
     text: Text
+    help: str = ""  # neutral help text under the question (never an example answer)
 
 
 Question = Annotated[
@@ -187,6 +201,15 @@ class Study(Strict):
     questions: dict[str, Question]
     attention_checks: list[AttentionCheck] = []
     build: dict | None = None  # read by `foil bundle`, not by the server
+
+    def consent_version(self) -> str:
+        """The version of the consent text each participant is recorded with: `[study] consent_version`, or
+        `sha256:` and the first 12 hex digits of the consent text's hash (any edit gives a new version)."""
+        import hashlib
+
+        if self.study.consent_version:
+            return self.study.consent_version
+        return "sha256:" + hashlib.sha256(self.texts.consent.encode()).hexdigest()[:12]
 
     def rotations(self) -> range:
         """How far the scenarios are rotated across parts, one value per scenario counterbalancing level."""

@@ -1,28 +1,116 @@
-// Clip gating and page timing. The answer controls stay disabled until the clip has played to its end
-// (replays allowed); every clip event is logged and sent with the form, with the time spent on the page.
+// Clip gating, playback record and page state. The answer controls stay disabled until the clip has played to
+// its end; on a first viewing seeking forward and faster playback are undone. Every clip event (plays, pauses,
+// seeks, rate changes, the tab being hidden) is logged and sent with the form, with the time on the page and the
+// viewport. What the participant typed or chose, the log and whether the clip was watched are kept in the
+// browser's storage for this screen, so a reload (phones reload background tabs) loses nothing; the server keeps
+// its own clock and refuses answers given sooner than the clip can have been watched.
 "use strict";
 
 (function () {
   const started = performance.now();
   const events = document.querySelector("[data-events]");
-  const log = events && events.value ? safeParse(events.value) : [];
+  const stepField = document.querySelector("input[name=step]");
+  const csrf = document.querySelector("input[name=csrf_token]");
+  const answers = document.querySelector("[data-answers]");
+  const storageKey = stepField && csrf ? "foil:" + csrf.value.slice(0, 16) + ":" + stepField.value : null;
+  const renderedWithLog = Boolean(events && events.value);
+  let log = renderedWithLog ? safeParse(events.value) : [];
+  let state = { watched: false, values: {} };
 
   function safeParse(text) {
     try { const value = JSON.parse(text); return Array.isArray(value) ? value : []; } catch (e) { return []; }
   }
 
-  function record(type) {
-    log.push({ type: type, t: Math.round(performance.now() - started) });
+  function storage() {
+    try { return window.localStorage; } catch (e) { return null; }
+  }
+
+  function save() {
+    const store = storage();
+    if (!store || !storageKey) return;
+    try { store.setItem(storageKey, JSON.stringify({ log: log.slice(-400), watched: state.watched, values: state.values })); }
+    catch (e) { /* storage full or off: the page still works, a reload just starts it afresh */ }
+  }
+
+  function restore() {
+    const store = storage();
+    if (!store || !storageKey) return;
+    const prefix = storageKey.slice(0, storageKey.lastIndexOf(":") + 1);
+    for (let i = store.length - 1; i >= 0; i--) {  // screens answered before this one are done with
+      const key = store.key(i);
+      if (key && key.indexOf("foil:") === 0 && key !== storageKey) store.removeItem(key);
+    }
+    let kept = null;
+    try { kept = JSON.parse(store.getItem(storageKey) || "null"); } catch (e) { kept = null; }
+    if (!kept || typeof kept !== "object" || prefix === "") return;
+    state.watched = kept.watched === true;
+    state.values = kept.values && typeof kept.values === "object" ? kept.values : {};
+    if (!renderedWithLog && Array.isArray(kept.log) && kept.log.length) {
+      log = kept.log.concat([{ type: "reload", t: 0 }]);
+      if (events) events.value = JSON.stringify(log.slice(-400));
+    }
+  }
+
+  function record(type, value) {
+    const item = { type: type, t: Math.round(performance.now() - started) };
+    if (typeof value === "number" && isFinite(value)) item.v = Math.round(value * 1000) / 1000;
+    log.push(item);
     if (events) events.value = JSON.stringify(log.slice(-400));
+    save();
+  }
+
+  // Form values: kept on every change, put back after a reload unless the server already filled them in.
+  function keepValues(form) {
+    form.addEventListener("input", function (event) {
+      const field = event.target;
+      if (!field.name || field.type === "hidden") return;
+      state.values[field.name] = field.value;
+      save();
+    });
+    form.addEventListener("change", function (event) {
+      const field = event.target;
+      if (!field.name || field.type === "hidden") return;
+      if (field.type === "radio" && !field.checked) return;
+      state.values[field.name] = field.value;
+      save();
+    });
+  }
+
+  function putBackValues(form) {
+    Object.keys(state.values).forEach(function (name) {
+      const value = String(state.values[name]);
+      const fields = form.querySelectorAll("[name='" + name.replace(/'/g, "") + "']");
+      fields.forEach(function (field) {
+        if (field.type === "radio") {
+          if (!form.querySelector("input[type=radio][name='" + field.name + "']:checked") && field.value === value) field.checked = true;
+        } else if (field.type !== "hidden" && !field.value) {
+          field.value = value;
+        }
+      });
+    });
+  }
+
+  function unlock() {
+    if (answers) answers.disabled = false;
+    const stale = document.getElementById("video-error");
+    if (stale) stale.hidden = true;
+    const hint = document.querySelector("[data-example-hint]");
+    if (hint) hint.hidden = true;
   }
 
   function setUpClip(box) {
     const video = box.querySelector("video");
     const button = box.querySelector("[data-play]");
     const status = box.querySelector("[data-status]");
-    const answers = document.querySelector("[data-answers]");
+    const fill = box.querySelector("[data-fill]");
     const gated = box.hasAttribute("data-gated");
+    const width = parseFloat(video.getAttribute("width")), height = parseFloat(video.getAttribute("height"));
+    if (width > 0 && height > 0) box.style.setProperty("--ratio", String(width / height));
+    let watched = box.hasAttribute("data-watched") || (gated && state.watched && !box.hasAttribute("data-refused"));
+    if (box.hasAttribute("data-refused")) { state.watched = false; save(); }
     let loaded = false;
+    let furthest = 0;  // the furthest point reached by playing, on a first viewing
+    let undoing = false;
 
     function say(text, failed) {
       status.textContent = text;
@@ -43,7 +131,8 @@
       loaded = true;
       clearTimeout(timer);
       record("loaded");
-      say(gated && !box.hasAttribute("data-watched") ? "Press Play clip. The questions unlock when the clip ends." : "Ready.");
+      say(gated && !watched ? "Press Play clip (or tap the picture). You can answer when the clip ends."
+                            : "Ready. You can replay the clip.");
     });
     video.addEventListener("error", function () {
       clearTimeout(timer);
@@ -52,37 +141,136 @@
     });
     video.addEventListener("play", function () { record("play"); button.textContent = "Pause"; say("Playing…"); });
     video.addEventListener("pause", function () {
-      if (!video.ended) { record("pause"); button.textContent = "Play clip"; say("Paused."); }
+      if (!video.ended) { record("pause"); button.textContent = "Play clip"; say("Paused. Press Play clip to go on."); }
+    });
+    video.addEventListener("timeupdate", function () {
+      if (!video.seeking && video.currentTime > furthest && video.currentTime - furthest < 1.5) furthest = video.currentTime;
+      if (fill && video.duration) fill.style.width = (100 * video.currentTime / video.duration).toFixed(1) + "%";
+    });
+    video.addEventListener("seeking", function () {
+      if (undoing) { undoing = false; return; }
+      if (!watched && video.currentTime > furthest + 0.5) {
+        record("seek_blocked", video.currentTime);
+        undoing = true;
+        video.currentTime = furthest;
+        say("Please watch the whole clip once before skipping ahead.", true);
+        return;
+      }
+      record("seek", video.currentTime);
+    });
+    video.addEventListener("ratechange", function () {
+      record("ratechange", video.playbackRate);
+      if (!watched && video.playbackRate !== 1) video.playbackRate = 1;
     });
     video.addEventListener("ended", function () {
       record("ended");
+      watched = true;
+      if (gated) { state.watched = true; save(); }
       button.textContent = "Replay clip";
-      say(gated ? "Clip finished. You can now answer, or replay the clip." : "Clip finished.");
-      if (answers) answers.disabled = false;
-      video.controls = true;  // seeking is fine once the whole clip has been seen
+      say(gated ? "Clip finished. You can now answer, or replay the clip." : "Clip finished. You can replay it.");
+      if (gated) unlock();
     });
-    button.addEventListener("click", function () {
+    video.addEventListener("contextmenu", function (event) { event.preventDefault(); });  // no "Show controls"
+
+    function toggle() {
       if (video.paused || video.ended) {
+        if (video.ended) video.currentTime = 0;
         const played = video.play();
         if (played && played.catch) played.catch(function () { say("Press Play clip again to start the clip.", true); });
       } else {
         video.pause();
       }
-    });
-    if (box.hasAttribute("data-watched")) video.controls = true;
+    }
+    button.addEventListener("click", toggle);
+    video.addEventListener("click", toggle);  // tapping the picture plays and pauses it
+    video.controls = false;
+    if (watched && gated) {
+      unlock();
+      button.textContent = "Replay clip";
+    }
     video.load();
+  }
+
+  const form = document.querySelector("form[data-step-form]");
+  if (form) {
+    restore();
+    putBackValues(form);
+    keepValues(form);
   }
 
   document.querySelectorAll("[data-clip]").forEach(setUpClip);
 
-  document.querySelectorAll("form[data-step-form]").forEach(function (form) {
-    form.addEventListener("submit", function (event) {
-      const time = form.querySelector("[data-time]");
+  document.addEventListener("visibilitychange", function () {
+    if (events) record(document.visibilityState === "hidden" ? "hidden" : "visible");
+  });
+
+  // A ranking names each robot once: say so as soon as a robot is chosen twice, before sending.
+  document.querySelectorAll("[data-ranking]").forEach(function (group) {
+    const selects = Array.prototype.slice.call(group.querySelectorAll("select"));
+    const message = group.querySelector("[data-rank-error]");
+    function check() {
+      const seen = {};
+      let twice = "";
+      selects.forEach(function (select) {
+        if (select.value && seen[select.value]) twice = select.value;
+        seen[select.value] = true;
+      });
+      selects.forEach(function (select) {
+        const clash = twice && select.value === twice;
+        select.setCustomValidity(clash ? twice + " is already in another place." : "");
+        if (clash) select.setAttribute("aria-invalid", "true"); else select.removeAttribute("aria-invalid");
+      });
+      message.hidden = !twice;
+      message.textContent = twice ? "Each robot can take only one place: " + twice + " is chosen twice." : "";
+    }
+    selects.forEach(function (select) { select.addEventListener("change", check); });
+    check();
+  });
+
+  // Back to this page from the browser's history (back/forward cache): ask the server for the current screen.
+  window.addEventListener("pageshow", function (event) {
+    if (event.persisted && form) window.location.reload();
+  });
+
+  document.querySelectorAll("form[data-step-form]").forEach(function (stepForm) {
+    stepForm.addEventListener("submit", function (event) {
+      const time = stepForm.querySelector("[data-time]");
       if (time) time.value = String(Math.round(performance.now() - started));
-      if (form.dataset.sent) { event.preventDefault(); return; }  // a double click sends once
-      form.dataset.sent = "1";
+      const viewport = stepForm.querySelector("[data-viewport]");
+      if (viewport) viewport.value = window.innerWidth + "x" + window.innerHeight;
+      if (stepForm.dataset.sent) { event.preventDefault(); return; }  // a double click sends once
+      stepForm.dataset.sent = "1";
     });
   });
+
+  const consent = document.querySelector("form[action='/consent']");
+  if (consent) consent.addEventListener("submit", function () {  // a new participant starts with nothing kept
+    const store = storage();
+    if (!store) return;
+    for (let i = store.length - 1; i >= 0; i--) {
+      const key = store.key(i);
+      if (key && key.indexOf("foil:") === 0) store.removeItem(key);
+    }
+  });
+
+  const copy = document.querySelector("[data-copy]");
+  if (copy) copy.addEventListener("click", function () {
+    const code = document.getElementById("completion-code").textContent.trim();
+    const done = function () { copy.textContent = "Copied"; };
+    if (navigator.clipboard && navigator.clipboard.writeText) {
+      navigator.clipboard.writeText(code).then(done, function () { selectCode(); });
+    } else {
+      selectCode();
+    }
+  });
+  function selectCode() {
+    const range = document.createRange();
+    range.selectNodeContents(document.getElementById("completion-code"));
+    const selection = window.getSelection();
+    selection.removeAllRanges();
+    selection.addRange(range);
+    copy.textContent = "Selected: press Ctrl+C (or Copy)";
+  }
 
   const summary = document.querySelector("[data-focus]");
   if (summary) summary.focus();

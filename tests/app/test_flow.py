@@ -50,7 +50,8 @@ def test_paper_study_whole_session_on_mturk(make_client):
     assert sorted(ranking.answers["ranking"]) == ["Robot 1", "Robot 2", "Robot 3"]
     assert set(ranking.answers) == {"ranking", "explanation", "difference", "easy_worst_middle", "easy_middle_best"}
     progress = " ".join(seen)
-    assert "Part 1 of 2, clip 3 of 6" in progress and "Part 2 of 2, ranking 2 of 2" in progress
+    assert "Part 1 of 2, clip 3 of 6" in progress and "Part 2 of 2, round 2 of 2, ranking" in progress
+    assert "Part 2 of 2, round 1 of 2, clip 3 of 3" in progress
     for page in seen:  # ground truth and real names never reach the browser
         for secret in SECRET_NAMES.values():
             assert secret not in page
