@@ -1,0 +1,175 @@
+"""The server's own viewing check, participant kinds and answers sent again: the real app on a real SQLite file,
+with a bundle of 3-second clips (longer than the check's 1-second tolerance)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import time
+from pathlib import Path
+
+import imageio_ffmpeg
+import pytest
+from sqlalchemy import select
+
+from app.export_csv import export_study
+from app.exclusions import ExclusionRules
+from app.kinds import pilot_token
+from app.models import Participant, Response
+from app.report import tally_study
+from tests.app.conftest import (
+    AGENT_RANK,
+    SECRET_NAMES,
+    FormReader,
+    answer_for,
+    finish,
+    start,
+    stored,
+    write_bundle,
+)
+
+CLIP_S = 3.0
+
+
+@pytest.fixture(scope="module")
+def bundle_dir(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("long-clips")
+    files = []
+    for name, source in (("a", "testsrc"), ("b", "testsrc2")):
+        files.append(folder / f"{name}.mp4")
+        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i",
+                        f"{source}=size=72x88:rate=10:duration={CLIP_S}", "-c:v", "libx264", "-pix_fmt", "yuv420p",
+                        "-movflags", "+faststart", str(files[-1])], check=True)
+    names = SECRET_NAMES
+    return write_bundle(tmp_path_factory.mktemp("long-bundle"), files,
+                        schemes=[names["adaptive"], names["nfirst"]],
+                        scenarios=[names["paper-bl-tr"], names["paper-tl-br"]], agents=AGENT_RANK,
+                        example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])))
+
+
+ANONYMOUS = {"platform": '"none"', "assignment": '"balanced"'}
+
+
+def to_first_clip(client, query: str = "") -> str:
+    page = start(client, query)
+    assert "Instructions" in page
+    response = client.post("/study", data=answer_for(page))
+    assert response.status_code == 200
+    return response.text
+
+
+def test_a_clip_answered_sooner_than_it_plays_is_refused_and_nothing_saved(make_client):
+    client = make_client(ANONYMOUS)
+    page = to_first_clip(client)
+    assert FormReader(page).hidden["step"] == "1"
+    # The skip-to-end attack: the page's record says the clip played and ended, 0.1 s after it was shown.
+    refused = client.post("/study", data=answer_for(page))
+    assert refused.status_code == 422
+    assert "cannot have been watched to the end" in refused.text and "plays for 3 seconds" in refused.text
+    assert [r.step for r in stored(client, Response)] == [0]  # the instructions only: nothing saved
+    assert FormReader(refused.text).disabled_answers  # the answers are locked again until the clip ends
+    plan = stored(client, Participant)[0].plan
+    assert plan[1]["clip_ms"] == 3000 and (plan[1]["width"], plan[1]["height"]) == (72, 88)
+
+    time.sleep(CLIP_S - 0.8)  # the screen has now been open for the clip's length, less the tolerance
+    accepted = client.post("/study", data=answer_for(page))
+    assert accepted.status_code == 200 and FormReader(accepted.text).hidden["step"] == "2"
+    assert [r.step for r in stored(client, Response)] == [0, 1]
+
+
+def test_pilot_and_bot_links_are_recorded_and_only_the_token_skips_the_wait(make_client):
+    client = make_client(ANONYMOUS)
+    db = client.app.state.context.db
+    token = pilot_token(db, "paper")
+    assert pilot_token(db, "paper") == token and len(token) >= 20
+
+    assert client.get("/?pilot=wrong-token").status_code == 400
+    fast = make_client(ANONYMOUS)
+    page = to_first_clip(fast, f"?pilot={token}&bot=1")
+    assert fast.post("/study", data=answer_for(page)).status_code == 200  # no wait for a bot with the token
+    finish(fast, fast.get("/study").text)
+
+    selfdeclared = make_client(ANONYMOUS)
+    page = to_first_clip(selfdeclared, "?bot=1")
+    assert selfdeclared.post("/study", data=answer_for(page)).status_code == 422  # held to the rule
+
+    pilot = make_client(ANONYMOUS)
+    to_first_clip(pilot, f"?pilot={token}")
+    kinds = sorted(p.kind for p in stored(client, Participant))
+    assert kinds == ["bot", "bot", "pilot"]
+    versions = {p.consent_version for p in stored(client, Participant)}
+    assert len(versions) == 1 and next(iter(versions)).startswith("sha256:")
+
+
+def test_the_report_and_export_leave_pilots_and_bots_out_by_default(make_client, tmp_path):
+    token = None
+    clients = []
+    for query in ("", "?pilot={token}&bot=1", "?pilot={token}"):
+        client = make_client(ANONYMOUS)
+        token = token or pilot_token(client.app.state.context.db, "paper")
+        page = to_first_clip(client, query.format(token=token))
+        if not query:
+            time.sleep(CLIP_S)  # a real participant waits on every clip: answer the first one only
+            client.post("/study", data=answer_for(page))
+        else:
+            finish(client, page)
+        clients.append(client)
+    ctx = clients[0].app.state.context
+    data = tally_study(ctx.db, ctx.study)
+    assert data.exclusions.before == 3 and data.exclusions.per_reason["pilot_or_bot"] == 2
+    with_bots = tally_study(ctx.db, ctx.study, ExclusionRules(include_kinds=("bot", "pilot")))
+    assert with_bots.exclusions.per_reason["pilot_or_bot"] == 0
+    assert with_bots.exclusions.per_reason["skipped_viewing"] == 2  # analysed, their unwatched clips are flagged
+
+    export_study(ctx.db, ctx.study, tmp_path / "export")
+    import csv
+
+    people = list(csv.DictReader((tmp_path / "export" / "participants.csv").open(encoding="utf-8")))
+    assert sorted((p["kind"], p["pilot_or_bot"]) for p in people) == [("bot", "1"), ("pilot", "1"), ("real", "0")]
+    long = list(csv.DictReader((tmp_path / "export" / "long.csv").open(encoding="utf-8")))
+    real = next(p["participant"] for p in people if p["kind"] == "real")
+    clip_row = next(r for r in long if r["participant"] == real and r["screen"] == "pairwise")
+    assert clip_row["clip_ms"] == "3000" and int(clip_row["time_on_screen_ms"]) >= 2000
+    assert clip_row["skipped_viewing"] == "0" and clip_row["plays"] == "1"
+    bot = next(p["participant"] for p in people if p["kind"] == "bot")
+    assert {r["skipped_viewing"] for r in long if r["participant"] == bot and r["screen"] == "pairwise"} == {"1"}
+    book = json.loads((tmp_path / "export" / "codebook.json").read_text())
+    assert book["exclusion_rules"]["analysed_kinds"] == ["real"]
+
+
+def test_an_answered_screen_sent_again_with_other_answers_says_the_first_is_kept(make_client):
+    client = make_client(ANONYMOUS)
+    token = pilot_token(client.app.state.context.db, "paper")
+    page = to_first_clip(client, f"?pilot={token}")
+    first = answer_for(page, choice=0)
+    client.post("/study", data=first)
+    again = client.post("/study", data=first)  # a double click: same answers, nothing to say
+    assert "first answers are kept" not in again.text
+    changed = client.post("/study", data=answer_for(page, choice=1))  # the back button, then another choice
+    assert changed.status_code == 200 and FormReader(changed.text).hidden["step"] == "2"
+    assert "first answers are kept" in changed.text and first["better"] in changed.text
+    saved = [r for r in stored(client, Response) if r.step == 1]
+    assert len(saved) == 1 and saved[0].answers["better"] == first["better"]
+    assert "first answers are kept" not in client.get("/study").text  # said once
+
+
+def test_events_of_the_new_kinds_are_kept_with_their_values(make_client):
+    client = make_client(ANONYMOUS)
+    token = pilot_token(client.app.state.context.db, "paper")
+    page = to_first_clip(client, f"?pilot={token}")
+    events = [{"type": "loaded", "t": 5}, {"type": "play", "t": 10}, {"type": "seek_blocked", "t": 50, "v": 2.9},
+              {"type": "ratechange", "t": 60, "v": 2}, {"type": "hidden", "t": 100}, {"type": "visible", "t": 600},
+              {"type": "ended", "t": 3100}, {"type": "reload", "t": 0}, {"type": "play", "t": 40},
+              {"type": "ended", "t": 3040}]
+    data = answer_for(page) | {"video_events": json.dumps(events), "viewport": "360x800"}
+    assert client.post("/study", data=data).status_code == 200
+    with client.app.state.context.db.reading() as session:
+        response = session.scalar(select(Response).where(Response.step == 1))
+    assert response.plays == 2 and response.details == {"viewport": "360x800"}
+    assert response.video_events[2] == {"type": "seek_blocked", "t": 50, "v": 2.9}
+    from app.exclusions import viewing_problems
+
+    plan = stored(client, Participant)[0].plan
+    viewing = viewing_problems(response, plan[1])
+    assert viewing["seeks_blocked"] == 1 and viewing["hidden_ms"] == 500 and viewing["reloads"] == 1
+    assert viewing["skipped"]  # sped up before the first end
