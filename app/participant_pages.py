@@ -37,7 +37,8 @@ PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, Partic
 _SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind"]).where(
     PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
-BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
+BY_IDENTITY = _SHOWN.add_columns(PARTICIPANT.c.platform_study_id, PARTICIPANT.c.platform_session_id).where(
+    PARTICIPANT.c.platform == bindparam("platform"),
                            PARTICIPANT.c.external_id == bindparam("external_id"))
 SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
 ENTER = insert(PARTICIPANT).values(
@@ -89,14 +90,27 @@ def _see_current() -> HTTPResponse:
 def _platform_identity(platform: str, params) -> dict:
     names = PLATFORM_PARAMS[platform]
     values = [params.get(name, "") for name in names]
-    if not values[0]:
-        raise HTTPException(400, f"This link must be opened from {PLATFORM_NAMES[platform]}: it lacks {names[0]}. "
-                                 "Please go back to the study's page there and use its link.")
+    # All three, or the link cannot tell its participant from someone who only knows their platform id.
+    if missing := [name for name, value in zip(names, values, strict=True) if not value]:
+        raise HTTPException(400, f"This link must be opened from {PLATFORM_NAMES[platform]}: it lacks "
+                                 f"{' and '.join(missing)}. Please go back to the study's page there and use its link.")
     for name, value in zip(names, values, strict=True):
         if value and not ID_VALUE.match(value):
             raise HTTPException(400, f"The link's {name} is not a valid identifier.")
     return {"external_id": values[0], "platform_study_id": values[1] or None,
             "platform_session_id": values[2] or None}
+
+
+NOT_YOURS = ("The study cannot be started from this link. Please open the study from its page on the platform "
+             "where you signed up; if this message comes again, contact the researcher.")
+
+
+def _same_person(known: tuple, identity: dict, own_code) -> bool:
+    """Whether the visitor with this link (and this session cookie's participant code) is the participant `known`
+    found by its platform id: only with the participant's own platform study and session ids, or cookie."""
+    ids = (identity["platform_study_id"], identity["platform_session_id"])
+    return own_code == known.code or (None not in ids and ids == (known.platform_study_id,
+                                                                    known.platform_session_id))
 
 
 def _by_code(sql: Statements, ctx: Context, code) -> tuple | None:
@@ -144,6 +158,8 @@ async def landing(request: Request):
     if info.platform != "none":
         identity = _platform_identity(info.platform, request.query_params)
         known = await ctx.db.run(_read, _by_identity, ctx, identity["external_id"])
+        if known is not None and not _same_person(known, identity, request.session.get("participant")):
+            known = None  # someone else's id: the consent page any new id gets, which tells nothing
         request.session["identity"] = identity
     else:
         known = await ctx.db.run(_read, _by_code, ctx, request.session.get("participant"))
@@ -165,6 +181,8 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
                 if identity.get("external_id"):
                     known = _by_identity(sql, ctx, identity["external_id"])
                     if known is not None:
+                        if not _same_person(known, identity, None):
+                            raise HTTPException(400, NOT_YOURS)
                         return known.code
                 now = datetime.now(UTC)
                 values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,

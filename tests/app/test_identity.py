@@ -1,0 +1,78 @@
+"""A platform id is not a password: it resumes a participant only together with the same platform study and
+session ids (Prolific's STUDY_ID and SESSION_ID, MTurk's hitId and assignmentId), or with the participant's own
+signed cookie. Anyone else gets the page a new id gets, which says nothing about whether the id took part, and
+cannot answer, leave or otherwise touch the participant's record."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.models import Participant, Response
+from tests.app.conftest import FormReader, answer_for, start, stored
+
+PLATFORMS = {
+    "prolific": ({"platform": '"prolific"', "assignment": '"balanced"'},
+                 "?PROLIFIC_PID={id}&STUDY_ID={study}&SESSION_ID={session}", "?PROLIFIC_PID={id}"),
+    "mturk": ({"platform": '"mturk"', "assignment": '"balanced"'},
+              "?workerId={id}&hitId={study}&assignmentId={session}", "?workerId={id}"),
+}
+
+
+def neutral(text: str) -> str:
+    """A page without what differs between any two visitors (the session's CSRF token)."""
+    return re.sub(r'name="csrf_token" value="[^"]*"', "", text)
+
+
+@pytest.fixture(params=sorted(PLATFORMS))
+def platform(request, make_client):
+    changes, full, bare = PLATFORMS[request.param]
+    client = make_client(changes)
+    victim = TestClient(client.app)
+    page = start(victim, full.format(id="VICTIM1", study="STUDY1", session="SESSION1"))
+    victim.post("/study", data=answer_for(page))  # the victim is at their second screen
+    return client, victim, full, bare
+
+
+def stranger(client: TestClient) -> TestClient:
+    return TestClient(client.app, follow_redirects=False, raise_server_exceptions=False)
+
+
+def test_the_bare_platform_id_neither_resumes_nor_tells_whether_it_took_part(platform):
+    client, victim, full, bare = platform
+    known = stranger(client).get("/" + bare.format(id="VICTIM1"))
+    unknown = stranger(client).get("/" + bare.format(id="NOBODY1"))
+    assert known.status_code == unknown.status_code == 400
+    assert "location" not in known.headers and neutral(known.text) == neutral(unknown.text)
+    assert "STUDY_ID" in known.text or "hitId" in known.text  # it says what the link lacks
+
+
+def test_other_study_or_session_ids_do_not_take_the_participant_over(platform):
+    client, victim, full, bare = platform
+    before = [(p.step, p.status) for p in stored(client, Participant)], len(stored(client, Response))
+    for study, session in [("STUDY1", "GUESSED"), ("GUESSED", "SESSION1"), ("OTHER", "OTHER")]:
+        attacker = stranger(client)
+        known = attacker.get("/" + full.format(id="VICTIM1", study=study, session=session))
+        unknown = stranger(client).get("/" + full.format(id="NOBODY1", study=study, session=session))
+        # the same consent page as any new id: no redirect into the victim's record
+        assert known.status_code == unknown.status_code == 200 and "location" not in known.headers
+        assert neutral(known.text) == neutral(unknown.text)
+        token = FormReader(known.text).hidden["csrf_token"]
+        agreed = attacker.post("/consent", data={"csrf_token": token, "choice": "agree"})
+        assert agreed.status_code == 400 and "open the study" in agreed.text
+        assert attacker.get("/study").status_code == 400  # no place in the study: nothing to answer
+        left = attacker.post("/leave", data={"csrf_token": token})
+        assert left.status_code == 400
+    assert ([(p.step, p.status) for p in stored(client, Participant)], len(stored(client, Response))) == before
+
+
+def test_the_participant_resumes_with_their_own_ids_or_their_own_cookie(platform):
+    client, victim, full, bare = platform
+    elsewhere = TestClient(client.app)  # another browser, the link from the platform again
+    page = elsewhere.get("/" + full.format(id="VICTIM1", study="STUDY1", session="SESSION1"))
+    assert FormReader(page.text).hidden["step"] == "1"
+    again = victim.get("/" + full.format(id="VICTIM1", study="STUDY1", session="SESSION1"))
+    assert FormReader(again.text).hidden["step"] == "1"
+    assert len(stored(client, Participant)) == 1
