@@ -5,9 +5,11 @@ flag (the report and downloads are in app.analysis_pages). They exist only when 
 from __future__ import annotations
 
 import hmac
+import logging
 import secrets
 import statistics
 from collections import Counter
+from math import ceil
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Request
@@ -19,12 +21,13 @@ from app.answer_table import ParticipantRecord, long_rows
 from app.context import Context, ContextDep
 from app.database import as_utc
 from app.models import Participant
-from app.security import checked_form, unstorable
+from app.security import LoginThrottle, admin_mark, checked_form, is_admin, unstorable
 
 router = APIRouter(prefix="/admin")
 disabled_router = APIRouter()
 FormDep = Annotated[FormData, Depends(checked_form)]
 STATUSES = ["started", "completed", "returned", "declined"]
+log = logging.getLogger("foil.admin")
 
 
 class LoginRequired(Exception):
@@ -32,8 +35,14 @@ class LoginRequired(Exception):
 
 
 def admin_only(request: Request) -> None:
-    if request.session.get("admin") is not True:
+    """Only for a session logged in since the last logout, with the current password (`security.admin_mark`)."""
+    mark = request.session.get("admin")
+    if not isinstance(mark, str):
         raise LoginRequired
+    ctx: Context = request.app.state.context
+    with ctx.db.reading() as session:
+        if not is_admin(session, ctx.settings.admin_password.get_secret_value(), mark):
+            raise LoginRequired
 
 
 Admin = Depends(admin_only)
@@ -53,18 +62,34 @@ def login_page(request: Request, ctx: ContextDep):
 
 @router.post("/login")
 def login(request: Request, ctx: ContextDep, form: FormDep):
+    throttle: LoginThrottle = request.app.state.login_throttle
+    client = request.client.host if request.client else "unknown"
+    if (wait := throttle.wait_s(client)) > 0:
+        log.warning("admin login from %s refused without checking: too many wrong passwords, %.0f s to wait",
+                    client, wait)
+        refused = ctx.render(request, "admin/login.html", status_code=429,
+                             error=f"Too many wrong passwords. Try again in {ceil(wait)} seconds.")
+        refused.headers["retry-after"] = str(ceil(wait))
+        return refused
     typed = form.get("password")
     expected = ctx.settings.admin_password.get_secret_value()
     if not isinstance(typed, str) or not hmac.compare_digest(typed.encode(), expected.encode()):
+        log.warning("admin login from %s: wrong password (%d in a row)", client, throttle.failed(client))
         return ctx.render(request, "admin/login.html", status_code=401, error="Wrong password.")
-    request.session["admin"] = True
+    throttle.succeeded(client)
+    log.info("admin login from %s", client)
+    with ctx.db.writing() as session:
+        request.session["admin"] = admin_mark(session, expected)
     request.session["csrf"] = secrets.token_urlsafe(32)  # a new token once logged in
     return RedirectResponse("/admin", status_code=303)
 
 
 @router.post("/logout", dependencies=[Admin])
-def logout(request: Request, form: FormDep):
+def logout(request: Request, ctx: ContextDep, form: FormDep):
+    with ctx.db.writing() as session:  # a new version of the admin sessions: every admin cookie so far ends
+        admin_mark(session, ctx.settings.admin_password.get_secret_value(), renew=True)
     request.session.pop("admin", None)
+    log.info("admin logout from %s: every admin session ended", request.client.host if request.client else "?")
     return RedirectResponse("/admin/login", status_code=303)
 
 

@@ -21,6 +21,7 @@ from app.context import Context
 from app.database import Database, check_migrated
 from app.security import (
     BodyLimitMiddleware,
+    LoginThrottle,
     SecurityHeadersMiddleware,
     SessionMiddleware,
     csrf_token,
@@ -65,6 +66,9 @@ def create_app(settings: Settings) -> FastAPI:
 
     app = FastAPI(title="Foil survey", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.context = context
+    app.state.login_throttle = LoginThrottle(
+        free_per_client=settings.login_free_attempts, free_overall=settings.login_free_attempts_overall,
+        delay_s=settings.login_delay_s, max_delay_s=settings.login_max_delay_s)
     app.router.routes.extend([*participant_pages.ROUTES, *media.ROUTES])  # first: the pages asked most often
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
     if settings.admin_password is None:

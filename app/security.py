@@ -233,6 +233,78 @@ async def _form(request: Request) -> FormData:
 MAX_FIELDS, MAX_FIELD_CHARS = 64, 32 * 1024
 
 
+class LoginThrottle:
+    """Failed admin logins in this process, per client address and overall. After `free` failures (per client:
+    `free_per_client`; from everyone together: `free_overall`) each further attempt must wait a delay that starts
+    at `delay_s` and doubles with every failure, up to `max_delay_s`; an attempt during the delay is refused
+    without checking the password. A success clears its client's count; counts are forgotten a day after their
+    last failure. With several worker processes each keeps its own counts."""
+
+    FORGET_S = 24 * 3600
+    MAX_CLIENTS = 10_000
+
+    def __init__(self, *, free_per_client: int = 5, free_overall: int = 100, delay_s: float = 1.0,
+                 max_delay_s: float = 900.0, clock=time.monotonic):
+        self.free_per_client, self.free_overall = free_per_client, free_overall
+        self.delay_s, self.max_delay_s = delay_s, max_delay_s
+        self.clock = clock
+        self.clients: dict[str, tuple[int, float]] = {}  # address -> (failures, time of the last one)
+        self.overall: tuple[int, float] = (0, 0.0)
+
+    def _wait(self, count: tuple[int, float], free: int, now: float) -> float:
+        failures, last = count
+        if failures < free or now - last > self.FORGET_S:
+            return 0.0
+        delay = min(self.max_delay_s, self.delay_s * 2.0 ** min(failures - free, 40))
+        return max(0.0, last + delay - now)
+
+    def wait_s(self, client: str) -> float:
+        """Seconds before `client` may try a password again (0: now)."""
+        now = self.clock()
+        return max(self._wait(self.clients.get(client, (0, 0.0)), self.free_per_client, now),
+                   self._wait(self.overall, self.free_overall, now))
+
+    def failed(self, client: str) -> int:
+        """Count a wrong password; returns the client's failures so far."""
+        now = self.clock()
+        failures, last = self.clients.get(client, (0, now))
+        failures = 1 if now - last > self.FORGET_S else failures + 1
+        if client not in self.clients and len(self.clients) >= self.MAX_CLIENTS:
+            self.clients.pop(next(iter(self.clients)))  # the longest unseen
+        self.clients.pop(client, None)
+        self.clients[client] = (failures, now)
+        total, last_any = self.overall
+        self.overall = (1 if now - last_any > self.FORGET_S else total + 1, now)
+        return failures
+
+    def succeeded(self, client: str) -> None:
+        self.clients.pop(client, None)
+
+
+ADMIN_SESSIONS = "admin_sessions"
+
+
+def admin_mark(session, password: str, *, renew: bool = False) -> str:
+    """What an admin's session cookie holds once logged in: an HMAC, keyed by the admin password, of the admin
+    sessions' version kept in the database. Logging out draws a new version (`renew`), which ends every admin
+    session signed before, in every worker; a new password ends them too."""
+    row = session.get(ServerSetting, ADMIN_SESSIONS)
+    if row is None:
+        row = ServerSetting(key=ADMIN_SESSIONS, value=secrets.token_urlsafe(32))
+        session.add(row)
+    elif renew:
+        row.value = secrets.token_urlsafe(32)
+    return hmac.new(password.encode(), row.value.encode(), "sha256").hexdigest()
+
+
+def is_admin(session, password: str, mark) -> bool:
+    """Whether a session cookie's `mark` is the current one (see `admin_mark`)."""
+    row = session.get(ServerSetting, ADMIN_SESSIONS)
+    if row is None or not isinstance(mark, str):
+        return False
+    return hmac.compare_digest(mark, hmac.new(password.encode(), row.value.encode(), "sha256").hexdigest())
+
+
 def unstorable(text: str) -> str | None:
     """What in `text` a text column cannot hold on every database (PostgreSQL refuses NUL, and no database takes
     an unpaired surrogate), in words for a message; None when it can be stored as it is."""
