@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
@@ -32,23 +33,50 @@ from app.database import Database
 from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
 from app.study import ScaleQuestion, Study
 
-# A cell starting with one of these is a formula to Excel, LibreOffice or Google Sheets (tab and carriage
-# return too, in some of them); an apostrophe in front makes it text.
-FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 # Whole cells that pandas (by default) or R read as a missing value, though a participant may type them.
 MISSING_TOKENS = {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN", "<NA>",
                   "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null"}
 FILES = ("long.csv", "wide.csv", "participants.csv")
 
-
-RISKY_FIRST = frozenset(FORMULA_START + ("'",))
+# What a spreadsheet may take for the start of a formula: = + - @, their fullwidth and small forms (which some
+# spreadsheets and input methods turn into the ASCII ones) and the minus sign.
+FORMULA_SIGNS = "=+\\-@\uff1d\uff0b\uff0d\uff20\ufe66\ufe62\ufe63\ufe6b\u2212"
+# A spreadsheet that splits a cell on a comma, semicolon, tab or line break, and trims whitespace, reads a formula
+# from any piece. A piece starts at the cell's start or right after one of these; an apostrophe put there makes
+# the piece text however it is split and trimmed. A piece that starts with an apostrophe gets one too, so that
+# every apostrophe at a piece start in the export is one that was put there.
+_NEEDS_MARK = re.compile(rf"(^|[,;\t\n\r])(?=[^\S\t\n\r]*[{FORMULA_SIGNS}]|')")
+_MARK = re.compile(r"(^|[,;\t\n\r])'")
+_RISKY = re.compile(rf"[{FORMULA_SIGNS}'\x00\u2400]")
+# NUL, which no spreadsheet or PostgreSQL text column keeps, is written as U+2400 (the symbol for null) and a 0;
+# a U+2400 that was typed is doubled.
+NUL_SIGN = "\u2400"
+_NUL_ESCAPE = re.compile(f"{NUL_SIGN}([{NUL_SIGN}0])")
 
 
 def neutralise(text: str) -> str:
-    """Put an apostrophe in front of text a spreadsheet would execute or a reader would take for a missing value,
-    and in front of text that already starts with one, so that the rule reverses exactly: drop the first
-    character of any cell starting with an apostrophe to get what was typed."""
-    return "'" + text if text[:1] in RISKY_FIRST or text in MISSING_TOKENS else text
+    """Text as written to a CSV cell, safe in any spreadsheet and reversible with `restore`: an apostrophe at the
+    start of every piece of the cell (see `_NEEDS_MARK`) that starts, after any whitespace, with a formula sign
+    or with an apostrophe; at the start of a cell that starts with a tab or line break or reads as a missing
+    value; NUL escaped."""
+    if _RISKY.search(text) is None and text[:1] not in ("\t", "\n", "\r") and text not in MISSING_TOKENS:
+        return text  # the common case: nothing to do
+    if "\x00" in text or NUL_SIGN in text:
+        text = text.replace(NUL_SIGN, NUL_SIGN * 2).replace("\x00", NUL_SIGN + "0")
+    marked = _NEEDS_MARK.sub(r"\1'", text)
+    if not marked.startswith("'") and (text[:1] in ("\t", "\n", "\r") or text in MISSING_TOKENS):
+        marked = "'" + marked
+    return marked
+
+
+def restore(cell: str) -> str:
+    """What was typed, from a cell `neutralise` wrote: drop the apostrophe at the start of the cell and right after
+    each comma, semicolon, tab or line break, then turn U+2400 followed by 0 back into NUL and a doubled U+2400
+    into one."""
+    text = _MARK.sub(r"\1", cell)
+    if NUL_SIGN in text:
+        text = _NUL_ESCAPE.sub(lambda m: "\x00" if m[1] == "0" else NUL_SIGN, text)
+    return text
 
 
 def _cell(value) -> str | int | float:
@@ -138,10 +166,17 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
                             "analysed_kinds": list(rules.kinds),
                             "too_fast_threshold_s": rules.threshold_s(median_s),
                             "median_duration_s": median_s},
-        "neutralised_cells": "a text cell starting with = + - @ tab, carriage return or an apostrophe, or one "
-                             "that reads as a missing value (NA, null, None, ...), gets an apostrophe in front; "
-                             "drop the first character of a cell starting with an apostrophe to get the text as "
-                             "typed",
+        "neutralised_cells": "no piece of a cell can start a formula in a spreadsheet, however it splits cells (on a "
+                             "comma, semicolon, tab or line break) or trims spaces: an apostrophe is put at the "
+                             "start of the cell and right after each of those characters where the text then "
+                             "starts, after any spaces, with = + - @ (or their fullwidth forms, or the minus sign) or "
+                             "with an apostrophe; also in front of a cell that starts with a tab or line break or "
+                             "reads as a missing value (NA, null, None, ...). A NUL character is written as U+2400 "
+                             "followed by 0, and a typed U+2400 is doubled. To restore the text as typed: remove the "
+                             "apostrophe at the start of the cell and right after each comma, semicolon, tab or "
+                             "line break (pandas: series.str.replace(r\"(^|[,;\\t\\n\\r])'\", r\"\\1\", "
+                             "regex=True)), then replace U+2400 0 by NUL and U+2400 U+2400 by U+2400 "
+                             "(app.export_csv.restore does both)",
     }
 
 
