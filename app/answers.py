@@ -106,6 +106,16 @@ def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
     out = Checked()
     for name in screen.get("questions", []):
         _check_question(name, study.questions[name], screen, form, out)
+    if screen["kind"] == "instructions":
+        for number, check in enumerate(study.comprehension, start=1):
+            value = _one(form, f"understand{number}")
+            if value not in check.options:
+                out.errors[f"understand{number}"] = "Choose one of the answers."
+            elif value != check.expected:
+                out.errors[f"understand{number}"] = ("That is not right. Read the instructions above again, then "
+                                                     "choose another answer.")
+            else:
+                out.answers[f"understand{number}"] = value
     if screen["kind"] == "attention":
         value = _one(form, "attention")
         if value not in screen["options"]:

@@ -14,9 +14,11 @@ import html
 import json
 import random
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from app.clip_length import clip_shape
 from app.visible import Observer, VisibleClip, contrast
 
 
@@ -30,12 +32,16 @@ class ClipIndex:
         except FileNotFoundError:
             raise ValueError(f"no manifest.json in bundle {root}") from None
         self.clips: dict[str, VisibleClip] = {}
+        self.lengths_ms: dict[str, int] = {}  # what the server holds each clip's answers for
         for entry in manifest.get("clips", []):
             path = root / entry.get("summary", "")
             if not entry.get("summary") or not path.is_file():
                 raise ValueError(f"clip {entry.get('id')!r}: no summary file {path}; the bots judge clips from it")
             summary = json.loads(path.read_text(encoding="utf-8"))
             self.clips[entry["sha256"].lower()] = VisibleClip.of_summary(summary, entry["agents"], entry["labels"])
+            clip_file = root / entry.get("file", "")
+            if entry.get("file") and clip_file.is_file():
+                self.lengths_ms[entry["sha256"].lower()] = clip_shape(clip_file).ms
 
     def at(self, url: str) -> tuple[str, VisibleClip]:
         match = re.search(r"/clips/([0-9a-f]{64})\.mp4", url)
@@ -126,8 +132,8 @@ class PageForm:
                 self.selects[select].append(a["value"])
             elif tag == "textarea":
                 self.textareas.append(a["name"])
-            elif tag == "video":
-                self.video = a.get("src", "")
+            elif tag == "video" and "data-example" not in a and "data-round" not in a:
+                self.video = a.get("src", "")  # the screen's clip; not the instructions' example or a replay
         code = COMPLETION_CODE.search(page)
         self.code = "".join(html.unescape(piece).strip() for piece in ANY_TAG.split(
             page[code.end():page.find("</", code.end())])) if code else ""
@@ -152,9 +158,11 @@ class Bot:
     ranking block."""
 
     def __init__(self, client, clips: ClipIndex, observer: Observer, rng: random.Random, *, number: int,
-                 external_id: str, attentive: bool = True):
+                 external_id: str, attentive: bool = True, link: dict | None = None, fast: bool = False):
         self.client, self.clips, self.observer, self.rng = client, clips, observer, rng
         self.number, self.attentive = number, attentive
+        self.link = {"bot": "1", **(link or {})}  # marks the participant as a bot; `pilot=TOKEN` for the fast mode
+        self.fast = fast  # with the pilot token the server does not hold answers for the clip's playing time
         self.run = BotRun(external_id=external_id)
         self.block: list[tuple[str, dict[str, float]]] = []  # (clip, perceived scores) since the last ranking
 
@@ -170,7 +178,7 @@ class Bot:
         reopens the link, which resumes where the server says this participant is."""
         ids = {"PROLIFIC_PID": self.run.external_id, "STUDY_ID": "simulated", "SESSION_ID": self.run.external_id,
                "workerId": self.run.external_id, "hitId": "simulated", "assignmentId": self.run.external_id}
-        page = self._ok(self.client.get("/", params=ids))
+        page = self._ok(self.client.get("/", params=ids | self.link))
         for _ in range(max_pages):
             form = PageForm(page)
             if form.action == "/consent":
@@ -181,7 +189,12 @@ class Bot:
                 page = self._ok(self.client.post("/condition", data={"csrf_token": form.hidden["csrf_token"],
                                                                      "number": str(self.number % n + 1)}))
             elif "step" in form.hidden:
-                page = self._ok(self.client.post("/study", data=self.answer(form)))
+                shown = time.monotonic()
+                data = self.answer(form)
+                if form.video and not self.fast:  # watch the clip: the server's clock checks it
+                    wait = self.clips.lengths_ms.get(self.clips.at(form.video)[0], 0) / 1000 + 0.2
+                    time.sleep(max(0.0, shown + wait - time.monotonic()))
+                page = self._ok(self.client.post("/study", data=data))
                 if form.selects:  # the ranking is saved; forget its clips only now, so a lost reply can be retried
                     self.block = []
             else:
@@ -284,11 +297,18 @@ class Bot:
 
 
 def simulate(url: str, bundle_dir: str | Path, participants: int, *, noise: float = 0.5, seed: int = 0,
-             inattentive: float = 0.0, first: int = 0) -> list[BotRun]:
-    """Run `participants` bots one after another against the server at `url`; bot k is `bot-SEED-k`.
+             inattentive: float = 0.0, first: int = 0, pilot_token: str = "") -> list[BotRun]:
+    """Run `participants` bots against the server at `url`; bot k is `bot-SEED-k`, recorded as a bot.
+
+    With the study's pilot token (in `url` as `?pilot=TOKEN`, the admin overview's pilot link, or given) the
+    server does not hold a bot's answers for the clips' playing time, and the bots run one after another, fast.
+    Without it each bot waits every clip's real playing time, as a participant must, and all bots run at once.
 
     `inattentive` is the share of bots that answer attention checks at random; `first` numbers the bots from
     there, so a second run against the same study adds new participants instead of resuming finished ones."""
+    from concurrent.futures import ThreadPoolExecutor
+    from urllib.parse import parse_qsl, urlsplit
+
     import httpx
 
     if participants < 1:
@@ -297,14 +317,26 @@ def simulate(url: str, bundle_dir: str | Path, participants: int, *, noise: floa
         raise ValueError("--noise must not be negative and --inattentive must be in [0, 1]")
     clips = ClipIndex(bundle_dir)
     observer = Observer(noise=noise)
-    runs = []
-    for k in range(first, first + participants):
+    parts = urlsplit(url)
+    link = dict(parse_qsl(parts.query))
+    if pilot_token:
+        link["pilot"] = pilot_token
+    fast = bool(link.get("pilot"))
+    base = f"{parts.scheme}://{parts.netloc}{parts.path.rstrip('/')}"
+
+    def one(k: int) -> BotRun:
         rng = random.Random(f"{seed}:bot:{k}")
         attentive = rng.random() >= inattentive
-        with httpx.Client(base_url=url, follow_redirects=True, timeout=60) as client:
-            bot = Bot(client, clips, observer, rng, number=k, external_id=f"bot-{seed}-{k}", attentive=attentive)
-            runs.append(bot.take_study())
-    return runs
+        with httpx.Client(base_url=base, follow_redirects=True, timeout=60) as client:
+            bot = Bot(client, clips, observer, rng, number=k, external_id=f"bot-{seed}-{k}", attentive=attentive,
+                      link=link, fast=fast)
+            return bot.take_study()
+
+    numbers = range(first, first + participants)
+    if fast:
+        return [one(k) for k in numbers]
+    with ThreadPoolExecutor(max_workers=min(participants, 64)) as pool:  # the waits overlap
+        return list(pool.map(one, numbers))
 
 
 def run_simulate(*, url: str, bundle: str | None, participants: int, noise: float, seed: int, inattentive: float,
@@ -319,7 +351,8 @@ def run_simulate(*, url: str, bundle: str | None, participants: int, noise: floa
         raise ValueError("give the study bundle the server serves (--bundle DIR or FOIL_BUNDLE_DIR): the bots "
                          "look at its clips' summaries")
     try:
-        runs = simulate(url, bundle, participants, noise=noise, seed=seed, inattentive=inattentive, first=first)
+        runs = simulate(url, bundle, participants, noise=noise, seed=seed, inattentive=inattentive, first=first,
+                        pilot_token=os.environ.get("FOIL_PILOT_TOKEN", ""))
     except (httpx.HTTPError, BotError) as error:
         raise ValueError(f"the bots could not take the study at {url}: {error}") from None
     done = sum(run.completed for run in runs)

@@ -17,7 +17,7 @@ REASONS = {
     "failed_attention": "failed at least one attention check",
     "too_fast": "completed faster than the time threshold",
     "flagged_by_admin": "flagged for exclusion on the admin pages",
-    "skipped_viewing": "answered a clip sooner than it plays, sped it up, or without it having ended",
+    "skipped_viewing": "answered a clip sooner than it plays, or sped it up before it first ended",
 }
 VIEW_TOLERANCE_MS = 1000  # as the server's own check (app.participant_pages)
 
@@ -82,7 +82,8 @@ def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("re
 def viewing_problems(response, screen: dict) -> dict:
     """How a clip screen was watched, from its response and the plan's screen: the clip's length, time on screen
     (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden; `skipped` when the screen was
-    answered sooner than the clip plays, with playback faster than normal, or without the clip having ended."""
+    answered sooner than the clip plays (by the server's clock), or with playback faster than normal before the
+    clip first ended."""
     events = response.video_events or []
     clip_ms = screen.get("clip_ms")
     hidden_ms, hidden_at = 0, None
@@ -95,8 +96,7 @@ def viewing_problems(response, screen: dict) -> dict:
     first_end = next((i for i, e in enumerate(events) if e["type"] == "ended"), None)
     before_end = events if first_end is None else events[:first_end]
     sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
-    skipped = bool("media" in screen and (
-        first_end is None or sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
+    skipped = bool("media" in screen and (sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
     return {"clip_ms": clip_ms, "seeks": sum(e["type"] == "seek" for e in events),
             "seeks_blocked": sum(e["type"] == "seek_blocked" for e in events),
             "rate_changes": sum(e["type"] == "ratechange" for e in events),

@@ -307,6 +307,9 @@ async def current_page(request: Request):
                           notice=notice if isinstance(notice, str) else "")
 
 
+DETAILS = select(PARTICIPANT.c.details).where(PARTICIPANT.c.id == bindparam("participant"))
+SAVE_DETAILS = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
+    details=bindparam("details"))
 SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bindparam("participant"),
                                                  RESPONSE.c.step == bindparam("step"))
 
@@ -364,7 +367,15 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[di
                 if problem:
                     checked.errors["video"] = problem
             if checked.errors:
+                if any(name.startswith("understand") for name in checked.errors):
+                    details = dict(sql.scalar(DETAILS, {"participant": participant.id}) or {})
+                    details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
+                    sql.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
                 return screen, checked
+            if screen["kind"] == "instructions" and ctx.study.comprehension:
+                details = dict(sql.scalar(DETAILS, {"participant": participant.id}) or {})
+                details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
+                sql.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
             viewport = _one_value(form, "viewport")
             sql.execute(SAVE_RESPONSE, {
                 "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,

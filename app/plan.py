@@ -29,8 +29,11 @@ def _pick(bundle: Bundle, scheme: str, scenario: str, pair: tuple[str, str], rng
 
 
 def _shape(bundle: Bundle, clip: ManifestClip) -> dict:
-    """The clip's playing time and picture size, from its file."""
-    shape = clip_shape(bundle.paths[clip.sha256.lower()])
+    """The clip's playing time and picture size, from its file (nothing for a bundle without its files)."""
+    path = bundle.paths.get(clip.sha256.lower())
+    if path is None:
+        return {}
+    shape = clip_shape(path)
     return {"clip_ms": shape.ms, "width": shape.width, "height": shape.height}
 
 
@@ -100,8 +103,8 @@ def _label_progress(screens: list[dict], part_no: int, n_parts: int) -> None:
             what = f"round {rounds.index(screen['block']) + 1} of {len(rounds)}, "
             what += (f"clip {in_round.index(screen) + 1} of {len(in_round)}" if "media" in screen
                      else "ranking")
-        elif "media" in screen:
-            clips = [s for s in screens if "media" in s]
+        elif "media" in screen and screen["kind"] != "attention":
+            clips = [s for s in screens if "media" in s and s["kind"] != "attention"]
             what = f"clip {clips.index(screen) + 1} of {len(clips)}"
         else:
             what = "a check question"
@@ -131,10 +134,12 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                 screens += _ranking_screens(part, part_no, scheme, scenario, bundle, rng, block=b + 1)
         for c, check in reversed(list(enumerate(study.attention_checks))):
             if check.part == part_no:
-                screens.insert(min(check.after, len(screens)), {
-                    "kind": "attention", "part": part_no, "check": c,
-                    "options": list(check.options), "expected": check.expected,
-                })
+                screen = {"kind": "attention", "part": part_no, "check": c,
+                          "options": list(check.options), "expected": check.expected}
+                if check.clip is not None:  # a video attention check: its clip, watched like any other
+                    clip = bundle.matching(check.clip.scheme, check.clip.scenario, check.clip.agents)[0]
+                    screen |= {"clip": clip.id, "media": clip.sha256.lower(), **_shape(bundle, clip)}
+                screens.insert(min(check.after, len(screens)), screen)
         _label_progress(screens, part_no, len(study.parts))
         for screen in screens:
             for robot in screen.get("robots", []):

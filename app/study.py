@@ -176,16 +176,34 @@ Part = Annotated[PairwisePart | RankingPart, Field(discriminator="kind")]
 
 
 class AttentionCheck(Strict):
-    """An instructed-response item shown after screen `after` of part `part` (both counted from 1)."""
+    """An instructed-response item shown after screen `after` of part `part` (both counted from 1). With `clip`,
+    a video attention check: the clip is shown (and must be watched) and the question has a known answer about
+    what it visibly shows (say, whether a robot crashed)."""
 
     part: Annotated[int, Field(ge=1)]
     after: Annotated[int, Field(ge=0)]
     text: Text
     options: Annotated[list[Text], Field(min_length=2)]
     expected: Text
+    clip: ClipRef | None = None
 
     @model_validator(mode="after")
     def _expected_is_an_option(self) -> AttentionCheck:
+        if self.expected not in self.options:
+            raise ValueError(f"expected {self.expected!r} is not one of the options")
+        return self
+
+
+class ComprehensionCheck(Strict):
+    """A question about the instructions, asked on the instructions page; the participant goes on only once it is
+    answered right (every attempt is counted on their record)."""
+
+    text: Text
+    options: Annotated[list[Text], Field(min_length=2)]
+    expected: Text
+
+    @model_validator(mode="after")
+    def _expected_is_an_option(self) -> ComprehensionCheck:
         if self.expected not in self.options:
             raise ValueError(f"expected {self.expected!r} is not one of the options")
         return self
@@ -200,6 +218,7 @@ class Study(Strict):
     parts: Annotated[list[Part], Field(min_length=1)]
     questions: dict[str, Question]
     attention_checks: list[AttentionCheck] = []
+    comprehension: list[ComprehensionCheck] = []
     build: dict | None = None  # read by `foil bundle`, not by the server
 
     def consent_version(self) -> str:

@@ -81,9 +81,12 @@ def test_bots_take_the_study_and_the_report_counts_their_answers(live_server, bu
     assert 0 < analysed < len(runs)  # some bots failed the check, some passed
 
     db = analysis_database(db_url)
-    data = tally_study(db, parse_study(study_file.read_text()), ExclusionRules(min_seconds=0))
+    by_default = tally_study(db, parse_study(study_file.read_text()), ExclusionRules(min_seconds=0))
+    assert by_default.exclusions.after == 0 and by_default.exclusions.per_reason["pilot_or_bot"] == 8  # bots out
+    data = tally_study(db, parse_study(study_file.read_text()), ExclusionRules(min_seconds=0, include_kinds=("bot",)))
     db.dispose()
     assert data.exclusions.before == 8 and data.exclusions.after == analysed
+    assert data.exclusions.per_reason["skipped_viewing"] == 0  # without the pilot token the bots waited
     for task in ("pairwise", "ranking"):
         for scheme in SCHEMES:
             tally = data.tally(task, ALL, scheme)
