@@ -7,8 +7,9 @@ import shutil
 import tempfile
 import zipfile
 from pathlib import Path
+from typing import Annotated
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import FileResponse, HTMLResponse, StreamingResponse
 from starlette.background import BackgroundTask
 
@@ -24,6 +25,11 @@ REPORT_POLICY = ("default-src 'none'; style-src 'unsafe-inline'; img-src data:; 
                  "form-action 'none'; frame-ancestors 'none'")
 
 
+# Numbers from the query string: finite and in range, or the request is refused with a message naming the field.
+MinSeconds = Annotated[float | None, Query(ge=0, le=7 * 24 * 3600, allow_inf_nan=False)]
+MedianFraction = Annotated[float, Query(ge=0, lt=1, allow_inf_nan=False)]
+
+
 def _rules(min_seconds: float | None, median_fraction: float) -> ExclusionRules:
     try:
         return ExclusionRules(min_seconds=min_seconds, median_fraction=median_fraction)
@@ -32,8 +38,11 @@ def _rules(min_seconds: float | None, median_fraction: float) -> ExclusionRules:
 
 
 @router.get("/report")
-def report_page(ctx: ContextDep, min_seconds: float | None = None, median_fraction: float = 1 / 3):
-    html = render_report(tally_study(ctx.db, ctx.study, _rules(min_seconds, median_fraction)))
+def report_page(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3):
+    data = tally_study(ctx.db, ctx.study, _rules(min_seconds, median_fraction))
+    data.audits = {clip.id: clip.audit.model_dump() for clip in ctx.bundle.clips.values()
+                   if getattr(clip, "audit", None) is not None}
+    html = render_report(data)
     return HTMLResponse(html, headers={"content-security-policy": REPORT_POLICY})
 
 
@@ -45,7 +54,7 @@ def long_csv(ctx: ContextDep):
 
 
 @router.get("/export.zip")
-def export_zip(ctx: ContextDep, min_seconds: float | None = None, median_fraction: float = 1 / 3):
+def export_zip(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3):
     """`foil export` into a temporary folder, zipped; both are deleted once the download has been sent."""
     rules = _rules(min_seconds, median_fraction)
     folder = Path(tempfile.mkdtemp(prefix="foil-export-"))

@@ -65,6 +65,8 @@ class ReportData:
     accuracy: dict[tuple[str, str, str], Tally]  # (task, scope, scheme) -> tally; scope ALL or a scenario
     unscored_rankings: int  # rankings whose clips gave no strict true order
     ratings: dict[str, dict[str, Counter]]  # scale question -> scheme -> point -> answers
+    per_clip: dict[str, dict] = field(default_factory=dict)  # clip id -> scheme, scenario, agents, Tally
+    audits: dict[str, dict] = field(default_factory=dict)  # clip id -> the manifest's audit, when known
 
     @property
     def schemes(self) -> list[str]:
@@ -98,6 +100,7 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     ratings = {name: {scheme: Counter() for scheme in study.design.schemes}
                for name, q in study.questions.items() if isinstance(q, ScaleQuestion)}
     unscored = 0
+    per_clip: dict[str, dict] = {}
     for record in participant_records(db, study.study.id):
         flags = exclusion_flags(record.participant, threshold, record.responses, rules)
         exclusions.before += 1
@@ -112,6 +115,12 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                     unscored += 1
                     continue
                 task = "pairwise" if kind == "choose" else "ranking"
+                if task == "pairwise" and row.get("clip"):
+                    entry = per_clip.setdefault(row["clip"], {"scheme": row["scheme"], "scenario": row["scenario"],
+                                                             "agents": " vs ".join(sorted(row["agents"].split(";"))),
+                                                             "better": row["truth"], "tally": Tally()})
+                    entry["tally"].correct += row["correct"]
+                    entry["tally"].incorrect += 1 - row["correct"]
                 for scope in (ALL, row["scenario"]):
                     tally = accuracy[(task, scope, row["scheme"])]
                     tally.correct += row["correct"]
@@ -119,13 +128,35 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
             elif kind == "scale" and row["scheme"] in ratings[row["question"]]:
                 ratings[row["question"]][row["scheme"]][row["value"]] += 1
     return ReportData(study=study, exclusions=exclusions, accuracy=dict(accuracy), unscored_rankings=unscored,
-                      ratings=ratings)
+                      ratings=ratings, per_clip=dict(sorted(per_clip.items())), audits=_audits())
+
+
+def _audits(bundle_dir: str | None = None) -> dict[str, dict]:
+    """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest, when the
+    bundle is known (FOIL_BUNDLE_DIR, or the served bundle on the admin pages)."""
+    import json
+    import os
+
+    folder = bundle_dir or os.environ.get("FOIL_BUNDLE_DIR")
+    if not folder:
+        return {}
+    try:
+        manifest = json.loads((Path(folder) / "manifest.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return {clip["id"]: clip["audit"] for clip in manifest.get("clips", [])
+            if isinstance(clip.get("audit"), dict) and "id" in clip}
 
 
 # Tables ------------------------------------------------------------------------------------------------------
 
 def _number(value: float | None, digits: int = 4) -> str | float:
     return "" if value is None else round(value, digits)
+
+
+def _significant(value: float | None, digits: int = 3) -> str | float:
+    """A p-value to 3 significant digits."""
+    return "" if value is None else float(f"{value:.{digits}g}")
 
 
 def table1_rows(data: ReportData) -> list[dict]:
@@ -149,7 +180,7 @@ def accuracy_test_rows(data: ReportData) -> list[dict]:
         for task in TASKS:
             result = data.accuracy_test(task, scope)
             rows.append({"scope": scope, "task": task, "test": result.test, "statistic": _number(result.statistic),
-                         "p_value": _number(result.p_value, 6), "odds_ratio": _number(result.effect)})
+                         "p_value": _significant(result.p_value), "odds_ratio": _number(result.effect)})
     return rows
 
 
@@ -173,7 +204,7 @@ def rating_test_rows(data: ReportData) -> list[dict]:
         result = data.rating_test(name)
         counts = {f"n_{scheme}": sum(data.ratings[name][scheme].values()) for scheme in data.schemes}
         rows.append({"question": name, "test": result.test, "statistic": _number(result.statistic),
-                     "p_value": _number(result.p_value, 6), "rank_biserial": _number(result.effect), **counts})
+                     "p_value": _significant(result.p_value), "rank_biserial": _number(result.effect), **counts})
     return rows
 
 
@@ -202,14 +233,14 @@ def _pyplot():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    plt.rcParams.update({"svg.hashsalt": "foil", "svg.fonttype": "none", "font.size": 9})
+    plt.rcParams.update({"svg.hashsalt": "foil", "svg.fonttype": "none", "font.size": 12})
     return plt
 
 
 def distribution_figure(data: ReportData, name: str, question: ScaleQuestion):
     """The paper's Figure 3 for any scale question: the share of answers at each point, one bar per scheme."""
     plt = _pyplot()
-    figure, axes = plt.subplots(figsize=(6.4, 3.2))
+    figure, axes = plt.subplots(figsize=(7.5, 4.2))
     labels = question.point_labels()
     width = 0.8 / max(1, len(data.schemes))
     any_answers = False
@@ -223,7 +254,7 @@ def distribution_figure(data: ReportData, name: str, question: ScaleQuestion):
     axes.set_xticks(range(1, question.points + 1),
                     [f"{p}\n{label}" if not label.isdigit() else str(p) for p, label in enumerate(labels, 1)])
     axes.set_ylabel("% of answers")
-    axes.set_title(textwrap.fill(question.text, 80), fontsize=9)
+    axes.set_title(textwrap.fill(question.text, 60), fontsize=12)
     if any_answers:
         axes.legend(frameon=False)
     else:
@@ -246,7 +277,7 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
     of the scale (disagreement to the left, agreement to the right)."""
     plt = _pyplot()
     n = max(1, len(questions))
-    figure, axes_list = plt.subplots(1, n, figsize=(5.2 * n, 1.5 + 0.6 * len(data.schemes)), squeeze=False)
+    figure, axes_list = plt.subplots(1, n, figsize=(6.0 * n, 2.6 + 0.7 * len(data.schemes)), squeeze=False)
     for axes, (name, question) in zip(axes_list[0], questions, strict=False):
         colours = _likert_colours(question.points)
         middle = question.points / 2 + 0.5  # the neutral point (odd scales) or the gap between the halves
@@ -266,13 +297,13 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
         axes.set_yticks(range(len(data.schemes)), ticks)
         axes.set_xlim(-100, 100)
         axes.set_xlabel("% of answers (disagreement left, agreement right)")
-        axes.set_title(textwrap.fill(question.text, 60), fontsize=9)
+        axes.set_title(textwrap.fill(question.text, 45), fontsize=12)
         axes.invert_yaxis()
         axes.spines[["top", "right", "left"]].set_visible(False)
     handles, labels = axes_list[0][0].get_legend_handles_labels()
     if handles:
-        figure.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=8)
-    figure.tight_layout(rect=(0, 0.12, 1, 1))
+        figure.legend(handles, labels, loc="lower center", ncol=min(len(labels), 3), frameon=False, fontsize=12)
+    figure.tight_layout(rect=(0, 0.22, 1, 1))
     return figure
 
 
@@ -294,7 +325,7 @@ def _save(figure, out: Path, stem: str) -> str:
 def _template_env() -> Environment:
     env = Environment(loader=FileSystemLoader(str(REPO_ROOT / "templates")), autoescape=select_autoescape())
     env.filters["percent"] = lambda value: "–" if value is None else f"{100 * value:.2f}%"
-    env.filters["p"] = lambda value: "–" if value is None else ("< 0.0001" if value < 1e-4 else f"{value:.4f}")
+    env.filters["p"] = lambda value: "–" if value is None else ("< 0.001" if value < 1e-3 else f"{value:.3g}")
     env.filters["num"] = lambda value: "–" if value is None else f"{value:.3g}"
     return env
 
@@ -322,7 +353,8 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
                 _write_csv(folder / name, rows)
         html = _template_env().get_template("report.html").render(
             data=data, tasks=TASKS, all_scopes=ALL, figures=figures, exclusion_rows=tables["exclusions.csv"],
-            rating_tests=tables["rating_tests.csv"], tables=list(tables) if out is not None else [])
+            rating_tests=tables["rating_tests.csv"], tables=list(tables) if out is not None else [],
+            files=out is not None, likert=bool(labelled))
         if out is not None:
             (folder / "report.html").write_text(html, encoding="utf-8")
     return html

@@ -44,8 +44,12 @@ def accuracy_difference(counts: dict[str, tuple[int, int]]) -> TestResult:
         return TestResult("not tested: fewer than two schemes have answers")
     if len(table) == 2:
         odds, p = stats.fisher_exact(table, alternative="two-sided")
-        odds = None if math.isnan(odds) else float(odds)  # 0/0: every answer in one column
-        return TestResult("Fisher's exact test, two-sided", statistic=odds, p_value=float(p), effect=odds)
+        (a, b), (c, d) = table
+        if 0 in (a, b, c, d):  # Haldane-Anscombe: add 0.5 to every cell, so the odds ratio is finite
+            a, b, c, d = a + 0.5, b + 0.5, c + 0.5, d + 0.5
+        effect = (a * d) / (b * c)
+        return TestResult("Fisher's exact test, two-sided; odds ratio with the Haldane-Anscombe correction (0.5 "
+                          "added to every cell) when a cell is 0", statistic=effect, p_value=float(p), effect=effect)
     if all(c == 0 for c, _ in table) or all(i == 0 for _, i in table):
         return TestResult("Pearson's chi-square test: every answer is in one column, so no difference", 0.0, 1.0)
     chi2, p, dof, _ = stats.chi2_contingency(table, correction=False)

@@ -70,7 +70,8 @@ class Texts(Strict):
     agree: Text = "I agree to take part"
     decline: Text = "I do not agree"
     declined: Text = "You chose not to take part. Thank you for your time; you can close this page."
-    completion: Text = "Thank you! You have finished the study."
+    completion: Text = "Thank you for taking part."
+    debrief: str = ""  # shown on the completion page: what the study was about
     preview: Text = "Accept the HIT to start the study."
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
