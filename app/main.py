@@ -7,11 +7,13 @@ import logging
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import RedirectResponse
+from fastapi.responses import PlainTextResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from jinja2 import Environment, FileSystemLoader
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
+from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.requests import ClientDisconnect
 
 from app import admin_pages, analysis_pages, media, participant_pages
 from app.answer_table import remember_study
@@ -92,15 +94,34 @@ def create_app(settings: Settings) -> FastAPI:
 
     @app.exception_handler(RequestValidationError)
     async def _bad_request(request: Request, error: RequestValidationError):
-        fields = ", ".join(str(e["loc"][-1]) for e in error.errors())
+        fields = "; ".join(f"{e['loc'][-1]} ({e['msg'].lower()})" for e in error.errors())
         return context.message(request, "Bad request", f"The request is missing or has invalid fields: {fields}.",
                                status_code=400)
 
+    @app.exception_handler(ClientDisconnect)
+    async def _gone(request: Request, error: ClientDisconnect):
+        log.info("%s %s from %s: the client left before its request had arrived", request.method, request.url.path,
+                 request.client.host if request.client else "?")
+        return Response(status_code=400)  # nobody reads it
+
+    security_headers = SecurityHeadersMiddleware(app, frame_ancestors=settings.frame_ancestors)
+
+    @app.exception_handler(Exception)
+    async def _server_error(request: Request, error: Exception):
+        # Starlette's outermost layer sends this (and logs the error): the middlewares below never see it.
+        return PlainTextResponse("Something went wrong on the server. What you had already submitted is saved; "
+                                 "please go back and try again in a moment.", status_code=500,
+                                 headers={name.decode(): value.decode() for name, value in security_headers.headers})
+
+    app.router.redirect_slashes = False  # its redirect is built from the Host header
+    # Innermost first: every reply, the body limit's 413 and the host check's 400 included, gets the headers.
     app.add_middleware(SessionMiddleware, secret_key=_cookie_secret(settings, db), session_cookie="foil_session",
                        max_age=settings.session_max_age_s, same_site=settings.cookie_samesite,
                        https_only=settings.cookie_secure, sessionless=("/clips/", "/static/"))
-    app.add_middleware(SecurityHeadersMiddleware, frame_ancestors=settings.frame_ancestors)
     app.add_middleware(BodyLimitMiddleware, limit=settings.max_body_bytes)
+    if settings.allowed_hosts != ["*"]:
+        app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.allowed_hosts, www_redirect=False)
+    app.add_middleware(SecurityHeadersMiddleware, frame_ancestors=settings.frame_ancestors)
     return app
 
 

@@ -9,7 +9,8 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 
 from app.database import migrate
-from app.settings import Settings
+from app.settings import Settings, TransportLimits
+from app.transport import survey_protocol
 
 
 def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: str, port: int) -> int:
@@ -29,7 +30,9 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
         "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/",
         app.state.context.study.study.id, settings.study_path(), settings.bundle_dir,
         _shown(settings.database_url), host, port)
-    uvicorn.run(app, host=host, port=port, proxy_headers=True, server_header=False, access_log=settings.access_log)
+    limits = TransportLimits()
+    uvicorn.run(app, host=host, port=port, proxy_headers=True, server_header=False, access_log=settings.access_log,
+                http=survey_protocol(limits), timeout_keep_alive=limits.keep_alive_s)
     return 0
 
 

@@ -11,6 +11,23 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
+class TransportLimits(BaseSettings):
+    """What the HTTP server accepts (app.transport), from the same FOIL_* variables; `foil serve` applies them,
+    and so does uvicorn's command line with `--http app.transport:SurveyHttpProtocol`."""
+
+    model_config = SettingsConfigDict(env_prefix="FOIL_", extra="ignore")
+
+    # The request line and header fields together; a browser sends 1-2 KB here (the session cookie is small).
+    max_header_bytes: int = Field(default=16 * 1024, ge=1024)
+    max_headers: int = Field(default=64, ge=8)
+    # From the first byte of a request (or the connection's opening) to its last: a form is at most
+    # FOIL_MAX_BODY_BYTES, which even a poor mobile connection sends in a few seconds.
+    request_timeout_s: float = Field(default=20.0, gt=0, le=3600, allow_inf_nan=False)
+    # How long a connection stays open between requests (uvicorn's timeout_keep_alive): long enough for a page's
+    # stylesheet, script and clip requests, not for the minutes a participant spends on a page.
+    keep_alive_s: int = Field(default=5, ge=1, le=300)
+
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="FOIL_", extra="ignore")
 
@@ -36,6 +53,9 @@ class Settings(BaseSettings):
     login_free_attempts_overall: int = Field(default=100, ge=1)
     login_delay_s: float = Field(default=1.0, gt=0, allow_inf_nan=False)
     login_max_delay_s: float = Field(default=900.0, gt=0, allow_inf_nan=False)
+    # Host names the server answers to (Starlette's TrustedHostMiddleware; other Host headers get 400), as a JSON
+    # list: FOIL_ALLOWED_HOSTS='["survey.example.org"]'. No reply is built from the Host header in any case.
+    allowed_hosts: list[str] = ["*"]
     templates_dir: Path = REPO_ROOT / "templates"
     static_dir: Path = REPO_ROOT / "static"
 
