@@ -163,6 +163,14 @@
       if (!watched && video.playbackRate !== 1) video.playbackRate = 1;
     });
     video.addEventListener("ended", function () {
+      if (!watched && video.duration && furthest + 1.5 < video.duration) {  // reached by a skip, not by playing
+        record("seek_blocked", video.currentTime);
+        undoing = true;
+        video.currentTime = furthest;
+        button.textContent = "Play clip";
+        say("Please watch the whole clip once before skipping ahead. Press Play clip to go on.", true);
+        return;
+      }
       record("ended");
       watched = true;
       if (gated) { state.watched = true; save(); }
