@@ -59,6 +59,8 @@ class Walker:
             return "complete"
         if page.locator("select[name^=ranking]").count():
             return "ranking"
+        if self.step() == 0:
+            return "instructions"
         if page.locator("[data-answers]").count():
             return "clip"
         if self.step() is not None:
@@ -147,6 +149,8 @@ class Walker:
             self.page.check(f"input[name=number][value='{choice % 4 + 1}']")
             self.submit(double=double)
         elif kind == "instructions":
+            if self.page.locator("video").count():  # the example is watched before the study starts
+                self.watch()
             self.submit(double=double)
         elif kind == "clip":
             self.watch()
