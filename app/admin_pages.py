@@ -106,13 +106,23 @@ def _overview(ctx: Context, participants: list[Participant]) -> dict:
             "n_completed": len(durations)}
 
 
+PAGE_SIZE = 50
+
+
 @router.get("", dependencies=[Admin])
-def overview(request: Request, ctx: ContextDep):
+def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1):
+    from app.kinds import pilot_token
+
     with ctx.db.reading() as session:
         participants = list(session.scalars(
             select(Participant).where(Participant.study == ctx.study.study.id).order_by(Participant.id.desc())))
+    shown = [p for p in participants if not status or p.status == status or p.kind == status]
+    pages = max(1, -(-len(shown) // PAGE_SIZE))
+    page = min(max(1, page), pages)
+    pilot = f"{str(request.base_url).rstrip('/')}/?pilot={pilot_token(ctx.db, ctx.study.study.id)}"
     return ctx.render(request, "admin/overview.html", statuses=STATUSES, participants=participants,
-                      **_overview(ctx, participants))
+                      shown=shown[(page - 1) * PAGE_SIZE:page * PAGE_SIZE], status=status, page=page, pages=pages,
+                      n_shown=len(shown), pilot_link=pilot, **_overview(ctx, participants))
 
 
 def _participant(session, ctx: Context, code: str) -> Participant:

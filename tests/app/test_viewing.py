@@ -12,8 +12,8 @@ import imageio_ffmpeg
 import pytest
 from sqlalchemy import select
 
-from app.export_csv import export_study
 from app.exclusions import ExclusionRules
+from app.export_csv import export_study
 from app.kinds import pilot_token
 from app.models import Participant, Response
 from app.report import tally_study
