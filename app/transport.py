@@ -76,7 +76,7 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
         self._deadline = None
         if self.transport.is_closing():
             return
-        client = "%s:%d" % self.client if self.client else "a client"
+        client = "{}:{}".format(*self.client) if self.client else "a client"
         if self._in_head:
             log.info("%s sent no complete request within %s s: closed with 408", client,
                      self.limits.request_timeout_s)
@@ -110,7 +110,8 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
         if self._refused is None:
             super().send_400_response(msg)
             return
-        log.info("%s: refused with 431: %s", "%s:%d" % self.client if self.client else "a client", self._refused)
+        log.info("%s: refused with 431: %s", "{}:{}".format(*self.client) if self.client else "a client",
+                 self._refused)
         self._reply(431, self._refused)
 
     def _reply(self, status: int, text: str) -> None:

@@ -10,7 +10,7 @@ from collections import Counter
 from datetime import UTC, datetime
 
 import pytest
-from sqlalchemy import bindparam, insert, select
+from sqlalchemy import insert, select
 
 from app.assignment import condition_for_slot, conditions, next_slot
 from app.database import Database
@@ -21,13 +21,15 @@ from tests.live_server import LiveServer
 from tests.robustness.crowd import LoopbackClient
 
 ARRIVALS = 500
-ENTER = insert(Participant.__table__).values(
-    {name: bindparam(name) for name in ("code", "study", "platform", "status", "slot", "step", "step_started_at",
-                                        "user_agent", "created_at", "excluded", "exclusion_note",
-                                        "attention_failures")})
-PARTICIPANT_ROW = {"study": "paper", "platform": "none", "status": "started", "step": 0, "user_agent": "",
-                   "step_started_at": datetime.now(UTC), "created_at": datetime.now(UTC), "excluded": False,
-                   "exclusion_note": "", "attention_failures": 0}
+
+
+def participant_row(code: str, slot: int) -> dict:
+    """A participant's row with every column the table needs: its scalar defaults and the given values."""
+    row = {column.name: column.default.arg for column in Participant.__table__.c
+           if column.default is not None and column.default.is_scalar}
+    now = datetime.now(UTC)
+    return {**row, "code": code, "study": "paper", "platform": "none", "slot": slot, "step_started_at": now,
+            "created_at": now, "user_agent": ""}
 
 
 @pytest.mark.slow
@@ -97,7 +99,7 @@ def test_a_second_arrival_waits_for_the_first_and_takes_the_next_slot(make_clien
             if slot_claimed is not None:
                 slot_claimed.set()
                 second_done.wait(timeout=1.0)  # the second arrival is under way meanwhile
-            sql.execute(ENTER, {**PARTICIPANT_ROW, "code": name, "slot": slots[name]})
+            sql.execute(insert(Participant.__table__).values(participant_row(name, slots[name])), {})
 
     first = threading.Thread(target=arrival, args=("first", first_claimed))
     first.start()
