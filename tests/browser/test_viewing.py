@@ -121,7 +121,8 @@ def test_reload_keeps_the_text_the_choices_and_the_watched_clip(long_server, new
     page.reload()
     page.wait_for_function("() => document.querySelector('video').readyState >= 2")
     assert page.input_value("textarea[name=justification]") == "It kept its distance"
-    assert page.is_checked("input[name=difficulty][value='4']") and page.is_checked(f"input[name=better][value='{better}']")
+    assert page.is_checked("input[name=difficulty][value='4']")
+    assert page.is_checked(f"input[name=better][value='{better}']")
     assert page.locator(NEXT).is_enabled()  # still unlocked
     page.click("[data-play]")  # a second viewing after the reload
     page.wait_for_function("() => document.querySelector('video').ended", timeout=20_000)
