@@ -10,6 +10,7 @@ import torch
 
 from search.coupled import CoupledSimulator
 from search.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
+from search.policies import ROBOT_NODE_SIZE
 from search.scenarios import Scenario
 from tests.agents.conftest import SMALL, make_net, random_observation
 
@@ -75,7 +76,7 @@ def test_sequence_forward_matches_stepping_with_resets(net):
     """PPO's sequence pass and the acting step agree, including hidden states zeroed at episode starts."""
     t, b, n = 5, 3, SMALL.max_humans
     torch.manual_seed(1)
-    inputs = (torch.randn(t, b, 7), torch.randn(t, b, 2), torch.randn(t, b, n, 2), torch.ones(t, b, n))
+    inputs = (torch.randn(t, b, ROBOT_NODE_SIZE), torch.randn(t, b, 2), torch.randn(t, b, n, 2), torch.ones(t, b, n))
     starts = torch.zeros(t, b)
     starts[2, 1] = 1.0
     hidden = [torch.randn_like(h) for h in net.initial_state(b)]
@@ -95,7 +96,7 @@ def sequence_with_absent_humans_and_resets(net: DSRNN, t: int = 6, b: int = 3):
     n = net.max_humans
     torch.manual_seed(2)
     mask = (torch.rand(t, b, n) > 0.3).float()
-    inputs = (torch.randn(t, b, 7), torch.randn(t, b, 2), torch.randn(t, b, n, 2), mask)
+    inputs = (torch.randn(t, b, ROBOT_NODE_SIZE), torch.randn(t, b, 2), torch.randn(t, b, n, 2), mask)
     starts = torch.zeros(t, b)
     starts[3, 0] = starts[1, 2] = 1.0
     hidden = [torch.randn_like(h) for h in net.initial_state(b)]
