@@ -150,6 +150,9 @@ def required_clips(study: Study) -> list[tuple[ClipRef, str]]:
             for scheme in study.design.schemes:
                 for pair in pairs:
                     refs.append((ClipRef(scheme=scheme, scenario=scenario, agents=tuple(pair)), f"parts[{p}]"))
+    for c, check in enumerate(study.attention_checks):
+        if check.clip is not None:  # a video attention check
+            refs.append((check.clip, f"attention_checks[{c}] (a video attention check's clip)"))
     return refs
 
 

@@ -76,3 +76,35 @@ def test_ranking_clips_must_label_each_robot_once(bundle_copy):
     edit_manifest(bundle_copy, relabel)
     with pytest.raises(BundleError, match="a ranking needs one label per robot"):
         check_study_against_bundle(parse_study(study_text()), load_bundle(bundle_copy))
+
+
+VIDEO_CHECK = '''""
+[[attention_checks]]
+part = 1
+after = 1
+text = "Did one of the robots touch a person?"
+options = ["Yes", "No"]
+expected = "Yes"
+clip = {{scheme = "{scheme}", scenario = "scenarioexamplesecret", agents = ["agentlowsecret", "agenthighsecret"]}}'''
+
+
+def test_a_video_attention_checks_clip_must_be_in_the_bundle(bundle_dir):
+    bundle = load_bundle(bundle_dir)
+    present = parse_study(study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret")))
+    check_study_against_bundle(present, bundle)
+    missing = parse_study(study_text(contact=VIDEO_CHECK.format(scheme="schemeadaptivesecret")))
+    with pytest.raises(BundleError, match=r"attention_checks\[0\] \(a video attention check's clip\) needs a clip of "
+                                          "scheme 'schemeadaptivesecret', scenario 'scenarioexamplesecret', agents "
+                                          "'agentlowsecret' and 'agenthighsecret'; the manifest has none"):
+        check_study_against_bundle(missing, bundle)
+
+
+def test_the_server_does_not_start_without_the_video_attention_checks_clip(tmp_path, bundle_dir):
+    from app.main import create_app
+    from app.settings import Settings
+
+    study = tmp_path / "study.toml"
+    study.write_text(study_text(contact=VIDEO_CHECK.format(scheme="schemeadaptivesecret")))
+    settings = Settings(bundle_dir=bundle_dir, study_file=study, database_url=f"sqlite:///{tmp_path / 'db.sqlite3'}")
+    with pytest.raises(BundleError, match=r"attention_checks\[0\] \(a video attention check's clip\)"):
+        create_app(settings)
