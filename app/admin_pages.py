@@ -133,15 +133,34 @@ def _participant(session, ctx: Context, code: str) -> Participant:
     return participant
 
 
+SCREEN_NAMES = {"instructions": "Instructions", "closing": "Closing questions"}
+
+
+def shown_as(plan: list[dict], step: int) -> str:
+    """A screen named as its participant saw it: the line above it ("Part 1 of 2, clip 3 of 6"; in a ranking part
+    "Part 2 of 2, round 1 of 2, ranking"), not its index in the plan."""
+    if step >= len(plan):
+        return "finished"
+    screen = plan[step]
+    if screen.get("progress"):
+        return screen["progress"]
+    if screen["kind"] in SCREEN_NAMES:
+        return SCREEN_NAMES[screen["kind"]]
+    return f"Part {screen['part']}, {screen['kind']}" if "part" in screen else screen["kind"]
+
+
 @router.get("/participants/{code}", dependencies=[Admin])
 def participant_page(code: str, request: Request, ctx: ContextDep):
     with ctx.db.reading() as session:
         participant = _participant(session, ctx, code)
         rows = list(long_rows(ctx.study, ParticipantRecord(participant, list(participant.responses))))
+    plan = participant.plan or []
+    for row in rows:
+        row["shown_as"] = shown_as(plan, row["step"])
     condition = None if participant.condition is None else ctx.conditions[participant.condition]
     return ctx.render(request, "admin/participant.html", participant=participant, rows=rows,
                       condition=condition.describe(ctx.study) if condition else "not assigned yet",
-                      steps=len(participant.plan or []))
+                      steps=len(plan), current=shown_as(plan, participant.step) if plan else "")
 
 
 @router.post("/participants/{code}/exclusion", dependencies=[Admin])

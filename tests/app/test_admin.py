@@ -122,3 +122,26 @@ def test_csv_neutralises_spreadsheet_formulas(make_client):
     log_in(client)
     rows = list(csv.DictReader(io.StringIO(client.get("/admin/export.csv").text)))
     assert [r["answer"] for r in rows if r["question"] == "justification"] == ["'=1+1"]
+
+
+def test_participant_page_names_screens_as_the_participant_saw_them(make_client):
+    client = make_client(BALANCED)
+    finisher = TestClient(client.app)
+    finish(finisher, start(finisher, "?PROLIFIC_PID=done1&STUDY_ID=s&SESSION_ID=a"))
+    halfway = TestClient(client.app)
+    page = start(halfway, "?PROLIFIC_PID=half2&STUDY_ID=s&SESSION_ID=b")
+    halfway.post("/study", data=answer_for(page))
+    finished, started = stored(client, Participant)
+    log_in(client)
+
+    detail = client.get(f"/admin/participants/{finished.code}").text
+    cells = [cell.split("</td>")[0] for cell in detail.split("<tbody>")[1].split("<tr>")[1:] for cell in
+             [cell.split("<td>", 1)[1]]]
+    assert cells[0] == "Instructions"
+    assert "Part 1 of 2, clip 1 of 6" in cells and "Part 1 of 2, clip 6 of 6" in cells
+    assert "Part 2 of 2, round 1 of 2, clip 3 of 3" in cells and "Part 2 of 2, round 2 of 2, ranking" in cells
+    assert not any("ranking 4" in cell or "pairwise" in cell for cell in cells)  # no plan indices, no kinds
+    assert f"all {len(finished.plan)} answered" in detail
+
+    current = client.get(f"/admin/participants/{started.code}").text
+    assert f"2 of {len(started.plan)}: Part 1 of 2, clip 1 of 6" in current
