@@ -36,7 +36,8 @@ def _serve(args: argparse.Namespace) -> int:
 def _exclusion_rules(args: argparse.Namespace):
     from app.exclusions import ExclusionRules
 
-    return ExclusionRules(min_seconds=args.min_seconds, median_fraction=args.median_fraction)
+    return ExclusionRules(min_seconds=args.min_seconds, median_fraction=args.median_fraction,
+                          include_kinds=tuple(_names(args.include)))
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -173,6 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "fraction of the median, see --median-fraction; 0: no time rule)")
         command.add_argument("--median-fraction", type=float, default=1 / 3,
                              help="exclude completions faster than this fraction of the median (default 1/3)")
+        command.add_argument("--include", default="", metavar="KINDS",
+                             help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
+                             "(default: none; pilots and bots are left out)")
         command.set_defaults(handler=handler)
 
     simulate = sub.add_parser("simulate", help="bot participants take the study through a running server")

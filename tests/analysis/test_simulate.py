@@ -109,6 +109,15 @@ def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "2 participants" in out and (tmp_path / "report" / "report.html").exists()
     assert (tmp_path / "export" / "wide.csv").read_text().count("\n") == 3
+    # the bots are left out of the analysis unless asked for
+    assert json.loads((tmp_path / "export" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] \
+        == ["real"]
+    assert main(["export", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "with-bots"),
+                 "--include", "bot"]) == 0
+    assert json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] \
+        == ["real", "bot"]
+    assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "x"),
+                 "--include", "robots"]) == 2
     # errors are named, not raised
     assert main(["report", "--db", f"sqlite:///{tmp_path / 'nope.sqlite3'}", "--study", str(study_file),
                  "--out", str(tmp_path / "x")]) == 2
