@@ -22,7 +22,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 from app.database import Database, DatabaseError, as_utc, check_migrated
 from app.exclusions import duration_s, viewing_problems
 from app.models import Participant, ParticipantPlan, Response, ServerSetting
-from app.study import PairwisePart, Study, load_study, parse_study
+from app.study import FEEDBACK, PairwisePart, Study, load_study, parse_study
 
 LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
 ORDER_SEPARATOR = ">"  # between the places of a ranking, best first
@@ -134,7 +134,8 @@ LONG_COLUMNS = [
     Column("condition", "Int64", "condition number, 1-based (see `conditions` in the codebook)"),
     Column("step", "Int64", "index of the screen in the participant's plan (0 is the instructions)"),
     Column("part", "Int64", "part of the study, 1-based; empty for the instructions"),
-    Column("screen", "string", "kind of screen: instructions, pairwise, watch, ranking or attention"),
+    Column("screen", "string", "kind of screen: instructions, pairwise, watch, ranking, attention or closing (the "
+                               "closing questions and feedback box after the last part)"),
     Column("trial", "Int64", "position of the screen within its part, 1-based, in the order it was shown"),
     Column("block", "Int64", "in a ranking part: which of the participant's ranking blocks (1 = first shown)"),
     Column("clip", "string", "clip id in the bundle; on a ranking screen, the clips of its block"),
@@ -143,11 +144,12 @@ LONG_COLUMNS = [
     Column("agents", "string", f"real agents on the screen, '{LIST_SEPARATOR}'-separated, in the order the robots "
                                "were offered as answers"),
     Column("labels", "string", "their on-screen labels (e.g. Robot 1), in the same order as `agents`"),
-    Column("question", "string", "question name from the study file; 'attention' for an attention check; empty on "
-                                 "a screen without questions"),
-    Column("question_type", "string", "choose, text, scale, rank or attention; empty without a question"),
-    Column("answer", "string", "what was submitted: the robot label chosen, the text, the scale point, or the "
-                               f"ranking's labels best first joined by '{ORDER_SEPARATOR}'"),
+    Column("question", "string", "question name from the study file; 'attention' for an attention check; "
+                                 f"'{FEEDBACK}' for the closing feedback box; empty on a screen without questions"),
+    Column("question_type", "string", "choose, text, scale, rank, choice or attention; empty without a question"),
+    Column("answer", "string", "what was submitted: the robot label chosen, the option chosen, the text, the scale "
+                               f"point, or the ranking's labels best first joined by '{ORDER_SEPARATOR}'; an "
+                               "optional closing question left unanswered has no row"),
     Column("answer_agent", "string", "the real agent behind a chosen label; for a ranking, the agents best first"),
     Column("value", "Int64", "the scale point (1 to the number of points) for a scale question"),
     Column("truth", "string", "the right answer: the better agent, the true order best first, or the expected "
@@ -214,6 +216,7 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
     plan = participant.plan or []
     trials = _trials(plan)
     types = {name: question.type for name, question in study.questions.items()} | {"attention": "attention"}
+    types[FEEDBACK] = types.get(FEEDBACK, "text")
     for response in record.responses:
         screen = plan[response.step] if response.step < len(plan) else {"kind": response.kind}
         robots = screen.get("robots", [])
@@ -320,7 +323,7 @@ def _slug(name: str) -> str:
 def _answer_columns(question: str, kind: str, prefix: str, what: str) -> list[Column]:
     dtype = {"scale": "Int64"}.get(kind, "string")
     meaning = {"choose": "the agent chosen", "rank": f"the agents ranked, best first, joined by '{ORDER_SEPARATOR}'",
-               "scale": "the scale point", "text": "the text written"}[kind]
+               "scale": "the scale point", "text": "the text written", "choice": "the option chosen"}[kind]
     columns = [Column(f"{prefix}_{question}", dtype, f"{what}, question {question}: {meaning}")]
     if kind in ("choose", "rank"):
         columns.append(Column(f"{prefix}_{question}_correct", "Int64", f"{what}, question {question}: 1 if right"))
@@ -354,6 +357,12 @@ class WideLayout:
         for c in range(1, len(study.attention_checks) + 1):
             self.columns.append(Column(f"attention{c}", "string", f"attention check {c}: the option chosen"))
             self.columns.append(Column(f"attention{c}_passed", "Int64", f"attention check {c}: 1 if it was right"))
+        if study.closing is not None:
+            what = "closing screen (empty when not answered)"
+            for name in study.closing.questions:
+                self.columns += _answer_columns(name, study.questions[name].type, "closing", what)
+            if study.closing.feedback:
+                self.columns += _answer_columns(FEEDBACK, "text", "closing", what)
         names = [c.name for c in self.columns]
         if len(set(names)) != len(names):
             clashes = sorted({n for n in names if names.count(n) > 1})
@@ -376,6 +385,11 @@ class WideLayout:
             if answer["question_type"] == "attention":
                 prefix = f"attention{screen['check'] + 1}"
                 row[prefix], row[f"{prefix}_passed"] = answer["answer"], answer["correct"]
+                continue
+            if screen["kind"] == "closing":
+                key = f"closing_{answer['question']}"
+                if key in self.names:  # a closing screen the study file no longer asks is left out
+                    row[key] = answer["value" if answer["question_type"] == "scale" else "answer"]
                 continue
             if screen["kind"] == "pairwise":
                 pair = self._pairs.get((screen["part"], frozenset(r["agent"] for r in screen["robots"])), "?")

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 from starlette.datastructures import FormData
 
-from app.study import ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
+from app.study import FEEDBACK, ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
 
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
 # seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being
@@ -40,9 +40,21 @@ def _one(form: FormData, name: str) -> str | None:
     return values[0] if len(values) == 1 and isinstance(values[0], str) else None
 
 
+def _unanswered(form: FormData, name: str) -> bool:
+    """Whether an optional field was left empty (missing, or only whitespace): then nothing is stored for it."""
+    values = form.getlist(name)
+    return not values or (len(values) == 1 and isinstance(values[0], str) and not values[0].strip())
+
+
 def _check_question(name: str, question, screen: dict, form: FormData, out: Checked) -> None:
     labels = [robot["label"] for robot in screen.get("robots", [])]
-    if isinstance(question, ChooseQuestion):
+    if isinstance(question, ChoiceQuestion):
+        value = _one(form, name)
+        if value not in question.options:
+            out.errors[name] = "Choose one of the answers."
+        else:
+            out.answers[name] = value
+    elif isinstance(question, ChooseQuestion):
         value = _one(form, name)
         if value not in labels:
             out.errors[name] = "Choose one of the robots." if not value else "That robot is not in this clip."
@@ -104,8 +116,13 @@ def _video_events(raw: str | None) -> list[dict] | None:
 
 def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
     out = Checked()
+    required = study.closing.required if screen["kind"] == "closing" and study.closing else None
     for name in screen.get("questions", []):
+        if required is not None and name not in required and _unanswered(form, name):
+            continue  # a closing question left unanswered: allowed unless the study requires it
         _check_question(name, study.questions[name], screen, form, out)
+    if screen.get("feedback") and not (FEEDBACK not in (required or []) and _unanswered(form, FEEDBACK)):
+        _check_question(FEEDBACK, TextQuestion(type="text", text="feedback"), screen, form, out)
     if screen["kind"] == "instructions":
         for number, check in enumerate(study.comprehension, start=1):
             value = _one(form, f"understand{number}")

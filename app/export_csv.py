@@ -31,7 +31,7 @@ from app.answer_table import (
 from app.assignment import conditions
 from app.database import Database
 from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.study import ScaleQuestion, Study
+from app.study import FEEDBACK, ChoiceQuestion, ScaleQuestion, Study
 
 # Whole cells that pandas (by default) or R read as a missing value, though a participant may type them.
 MISSING_TOKENS = {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN", "<NA>",
@@ -136,7 +136,15 @@ def _question_codes(study: Study) -> dict:
         if isinstance(question, ScaleQuestion):
             entry["points"] = question.points
             entry["point_labels"] = question.point_labels()
+        if isinstance(question, ChoiceQuestion):
+            entry["options"] = list(question.options)
         codes[name] = entry
+    closing = study.closing
+    if closing is not None:
+        if closing.feedback:
+            codes[FEEDBACK] = {"type": "text", "text": closing.feedback}
+        for name in closing.asks():
+            codes[name] |= {"asked": "closing", "required": name in closing.required}
     return codes
 
 
@@ -193,9 +201,14 @@ def codebook_markdown(book: dict) -> str:
         lines += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
         lines += [f"| `{c['name']}` | {c['dtype']} | {c['description']} |" for c in spec["columns"]]
         lines.append("")
-    lines += ["## Questions", "", "| question | type | text | points |", "|---|---|---|---|"]
+    lines += ["## Questions", "", "| question | type | text | points, options, where asked |", "|---|---|---|---|"]
     for name, q in book["questions"].items():
         points = "; ".join(f"{i} = {label}" for i, label in enumerate(q.get("point_labels", []), start=1))
+        if q.get("options"):
+            points = "options: " + "; ".join(q["options"])
+        if q.get("asked") == "closing":
+            points = "; ".join(filter(None, [points, "closing screen, " + (
+                "required" if q["required"] else "optional")]))
         lines.append(f"| `{name}` | {q['type']} | {q['text']} | {points} |")
     lines += ["", "## Conditions", "", "| condition | schemes in order | scenario of each part |", "|---|---|---|"]
     lines += [f"| {c['number']} | {', '.join(c['schemes'])} | {', '.join(c['part_scenarios'])} |"

@@ -30,6 +30,7 @@ from app.kinds import kind_from_link, pilot_token
 from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
 from app.security import checked_form
+from app.study import TextQuestion
 
 # The hot path reads and writes with Core statements built once and run on the driver (`Database.statements`):
 # the ORM's unit of work, and even Core's execution, cost more than the SQL. The INSERTs name every column.
@@ -247,7 +248,7 @@ def screen_view(ctx: Context, screen: dict) -> dict:
     view = {"kind": screen["kind"], "progress": screen.get("progress", ""), "position": screen.get("position"),
             "labels": [robot["label"] for robot in screen.get("robots", [])],
             "questions": [(name, study.questions[name]) for name in screen.get("questions", [])],
-            "block": screen.get("block"), "round_start": screen.get("round_start", False)}
+            "block": screen.get("block"), "round_start": screen.get("round_start", False), "optional": []}
     if "part" in screen:
         part = study.parts[screen["part"] - 1]
         view["part_title"], view["part_intro"], view["part_kind"] = part.title, part.intro, part.kind
@@ -261,6 +262,12 @@ def screen_view(ctx: Context, screen: dict) -> dict:
     if screen["kind"] == "attention":
         check = study.attention_checks[screen["check"]]
         view["attention_text"], view["options"] = check.text, screen["options"]
+    if screen["kind"] == "closing" and study.closing is not None:
+        closing = study.closing
+        view["part_title"], view["part_intro"] = closing.title, closing.intro
+        view["optional"] = [name for name in closing.asks() if name not in closing.required]
+        if screen.get("feedback") and closing.feedback:
+            view["feedback"] = TextQuestion(type="text", text=closing.feedback, rows=4)
     if screen["kind"] == "instructions" and study.example is not None:
         example = ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
         sha = example.sha256.lower()

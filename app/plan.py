@@ -145,6 +145,9 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
             for robot in screen.get("robots", []):
                 used.setdefault(robot["label"], robot["agent"])
         plan += screens
+    if study.closing is not None:  # the closing questions and feedback box, after the last part
+        plan.append({"kind": "closing", "questions": list(study.closing.questions),
+                     "feedback": bool(study.closing.feedback), "progress": "Last screen: closing questions"})
     for number, screen in enumerate(plan):
         screen["position"] = [number, len(plan)]
     return plan

@@ -88,7 +88,9 @@ class ReportData:
                                    for scheme in self.schemes})
 
     def scale_questions(self) -> list[tuple[str, ScaleQuestion]]:
-        return [(name, q) for name, q in self.study.questions.items() if isinstance(q, ScaleQuestion)]
+        asked = self.study.part_questions()  # not the closing screen's scales: they rate no scheme
+        return [(name, q) for name, q in self.study.questions.items()
+                if isinstance(q, ScaleQuestion) and name in asked]
 
 
 def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None) -> ReportData:

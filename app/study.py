@@ -147,9 +147,42 @@ class RankQuestion(Strict):
     help: str = ""  # neutral help text under the question (never an example answer)
 
 
+class ChoiceQuestion(Strict):
+    """One of the researcher's options, such as an age range (a closing question, see `Closing`)."""
+
+    type: Literal["choice"]
+    text: Text
+    help: str = ""  # neutral help text under the question (never an example answer)
+    options: Annotated[list[Text], Field(min_length=2)]
+
+    @field_validator("options")
+    @classmethod
+    def _distinct(cls, values: list[str]) -> list[str]:
+        if len(set(values)) != len(values):
+            raise ValueError("options must not repeat")
+        return values
+
+
 Question = Annotated[
-    ChooseQuestion | TextQuestion | ScaleQuestion | RankQuestion, Field(discriminator="type")
+    ChooseQuestion | TextQuestion | ScaleQuestion | RankQuestion | ChoiceQuestion, Field(discriminator="type")
 ]
+
+FEEDBACK = "feedback"  # the name of the closing screen's feedback box in the data
+
+
+class Closing(Strict):
+    """An optional last screen after the parts, before the completion page: closing questions (demographics,
+    experience with robots) and a free-text feedback box, every answer optional unless named in `required`."""
+
+    title: Text = "Before you finish"
+    intro: str = "These last questions are optional: answer the ones you are comfortable answering."
+    questions: list[Text] = []  # names of [questions] entries of type choice, scale or text
+    feedback: str = ""  # the feedback box's question; empty: no box
+    required: list[Text] = []  # closing questions (or "feedback") that must be answered
+
+    def asks(self) -> list[str]:
+        """Every answer the screen can hold, in order: the questions, then the feedback box."""
+        return [*self.questions, *([FEEDBACK] if self.feedback else [])]
 
 
 class PairwisePart(Strict):
@@ -220,6 +253,7 @@ class Study(Strict):
     questions: dict[str, Question]
     attention_checks: list[AttentionCheck] = []
     comprehension: list[ComprehensionCheck] = []
+    closing: Closing | None = None
     build: dict | None = None  # read by `foil bundle`, not by the server
 
     def consent_version(self) -> str:
@@ -230,6 +264,10 @@ class Study(Strict):
         if self.study.consent_version:
             return self.study.consent_version
         return "sha256:" + hashlib.sha256(self.texts.consent.encode()).hexdigest()[:12]
+
+    def part_questions(self) -> set[str]:
+        """The questions asked about the clips, in the parts (not on the closing screen)."""
+        return {name for part in self.parts for name in part.questions}
 
     def rotations(self) -> range:
         """How far the scenarios are rotated across parts, one value per scenario counterbalancing level."""
@@ -266,6 +304,25 @@ def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
             for i, pair in enumerate(part.pairs):
                 if pair[0] == pair[1]:
                     problems.append((("parts", p, "pairs", i), "a pair needs two different agents"))
+    if study.closing is not None:
+        closing = study.closing
+        for q, name in enumerate(closing.questions):
+            question = study.questions.get(name)
+            if question is None:
+                problems.append((("closing", "questions", q), f"no question named {name!r} in [questions]"))
+            elif question.type not in ("choice", "scale", "text"):
+                message = f"a {question.type!r} question cannot be asked on the closing screen (choice, scale, text)"
+                problems.append((("closing", "questions", q), message))
+        if len(set(closing.questions)) != len(closing.questions):
+            problems.append((("closing", "questions"), "questions must not repeat"))
+        if closing.feedback and (FEEDBACK in study.questions):
+            problems.append((("closing", "feedback"), f"the feedback box's answers are named {FEEDBACK!r}: rename "
+                                                      f"[questions.{FEEDBACK}]"))
+        for r, name in enumerate(closing.required):
+            if name not in closing.asks():
+                problems.append((("closing", "required", r), f"{name!r} is not asked on the closing screen"))
+        if not closing.asks():
+            problems.append((("closing",), "give closing questions, a feedback question, or both"))
     for c, check in enumerate(study.attention_checks):
         if check.part > len(study.parts):
             problems.append((("attention_checks", c, "part"), f"there are only {len(study.parts)} parts"))
@@ -318,7 +375,7 @@ def _field(loc: tuple) -> str:
 
 def _loc_without_union_tags(loc: tuple) -> tuple:
     """Pydantic puts the chosen union member (`questions.NAME.scale...`) in the location; the file does not."""
-    tags = {"parts": {"pairwise", "ranking"}, "questions": {"choose", "text", "scale", "rank"}}
+    tags = {"parts": {"pairwise", "ranking"}, "questions": {"choose", "text", "scale", "rank", "choice"}}
     if len(loc) >= 3 and loc[0] in tags and loc[2] in tags[loc[0]]:
         return loc[:2] + loc[3:]
     return loc
