@@ -30,7 +30,7 @@ from app.kinds import kind_from_link, pilot_token
 from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
 from app.security import checked_form
-from app.study import TextQuestion
+from app.study import FEEDBACK, TextQuestion
 
 # The hot path reads and writes with Core statements built once and run on the driver (`Database.statements`):
 # the ORM's unit of work, and even Core's execution, cost more than the SQL. The INSERTs name every column.
@@ -326,7 +326,7 @@ def _kept_notice(ctx: Context, screen: dict, saved: dict) -> str:
     shown = []
     for name, value in saved.items():
         question = ctx.study.questions.get(name)
-        text = question.text if question is not None else "Check question"
+        text = question.text if question is not None else ("Your feedback" if name == FEEDBACK else "Check question")
         shown.append(f"{text} {' > '.join(value) if isinstance(value, list) else value}")
     where = screen.get("progress") or "that screen"
     kept = (" Your saved answers: " + "; ".join(shown) + ".") if shown else ""

@@ -141,3 +141,13 @@ def test_paper_study_has_no_closing_screen_and_the_demo_has_one():
     assert load_study(PAPER_STUDY).closing is None
     demo = load_study(PAPER_STUDY.parent / "demo.toml").closing
     assert demo is not None and demo.questions and demo.feedback and not demo.required
+
+
+def test_closing_screen_sent_again_keeps_the_first_answers(make_client):
+    client = closing_client(make_client)
+    page = to_closing(client)
+    hidden = FormReader(page).hidden
+    client.post("/study", data={**hidden, "feedback": "First thoughts."})
+    again = client.post("/study", data={**hidden, "feedback": "Second thoughts."})
+    assert again.status_code == 200
+    assert stored(client, Response)[-1].answers == {"feedback": "First thoughts."}
