@@ -33,6 +33,8 @@ SETTINGS = {
                                                         **PAPER_CONSTANTS},
     "first, plain": {"finish": "first"},
     "first, paper code's constants (paper preset)": {"finish": "first", **PAPER_CONSTANTS},
+    "first, paper code's constants, goal needs contrast": {"finish": "first", "goal_needs_contrast": True,
+                                                            **PAPER_CONSTANTS},
 }
 
 
@@ -55,6 +57,7 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, help="keep the searches here (default: a temporary folder)")
+    parser.add_argument("--settings", help="only the settings whose names contain this text")
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     rewards = ground_truth()
@@ -62,6 +65,8 @@ def main() -> None:
     out = args.out or Path(tempfile.mkdtemp(prefix="informativeness-"))
     rows = []
     for name, reward in SETTINGS.items():
+        if args.settings and args.settings not in name:
+            continue
         jobs = [SearchJob(agents=pair, scenario=scenario, budget=args.budget, seed=seed, top_k=1,
                           reward_settings=reward)
                 for pair in itertools.combinations(AGENTS, 2) for scenario in SCENARIOS for seed in seeds]

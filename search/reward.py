@@ -8,7 +8,8 @@ Per step (step t = 1, 2, ... counts steps from the scenario's initial state):
   t reached the horizon T, or the agents' episodes ended as ``finish`` says. With ``finish = "all"`` a robot
   that finished stands still and the trajectory goes on until every robot has finished; with ``finish =
   "first"`` (the paper's Algorithm 1, CrowdNav's ``done``) it ends as soon as any robot's episode ends, so a
-  collision ends it too, without the goal's reward unless ``collision_is_goal``;
+  collision ends it too, without the goal's reward unless ``collision_is_goal``; with ``goal_needs_contrast``
+  a step on which every robot has reached its goal is no goal step (nothing tells the robots apart there);
 - any other step gives the action divergence d_a of the agents' actions;
 - every step adds ``plausibility * log p(a_env)`` under the environment action prior (0 by default).
 
@@ -50,6 +51,7 @@ class RewardConfig:
     heuristic: str = "state_divergence"  # a name in HEURISTICS or module:attribute
     collision_is_goal: bool = False
     finish: str = "all"  # the trajectory ends when "all" robots have finished, or when the "first" one has
+    goal_needs_contrast: bool = False  # no goal term when every robot reaches its goal (they arrive together)
     plausibility: float = 0.0
     prior: str = "uniform"  # environment action prior: "uniform" or "gaussian"
     prior_sigma: float = 0.1
@@ -132,6 +134,8 @@ class DivergenceReward:
         if self.config.collision_is_goal:
             goal_outcome = goal_outcome | (outcome == COLLISION)
         goal = (newly_done & goal_outcome).any(axis=-1)
+        if self.config.goal_needs_contrast:
+            goal &= ~goal_outcome.all(axis=-1)
         finished = all_done if self.config.finish == "all" else newly_done.any(axis=-1)
         end = ~goal & ((t >= self.config.horizon) | finished)
         return goal, end

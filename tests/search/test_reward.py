@@ -52,6 +52,18 @@ def test_first_finish_ends_on_any_robots_end_and_a_collision_is_no_goal():
     assert goal.tolist() == [True, True, False] and end.tolist() == [False, False, False]
 
 
+def test_a_goal_needs_contrast_when_asked():
+    """Robots that reach their goals on the same step show no difference: with goal_needs_contrast that step ends
+    the trajectory without the goal term; one robot arriving alone is still a goal."""
+    newly = np.array([[True, True], [True, False]])
+    outcome = np.array([[SUCCESS, SUCCESS], [SUCCESS, RUNNING]])
+    all_done, t = np.array([True, False]), np.array([40, 40])
+    goal, end = reward(finish="first").events(newly, outcome, all_done, t)
+    assert goal.tolist() == [True, True] and end.tolist() == [False, False]
+    goal, end = reward(finish="first", goal_needs_contrast=True).events(newly, outcome, all_done, t)
+    assert goal.tolist() == [False, True] and end.tolist() == [True, False]
+
+
 def test_step_terms_by_hand():
     r = reward(alpha=2.0, goal_bonus=100.0, beta=3.0, horizon_offset=-50.0)
     actions = np.array([[[1.0, 0.0], [0.0, 0.0]]] * 3)  # action divergence 1 (plain)
