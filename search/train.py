@@ -52,7 +52,7 @@ def native_bfloat16() -> bool:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Every hyperparameter of a run. Defaults: CrowdNav_DSRNN's PPO on the paper's world (DESIGN.md)."""
+    """Every hyperparameter of a run. Defaults: CrowdNav_DSRNN's PPO on the paper's world (docs/agents.md)."""
 
     seed: int = 0
     total_steps: int = 10_000_000

@@ -78,7 +78,7 @@ def test_config_files_are_checked(tmp_path):
     path.write_text("num_envs = 8\nlearning_rate = 1e-4\n[network]\nedge_hidden = 32\n[world]\nhuman_num = 5\n")
     config = load_train_config(path)
     assert (config.num_envs, config.network.edge_hidden, config.world.human_num) == (8, 32, 5)
-    assert config.network.node_hidden == 128 and config.epochs == 5  # the rest keeps DESIGN.md's defaults
+    assert config.network.node_hidden == 128 and config.epochs == 5  # the rest keeps the paper's defaults
     for text, message in [("lr = 1\n", "unknown training setting"), ("[network]\nwidth = 3\n", "unknown network"),
                           ("num_envs = 3\n", "multiple of minibatches"), ("[world]\nhuman_num = 11\n", "max_humans"),
                           ("num_envs = \n", "not valid TOML"), ("precision = 'half'\n", "precision must be")]:
