@@ -3,6 +3,7 @@ flag columns) and by the report (which drops flagged participants and counts the
 
 from __future__ import annotations
 
+import math
 import statistics
 from dataclasses import dataclass
 
@@ -32,8 +33,9 @@ class ExclusionRules:
     include_kinds: tuple[str, ...] = ()  # "pilot", "bot": analyse them too (left out by default)
 
     def __post_init__(self):
-        if self.min_seconds is not None and self.min_seconds < 0:
-            raise ValueError(f"the minimum duration must not be negative, got {self.min_seconds}")
+        if self.min_seconds is not None and not 0 <= self.min_seconds < math.inf:
+            raise ValueError(f"the minimum duration must be a finite number of seconds, 0 or more, got "
+                             f"{self.min_seconds}")
         if not 0 <= self.median_fraction < 1:
             raise ValueError(f"the fraction of the median duration must be in [0, 1), got {self.median_fraction}")
         unknown = set(self.include_kinds) - {"pilot", "bot"}

@@ -116,8 +116,8 @@ def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
                  "--include", "bot"]) == 0
     assert json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] \
         == ["real", "bot"]
-    assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "x"),
-                 "--include", "robots"]) == 2
+    for bad in (["--include", "robots"], ["--min-seconds", "nan"], ["--min-seconds", "inf"], ["--min-seconds", "-1"]):
+        assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "x"), *bad]) == 2
     # errors are named, not raised
     assert main(["report", "--db", f"sqlite:///{tmp_path / 'nope.sqlite3'}", "--study", str(study_file),
                  "--out", str(tmp_path / "x")]) == 2
