@@ -53,6 +53,19 @@ def test_shipped_agents_load_by_name_and_act(name):
     assert np.isfinite(act_once(policy, humans=4)).all()  # smaller crowds than trained on
 
 
+@pytest.mark.parametrize("scenario", ["paper-bl-tr", "paper-tl-br", "paper-code"])
+def test_the_better_shipped_agents_reach_the_goal_in_the_clips_horizon(scenario):
+    """med and hi drive into the goal within the clips' 25 s on every shipped scenario when nobody disturbs the
+    crowd (the agents before the relative goal circled it and timed out)."""
+    from search.coupled import replay
+    from search.scenarios import load_scenario
+    from search.world import SUCCESS
+
+    trajectory = replay([load_policy("med"), load_policy("hi")], load_scenario(scenario), np.zeros((100, 10, 2)))
+    assert trajectory.outcome.tolist() == [SUCCESS, SUCCESS]
+    assert (trajectory.event_time <= 25.0).all()
+
+
 def test_missing_files_and_unknown_names_are_clear_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match="no agent file"):
         load_policy(str(tmp_path / "nope.pt"))
