@@ -49,13 +49,19 @@ def test_admin_pages_need_the_password(make_client):
     assert client.get("/admin", follow_redirects=False).status_code == 303
 
 
-def test_progress_median_participant_view_exclusion_and_csv(make_client):
-    client = make_client(BALANCED)
+def finished_and_halfway(client) -> tuple[TestClient, str]:
+    """One participant who completed the study and one who answered its first screen: the second's client and the
+    page it is on."""
     finisher = TestClient(client.app)
     finish(finisher, start(finisher, "?PROLIFIC_PID=done1&STUDY_ID=s&SESSION_ID=a"))
     halfway = TestClient(client.app)
     page = start(halfway, "?PROLIFIC_PID=half2&STUDY_ID=s&SESSION_ID=b")
-    page = halfway.post("/study", data=answer_for(page)).text
+    return halfway, halfway.post("/study", data=answer_for(page)).text
+
+
+def test_progress_median_participant_view_exclusion_and_csv(make_client):
+    client = make_client(BALANCED)
+    halfway, page = finished_and_halfway(client)
     evil = "<script>alert(1)</script>=HYPERLINK(\"http://x\")"
     halfway.post("/study", data={**answer_for(page), "justification": evil})
 
@@ -126,11 +132,7 @@ def test_csv_neutralises_spreadsheet_formulas(make_client):
 
 def test_participant_page_names_screens_as_the_participant_saw_them(make_client):
     client = make_client(BALANCED)
-    finisher = TestClient(client.app)
-    finish(finisher, start(finisher, "?PROLIFIC_PID=done1&STUDY_ID=s&SESSION_ID=a"))
-    halfway = TestClient(client.app)
-    page = start(halfway, "?PROLIFIC_PID=half2&STUDY_ID=s&SESSION_ID=b")
-    halfway.post("/study", data=answer_for(page))
+    finished_and_halfway(client)
     finished, started = stored(client, Participant)
     log_in(client)
 
