@@ -11,7 +11,7 @@ import csv
 import io
 import textwrap
 from collections import Counter, defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader, select_autoescape
@@ -362,13 +362,19 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
     return html
 
 
-def run_report(*, database_url: str, study: str | None, out: str, rules: ExclusionRules) -> int:
-    """`foil report`: prints Table 1 in short and where the report went."""
+def run_report(*, database_url: str, study: str | None, out: str, rules: ExclusionRules,
+               bundle: str | None = None) -> int:
+    """`foil report`: prints Table 1 in short and where the report went. With the study's ``bundle`` the
+    per-clip table shows each clip's audit."""
+    if bundle and not (Path(bundle) / "manifest.json").is_file():
+        raise ValueError(f"no manifest.json in bundle {bundle}: give the bundle the study was served from")
     db = analysis_database(database_url)
     try:
         data = tally_study(db, analysis_study(db, study), rules)
     finally:
         db.dispose()
+    if bundle:
+        data = replace(data, audits=_audits(bundle))
     render_report(data, Path(out))
     e = data.exclusions
     print(f"{e.before} participants, {e.after} analysed after exclusions")

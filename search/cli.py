@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -49,7 +50,8 @@ def _export(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from app.report import run_report
 
-    return run_report(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
+    return run_report(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args),
+                      bundle=args.bundle)
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -174,6 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "fraction of the median, see --median-fraction; 0: no time rule)")
         command.add_argument("--median-fraction", type=float, default=1 / 3,
                              help="exclude completions faster than this fraction of the median (default 1/3)")
+        if name == "report":
+            command.add_argument("--bundle", default=os.environ.get("FOIL_BUNDLE_DIR"),
+                                 help="the bundle the study was served from (default FOIL_BUNDLE_DIR): each clip's "
+                                 "accuracy is shown beside its audit")
         command.add_argument("--include", default="", metavar="KINDS",
                              help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
                              "(default: none; pilots and bots are left out)")

@@ -4,6 +4,7 @@ what they answered."""
 from __future__ import annotations
 
 import json
+import shutil
 import threading
 import time
 from collections import Counter
@@ -116,7 +117,17 @@ def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
                  "--include", "bot"]) == 0
     assert json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] \
         == ["real", "bot"]
-    for bad in (["--include", "robots"], ["--min-seconds", "nan"], ["--min-seconds", "inf"], ["--min-seconds", "-1"]):
+    # with the bundle, each clip's accuracy stands beside its audit; a folder without a manifest is refused
+    audited = tmp_path / "audited-bundle"
+    shutil.copytree(bundle_dir, audited)
+    manifest = json.loads((audited / "manifest.json").read_text())
+    manifest["clips"][0]["audit"] = {"shows": "worse", "why": "Robot 9 bumped into a person early."}
+    (audited / "manifest.json").write_text(json.dumps(manifest))
+    assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "audited"),
+                 "--include", "bot", "--bundle", str(audited)]) == 0
+    assert "Robot 9 bumped into a person early." in (tmp_path / "audited" / "report.html").read_text()
+    for bad in (["--include", "robots"], ["--bundle", str(tmp_path / "nowhere")], ["--min-seconds", "nan"],
+                ["--min-seconds", "inf"], ["--min-seconds", "-1"]):
         assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "x"), *bad]) == 2
     # errors are named, not raised
     assert main(["report", "--db", f"sqlite:///{tmp_path / 'nope.sqlite3'}", "--study", str(study_file),
