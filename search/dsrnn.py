@@ -360,9 +360,10 @@ def read_checkpoint(path: str | Path) -> dict:
     if not isinstance(data, dict) or not str(data.get("format", "")).startswith("foil.dsrnn/"):
         raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (expected format {CHECKPOINT_FORMAT!r})")
     if data["format"] != CHECKPOINT_FORMAT or data.get("observation") != OBSERVATION_LAYOUT:
+        fields_read = (data.get("observation") or {}).get("robot_node") or ROBOT_NODE_FIELDS[:7]  # format 1's
         raise ValueError(
             f"{path} is a {data['format']} checkpoint whose network reads an older observation (robot node "
-            f"{data.get('observation', {}).get('robot_node', 'px py radius gx gy v_pref theta')}); this version of "
+            f"{' '.join(map(str, fields_read))}); this version of "
             f"Foil observes the goal relative to the robot as well ({' '.join(ROBOT_NODE_FIELDS)}). Retrain it with "
             "`foil train` (the shipped agents lo, med and hi are already of this version)")
     return data
