@@ -20,12 +20,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from search.coupled import replay  # noqa: E402
 from search.policies import load_policy  # noqa: E402
 from search.render import ClipRenderer, RenderOptions, render  # noqa: E402
-from search.scenarios import load_scenario  # noqa: E402
 from search.scene import Scene  # noqa: E402
-from search.world import OUTCOME_NAMES  # noqa: E402
+from search.sim.coupled import replay  # noqa: E402
+from search.sim.scenarios import load_scenario  # noqa: E402
+from search.sim.world import OUTCOME_NAMES  # noqa: E402
 
 STEPS = 100  # 25 s at dt = 0.25 s
 REPEATS = 3

@@ -6,8 +6,8 @@ Attributes are imported on first use so that `foil --help` and the survey server
 from importlib import import_module
 
 _EXPORTS = {
-    "orca_step": "search.orca",
-    "orca_velocities": "search.orca",
+    "orca_step": "search.sim.orca",
+    "orca_velocities": "search.sim.orca",
 }
 
 

@@ -271,9 +271,9 @@ def search_inputs(job: ClipJob) -> dict:
     `foil search` would apply them), so a changed default is a changed input."""
     from search.reward import RewardConfig
     from search.runner import parse_settings, solver_config_class
-    from search.scenarios import load_scenario
+    from search.sim.scenarios import load_scenario
+    from search.sim.world import WorldConfig
     from search.summary import frozen_scenario
-    from search.world import WorldConfig
 
     scheme = job.scheme
     given = dict(scheme.settings)

@@ -82,7 +82,7 @@ def _bundle(args: argparse.Namespace) -> int:
 def _search_job_settings(args: argparse.Namespace) -> dict:
     from search.reward import RewardConfig
     from search.runner import parse_settings, solver_config_class
-    from search.world import WorldConfig
+    from search.sim.world import WorldConfig
 
     return {"budget": args.budget, "seed": args.seed, "top_k": args.top_k,
             "solver_settings": parse_settings(solver_config_class(args.solver), args.set, "solver"),

@@ -6,10 +6,10 @@ import time
 
 import numpy as np
 
-from search.coupled import replay
 from search.policies import load_policy
-from search.scenarios import load_scenario
-from search.world import OUTCOME_NAMES
+from search.sim.coupled import replay
+from search.sim.scenarios import load_scenario
+from search.sim.world import OUTCOME_NAMES
 
 
 def run_demo(scenario: str = "paper-bl-tr", seed: int = 0, steps: int = 100) -> int:

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from search.policies import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
+from search.sim.observation import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
 
 CHECKPOINT_FORMAT = "foil.dsrnn/2"
 OBSERVATION_LAYOUT = {"robot_node": list(ROBOT_NODE_FIELDS)}

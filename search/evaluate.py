@@ -14,10 +14,11 @@ import math
 
 import numpy as np
 
-from search import world
-from search.policies import Policy, load_policy, observe
-from search.scenarios import sample_training_states
-from search.world import WorldConfig
+from search.policies import load_policy
+from search.sim import world
+from search.sim.observation import Policy, observe
+from search.sim.scenarios import sample_training_states
+from search.sim.world import WorldConfig
 
 TEST_STREAM = 1
 

@@ -11,12 +11,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from search.coupled import CoupledSimulator, Snapshot
-from search.policies import Policy
 from search.prior import ActionPrior
 from search.reward import DivergenceReward, RewardConfig
-from search.scenarios import Scenario
-from search.world import WorldConfig, WorldState
+from search.sim.coupled import CoupledSimulator, Snapshot
+from search.sim.observation import Policy
+from search.sim.scenarios import Scenario
+from search.sim.world import WorldConfig, WorldState
 
 
 class Problem(Protocol):

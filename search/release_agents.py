@@ -21,8 +21,8 @@ from pathlib import Path
 
 from search.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, read_checkpoint, save_checkpoint
 from search.evaluate import evaluate
+from search.sim.world import WorldConfig
 from search.train import checkpoints
-from search.world import WorldConfig
 
 HORIZON_S = 25.0  # the clips' horizon: 100 steps of 0.25 s
 HI_MIN_SUCCESS, HI_MAX_TIMEOUT = 0.95, 0.03

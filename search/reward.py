@@ -32,7 +32,7 @@ import numba
 import numpy as np
 
 from search.prior import PRIOR_KINDS, ActionPrior
-from search.world import COLLISION, SUCCESS
+from search.sim.world import COLLISION, SUCCESS
 
 TERMS = ("action_divergence", "goal", "horizon", "plausibility")
 

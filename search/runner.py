@@ -97,7 +97,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
     ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
     from search.policies import load_policy
-    from search.scenarios import load_scenario
+    from search.sim.scenarios import load_scenario
 
     started = time.perf_counter()
     policies = [load_policy(spec) for spec in job.agents]

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from search.scenarios import Scenario
-from search.world import OUTCOME_NAMES
+from search.sim.scenarios import Scenario
+from search.sim.world import OUTCOME_NAMES
 
 SUMMARY_FORMAT = "foil.summary/1"
 

@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from search.coupled import replay
 from search.policies import SCRIPTED, load_policy
 from search.prior import ActionPrior
 from search.reward import DivergenceReward, RewardConfig
-from search.scenarios import Scenario
-from search.world import OUTCOME_NAMES
+from search.sim.coupled import replay
+from search.sim.scenarios import Scenario
+from search.sim.world import OUTCOME_NAMES
 
 FORMAT = "foil.summary/1"
 

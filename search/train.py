@@ -30,11 +30,11 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from search import world
 from search.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
-from search.policies import ROBOT_NODE_SIZE, observe
-from search.scenarios import sample_training_states
-from search.world import WorldConfig, WorldState
+from search.sim import world
+from search.sim.observation import ROBOT_NODE_SIZE, observe
+from search.sim.scenarios import sample_training_states
+from search.sim.world import WorldConfig, WorldState
 
 TRAIN_STREAM = 0  # first word of every training seed sequence; evaluation uses another, so seeds never overlap
 PROGRESS_COLUMNS = ("update", "env_steps", "seconds", "steps_per_s", "episodes", "reward_mean", "success_rate",

@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from search.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
-from search.policies import ROBOT_NODE_FIELDS, SHIPPED_AGENTS, load_policy
+from search.policies import SHIPPED_AGENTS, load_policy
+from search.sim.observation import ROBOT_NODE_FIELDS
 from tests.agents.conftest import make_net, random_observation
 
 
@@ -57,9 +58,9 @@ def test_shipped_agents_load_by_name_and_act(name):
 def test_the_better_shipped_agents_reach_the_goal_in_the_clips_horizon(scenario):
     """med and hi drive into the goal within the clips' 25 s on every shipped scenario when nobody disturbs the
     crowd (the agents before the relative goal circled it and timed out)."""
-    from search.coupled import replay
-    from search.scenarios import load_scenario
-    from search.world import SUCCESS
+    from search.sim.coupled import replay
+    from search.sim.scenarios import load_scenario
+    from search.sim.world import SUCCESS
 
     trajectory = replay([load_policy("med"), load_policy("hi")], load_scenario(scenario), np.zeros((100, 10, 2)))
     assert trajectory.outcome.tolist() == [SUCCESS, SUCCESS]

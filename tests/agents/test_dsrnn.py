@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from search.coupled import CoupledSimulator
 from search.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
-from search.policies import ROBOT_NODE_SIZE
-from search.scenarios import Scenario
+from search.sim.coupled import CoupledSimulator
+from search.sim.observation import ROBOT_NODE_SIZE
+from search.sim.scenarios import Scenario
 from tests.agents.conftest import SMALL, make_net, random_observation
 
 

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from search.coupled import replay
 from search.policies import load_policy
 from search.reward import RewardConfig
-from search.scenarios import Scenario, load_scenario
+from search.sim.coupled import replay
+from search.sim.scenarios import Scenario, load_scenario
 from search.summary import build_summary, frozen_scenario
 
 

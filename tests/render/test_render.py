@@ -22,8 +22,8 @@ from search.render import (
     render,
     render_file,
 )
-from search.scenarios import load_scenario
 from search.scene import SummaryError, load_scene, scene_from_summary
+from search.sim.scenarios import load_scenario
 from tests.render.conftest import summary_from_simulation, visible
 
 FAST = RenderOptions(speed=4.0, hold_start=0.25, hold_end=0.25, event_hold=0.25)

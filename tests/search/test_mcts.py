@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from search.baselines import random_search
-from search.coupled import replay
 from search.mcts import MCTSConfig, StateNode, mcts
 from search.policies import load_policy
 from search.problem import CoupledProblem
 from search.reward import RewardConfig
 from search.rollout import Tracker
-from search.scenarios import load_scenario
+from search.sim.coupled import replay
+from search.sim.scenarios import load_scenario
 from tests.search.synthetic import LockProblem
 
 SEEDS = range(5)

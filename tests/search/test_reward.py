@@ -5,7 +5,7 @@ import pytest
 
 from search.prior import ActionPrior
 from search.reward import DivergenceReward, RewardConfig, pairwise_divergence
-from search.world import COLLISION, RUNNING, SUCCESS
+from search.sim.world import COLLISION, RUNNING, SUCCESS
 
 PRIOR = ActionPrior((1, 2), 0.25)
 

@@ -7,9 +7,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from search.cli import main
-from search.gym_env import CrowdNavEnv
-from search.scenarios import Scenario, load_scenario, sample_training_states, shipped_scenarios
-from search.world import WorldConfig
+from search.sim.gym_env import CrowdNavEnv
+from search.sim.scenarios import Scenario, load_scenario, sample_training_states, shipped_scenarios
+from search.sim.world import WorldConfig
 
 
 def test_shipped_scenarios_load_with_ten_humans():

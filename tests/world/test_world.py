@@ -5,9 +5,9 @@ import pickle
 import numpy as np
 import pytest
 
-from search import world
-from search.scenarios import load_scenario, sample_training_states
-from search.world import COLLISION, RUNNING, SUCCESS, TIMEOUT, WorldConfig, WorldState, new_state
+from search.sim import world
+from search.sim.scenarios import load_scenario, sample_training_states
+from search.sim.world import COLLISION, RUNNING, SUCCESS, TIMEOUT, WorldConfig, WorldState, new_state
 
 
 def one_robot_world(config, robot, goal, humans=(), human_goals=None):
@@ -89,8 +89,8 @@ def test_velocity_mode_adds_the_action_after_orca():
 
 
 def test_observation_mode_leaves_the_crowd_alone():
-    from search.coupled import CoupledSimulator
     from search.policies import load_policy
+    from search.sim.coupled import CoupledSimulator
 
     scenario = load_scenario("paper-bl-tr")
     config = WorldConfig(env_action_mode="observation")

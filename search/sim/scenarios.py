@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from search.world import WorldConfig, WorldState, new_state
+from search.sim.world import WorldConfig, WorldState, new_state
 
 SHIPPED_DIR = Path(__file__).parent / "scenarios"
 

@@ -18,10 +18,10 @@ from functools import cache
 
 import numpy as np
 
-from search import world
-from search.policies import Observation, Policy, PolicyState, observe_agents
-from search.scenarios import Scenario
-from search.world import WorldConfig, WorldState
+from search.sim import world
+from search.sim.observation import Observation, Policy, PolicyState, observe_agents
+from search.sim.scenarios import Scenario
+from search.sim.world import WorldConfig, WorldState
 
 
 @dataclass

@@ -11,10 +11,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from search import world
-from search.policies import ROBOT_NODE_SIZE, observe
-from search.scenarios import Scenario, sample_training_states
-from search.world import OUTCOME_NAMES, WorldConfig
+from search.sim import world
+from search.sim.observation import ROBOT_NODE_SIZE, observe
+from search.sim.scenarios import Scenario, sample_training_states
+from search.sim.world import OUTCOME_NAMES, WorldConfig
 
 
 class CrowdNavEnv(gym.Env):

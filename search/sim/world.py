@@ -23,8 +23,8 @@ from functools import cache
 import numba
 import numpy as np
 
-from search.orca import crowd_velocities, orca_velocities
-from search.social_force import social_force_velocities
+from search.sim.orca import crowd_velocities, orca_velocities
+from search.sim.social_force import social_force_velocities
 
 RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
 OUTCOME_NAMES = ("running", "success", "collision", "timeout")
