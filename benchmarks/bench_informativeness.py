@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 from app.visible import VisibleClip, audit
-from search.evaluate import evaluate
-from search.policies import load_policy
+from search.agents.evaluate import evaluate
+from search.agents.policies import load_policy
 from search.runner import SearchJob, run_all
 
 AGENTS = ("lo", "med", "hi")

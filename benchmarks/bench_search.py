@@ -33,9 +33,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from search.agents.policies import load_policy  # noqa: E402
 from search.baselines import cem, n_first, random_search  # noqa: E402
 from search.mcts import MCTSConfig, mcts  # noqa: E402
-from search.policies import load_policy  # noqa: E402
 from search.problem import CoupledProblem  # noqa: E402
 from search.rollout import Tracker  # noqa: E402
 from search.runner import parse_settings  # noqa: E402
@@ -67,7 +67,7 @@ def dsrnn_pair(names: str):
         return [load_policy(name) for name in names.split(",")]
     import torch
 
-    from search.dsrnn import DSRNN, DSRNNPolicy
+    from search.agents.dsrnn import DSRNN, DSRNNPolicy
 
     policies = []
     for seed in (1, 2):

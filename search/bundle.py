@@ -258,7 +258,7 @@ def _key(inputs: dict) -> str:
 
 def agent_identity(agent: str) -> dict:
     """What an agent's results depend on: its name and, for a network, the checksum of its file."""
-    from search.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
+    from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
 
     if agent in SCRIPTED:
         return {"agent": agent}
@@ -318,8 +318,8 @@ class Cache:
 
 def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, log) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth), computed once per input."""
-    from search.evaluate import evaluate
-    from search.policies import load_policy
+    from search.agents.evaluate import evaluate
+    from search.agents.policies import load_policy
 
     results = {}
     for agent in agents:

@@ -3,27 +3,33 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from search.demo import run_demo
-
-    return run_demo(scenario=args.scenario, seed=args.seed)
-
-
 def _train(args: argparse.Namespace) -> int:
-    from search.train import load_train_config, train
+    from search.agents.train import load_train_config, train
 
     last = train(load_train_config(args.config), args.out)
     print(f"last checkpoint: {last}")
     return 0
 
 
+def _release(args: argparse.Namespace) -> int:
+    from search.agents.policies import AGENTS_DIR
+    from search.agents.release import release, validate_run
+
+    if args.validate_only:
+        validate_run(args.run_dir, args.episodes, args.every)
+    else:
+        print(json.dumps(release(args.run_dir, args.out or AGENTS_DIR, args.episodes, args.every), indent=1))
+    return 0
+
+
 def _eval(args: argparse.Namespace) -> int:
-    from search.evaluate import run_eval
+    from search.agents.evaluate import run_eval
 
     return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit)
 
@@ -136,15 +142,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    demo = sub.add_parser("demo", help="run the demo: two scripted robots through a shipped scenario")
-    demo.add_argument("--scenario", default="paper-bl-tr", help="shipped scenario name or TOML file")
-    demo.add_argument("--seed", type=int, default=0, help="seed of the environment actions")
-    demo.set_defaults(handler=_demo)
-
     train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out)")
     train.add_argument("--config", required=True, help="TOML file of training settings (see docs/agents.md)")
     train.add_argument("--out", required=True, help="run directory: progress.csv and checkpoints/")
     train.set_defaults(handler=_train)
+
+    release = sub.add_parser("release", help="choose lo, med and hi from a training run and write their "
+                             "checkpoints and model cards (see docs/agents.md)")
+    release.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="the run directory of foil train")
+    release.add_argument("--out", type=Path, help="where the checkpoints and cards go (default: the shipped "
+                         "agents' folder of the installed package)")
+    release.add_argument("--episodes", type=int, default=500, help="validation and test episodes (default 500)")
+    release.add_argument("--every", type=int, default=2, help="validate every N-th checkpoint (default 2)")
+    release.add_argument("--validate-only", action="store_true", help="print the validation curve, ship nothing")
+    release.set_defaults(handler=_release)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
     evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint or "

@@ -96,7 +96,7 @@ def parse_settings(cls, items: list[str], what: str) -> dict:
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
     ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
-    from search.policies import load_policy
+    from search.agents.policies import load_policy
     from search.sim.scenarios import load_scenario
 
     started = time.perf_counter()

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from search.policies import SCRIPTED, load_policy
+from search.agents.policies import SCRIPTED, load_policy
 from search.prior import ActionPrior
 from search.reward import DivergenceReward, RewardConfig
 from search.sim.coupled import replay

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from search.dsrnn import DSRNN, NetworkConfig
+from search.agents.dsrnn import DSRNN, NetworkConfig
 from search.sim.observation import ROBOT_NODE_SIZE, Observation
 
 SMALL = NetworkConfig(max_humans=6, edge_hidden=16, node_hidden=12, embed=8, attention=8, mlp_hidden=16)

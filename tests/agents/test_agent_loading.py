@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from search.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
-from search.policies import SHIPPED_AGENTS, load_policy
+from search.agents.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
+from search.agents.policies import SHIPPED_AGENTS, load_policy
 from search.sim.observation import ROBOT_NODE_FIELDS
 from tests.agents.conftest import make_net, random_observation
 
@@ -32,7 +32,7 @@ def test_checkpoint_and_torchscript_files_load_the_same_agent(tmp_path):
 
 def test_module_attribute_loads_your_own_policy(tmp_path, monkeypatch):
     (tmp_path / "my_robot.py").write_text(
-        "from search.policies import GoalPolicy\n"
+        "from search.agents.policies import GoalPolicy\n"
         "class Cautious(GoalPolicy):\n"
         "    name = 'cautious'\n"
         "    def act(self, observation, state):\n"

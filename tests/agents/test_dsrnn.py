@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from search.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
+from search.agents.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
 from search.sim.coupled import CoupledSimulator
 from search.sim.observation import ROBOT_NODE_SIZE
 from search.sim.scenarios import Scenario

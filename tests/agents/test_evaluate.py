@@ -6,12 +6,12 @@ import json
 
 import numpy as np
 
+from search.agents.evaluate import TEST_STREAM, evaluate
+from search.agents.policies import load_policy
+from search.agents.train import TRAIN_STREAM
 from search.cli import main
-from search.evaluate import TEST_STREAM, evaluate
-from search.policies import load_policy
 from search.sim.scenarios import sample_training_states
 from search.sim.world import WorldConfig
-from search.train import TRAIN_STREAM
 
 KEYS = ["agent", "episodes", "success_rate", "collision_rate", "timeout_rate", "reward_mean", "reward_ci95",
         "nav_time_mean", "time_limit"]

@@ -7,10 +7,10 @@ import csv
 import pytest
 import torch
 
-from search.dsrnn import DSRNN, DSRNNPolicy, load_checkpoint_policy, read_checkpoint
-from search.evaluate import evaluate
+from search.agents.dsrnn import DSRNN, DSRNNPolicy, load_checkpoint_policy, read_checkpoint
+from search.agents.evaluate import evaluate
+from search.agents.train import PROGRESS_COLUMNS, TrainConfig, load_train_config, train
 from search.sim.world import WorldConfig
-from search.train import PROGRESS_COLUMNS, TrainConfig, load_train_config, train
 
 TINY_WORLD = WorldConfig(human_num=0, circle_radius=2.0, min_start_goal_distance=1.5, time_limit=5.0)
 TINY = TrainConfig.from_dict({

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from search.policies import load_policy
+from search.agents.policies import load_policy
 from search.reward import RewardConfig
 from search.sim.coupled import replay
 from search.sim.scenarios import Scenario, load_scenario

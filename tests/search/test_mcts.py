@@ -3,9 +3,9 @@ import gc
 import numpy as np
 import pytest
 
+from search.agents.policies import load_policy
 from search.baselines import random_search
 from search.mcts import MCTSConfig, StateNode, mcts
-from search.policies import load_policy
 from search.problem import CoupledProblem
 from search.reward import RewardConfig
 from search.rollout import Tracker

@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from search.policies import load_policy
+from search.agents.policies import load_policy
 from search.sim.coupled import CoupledSimulator, replay
 from search.sim.scenarios import load_scenario
 from search.sim.world import WorldConfig

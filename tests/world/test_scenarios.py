@@ -84,12 +84,6 @@ def test_gymnasium_episode_ends_with_terminated_or_truncated():
     assert terminated and info["outcome"] in ("success", "collision")
 
 
-def test_demo_command_runs(capsys):
-    assert main(["demo", "--scenario", "paper-code", "--seed", "1"]) == 0
-    out = capsys.readouterr().out
-    assert "robot 'goal'" in out and "robot 'orca'" in out
-
-
-def test_cli_reports_bad_scenarios_without_a_traceback(capsys):
-    assert main(["demo", "--scenario", "nowhere.toml"]) == 2
+def test_cli_reports_bad_scenarios_without_a_traceback(capsys, tmp_path):
+    assert main(["search", "--agents", "goal,orca", "--scenario", "nowhere.toml", "--out", str(tmp_path)]) == 2
     assert "no scenario" in capsys.readouterr().err

@@ -89,7 +89,7 @@ def test_velocity_mode_adds_the_action_after_orca():
 
 
 def test_observation_mode_leaves_the_crowd_alone():
-    from search.policies import load_policy
+    from search.agents.policies import load_policy
     from search.sim.coupled import CoupledSimulator
 
     scenario = load_scenario("paper-bl-tr")

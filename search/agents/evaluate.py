@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from search.policies import load_policy
+from search.agents.policies import load_policy
 from search.sim import world
 from search.sim.observation import Policy, observe
 from search.sim.scenarios import sample_training_states

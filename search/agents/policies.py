@@ -82,7 +82,7 @@ SCRIPTED = {"goal": GoalPolicy, "orca": OrcaRobotPolicy, "social_force": SocialF
 
 
 SHIPPED_AGENTS = ("lo", "med", "hi")
-AGENTS_DIR = Path(__file__).parent / "agents"
+AGENTS_DIR = Path(__file__).parent
 
 
 def load_policy(spec: str) -> Policy:
@@ -92,7 +92,7 @@ def load_policy(spec: str) -> Policy:
     if spec in SCRIPTED:
         return SCRIPTED[spec]()
     if spec in SHIPPED_AGENTS or Path(spec).suffix or "/" in spec:
-        from search.dsrnn import load_checkpoint_policy  # torch only when a network is asked for
+        from search.agents.dsrnn import load_checkpoint_policy  # torch only when a network is asked for
 
         return load_checkpoint_policy(AGENTS_DIR / f"{spec}.pt" if spec in SHIPPED_AGENTS else spec, name=spec)
     if ":" in spec:

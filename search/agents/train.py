@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from search.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
+from search.agents.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
 from search.sim import world
 from search.sim.observation import ROBOT_NODE_SIZE, observe
 from search.sim.scenarios import sample_training_states

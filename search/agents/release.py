@@ -1,6 +1,6 @@
 """Pick the shipped agents lo, med and hi from one training run and write their checkpoints and model cards.
 
-    python -m search.release_agents RUN_DIR [--out search/agents] [--episodes 500] [--every 2]
+    foil release RUN_DIR [--out DIR] [--episodes 500] [--every 2]
 
 Every ``every``-th checkpoint of the run is evaluated on validation episodes (evaluation seed 1) at the clips'
 horizon, 25 s, since that is what a study's viewers see. hi is the best snapshot (validation reward) that reaches
@@ -13,16 +13,14 @@ were not used to choose them. The shipped files keep only the weights and the tr
 
 from __future__ import annotations
 
-import argparse
 import csv
-import json
 import math
 from pathlib import Path
 
-from search.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, read_checkpoint, save_checkpoint
-from search.evaluate import evaluate
+from search.agents.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, read_checkpoint, save_checkpoint
+from search.agents.evaluate import evaluate
+from search.agents.train import checkpoints
 from search.sim.world import WorldConfig
-from search.train import checkpoints
 
 HORIZON_S = 25.0  # the clips' horizon: 100 steps of 0.25 s
 HI_MIN_SUCCESS, HI_MAX_TIMEOUT = 0.95, 0.03
@@ -31,7 +29,7 @@ VALIDATION_SEED, TEST_SEED = 1, 0
 COLUMNS = ("checkpoint", "env_steps", "episodes", "reward_mean", "reward_low", "reward_high", "success_rate",
            "collision_rate", "timeout_rate")
 REPRODUCE = ("foil train --config search/agents/train.toml --out runs/agents\n"
-             "python -m search.release_agents runs/agents")
+             "foil release runs/agents")
 
 
 class ReleaseError(ValueError):
@@ -195,26 +193,3 @@ def release(run_dir: Path, out: Path, episodes: int, every: int, log=print) -> d
         (out / f"{name}.md").write_text(model_card(name, data, results, row, minutes, run))
         summary[name] = {"checkpoint": row["checkpoint"], "test": results}
     return summary
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="pick and ship lo, med and hi from a training run")
-    parser.add_argument("run_dir", type=Path)
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "agents")
-    parser.add_argument("--episodes", type=int, default=500)
-    parser.add_argument("--every", type=int, default=2, help="validate every N-th checkpoint (default 2)")
-    parser.add_argument("--validate-only", action="store_true", help="print the validation curve, ship nothing")
-    args = parser.parse_args(argv)
-    try:
-        if args.validate_only:
-            validate_run(args.run_dir, args.episodes, args.every)
-        else:
-            print(json.dumps(release(args.run_dir, args.out, args.episodes, args.every), indent=1))
-    except (ReleaseError, FileNotFoundError) as error:
-        print(f"release_agents: error: {error}")
-        return 2
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
