@@ -22,7 +22,7 @@ from pathlib import Path
 from app.visible import VisibleClip, audit
 from search.agents.evaluate import evaluate
 from search.agents.policies import load_policy
-from search.runner import SearchJob, run_all
+from search.solvers.runner import SearchJob, run_all
 
 AGENTS = ("lo", "med", "hi")
 SCENARIOS = ("paper-bl-tr", "paper-tl-br")

@@ -269,11 +269,11 @@ def agent_identity(agent: str) -> dict:
 def search_inputs(job: ClipJob) -> dict:
     """Everything a clip's search depends on, with every default resolved (solver, reward and world settings as
     `foil search` would apply them), so a changed default is a changed input."""
-    from search.reward import RewardConfig
-    from search.runner import parse_settings, solver_config_class
     from search.sim.scenarios import load_scenario
     from search.sim.world import WorldConfig
-    from search.summary import frozen_scenario
+    from search.solvers.reward import RewardConfig
+    from search.solvers.runner import parse_settings, solver_config_class
+    from search.solvers.summary import frozen_scenario
 
     scheme = job.scheme
     given = dict(scheme.settings)
@@ -346,7 +346,7 @@ def _describe(job: ClipJob) -> str:
 def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
     """A cached search is reused while its inputs are unchanged and its summary still re-simulates exactly
     (`foil verify`), so changes to the simulator or the policies' code are caught too."""
-    from search.summary import verify
+    from search.solvers.summary import verify
 
     if not cache.valid("search", inputs, "summary-001.json"):
         return False
@@ -398,7 +398,7 @@ def run_searches(jobs: list[tuple[ClipJob, dict]], cache: Cache, log, workers: i
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from search.runner import _limit_threads
+    from search.solvers.runner import _limit_threads
 
     context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
     with ProcessPoolExecutor(min(workers, len(calls)), mp_context=context, initializer=_limit_threads) as pool:

@@ -86,9 +86,9 @@ def _bundle(args: argparse.Namespace) -> int:
 
 
 def _search_job_settings(args: argparse.Namespace) -> dict:
-    from search.reward import RewardConfig
-    from search.runner import parse_settings, solver_config_class
     from search.sim.world import WorldConfig
+    from search.solvers.reward import RewardConfig
+    from search.solvers.runner import parse_settings, solver_config_class
 
     return {"budget": args.budget, "seed": args.seed, "top_k": args.top_k,
             "solver_settings": parse_settings(solver_config_class(args.solver), args.set, "solver"),
@@ -97,7 +97,7 @@ def _search_job_settings(args: argparse.Namespace) -> dict:
 
 
 def _search(args: argparse.Namespace) -> int:
-    from search.runner import SearchJob, run_search, write_outputs
+    from search.solvers.runner import SearchJob, run_search, write_outputs
 
     job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
                     **_search_job_settings(args))
@@ -107,7 +107,7 @@ def _search(args: argparse.Namespace) -> int:
 
 
 def _search_all(args: argparse.Namespace) -> int:
-    from search.runner import run_all, study_jobs
+    from search.solvers.runner import run_all, study_jobs
 
     solvers = _names(args.solvers)
     settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0]}))
@@ -121,7 +121,7 @@ def _search_all(args: argparse.Namespace) -> int:
 
 
 def _verify(args: argparse.Namespace) -> int:
-    from search.summary import verify
+    from search.solvers.summary import verify
 
     failed = 0
     for path in args.summaries:

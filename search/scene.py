@@ -173,6 +173,6 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
 
 def load_scene(path: str | os.PathLike) -> Scene:
     """The scene of a summary file, read by the search's own summary reader."""
-    from search.summary import load_summary
+    from search.solvers.summary import load_summary
 
     return scene_from_summary(load_summary(path), source=str(path))

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from search.agents.policies import load_policy
-from search.reward import RewardConfig
 from search.sim.coupled import replay
 from search.sim.scenarios import Scenario, load_scenario
-from search.summary import build_summary, frozen_scenario
+from search.solvers.reward import RewardConfig
+from search.solvers.summary import build_summary, frozen_scenario
 
 
 def summary_from_simulation(agents: list[str], scenario: Scenario, seed: int = 0,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from search.prior import ActionPrior
+from search.solvers.prior import ActionPrior
 
 
 class LockProblem:

@@ -4,9 +4,9 @@ import json
 
 import pytest
 
-from search.baselines import CEMConfig
 from search.cli import main
-from search.runner import SearchJob, parse_settings, run_all, run_search, study_jobs
+from search.solvers.baselines import CEMConfig
+from search.solvers.runner import SearchJob, parse_settings, run_all, run_search, study_jobs
 
 SMALL = ["--budget", "600", "--top-k", "3", "--reward", "horizon=30", "--quiet"]
 

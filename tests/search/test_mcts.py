@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from search.agents.policies import load_policy
-from search.baselines import random_search
-from search.mcts import MCTSConfig, StateNode, mcts
-from search.problem import CoupledProblem
-from search.reward import RewardConfig
-from search.rollout import Tracker
 from search.sim.coupled import replay
 from search.sim.scenarios import load_scenario
+from search.solvers.baselines import random_search
+from search.solvers.coupled_problem import CoupledProblem
+from search.solvers.mcts import MCTSConfig, StateNode, mcts
+from search.solvers.reward import RewardConfig
+from search.solvers.rollout import Tracker
 from tests.search.synthetic import LockProblem
 
 SEEDS = range(5)

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from search.prior import ActionPrior
-from search.reward import DivergenceReward, RewardConfig, pairwise_divergence
 from search.sim.world import COLLISION, RUNNING, SUCCESS
+from search.solvers.prior import ActionPrior
+from search.solvers.reward import DivergenceReward, RewardConfig, pairwise_divergence
 
 PRIOR = ActionPrior((1, 2), 0.25)
 

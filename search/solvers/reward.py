@@ -31,8 +31,8 @@ from importlib import import_module
 import numba
 import numpy as np
 
-from search.prior import PRIOR_KINDS, ActionPrior
 from search.sim.world import COLLISION, SUCCESS
+from search.solvers.prior import PRIOR_KINDS, ActionPrior
 
 TERMS = ("action_divergence", "goal", "horizon", "plausibility")
 

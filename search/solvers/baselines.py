@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from search.problem import Problem
-from search.rollout import Tracker, fresh, rollout
+from search.solvers.problem import Problem
+from search.solvers.rollout import Tracker, fresh, rollout
 
 
 @dataclass(frozen=True)

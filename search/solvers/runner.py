@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from search.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
-from search.mcts import MCTSConfig, mcts
-from search.problem import CoupledProblem
-from search.reward import RewardConfig
-from search.rollout import Tracker
-from search.summary import build_summary, dumps, frozen_scenario
+from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
+from search.solvers.coupled_problem import CoupledProblem
+from search.solvers.mcts import MCTSConfig, mcts
+from search.solvers.reward import RewardConfig
+from search.solvers.rollout import Tracker
+from search.solvers.summary import build_summary, dumps, frozen_scenario
 
 SOLVERS = {
     "mcts": (mcts, MCTSConfig),

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from search.agents.policies import SCRIPTED, load_policy
-from search.prior import ActionPrior
-from search.reward import DivergenceReward, RewardConfig
 from search.sim.coupled import replay
 from search.sim.scenarios import Scenario
 from search.sim.world import OUTCOME_NAMES
+from search.solvers.prior import ActionPrior
+from search.solvers.reward import DivergenceReward, RewardConfig
 
 FORMAT = "foil.summary/1"
 

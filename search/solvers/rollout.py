@@ -7,8 +7,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from search.problem import Problem
-from search.topk import TopK
+from search.solvers.problem import Problem
+from search.solvers.topk import TopK
 
 
 class Tracker:

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from search.problem import Problem
-from search.rollout import Tracker
+from search.solvers.problem import Problem
+from search.solvers.rollout import Tracker
 
 
 @dataclass(frozen=True)
