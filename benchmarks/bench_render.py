@@ -21,8 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from search.agents.policies import load_policy  # noqa: E402
-from search.render import ClipRenderer, RenderOptions, render  # noqa: E402
-from search.scene import Scene  # noqa: E402
+from search.clips.render import ClipRenderer, RenderOptions, render  # noqa: E402
+from search.clips.scene import Scene  # noqa: E402
 from search.sim.coupled import replay  # noqa: E402
 from search.sim.scenarios import load_scenario  # noqa: E402
 from search.sim.world import OUTCOME_NAMES  # noqa: E402

@@ -68,7 +68,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from search.render import RenderOptions, render_file
+    from search.clips.render import RenderOptions, render_file
 
     options = RenderOptions(fps=args.fps, speed=args.speed, width=args.width, crf=args.crf)
     numbers = [int(n) for n in args.numbers.split(",")] if args.numbers else None
@@ -79,7 +79,7 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _bundle(args: argparse.Namespace) -> int:
-    from search.bundle import build_bundle
+    from search.bundle.build import build_bundle
 
     build_bundle(args.study, args.out, workers=args.jobs)
     return 0

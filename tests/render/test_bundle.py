@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from search.bundle import BuildError, build_bundle, load_build, parse_build, plan, search_inputs
+from search.bundle.build import BuildError, build_bundle, load_build, parse_build, plan, search_inputs
 
 ROOT = Path(__file__).resolve().parents[2]
 

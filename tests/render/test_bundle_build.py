@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from search.bundle import build_bundle, sha256_file
+from search.bundle.build import build_bundle, sha256_file
 
 pytestmark = pytest.mark.slow
 

@@ -11,7 +11,7 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
-from search.render import (
+from search.clips.render import (
     CRASH,
     HUMAN_FILL,
     ROBOT_STYLES,
@@ -22,7 +22,7 @@ from search.render import (
     render,
     render_file,
 )
-from search.scene import SummaryError, load_scene, scene_from_summary
+from search.clips.scene import SummaryError, load_scene, scene_from_summary
 from search.sim.scenarios import load_scenario
 from tests.render.conftest import summary_from_simulation, visible
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from search.scene import Scene, load_scene
+from search.clips.scene import Scene, load_scene
 
 # Colours that stay apart under the common colour-vision deficiencies (Okabe-Ito blue, vermillion and bluish green;
 # Paul Tol's purple, darker than Okabe-Ito's pink so its trail shows), and one shape each.

@@ -34,8 +34,8 @@ from pathlib import Path
 
 from app.bundle import sha256_file
 from app.visible import VisibleClip, audit
-from search.render import RenderOptions, render, robot_label
-from search.scene import load_scene
+from search.clips.render import RenderOptions, render, robot_label
+from search.clips.scene import load_scene
 
 MANIFEST_FORMAT = "foil.bundle/1"
 PARTS = ("pairwise", "ranking", "example")
@@ -417,10 +417,10 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
 
 def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
     """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
-    import search.render
+    import search.clips.render
 
     inputs = {"summary": sha256_file(summary), "numbers": list(job.numbers), "options": asdict(options),
-              "renderer": sha256_file(Path(search.render.__file__)), "clip": out.name}
+              "renderer": sha256_file(Path(search.clips.render.__file__)), "clip": out.name}
     folder = cache.path("render", inputs)
     if cache.valid("render", inputs, "sha256") and out.is_file() \
             and (folder / "sha256").read_text() == sha256_file(out):
