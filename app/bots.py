@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from app.clip_length import clip_shape
+from app.formats import Manifest, load_summary
 from app.visible import Observer, VisibleClip, contrast
 
 
@@ -28,20 +29,19 @@ class ClipIndex:
     def __init__(self, bundle_dir: str | Path):
         root = Path(bundle_dir)
         try:
-            manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+            manifest = Manifest.model_validate_json((root / "manifest.json").read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise ValueError(f"no manifest.json in bundle {root}") from None
         self.clips: dict[str, VisibleClip] = {}
         self.lengths_ms: dict[str, int] = {}  # what the server holds each clip's answers for
-        for entry in manifest.get("clips", []):
-            path = root / entry.get("summary", "")
-            if not entry.get("summary") or not path.is_file():
-                raise ValueError(f"clip {entry.get('id')!r}: no summary file {path}; the bots judge clips from it")
-            summary = json.loads(path.read_text(encoding="utf-8"))
-            self.clips[entry["sha256"].lower()] = VisibleClip.of_summary(summary, entry["agents"], entry["labels"])
-            clip_file = root / entry.get("file", "")
-            if entry.get("file") and clip_file.is_file():
-                self.lengths_ms[entry["sha256"].lower()] = clip_shape(clip_file).ms
+        for entry in manifest.clips:
+            path = root / entry.summary
+            if not entry.summary or not path.is_file():
+                raise ValueError(f"clip {entry.id!r}: no summary file {path}; the bots judge clips from it")
+            self.clips[entry.sha256.lower()] = VisibleClip.of_summary(load_summary(path), entry.agents, entry.labels)
+            clip_file = root / entry.file
+            if clip_file.is_file():
+                self.lengths_ms[entry.sha256.lower()] = clip_shape(clip_file).ms
 
     def at(self, url: str) -> tuple[str, VisibleClip]:
         match = re.search(r"/clips/([0-9a-f]{64})\.mp4", url)

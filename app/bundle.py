@@ -7,66 +7,21 @@ bundle, checksums, and that every clip the study needs is there.
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 from collections import defaultdict
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+from pydantic import ValidationError
 
+from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, sha256_file
 from app.study import ClipRef, Study
-
-FORMAT = "foil.bundle/1"
 
 
 class BundleError(ValueError):
     """A bundle the server cannot serve; the message names the problem."""
-
-
-class ClipAudit(BaseModel):
-    """What the clip visibly shows against the ground truth (`app.visible.audit`), for researchers only."""
-
-    model_config = ConfigDict(extra="ignore", frozen=True)
-
-    shows: Literal["better", "worse", "tie"]
-    why: str
-
-
-class ManifestClip(BaseModel):
-    model_config = ConfigDict(extra="ignore", frozen=True)
-
-    id: str
-    file: str
-    sha256: str
-    scheme: str
-    scenario: str
-    agents: list[str]
-    labels: list[str]
-    better: str
-    summary: str = ""
-    audit: ClipAudit | None = None
-
-    @model_validator(mode="after")
-    def _consistent(self) -> ManifestClip:
-        if len(self.labels) != len(self.agents):
-            raise ValueError("labels and agents must have the same length")
-        if self.better not in self.agents:
-            raise ValueError(f"better {self.better!r} is not one of its agents")
-        if len(set(self.labels)) != len(self.labels):
-            raise ValueError("labels must differ from each other")
-        return self
-
-
-class Manifest(BaseModel):
-    model_config = ConfigDict(extra="ignore", frozen=True)
-
-    format: str
-    clips: list[ManifestClip]
-    agents: dict[str, dict] = {}
 
 
 @dataclass(frozen=True)
@@ -90,14 +45,6 @@ class Bundle:
         return dict(index)
 
 
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def load_bundle(root: str | Path) -> Bundle:
     root = Path(root).resolve()
     manifest_path = root / "manifest.json"
@@ -112,8 +59,8 @@ def load_bundle(root: str | Path) -> Bundle:
     except ValidationError as error:
         problems = [f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}" for e in error.errors()]
         raise BundleError(f"{manifest_path} is not a valid manifest:\n" + "\n".join(problems)) from None
-    if manifest.format != FORMAT:
-        raise BundleError(f"{manifest_path}: format is {manifest.format!r}, this server reads {FORMAT!r}")
+    if manifest.format != MANIFEST_FORMAT:
+        raise BundleError(f"{manifest_path}: format is {manifest.format!r}, this server reads {MANIFEST_FORMAT!r}")
     clips: dict[str, ManifestClip] = {}
     paths: dict[str, Path] = {}
     problems = []

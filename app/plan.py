@@ -11,8 +11,9 @@ import itertools
 import random
 
 from app.assignment import Condition
-from app.bundle import Bundle, ManifestClip
+from app.bundle import Bundle
 from app.clip_length import clip_shape
+from app.formats import ManifestClip
 from app.study import RankingPart, Study
 
 

@@ -27,8 +27,9 @@ sys.path.insert(0, str(REPO))
 from sqlalchemy import insert  # noqa: E402
 
 from app.assignment import conditions  # noqa: E402
-from app.bundle import Bundle, ManifestClip  # noqa: E402
+from app.bundle import Bundle  # noqa: E402
 from app.database import Database, migrate  # noqa: E402
+from app.formats import ManifestClip  # noqa: E402
 from app.models import Participant, ParticipantPlan, Response  # noqa: E402
 from app.plan import build_plan  # noqa: E402
 from app.study import load_study  # noqa: E402

@@ -1,17 +1,8 @@
-"""Offline side of Foil: crowd world, coupled simulator, agents, search, rendering and bundles.
+"""The offline side of Foil, in layers that import only downwards:
 
-Attributes are imported on first use so that `foil --help` and the survey server start without numba or torch.
+    sim -> agents -> solvers -> clips -> bundle -> cli
+
+`sim` is the crowd world and the coupled simulator, `agents` the DS-RNN robots and their training, `solvers` the
+scenario search and its summaries, `clips` the renderer, `bundle` a study's clips and manifest, `cli` the `foil`
+command. docs/architecture.md draws the whole picture, the survey server (`app`) included.
 """
-
-from importlib import import_module
-
-_EXPORTS = {
-    "orca_step": "search.sim.orca",
-    "orca_velocities": "search.sim.orca",
-}
-
-
-def __getattr__(name):
-    if name in _EXPORTS:
-        return getattr(import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'search' has no attribute {name!r}")

@@ -32,12 +32,11 @@ import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from app.bundle import sha256_file
+from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
 from app.visible import VisibleClip, audit
 from search.clips.render import RenderOptions, render, robot_label
 from search.clips.scene import load_scene
 
-MANIFEST_FORMAT = "foil.bundle/1"
 PARTS = ("pairwise", "ranking", "example")
 SETTINGS = {"settings": "--set", "reward": "--reward", "world": "--world"}  # scheme tables -> foil search flags
 
@@ -433,7 +432,7 @@ def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, 
     log(f"render {job.id}: {result.frames} frames in {result.render_s:.1f} s")
 
 
-def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, workers: int = 1) -> dict:
+def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, workers: int = 1) -> Manifest:
     """Build (or bring up to date) the bundle of a study file in ``out``, running up to ``workers`` searches at
     once; returns the manifest."""
     spec, text = load_build(study)
@@ -464,38 +463,21 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
             log(f"warning: clip {job.id} is misleading: it shows the better robot {better} "
                 f"({labels[agents.index(better)]}) as {'no better' if clip_audit['shows'] == 'tie' else 'worse'}: "
                 f"{clip_audit['why']}")
-        clips.append({
-            "id": job.id,
-            "file": f"clips/{job.id}.mp4",
-            "sha256": sha256_file(clip),
-            "scheme": job.scheme.name,
-            "scenario": job.scenario,
-            "agents": agents,
-            "labels": labels,
-            "better": better,
-            "summary": f"summaries/{job.id}.json",
-            "audit": clip_audit,
-            "poster": f"clips/{job.id}.poster.png",
-            "sheet": f"clips/{job.id}.sheet.png",
-            "parts": list(job.parts),
-            "solver": job.scheme.solver,
-            "reward": data.get("reward"),
-            "outcomes": [data["outcomes"][k] for k in order],
-        })
+        clips.append(ManifestClip(
+            id=job.id, file=f"clips/{job.id}.mp4", sha256=sha256_file(clip), scheme=job.scheme.name,
+            scenario=job.scenario, agents=agents, labels=labels, better=better, summary=f"summaries/{job.id}.json",
+            audit=ClipAudit(**clip_audit), poster=f"clips/{job.id}.poster.png", sheet=f"clips/{job.id}.sheet.png",
+            parts=list(job.parts), solver=job.scheme.solver, reward=data.get("reward"),
+            outcomes=[data["outcomes"][k] for k in order]))
     (out / "study.toml").write_text(text, encoding="utf-8")
-    wanted = {c[key] for c in clips for key in ("file", "summary", "poster", "sheet")} | {"study.toml"}
+    wanted = {path for c in clips for path in (c.file, c.summary, c.poster, c.sheet)} | {"study.toml"}
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
-    write_gallery(out, clips, evaluations)
-    manifest = {
-        "format": MANIFEST_FORMAT,
-        "label_seed": spec.seed,
-        "clips": clips,
-        "agents": evaluations,
-        "files": {name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
-    }
-    (out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
+    write_gallery(out, [clip.model_dump() for clip in clips], evaluations)
+    manifest = Manifest(format=MANIFEST_FORMAT, label_seed=spec.seed, clips=clips, agents=evaluations,
+                        files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})})
+    (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
     return manifest
 

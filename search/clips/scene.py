@@ -1,4 +1,4 @@
-"""What a clip shows, read from a summary.json (`foil.summary/1`): positions over time, starts, goals, outcomes.
+"""What a clip shows, read from a summary.json (`app.formats`): positions over time, starts, goals, outcomes.
 
 The renderer needs only this much of a summary, checked here with errors that say which part of the file is
 wrong, so a bad or truncated summary fails before any frame is drawn.
@@ -12,10 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from app.formats import SUMMARY_FORMAT, load_summary
 from search.sim.scenarios import Scenario
 from search.sim.world import OUTCOME_NAMES
-
-SUMMARY_FORMAT = "foil.summary/1"
 
 
 @dataclass(frozen=True)
@@ -172,7 +171,5 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
 
 
 def load_scene(path: str | os.PathLike) -> Scene:
-    """The scene of a summary file, read by the search's own summary reader."""
-    from search.solvers.summary import load_summary
-
+    """The scene of a summary file."""
     return scene_from_summary(load_summary(path), source=str(path))

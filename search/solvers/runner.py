@@ -18,12 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
+from app.formats import summary_json
 from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
 from search.solvers.coupled_problem import CoupledProblem
 from search.solvers.mcts import MCTSConfig, mcts
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-from search.solvers.summary import build_summary, dumps, frozen_scenario
+from search.solvers.summary import build_summary, frozen_scenario
 
 SOLVERS = {
     "mcts": (mcts, MCTSConfig),
@@ -124,7 +125,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     files = {}
     for rank, summary in enumerate(summaries, start=1):
         summary["solver"]["rank"] = rank
-        files[f"summary-{rank:03d}.json"] = dumps(summary)
+        files[f"summary-{rank:03d}.json"] = summary_json(summary)
     record = {
         "format": "foil.run/1",
         "agents": list(job.agents),

@@ -1,4 +1,5 @@
-"""summary.json (format ``foil.summary/1``): one kept trajectory, replayable and checkable.
+"""Building and checking summaries (summary.json, defined in `app.formats`): one kept trajectory,
+replayable and checkable.
 
 A summary is built from a replay of its environment actions at batch size 1, never from a search's batched
 numbers (neural policies may differ in the last bits between batch sizes). ``verify`` builds it again from the
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.formats import SUMMARY_FORMAT, load_summary, summary_json
 from search.agents.policies import SCRIPTED, load_policy
 from search.sim.coupled import replay
 from search.sim.scenarios import Scenario
@@ -25,7 +27,7 @@ from search.sim.world import OUTCOME_NAMES
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 
-FORMAT = "foil.summary/1"
+REPLAY_KEYS = ("agents", "scenario", "solver", "reward_parameters", "env_actions")  # what verify needs
 
 
 def agent_entry(spec: str, policy) -> dict:
@@ -64,7 +66,7 @@ def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_
         where = "never ends" if ends.size == 0 else f"ends at step {ends[0] + 1} of {len(terminal)}"
         raise ValueError(f"the trajectory {where}: a summary holds exactly one complete trajectory")
     return {
-        "format": FORMAT,
+        "format": SUMMARY_FORMAT,
         "agents": [agent_entry(spec, policy) for spec, policy in zip(agents, policies, strict=True)],
         "scenario": scenario.to_dict(),
         "solver": solver,
@@ -81,27 +83,6 @@ def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_
         "reward": total,
         "reward_terms": terms,
     }
-
-
-def dumps(summary: dict) -> str:
-    return json.dumps(summary, indent=1, allow_nan=False) + "\n"
-
-
-def load_summary(path: str | Path) -> dict:
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"no summary file {str(path)!r}") from None
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON: {error}") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        found = data.get("format") if isinstance(data, dict) else type(data).__name__
-        raise ValueError(f"{path}: not a summary (format {found!r}, expected {FORMAT!r})")
-    missing = [key for key in ("agents", "scenario", "solver", "reward_parameters", "env_actions") if key not in data]
-    if missing:
-        raise ValueError(f"{path}: summary lacks {missing}; write it again with `foil search`")
-    return data
 
 
 def rebuild(data: dict) -> dict:
@@ -142,8 +123,11 @@ def differences(expected, found, where: str = "", limit: int = 10) -> list[str]:
 def verify(path: str | Path) -> list[str]:
     """Re-simulate a summary; the list of differences is empty when every number is reproduced exactly."""
     data = load_summary(path)
+    missing = [key for key in REPLAY_KEYS if key not in data]
+    if missing:
+        raise ValueError(f"{path}: summary lacks {missing}; write it again with `foil search`")
     try:
-        expected = json.loads(dumps(rebuild(data)))
+        expected = json.loads(summary_json(rebuild(data)))
     except (ValueError, KeyError, TypeError) as error:
         return [f"cannot re-simulate: {error}"]
     return differences(expected, data)

@@ -3,7 +3,6 @@ easy to search for in pages), a real database per test, and a bot that fills in 
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import re
@@ -17,6 +16,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.database import migrate
+from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, manifest_json, sha256_file
 from app.main import create_app
 from app.settings import Settings
 from tests.app import postgres
@@ -56,16 +56,14 @@ def write_bundle(root: Path, clip_files: list[Path], *, schemes, scenarios, agen
         name = f"clips/{n:03d}.mp4"
         shutil.copyfile(source, root / name)
         shown = list(pair) if n % 2 else list(reversed(pair))  # both on-screen orders occur
-        entries.append({
-            "id": f"{scheme}-{scenario}-{pair[0]}-{pair[1]}", "file": name,
-            "sha256": hashlib.sha256((root / name).read_bytes()).hexdigest(),
-            "scheme": scheme, "scenario": scenario, "agents": shown, "labels": [label[a] for a in shown],
-            "better": max(pair, key=AGENT_RANK.index) if pair[0] in AGENT_RANK else pair[1],
-            "summary": f"summaries/{n:03d}.json",
-        })
-    manifest = {"format": "foil.bundle/1", "clips": entries,
-                "agents": {agent: {"agent": agent, "episodes": 10, "success_rate": 0.5} for agent in agents}}
-    (root / "manifest.json").write_text(json.dumps(manifest, indent=1))
+        entries.append(ManifestClip(
+            id=f"{scheme}-{scenario}-{pair[0]}-{pair[1]}", file=name, sha256=sha256_file(root / name),
+            scheme=scheme, scenario=scenario, agents=shown, labels=[label[a] for a in shown],
+            better=max(pair, key=AGENT_RANK.index) if pair[0] in AGENT_RANK else pair[1],
+            summary=f"summaries/{n:03d}.json"))
+    manifest = Manifest(format=MANIFEST_FORMAT, clips=entries,
+                        agents={agent: {"agent": agent, "episodes": 10, "success_rate": 0.5} for agent in agents})
+    (root / "manifest.json").write_text(manifest_json(manifest))
     return root
 
 

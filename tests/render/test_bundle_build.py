@@ -6,7 +6,8 @@ import json
 
 import pytest
 
-from search.bundle.build import build_bundle, sha256_file
+from app.formats import sha256_file
+from search.bundle.build import build_bundle
 
 pytestmark = pytest.mark.slow
 
@@ -58,7 +59,7 @@ def built(tmp_path_factory):
     study = root / "study.toml"
     study.write_text(SMALL_STUDY)
     log = []
-    manifest = build_bundle(study, root / "out", log=log.append)
+    manifest = build_bundle(study, root / "out", log=log.append).model_dump(mode="json")
     return root / "out", manifest, log, study
 
 
@@ -109,7 +110,7 @@ def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(b
 def test_searches_in_parallel_give_the_same_bundle(built, tmp_path):
     _, manifest, _, study = built
     log = []
-    assert build_bundle(study, tmp_path / "parallel", log=log.append, workers=2) == manifest
+    assert build_bundle(study, tmp_path / "parallel", log=log.append, workers=2).model_dump(mode="json") == manifest
     assert len([line for line in log if line.startswith("search ") and not line.endswith("cached")]) == 3
 
 
@@ -125,7 +126,7 @@ def test_a_rebuild_reuses_cached_searches_and_clips(built):
     out, manifest, log, study = built
     assert not any(line.endswith(": cached") for line in log)
     again = []
-    assert build_bundle(study, out, log=again.append) == manifest
+    assert build_bundle(study, out, log=again.append).model_dump(mode="json") == manifest
     searches = [line for line in again if line.startswith("search ")]
     assert len(searches) == 3 and all(line.endswith(": cached") for line in searches)
     assert all(line.endswith(": cached") for line in again if line.startswith(("render ", "eval ")))
@@ -136,7 +137,7 @@ def test_a_changed_input_reruns_only_the_searches_it_touches(built):
     changed = study.with_name("changed.toml")
     changed.write_text(study.read_text().replace('solver = "mcts"\nbudget = 300', 'solver = "mcts"\nbudget = 400'))
     log = []
-    manifest = build_bundle(changed, out, log=log.append)
+    manifest = build_bundle(changed, out, log=log.append).model_dump(mode="json")
     searches = [line for line in log if line.startswith("search ")]
     assert sorted(line.endswith(": cached") for line in searches) == [False, True, True]
     assert [line for line in searches if not line.endswith(": cached")][0].startswith("search adaptive")

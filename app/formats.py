@@ -1,0 +1,142 @@
+"""The two files that pass between the offline side and the survey: summary.json and manifest.json.
+
+Both sides read and write them through this module only; it imports nothing heavy, so the server (which never
+imports the offline side) and the bundle builder share it. docs/formats.md describes every key.
+
+- summary.json (``foil.summary/1``): one kept trajectory of a search, with everything needed to replay it
+  exactly and to draw it. Written by ``search.solvers.summary``, read by ``foil verify``, the renderer, the
+  bundle's audit and the bots.
+- manifest.json (``foil.bundle/1``): a bundle's clips, each with its agents, on-screen labels, ground truth,
+  audit and checksum. Written by ``foil bundle``, read by the server and the bots.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Literal, TypedDict
+
+from pydantic import BaseModel, ConfigDict, model_validator
+
+SUMMARY_FORMAT = "foil.summary/1"
+MANIFEST_FORMAT = "foil.bundle/1"
+
+
+def sha256_file(path: Path) -> str:
+    """The hex sha256 of a file, read in blocks (clips can be large)."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class SummaryAgent(TypedDict):
+    name: str  # as given to foil search: lo, med, hi, a scripted policy or a checkpoint path
+    source: str  # "scripted", or the file the network was loaded from
+
+
+class SummaryStep(TypedDict):
+    t: float  # simulated seconds after the step
+    humans: list  # [[x, y], ...] per human; with visible robots, one such list per agent's crowd
+    robots: list[list[float]]  # [x, y] per agent
+    robot_actions: list[list[float]]  # the velocity each agent chose on this step
+
+
+class SummaryOutcome(TypedDict):
+    event: Literal["running", "success", "collision", "timeout"]
+    time: float | None  # when the event happened (null while running)
+    path_length: float
+    min_human_distance: float | None  # surface to surface; negative after a collision
+
+
+class Summary(TypedDict):
+    format: str  # SUMMARY_FORMAT
+    agents: list[SummaryAgent]
+    scenario: dict  # the scenario with its complete world config
+    solver: dict  # name, parameters, seed, budget, budget_used, search_reward, found_at_step, rank
+    reward_parameters: dict
+    env_actions: list[list[float]]  # per step, the flattened (humans x 2) environment action
+    steps: list[SummaryStep]
+    outcomes: list[SummaryOutcome]  # one per agent
+    reward: float
+    reward_terms: dict
+
+
+def summary_json(summary: Summary) -> str:
+    """A summary's file text: the one way summaries are written, so equal summaries are equal files."""
+    return json.dumps(summary, indent=1, allow_nan=False) + "\n"
+
+
+def load_summary(path: str | Path) -> Summary:
+    """A summary.json, or an error that names the file and what is wrong with it."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no summary file {str(path)!r}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON: {error}") from None
+    if not isinstance(data, dict) or data.get("format") != SUMMARY_FORMAT:
+        found = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise ValueError(f"{path}: not a summary (format {found!r}, expected {SUMMARY_FORMAT!r})")
+    return data
+
+
+class ClipAudit(BaseModel):
+    """What the clip visibly shows against the ground truth (`app.visible.audit`), for researchers only."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    shows: Literal["better", "worse", "tie"]
+    why: str
+
+
+class ManifestClip(BaseModel):
+    """One clip of a bundle. Fields after ``audit`` are for the researcher's gallery and analysis; the server
+    needs only those before."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    id: str
+    file: str  # relative to the bundle
+    sha256: str
+    scheme: str
+    scenario: str
+    agents: list[str]  # in on-screen order
+    labels: list[str]  # each agent's on-screen name, e.g. "Robot 2"
+    better: str  # the agent with the higher mean test reward: the ground truth
+    summary: str = ""  # the summary.json the clip shows, relative to the bundle
+    audit: ClipAudit | None = None
+    poster: str = ""
+    sheet: str = ""
+    parts: list[str] = []  # survey parts the clip feeds: pairwise, ranking, example
+    solver: str = ""
+    reward: float | None = None  # the summary's divergence reward
+    outcomes: list[dict] = []  # each agent's summary outcome, in on-screen order
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ManifestClip:
+        if len(self.labels) != len(self.agents):
+            raise ValueError("labels and agents must have the same length")
+        if self.better not in self.agents:
+            raise ValueError(f"better {self.better!r} is not one of its agents")
+        if len(set(self.labels)) != len(self.labels):
+            raise ValueError("labels must differ from each other")
+        return self
+
+
+class Manifest(BaseModel):
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    format: str  # MANIFEST_FORMAT
+    label_seed: int | None = None  # seeds the agent-to-robot-number mapping of the clips
+    clips: list[ManifestClip]
+    agents: dict[str, dict] = {}  # each agent's `foil eval --json` object
+    files: dict[str, str] = {}  # every file of the bundle (relative path) -> sha256
+
+
+def manifest_json(manifest: Manifest) -> str:
+    """A manifest's file text: the one way manifests are written."""
+    return json.dumps(manifest.model_dump(mode="json"), indent=1) + "\n"
