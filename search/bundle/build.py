@@ -18,10 +18,8 @@ Bundle layout::
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import html
-import io
 import itertools
 import json
 import os
@@ -29,16 +27,24 @@ import random
 import shutil
 import time
 import tomllib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
 from app.visible import VisibleClip, audit
 from search.clips.render import RenderOptions, render, robot_label
 from search.clips.scene import load_scene
+from search.solvers.runner import (
+    SearchJob,
+    check_settings,
+    limit_threads,
+    run_search,
+    solver_config_class,
+    write_outputs,
+)
 
 PARTS = ("pairwise", "ranking", "example")
-SETTINGS = {"settings": "--set", "reward": "--reward", "world": "--world"}  # scheme tables -> foil search flags
+SETTINGS = ("settings", "reward", "world")  # a scheme's tables of settings
 
 
 class BuildError(ValueError):
@@ -47,17 +53,17 @@ class BuildError(ValueError):
 
 @dataclass(frozen=True)
 class Scheme:
-    """How one scheme's clips are found: a solver of `foil search`, its simulator-step budget and seed."""
+    """How one scheme's clips are found: a solver with its simulator-step budget, seed and settings, and the
+    reward and world settings, as a study file's `[build.schemes.NAME]` table gives them."""
 
     name: str
     solver: str
     budget: int
     seed: int
     top_k: int
-    settings: tuple[tuple[str, tuple[str, ...]], ...] = ()  # ("--set" | "--reward" | "--world", ("key=value", ...))
-
-    def arguments(self) -> list[str]:
-        return [part for flag, items in self.settings for item in items for part in (flag, item)]
+    settings: dict = field(default_factory=dict)  # the solver's
+    reward: dict = field(default_factory=dict)
+    world: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -139,19 +145,15 @@ def parse_build(table: dict, source: str = "study file") -> BuildSpec:
                     where)
         if not isinstance(scheme["solver"], str) or not scheme["solver"]:
             _fail(source, f"{where}.solver", "must name a solver of foil search (mcts, nfirst, random, cem)")
-        settings = []
-        for key, flag in SETTINGS.items():
+        for key in SETTINGS:
             values = scheme.get(key, {})
             if not isinstance(values, dict) or not all(isinstance(v, int | float | str) for v in values.values()):
                 _fail(source, f"{where}.{key}", "must be a table of key = value settings")
-            if values:
-                settings.append((flag, tuple(f"{k}={str(v).lower() if isinstance(v, bool) else v}"
-                                             for k, v in sorted(values.items()))))
         schemes[name] = Scheme(name=name, solver=scheme["solver"],
                                budget=_int(scheme["budget"], source, f"{where}.budget", 1),
                                seed=_int(scheme["seed"], source, f"{where}.seed"),
                                top_k=_int(scheme.get("top_k", 1), source, f"{where}.top_k", 1),
-                               settings=tuple(settings))
+                               **{key: dict(scheme.get(key, {})) for key in SETTINGS})
 
     sets = []
     if not isinstance(table["sets"], list) or not table["sets"]:
@@ -265,25 +267,32 @@ def agent_identity(agent: str) -> dict:
     return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
 
 
-def search_inputs(job: ClipJob) -> dict:
-    """Everything a clip's search depends on, with every default resolved (solver, reward and world settings as
-    `foil search` would apply them), so a changed default is a changed input."""
-    from search.sim.scenarios import load_scenario
+def search_job(job: ClipJob) -> SearchJob:
+    """The search behind a clip, its settings checked against the solver's, reward's and world's fields."""
     from search.sim.world import WorldConfig
     from search.solvers.reward import RewardConfig
-    from search.solvers.runner import parse_settings, solver_config_class
-    from search.solvers.summary import frozen_scenario
 
     scheme = job.scheme
-    given = dict(scheme.settings)
-    solver_class = solver_config_class(scheme.solver)
-    solver = solver_class(**parse_settings(solver_class, list(given.get("--set", ())), "solver"))
-    reward = RewardConfig(**parse_settings(RewardConfig, list(given.get("--reward", ())), "reward"))
-    world = parse_settings(WorldConfig, list(given.get("--world", ())), "world")
-    return {"agents": [agent_identity(a) for a in job.pair],
-            "scenario": frozen_scenario(load_scenario(job.scenario), world).to_dict(),
-            "solver": scheme.solver, "solver_settings": asdict(solver), "reward": reward.to_dict(),
-            "budget": scheme.budget, "seed": scheme.seed, "top_k": scheme.top_k}
+    return SearchJob(agents=job.pair, scenario=job.scenario, solver=scheme.solver, budget=scheme.budget,
+                     seed=scheme.seed, top_k=scheme.top_k,
+                     solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
+                     reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
+                     world_settings=check_settings(WorldConfig, scheme.world, "world"))
+
+
+def search_inputs(search: SearchJob) -> dict:
+    """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
+    input."""
+    from search.sim.scenarios import load_scenario
+    from search.solvers.reward import RewardConfig
+    from search.solvers.summary import frozen_scenario
+
+    return {"agents": [agent_identity(a) for a in search.agents],
+            "scenario": frozen_scenario(load_scenario(search.scenario), search.world_settings).to_dict(),
+            "solver": search.solver, "solver_settings": asdict(solver_config_class(search.solver)(
+                **search.solver_settings)),
+            "reward": RewardConfig(**search.reward_settings).to_dict(),
+            "budget": search.budget, "seed": search.seed, "top_k": search.top_k}
 
 
 class Cache:
@@ -357,53 +366,39 @@ def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
     return True
 
 
-def _foil_search(arguments: list[str]) -> tuple[int, float]:
-    """`foil search` with these arguments (its CLI contract), in this process: exit status and seconds taken."""
-    from search.cli import main as foil
-
+def _run_search(search: SearchJob, folder: Path) -> float:
+    """Run one search and write its files into ``folder``; the seconds it took."""
     started = time.perf_counter()
-    try:
-        with contextlib.redirect_stdout(io.StringIO()):  # its one-line report; errors still reach stderr
-            code = foil(["search", *arguments])
-    except SystemExit as exit:  # argparse rejected the arguments (and said why)
-        code = exit.code
-    return code, time.perf_counter() - started
+    write_outputs(folder, run_search(search))
+    return time.perf_counter() - started
 
 
-def run_searches(jobs: list[tuple[ClipJob, dict]], cache: Cache, log, workers: int = 1) -> None:
+def run_searches(jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log, workers: int = 1) -> None:
     """Run every search the cache cannot supply, ``workers`` at a time in separate processes; each result is
     sealed in the cache as soon as it is complete, so an interrupted build keeps the finished ones."""
     todo = {}
-    for job, inputs in jobs:
+    for job, search, inputs in jobs:
         if _key(inputs) not in todo and not _reusable(job, inputs, cache, log):
-            todo[_key(inputs)] = (job, inputs)
-    calls = []
-    for job, inputs in todo.values():
-        scheme, folder = job.scheme, cache.store("search", inputs)
-        calls.append(["--agents", ",".join(job.pair), "--scenario", job.scenario, "--solver", scheme.solver,
-                      "--budget", str(scheme.budget), "--seed", str(scheme.seed), "--top-k", str(scheme.top_k),
-                      "--out", str(folder), "--quiet", *scheme.arguments()])
+            todo[_key(inputs)] = (job, search, inputs)
 
-    def finished(job: ClipJob, inputs: dict, code: int, seconds: float) -> None:
-        if code != 0 or not (cache.path("search", inputs) / "summary-001.json").is_file():
-            raise BuildError(f"{_describe(job)} failed (foil search exit status {code}); see its error above")
+    def finished(job: ClipJob, inputs: dict, seconds: float) -> None:
         cache.seal("search", inputs)
         log(f"{_describe(job)}: {seconds:.1f} s")
 
-    if workers <= 1 or len(calls) <= 1:
-        for (job, inputs), arguments in zip(todo.values(), calls, strict=True):
-            finished(job, inputs, *_foil_search(arguments))
+    if workers <= 1 or len(todo) <= 1:
+        for job, search, inputs in todo.values():
+            finished(job, inputs, _run_search(search, cache.store("search", inputs)))
         return
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from search.solvers.runner import _limit_threads
-
     context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
-    with ProcessPoolExecutor(min(workers, len(calls)), mp_context=context, initializer=_limit_threads) as pool:
-        futures = {pool.submit(_foil_search, arguments): key for key, arguments in zip(todo, calls, strict=True)}
+    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=context, initializer=limit_threads) as pool:
+        futures = {pool.submit(_run_search, search, cache.store("search", inputs)): key
+                   for key, (_, search, inputs) in todo.items()}
         for future in as_completed(futures):
-            finished(*todo[futures[future]], *future.result())
+            job, _, inputs = todo[futures[future]]
+            finished(job, inputs, future.result())
 
 
 def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
@@ -437,8 +432,9 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     once; returns the manifest."""
     spec, text = load_build(study)
     jobs = plan(spec)
-    try:
-        inputs = [search_inputs(job) for job in jobs]  # bad settings or scenarios fail here, before any work
+    try:  # bad settings or scenarios fail here, before any work
+        searches = [search_job(job) for job in jobs]
+        inputs = [search_inputs(search) for search in searches]
     except (ValueError, FileNotFoundError) as error:
         raise BuildError(f"{study}: [build]: {error}") from None
     out = Path(out)
@@ -447,7 +443,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log)
-    run_searches(list(zip(jobs, inputs, strict=True)), cache, log, workers)
+    run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
     clips = []
     for job, search in zip(jobs, inputs, strict=True):
         summary = out / "summaries" / f"{job.id}.json"

@@ -94,6 +94,23 @@ def parse_settings(cls, items: list[str], what: str) -> dict:
     return settings
 
 
+def check_settings(cls, values: dict, what: str) -> dict:
+    """Settings for dataclass ``cls`` given as typed values (a study file's table), each checked against its
+    field's type; a whole number is taken where a float is expected, as ``parse_settings`` takes "10"."""
+    types = {f.name: type(f.default) for f in fields(cls)}
+    settings = {}
+    for key, value in values.items():
+        if key not in types:
+            raise ValueError(f"bad {what} setting {key!r}: use a key among {sorted(types)}")
+        kind = types[key]
+        if kind is float and type(value) is int:
+            value = float(value)
+        if type(value) is not kind:
+            raise ValueError(f"bad {what} setting {key} = {value!r}: {key} takes a {kind.__name__}")
+        settings[key] = value
+    return settings
+
+
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
     ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
@@ -166,14 +183,14 @@ def study_jobs(agents: list[str], scenarios: list[str], solvers: list[str], join
             for solver in solvers for group in groups for scenario in scenarios]
 
 
-def _limit_threads() -> None:
+def limit_threads() -> None:
     """One search per core: keep libraries inside a worker from starting a thread per core each."""
     for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ.setdefault(name, "1")
 
 
 def _job_in_worker(job: SearchJob) -> dict[str, str]:
-    _limit_threads()
+    limit_threads()
     return run_search(job)
 
 
@@ -201,7 +218,7 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
-            with ProcessPoolExecutor(workers, mp_context=context, initializer=_limit_threads) as pool:
+            with ProcessPoolExecutor(workers, mp_context=context, initializer=limit_threads) as pool:
                 futures = {pool.submit(_job_in_worker, job): index for index, job in enumerate(jobs)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from search.bundle.build import BuildError, build_bundle, load_build, parse_build, plan, search_inputs
+from search.bundle.build import BuildError, build_bundle, load_build, parse_build, plan, search_inputs, search_job
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -81,13 +81,22 @@ def test_bad_build_tables_give_clear_errors(change, message):
         parse_build(table, source="study.toml")
 
 
-def test_scheme_settings_become_foil_search_flags():
+def test_scheme_settings_reach_the_search_as_the_fields_types():
+    """A whole number in the study file is a float where the setting is one, as `foil search --set
+    exploration=100` gives it, so both make the same search."""
     table = copy(BUILD)
     table["schemes"]["adaptive"] |= {"settings": {"exploration": 100, "mode": "receding"}, "reward": {"alpha": 2},
                                      "world": {"robot_visible": True}}
-    scheme = parse_build(table).schemes["adaptive"]
-    assert scheme.arguments() == ["--set", "exploration=100", "--set", "mode=receding", "--reward", "alpha=2",
-                                  "--world", "robot_visible=true"]
+    job = next(job for job in plan(parse_build(table)) if job.scheme.name == "adaptive")
+    search = search_job(job)
+    assert search.solver_settings == {"exploration": 100.0, "mode": "receding"}
+    assert type(search.solver_settings["exploration"]) is float and type(search.reward_settings["alpha"]) is float
+    assert search.reward_settings == {"alpha": 2.0} and search.world_settings == {"robot_visible": True}
+    assert (search.agents, search.scenario, search.budget, search.seed) == (job.pair, job.scenario, 300, 1)
+    table["schemes"]["adaptive"]["world"] = {"robot_visible": "yes"}
+    job = next(job for job in plan(parse_build(table)) if job.scheme.name == "adaptive")
+    with pytest.raises(ValueError, match="bad world setting robot_visible = 'yes': robot_visible takes a bool"):
+        search_job(job)
     table["schemes"]["adaptive"]["settings"] = {"nested": {"x": 1}}
     with pytest.raises(BuildError, match="schemes.adaptive.settings: must be a table of key = value settings"):
         parse_build(table)
@@ -98,7 +107,7 @@ def test_bad_search_settings_are_refused_before_any_work(tmp_path):
     study.write_text('[build]\nseed = 1\n[build.schemes.a]\nsolver = "mcts"\nbudget = 10\nseed = 0\n'
                      '[build.schemes.a.settings]\nexplorashun = 3\n[[build.sets]]\nparts = ["pairwise"]\n'
                      'schemes = ["a"]\nscenarios = ["paper-bl-tr"]\npairs = [["goal", "orca"]]\n')
-    with pytest.raises(BuildError, match="bad solver setting 'explorashun=3'"):
+    with pytest.raises(BuildError, match="bad solver setting 'explorashun'"):
         build_bundle(study, tmp_path / "out", log=lambda line: None)
     assert not (tmp_path / "out").exists()
 
@@ -129,9 +138,10 @@ def test_paper_build_reproduces_the_papers_clip_set():
             pairs = {frozenset(job.pair) for job in main if job.scheme.name == scheme and job.scenario == scenario}
             assert pairs == {frozenset(p) for p in (("lo", "med"), ("med", "hi"), ("lo", "hi"))}
     # the paper's reward as its code sets it, ending at the first robot's end (docs/search.md)
-    adaptive = next(search_inputs(job) for job in main if job.scheme.name == "adaptive")
+    adaptive = next(search_inputs(search_job(job)) for job in main if job.scheme.name == "adaptive")
     assert {k: adaptive["reward"][k] for k in ("finish", "goal_bonus", "alpha", "beta", "horizon_offset",
                                                  "collision_is_goal")} == {
         "finish": "first", "goal_bonus": 100.0, "alpha": 1.0, "beta": 1e4, "horizon_offset": -1e5,
         "collision_is_goal": False}
-    assert all(search_inputs(job)["reward"]["finish"] == "first" for job in main if job.scheme.name == "nfirst")
+    assert all(search_inputs(search_job(job))["reward"]["finish"] == "first"
+               for job in main if job.scheme.name == "nfirst")
