@@ -137,7 +137,8 @@ def test_search_all_in_parallel_processes_reproduces_single_searches(tmp_path):
 
 @pytest.mark.slow
 def test_search_all_on_a_local_ray_instance(tmp_path):
-    pytest.importorskip("ray")
+    """The engine users move to when one machine is not enough: `foil search-all --backend ray` starts a local
+    Ray instance (no address given) and reproduces a single search exactly."""
     common = {"budget": 300, "top_k": 2, "reward_settings": {"horizon": 20}}
     jobs = study_jobs(["goal", "orca"], ["paper-bl-tr", "paper-tl-br"], ["random"], **common)
     study = run_all(jobs, tmp_path, workers=2, backend="ray", progress=False)
