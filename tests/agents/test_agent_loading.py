@@ -48,9 +48,24 @@ def test_module_attribute_loads_your_own_policy(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("name", SHIPPED_AGENTS)
 def test_shipped_agents_load_by_name_and_act(name):
+    """A shipped name loads its network, whose first move in a shipped scenario heads for the goal (the world
+    clips its speed), the same move every time, in crowds as large as trained on or smaller."""
+    from search.agents.policies import AGENTS_DIR
+    from search.sim.observation import observe
+    from search.sim.scenarios import load_scenario
+
     policy = load_policy(name)
     assert policy.name == name
-    assert np.isfinite(act_once(policy, humans=10)).all()
+    scenario = load_scenario("paper-bl-tr")
+    config = scenario.config()
+    observation = observe(scenario.initial_state(config), config, robot=0)
+    action, _ = policy.act(observation, policy.initial_state(1))
+    goal = np.subtract(scenario.robot_goal, scenario.robot_start)
+    assert action.shape == (1, 2)
+    assert action[0] @ goal / (np.linalg.norm(action[0]) * np.linalg.norm(goal)) > 0.5  # within 60 degrees
+    np.testing.assert_array_equal(policy.act(observation, policy.initial_state(1))[0], action)
+    from_file = load_policy(str(AGENTS_DIR / f"{name}.pt"))  # the shipped name is that file's network
+    np.testing.assert_array_equal(from_file.act(observation, from_file.initial_state(1))[0], action)
     assert np.isfinite(act_once(policy, humans=4)).all()  # smaller crowds than trained on
 
 
