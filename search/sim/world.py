@@ -112,7 +112,7 @@ class WorldConfig:
 
 STATE_FIELDS = ("human_pos", "human_vel", "human_goal", "human_radius", "human_v_pref", "robot_pos", "robot_vel",
                 "robot_theta", "robot_speed", "robot_goal", "time", "done", "outcome", "event_time", "path_length",
-                "min_clearance")  # in the constructor's order
+                "min_clearance")
 
 
 class WorldState:
@@ -132,11 +132,12 @@ class WorldState:
 
     __slots__ = ("rows", "layout", *STATE_FIELDS)
 
-    def __init__(self, human_pos, human_vel, human_goal, human_radius, human_v_pref, robot_pos, robot_vel,
-                 robot_theta, robot_speed, robot_goal, time, done, outcome, event_time, path_length, min_clearance):
-        arguments = locals()
-        values = {name: arguments[name] for name in STATE_FIELDS}
-        human_pos, robot_pos = np.asarray(human_pos), np.asarray(robot_pos)
+    def __init__(self, **values: np.ndarray):
+        """Worlds from every field of STATE_FIELDS, given by name, each copied into the rows."""
+        if values.keys() != set(STATE_FIELDS):
+            raise TypeError(f"WorldState takes every field by name: missing {sorted(set(STATE_FIELDS) - values.keys())}"
+                            f", unknown {sorted(values.keys() - set(STATE_FIELDS))}")
+        human_pos, robot_pos = np.asarray(values["human_pos"]), np.asarray(values["robot_pos"])
         layout = _layout(human_pos.shape[1], robot_pos.shape[1])
         object.__setattr__(self, "layout", layout)
         object.__setattr__(self, "rows", np.zeros((human_pos.shape[0], layout.row_bytes), np.uint8))

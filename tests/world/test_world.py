@@ -50,6 +50,8 @@ def test_worlds_are_taken_copied_and_overwritten_whole_and_fields_written_in_pla
         expected[1] = value[2]
         assert np.array_equal(getattr(unpickled, name), expected, equal_nan=True), name
     assert state.equals(WorldState(**fields))  # untouched by the copies
+    with pytest.raises(TypeError, match=r"missing \['time'\], unknown \['tme'\]"):
+        WorldState(**{("tme" if name == "time" else name): value for name, value in fields.items()})
     assert state.take([]).human_pos.shape == (0, 10, 2)
     with pytest.raises(AttributeError, match="in place"):
         state.time = np.zeros(4)
