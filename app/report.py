@@ -266,6 +266,11 @@ def distribution_figure(data: ReportData, name: str, question: ScaleQuestion):
     return figure
 
 
+# Figures are 12-pt text and at most 12 inches wide, so shown at report.html's figure width (60rem, 960 px) no
+# text is under 12 px (12 pt = 16 px at 9 inches; 13.3 px at 12 inches); likert panels wrap after two columns.
+LIKERT_COLUMNS = 2
+
+
 def _likert_colours(points: int) -> list[str]:
     """Disagreement (orange) below the middle, agreement (blue) above, grey in the middle of an odd scale."""
     half = points // 2
@@ -279,8 +284,14 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
     of the scale (disagreement to the left, agreement to the right)."""
     plt = _pyplot()
     n = max(1, len(questions))
-    figure, axes_list = plt.subplots(1, n, figsize=(6.0 * n, 2.6 + 0.7 * len(data.schemes)), squeeze=False)
-    for axes, (name, question) in zip(axes_list[0], questions, strict=False):
+    columns = min(n, LIKERT_COLUMNS)
+    rows = -(-n // columns)
+    figure, axes_grid = plt.subplots(rows, columns, figsize=(6.0 * columns, (2.6 + 0.7 * len(data.schemes)) * rows),
+                                     squeeze=False)
+    axes_list = [axes for row in axes_grid for axes in row]
+    for axes in axes_list[n:]:
+        axes.set_visible(False)
+    for axes, (name, question) in zip(axes_list, questions, strict=False):
         colours = _likert_colours(question.points)
         middle = question.points / 2 + 0.5  # the neutral point (odd scales) or the gap between the halves
         ticks = []
@@ -302,10 +313,10 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
         axes.set_title(textwrap.fill(question.text, 45), fontsize=12)
         axes.invert_yaxis()
         axes.spines[["top", "right", "left"]].set_visible(False)
-    handles, labels = axes_list[0][0].get_legend_handles_labels()
+    handles, labels = axes_list[0].get_legend_handles_labels()
     if handles:
         figure.legend(handles, labels, loc="lower center", ncol=min(len(labels), 3), frameon=False, fontsize=12)
-    figure.tight_layout(rect=(0, 0.22, 1, 1))
+    figure.tight_layout(rect=(0, 0.22 / rows, 1, 1))
     return figure
 
 

@@ -77,12 +77,12 @@ class Texts(Strict):
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
     example_caption: Text = ("An example: two robots, each with its own colour, shape and name, walk through a crowd "
                              "to the same goal.")
-    robot_names: Text = ("A robot's name, colour and shape only tell apart the robots of one clip (in part two, of "
-                         "one round of three clips). The same name in another clip or round may be a different "
-                         "robot, so judge every clip on its own.")
+    robot_names: Text = ("Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
+                         "for two different robots in this study, and in a ranking round each name is one robot in "
+                         "all of the round's clips. Each new round brings robots with new names.")
     names_in_round: Text = "In this round each name, colour and shape is one robot in all three clips."
-    new_round: Text = ("A new round begins. The names Robot 1, 2 and 3 hold within this round only: judge the robots "
-                       "from this round's clips alone.")
+    new_round: Text = ("A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
+                       "from this round's clips.")
 
 
 class Completion(Strict):

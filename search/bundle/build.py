@@ -3,8 +3,9 @@
 The table names the agents, scenarios, schemes (a solver with its budget and seed) and sets of clips; each set
 says which survey parts its clips feed. The builder evaluates every agent (the ground truth `better`), runs one
 search per clip (or reuses a cached one whose inputs are unchanged), renders the best summary of each with a
-seeded, recorded mapping of agents to robot numbers, audits each clip (does it visibly show the better robot as
-better? judged by the bots' observer, `app.visible`; a warning line per misleading clip), and writes manifest.json
+seeded, recorded mapping of agents to robot numbers (no number names two agents anywhere in the bundle), audits
+each clip (does it visibly show the better robot as better? judged by the bots' observer, `app.visible`; a
+warning line per misleading clip), and writes manifest.json
 (`foil.bundle/1`, a sha256 for every file, each clip's `audit`), a copy of the study file and a static index.html
 gallery for the researcher, where misleading clips are marked.
 
@@ -32,7 +33,7 @@ from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
 from app.visible import VisibleClip, audit
-from search.clips.render import RenderOptions, render, robot_label
+from search.clips.render import ROBOT_STYLES, RenderOptions, render, robot_label
 from search.clips.scene import load_scene
 from search.solvers.runner import (
     SearchJob,
@@ -68,7 +69,8 @@ class Scheme:
 
 @dataclass(frozen=True)
 class ClipSet:
-    """Every pair under every scheme on every scenario; a set that feeds a ranking labels each agent once."""
+    """Every pair under every scheme on every scenario; a set that feeds a ranking labels each agent once per
+    scheme and scenario (a round)."""
 
     parts: tuple[str, ...]
     schemes: tuple[str, ...]
@@ -175,6 +177,9 @@ def parse_build(table: dict, source: str = "study file") -> BuildSpec:
             agents = _names(entry["agents"], source, f"{where}.agents")
             if len(agents) < 2:
                 _fail(source, f"{where}.agents", "needs at least two agents")
+            if "ranking" in parts and len(agents) > len(ROBOT_STYLES):
+                _fail(source, f"{where}.agents", f"a ranking shows at most {len(ROBOT_STYLES)} robots (one colour "
+                      f"and shape each), got {len(agents)}")
             pairs = tuple(itertools.combinations(agents, 2))
         else:
             if "ranking" in parts:
@@ -235,18 +240,25 @@ class ClipJob:
 
 
 def plan(spec: BuildSpec) -> list[ClipJob]:
-    """Every clip of the study with its robot numbers, drawn from seeded generators named after the clip (or,
-    in a ranking set, after the set's scheme and scenario: one number per agent across those clips)."""
-    jobs = []
+    """Every clip of the study with its robot numbers. Numbers are handed out in blocks and never twice: a block
+    of two per clip, or, in a set that feeds a ranking, one per scheme and scenario (a round) with one number per
+    agent across its clips. So a participant never sees one name (colour, shape) stand for two agents, whichever
+    clips their plan shows, and a round's robots keep theirs. Which agent gets which number of its block is drawn
+    from a seeded generator named after the clip or round."""
+    jobs, first = [], 1
     for i, clip_set in enumerate(spec.sets):
         for scheme, scenario in itertools.product(clip_set.schemes, clip_set.scenarios):
-            group = random.Random(f"{spec.seed}/{i}/{scheme}/{scenario}")
-            shared = dict(zip(clip_set.agents, group.sample(range(1, len(clip_set.agents) + 1),
-                                                            len(clip_set.agents)), strict=True))
+            group = f"{spec.seed}/{i}/{scheme}/{scenario}"
+            if clip_set.ranking:
+                block = range(first, first + len(clip_set.agents))
+                first += len(block)
+                shared = dict(zip(clip_set.agents, random.Random(group).sample(block, len(block)), strict=True))
             for pair in clip_set.pairs:
-                name = f"{spec.seed}/{i}/{scheme}/{scenario}/{pair[0]}/{pair[1]}"
-                numbers = tuple(shared[a] for a in pair) if clip_set.ranking else \
-                    tuple(random.Random(name).sample([1, 2], 2))
+                name = f"{group}/{pair[0]}/{pair[1]}"
+                if clip_set.ranking:
+                    numbers = tuple(shared[a] for a in pair)
+                else:
+                    numbers, first = tuple(random.Random(name).sample([first, first + 1], 2)), first + 2
                 jobs.append(ClipJob(id="clip-" + hashlib.sha256(name.encode()).hexdigest()[:10],
                                     scheme=spec.schemes[scheme], scenario=scenario, pair=pair, numbers=numbers,
                                     parts=clip_set.parts))
@@ -490,7 +502,21 @@ td, th { padding: .25rem .6rem; border-bottom: 1px solid #ddd; text-align: left;
 main { display: grid; grid-template-columns: repeat(auto-fill, minmax(340px, 1fr)); gap: 1.2rem; }
 figure { margin: 0; } figure.misleading { outline: 3px solid #b00020; outline-offset: 4px; }
 .audit { margin: 0 0 .3rem; } .misleading .audit { color: #b00020; font-weight: 600; }
-video { width: 100%; background: #eee; } ul { margin: .3rem 0; padding-left: 1.2rem; }
+video { display: block; width: 100%; background: #eee; cursor: pointer; } ul { margin: .3rem 0; padding-left: 1.2rem; }
+button { font: inherit; margin: .4rem 0; padding: .3rem 1rem; }
+"""
+
+# No browser controls over the picture (they would cover the clip's status lines at its bottom): a button below
+# it plays, pauses and replays, as on the participants' pages; so does a click on the picture.
+GALLERY_SCRIPT = """
+for (const figure of document.querySelectorAll("figure")) {
+  const video = figure.querySelector("video"), button = figure.querySelector("button");
+  const toggle = () => { if (video.paused) video.play(); else video.pause(); };
+  const label = () => { button.textContent = !video.paused ? "Pause" : video.ended ? "Replay" : "Play"; };
+  button.addEventListener("click", toggle);
+  video.addEventListener("click", toggle);
+  for (const event of ["play", "pause", "ended"]) video.addEventListener(event, label);
+}
 """
 
 
@@ -516,8 +542,9 @@ def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) ->
         cards.append(
             f"<figure class=\"{'ok' if shows == 'better' else 'misleading'}\"><p class=\"audit\">{esc(verdict)}: "
             f"{esc(clip['audit']['why'])}</p>\n"
-            f"<video controls preload=\"none\" poster=\"{esc(clip['poster'])}\" src=\"{esc(clip['file'])}\">"
-            f"</video><figcaption><b>{esc(clip['scheme'])}</b> ({esc(clip['solver'])}) · {esc(clip['scenario'])} · "
+            f"<video preload=\"none\" playsinline poster=\"{esc(clip['poster'])}\" src=\"{esc(clip['file'])}\">"
+            f"</video><button type=\"button\">Play</button>"
+            f"<figcaption><b>{esc(clip['scheme'])}</b> ({esc(clip['solver'])}) · {esc(clip['scenario'])} · "
             f"parts: {esc(', '.join(clip['parts']))}<ul>{robots}</ul>divergence reward {reward} · "
             f"<a href=\"{esc(clip['sheet'])}\">contact sheet</a> · <a href=\"{esc(clip['summary'])}\">summary</a> · "
             f"<code>{esc(clip['id'])}</code></figcaption></figure>")
@@ -529,6 +556,7 @@ def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) ->
         f" {misleading} of {len(clips)} clips are misleading: what they visibly show (who bumped into a person, who "
         "reached the goal and when, how far the others got) does not show the better robot as better.</p>\n"
         "<table><tr><th>agent</th><th>mean reward [95% CI]</th><th>success</th><th>collision</th>"
-        f"<th>timeout</th><th>episodes</th></tr>{rows}</table>\n<main>{''.join(cards)}</main>\n</body></html>\n"
+        f"<th>timeout</th><th>episodes</th></tr>{rows}</table>\n<main>{''.join(cards)}</main>\n"
+        f"<script>{GALLERY_SCRIPT}</script>\n</body></html>\n"
     )
     (out / "index.html").write_text(page, encoding="utf-8")

@@ -2,7 +2,8 @@
 
 Participants judge two robots from a clip in a few seconds, on a laptop or a 360-px-wide phone, so the picture
 must be readable at a glance: humans are grey discs numbered 0-9; each robot has a strong colour, its own shape
-and its number (colour-blind viewers get shape and number); a collision is a yellow-and-black burst with a tag
+and its number (colour-blind viewers get shape and number); markers and their numbers keep a minimum size on a
+phone, so in a wide view they are drawn larger than to scale; a collision is a yellow-and-black burst with a tag
 where it happened and a pause; reaching the goal or running out of time gets a badge and a line in the legend.
 The legend sits below the arena and never names the real agent, only "Robot 1", "Robot 2", ...
 
@@ -24,14 +25,23 @@ from PIL import Image, ImageDraw, ImageFont
 
 from search.clips.scene import Scene, load_scene
 
-# Colours that stay apart under the common colour-vision deficiencies (Okabe-Ito blue, vermillion and bluish green;
-# Paul Tol's purple, darker than Okabe-Ito's pink so its trail shows), and one shape each.
-ROBOT_STYLES = (
-    ((0, 114, 178), "circle"),  # blue
-    ((213, 94, 0), "square"),  # vermillion
-    ((170, 51, 119), "diamond"),  # purple
-    ((0, 158, 115), "triangle"),  # bluish green
+# Colours that stay apart under the common colour-vision deficiencies: Okabe-Ito's blue, vermillion, bluish green,
+# orange, sky blue and reddish purple, and Paul Tol's purple (darker than Okabe-Ito's pink so its trail shows);
+# Okabe-Ito's yellow is kept for collisions. Robot N gets colour (N-1) mod 7 and shape (N-1) mod 6: 7 and 6 are
+# coprime, so the 42 numbers of a cycle each have a style of their own and any 6 consecutive numbers differ in both
+# colour and shape. The number is always drawn, so colour-blind viewers get shape and number.
+ROBOT_COLOURS = (
+    (0, 114, 178),  # blue
+    (213, 94, 0),  # vermillion
+    (170, 51, 119),  # purple
+    (0, 158, 115),  # bluish green
+    (230, 159, 0),  # orange
+    (86, 180, 233),  # sky blue
+    (204, 121, 167),  # reddish purple
 )
+ROBOT_SHAPES = ("circle", "square", "diamond", "triangle", "triangle-down", "plus")
+ROBOT_STYLES = tuple((ROBOT_COLOURS[i % len(ROBOT_COLOURS)], ROBOT_SHAPES[i % len(ROBOT_SHAPES)])
+                     for i in range(len(ROBOT_COLOURS) * len(ROBOT_SHAPES)))
 BACKGROUND = (255, 255, 255)
 ARENA = (247, 247, 245)
 GRID = (228, 228, 224)
@@ -45,6 +55,7 @@ SUCCESS = (0, 158, 115)
 SUPERSAMPLE = 4
 PHONE_WIDTH = 360  # the narrowest screen a clip must stay readable on
 MIN_PHONE_TEXT = 13  # px of legend text on that screen
+MIN_PHONE_MARKER = 10  # px radius of a person's or robot's marker on that screen, so its number is about 10 px tall
 CRASH_TAG_SECONDS = 3.0  # of video after a collision's pause
 
 
@@ -80,6 +91,23 @@ class RenderOptions:
 def robot_label(number: int) -> str:
     """The only name a participant ever sees for a robot."""
     return f"Robot {number}"
+
+
+def robot_style(number: int) -> tuple[tuple[int, int, int], str]:
+    """Robot ``number``'s colour and shape (numbers from 1; the styles repeat after len(ROBOT_STYLES))."""
+    return ROBOT_STYLES[(number - 1) % len(ROBOT_STYLES)]
+
+
+def _luminance(colour) -> float:
+    linear = [v / 255 / 12.92 if v / 255 <= 0.03928 else ((v / 255 + 0.055) / 1.055) ** 2.4 for v in colour]
+    return 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
+
+
+def number_ink(colour) -> tuple[int, int, int]:
+    """White or ink for a number on ``colour``, whichever contrasts more (WCAG contrast ratio)."""
+    white = 1.05 / (_luminance(colour) + 0.05)
+    ink = (_luminance(colour) + 0.05) / (_luminance(INK) + 0.05)
+    return (255, 255, 255) if white >= ink else INK
 
 
 @cache
@@ -129,6 +157,10 @@ class Layout:
         """Pixels per metre."""
         return self.panel / self.span
 
+    def marker(self, radius_m: float) -> float:
+        """Pixel radius of a person or robot: to scale, but never under MIN_PHONE_MARKER on a phone."""
+        return max(radius_m * self.scale, MIN_PHONE_MARKER * self.width / PHONE_WIDTH)
+
     def to_pixel(self, panel: int, xy) -> np.ndarray:
         """World coordinates (..., 2) to pixel (column, row) in the frame; y points up on screen."""
         xy = np.asarray(xy, dtype=np.float64)
@@ -137,9 +169,10 @@ class Layout:
         return np.stack([col, row], axis=-1)
 
 
-def _sprite(size_m: float, scale: float, paint) -> tuple[Image.Image, int]:
-    """An anti-aliased RGBA sprite drawn at SUPERSAMPLE x by ``paint(draw, centre, px_per_m)``, and its half size."""
-    half = max(4, math.ceil(size_m * scale))
+def _sprite(size: float, scale: float, paint) -> tuple[Image.Image, int]:
+    """An anti-aliased RGBA sprite of half size ``size * scale`` px drawn at SUPERSAMPLE x by ``paint(draw, centre,
+    scale)`` (scale: px per unit of ``size``), and its half size."""
+    half = max(4, math.ceil(size * scale))
     big = Image.new("RGBA", (2 * half * SUPERSAMPLE, 2 * half * SUPERSAMPLE), (0, 0, 0, 0))
     paint(ImageDraw.Draw(big), half * SUPERSAMPLE, scale * SUPERSAMPLE)
     return big.resize((2 * half, 2 * half), Image.LANCZOS), half
@@ -149,18 +182,27 @@ def _shape(draw: ImageDraw.ImageDraw, shape: str, c: float, r: float, **style) -
     if shape == "circle":
         draw.ellipse((c - r, c - r, c + r, c + r), **style)
     elif shape == "square":
-        s = r * 0.88
+        s = r * 0.95
         draw.rectangle((c - s, c - s, c + s, c + s), **style)
     elif shape == "diamond":
-        s = r * 1.2
-        draw.polygon([(c, c - s), (c + s, c), (c, c + s), (c - s, c)], **style)
-    else:
         s = r * 1.25
+        draw.polygon([(c, c - s), (c + s, c), (c, c + s), (c - s, c)], **style)
+    elif shape in ("triangle", "triangle-down"):
+        s = r * 1.55 * (1 if shape == "triangle" else -1)
         draw.polygon([(c, c - s), (c + s * 0.87, c + s * 0.5), (c - s * 0.87, c + s * 0.5)], **style)
+    else:  # a plus, arms wide enough for two digits
+        s, w = r * 1.3, r * 0.6
+        draw.polygon([(c - w, c - s), (c + w, c - s), (c + w, c - w), (c + s, c - w), (c + s, c + w), (c + w, c + w),
+                      (c + w, c + s), (c - w, c + s), (c - w, c + w), (c - s, c + w), (c - s, c - w), (c - w, c - w)],
+                     **style)
 
 
-def _centered_text(draw: ImageDraw.ImageDraw, c: float, text: str, size: int, fill) -> None:
-    draw.text((c, c), text, font=font(size), fill=fill, anchor="mm")
+# a number in a triangle sits towards its wide side (by this many radii) and a size smaller
+NUMBER_DROP = {"triangle": 0.3, "triangle-down": -0.3}
+
+
+def _centered_text(draw: ImageDraw.ImageDraw, c: float, text: str, size: int, fill, dy: float = 0) -> None:
+    draw.text((c, c + dy), text, font=font(size), fill=fill, anchor="mm")
 
 
 @lru_cache(maxsize=4096)
@@ -178,42 +220,41 @@ def _text_stamp(text: str, size: int, fill, anchor: str, bold: bool) -> tuple[Im
 class Sprites:
     """Humans, robots and marks pre-rendered once per clip: at the arena's scale, and at legend size."""
 
-    def __init__(self, scene: Scene, scale: float, legend_text: int):
-        hr, rr = scene.human_radius, scene.robot_radius
-        numbers = range(1, len(ROBOT_STYLES) + 1)
-        self.humans = [self._human(i, hr, scale) for i in range(scene.n_humans)]
-        self.robots = [self._robot(n, rr, scale) for n in numbers]
-        icon_scale = legend_text * 0.85 / (rr * 1.5)
-        self.icons = [self._robot(n, rr, icon_scale) for n in numbers]
-        self.crash = _sprite(rr * 2.6, scale, _paint_burst)
-        self.badges = {"success": _sprite(rr * 0.75, scale, _paint_check),
-                       "timeout": _sprite(rr * 0.75, scale, _paint_clock)}
-        small = legend_text * 0.5 / (rr * 0.75)
-        self.small_badges = {"success": _sprite(rr * 0.75, small, _paint_check),
-                             "timeout": _sprite(rr * 0.75, small, _paint_clock)}
+    def __init__(self, numbers: list[int], n_humans: int, human: float, robot: float, legend_text: int):
+        """``human`` and ``robot``: their markers' radii in px; ``numbers``: the clip's robot numbers."""
+        self.humans = [self._human(i, human) for i in range(n_humans)]
+        self.robots = {n: self._robot(n, robot, 1.0) for n in numbers}
+        self.icons = {n: self._robot(n, robot, legend_text * 0.85 / (robot * 1.5)) for n in numbers}
+        self.crash = _sprite(robot * 2.6, 1.0, _paint_burst)
+        self.badges = {"success": _sprite(robot * 0.75, 1.0, _paint_check),
+                       "timeout": _sprite(robot * 0.75, 1.0, _paint_clock)}
+        small = legend_text * 0.5 / (robot * 0.75)
+        self.small_badges = {"success": _sprite(robot * 0.75, small, _paint_check),
+                             "timeout": _sprite(robot * 0.75, small, _paint_clock)}
 
     @staticmethod
-    def _human(index: int, radius: float, scale: float):
+    def _human(index: int, radius: float):
         def paint(draw, c, ppm):
             r = radius * ppm
             draw.ellipse((c - r, c - r, c + r, c + r), fill=HUMAN_FILL, outline=HUMAN_EDGE, width=max(1, int(r / 8)))
-            _centered_text(draw, c, str(index), int(r * 1.25), INK)
-        return _sprite(radius * 1.05, scale, paint)
+            _centered_text(draw, c, str(index), int(r * (1.5 if index < 10 else 1.1)), INK)
+        return _sprite(radius * 1.05, 1.0, paint)
 
     @staticmethod
     def _robot(number: int, radius: float, scale: float):
-        colour, shape = ROBOT_STYLES[(number - 1) % len(ROBOT_STYLES)]
+        colour, shape = robot_style(number)
+        size = {1: 1.45, 2: 1.2}.get(len(str(number)), 0.85)  # font size in radii: wider numbers, smaller type
+        size *= 0.85 if shape in NUMBER_DROP else 1
 
         def paint(draw, c, ppm):
             r = radius * ppm
             _shape(draw, shape, c, r * 1.15, fill=(255, 255, 255))
             _shape(draw, shape, c, r, fill=colour, outline=INK, width=max(1, int(r / 10)))
-            _centered_text(draw, c + (r * 0.12 if shape == "triangle" else 0), str(number), int(r * 1.1),
-                           (255, 255, 255))
-        return _sprite(radius * 1.5, scale, paint)
+            _centered_text(draw, c, str(number), int(r * size), number_ink(colour), r * NUMBER_DROP.get(shape, 0))
+        return _sprite(radius * 1.75, scale, paint)
 
     def robot(self, number: int):
-        return self.robots[number - 1]
+        return self.robots[number]
 
 
 def _paint_burst(draw, c, ppm):
@@ -270,12 +311,15 @@ class ClipRenderer:
         self.scene = scene
         self.options = options or RenderOptions()
         self.numbers = list(numbers) if numbers is not None else list(range(1, scene.n_agents + 1))
-        if len(set(self.numbers)) != scene.n_agents or len(self.numbers) != scene.n_agents \
-                or not all(1 <= n <= len(ROBOT_STYLES) for n in self.numbers):
-            raise ValueError(f"give one distinct robot number from 1 to {len(ROBOT_STYLES)} per agent; the summary "
-                             f"has {scene.n_agents} agents, got {self.numbers}")
+        if len(self.numbers) != scene.n_agents or not all(isinstance(n, int) and n >= 1 for n in self.numbers) \
+                or len({robot_style(n) for n in self.numbers}) != scene.n_agents:
+            raise ValueError(f"give one robot number (1 or more) per agent, each with its own colour and shape "
+                             f"(numbers {len(ROBOT_STYLES)} apart share one); the summary has {scene.n_agents} "
+                             f"agents, got {self.numbers}")
         self.layout = Layout.make(scene, self.options)
-        self.sprites = Sprites(scene, self.layout.scale, self.layout.text)
+        self.robot_px = self.layout.marker(scene.robot_radius)
+        self.sprites = Sprites(self.numbers, scene.n_humans, self.layout.marker(scene.human_radius), self.robot_px,
+                               self.layout.text)
         # on-screen order: by robot number; panel p shows the agent self.order[p] when each robot has its own crowd
         self.order = sorted(range(scene.n_agents), key=lambda k: self.numbers[k])
         self.panel_of = [self.order.index(k) if scene.n_panels > 1 else 0 for k in range(scene.n_agents)]
@@ -352,7 +396,7 @@ class ClipRenderer:
         draw = ImageDraw.Draw(image)
         lay = self.layout
         panel = self.panel_of[k]
-        r = self.scene.robot_radius * lay.scale
+        r = self.robot_px
         size = max(12, int(lay.text * 0.75))
         width = max(2, int(r / 6))
         sx, sy = lay.to_pixel(panel, self.scene.starts[k])
@@ -385,11 +429,11 @@ class ClipRenderer:
 
     def _draw_trail(self, draw: ImageDraw.ImageDraw, k: int, i: int, t: float, head) -> None:
         """The path so far, fading with age to a faint floor; runs of equal shade are drawn as one polyline."""
-        colour = ROBOT_STYLES[self.numbers[k] - 1][0]
+        colour = robot_style(self.numbers[k])[0]
         points = [tuple(p) for p in self.pixels_robots[: i + 1, k]] + [tuple(head)]
         ages = t - np.append(self.scene.times[: i + 1], t)
         shades = np.round((0.25 + 0.75 * np.exp(-ages / self.options.trail_fade)) * 8) / 8
-        width = max(3, int(self.scene.robot_radius * self.layout.scale * 0.35))
+        width = max(3, int(self.robot_px * 0.35))
         start = 0
         for j in range(1, len(points)):
             if j == len(points) - 1 or shades[j] != shades[start]:
@@ -435,7 +479,7 @@ class ClipRenderer:
     def _draw_robots(self, image: Image.Image, robots: np.ndarray) -> None:
         """Robots on top of each other (both start at the same place) are drawn as one split marker, a vertical
         slice of each, so none is hidden."""
-        near = self.scene.robot_radius * self.layout.scale * 0.5
+        near = self.robot_px * 0.5
         for k in self.order[::-1]:
             together = [j for j in self.order if self.panel_of[j] == self.panel_of[k]
                         and np.hypot(*(robots[j] - robots[k])) < near]
@@ -462,7 +506,7 @@ class ClipRenderer:
         """An expanding ring while the clip pauses on the event; then a badge (arrival, timeout) on the robot, or
         a CRASH tag for a few seconds (it would hide the people walking past later)."""
         event, when = happened
-        r = self.scene.robot_radius * self.layout.scale
+        r = self.robot_px
         since = self._since(when, frame)
         if 0 <= since < self.options.event_hold + 0.3:
             grow = 1.5 + 4.0 * min(1.0, since / max(self.options.event_hold, 1e-6))
@@ -493,7 +537,7 @@ class ClipRenderer:
             else:
                 x0, y = self.panel_of[k] * lay.panel + lay.text * 0.6, top + row / 2
                 status_xy, anchor = (x0 + lay.text * 1.8, y + row), "lm"
-            icon = self.sprites.icons[number - 1]
+            icon = self.sprites.icons[number]
             _paste(image, icon, (x0 + icon[1], y))
             self._text(image, (x0 + lay.text * 1.8, y), robot_label(number), lay.text, INK, "lm", bold=True)
             event, when = self._event(k, t) or ("", t)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import csv
+import io
+import re
 
 import pytest
 
@@ -120,3 +122,37 @@ def test_report_with_one_scheme_missing(survey_db, bundle_dir, tmp_path):
     html = render_report(data, tmp_path / "one")
     assert "not tested" in html and "Mann-Whitney" not in html
     assert (tmp_path / "one" / "likert.png").exists()
+
+
+FIGURE_WIDTH_PX = 960  # report.html shows a figure 100% wide up to 60rem
+
+
+def smallest_text_px(svg: str) -> float:
+    """The smallest text of an SVG figure, in CSS px, when it is shown FIGURE_WIDTH_PX wide."""
+    width = float(re.search(r'viewBox="0 0 ([\d.]+) ', svg).group(1))
+    sizes = [float(size) for size in re.findall(r"font-size: ([\d.]+)px", svg)]
+    assert sizes, "no text found"
+    return min(sizes) * FIGURE_WIDTH_PX / width
+
+
+def test_figure_text_and_legends_are_at_least_12_px_where_the_report_shows_them(known_db):
+    """Measured from the SVG: legends, ticks and titles of every figure are 12 px or more at the figure width of
+    report.html (also on the admin report page), however many labelled scale questions the study has."""
+    import matplotlib.pyplot as plt
+
+    from app.report import likert_figure
+
+    db, study = known_db
+    data = tally_study(db, study)
+    html = render_report(data)
+    assert "max-width: 60rem" in html
+    svgs = re.findall(r"<svg.*?</svg>", html, flags=re.S)
+    assert len(svgs) == 3
+    assert min(smallest_text_px(svg) for svg in svgs) >= 12
+    labelled = [(name, q) for name, q in study.questions.items() if getattr(q, "labels", None)]
+    for copies in (2, 3):  # 4 and 6 panels
+        figure = likert_figure(data, labelled * copies)
+        buffer = io.StringIO()
+        figure.savefig(buffer, format="svg")
+        plt.close(figure)
+        assert smallest_text_px(buffer.getvalue()) >= 12

@@ -41,13 +41,30 @@ def test_plan_covers_every_pair_scheme_and_scenario():
 
 def test_a_ranking_set_gives_each_agent_one_number_per_scheme_and_scenario():
     jobs = [job for job in plan(parse_build(BUILD)) if "ranking" in job.parts]
+    blocks = []
     for scheme in ("adaptive", "nfirst"):
         numbers = {}
         for job in (j for j in jobs if j.scheme.name == scheme):
             for agent, number in zip(job.pair, job.numbers, strict=True):
                 numbers.setdefault(agent, set()).add(number)
         assert all(len(found) == 1 for found in numbers.values())
-        assert sorted(n for found in numbers.values() for n in found) == [1, 2, 3]
+        blocks.append(sorted(n for found in numbers.values() for n in found))
+    assert blocks == [[1, 2, 3], [4, 5, 6]]  # each round (scheme and scenario) its own numbers
+
+
+def test_no_robot_number_names_two_agents_anywhere_in_a_bundle():
+    table = copy(BUILD)
+    table["sets"][0]["scenarios"] = ["paper-bl-tr", "paper-tl-br"]
+    table["sets"].append({"parts": ["pairwise"], "schemes": ["adaptive"], "scenarios": ["paper-code"],
+                          "agents": ["goal", "orca", "social_force"]})
+    jobs = plan(parse_build(table))
+    agent_of = {}
+    for job in jobs:
+        for agent, number in zip(job.pair, job.numbers, strict=True):
+            assert agent_of.setdefault(number, agent) == agent
+    pairwise = [job for job in jobs if job.parts == ("pairwise",)]
+    assert len({n for job in pairwise for n in job.numbers}) == 2 * len(pairwise)  # a fresh pair per clip
+    assert sorted(agent_of) == list(range(1, len(agent_of) + 1))
 
 
 def test_robot_numbers_are_seeded_and_vary_with_the_seed():
@@ -59,7 +76,7 @@ def test_robot_numbers_are_seeded_and_vary_with_the_seed():
         mappings.add(tuple(job.numbers for job in plan(parse_build(table))))
     assert len(mappings) > 3
     example = [job for job in plan(parse_build(BUILD)) if job.parts == ("example",)][0]
-    assert sorted(example.numbers) == [1, 2]
+    assert sorted(example.numbers) == [7, 8]
 
 
 @pytest.mark.parametrize(("change", "message"), [
@@ -73,6 +90,7 @@ def test_robot_numbers_are_seeded_and_vary_with_the_seed():
                                                                                     r"already in sets\[0\]"),
     (lambda b: b["sets"][0].pop("agents"), "give either agents"),
     (lambda b: b.update(render={"fps": 5}), "fps must be at least 20"),
+    (lambda b: b["sets"][0].update(agents=[f"a{i}" for i in range(43)]), r"a ranking shows at most 42 robots"),
 ])
 def test_bad_build_tables_give_clear_errors(change, message):
     table = copy(BUILD)

@@ -68,9 +68,11 @@ def test_manifest_matches_files_and_checksums(built):
     assert manifest == json.loads((out / "manifest.json").read_text())
     assert manifest["format"] == "foil.bundle/1"
     assert len(manifest["clips"]) == 3
+    agent_of = {}
     for clip in manifest["clips"]:
         assert sha256_file(out / clip["file"]) == clip["sha256"]
-        assert set(clip["labels"]) == {"Robot 1", "Robot 2"}
+        for label, agent in zip(clip["labels"], clip["agents"], strict=True):
+            assert agent_of.setdefault(label, agent) == agent  # no label names two agents in the bundle
         assert clip["better"] in clip["agents"]
         summary = json.loads((out / clip["summary"]).read_text())
         assert summary["format"] == "foil.summary/1"
@@ -85,8 +87,12 @@ def test_manifest_matches_files_and_checksums(built):
     listed = set(manifest["files"])
     on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.parts[len(out.parts)] != "cache"}
     assert on_disk - {"manifest.json"} == listed
+    assert sorted(agent_of) == [f"Robot {n}" for n in range(1, 7)]  # two rounds of two, then the example's two
     gallery = (out / "index.html").read_text()
     assert all(clip["id"] in gallery for clip in manifest["clips"])
+    # no browser controls over the picture (they cover the clip's status lines): a play button below each clip
+    assert "controls" not in gallery
+    assert gallery.count("<video ") == gallery.count('<button type="button">Play</button>') == 3
 
 
 def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(built):

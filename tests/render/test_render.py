@@ -6,6 +6,7 @@ import dataclasses
 import json
 import re
 import subprocess
+from pathlib import Path
 
 import imageio_ffmpeg
 import numpy as np
@@ -14,13 +15,19 @@ import pytest
 from search.clips.render import (
     CRASH,
     HUMAN_FILL,
+    INK,
+    ROBOT_COLOURS,
+    ROBOT_SHAPES,
     ROBOT_STYLES,
     SUCCESS,
     ClipRenderer,
     Frame,
     RenderOptions,
+    Sprites,
+    number_ink,
     render,
     render_file,
+    robot_style,
 )
 from search.clips.scene import SummaryError, load_scene, scene_from_summary
 from search.sim.scenarios import load_scenario
@@ -133,8 +140,83 @@ def test_robot_numbers_pick_colour_and_order(shared_summary):
     _, robots, _ = swapped._state(5.0)
     found = blob_centre(blue, robots[1], 0.3 * swapped.layout.scale)
     assert found is not None  # Robot 1's colour is drawn at the summary's second robot
-    with pytest.raises(ValueError, match="distinct robot number"):
+    with pytest.raises(ValueError, match="one robot number"):
         ClipRenderer(scene, numbers=[1, 1])
+    with pytest.raises(ValueError, match="its own colour and shape"):
+        ClipRenderer(scene, numbers=[3, 3 + len(ROBOT_STYLES)])  # another name, but the same look
+    high = ClipRenderer(scene, numbers=[40, 41])  # any number is drawn, in its own colour and shape
+    image = high.draw(Frame(0.0))
+    assert {"Robot 40", "Robot 41"} <= high.texts
+    assert colour_mask(image, robot_style(41)[0], tolerance=3).sum() > 50
+
+
+def linear(colour) -> np.ndarray:
+    c = np.asarray(colour) / 255
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def contrast(a, b) -> float:
+    """WCAG contrast ratio."""
+    high, low = sorted((linear(a) @ [0.2126, 0.7152, 0.0722], linear(b) @ [0.2126, 0.7152, 0.0722]), reverse=True)
+    return (high + 0.05) / (low + 0.05)
+
+
+def lab(colour) -> np.ndarray:
+    """CIE L*a*b* (D65) of an sRGB colour."""
+    xyz = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]) @ linear(colour)
+    f = np.cbrt(xyz / [0.9505, 1.0, 1.089])
+    f = np.where(xyz / [0.9505, 1.0, 1.089] > 0.008856, f, 7.787 * xyz / [0.9505, 1.0, 1.089] + 16 / 116)
+    return np.array([116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])])
+
+
+def test_every_robot_style_is_distinct():
+    """A robot's look (colour and shape) is its own: every style differs from every other, any round's robots
+    (consecutive numbers) differ in colour and in shape, and each number is legible on its colour."""
+    assert len(set(ROBOT_STYLES)) == len(ROBOT_STYLES) == len(ROBOT_COLOURS) * len(ROBOT_SHAPES)
+    for first in range(1, len(ROBOT_STYLES) + 1):
+        block = [robot_style(n) for n in range(first, first + len(ROBOT_SHAPES))]
+        assert len({colour for colour, _ in block}) == len({shape for _, shape in block}) == len(block)
+    for i, a in enumerate(ROBOT_COLOURS):
+        assert contrast(number_ink(a), a) >= 4.0
+        assert np.linalg.norm(lab(a) - lab(CRASH)) > 20  # never the collision's yellow
+        for b in ROBOT_COLOURS[i + 1:]:
+            assert np.linalg.norm(lab(a) - lab(b)) > 20, (a, b)  # CIE76 distance: clearly different colours
+    # silhouettes: each shape's marker (with its white rim) overlaps any other by at most 5/6 of their union
+    numbers = list(range(1, len(ROBOT_SHAPES) + 1))
+    sprites = Sprites(numbers, 0, 30.0, 30.0, 13)
+    masks = {n: np.asarray(sprites.robot(n)[0])[..., 3] > 128 for n in numbers}
+    for a in numbers:
+        for b in numbers[a:]:
+            overlap = (masks[a] & masks[b]).sum() / (masks[a] | masks[b]).sum()
+            assert overlap < 0.85, (robot_style(a)[1], robot_style(b)[1], overlap)
+
+
+def number_height(sprite, ink, within: float) -> int:
+    """Rows spanned by the number's pixels (ink colour, within ``within`` half sizes of the centre)."""
+    image, half = sprite
+    pixels = np.asarray(image, dtype=np.int16)
+    rows, cols = np.mgrid[:pixels.shape[0], :pixels.shape[1]]
+    mask = (np.hypot(cols - half, rows - half) <= within * half) & (pixels[..., 3] > 200) \
+        & (np.abs(pixels[..., :3] - np.array(ink)).max(axis=-1) < 60)
+    found = np.nonzero(mask.any(axis=1))[0]
+    return found.max() - found.min() + 1
+
+
+@pytest.mark.parametrize("robot_visible", [False, True])
+@pytest.mark.parametrize("width", [None, 640, 1280])
+def test_people_and_robots_stay_readable_on_a_360_px_phone(robot_visible, width):
+    """Shown 360 px wide, a person's number is at least 10 px tall and a robot's one-digit number 9 px, also when
+    the view is wide or split in two arenas (markers are then drawn larger than to scale)."""
+    scenario = load_scenario("paper-bl-tr")
+    scene = scene_from_summary(summary_from_simulation(["goal", "orca"],
+                                                       visible(scenario) if robot_visible else scenario))
+    renderer = ClipRenderer(scene, numbers=[7, 12], options=RenderOptions(width=width))
+    phone = 360 / renderer.layout.width
+    assert renderer.layout.marker(scene.human_radius) >= scene.human_radius * renderer.layout.scale
+    for sprite in renderer.sprites.humans:
+        assert number_height(sprite, INK, 0.7) * phone >= 10
+    assert number_height(renderer.sprites.robot(7), number_ink(robot_style(7)[0]), 0.4) * phone >= 9
+    assert number_height(renderer.sprites.robot(12), number_ink(robot_style(12)[0]), 0.4) * phone >= 8
 
 
 def test_collision_is_marked_where_and_when_it_happens(shared_summary):
@@ -290,3 +372,24 @@ def test_render_options_are_checked():
         RenderOptions(fps=10)
     with pytest.raises(ValueError, match="speed"):
         RenderOptions(speed=0)
+
+
+def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
+    """The survey pages' key beside a clip (templates/_macros.html, static/survey.css) draws Robot N in the colour
+    and shape the clip gives it."""
+    from jinja2 import Environment, FileSystemLoader
+
+    root = Path(__file__).resolve().parents[2]
+    css = (root / "static" / "survey.css").read_text()
+    colours = {int(k): tuple(map(int, rgb.split(","))) for k, rgb in
+               re.findall(r"\.robot-colour-(\d+) \{ background: rgb\(([\d, ]+)\); \}", css)}
+    shapes = set(re.findall(r"\.robot-([a-z-]+) \{", css)) - {"x", "key"}
+    macros = Environment(loader=FileSystemLoader(root / "templates"), autoescape=True) \
+        .get_template("_macros.html").module
+    for number in range(1, 2 * len(ROBOT_STYLES) + 1):
+        marker = str(macros.robot_marker(f"Robot {number}"))
+        colour, shape = re.fullmatch(r'<span class="marker robot-colour-(\d+) robot-([a-z-]+)" aria-hidden="true">'
+                                     r'</span>', marker.strip()).groups()
+        assert (colours[int(colour)], shape) == robot_style(number)
+        assert shape in shapes
+    assert "robot-x" in str(macros.robot_marker("Robot A"))
