@@ -20,7 +20,6 @@ Bundle layout::
 from __future__ import annotations
 
 import hashlib
-import html
 import itertools
 import json
 import os
@@ -482,7 +481,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
-    write_gallery(out, [clip.model_dump() for clip in clips], evaluations)
+    write_gallery(out, clips, evaluations)
     manifest = Manifest(format=MANIFEST_FORMAT, label_seed=spec.seed, clips=clips, agents=evaluations,
                         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})})
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
@@ -490,73 +489,11 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     return manifest
 
 
-def _outcome(outcome: dict) -> str:
-    when = outcome.get("time")
-    return outcome["event"] + ("" if when is None else f" at {when:.2f} s")
-
-
-GALLERY_STYLE = """
-body { font: 15px/1.4 system-ui, sans-serif; margin: 1.5rem; color: #222; }
-table { border-collapse: collapse; margin-bottom: 1.5rem; }
-td, th { padding: .25rem .6rem; border-bottom: 1px solid #ddd; text-align: left; }
-main { display: grid; grid-template-columns: repeat(auto-fill, minmax(340px, 1fr)); gap: 1.2rem; }
-figure { margin: 0; } figure.misleading { outline: 3px solid #b00020; outline-offset: 4px; }
-.audit { margin: 0 0 .3rem; } .misleading .audit { color: #b00020; font-weight: 600; }
-video { display: block; width: 100%; background: #eee; cursor: pointer; } ul { margin: .3rem 0; padding-left: 1.2rem; }
-button { font: inherit; margin: .4rem 0; padding: .3rem 1rem; }
-"""
-
-# No browser controls over the picture (they would cover the clip's status lines at its bottom): a button below
-# it plays, pauses and replays, as on the participants' pages; so does a click on the picture.
-GALLERY_SCRIPT = """
-for (const figure of document.querySelectorAll("figure")) {
-  const video = figure.querySelector("video"), button = figure.querySelector("button");
-  const toggle = () => { if (video.paused) video.play(); else video.pause(); };
-  const label = () => { button.textContent = !video.paused ? "Pause" : video.ended ? "Replay" : "Play"; };
-  button.addEventListener("click", toggle);
-  video.addEventListener("click", toggle);
-  for (const event of ["play", "pause", "ended"]) video.addEventListener(event, label);
-}
-"""
-
-
-def write_gallery(out: Path, clips: list[dict], evaluations: dict[str, dict]) -> None:
+def write_gallery(out: Path, clips: list[ManifestClip], evaluations: dict[str, dict]) -> None:
     """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward."""
-    esc = html.escape
-    misleading = sum(clip["audit"]["shows"] != "better" for clip in clips)
-    rows = "".join(
-        f"<tr><td>{esc(name)}</td><td>{e['reward_mean']:.2f} [{e['reward_ci95'][0]:.2f}, {e['reward_ci95'][1]:.2f}]"
-        f"</td><td>{e['success_rate']:.2f}</td><td>{e['collision_rate']:.2f}</td><td>{e['timeout_rate']:.2f}</td>"
-        f"<td>{e['episodes']}</td></tr>" for name, e in evaluations.items())
-    cards = []
-    for clip in clips:
-        robots = "".join(
-            f"<li><b>{esc(label)}</b> = {esc(agent)}{' (better)' if agent == clip['better'] else ''}: "
-            f"{esc(_outcome(outcome))}</li>"
-            for label, agent, outcome in zip(clip["labels"], clip["agents"], clip["outcomes"], strict=True))
-        reward = "n/a" if clip["reward"] is None else f"{clip['reward']:.3f}"
-        shows = clip["audit"]["shows"]
-        verdict = ("shows the better robot as better" if shows == "better" else
-                   "MISLEADING: shows no visible difference" if shows == "tie" else
-                   "MISLEADING: shows the better robot as worse")
-        cards.append(
-            f"<figure class=\"{'ok' if shows == 'better' else 'misleading'}\"><p class=\"audit\">{esc(verdict)}: "
-            f"{esc(clip['audit']['why'])}</p>\n"
-            f"<video preload=\"none\" playsinline poster=\"{esc(clip['poster'])}\" src=\"{esc(clip['file'])}\">"
-            f"</video><button type=\"button\">Play</button>"
-            f"<figcaption><b>{esc(clip['scheme'])}</b> ({esc(clip['solver'])}) · {esc(clip['scenario'])} · "
-            f"parts: {esc(', '.join(clip['parts']))}<ul>{robots}</ul>divergence reward {reward} · "
-            f"<a href=\"{esc(clip['sheet'])}\">contact sheet</a> · <a href=\"{esc(clip['summary'])}\">summary</a> · "
-            f"<code>{esc(clip['id'])}</code></figcaption></figure>")
-    page = (
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
-        f"<title>Study bundle: clips</title><style>{GALLERY_STYLE}</style></head><body>\n<h1>Study bundle</h1>\n"
-        "<p>For the researcher only: this page shows which agent each robot is. Participants see the clips alone."
-        f" {misleading} of {len(clips)} clips are misleading: what they visibly show (who bumped into a person, who "
-        "reached the goal and when, how far the others got) does not show the better robot as better.</p>\n"
-        "<table><tr><th>agent</th><th>mean reward [95% CI]</th><th>success</th><th>collision</th>"
-        f"<th>timeout</th><th>episodes</th></tr>{rows}</table>\n<main>{''.join(cards)}</main>\n"
-        f"<script>{GALLERY_SCRIPT}</script>\n</body></html>\n"
-    )
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined
+
+    templates = Environment(loader=FileSystemLoader(Path(__file__).parent), autoescape=True, undefined=StrictUndefined,
+                            keep_trailing_newline=True)
+    page = templates.get_template("gallery.html").render(clips=clips, evaluations=evaluations, zip=zip)
     (out / "index.html").write_text(page, encoding="utf-8")
