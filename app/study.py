@@ -365,7 +365,7 @@ class Study(Strict):
     attention_checks: list[AttentionCheck] = []
     comprehension: list[ComprehensionCheck] = []
     closing: Closing | None = None
-    build: Build | None = None  # read by `foil bundle`, not by the server
+    build: Build | None = None  # checked here, used by `foil bundle` alone
 
     def consent_version(self) -> str:
         """The version of the consent text each participant is recorded with: `[study] consent_version`, or
