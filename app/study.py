@@ -1,18 +1,28 @@
 """The study definition: a TOML file validated with pydantic, with errors that name the line and the field.
 
 The file says what participants see (texts, parts, questions), how they are assigned (design), where they come from
-(platform) and where they go at the end (completion). A top-level `[build]` table belongs to `foil bundle` and is
-accepted here without being read.
+(platform) and where they go at the end (completion). A top-level `[build]` table says which clips `foil bundle`
+searches for and renders; it is checked here too, so the server and the bundle builder report a bad line alike.
 """
 
 from __future__ import annotations
 
+import itertools
 import re
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 
 class StudyError(ValueError):
@@ -24,6 +34,22 @@ class Strict(BaseModel):
 
 
 Text = Annotated[str, Field(min_length=1)]
+
+
+def _distinct(values: list) -> list:
+    if len(set(values)) != len(values):
+        raise ValueError("names must not repeat")
+    return values
+
+
+def _two_different(pair: tuple[str, str]) -> tuple[str, str]:
+    if pair[0] == pair[1]:
+        raise ValueError("a pair needs two different agents")
+    return pair
+
+
+Names = Annotated[list[Text], Field(min_length=1), AfterValidator(_distinct)]
+Pair = Annotated[tuple[Text, Text], AfterValidator(_two_different)]
 
 
 class ClipRef(Strict):
@@ -50,18 +76,11 @@ class StudyInfo(Strict):
 
 
 class Design(Strict):
-    schemes: Annotated[list[Text], Field(min_length=1)]
+    schemes: Names
     scheme_factor: Literal["within", "between"] = "within"
-    scenarios: Annotated[list[Text], Field(min_length=1)]
+    scenarios: Names
     counterbalance_scenarios: bool = True
     counterbalance_scheme_order: bool = True
-
-    @field_validator("schemes", "scenarios")
-    @classmethod
-    def _distinct(cls, values: list[str]) -> list[str]:
-        if len(set(values)) != len(values):
-            raise ValueError("names must not repeat")
-        return values
 
 
 class Texts(Strict):
@@ -191,7 +210,7 @@ class PairwisePart(Strict):
     kind: Literal["pairwise"]
     title: Text
     intro: str = ""
-    pairs: Annotated[list[tuple[Text, Text]], Field(min_length=1)]
+    pairs: Annotated[list[Pair], Field(min_length=1)]
     order: Literal["shuffled", "blocked"] = "shuffled"
     questions: Annotated[list[Text], Field(min_length=1)]
 
@@ -243,6 +262,98 @@ class ComprehensionCheck(Strict):
         return self
 
 
+def _settings(value):
+    """A table of key = value settings as `foil search --set` takes them: scalars, no nested tables."""
+    if not isinstance(value, dict) or not all(isinstance(v, bool | int | float | str) for v in value.values()):
+        raise ValueError("must be a table of key = value settings (numbers, strings, true/false; no nested tables)")
+    return value
+
+
+Settings = Annotated[dict[str, bool | int | float | str], BeforeValidator(_settings)]
+
+
+def _whole(minimum: int):
+    """A whole number >= minimum; strict, so a string or true/false is refused rather than converted."""
+    return Annotated[int, Field(ge=minimum, strict=True)]
+
+
+class BuildEval(Strict):
+    """The ground truth: each agent's `foil eval` on these test episodes."""
+
+    episodes: _whole(2) = 500
+    seed: _whole(0) = 0
+
+
+class BuildScheme(Strict):
+    """How one scheme's clips are found: a solver of `foil search` with its simulator-step budget, seed and top-K,
+    and its solver, reward and world settings (checked against their fields by the bundle builder)."""
+
+    solver: Text  # mcts, nfirst, random, cem
+    budget: _whole(1)
+    seed: _whole(0)
+    top_k: _whole(1) = 1
+    settings: Settings = {}
+    reward: Settings = {}
+    world: Settings = {}
+
+
+class BuildSet(Strict):
+    """Every pair under every scheme on every scenario, feeding the survey parts named."""
+
+    parts: Annotated[list[Literal["pairwise", "ranking", "example"]], Field(min_length=1), AfterValidator(_distinct)]
+    schemes: Names
+    scenarios: Names
+    agents: Annotated[Names, Field(min_length=2)] | None = None  # every pair of these ...
+    pairs: Annotated[list[Pair], Field(min_length=1)] | None = None  # ... or these pairs
+
+    @model_validator(mode="after")
+    def _agents_or_pairs(self) -> BuildSet:
+        if (self.agents is None) == (self.pairs is None):
+            raise ValueError("give either agents = [...] (every pair of them) or pairs = [[a, b], ...]")
+        if self.agents is None and "ranking" in self.parts:
+            raise ValueError("a set that feeds a ranking part lists its agents (agents = [...]), so each agent "
+                             "keeps one robot number in all its clips")
+        return self
+
+    def clip_pairs(self) -> tuple[tuple[str, str], ...]:
+        if self.agents is not None:
+            return tuple(itertools.combinations(self.agents, 2))
+        return tuple(self.pairs)
+
+    def all_agents(self) -> tuple[str, ...]:
+        """Every agent of the set's clips, in the order given."""
+        return tuple(dict.fromkeys(a for pair in self.clip_pairs() for a in pair))
+
+
+class Build(Strict):
+    """The `[build]` table: which clips `foil bundle` searches for and renders (docs/clips.md)."""
+
+    seed: _whole(0)  # seeds which robot number each agent gets in each clip
+    eval: BuildEval = BuildEval()
+    render: Settings = {}  # RenderOptions fields, checked by the renderer
+    schemes: Annotated[dict[str, BuildScheme], Field(min_length=1)]
+    sets: Annotated[list[BuildSet], Field(min_length=1)]
+
+
+def _build_problems(build: Build) -> list[tuple[tuple, str]]:
+    """Checks across the [build] tables: every scheme a set names is defined, and every clip is listed once."""
+    problems = []
+    seen: dict[tuple, int] = {}
+    for i, clip_set in enumerate(build.sets):
+        for j, name in enumerate(clip_set.schemes):
+            if name not in build.schemes:
+                problems.append((("build", "sets", i, "schemes", j),
+                                 f"no scheme {name!r}; defined: {sorted(build.schemes)}"))
+        for scheme, scenario, pair in itertools.product(clip_set.schemes, clip_set.scenarios, clip_set.clip_pairs()):
+            key = (scheme, scenario, frozenset(pair))
+            if key in seen:
+                problems.append((("build", "sets", i), f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} "
+                                 f"is already in sets[{seen[key]}]; list each clip once, with every part it feeds"))
+                break
+            seen[key] = i
+    return problems
+
+
 class Study(Strict):
     study: StudyInfo
     design: Design
@@ -254,7 +365,7 @@ class Study(Strict):
     attention_checks: list[AttentionCheck] = []
     comprehension: list[ComprehensionCheck] = []
     closing: Closing | None = None
-    build: dict | None = None  # read by `foil bundle`, not by the server
+    build: Build | None = None  # checked here, used by `foil bundle` alone
 
     def consent_version(self) -> str:
         """The version of the consent text each participant is recorded with: `[study] consent_version`, or
@@ -300,10 +411,6 @@ def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
                 problems.append((("parts", p, "questions"), "a ranking part asks exactly one 'rank' question"))
             if len(set(part.agents)) != len(part.agents):
                 problems.append((("parts", p, "agents"), "agents must not repeat"))
-        else:
-            for i, pair in enumerate(part.pairs):
-                if pair[0] == pair[1]:
-                    problems.append((("parts", p, "pairs", i), "a pair needs two different agents"))
     if study.closing is not None:
         closing = study.closing
         for q, name in enumerate(closing.questions):
@@ -326,15 +433,19 @@ def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
     for c, check in enumerate(study.attention_checks):
         if check.part > len(study.parts):
             problems.append((("attention_checks", c, "part"), f"there are only {len(study.parts)} parts"))
+    if study.build is not None:
+        problems += _build_problems(study.build)
     return problems
 
 
-def _table_path(header: str, arrays: dict[tuple, int]) -> tuple:
-    """Resolve a dotted header to a path with the current index of every array-of-tables along it."""
+def _table_path(header: str, arrays: dict[tuple, int], new_element: bool = False) -> tuple:
+    """Resolve a dotted header to a path with the current index of every array-of-tables along it; a `[[...]]`
+    header (`new_element`) starts the next element of the array it names, so that one gets no index here."""
+    names = [name.strip().strip('"') for name in header.split(".")]
     path: tuple = ()
-    for name in header.split("."):
-        path += (name.strip().strip('"'),)
-        if path in arrays:
+    for i, name in enumerate(names):
+        path += (name,)
+        if path in arrays and not (new_element and i == len(names) - 1):
             path += (arrays[path],)
     return path
 
@@ -348,7 +459,7 @@ def locate(text: str, loc: tuple) -> int | None:
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if line.startswith("[["):
-            names = _table_path(line[2 : line.find("]]")], arrays)
+            names = _table_path(line[2 : line.find("]]")], arrays, new_element=True)
             arrays[names] = arrays.get(names, -1) + 1
             table = names + (arrays[names],)
             path = table
@@ -361,8 +472,9 @@ def locate(text: str, loc: tuple) -> int | None:
         else:
             continue
         path = tuple(str(x) for x in path)
-        if want[: len(path)] == path and len(path) > best_depth:
-            best, best_depth = number, len(path)
+        depth = len(path) if want[: len(path)] == path else len(want) if path[: len(want)] == want else -1
+        if depth > best_depth:  # a table only made by its subtables is found at the first of them
+            best, best_depth = number, depth
     return best
 
 
@@ -381,32 +493,56 @@ def _loc_without_union_tags(loc: tuple) -> tuple:
     return loc
 
 
-def parse_study(text: str, source: str = "study file") -> Study:
-    """Parse and validate study TOML; raise StudyError listing every problem with its line and field."""
+def _toml(text: str, source: str) -> dict:
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise StudyError(f"{source}: not valid TOML: {error}") from None
-    problems: list[tuple[tuple, str]] = []
-    try:
-        study = Study.model_validate(data)
-    except ValidationError as error:
-        for item in error.errors():
-            loc = _loc_without_union_tags(item["loc"])
-            message = item["msg"].removeprefix("Value error, ")
-            if item["type"] == "extra_forbidden":
-                message = "unknown key (check the spelling; see docs/survey.md for the keys a study file takes)"
-            problems.append((loc, message))
-    else:
-        problems = _reference_problems(study)
+
+
+def refuse(text: str, source: str, problems: list[tuple[tuple, str]]) -> None:
+    """Raise StudyError listing every (location, message) problem with the file, the line and the field."""
     if problems:
         lines = []
         for loc, message in problems:
             line = locate(text, loc)
-            where = f"line {line}" if line else "no line"
-            lines.append(f"{source}, {where}, {_field(loc)}: {message}")
+            lines.append(f"{source}, {f'line {line}' if line else 'no line'}, {_field(loc)}: {message}")
         raise StudyError("\n".join(lines))
-    return study
+
+
+def _validated(model: type[Strict], data: dict, text: str, source: str, at: tuple, checks):
+    """`data` (the table at location `at` of the file) as `model`, then `checks(value)`'s problems; every problem
+    of either refused with its line and field."""
+    problems: list[tuple[tuple, str]] = []
+    try:
+        value = model.model_validate(data)
+    except ValidationError as error:
+        for item in error.errors():
+            loc = _loc_without_union_tags(at + item["loc"])
+            message = item["msg"].removeprefix("Value error, ")
+            if item["type"] == "extra_forbidden":
+                docs = "docs/clips.md" if loc[0] == "build" else "docs/survey.md"
+                message = f"unknown key (check the spelling; see {docs} for the keys a study file takes)"
+            problems.append((loc, message))
+    else:
+        problems = checks(value)
+    refuse(text, source, problems)
+    return value
+
+
+def parse_study(text: str, source: str = "study file") -> Study:
+    """Parse and validate study TOML; raise StudyError listing every problem with its line and field."""
+    return _validated(Study, _toml(text, source), text, source, (), _reference_problems)
+
+
+def parse_build(text: str, source: str = "study file") -> Build:
+    """The `[build]` table of study TOML alone, with the same errors as `parse_study`: `foil bundle` may build a
+    study whose survey tables are not final yet."""
+    data = _toml(text, source)
+    if "build" not in data:
+        raise StudyError(f"{source}: no [build] table: it says which clips to search for and render (see "
+                         "docs/clips.md)")
+    return _validated(Build, data["build"], text, source, ("build",), _build_problems)
 
 
 def load_study(path: str | Path) -> Study:

@@ -26,11 +26,12 @@ import os
 import random
 import shutil
 import time
-import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
+from app.study import Build, StudyError, refuse
+from app.study import parse_build as parse_build_table
 from app.visible import VisibleClip, audit
 from search.clips.render import ROBOT_STYLES, RenderOptions, render, robot_label
 from search.clips.scene import load_scene
@@ -43,12 +44,9 @@ from search.solvers.runner import (
     write_outputs,
 )
 
-PARTS = ("pairwise", "ranking", "example")
-SETTINGS = ("settings", "reward", "world")  # a scheme's tables of settings
-
 
 class BuildError(ValueError):
-    """A `[build]` table that cannot be built; the message names the file and the key."""
+    """A `[build]` table that cannot be built; the message names the file, the line and the field."""
 
 
 @dataclass(frozen=True)
@@ -96,117 +94,34 @@ class BuildSpec:
         return list(dict.fromkeys(a for s in self.sets for a in s.agents))
 
 
-def _fail(source: str, where: str, message: str):
-    raise BuildError(f"{source}: [build]{'.' + where if where else ''}: {message}")
-
-
-def _check_keys(table, allowed: set[str], required: set[str], source: str, where: str) -> None:
-    if not isinstance(table, dict):
-        _fail(source, where, "must be a table")
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        _fail(source, where, f"unknown key(s) {unknown}; expected some of {sorted(allowed)}")
-    missing = sorted(required - set(table))
-    if missing:
-        _fail(source, where, f"missing key(s) {missing}")
-
-
-def _int(value, source: str, where: str, minimum: int = 0) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
-        _fail(source, where, f"must be a whole number >= {minimum}, got {value!r}")
-    return value
-
-
-def _names(value, source: str, where: str) -> tuple[str, ...]:
-    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v for v in value):
-        _fail(source, where, f"must be a non-empty list of names, got {value!r}")
-    if len(set(value)) != len(value):
-        _fail(source, where, f"names must not repeat: {value}")
-    return tuple(value)
-
-
-def parse_build(table: dict, source: str = "study file") -> BuildSpec:
-    """The `[build]` table as a BuildSpec, or BuildError naming the file, key and problem."""
-    _check_keys(table, {"seed", "eval", "render", "schemes", "sets"}, {"seed", "schemes", "sets"}, source, "")
-    evaluation = table.get("eval", {})
-    _check_keys(evaluation, {"episodes", "seed"}, set(), source, "eval")
-    render_table = table.get("render", {})
-    _check_keys(render_table, {f.name for f in fields(RenderOptions)}, set(), source, "render")
+def _render_options(build: Build, text: str, source: str) -> RenderOptions:
+    """`[build.render]` as RenderOptions, refused with its line like the rest of the table."""
+    known = {f.name for f in fields(RenderOptions)}
+    refuse(text, source, [(("build", "render", key), f"unknown key; expected some of {sorted(known)}")
+                          for key in build.render if key not in known])
     try:
-        options = RenderOptions(**render_table)
+        return RenderOptions(**build.render)
     except (TypeError, ValueError) as error:
-        _fail(source, "render", str(error))
+        refuse(text, source, [(("build", "render"), str(error))])
 
-    schemes = {}
-    if not isinstance(table["schemes"], dict) or not table["schemes"]:
-        _fail(source, "schemes", "give at least one scheme, e.g. [build.schemes.adaptive] solver = \"mcts\"")
-    for name, scheme in table["schemes"].items():
-        where = f"schemes.{name}"
-        _check_keys(scheme, {"solver", "budget", "seed", "top_k", *SETTINGS}, {"solver", "budget", "seed"}, source,
-                    where)
-        if not isinstance(scheme["solver"], str) or not scheme["solver"]:
-            _fail(source, f"{where}.solver", "must name a solver of foil search (mcts, nfirst, random, cem)")
-        for key in SETTINGS:
-            values = scheme.get(key, {})
-            if not isinstance(values, dict) or not all(isinstance(v, int | float | str) for v in values.values()):
-                _fail(source, f"{where}.{key}", "must be a table of key = value settings")
-        schemes[name] = Scheme(name=name, solver=scheme["solver"],
-                               budget=_int(scheme["budget"], source, f"{where}.budget", 1),
-                               seed=_int(scheme["seed"], source, f"{where}.seed"),
-                               top_k=_int(scheme.get("top_k", 1), source, f"{where}.top_k", 1),
-                               **{key: dict(scheme.get(key, {})) for key in SETTINGS})
 
-    sets = []
-    if not isinstance(table["sets"], list) or not table["sets"]:
-        _fail(source, "sets", "give at least one [[build.sets]] table")
-    for i, entry in enumerate(table["sets"]):
-        where = f"sets[{i}]"
-        _check_keys(entry, {"parts", "schemes", "scenarios", "agents", "pairs"}, {"parts", "schemes", "scenarios"},
-                    source, where)
-        parts = _names(entry["parts"], source, f"{where}.parts")
-        if not set(parts) <= set(PARTS):
-            _fail(source, f"{where}.parts", f"parts are {list(PARTS)}, got {list(parts)}")
-        names = _names(entry["schemes"], source, f"{where}.schemes")
-        for name in names:
-            if name not in schemes:
-                _fail(source, f"{where}.schemes", f"no scheme {name!r}; defined: {sorted(schemes)}")
-        if ("agents" in entry) == ("pairs" in entry):
-            _fail(source, where, "give either agents = [...] (every pair of them) or pairs = [[a, b], ...]")
-        if "agents" in entry:
-            agents = _names(entry["agents"], source, f"{where}.agents")
-            if len(agents) < 2:
-                _fail(source, f"{where}.agents", "needs at least two agents")
-            if "ranking" in parts and len(agents) > len(ROBOT_STYLES):
-                _fail(source, f"{where}.agents", f"a ranking shows at most {len(ROBOT_STYLES)} robots (one colour "
-                      f"and shape each), got {len(agents)}")
-            pairs = tuple(itertools.combinations(agents, 2))
-        else:
-            if "ranking" in parts:
-                _fail(source, where, "a set that feeds a ranking part lists its agents (agents = [...]), so each "
-                      "agent keeps one robot number in all its clips")
-            raw = entry["pairs"]
-            if not isinstance(raw, list) or not raw:
-                _fail(source, f"{where}.pairs", "must be a non-empty list of [a, b] pairs")
-            pairs = tuple(_names(p, source, f"{where}.pairs[{j}]") for j, p in enumerate(raw))
-            if any(len(p) != 2 for p in pairs):
-                _fail(source, f"{where}.pairs", f"every pair has two different agents, got {raw}")
-            agents = tuple(dict.fromkeys(a for p in pairs for a in p))
-        sets.append(ClipSet(parts=parts, schemes=names, scenarios=_names(entry["scenarios"], source,
-                                                                             f"{where}.scenarios"),
-                            pairs=pairs, agents=agents))
-    spec = BuildSpec(seed=_int(table["seed"], source, "seed"),
-                     eval_episodes=_int(evaluation.get("episodes", 500), source, "eval.episodes", 2),
-                     eval_seed=_int(evaluation.get("seed", 0), source, "eval.seed"),
-                     render=options, schemes=schemes, sets=tuple(sets))
-    seen: dict[tuple, int] = {}
-    for i, clip_set in enumerate(spec.sets):
-        for scheme, scenario, pair in itertools.product(clip_set.schemes, clip_set.scenarios, clip_set.pairs):
-            key = (scheme, scenario, frozenset(pair))
-            if key in seen:
-                _fail(source, f"sets[{i}]", f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} is already "
-                      f"in sets[{seen[key]}]; list each clip once, with every part it feeds")
-            seen[key] = i
-    return spec
+def parse_build(text: str, source: str = "study file") -> BuildSpec:
+    """The `[build]` table of a study file's text as a BuildSpec, or BuildError naming the file, line and field as
+    the server does (`app.study`); the survey tables are left to the server."""
+    try:
+        build = parse_build_table(text, source)
+        options = _render_options(build, text, source)
+        refuse(text, source, [(("build", "sets", i, "agents"), f"a ranking shows at most {len(ROBOT_STYLES)} robots "
+                               f"(one colour and shape each), got {len(clip_set.agents)}")
+                              for i, clip_set in enumerate(build.sets)
+                              if "ranking" in clip_set.parts and len(clip_set.agents) > len(ROBOT_STYLES)])
+    except StudyError as error:
+        raise BuildError(str(error)) from None
+    return BuildSpec(
+        seed=build.seed, eval_episodes=build.eval.episodes, eval_seed=build.eval.seed, render=options,
+        schemes={name: Scheme(name=name, **scheme.model_dump()) for name, scheme in build.schemes.items()},
+        sets=tuple(ClipSet(parts=tuple(s.parts), schemes=tuple(s.schemes), scenarios=tuple(s.scenarios),
+                           pairs=s.clip_pairs(), agents=s.all_agents()) for s in build.sets))
 
 
 def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
@@ -216,14 +131,7 @@ def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FileNotFoundError(f"no study file {path}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise BuildError(f"{path}: not valid TOML: {error}") from None
-    if "build" not in data:
-        raise BuildError(f"{path}: no [build] table: it says which clips to search for and render (see "
-                         "docs/clips.md)")
-    return parse_build(data["build"], source=str(path)), text
+    return parse_build(text, source=str(path)), text
 
 
 @dataclass(frozen=True)

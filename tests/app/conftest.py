@@ -90,7 +90,7 @@ def study_text(**changes: str) -> str:
     """The shipped paper study with secret names; `changes` replace whole `key = value` lines (key=new value)."""
     text_ = PAPER_STUDY.read_text()
     for old, new in SECRET_NAMES.items():
-        text_ = text_.replace(f'"{old}"', f'"{new}"')
+        text_ = text_.replace(f'"{old}"', f'"{new}"').replace(f"[build.schemes.{old}", f"[build.schemes.{new}")
     for key, value in changes.items():
         text_, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", text_, count=1, flags=re.MULTILINE)
         assert n == 1, key

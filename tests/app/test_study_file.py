@@ -29,9 +29,15 @@ def test_paper_study_is_the_papers_survey():
     assert study.study.assignment == "self-select"
 
 
-def test_build_table_is_accepted_and_ignored():
-    text = PAPER.replace("[build]\n", "[build]\nsolver = \"mcts\"\nbudget = 5000\n[build.extra]\nanything = [1, 2]\n")
-    assert parse_study(text).build["solver"] == "mcts"
+def test_build_table_is_checked_and_a_second_set_is_found_at_its_line():
+    build = parse_study(PAPER).build
+    assert build.schemes["adaptive"].budget == 1_000_000 and build.sets[1].pairs == [("lo", "hi")]
+    text = PAPER.replace('scenarios = ["paper-code"]', 'scenarios = ["paper-code"]\nagents = ["lo", "hi"]')
+    with pytest.raises(StudyError) as error:
+        parse_study(text, "paper.toml")
+    line = line_of(text, "[[build.sets]]               # the instructions page")
+    assert str(error.value) == (f"paper.toml, line {line}, build.sets[1]: give either agents = [...] (every pair of "
+                                "them) or pairs = [[a, b], ...]")
 
 
 def test_unknown_top_level_key_is_rejected_with_its_line():

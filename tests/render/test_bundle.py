@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
@@ -11,21 +10,40 @@ from search.bundle.build import BuildError, build_bundle, load_build, parse_buil
 
 ROOT = Path(__file__).resolve().parents[2]
 
-BUILD = {
-    "seed": 7,
-    "eval": {"episodes": 4, "seed": 0},
-    "schemes": {"adaptive": {"solver": "mcts", "budget": 300, "seed": 1},
-                "nfirst": {"solver": "nfirst", "budget": 300, "seed": 1}},
-    "sets": [
-        {"parts": ["pairwise", "ranking"], "schemes": ["adaptive", "nfirst"], "scenarios": ["paper-bl-tr"],
-         "agents": ["goal", "orca", "social_force"]},
-        {"parts": ["example"], "schemes": ["nfirst"], "scenarios": ["paper-code"], "pairs": [["goal", "orca"]]},
-    ],
-}
+BUILD = """\
+[build]
+seed = 7
+
+[build.eval]
+episodes = 4
+seed = 0
+
+[build.schemes.adaptive]
+solver = "mcts"
+budget = 300
+seed = 1
+
+[build.schemes.nfirst]
+solver = "nfirst"
+budget = 300
+seed = 1
+
+[[build.sets]]
+parts = ["pairwise", "ranking"]
+schemes = ["adaptive", "nfirst"]
+scenarios = ["paper-bl-tr"]
+agents = ["goal", "orca", "social_force"]
+
+[[build.sets]]
+parts = ["example"]
+schemes = ["nfirst"]
+scenarios = ["paper-code"]
+pairs = [["goal", "orca"]]
+"""
 
 
-def copy(table: dict) -> dict:
-    return json.loads(json.dumps(table))
+def line_of(text: str, needle: str) -> int:
+    return next(i for i, line in enumerate(text.splitlines(), 1) if needle in line)
 
 
 def test_plan_covers_every_pair_scheme_and_scenario():
@@ -53,11 +71,10 @@ def test_a_ranking_set_gives_each_agent_one_number_per_scheme_and_scenario():
 
 
 def test_no_robot_number_names_two_agents_anywhere_in_a_bundle():
-    table = copy(BUILD)
-    table["sets"][0]["scenarios"] = ["paper-bl-tr", "paper-tl-br"]
-    table["sets"].append({"parts": ["pairwise"], "schemes": ["adaptive"], "scenarios": ["paper-code"],
-                          "agents": ["goal", "orca", "social_force"]})
-    jobs = plan(parse_build(table))
+    text = BUILD.replace('scenarios = ["paper-bl-tr"]', 'scenarios = ["paper-bl-tr", "paper-tl-br"]') + (
+        '\n[[build.sets]]\nparts = ["pairwise"]\nschemes = ["adaptive"]\nscenarios = ["paper-code"]\n'
+        'agents = ["goal", "orca", "social_force"]\n')
+    jobs = plan(parse_build(text))
     agent_of = {}
     for job in jobs:
         for agent, number in zip(job.pair, job.numbers, strict=True):
@@ -72,52 +89,84 @@ def test_robot_numbers_are_seeded_and_vary_with_the_seed():
     assert first == [job.numbers for job in plan(parse_build(BUILD))]
     mappings = set()
     for seed in range(12):
-        table = copy(BUILD) | {"seed": seed}
-        mappings.add(tuple(job.numbers for job in plan(parse_build(table))))
+        text = BUILD.replace("seed = 7", f"seed = {seed}")
+        mappings.add(tuple(job.numbers for job in plan(parse_build(text))))
     assert len(mappings) > 3
     example = [job for job in plan(parse_build(BUILD)) if job.parts == ("example",)][0]
     assert sorted(example.numbers) == [7, 8]
 
 
-@pytest.mark.parametrize(("change", "message"), [
-    (lambda b: b.pop("schemes"), r"missing key\(s\) \['schemes'\]"),
-    (lambda b: b["schemes"]["adaptive"].update(budget=0), r"schemes.adaptive.budget: must be a whole number >= 1"),
-    (lambda b: b["schemes"]["nfirst"].update(sovler="x"), r"schemes.nfirst: unknown key\(s\) \['sovler'\]"),
-    (lambda b: b["sets"][0].update(schemes=["adaptive", "mcts"]), r"sets\[0\].schemes: no scheme 'mcts'"),
-    (lambda b: b["sets"][1].update(parts=["warmup"]), r"sets\[1\].parts: parts are"),
-    (lambda b: b["sets"][1].update(parts=["ranking"]), r"sets\[1\]: a set that feeds a ranking part lists its agents"),
-    (lambda b: b["sets"][1].update(scenarios=["paper-bl-tr"], schemes=["adaptive"]), r"sets\[1\]: the clip of .*"
-                                                                                    r"already in sets\[0\]"),
-    (lambda b: b["sets"][0].pop("agents"), "give either agents"),
-    (lambda b: b.update(render={"fps": 5}), "fps must be at least 20"),
-    (lambda b: b["sets"][0].update(agents=[f"a{i}" for i in range(43)]), r"a ranking shows at most 42 robots"),
+@pytest.mark.parametrize(("old", "new", "message"), [
+    ("seed = 7\n", "", r"line 1, build\.seed: Field required"),
+    ("[build.schemes.adaptive]", "[build.scheme.adaptive]",
+     r"line 8, build\.scheme: unknown key \(check the spelling; see docs/clips\.md"),
+    ("budget = 300\nseed = 1\n\n[build.schemes.nfirst]", "budget = 0\nseed = 1\n\n[build.schemes.nfirst]",
+     r"line 10, build\.schemes\.adaptive\.budget: Input should be greater than or equal to 1"),
+    ("budget = 300\nseed = 1\n\n[build.schemes.nfirst]", 'budget = "300"\nseed = 1\n\n[build.schemes.nfirst]',
+     r"line 10, build\.schemes\.adaptive\.budget: Input should be a valid integer"),
+    ('solver = "nfirst"', 'sovler = "nfirst"', r"line 13, build\.schemes\.nfirst\.solver: Field required\n"
+                                               r".*line 14, build\.schemes\.nfirst\.sovler: unknown key"),
+    ("episodes = 4", "episodes = 1", r"build\.eval\.episodes: Input should be greater than or equal to 2"),
+    ('schemes = ["adaptive", "nfirst"]', 'schemes = ["adaptive", "mcts"]',
+     r"line 20, build\.sets\[0\]\.schemes\[1\]: no scheme 'mcts'; defined: \['adaptive', 'nfirst'\]"),
+    ('parts = ["example"]', 'parts = ["warmup"]',
+     r"build\.sets\[1\]\.parts\[0\]: Input should be 'pairwise', 'ranking' or 'example'"),
+    ('parts = ["example"]', 'parts = ["ranking"]',
+     r"line 24, build\.sets\[1\]: a set that feeds a ranking part lists its agents"),
+    ('scenarios = ["paper-code"]', 'scenarios = ["paper-bl-tr", "paper-bl-tr"]',
+     r"build\.sets\[1\]\.scenarios: names must not repeat"),
+    ('pairs = [["goal", "orca"]]', 'pairs = [["goal", "goal"]]',
+     r"build\.sets\[1\]\.pairs\[0\]: a pair needs two different agents"),
+    ('agents = ["goal", "orca", "social_force"]', 'agents = ["goal"]',
+     r"line 22, build\.sets\[0\]\.agents: Value should have at least 2 items"),
+    ('schemes = ["nfirst"]\nscenarios = ["paper-code"]', 'schemes = ["adaptive"]\nscenarios = ["paper-bl-tr"]',
+     r"line 24, build\.sets\[1\]: the clip of adaptive, paper-bl-tr, goal and orca is already in sets\[0\]"),
+    ('agents = ["goal", "orca", "social_force"]', "", r"line 18, build\.sets\[0\]: give either agents"),
+    ("[build.eval]", "[build.render]\nfps = 5\n[build.eval]", r"line 4, build\.render: .*fps must be at least 20"),
+    ("[build.eval]", "[build.render]\nfsp = 24\n[build.eval]",
+     r"line 5, build\.render\.fsp: unknown key; expected some of \[.*'fps'"),
+    ('agents = ["goal", "orca", "social_force"]', f"agents = {[f'a{i}' for i in range(43)]}",
+     r"line 22, build\.sets\[0\]\.agents: a ranking shows at most 42 robots"),
 ])
-def test_bad_build_tables_give_clear_errors(change, message):
-    table = copy(BUILD)
-    change(table)
-    with pytest.raises(BuildError, match=message):
-        parse_build(table, source="study.toml")
+def test_bad_build_tables_give_clear_errors_with_their_line(old, new, message):
+    assert old in BUILD
+    with pytest.raises(BuildError, match=f"^study.toml, (.|\n)*{message}"):
+        parse_build(BUILD.replace(old, new), source="study.toml")
+
+
+def test_the_server_and_the_bundle_builder_report_a_bad_build_line_alike(tmp_path):
+    """The server validates the whole study file, `foil bundle` only its [build] table, with the same models."""
+    from app.study import StudyError, load_study
+
+    study = tmp_path / "study.toml"
+    study.write_text((ROOT / "studies" / "demo.toml").read_text().replace("budget = 5_000   ", "budget = -5   "))
+    with pytest.raises(StudyError) as served:
+        load_study(study)
+    with pytest.raises(BuildError) as bundled:
+        load_build(study)
+    assert str(served.value) == str(bundled.value)
+    line = line_of(study.read_text(), "budget = -5")
+    assert str(bundled.value) == (f"{study}, line {line}, build.schemes.adaptive.budget: Input should be greater "
+                                  "than or equal to 1")
 
 
 def test_scheme_settings_reach_the_search_as_the_fields_types():
     """A whole number in the study file is a float where the setting is one, as `foil search --set
     exploration=100` gives it, so both make the same search."""
-    table = copy(BUILD)
-    table["schemes"]["adaptive"] |= {"settings": {"exploration": 100, "mode": "receding"}, "reward": {"alpha": 2},
-                                     "world": {"robot_visible": True}}
-    job = next(job for job in plan(parse_build(table)) if job.scheme.name == "adaptive")
+    text = BUILD + ('[build.schemes.adaptive.settings]\nexploration = 100\nmode = "receding"\n'
+                    "[build.schemes.adaptive.reward]\nalpha = 2\n[build.schemes.adaptive.world]\n")
+    job = next(job for job in plan(parse_build(text + "robot_visible = true\n")) if job.scheme.name == "adaptive")
     search = search_job(job)
     assert search.solver_settings == {"exploration": 100.0, "mode": "receding"}
     assert type(search.solver_settings["exploration"]) is float and type(search.reward_settings["alpha"]) is float
     assert search.reward_settings == {"alpha": 2.0} and search.world_settings == {"robot_visible": True}
     assert (search.agents, search.scenario, search.budget, search.seed) == (job.pair, job.scenario, 300, 1)
-    table["schemes"]["adaptive"]["world"] = {"robot_visible": "yes"}
-    job = next(job for job in plan(parse_build(table)) if job.scheme.name == "adaptive")
+    job = next(job for job in plan(parse_build(text + 'robot_visible = "yes"\n')) if job.scheme.name == "adaptive")
     with pytest.raises(ValueError, match="bad world setting robot_visible = 'yes': robot_visible takes a bool"):
         search_job(job)
-    table["schemes"]["adaptive"]["settings"] = {"nested": {"x": 1}}
-    with pytest.raises(BuildError, match="schemes.adaptive.settings: must be a table of key = value settings"):
-        parse_build(table)
+    with pytest.raises(BuildError, match=r"build\.schemes\.adaptive\.settings: must be a table of key = value "
+                                         "settings"):
+        parse_build(text.replace("exploration = 100", "nested = {x = 1}") + "robot_visible = true\n")
 
 
 def test_bad_search_settings_are_refused_before_any_work(tmp_path):
