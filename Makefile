@@ -9,7 +9,7 @@ BIN = $(VENV)/bin
 AXE = .cache/axe/node_modules/axe-core/axe.min.js
 DEMO_BUNDLE ?= bundles/demo
 
-.PHONY: demo test install browser postgres
+.PHONY: demo test check install browser postgres
 
 install: $(VENV)/.installed
 
@@ -42,3 +42,7 @@ demo: install
 
 test: install browser postgres
 	$(BIN)/python -m pytest -q
+
+# The fast loop while working: everything but the slow and the browser tests (they run in `make test`).
+check: install postgres
+	$(BIN)/python -m pytest -q -m "not slow and not browser"
