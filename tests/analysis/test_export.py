@@ -203,7 +203,7 @@ def answer_of(screen: dict) -> dict:
 
 
 def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
-    from app.answer_table import analysis_database, analysis_study
+    from app.analysis_source import analysis_database, analysis_study
 
     with pytest.raises(ValueError, match="no database file"):
         analysis_database(f"sqlite:///{tmp_path / 'missing.sqlite3'}")
@@ -216,14 +216,14 @@ def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
 
 
 def test_the_server_stores_its_study_file(make_client):
-    from app.answer_table import analysis_study
+    from app.analysis_source import analysis_study
 
     context = make_client({"platform": '"none"'}).app.state.context
     assert analysis_study(context.db, None) == context.study
 
 
 def test_study_stored_in_the_database(survey_db, paper_study):
-    from app.answer_table import analysis_study, remember_study
+    from app.analysis_source import analysis_study, remember_study
 
     path, study = paper_study
     remember_study(survey_db, path.read_text(), study)
