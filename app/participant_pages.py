@@ -302,7 +302,7 @@ def _render_screen(request: Request, ctx: Context, screen: Screen, step: int, *,
                    events: str = "", status_code: int = 200, notice: str = "", watched: bool | None = None):
     name = "instructions.html" if isinstance(screen, Instructions) else "screen.html"
     if not (errors or values or events or notice):  # as first shown: the same page for everyone at this step
-        return ctx.render_form(request, (name, step, repr(screen)), name, lambda: {
+        return ctx.render_form(request, (name, step, screen.text), name, lambda: {
             "screen": screen_view(ctx, screen), "step": step, "errors": {}, "values": {}, "video_events": "",
             "watched": False, "notice": ""})
     return ctx.render(

@@ -8,6 +8,7 @@ a screen sets last, its `progress` line and its `position` in the plan, come las
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Annotated, Literal, TypeGuard
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
@@ -15,6 +16,13 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 class _Stored(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+
+class _Screen(_Stored):
+    @cached_property
+    def text(self) -> str:
+        """The screen as text, made once: the page cache's key (a screen read from a stored plan never changes)."""
+        return repr(self)
 
 
 class Robot(_Stored):
@@ -32,7 +40,7 @@ class Shape(_Stored):
     height: int | None = None
 
 
-class Instructions(_Stored):
+class Instructions(_Screen):
     """The instructions and comprehension questions, always the first screen."""
 
     kind: Literal["instructions"]
@@ -40,7 +48,7 @@ class Instructions(_Stored):
     position: tuple[int, int] | None = None  # (index in the plan, number of screens)
 
 
-class _ClipScreen(_Stored):
+class _ClipScreen(_Screen):
     kind: Literal["pairwise", "watch"]
     part: int
     clip: str
@@ -73,7 +81,7 @@ class Watch(_ClipScreen):
     position: tuple[int, int] | None = None
 
 
-class Ranking(_Stored):
+class Ranking(_Screen):
     """The ranking of a round's robots, after its clips (`clips`, `media_list`, `shapes`, in the order shown)."""
 
     kind: Literal["ranking"]
@@ -91,7 +99,7 @@ class Ranking(_Stored):
     position: tuple[int, int] | None = None
 
 
-class Attention(_Stored):
+class Attention(_Screen):
     """Attention check number `check` of the study file; with a clip, a video attention check."""
 
     kind: Literal["attention"]
@@ -108,7 +116,7 @@ class Attention(_Stored):
     position: tuple[int, int] | None = None
 
 
-class Closing(_Stored):
+class Closing(_Screen):
     """The closing questions and feedback box, after the last part."""
 
     kind: Literal["closing"]
