@@ -21,6 +21,7 @@ from app.answer_table import ParticipantRecord, long_rows
 from app.context import Context, ContextDep
 from app.database import as_utc
 from app.models import Participant
+from app.screens import Closing, Instructions, Screen
 from app.security import LoginThrottle, admin_mark, checked_form, is_admin, unstorable
 
 router = APIRouter(prefix="/admin")
@@ -133,28 +134,30 @@ def _participant(session, ctx: Context, code: str) -> Participant:
     return participant
 
 
-SCREEN_NAMES = {"instructions": "Instructions", "closing": "Closing questions"}
-
-
-def shown_as(plan: list[dict], step: int) -> str:
+def shown_as(plan: list[Screen], step: int) -> str:
     """A screen named as its participant saw it: the line above it ("Part 1 of 2, clip 3 of 6"; in a ranking part
     "Part 2 of 2, round 1 of 2, ranking"), not its index in the plan."""
     if step >= len(plan):
         return "finished"
     screen = plan[step]
-    if screen.get("progress"):
-        return screen["progress"]
-    if screen["kind"] in SCREEN_NAMES:
-        return SCREEN_NAMES[screen["kind"]]
-    return f"Part {screen['part']}, {screen['kind']}" if "part" in screen else screen["kind"]
+    if screen.progress:
+        return screen.progress
+    match screen:
+        case Instructions():
+            return "Instructions"
+        case Closing():
+            return "Closing questions"
+        case _:
+            return f"Part {screen.part}, {screen.kind}"
 
 
 @router.get("/participants/{code}", dependencies=[Admin])
 def participant_page(code: str, request: Request, ctx: ContextDep):
     with ctx.db.reading() as session:
         participant = _participant(session, ctx, code)
-        rows = list(long_rows(ctx.study, ParticipantRecord(participant, list(participant.responses))))
-    plan = participant.plan or []
+        record = ParticipantRecord(participant, list(participant.responses))
+        rows = list(long_rows(ctx.study, record))
+    plan = record.plan
     for row in rows:
         row["shown_as"] = shown_as(plan, row["step"])
     condition = None if participant.condition is None else ctx.conditions[participant.condition]

@@ -11,18 +11,29 @@ from __future__ import annotations
 import functools
 import re
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from pathlib import Path
 
 from sqlalchemy import Row, select
-from sqlalchemy.engine import make_url
-from sqlalchemy.exc import IntegrityError, OperationalError
 
-from app.database import Database, DatabaseError, as_utc, check_migrated
+from app.database import Database, as_utc
 from app.exclusions import duration_s, viewing_problems
-from app.models import Participant, ParticipantPlan, Response, ServerSetting
-from app.study import FEEDBACK, PairwisePart, Study, load_study, parse_study
+from app.models import Participant, ParticipantPlan, Response
+from app.screens import (
+    Attention,
+    Closing,
+    InPart,
+    Pairwise,
+    Ranking,
+    Robot,
+    Round,
+    Screen,
+    Watch,
+    WithRobots,
+    parse_plan,
+    shows_clip,
+)
+from app.study import FEEDBACK, PairwisePart, Study
 
 LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
 ORDER_SEPARATOR = ">"  # between the places of a ranking, best first
@@ -39,6 +50,10 @@ class Column:
 class ParticipantRecord:
     participant: Row  # the participant table's columns and the plan, as attributes
     responses: list[Row]  # the response table's columns, ordered by step
+    plan: list[Screen] = field(init=False)  # the participant's plan, parsed once
+
+    def __post_init__(self):
+        self.plan = parse_plan(self.participant.plan or [])
 
 
 def participant_records(db: Database, study_id: str, batch: int = 500) -> Iterator[ParticipantRecord]:
@@ -70,60 +85,6 @@ def iso_utc(moment: datetime | None) -> str | None:
     if moment is None:
         return None
     return as_utc(moment).astimezone(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-
-
-def analysis_database(url: str) -> Database:
-    """An existing, migrated survey database; a clear error for a wrong path or an unmigrated file (opening a
-    missing SQLite file would otherwise create an empty one)."""
-    parsed = make_url(url)
-    if parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "", ":memory:"):
-        if not Path(parsed.database).is_file():
-            raise ValueError(f"no database file {parsed.database} (URL {url!r})")
-    db = Database(url)
-    try:
-        check_migrated(db.engine)
-    except (DatabaseError, OperationalError) as error:
-        db.dispose()
-        raise ValueError(f"{url!r} is not a usable survey database: {error}") from None
-    return db
-
-
-STUDY_KEY = "study-file:"  # server_setting key prefix: the text of each study file the server was started with
-
-
-def remember_study(db: Database, study_text: str, study: Study) -> None:
-    """Keep the study file's text in the database, so that `foil export` and `foil report` need only the
-    database. The server calls this at start-up; the latest start wins."""
-    key = STUDY_KEY + study.study.id
-    try:
-        with db.writing() as session:
-            row = session.get(ServerSetting, key)
-            if row is None:
-                session.add(ServerSetting(key=key, value=study_text))
-            else:
-                row.value = study_text
-    except IntegrityError:  # another worker stored it at the same moment
-        pass
-
-
-def analysis_study(db: Database, study: str | Path | None) -> Study:
-    """The study definition for a database: a study file, or the id of a study whose file the server stored
-    (`remember_study`); without either, the only study stored."""
-    if study is not None and Path(study).is_file():
-        return load_study(study)
-    with db.reading() as session:
-        stored = dict(session.execute(
-            select(ServerSetting.key, ServerSetting.value).where(ServerSetting.key.startswith(STUDY_KEY))).all())
-    texts = {key.removeprefix(STUDY_KEY): text for key, text in stored.items()}
-    if study is None and len(texts) == 1:
-        study = next(iter(texts))
-    if study is not None and str(study) in texts:
-        return parse_study(texts[str(study)], source=f"the study file stored in the database for {study!r}")
-    if study is not None:
-        raise ValueError(f"no study file {study} and no study {str(study)!r} stored in the database "
-                         f"(stored: {sorted(texts) or 'none'})")
-    raise ValueError("give the study: --study FILE (the study file the survey was served with) or --study ID of one "
-                     f"stored in the database (stored: {sorted(texts) or 'none'})")
 
 
 # Long format ---------------------------------------------------------------------------------------------------
@@ -171,69 +132,80 @@ LONG_COLUMNS = [
 ]
 
 
-def _agent_of(screen: dict) -> dict[str, str]:
-    return {robot["label"]: robot["agent"] for robot in screen.get("robots", [])}
+def _robots(screen: Screen | None) -> list[Robot]:
+    return screen.robots if isinstance(screen, WithRobots) else []
 
 
-def _scored(question_type: str, value, screen: dict) -> dict:
+def _scored(question_type: str, value, screen: Screen | None) -> dict:
     """answer, answer_agent, value, truth and correct of one submitted value."""
-    agent_of = _agent_of(screen)
+    agent_of = {robot.label: robot.agent for robot in _robots(screen)}
     if question_type == "choose":
         agent = agent_of.get(value)
-        return {"answer": value, "answer_agent": agent, "truth": screen.get("better"),
-                "correct": None if agent is None else int(agent == screen.get("better"))}
+        better = screen.better if isinstance(screen, Pairwise | Watch) else None
+        return {"answer": value, "answer_agent": agent, "truth": better,
+                "correct": None if agent is None else int(agent == better)}
     if question_type == "rank":
         agents = [agent_of.get(label) for label in value]
-        truth = screen.get("true_order")
+        truth = screen.true_order if isinstance(screen, Ranking) else None
         return {"answer": ORDER_SEPARATOR.join(value),
                 "answer_agent": None if None in agents else ORDER_SEPARATOR.join(agents),
                 "truth": None if truth is None else ORDER_SEPARATOR.join(truth),
                 "correct": None if truth is None or None in agents else int(agents == truth)}
     if question_type == "scale":
         return {"answer": str(value), "value": int(value)}
-    if question_type == "attention":
-        return {"answer": value, "truth": screen["expected"], "correct": int(value == screen["expected"])}
+    if question_type == "attention" and isinstance(screen, Attention):
+        return {"answer": value, "truth": screen.expected, "correct": int(value == screen.expected)}
     return {"answer": value if isinstance(value, str) else str(value)}
 
 
-def _trials(plan: list[dict]) -> list[int | None]:
+def _clips(screen: Screen | None) -> str | None:
+    """The screen's clip id; a ranking's, the clips of its round."""
+    match screen:
+        case Ranking():
+            return LIST_SEPARATOR.join(screen.clips) or None
+        case Pairwise() | Watch() | Attention():
+            return screen.clip or None
+    return None
+
+
+def _trials(plan: list[Screen]) -> list[int | None]:
     """Each screen's 1-based position within its part."""
     seen: dict[int, int] = {}
     out = []
     for screen in plan:
-        part = screen.get("part")
-        if part is None:
-            out.append(None)
+        if isinstance(screen, InPart):
+            seen[screen.part] = seen.get(screen.part, 0) + 1
+            out.append(seen[screen.part])
         else:
-            seen[part] = seen.get(part, 0) + 1
-            out.append(seen[part])
+            out.append(None)
     return out
 
 
 def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
     """One row per answered question; a screen without questions gives one row with an empty question."""
     participant = record.participant
-    plan = participant.plan or []
+    plan = record.plan
     trials = _trials(plan)
     types = {name: question.type for name, question in study.questions.items()} | {"attention": "attention"}
     types[FEEDBACK] = types.get(FEEDBACK, "text")
     for response in record.responses:
-        screen = plan[response.step] if response.step < len(plan) else {"kind": response.kind}
-        robots = screen.get("robots", [])
+        screen = plan[response.step] if response.step < len(plan) else None
+        robots = _robots(screen)
+        scheme, scenario = (screen.scheme, screen.scenario) if isinstance(screen, WithRobots) else (None, None)
         common = {
             "study": participant.study, "participant": participant.code,
             "condition": None if participant.condition is None else participant.condition + 1,
-            "step": response.step, "part": screen.get("part"), "screen": response.kind,
-            "trial": trials[response.step] if response.step < len(trials) else None, "block": screen.get("block"),
-            "clip": screen.get("clip") or LIST_SEPARATOR.join(screen.get("clips", [])) or None,
-            "scheme": screen.get("scheme"), "scenario": screen.get("scenario"),
-            "agents": LIST_SEPARATOR.join(r["agent"] for r in robots) or None,
-            "labels": LIST_SEPARATOR.join(r["label"] for r in robots) or None,
+            "step": response.step, "part": screen.part if isinstance(screen, InPart) else None,
+            "screen": response.kind, "trial": trials[response.step] if response.step < len(trials) else None,
+            "block": screen.block if isinstance(screen, Round) else None, "clip": _clips(screen),
+            "scheme": scheme, "scenario": scenario,
+            "agents": LIST_SEPARATOR.join(r.agent for r in robots) or None,
+            "labels": LIST_SEPARATOR.join(r.label for r in robots) or None,
             "time_on_page_ms": response.client_ms, "server_ms": response.server_ms, "plays": response.plays,
             "submitted_at": iso_utc(response.submitted_at),
             "viewport": (getattr(response, "details", None) or {}).get("viewport"),
         }
-        if "media" in screen:
+        if shows_clip(screen):
             viewing = viewing_problems(response, screen)
             common |= {"clip_ms": viewing["clip_ms"], "time_on_screen_ms": response.server_ms,
                        "seeks": viewing["seeks"], "seeks_blocked": viewing["seeks_blocked"],
@@ -282,25 +254,26 @@ PARTICIPANT_COLUMNS = [
 ]
 
 
-def _plan_order(plan: list[dict], key: str) -> list[str]:
-    return list(dict.fromkeys(screen[key] for screen in plan if screen.get(key)))
+def _schemes(plan: list[Screen]) -> list[str]:
+    """The schemes in the order the participant saw them."""
+    return list(dict.fromkeys(screen.scheme for screen in plan if isinstance(screen, WithRobots) and screen.scheme))
 
 
-def part_scenarios(plan: list[dict]) -> list[str]:
-    by_part = {screen["part"]: screen["scenario"] for screen in plan if "part" in screen and "scenario" in screen}
+def part_scenarios(plan: list[Screen]) -> list[str]:
+    by_part = {screen.part: screen.scenario for screen in plan if isinstance(screen, WithRobots)}
     return [by_part[part] for part in sorted(by_part)]
 
 
 def participant_row(record: ParticipantRecord, flags: dict[str, bool]) -> dict:
     p = record.participant
-    plan = p.plan or []
+    plan = record.plan
     duration = duration_s(p)
     return {
         "study": p.study, "participant": p.code, "platform": p.platform, "external_id": p.external_id,
         "kind": getattr(p, "kind", None) or "real", "consent_version": getattr(p, "consent_version", None) or None,
         "platform_study_id": p.platform_study_id, "platform_session_id": p.platform_session_id,
         "status": p.status, "condition": None if p.condition is None else p.condition + 1,
-        "schemes": LIST_SEPARATOR.join(_plan_order(plan, "scheme")) or None,
+        "schemes": LIST_SEPARATOR.join(_schemes(plan)) or None,
         "scenarios": LIST_SEPARATOR.join(part_scenarios(plan)) or None, "slot": p.slot,
         "created_at": iso_utc(p.created_at), "completed_at": iso_utc(p.completed_at),
         "duration_s": None if duration is None else round(duration, 3),
@@ -375,31 +348,33 @@ class WideLayout:
         row = {"study": p.study, "participant": p.code, "condition": None if p.condition is None else p.condition + 1,
                "status": p.status, "excluded": int(flags["excluded"]),
                "duration_s": None if duration is None else round(duration, 3)}
-        for part, scenario in enumerate(part_scenarios(p.plan or []), start=1):
+        for part, scenario in enumerate(part_scenarios(record.plan), start=1):
             row[f"p{part}_scenario"] = scenario
-        plan = p.plan or []
         for answer in long:
             if not answer.get("question"):
                 continue
-            screen = plan[answer["step"]]
-            if answer["question_type"] == "attention":
-                prefix = f"attention{screen['check'] + 1}"
-                row[prefix], row[f"{prefix}_passed"] = answer["answer"], answer["correct"]
-                continue
-            if screen["kind"] == "closing":
-                key = f"closing_{answer['question']}"
-                if key in self.names:  # a closing screen the study file no longer asks is left out
-                    row[key] = answer["value" if answer["question_type"] == "scale" else "answer"]
-                continue
-            if screen["kind"] == "pairwise":
-                pair = self._pairs.get((screen["part"], frozenset(r["agent"] for r in screen["robots"])), "?")
-                prefix = f"p{screen['part']}_{_slug(screen['scheme'])}_{pair}"
-            else:
-                prefix = f"p{screen['part']}_{_slug(screen['scheme'])}"
+            screen = record.plan[answer["step"]]
+            match screen:
+                case Attention() if answer["question_type"] == "attention":
+                    prefix = f"attention{screen.check + 1}"
+                    row[prefix], row[f"{prefix}_passed"] = answer["answer"], answer["correct"]
+                    continue
+                case Closing():
+                    key = f"closing_{answer['question']}"
+                    if key in self.names:  # a closing screen the study file no longer asks is left out
+                        row[key] = answer["value" if answer["question_type"] == "scale" else "answer"]
+                    continue
+                case Pairwise():
+                    pair = self._pairs.get((screen.part, frozenset(r.agent for r in screen.robots)), "?")
+                    prefix = f"p{screen.part}_{_slug(screen.scheme)}_{pair}"
+                case Watch() | Ranking():
+                    prefix = f"p{screen.part}_{_slug(screen.scheme)}"
+                case _:  # the instructions' comprehension answers: no column (a wrong answer is never saved)
+                    continue
             key = f"{prefix}_{answer['question']}"
             if key not in self.names:
-                raise ValueError(f"participant {p.code} answered {answer['question']!r} on a {screen['kind']} screen "
-                                 f"of scheme {screen['scheme']!r} that the study file does not define: is it the "
+                raise ValueError(f"participant {p.code} answered {answer['question']!r} on a {screen.kind} screen "
+                                 f"of scheme {screen.scheme!r} that the study file does not define: is it the "
                                  "study file the survey was served with?")
             value_key = {"choose": "answer_agent", "rank": "answer_agent", "scale": "value"}.get(
                 answer["question_type"], "answer")

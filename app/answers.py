@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from starlette.datastructures import FormData
 
+from app.screens import Asking, Attention, Closing, Instructions, Screen, WithRobots, shows_clip
 from app.study import FEEDBACK, ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
 
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
@@ -46,8 +47,8 @@ def _unanswered(form: FormData, name: str) -> bool:
     return not values or (len(values) == 1 and isinstance(values[0], str) and not values[0].strip())
 
 
-def _check_question(name: str, question, screen: dict, form: FormData, out: Checked) -> None:
-    labels = [robot["label"] for robot in screen.get("robots", [])]
+def _check_question(name: str, question, screen: Screen, form: FormData, out: Checked) -> None:
+    labels = [robot.label for robot in screen.robots] if isinstance(screen, WithRobots) else []
     if isinstance(question, ChoiceQuestion):
         value = _one(form, name)
         if value not in question.options:
@@ -114,16 +115,17 @@ def _video_events(raw: str | None) -> list[dict] | None:
     return clean
 
 
-def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
+def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
     out = Checked()
-    required = study.closing.required if screen["kind"] == "closing" and study.closing else None
-    for name in screen.get("questions", []):
+    required = study.closing.required if isinstance(screen, Closing) and study.closing else None
+    for name in screen.questions if isinstance(screen, Asking) else []:
         if required is not None and name not in required and _unanswered(form, name):
             continue  # a closing question left unanswered: allowed unless the study requires it
         _check_question(name, study.questions[name], screen, form, out)
-    if screen.get("feedback") and not (FEEDBACK not in (required or []) and _unanswered(form, FEEDBACK)):
+    if (isinstance(screen, Closing) and screen.feedback
+            and not (FEEDBACK not in (required or []) and _unanswered(form, FEEDBACK))):
         _check_question(FEEDBACK, TextQuestion(type="text", text="feedback"), screen, form, out)
-    if screen["kind"] == "instructions":
+    if isinstance(screen, Instructions):
         for number, check in enumerate(study.comprehension, start=1):
             value = _one(form, f"understand{number}")
             if value not in check.options:
@@ -133,16 +135,16 @@ def check_screen(study: Study, screen: dict, form: FormData) -> Checked:
                                                      "choose another answer.")
             else:
                 out.answers[f"understand{number}"] = value
-    if screen["kind"] == "attention":
+    if isinstance(screen, Attention):
         value = _one(form, "attention")
-        if value not in screen["options"]:
+        if value not in screen.options:
             out.errors["attention"] = "Choose one of the answers."
         else:
             out.answers["attention"] = value
     events = _video_events(_one(form, "video_events"))
     if events is None:
         out.errors["video"] = "The page sent a malformed record of the clip's playback; reload the page."
-    elif "media" in screen and study.study.require_full_view and not any(e["type"] == "ended" for e in events):
+    elif shows_clip(screen) and study.study.require_full_view and not any(e["type"] == "ended" for e in events):
         out.errors["video"] = "Please watch the clip to the end before going on."
     out.video_events = events or []
     client_ms = _one(form, "time_on_page_ms") or ""

@@ -11,6 +11,7 @@ from sqlalchemy import Row, select
 
 from app.database import Database, as_utc
 from app.models import Participant
+from app.screens import Attention, Pairwise, Screen, Watch, shows_clip
 
 REASONS = {
     "pilot_or_bot": "a pilot (preview link) or a bot (`foil simulate`), not a real participant",
@@ -81,13 +82,13 @@ def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("re
     return statistics.median(durations) if durations else None
 
 
-def viewing_problems(response, screen: dict) -> dict:
+def viewing_problems(response, screen: Pairwise | Watch | Attention) -> dict:
     """How a clip screen was watched, from its response and the plan's screen: the clip's length, time on screen
     (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden; `skipped` when the screen was
     answered sooner than the clip plays (by the server's clock), or with playback faster than normal before the
     clip first ended."""
     events = response.video_events or []
-    clip_ms = screen.get("clip_ms")
+    clip_ms = screen.clip_ms
     hidden_ms, hidden_at = 0, None
     for event in events:
         if event["type"] == "hidden":
@@ -98,7 +99,7 @@ def viewing_problems(response, screen: dict) -> dict:
     first_end = next((i for i, e in enumerate(events) if e["type"] == "ended"), None)
     before_end = events if first_end is None else events[:first_end]
     sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
-    skipped = bool("media" in screen and (sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
+    skipped = bool(shows_clip(screen) and (sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
     return {"clip_ms": clip_ms, "seeks": sum(e["type"] == "seek" for e in events),
             "seeks_blocked": sum(e["type"] == "seek_blocked" for e in events),
             "rate_changes": sum(e["type"] == "ratechange" for e in events),
@@ -106,14 +107,14 @@ def viewing_problems(response, screen: dict) -> dict:
 
 
 def exclusion_flags(participant: Participant | Row, threshold_s: float | None, responses: list | None = None,
-                    rules: ExclusionRules | None = None) -> dict[str, bool]:
-    """One flag per reason in REASONS, plus `excluded` when any of them holds. `responses` (with the
-    participant's plan) give the viewing flag; without them it is not set."""
+                    rules: ExclusionRules | None = None, plan: list[Screen] | None = None) -> dict[str, bool]:
+    """One flag per reason in REASONS, plus `excluded` when any of them holds. `responses` with the
+    participant's `plan` give the viewing flag; without them it is not set."""
     duration = duration_s(participant)
     kinds = (rules or ExclusionRules()).kinds
-    plan = getattr(participant, "plan", None) or []
+    plan = plan or []
     skipped = any(viewing_problems(r, plan[r.step])["skipped"] for r in responses or [] if r.step < len(plan)
-                  and "media" in plan[r.step])
+                  and shows_clip(plan[r.step]))
     flags = {
         "pilot_or_bot": (getattr(participant, "kind", None) or "real") not in kinds,
         "incomplete": participant.status != "completed",

@@ -17,13 +17,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TextIO
 
+from app.analysis_source import analysis_database, analysis_study
 from app.answer_table import (
     LONG_COLUMNS,
     PARTICIPANT_COLUMNS,
     Column,
     WideLayout,
-    analysis_database,
-    analysis_study,
     long_rows,
     participant_records,
     participant_row,
@@ -238,7 +237,7 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     excluded = 0
     try:
         for record in participant_records(db, study.study.id, batch=batch):
-            flags = exclusion_flags(record.participant, threshold, record.responses, rules)
+            flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
             excluded += flags["excluded"]
             long = list(long_rows(study, record))
             for row in long:

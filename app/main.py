@@ -16,7 +16,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import ClientDisconnect
 
 from app import admin_pages, analysis_pages, media, participant_pages
-from app.answer_table import remember_study
+from app.analysis_source import remember_study
 from app.assignment import conditions
 from app.bundle import check_study_against_bundle, load_bundle
 from app.context import Context

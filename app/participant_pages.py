@@ -29,6 +29,23 @@ from app.database import Statements, as_utc
 from app.kinds import kind_from_link, pilot_token
 from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
+from app.screens import (
+    Asking,
+    Attention,
+    Closing,
+    InPart,
+    Instructions,
+    Pairwise,
+    Ranking,
+    Round,
+    Screen,
+    Shape,
+    Watch,
+    WithRobots,
+    dump_plan,
+    parse_plan,
+    shows_clip,
+)
 from app.security import checked_form
 from app.study import FEEDBACK, TextQuestion
 
@@ -64,7 +81,7 @@ VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
 VIEW_TOLERANCE_MS = 1000
 
 
-def _plan(sql: Statements, ctx: Context, participant: tuple) -> list[dict] | None:
+def _plan(sql: Statements, ctx: Context, participant: tuple) -> list[Screen] | None:
     """The participant's screens (None before a condition is assigned). A plan never changes once assigned, so each
     is read once for the participants at work at any time (`Context.plans`), and then only looked up; for the same
     reason it may be read apart from the participant's row, outside its transaction."""
@@ -74,11 +91,11 @@ def _plan(sql: Statements, ctx: Context, participant: tuple) -> list[dict] | Non
         if plan is not None:
             if len(ctx.plans) >= MAX_PLANS:
                 ctx.plans.clear()
-            ctx.plans[participant.id] = plan
+            ctx.plans[participant.id] = plan = parse_plan(plan)
     return plan
 
 
-def _current_screens(sql: Statements, ctx: Context, request: Request) -> tuple[tuple, list[dict] | None]:
+def _current_screens(sql: Statements, ctx: Context, request: Request) -> tuple[tuple, list[Screen] | None]:
     participant = _current(sql, ctx, request)
     return participant, _plan(sql, ctx, participant) if participant.status == "started" else None
 
@@ -209,7 +226,7 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
 
 def _new_plan(ctx: Context, participant_id: int, condition: int) -> list[dict]:
     rng = random.Random(f"{ctx.study.study.seed}:participant:{participant_id}")
-    return build_plan(ctx.study, ctx.bundle, ctx.conditions[condition], rng)
+    return dump_plan(build_plan(ctx.study, ctx.bundle, ctx.conditions[condition], rng))
 
 
 def _assign_plan(ctx: Context, participant: Participant) -> None:
@@ -236,52 +253,56 @@ async def consent(request: Request):
     return _see_current()
 
 
-def _clip_view(sha: str, shape: dict | None) -> dict:
-    shape = shape or {}
-    return {"url": f"/clips/{sha}.mp4", "width": shape.get("width") or 720, "height": shape.get("height") or 880,
-            "seconds": round((shape.get("clip_ms") or 0) / 1000, 1)}
+def _clip_view(sha: str, shape: Shape | Pairwise | Watch | Attention) -> dict:
+    """A clip's address and box; `shape` is anything with its `clip_ms`, `width` and `height` (a clip screen)."""
+    return {"url": f"/clips/{sha}.mp4", "width": shape.width or 720, "height": shape.height or 880,
+            "seconds": round((shape.clip_ms or 0) / 1000, 1)}
 
 
-def screen_view(ctx: Context, screen: dict) -> dict:
+def screen_view(ctx: Context, screen: Screen) -> dict:
     """What a page may know about a screen: labels and the clip's address, never agent names or ground truth."""
     study = ctx.study
-    view = {"kind": screen["kind"], "progress": screen.get("progress", ""), "position": screen.get("position"),
-            "labels": [robot["label"] for robot in screen.get("robots", [])],
-            "questions": [(name, study.questions[name]) for name in screen.get("questions", [])],
-            "block": screen.get("block"), "round_start": screen.get("round_start", False), "optional": []}
-    if "part" in screen:
-        part = study.parts[screen["part"] - 1]
+    robots = screen.robots if isinstance(screen, WithRobots) else []
+    view = {"kind": screen.kind, "progress": screen.progress, "position": screen.position,
+            "labels": [robot.label for robot in robots],
+            "questions": [(name, study.questions[name]) for name in screen.questions] if isinstance(screen, Asking)
+            else [],
+            "block": screen.block if isinstance(screen, Round) else None,
+            "round_start": isinstance(screen, Watch) and screen.round_start, "optional": []}
+    if isinstance(screen, InPart):
+        part = study.parts[screen.part - 1]
         view["part_title"], view["part_intro"], view["part_kind"] = part.title, part.intro, part.kind
-    if "media" in screen:
-        view["clip"] = _clip_view(screen["media"], screen)
+    if shows_clip(screen):
+        view["clip"] = _clip_view(screen.media, screen)
         view["clip_url"] = view["clip"]["url"]
-    if screen["kind"] == "ranking" and screen.get("media_list"):
-        shapes = screen.get("shapes") or [None] * len(screen["media_list"])
-        view["round_clips"] = [_clip_view(sha, shape) for sha, shape in zip(screen["media_list"], shapes,
-                                                                              strict=True)]
-    if screen["kind"] == "attention":
-        check = study.attention_checks[screen["check"]]
-        view["attention_text"], view["options"] = check.text, screen["options"]
-    if screen["kind"] == "closing" and study.closing is not None:
-        closing = study.closing
-        view["part_title"], view["part_intro"] = closing.title, closing.intro
-        view["optional"] = [name for name in closing.asks() if name not in closing.required]
-        if screen.get("feedback") and closing.feedback:
-            view["feedback"] = TextQuestion(type="text", text=closing.feedback, rows=4)
-    if screen["kind"] == "instructions" and study.example is not None:
-        example = ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
-        sha = example.sha256.lower()
-        shape = clip_shape(ctx.bundle.paths[sha])
-        view["clip"] = _clip_view(sha, {"clip_ms": shape.ms, "width": shape.width, "height": shape.height})
-        view["clip_url"] = view["clip"]["url"]
+    match screen:
+        case Ranking() if screen.media_list:
+            shapes = screen.shapes or [Shape()] * len(screen.media_list)
+            view["round_clips"] = [_clip_view(sha, shape) for sha, shape in zip(screen.media_list, shapes,
+                                                                                  strict=True)]
+        case Attention():
+            check = study.attention_checks[screen.check]
+            view["attention_text"], view["options"] = check.text, screen.options
+        case Closing() if study.closing is not None:
+            closing = study.closing
+            view["part_title"], view["part_intro"] = closing.title, closing.intro
+            view["optional"] = [name for name in closing.asks() if name not in closing.required]
+            if screen.feedback and closing.feedback:
+                view["feedback"] = TextQuestion(type="text", text=closing.feedback, rows=4)
+        case Instructions() if study.example is not None:
+            example = ctx.bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
+            sha = example.sha256.lower()
+            shape = clip_shape(ctx.bundle.paths[sha])
+            view["clip"] = _clip_view(sha, Shape(clip_ms=shape.ms, width=shape.width, height=shape.height))
+            view["clip_url"] = view["clip"]["url"]
     return view
 
 
-def _render_screen(request: Request, ctx: Context, screen: dict, step: int, *, errors=None, values=None,
+def _render_screen(request: Request, ctx: Context, screen: Screen, step: int, *, errors=None, values=None,
                    events: str = "", status_code: int = 200, notice: str = "", watched: bool | None = None):
-    name = "instructions.html" if screen["kind"] == "instructions" else "screen.html"
+    name = "instructions.html" if isinstance(screen, Instructions) else "screen.html"
     if not (errors or values or events or notice):  # as first shown: the same page for everyone at this step
-        return ctx.render_form(request, (name, step, repr(screen)), name, lambda: {
+        return ctx.render_form(request, (name, step, screen.text), name, lambda: {
             "screen": screen_view(ctx, screen), "step": step, "errors": {}, "values": {}, "video_events": "",
             "watched": False, "notice": ""})
     return ctx.render(
@@ -321,23 +342,23 @@ SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bi
                                                  RESPONSE.c.step == bindparam("step"))
 
 
-def _kept_notice(ctx: Context, screen: dict, saved: dict) -> str:
+def _kept_notice(ctx: Context, screen: Screen, saved: dict) -> str:
     """What the participant is told when a screen they had already answered is sent again with other answers."""
     shown = []
     for name, value in saved.items():
         question = ctx.study.questions.get(name)
         text = question.text if question is not None else ("Your feedback" if name == FEEDBACK else "Check question")
         shown.append(f"{text} {' > '.join(value) if isinstance(value, list) else value}")
-    where = screen.get("progress") or "that screen"
+    where = screen.progress or "that screen"
     kept = (" Your saved answers: " + "; ".join(shown) + ".") if shown else ""
     return (f"You had already answered {where}. Answers cannot be changed once sent, so your first answers are "
             f"kept and the new ones were not saved.{kept} Please continue with the screen below.")
 
 
-def _viewing_problem(screen: dict, started_at: datetime, now: datetime) -> str | None:
+def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime, now: datetime) -> str | None:
     """Why the server cannot accept a clip's answers yet: the screen has not been open as long as the clip plays
     (by the server's own clock, since the screen became current), so the clip cannot have been watched."""
-    need = screen.get("clip_ms")
+    need = screen.clip_ms
     if not need:
         return None
     open_ms = (now - as_utc(started_at)).total_seconds() * 1000
@@ -348,7 +369,7 @@ def _viewing_problem(screen: dict, started_at: datetime, now: datetime) -> str |
             "saved. Please play the clip from the start to the end, then answer again.")
 
 
-def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[dict, Checked] | str | None:
+def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Screen, Checked] | str | None:
     """Save the answers to screen `step`: None when saved or nothing is left to save, a notice for the next page
     when the screen had been answered before with other answers, else the screen to show again and why."""
     try:
@@ -369,7 +390,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[di
             checked = check_screen(ctx.study, screen, form)
             now = datetime.now(UTC)
             fast = request.session.get("fast") is True and participant.kind in ("pilot", "bot")
-            if "media" in screen and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
+            if shows_clip(screen) and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
                 problem = _viewing_problem(screen, participant.step_started_at, now)
                 if problem:
                     checked.errors["video"] = problem
@@ -379,20 +400,20 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[di
                     details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
                     sql.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
                 return screen, checked
-            if screen["kind"] == "instructions" and ctx.study.comprehension:
+            if isinstance(screen, Instructions) and ctx.study.comprehension:
                 details = dict(sql.scalar(DETAILS, {"participant": participant.id}) or {})
                 details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
                 sql.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
             viewport = _one_value(form, "viewport")
             sql.execute(SAVE_RESPONSE, {
-                "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,
+                "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
                 "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
                 "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
                 "submitted_at": now,
                 "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
             })
             done = step + 1 == len(plan)
-            failed = screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]
+            failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
             sql.execute(NEXT_STEP, {
                 "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
                 "to_status": "completed" if done else "started", "completed": now if done else None,

@@ -14,6 +14,19 @@ from app.assignment import Condition
 from app.bundle import Bundle
 from app.clip_length import clip_shape
 from app.formats import ManifestClip
+from app.screens import (
+    Attention,
+    Closing,
+    Instructions,
+    Pairwise,
+    Ranking,
+    Robot,
+    Round,
+    Screen,
+    Shape,
+    Watch,
+    WithRobots,
+)
 from app.study import RankingPart, Study
 
 
@@ -29,26 +42,26 @@ def _pick(bundle: Bundle, scheme: str, scenario: str, pair: tuple[str, str], rng
     return rng.choice(options)
 
 
-def _shape(bundle: Bundle, clip: ManifestClip) -> dict:
-    """The clip's playing time and picture size, from its file (nothing for a bundle without its files)."""
+def _shape(bundle: Bundle, clip: ManifestClip) -> Shape:
+    """The clip's playing time and picture size, from its file (nothing set for a bundle without its files)."""
     path = bundle.paths.get(clip.sha256.lower())
     if path is None:
-        return {}
+        return Shape()
     shape = clip_shape(path)
-    return {"clip_ms": shape.ms, "width": shape.width, "height": shape.height}
+    return Shape(clip_ms=shape.ms, width=shape.width, height=shape.height)
 
 
-def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[dict]:
+def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[Robot]:
     """Answer options as (label, agent), in a random order so that no robot is always offered first."""
-    robots = [{"label": label, "agent": agent} for agent, label in dict(pairs).items()]
+    robots = [Robot(label=label, agent=agent) for agent, label in dict(pairs).items()]
     rng.shuffle(robots)
     return robots
 
 
-def _clip_screen(kind: str, part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random,
+def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random,
                  bundle: Bundle) -> dict:
+    """The fields of a pairwise or watch screen showing `clip`."""
     return {
-        "kind": kind,
         "part": part_no,
         "clip": clip.id,
         "media": clip.sha256.lower(),
@@ -57,7 +70,7 @@ def _clip_screen(kind: str, part_no: int, clip: ManifestClip, questions: list[st
         "robots": _robots(list(zip(clip.agents, clip.labels, strict=True)), rng),
         "better": clip.better,
         "questions": questions,
-        **_shape(bundle, clip),
+        **_shape(bundle, clip).model_dump(exclude_unset=True),
     }
 
 
@@ -72,57 +85,59 @@ def _true_order(clips: list[ManifestClip], agents: list[str]) -> list[str] | Non
 
 
 def _ranking_screens(part: RankingPart, part_no: int, scheme: str, scenario: str, bundle: Bundle,
-                     rng: random.Random, block: int) -> list[dict]:
+                     rng: random.Random, block: int) -> list[Screen]:
     clips = [_pick(bundle, scheme, scenario, pair, rng) for pair in itertools.combinations(part.agents, 2)]
     rng.shuffle(clips)
-    screens = [_clip_screen("watch", part_no, clip, [], rng, bundle) | {"block": block, "round_start": k == 0}
-               for k, clip in enumerate(clips)]
+    screens: list[Screen] = [Watch(kind="watch", **_clip_fields(part_no, clip, [], rng, bundle), block=block,
+                                   round_start=k == 0) for k, clip in enumerate(clips)]
     labels = [(agent, label) for clip in clips for agent, label in zip(clip.agents, clip.labels, strict=True)]
-    screens.append({
-        "kind": "ranking",
-        "part": part_no,
-        "block": block,
-        "scheme": scheme,
-        "scenario": scenario,
-        "clips": [clip.id for clip in clips],
-        "media_list": [clip.sha256.lower() for clip in clips],
-        "shapes": [_shape(bundle, clip) for clip in clips],
-        "robots": _robots(labels, rng),
-        "true_order": _true_order(clips, part.agents),
-        "questions": list(part.questions),
-    })
+    screens.append(Ranking(
+        kind="ranking",
+        part=part_no,
+        block=block,
+        scheme=scheme,
+        scenario=scenario,
+        clips=[clip.id for clip in clips],
+        media_list=[clip.sha256.lower() for clip in clips],
+        shapes=[_shape(bundle, clip) for clip in clips],
+        robots=_robots(labels, rng),
+        true_order=_true_order(clips, part.agents),
+        questions=list(part.questions),
+    ))
     return screens
 
 
-def _label_progress(screens: list[dict], part_no: int, n_parts: int) -> None:
+def _label_progress(screens: list[Screen], part_no: int, n_parts: int) -> None:
     """What the page says about where the participant is: clips counted per part, or per round of a ranking
     part (the round's clips, then its ranking), as the part's introduction counts them."""
-    rounds = sorted({s["block"] for s in screens if "block" in s})
+    rounds = sorted({s.block for s in screens if isinstance(s, Round)})
+    clips = [s for s in screens if isinstance(s, Pairwise)]
     for screen in screens:
-        if "block" in screen:
-            in_round = [s for s in screens if s.get("block") == screen["block"] and "media" in s]
-            what = f"round {rounds.index(screen['block']) + 1} of {len(rounds)}, "
-            what += (f"clip {in_round.index(screen) + 1} of {len(in_round)}" if "media" in screen
-                     else "ranking")
-        elif "media" in screen and screen["kind"] != "attention":
-            clips = [s for s in screens if "media" in s and s["kind"] != "attention"]
-            what = f"clip {clips.index(screen) + 1} of {len(clips)}"
-        else:
-            what = "a check question"
-        screen["progress"] = f"Part {part_no} of {n_parts}, {what}"
+        match screen:
+            case Watch() | Ranking():
+                in_round = [s for s in screens if isinstance(s, Watch) and s.block == screen.block]
+                what = f"round {rounds.index(screen.block) + 1} of {len(rounds)}, "
+                what += (f"clip {in_round.index(screen) + 1} of {len(in_round)}" if isinstance(screen, Watch)
+                         else "ranking")
+            case Pairwise():
+                what = f"clip {clips.index(screen) + 1} of {len(clips)}"
+            case _:
+                what = "a check question"
+        screen.progress = f"Part {part_no} of {n_parts}, {what}"
 
 
-def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.Random) -> list[dict]:
-    plan: list[dict] = [{"kind": "instructions"}]
+def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.Random) -> list[Screen]:
+    plan: list[Screen] = [Instructions(kind="instructions")]
     used: dict[str, str] = {}  # label -> the first agent it named for this participant
     for p, part in enumerate(study.parts):
         part_no = p + 1
         scenario = study.part_scenario(p, condition.rotation)
-        screens: list[dict] = []
+        screens: list[Screen] = []
         if part.kind == "pairwise":
             blocks = [
-                [_clip_screen("pairwise", part_no, _pick(bundle, scheme, scenario, tuple(pair), rng, used),
-                              list(part.questions), rng, bundle) for pair in part.pairs]
+                [Pairwise(kind="pairwise", **_clip_fields(part_no, _pick(bundle, scheme, scenario, tuple(pair), rng,
+                                                                         used), list(part.questions), rng, bundle))
+                 for pair in part.pairs]
                 for scheme in condition.schemes
             ]
             if part.order == "shuffled":
@@ -135,20 +150,23 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                 screens += _ranking_screens(part, part_no, scheme, scenario, bundle, rng, block=b + 1)
         for c, check in reversed(list(enumerate(study.attention_checks))):
             if check.part == part_no:
-                screen = {"kind": "attention", "part": part_no, "check": c,
-                          "options": list(check.options), "expected": check.expected}
+                video = {}
                 if check.clip is not None:  # a video attention check: its clip, watched like any other
                     clip = bundle.matching(check.clip.scheme, check.clip.scenario, check.clip.agents)[0]
-                    screen |= {"clip": clip.id, "media": clip.sha256.lower(), **_shape(bundle, clip)}
+                    video = {"clip": clip.id, "media": clip.sha256.lower(),
+                             **_shape(bundle, clip).model_dump(exclude_unset=True)}
+                screen = Attention(kind="attention", part=part_no, check=c, options=list(check.options),
+                                   expected=check.expected, **video)
                 screens.insert(min(check.after, len(screens)), screen)
         _label_progress(screens, part_no, len(study.parts))
         for screen in screens:
-            for robot in screen.get("robots", []):
-                used.setdefault(robot["label"], robot["agent"])
+            if isinstance(screen, WithRobots):
+                for robot in screen.robots:
+                    used.setdefault(robot.label, robot.agent)
         plan += screens
     if study.closing is not None:  # the closing questions and feedback box, after the last part
-        plan.append({"kind": "closing", "questions": list(study.closing.questions),
-                     "feedback": bool(study.closing.feedback), "progress": "Last screen: closing questions"})
+        plan.append(Closing(kind="closing", questions=list(study.closing.questions),
+                            feedback=bool(study.closing.feedback), progress="Last screen: closing questions"))
     for number, screen in enumerate(plan):
-        screen["position"] = [number, len(plan)]
+        screen.position = (number, len(plan))
     return plan

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 
-from app.answer_table import analysis_database, analysis_study, long_rows, participant_records
+from app.analysis_source import analysis_database, analysis_study
+from app.answer_table import long_rows, participant_records
 from app.database import Database
 from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
 from app.settings import REPO_ROOT
@@ -104,7 +105,7 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     unscored = 0
     per_clip: dict[str, dict] = {}
     for record in participant_records(db, study.study.id):
-        flags = exclusion_flags(record.participant, threshold, record.responses, rules)
+        flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
         exclusions.before += 1
         exclusions.per_reason.update(reason for reason in REASONS if flags[reason])
         if flags["excluded"]:

@@ -32,6 +32,7 @@ from app.database import Database, migrate  # noqa: E402
 from app.formats import ManifestClip  # noqa: E402
 from app.models import Participant, ParticipantPlan, Response  # noqa: E402
 from app.plan import build_plan  # noqa: E402
+from app.screens import dump_plan  # noqa: E402
 from app.study import load_study  # noqa: E402
 
 STUDY = REPO / "studies" / "paper.toml"
@@ -81,7 +82,7 @@ def fill(url: str, n: int, seed: int = 0, chunk: int = 500) -> None:
         people, plans, responses = [], [], []
         for pid in range(first + 1, min(n, first + chunk) + 1):
             condition = pid % len(options)
-            plan = build_plan(study, bundle, options[condition], random.Random(f"{seed}:{pid}"))
+            plan = dump_plan(build_plan(study, bundle, options[condition], random.Random(f"{seed}:{pid}")))
             created = start + timedelta(minutes=pid)
             people.append({"id": pid, "code": f"p{pid:06d}", "study": study.study.id, "platform": "mturk",
                            "external_id": f"W{pid}", "status": "completed", "condition": condition,

@@ -17,6 +17,7 @@ from app.bundle import load_bundle
 from app.database import Database, migrate
 from app.models import Participant, Response
 from app.plan import build_plan
+from app.screens import dump_plan
 from app.study import parse_study
 from tests.app.conftest import (  # noqa: F401  (fixtures used by name)
     AGENT_RANK,
@@ -112,7 +113,7 @@ def add_participant(db: Database, study, bundle_root: Path, *, condition: int, a
                                   completed_at=start + timedelta(minutes=minutes) if status == "completed" else None)
         session.add(participant)
         session.flush()
-        participant.plan = build_plan(study, bundle, conditions(study)[condition], random.Random(seed))
+        participant.plan = dump_plan(build_plan(study, bundle, conditions(study)[condition], random.Random(seed)))
         for step, screen in enumerate(participant.plan):
             answers = answer(screen)
             if screen["kind"] == "attention" and answers["attention"] != screen["expected"]:

@@ -203,7 +203,7 @@ def answer_of(screen: dict) -> dict:
 
 
 def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
-    from app.answer_table import analysis_database, analysis_study
+    from app.analysis_source import analysis_database, analysis_study
 
     with pytest.raises(ValueError, match="no database file"):
         analysis_database(f"sqlite:///{tmp_path / 'missing.sqlite3'}")
@@ -216,14 +216,14 @@ def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
 
 
 def test_the_server_stores_its_study_file(make_client):
-    from app.answer_table import analysis_study
+    from app.analysis_source import analysis_study
 
     context = make_client({"platform": '"none"'}).app.state.context
     assert analysis_study(context.db, None) == context.study
 
 
 def test_study_stored_in_the_database(survey_db, paper_study):
-    from app.answer_table import analysis_study, remember_study
+    from app.analysis_source import analysis_study, remember_study
 
     path, study = paper_study
     remember_study(survey_db, path.read_text(), study)
@@ -236,3 +236,23 @@ def test_study_stored_in_the_database(survey_db, paper_study):
         analysis_study(survey_db, None)
     with pytest.raises(ValueError, match="no study file nope"):
         analysis_study(survey_db, "nope")
+
+
+def test_comprehension_answers_are_in_long_and_leave_wide_as_it_is(survey_db, bundle_dir, tmp_path):
+    """The instructions' comprehension answers (always the expected one: a wrong one is refused) are long.csv rows
+    of the instructions screen; wide.csv has no column for them and is written as without them."""
+    study = parse_study(study_text(platform='"none"', assignment='"balanced"') + """
+[[comprehension]]
+text = "Which robot is better?"
+options = ["The first", "The one that reaches its goal without touching anyone"]
+expected = "The one that reaches its goal without touching anyone"
+""")
+    understood = {"understand1": study.comprehension[0].expected}
+    add_participant(survey_db, study, bundle_dir, condition=0, seed=5,
+                    answer=lambda screen: understood if screen["kind"] == "instructions" else answer_of(screen))
+    result = export_study(survey_db, study, tmp_path / "out")
+    long = pd.read_csv(result.out / "long.csv")
+    (row,) = long[long.step == 0].itertuples()
+    assert (row.screen, row.question, row.answer) == ("instructions", "understand1", understood["understand1"])
+    wide = pd.read_csv(result.out / "wide.csv")
+    assert not any("understand" in column for column in wide.columns) and len(wide) == 1

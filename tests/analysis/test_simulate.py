@@ -12,7 +12,7 @@ from collections import Counter
 import pytest
 import uvicorn
 
-from app.answer_table import analysis_database
+from app.analysis_source import analysis_database
 from app.bots import Observer, VisibleClip, simulate
 from app.database import migrate
 from app.exclusions import ExclusionRules

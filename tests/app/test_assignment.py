@@ -11,6 +11,7 @@ from fastapi.testclient import TestClient
 from app.assignment import condition_for_slot, conditions
 from app.models import Participant
 from app.plan import build_plan
+from app.screens import Pairwise, Ranking
 from app.study import load_study
 from tests.app.conftest import PAPER_STUDY, FormReader, start, stored
 
@@ -87,11 +88,11 @@ def test_plan_is_seeded_and_randomises_order_and_answer_options(bundle_dir, tmp_
     condition = conditions(study)[0]
     plans = [build_plan(study, bundle, condition, random.Random(seed)) for seed in range(8)]
     assert build_plan(study, bundle, condition, random.Random(3)) == plans[3]
-    assert len({tuple(s.get("clip") for s in plan) for plan in plans}) > 1
-    first_offered = {plan[1]["robots"][0]["agent"] for plan in plans}
+    assert len({tuple(s.clip for s in plan if isinstance(s, Pairwise)) for plan in plans}) > 1
+    first_offered = {plan[1].robots[0].agent for plan in plans}
     assert len(first_offered) > 1
     for plan in plans:
         for screen in plan:
-            if screen["kind"] == "ranking":
-                assert screen["true_order"] == ["agenthighsecret", "agentmedsecret", "agentlowsecret"]
-                assert len({r["label"] for r in screen["robots"]}) == 3
+            if isinstance(screen, Ranking):
+                assert screen.true_order == ["agenthighsecret", "agentmedsecret", "agentlowsecret"]
+                assert len({r.label for r in screen.robots}) == 3

@@ -17,6 +17,7 @@ from app.export_csv import export_study
 from app.kinds import pilot_token
 from app.models import Participant, Response
 from app.report import tally_study
+from app.screens import parse_plan
 from tests.app.conftest import (
     AGENT_RANK,
     SECRET_NAMES,
@@ -169,7 +170,7 @@ def test_events_of_the_new_kinds_are_kept_with_their_values(make_client):
     assert response.video_events[2] == {"type": "seek_blocked", "t": 50, "v": 2.9}
     from app.exclusions import viewing_problems
 
-    plan = stored(client, Participant)[0].plan
+    plan = parse_plan(stored(client, Participant)[0].plan)
     viewing = viewing_problems(response, plan[1])
     assert viewing["seeks_blocked"] == 1 and viewing["hidden_ms"] == 500 and viewing["reloads"] == 1
     assert viewing["skipped"]  # sped up before the first end
