@@ -137,18 +137,18 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
 def _audits(bundle_dir: str | None = None) -> dict[str, dict]:
     """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest, when the
     bundle is known (FOIL_BUNDLE_DIR, or the served bundle on the admin pages)."""
-    import json
     import os
+
+    from app.formats import Manifest
 
     folder = bundle_dir or os.environ.get("FOIL_BUNDLE_DIR")
     if not folder:
         return {}
     try:
-        manifest = json.loads((Path(folder) / "manifest.json").read_text(encoding="utf-8"))
+        manifest = Manifest.model_validate_json((Path(folder) / "manifest.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return {}
-    return {clip["id"]: clip["audit"] for clip in manifest.get("clips", [])
-            if isinstance(clip.get("audit"), dict) and "id" in clip}
+    return {clip.id: clip.audit.model_dump() for clip in manifest.clips if clip.audit is not None}
 
 
 # Tables ------------------------------------------------------------------------------------------------------
