@@ -8,7 +8,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+PACKAGE_DIR = Path(__file__).resolve().parent  # templates/ and static/ ship inside the package
 
 
 class TransportLimits(BaseSettings):
@@ -56,8 +56,8 @@ class Settings(BaseSettings):
     # Host names the server answers to (Starlette's TrustedHostMiddleware; other Host headers get 400), as a JSON
     # list: FOIL_ALLOWED_HOSTS='["survey.example.org"]'. No reply is built from the Host header in any case.
     allowed_hosts: list[str] = ["*"]
-    templates_dir: Path = REPO_ROOT / "templates"
-    static_dir: Path = REPO_ROOT / "static"
+    templates_dir: Path = PACKAGE_DIR / "templates"
+    static_dir: Path = PACKAGE_DIR / "static"
 
     @model_validator(mode="after")
     def _sane(self) -> Settings:
