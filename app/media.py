@@ -12,10 +12,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from fastapi import HTTPException, Request
+from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse, Response
-from starlette.routing import Route
 
+router = APIRouter()
 CLIP_NAME = re.compile(r"^([0-9a-f]{64})\.mp4$")
 CACHE = "public, max-age=31536000, immutable"  # the name is the content's hash: it never changes
 SIMPLE_RANGE = re.compile(r"^bytes=(\d{1,15})-(\d{0,15})$")
@@ -54,8 +54,9 @@ def _small_range(data: bytes, request: Request, headers: dict) -> Response | Non
         **headers, "accept-ranges": "bytes", "content-range": f"bytes {start}-{end}/{size}"})
 
 
-async def clip(request: Request):  # no blocking call on the usual path: no thread pool needed
-    match = CLIP_NAME.match(request.path_params["name"])
+@router.api_route("/clips/{name}", methods=["GET", "HEAD"])
+async def clip(name: str, request: Request):  # no blocking call on the usual path: no thread pool needed
+    match = CLIP_NAME.match(name)
     path = request.app.state.context.bundle.paths.get(match.group(1)) if match else None
     if path is None:
         raise HTTPException(404, "No such clip.")
@@ -66,5 +67,3 @@ async def clip(request: Request):  # no blocking call on the usual path: no thre
     return (data is not None and _small_range(data, request, headers)) or FileResponse(
         path, media_type="video/mp4", headers=headers)
 
-
-ROUTES = [Route("/clips/{name}", clip, methods=["GET", "HEAD"])]

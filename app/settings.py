@@ -44,8 +44,9 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=64 * 1024, ge=1024)
     # Who may show the pages in a frame (Content-Security-Policy frame-ancestors); none by default.
     frame_ancestors: str = "'none'"
-    # SQLite only: "normal" commits survive a crash of the server process, "full" also a power loss (docs/survey.md).
-    sqlite_synchronous: Literal["normal", "full"] = "normal"
+    # SQLite only: "full" commits survive a power loss or an operating-system crash, "normal" only a crash of the
+    # server process (docs/survey.md).
+    sqlite_synchronous: Literal["normal", "full"] = "full"
     access_log: bool = True  # uvicorn's line per request, from `foil serve`
     # Admin password guessing: after this many wrong passwords (per client address; from everyone together) each
     # attempt waits a delay that starts at login_delay_s and doubles with every failure, up to login_max_delay_s.
