@@ -2,8 +2,8 @@
 current screen, so a reload, the back button or reopening the link shows the same page, and a screen can be
 answered only when it is the current one.
 
-The endpoints are plain functions: FastAPI runs them in its thread pool, where they read and write through
-`Database.reading()` and `writing()`; every answer is committed before the reply.
+The endpoints are plain functions, which FastAPI runs in its thread pool; they read and write through
+`Database.reading()` and `writing()`, and every answer is committed before the reply.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import select
+from sqlalchemy import Row, bindparam, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
@@ -26,12 +26,29 @@ from app.clip_length import clip_shape
 from app.context import Context, ContextDep
 from app.database import as_utc
 from app.kinds import kind_from_link, pilot_token
-from app.models import Participant, Response
+from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
 from app.security import FormDep
 from app.study import FEEDBACK, TextQuestion
 
+# Every request of a participant runs these Core statements in a Session: loading ORM objects and flushing them
+# cost several times what the statements do. The INSERTs name every column.
 router = APIRouter()
+PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
+_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind"]).where(
+    PARTICIPANT.c.study == bindparam("study"))
+BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
+BY_IDENTITY = _SHOWN.add_columns(PARTICIPANT.c.platform_study_id, PARTICIPANT.c.platform_session_id).where(
+    PARTICIPANT.c.platform == bindparam("platform"),
+                           PARTICIPANT.c.external_id == bindparam("external_id"))
+SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
+ENTER = insert(PARTICIPANT).values(
+    {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
+PLAN = select(PLANS.c.plan).where(PLANS.c.participant_id == bindparam("participant"))
+SAVE_PLAN = insert(PLANS).values(participant_id=bindparam("participant"), plan=bindparam("plan"))
+NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
+    step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
+    completed_at=bindparam("completed"), attention_failures=PARTICIPANT.c.attention_failures + bindparam("failed"))
 
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 PLATFORM_PARAMS = {  # external id, platform study id, platform session id
@@ -45,6 +62,16 @@ VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
 # How much sooner than the clip's playing time (since the screen became current, by the server's clock) its
 # answers are still accepted: clock granularity and the browser's own rounding, not a way to skip.
 VIEW_TOLERANCE_MS = 1000
+
+
+def _plan(session: Session, participant: Row) -> list[dict] | None:
+    """The participant's screens (None before a condition is assigned)."""
+    return None if participant.condition is None else session.scalar(PLAN, {"participant": participant.id})
+
+
+def _current_screens(session: Session, ctx: Context, request: Request) -> tuple[Row, list[dict] | None]:
+    participant = _current(session, ctx, request)
+    return participant, _plan(session, participant) if participant.status == "started" else None
 
 
 def _see_current() -> RedirectResponse:
@@ -69,7 +96,7 @@ NOT_YOURS = ("The study cannot be started from this link. Please open the study 
              "where you signed up; if this message comes again, contact the researcher.")
 
 
-def _same_person(known: Participant, identity: dict, own_code) -> bool:
+def _same_person(known: Row, identity: dict, own_code) -> bool:
     """Whether the visitor with this link (and this session cookie's participant code) is the participant `known`
     found by its platform id: only with the participant's own platform study and session ids, or cookie."""
     ids = (identity["platform_study_id"], identity["platform_session_id"])
@@ -77,25 +104,30 @@ def _same_person(known: Participant, identity: dict, own_code) -> bool:
                                                                     known.platform_session_id))
 
 
-def _by_code(session: Session, ctx: Context, code) -> Participant | None:
+def _by_code(session: Session, ctx: Context, code) -> Row | None:
     if not isinstance(code, str):
         return None
-    return session.scalar(select(Participant).where(Participant.study == ctx.study.study.id,
-                                                    Participant.code == code))
+    return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first()
 
 
-def _by_identity(session: Session, ctx: Context, external_id: str) -> Participant | None:
+def _by_identity(session: Session, ctx: Context, external_id: str) -> Row | None:
     info = ctx.study.study
-    return session.scalar(select(Participant).where(Participant.study == info.id, Participant.platform == info.platform,
-                                                    Participant.external_id == external_id))
+    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform,
+                                         "external_id": external_id}).first()
 
 
-def _current(session: Session, ctx: Context, request: Request) -> Participant:
+def _current(session: Session, ctx: Context, request: Request) -> Row:
     participant = _by_code(session, ctx, request.session.get("participant"))
     if participant is None:
         raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
                                  "expired). Please open the study again from the link you were given.")
     return participant
+
+
+def _read(find, ctx: Context, *args):
+    """`find(session, ctx, *args)` in a read transaction."""
+    with ctx.db.reading() as session:
+        return find(session, ctx, *args)
 
 
 @router.get("/")
@@ -119,14 +151,12 @@ def landing(request: Request, ctx: ContextDep):
         request.session["kind"], request.session["fast"] = kind, fast
     if info.platform != "none":
         identity = _platform_identity(info.platform, request.query_params)
-        with ctx.db.reading() as session:
-            known = _by_identity(session, ctx, identity["external_id"])
+        known = _read(_by_identity, ctx, identity["external_id"])
         if known is not None and not _same_person(known, identity, request.session.get("participant")):
             known = None  # someone else's id: the consent page any new id gets, which tells nothing
         request.session["identity"] = identity
     else:
-        with ctx.db.reading() as session:
-            known = _by_code(session, ctx, request.session.get("participant"))
+        known = _read(_by_code, ctx, request.session.get("participant"))
     if known is not None:
         request.session["participant"] = known.code
         return _see_current()
@@ -149,19 +179,22 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
                             raise HTTPException(400, NOT_YOURS)
                         return known.code
                 now = datetime.now(UTC)
-                participant = Participant(
-                    code=secrets.token_hex(16), study=info.id, platform=info.platform,
-                    status="started" if agreed else "declined", step=0, step_started_at=now, created_at=now,
-                    user_agent=user_agent[:512], kind=kind, consent_version=ctx.study.consent_version(), **identity)
+                values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
+                          "external_id": None, "platform_study_id": None, "platform_session_id": None,
+                          "status": "started" if agreed else "declined", "slot": None, "condition": None,
+                          "step": 0, "step_started_at": now, "user_agent": user_agent[:512],
+                          "created_at": now, "completed_at": None, "excluded": False, "exclusion_note": "",
+                          "attention_failures": 0, "kind": kind,
+                          "consent_version": ctx.study.consent_version(), "details": None, **identity}
                 if agreed and info.assignment == "balanced":
-                    participant.slot = next_slot(session, study=info.id)
-                    participant.condition = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
-                                                               slot=participant.slot)
-                session.add(participant)
-                if participant.condition is not None:
-                    session.flush()  # its id seeds the plan
-                    participant.plan = _new_plan(ctx, participant.id, participant.condition)
-                return participant.code
+                    values["slot"] = next_slot(session, study=info.id)
+                    values["condition"] = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
+                                                             slot=values["slot"])
+                participant_id = session.scalar(ENTER, values)
+                if values["condition"] is not None:
+                    session.execute(SAVE_PLAN, {"participant": participant_id,
+                                                "plan": _new_plan(ctx, participant_id, values["condition"])})
+                return values["code"]
         except IntegrityError:
             continue
     raise HTTPException(503, "The study is very busy at this moment. Please wait a few seconds and try again.")
@@ -250,7 +283,7 @@ def _render_screen(request: Request, ctx: Context, screen: dict, step: int, *, e
     )
 
 
-def _status_page(request: Request, ctx: Context, participant: Participant):
+def _status_page(request: Request, ctx: Context, participant: Row):
     texts = ctx.study.texts
     if participant.status == "declined":
         return ctx.message(request, "Thank you", texts.declined)
@@ -263,9 +296,7 @@ def _status_page(request: Request, ctx: Context, participant: Participant):
 
 @router.get("/study")
 def current_page(request: Request, ctx: ContextDep):
-    with ctx.db.reading() as session:
-        participant = _current(session, ctx, request)
-        plan = participant.plan
+    participant, plan = _read(_current_screens, ctx, request)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
     if participant.condition is None:
@@ -273,6 +304,13 @@ def current_page(request: Request, ctx: ContextDep):
     notice = request.session.pop("notice", "") if "notice" in request.session else ""
     return _render_screen(request, ctx, plan[participant.step], participant.step,
                           notice=notice if isinstance(notice, str) else "")
+
+
+DETAILS = select(PARTICIPANT.c.details).where(PARTICIPANT.c.id == bindparam("participant"))
+SAVE_DETAILS = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
+    details=bindparam("details"))
+SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bindparam("participant"),
+                                                 RESPONSE.c.step == bindparam("step"))
 
 
 def _kept_notice(ctx: Context, screen: dict, saved: dict) -> str:
@@ -308,12 +346,11 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[di
     try:
         with ctx.db.writing() as session:
             participant = _current(session, ctx, request)
-            plan = participant.plan
+            plan = _plan(session, participant)
             if participant.status != "started" or plan is None:
                 return None
             if step < participant.step:  # already answered: a double click or the back button; keep the first
-                saved = session.scalar(select(Response.answers).where(Response.participant_id == participant.id,
-                                                                      Response.step == step))
+                saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
                 sent = check_screen(ctx.study, plan[step], form)
                 if saved is not None and not sent.errors and sent.answers != saved:
                     return _kept_notice(ctx, plan[step], saved)
@@ -330,31 +367,31 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[di
                     checked.errors["video"] = problem
             if checked.errors:
                 if any(name.startswith("understand") for name in checked.errors):
-                    _count_comprehension_attempt(participant)
+                    details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
+                    details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
+                    session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
                 return screen, checked
             if screen["kind"] == "instructions" and ctx.study.comprehension:
-                _count_comprehension_attempt(participant)
+                details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
+                details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
+                session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
             viewport = _one_value(form, "viewport")
-            session.add(Response(
-                participant_id=participant.id, step=step, kind=screen["kind"], answers=checked.answers,
-                video_events=checked.video_events, plays=checked.plays, client_ms=checked.client_ms,
-                server_ms=int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
-                submitted_at=now, details={"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
-            ))
+            session.execute(SAVE_RESPONSE, {
+                "participant_id": participant.id, "step": step, "kind": screen["kind"], "answers": checked.answers,
+                "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
+                "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+                "submitted_at": now,
+                "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
+            })
             done = step + 1 == len(plan)
             failed = screen["kind"] == "attention" and checked.answers["attention"] != screen["expected"]
-            participant.step, participant.step_started_at = step + 1, now
-            participant.status, participant.completed_at = ("completed", now) if done else ("started", None)
-            participant.attention_failures += int(failed)
+            session.execute(NEXT_STEP, {
+                "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
+                "to_status": "completed" if done else "started", "completed": now if done else None,
+            })
     except IntegrityError:
         pass  # the same screen was saved by a concurrent submission
     return None
-
-
-def _count_comprehension_attempt(participant: Participant) -> None:
-    details = dict(participant.details or {})  # a new dict: the ORM saves a JSON column when it is assigned
-    details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
-    participant.details = details
 
 
 def _one_value(form: FormData, name: str) -> str:
@@ -385,29 +422,30 @@ def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
     """The paper's self-selected assignment: the participant picks a number from 1 to N."""
     number = form.get("number")
     n = len(ctx.conditions)
-    valid = isinstance(number, str) and digits(number) and 1 <= int(number) <= n
-    with ctx.db.writing() as session:
-        participant = _current(session, ctx, request)
-        if valid and participant.status == "started" and participant.condition is None:
-            participant.condition = int(number) - 1
-            _assign_plan(ctx, participant)
-    if not valid:
+    participant_id = _read(_current, ctx, request).id
+    if not isinstance(number, str) or not digits(number) or not 1 <= int(number) <= n:
         return ctx.render(request, "choose.html", status_code=422, n_conditions=n,
                           error=f"Please choose a number from 1 to {n}.")
+    with ctx.db.writing() as session:
+        participant = session.get(Participant, participant_id)
+        if participant.status == "started" and participant.condition is None:
+            participant.condition = int(number) - 1
+            _assign_plan(ctx, participant)
     return _see_current()
 
 
 @router.get("/leave")
 def leave_confirm(request: Request, ctx: ContextDep):
-    with ctx.db.reading() as session:
-        _current(session, ctx, request)
+    _read(_current, ctx, request)
     return ctx.render(request, "leave.html")
 
 
 @router.post("/leave")
 def leave(request: Request, ctx: ContextDep, form: FormDep):
+    participant_id = _read(_current, ctx, request).id
     with ctx.db.writing() as session:
-        participant = _current(session, ctx, request)
+        participant = session.get(Participant, participant_id)
         if participant.status == "started":
             participant.status = "returned"
     return _see_current()
+
