@@ -4,7 +4,8 @@ FileResponse answers Range requests with 206 (Safari will not play a video other
 manifest, checked at start-up, can be reached, so no path from the request ever touches the file system. Clips of
 at most SMALL_CLIP bytes are kept in memory once read (up to KEPT_BYTES in all, per process), and a single range
 of theirs (what players ask first, and whole short clips) is answered from there on the event loop: opening and
-reading the file for every request costs more than the rest of the reply. Anything else streams from the file.
+reading the file for every request costs more than the rest of the reply, and the thread pool that
+FileResponse reads in may be full of database work. Anything else streams from the file.
 """
 
 from __future__ import annotations

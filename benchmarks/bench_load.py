@@ -10,7 +10,7 @@ Five runs, each bounded in time and count (--runs picks some):
            Ceiling and burst alternate for --rounds; in both the clients run in --processes processes (one
            interpreter lock each) pinned to all cores but the first, and the server is pinned to the first;
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
-           completed sessions per minute, p50/p95/p99 latency per page type, errors;
+           completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
            the bots reopen their links and finish; then the database is audited;
   cpu      server CPU per request, by kind: --cpu-sessions bots one at a time against `foil serve` (with its
