@@ -10,23 +10,20 @@ import secrets
 import statistics
 from collections import Counter
 from math import ceil
-from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import RedirectResponse
 from sqlalchemy import select
-from starlette.datastructures import FormData
 
 from app.answer_table import ParticipantRecord, long_rows
 from app.context import Context, ContextDep
 from app.database import as_utc
 from app.models import Participant
 from app.screens import Closing, Instructions, Screen
-from app.security import LoginThrottle, admin_mark, checked_form, is_admin, unstorable
+from app.security import FormDep, LoginThrottle, admin_mark, is_admin, unstorable
 
 router = APIRouter(prefix="/admin")
 disabled_router = APIRouter()
-FormDep = Annotated[FormData, Depends(checked_form)]
 STATUSES = ["started", "completed", "returned", "declined"]
 log = logging.getLogger("foil.admin")
 

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from sqlalchemy import Connection, bindparam, func, select
 from sqlalchemy.orm import Session
 
-from app.database import Statements
 from app.models import Participant
 from app.study import Study
 
@@ -59,7 +58,7 @@ HIGHEST_SLOT = select(func.max(Participant.slot)).where(Participant.study == bin
 ARRIVALS_TURN = select(func.pg_advisory_xact_lock(bindparam("key")))
 
 
-def next_slot(session: Session | Connection | Statements, *, study: str) -> int:
+def next_slot(session: Session | Connection, *, study: str) -> int:
     """The next free arrival slot, in a write transaction that then saves the participant with it. Arrivals take
     turns, so two are never handed the same slot: on PostgreSQL the transaction first takes an advisory lock of
     the study's arrivals (held until it commits, across processes), on SQLite its BEGIN IMMEDIATE already waits
@@ -71,7 +70,5 @@ def next_slot(session: Session | Connection | Statements, *, study: str) -> int:
     return 0 if highest is None else highest + 1
 
 
-def _dialect(session: Session | Connection | Statements):
-    if isinstance(session, Statements):
-        return session.dialect
+def _dialect(session: Session | Connection):
     return session.get_bind().dialect if isinstance(session, Session) else session.dialect

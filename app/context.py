@@ -15,13 +15,11 @@ from app.assignment import Condition
 from app.bundle import Bundle
 from app.database import Database
 from app.media import KeptClips
-from app.screens import Screen
 from app.security import csrf_token
 from app.settings import Settings
 from app.study import Study
 
 MAX_PAGES = 4096  # about 4 KB each; the paper study with 300 participants showed 544 distinct pages
-MAX_PLANS = 1024  # about 30 KB each as decoded (the paper study's)
 
 
 @dataclass(frozen=True)
@@ -36,7 +34,6 @@ class Context:
     pages: dict[tuple, list[str]] = field(default_factory=dict, compare=False)
     csrf_slot: str = field(default_factory=lambda: f"csrf-slot-{secrets.token_hex(16)}", compare=False)
     kept_clips: KeptClips = field(default_factory=KeptClips, compare=False)
-    plans: dict[int, list[Screen]] = field(default_factory=dict, compare=False)  # by participant id, once assigned
 
     def render(self, request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
         html = self.templates.get_template(name).render(request=request, study=self.study, **context)

@@ -12,6 +12,7 @@ from fastapi.staticfiles import StaticFiles
 from jinja2 import Environment, FileSystemLoader
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
+from starlette.middleware.sessions import SessionMiddleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import ClientDisconnect
 
@@ -25,7 +26,6 @@ from app.security import (
     BodyLimitMiddleware,
     LoginThrottle,
     SecurityHeadersMiddleware,
-    SessionMiddleware,
     csrf_token,
     stored_secret,
 )
@@ -71,7 +71,8 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.login_throttle = LoginThrottle(
         free_per_client=settings.login_free_attempts, free_overall=settings.login_free_attempts_overall,
         delay_s=settings.login_delay_s, max_delay_s=settings.login_max_delay_s)
-    app.router.routes.extend([*participant_pages.ROUTES, *media.ROUTES])  # first: the pages asked most often
+    app.include_router(participant_pages.router)
+    app.include_router(media.router)
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
     if settings.admin_password is None:
         log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off")
@@ -115,9 +116,10 @@ def create_app(settings: Settings) -> FastAPI:
 
     app.router.redirect_slashes = False  # its redirect is built from the Host header
     # Innermost first: every reply, the body limit's 413 and the host check's 400 included, gets the headers.
+    # Clips and static files never touch the session, so their replies carry no cookie and no Vary: Cookie.
     app.add_middleware(SessionMiddleware, secret_key=_cookie_secret(settings, db), session_cookie="foil_session",
                        max_age=settings.session_max_age_s, same_site=settings.cookie_samesite,
-                       https_only=settings.cookie_secure, sessionless=("/clips/", "/static/"))
+                       https_only=settings.cookie_secure)
     app.add_middleware(BodyLimitMiddleware, limit=settings.max_body_bytes)
     if settings.allowed_hosts != ["*"]:
         app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.allowed_hosts, www_redirect=False)

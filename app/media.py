@@ -4,7 +4,8 @@ FileResponse answers Range requests with 206 (Safari will not play a video other
 manifest, checked at start-up, can be reached, so no path from the request ever touches the file system. Clips of
 at most SMALL_CLIP bytes are kept in memory once read (up to KEPT_BYTES in all, per process), and a single range
 of theirs (what players ask first, and whole short clips) is answered from there on the event loop: opening and
-reading the file for every request costs more than the rest of the reply. Anything else streams from the file.
+reading the file for every request costs more than the rest of the reply, and the thread pool that
+FileResponse reads in may be full of database work. Anything else streams from the file.
 """
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from fastapi import HTTPException, Request
+from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse, Response
-from starlette.routing import Route
 
+router = APIRouter()
 CLIP_NAME = re.compile(r"^([0-9a-f]{64})\.mp4$")
 CACHE = "public, max-age=31536000, immutable"  # the name is the content's hash: it never changes
 SIMPLE_RANGE = re.compile(r"^bytes=(\d{1,15})-(\d{0,15})$")
@@ -54,8 +55,9 @@ def _small_range(data: bytes, request: Request, headers: dict) -> Response | Non
         **headers, "accept-ranges": "bytes", "content-range": f"bytes {start}-{end}/{size}"})
 
 
-async def clip(request: Request):  # no blocking call on the usual path: no thread pool needed
-    match = CLIP_NAME.match(request.path_params["name"])
+@router.api_route("/clips/{name}", methods=["GET", "HEAD"])
+async def clip(name: str, request: Request):  # no blocking call on the usual path: no thread pool needed
+    match = CLIP_NAME.match(name)
     path = request.app.state.context.bundle.paths.get(match.group(1)) if match else None
     if path is None:
         raise HTTPException(404, "No such clip.")
@@ -66,5 +68,3 @@ async def clip(request: Request):  # no blocking call on the usual path: no thre
     return (data is not None and _small_range(data, request, headers)) or FileResponse(
         path, media_type="video/mp4", headers=headers)
 
-
-ROUTES = [Route("/clips/{name}", clip, methods=["GET", "HEAD"])]

@@ -2,8 +2,8 @@
 current screen, so a reload, the back button or reopening the link shows the same page, and a screen can be
 answered only when it is the current one.
 
-These are plain Starlette routes (`ROUTES`, added first to the app), each taking the request: FastAPI's routing
-and dependency solving cost more per request than most of these pages' own work.
+The endpoints are plain functions, which FastAPI runs in its thread pool; they read and write through
+`Database.reading()` and `writing()`, and every answer is committed before the reply.
 """
 
 from __future__ import annotations
@@ -13,19 +13,18 @@ import re
 import secrets
 from datetime import UTC, datetime
 
-from fastapi import HTTPException, Request
-from fastapi.responses import Response as HTTPResponse
-from sqlalchemy import bindparam, insert, select, update
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import RedirectResponse
+from sqlalchemy import Row, bindparam, insert, select, update
 from sqlalchemy.exc import IntegrityError
-from starlette.concurrency import run_in_threadpool
+from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
-from starlette.routing import Route
 
 from app.answers import Checked, check_screen, digits
 from app.assignment import condition_for_slot, next_slot
 from app.clip_length import clip_shape
-from app.context import MAX_PLANS, Context
-from app.database import Statements, as_utc
+from app.context import Context, ContextDep
+from app.database import as_utc
 from app.kinds import kind_from_link, pilot_token
 from app.models import Participant, ParticipantPlan, Response
 from app.plan import build_plan
@@ -46,11 +45,12 @@ from app.screens import (
     parse_plan,
     shows_clip,
 )
-from app.security import checked_form
+from app.security import FormDep
 from app.study import FEEDBACK, TextQuestion
 
-# The hot path reads and writes with Core statements built once and run on the driver (`Database.statements`):
-# the ORM's unit of work, and even Core's execution, cost more than the SQL. The INSERTs name every column.
+# Every request of a participant runs these Core statements in a Session: loading ORM objects and flushing them
+# cost several times what the statements do. The INSERTs name every column.
+router = APIRouter()
 PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
 _SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind"]).where(
     PARTICIPANT.c.study == bindparam("study"))
@@ -81,28 +81,21 @@ VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
 VIEW_TOLERANCE_MS = 1000
 
 
-def _plan(sql: Statements, ctx: Context, participant: tuple) -> list[Screen] | None:
-    """The participant's screens (None before a condition is assigned). A plan never changes once assigned, so each
-    is read once for the participants at work at any time (`Context.plans`), and then only looked up; for the same
-    reason it may be read apart from the participant's row, outside its transaction."""
-    plan = ctx.plans.get(participant.id)
-    if plan is None and participant.condition is not None:
-        plan = sql.scalar(PLAN, {"participant": participant.id})
-        if plan is not None:
-            if len(ctx.plans) >= MAX_PLANS:
-                ctx.plans.clear()
-            ctx.plans[participant.id] = plan = parse_plan(plan)
-    return plan
+def _plan(session: Session, participant: Row) -> list[Screen] | None:
+    """The participant's screens (None before a condition is assigned)."""
+    if participant.condition is None:
+        return None
+    stored = session.scalar(PLAN, {"participant": participant.id})
+    return None if stored is None else parse_plan(stored)
 
 
-def _current_screens(sql: Statements, ctx: Context, request: Request) -> tuple[tuple, list[Screen] | None]:
-    participant = _current(sql, ctx, request)
-    return participant, _plan(sql, ctx, participant) if participant.status == "started" else None
+def _current_screens(session: Session, ctx: Context, request: Request) -> tuple[Row, list[Screen] | None]:
+    participant = _current(session, ctx, request)
+    return participant, _plan(session, participant) if participant.status == "started" else None
 
 
-def _see_current() -> HTTPResponse:
-    """303 to /study (a plain Response: RedirectResponse quotes its URL on every call)."""
-    return HTTPResponse(status_code=303, headers={"location": "/study"})
+def _see_current() -> RedirectResponse:
+    return RedirectResponse("/study", status_code=303)
 
 
 def _platform_identity(platform: str, params) -> dict:
@@ -123,7 +116,7 @@ NOT_YOURS = ("The study cannot be started from this link. Please open the study 
              "where you signed up; if this message comes again, contact the researcher.")
 
 
-def _same_person(known: tuple, identity: dict, own_code) -> bool:
+def _same_person(known: Row, identity: dict, own_code) -> bool:
     """Whether the visitor with this link (and this session cookie's participant code) is the participant `known`
     found by its platform id: only with the participant's own platform study and session ids, or cookie."""
     ids = (identity["platform_study_id"], identity["platform_session_id"])
@@ -131,17 +124,20 @@ def _same_person(known: tuple, identity: dict, own_code) -> bool:
                                                                     known.platform_session_id))
 
 
-def _by_code(sql: Statements, ctx: Context, code) -> tuple | None:
-    return sql.first(BY_CODE, {"study": ctx.study.study.id, "code": code}) if isinstance(code, str) else None
+def _by_code(session: Session, ctx: Context, code) -> Row | None:
+    if not isinstance(code, str):
+        return None
+    return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first()
 
 
-def _by_identity(sql: Statements, ctx: Context, external_id: str) -> tuple | None:
+def _by_identity(session: Session, ctx: Context, external_id: str) -> Row | None:
     info = ctx.study.study
-    return sql.first(BY_IDENTITY, {"study": info.id, "platform": info.platform, "external_id": external_id})
+    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform,
+                                         "external_id": external_id}).first()
 
 
-def _current(sql: Statements, ctx: Context, request: Request) -> tuple:
-    participant = _by_code(sql, ctx, request.session.get("participant"))
+def _current(session: Session, ctx: Context, request: Request) -> Row:
+    participant = _by_code(session, ctx, request.session.get("participant"))
     if participant is None:
         raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
                                  "expired). Please open the study again from the link you were given.")
@@ -149,13 +145,13 @@ def _current(sql: Statements, ctx: Context, request: Request) -> tuple:
 
 
 def _read(find, ctx: Context, *args):
-    """`find(sql, ctx, *args)`, a single read (for `Database.run`)."""
-    with ctx.db.statements() as sql:
-        return find(sql, ctx, *args)
+    """`find(session, ctx, *args)` in a read transaction."""
+    with ctx.db.reading() as session:
+        return find(session, ctx, *args)
 
 
-async def landing(request: Request):
-    ctx: Context = request.app.state.context
+@router.get("/")
+def landing(request: Request, ctx: ContextDep):
     info = ctx.study.study
     if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return ctx.render_form(request, ("consent.html", True), "consent.html", lambda: {"preview": True})
@@ -164,7 +160,7 @@ async def landing(request: Request):
                            "This study needs a laptop or desktop computer. Please open the link there.")
     kind, fast = "real", False
     if "pilot" in request.query_params or "bot" in request.query_params:
-        kind, fast = kind_from_link(request.query_params, await ctx.db.run(pilot_token, ctx.db, info.id))
+        kind, fast = kind_from_link(request.query_params, pilot_token(ctx.db, info.id))
         if "pilot" in request.query_params and not fast:
             raise HTTPException(400, "This preview link is not valid for this study (it may be from an older "
                                      "server). Copy the pilot link again from the admin overview.")
@@ -175,12 +171,12 @@ async def landing(request: Request):
         request.session["kind"], request.session["fast"] = kind, fast
     if info.platform != "none":
         identity = _platform_identity(info.platform, request.query_params)
-        known = await ctx.db.run(_read, _by_identity, ctx, identity["external_id"])
+        known = _read(_by_identity, ctx, identity["external_id"])
         if known is not None and not _same_person(known, identity, request.session.get("participant")):
             known = None  # someone else's id: the consent page any new id gets, which tells nothing
         request.session["identity"] = identity
     else:
-        known = await ctx.db.run(_read, _by_code, ctx, request.session.get("participant"))
+        known = _read(_by_code, ctx, request.session.get("participant"))
     if known is not None:
         request.session["participant"] = known.code
         return _see_current()
@@ -195,9 +191,9 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
     info = ctx.study.study
     for _ in range(50):
         try:
-            with ctx.db.statements(write=True) as sql:
+            with ctx.db.writing() as session:
                 if identity.get("external_id"):
-                    known = _by_identity(sql, ctx, identity["external_id"])
+                    known = _by_identity(session, ctx, identity["external_id"])
                     if known is not None:
                         if not _same_person(known, identity, None):
                             raise HTTPException(400, NOT_YOURS)
@@ -211,13 +207,13 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
                           "attention_failures": 0, "kind": kind,
                           "consent_version": ctx.study.consent_version(), "details": None, **identity}
                 if agreed and info.assignment == "balanced":
-                    values["slot"] = next_slot(sql, study=info.id)
+                    values["slot"] = next_slot(session, study=info.id)
                     values["condition"] = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
                                                              slot=values["slot"])
-                participant_id = sql.scalar(ENTER, values)
+                participant_id = session.scalar(ENTER, values)
                 if values["condition"] is not None:
-                    sql.execute(SAVE_PLAN, {"participant": participant_id,
-                                            "plan": _new_plan(ctx, participant_id, values["condition"])})
+                    session.execute(SAVE_PLAN, {"participant": participant_id,
+                                                "plan": _new_plan(ctx, participant_id, values["condition"])})
                 return values["code"]
         except IntegrityError:
             continue
@@ -235,9 +231,8 @@ def _assign_plan(ctx: Context, participant: Participant) -> None:
     participant.step_started_at = datetime.now(UTC)
 
 
-async def consent(request: Request):
-    ctx: Context = request.app.state.context
-    form = await checked_form(request)
+@router.post("/consent")
+def consent(request: Request, ctx: ContextDep, form: FormDep):
     choice = form.get("choice")
     if choice not in ("agree", "decline"):
         raise HTTPException(400, "Please choose whether you agree to take part.")
@@ -247,7 +242,7 @@ async def consent(request: Request):
         if not isinstance(identity, dict) or not identity.get("external_id"):
             raise HTTPException(400, "Please open the study from the link you were given.")
     kind = request.session.get("kind") if request.session.get("kind") in ("pilot", "bot") else "real"
-    code = await ctx.db.run(_enter, ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
+    code = _enter(ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
     request.session["participant"] = code
     request.session.pop("identity", None)
     return _see_current()
@@ -312,7 +307,7 @@ def _render_screen(request: Request, ctx: Context, screen: Screen, step: int, *,
     )
 
 
-def _status_page(request: Request, ctx: Context, participant: tuple):
+def _status_page(request: Request, ctx: Context, participant: Row):
     texts = ctx.study.texts
     if participant.status == "declined":
         return ctx.message(request, "Thank you", texts.declined)
@@ -323,9 +318,9 @@ def _status_page(request: Request, ctx: Context, participant: tuple):
     return ctx.render(request, "complete.html", completion=ctx.study.completion)
 
 
-async def current_page(request: Request):
-    ctx: Context = request.app.state.context
-    participant, plan = await ctx.db.run(_read, _current_screens, ctx, request)
+@router.get("/study")
+def current_page(request: Request, ctx: ContextDep):
+    participant, plan = _read(_current_screens, ctx, request)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
     if participant.condition is None:
@@ -373,13 +368,13 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Sc
     """Save the answers to screen `step`: None when saved or nothing is left to save, a notice for the next page
     when the screen had been answered before with other answers, else the screen to show again and why."""
     try:
-        with ctx.db.statements(write=True) as sql:
-            participant = _current(sql, ctx, request)
-            plan = _plan(sql, ctx, participant)
+        with ctx.db.writing() as session:
+            participant = _current(session, ctx, request)
+            plan = _plan(session, participant)
             if participant.status != "started" or plan is None:
                 return None
             if step < participant.step:  # already answered: a double click or the back button; keep the first
-                saved = sql.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
+                saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
                 sent = check_screen(ctx.study, plan[step], form)
                 if saved is not None and not sent.errors and sent.answers != saved:
                     return _kept_notice(ctx, plan[step], saved)
@@ -396,16 +391,16 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Sc
                     checked.errors["video"] = problem
             if checked.errors:
                 if any(name.startswith("understand") for name in checked.errors):
-                    details = dict(sql.scalar(DETAILS, {"participant": participant.id}) or {})
+                    details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
                     details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
-                    sql.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
+                    session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
                 return screen, checked
             if isinstance(screen, Instructions) and ctx.study.comprehension:
-                details = dict(sql.scalar(DETAILS, {"participant": participant.id}) or {})
+                details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
                 details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
-                sql.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
+                session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
             viewport = _one_value(form, "viewport")
-            sql.execute(SAVE_RESPONSE, {
+            session.execute(SAVE_RESPONSE, {
                 "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
                 "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
                 "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
@@ -414,7 +409,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Sc
             })
             done = step + 1 == len(plan)
             failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
-            sql.execute(NEXT_STEP, {
+            session.execute(NEXT_STEP, {
                 "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
                 "to_status": "completed" if done else "started", "completed": now if done else None,
             })
@@ -428,13 +423,12 @@ def _one_value(form: FormData, name: str) -> str:
     return value if isinstance(value, str) else ""
 
 
-async def submit(request: Request):
-    ctx: Context = request.app.state.context
-    form = await checked_form(request)
+@router.post("/study")
+def submit(request: Request, ctx: ContextDep, form: FormDep):
     step = form.get("step")
     if not isinstance(step, str) or not digits(step) or len(step) > 6:
         raise HTTPException(400, "The form is missing its step number; reload the page and try again.")
-    refused = await ctx.db.run(_save, ctx, request, int(step), form)
+    refused = _save(ctx, request, int(step), form)
     if refused is None:
         return _see_current()
     if isinstance(refused, str):
@@ -447,13 +441,9 @@ async def submit(request: Request):
                           watched=False if "video" in checked.errors else None)
 
 
-async def choose_condition(request: Request):
+@router.post("/condition")
+def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
     """The paper's self-selected assignment: the participant picks a number from 1 to N."""
-    form = await checked_form(request)
-    return await run_in_threadpool(_choose_condition, request, request.app.state.context, form)
-
-
-def _choose_condition(request: Request, ctx: Context, form: FormData):
     number = form.get("number")
     n = len(ctx.conditions)
     participant_id = _read(_current, ctx, request).id
@@ -468,18 +458,14 @@ def _choose_condition(request: Request, ctx: Context, form: FormData):
     return _see_current()
 
 
-def leave_confirm(request: Request):
-    ctx: Context = request.app.state.context
+@router.get("/leave")
+def leave_confirm(request: Request, ctx: ContextDep):
     _read(_current, ctx, request)
     return ctx.render(request, "leave.html")
 
 
-async def leave(request: Request):
-    await checked_form(request)
-    return await run_in_threadpool(_leave, request, request.app.state.context)
-
-
-def _leave(request: Request, ctx: Context):
+@router.post("/leave")
+def leave(request: Request, ctx: ContextDep, form: FormDep):
     participant_id = _read(_current, ctx, request).id
     with ctx.db.writing() as session:
         participant = session.get(Participant, participant_id)
@@ -487,13 +473,3 @@ def _leave(request: Request, ctx: Context):
             participant.status = "returned"
     return _see_current()
 
-
-ROUTES = [
-    Route("/", landing, methods=["GET"]),
-    Route("/consent", consent, methods=["POST"]),
-    Route("/study", current_page, methods=["GET"]),
-    Route("/study", submit, methods=["POST"]),
-    Route("/condition", choose_condition, methods=["POST"]),
-    Route("/leave", leave_confirm, methods=["GET"]),  # a plain function: Starlette runs it in the thread pool
-    Route("/leave", leave, methods=["POST"]),
-]

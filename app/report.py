@@ -20,7 +20,7 @@ from app.analysis_source import analysis_database, analysis_study
 from app.answer_table import long_rows, participant_records
 from app.database import Database
 from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.settings import REPO_ROOT
+from app.settings import PACKAGE_DIR
 from app.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
 from app.study import ScaleQuestion, Study
 
@@ -337,7 +337,7 @@ def _save(figure, out: Path, stem: str) -> str:
 # The report --------------------------------------------------------------------------------------------------
 
 def _template_env() -> Environment:
-    env = Environment(loader=FileSystemLoader(str(REPO_ROOT / "templates")), autoescape=select_autoescape())
+    env = Environment(loader=FileSystemLoader(str(PACKAGE_DIR / "templates")), autoescape=select_autoescape())
     env.filters["percent"] = lambda value: "–" if value is None else f"{100 * value:.2f}%"
     env.filters["p"] = lambda value: "–" if value is None else ("< 0.001" if value < 1e-3 else f"{value:.3g}")
     env.filters["num"] = lambda value: "–" if value is None else f"{value:.3g}"

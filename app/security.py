@@ -1,19 +1,16 @@
-"""Request size limits, security headers, the signed session cookie and CSRF tokens for every form."""
+"""Request size limits, security headers, CSRF tokens for every form (the session they live in is Starlette's
+signed cookie, app.main), admin login throttling and admin session versions."""
 
 from __future__ import annotations
 
-import base64
-import binascii
-import hashlib
 import hmac
-import json
 import secrets
 import time
+from typing import Annotated
 from urllib.parse import parse_qsl
 
-from fastapi import HTTPException, Request
+from fastapi import Depends, HTTPException, Request
 from starlette.datastructures import FormData
-from starlette.middleware.sessions import Session
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.models import ServerSetting
@@ -112,86 +109,6 @@ class SecurityHeadersMiddleware:
         await self.app(scope, receive, with_headers)
 
 
-def _b64(data: bytes) -> bytes:
-    return base64.urlsafe_b64encode(data).rstrip(b"=")
-
-
-def _unb64(data: bytes) -> bytes:
-    return base64.urlsafe_b64decode(data + b"=" * (-len(data) % 4))
-
-
-class SessionMiddleware:
-    """The session (`request.session`, a dict of JSON values) in a signed cookie.
-
-    The cookie is what Starlette's SessionMiddleware writes, so sessions carry over between the two: base64 of the
-    JSON, then the time it was signed, then an HMAC-SHA1 of both (itsdangerous's TimestampSigner with its default
-    key derivation). The key is derived once here instead of on every request, and the HMAC is one call into
-    hashlib. A cookie with a wrong signature, older than `max_age` or signed in the future is ignored: the request
-    starts an empty session. The cookie is sent again only when the session changed. Paths that start with one of
-    `sessionless` (files that are the same for everyone) have no session."""
-
-    def __init__(self, app: ASGIApp, secret_key: str, session_cookie: str = "session", max_age: int = 14 * 24 * 3600,
-                 same_site: str = "lax", https_only: bool = False, sessionless: tuple[str, ...] = ()):
-        self.app = app
-        self.sessionless = sessionless
-        self.key = hashlib.sha1(b"itsdangerous.Signer" + b"signer" + secret_key.encode()).digest()
-        self.cookie = session_cookie
-        self.max_age = max_age
-        flags = f"httponly; samesite={same_site}" + ("; secure" if https_only else "")
-        self.set_cookie = f"{session_cookie}={{}}; path=/; Max-Age={max_age}; {flags}"
-        self.clear_cookie = f"{session_cookie}=null; path=/; expires=Thu, 01 Jan 1970 00:00:00 GMT; {flags}".encode()
-
-    def sign(self, session: dict) -> str:
-        now = int(time.time())
-        signed = base64.b64encode(json.dumps(session).encode()) + b"." + _b64(now.to_bytes((now.bit_length() + 7) // 8,
-                                                                                            "big"))
-        return (signed + b"." + _b64(hmac.digest(self.key, signed, "sha1"))).decode()
-
-    def load(self, cookie: str) -> dict | None:
-        """The session in a cookie, or None if the cookie is not one this server signed in the last `max_age`."""
-        signed, _, signature = cookie.encode().rpartition(b".")
-        try:
-            if not hmac.compare_digest(_unb64(signature), hmac.digest(self.key, signed, "sha1")):
-                return None
-            data, _, stamp = signed.rpartition(b".")
-            age = int(time.time()) - int.from_bytes(_unb64(stamp), "big")
-            session = json.loads(base64.b64decode(data)) if 0 <= age <= self.max_age else None
-        except (binascii.Error, ValueError):
-            return None
-        return session if isinstance(session, dict) else None
-
-    def _from_headers(self, scope: Scope) -> dict | None:
-        cookie = None
-        for name, value in scope["headers"]:
-            if name == b"cookie":
-                for chunk in value.decode("latin-1").split(";"):
-                    key, _, text = chunk.partition("=")
-                    if key.strip() == self.cookie:
-                        cookie = text.strip()
-        return self.load(cookie) if cookie else None
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["path"].startswith(self.sessionless):
-            await self.app(scope, receive, send)
-            return
-        loaded = self._from_headers(scope)
-        session = scope["session"] = Session(loaded or {})
-
-        async def send_with_cookie(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                headers = list(message.get("headers", []))
-                if session.accessed:
-                    headers.append((b"vary", b"Cookie"))
-                if session.modified and session:
-                    headers.append((b"set-cookie", self.set_cookie.format(self.sign(session)).encode()))
-                elif session.modified and loaded:
-                    headers.append((b"set-cookie", self.clear_cookie))
-                message = {**message, "headers": headers}
-            await send(message)
-
-        await self.app(scope, receive, send_with_cookie)
-
-
 def csrf_token(request: Request) -> str:
     """The session's token, created on first use; every form carries it in a hidden field."""
     token = request.session.get("csrf")
@@ -213,6 +130,9 @@ async def checked_form(request: Request) -> FormData:
             "(cookies must be allowed for this site).",
         )
     return form
+
+
+FormDep = Annotated[FormData, Depends(checked_form)]
 
 
 async def _form(request: Request) -> FormData:

@@ -8,7 +8,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+PACKAGE_DIR = Path(__file__).resolve().parent  # templates/ and static/ ship inside the package
 
 
 class TransportLimits(BaseSettings):
@@ -44,8 +44,9 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=64 * 1024, ge=1024)
     # Who may show the pages in a frame (Content-Security-Policy frame-ancestors); none by default.
     frame_ancestors: str = "'none'"
-    # SQLite only: "normal" commits survive a crash of the server process, "full" also a power loss (docs/survey.md).
-    sqlite_synchronous: Literal["normal", "full"] = "normal"
+    # SQLite only: "full" commits survive a power loss or an operating-system crash, "normal" only a crash of the
+    # server process (docs/survey.md).
+    sqlite_synchronous: Literal["normal", "full"] = "full"
     access_log: bool = True  # uvicorn's line per request, from `foil serve`
     # Admin password guessing: after this many wrong passwords (per client address; from everyone together) each
     # attempt waits a delay that starts at login_delay_s and doubles with every failure, up to login_max_delay_s.
@@ -56,8 +57,8 @@ class Settings(BaseSettings):
     # Host names the server answers to (Starlette's TrustedHostMiddleware; other Host headers get 400), as a JSON
     # list: FOIL_ALLOWED_HOSTS='["survey.example.org"]'. No reply is built from the Host header in any case.
     allowed_hosts: list[str] = ["*"]
-    templates_dir: Path = REPO_ROOT / "templates"
-    static_dir: Path = REPO_ROOT / "static"
+    templates_dir: Path = PACKAGE_DIR / "templates"
+    static_dir: Path = PACKAGE_DIR / "static"
 
     @model_validator(mode="after")
     def _sane(self) -> Settings:

@@ -10,7 +10,7 @@ Five runs, each bounded in time and count (--runs picks some):
            Ceiling and burst alternate for --rounds; in both the clients run in --processes processes (one
            interpreter lock each) pinned to all cores but the first, and the server is pinned to the first;
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
-           completed sessions per minute, p50/p95/p99 latency per page type, errors;
+           completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
            the bots reopen their links and finish; then the database is audited;
   cpu      server CPU per request, by kind: --cpu-sessions bots one at a time against `foil serve` (with its
@@ -308,14 +308,18 @@ def main() -> int:
                         help="load generator processes of the ceiling and burst runs, sharing the clients")
     parser.add_argument("--crash-participants", type=int, default=100)
     parser.add_argument("--cpu-sessions", type=int, default=30, help="bots of the cpu run")
+    parser.add_argument("--sqlite-synchronous", choices=["full", "normal"], default="full",
+                        help="FOIL_SQLITE_SYNCHRONOUS of the survey server (default full, as deployed)")
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
     args = parser.parse_args()
     runs = set(args.runs.split(","))
+    SURVEY_SETTINGS["FOIL_SQLITE_SYNCHRONOUS"] = args.sqlite_synchronous
     if not runs <= set(RUNS) or {"ceiling", "burst"} & runs and not {"ceiling", "burst"} <= runs:
         parser.error(f"--runs takes some of {', '.join(RUNS)}; ceiling and burst go together (their ratio)")
 
-    lines = [f"{date.today()}, {os.cpu_count()} cores {platform.machine()}; server and bots on the same machine "
-             "(other work running; load averages from os.getloadavg() before each run)."]
+    lines = [f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, SQLite synchronous="
+             f"{args.sqlite_synchronous}; server and bots on the same machine (other work running; load averages from "
+             "os.getloadavg() before each run)."]
     ok = True
     with tempfile.TemporaryDirectory(prefix="foil-load-") as tmp:
         work = Path(tmp)
@@ -357,7 +361,8 @@ def main() -> int:
             lines += ["", f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
                       f"before every form (the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests "
                       f"per participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
-                      f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min), "
+                      f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min, "
+                      f"{len(non_video) / wall:.0f} non-video requests/s), "
                       f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "
                       f"{quantile(non_video, .95):.0f} ms.", "", *latency_table(crowd)]
             for error in crowd.errors[:10]:

@@ -94,12 +94,12 @@ def test_a_second_arrival_waits_for_the_first_and_takes_the_next_slot(make_clien
     slots: dict[str, int] = {}
 
     def arrival(name: str, slot_claimed: threading.Event | None) -> None:
-        with db.statements(write=True) as sql:
-            slots[name] = next_slot(sql, study=study_id)
+        with db.writing() as session:
+            slots[name] = next_slot(session, study=study_id)
             if slot_claimed is not None:
                 slot_claimed.set()
                 second_done.wait(timeout=1.0)  # the second arrival is under way meanwhile
-            sql.execute(insert(Participant.__table__).values(participant_row(name, slots[name])), {})
+            session.execute(insert(Participant.__table__).values(participant_row(name, slots[name])))
 
     first = threading.Thread(target=arrival, args=("first", first_claimed))
     first.start()
