@@ -19,7 +19,7 @@ from app.database import migrate
 from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, manifest_json, sha256_file
 from app.main import create_app
 from app.settings import Settings
-from tests.app import postgres
+from tests.support import postgres
 
 REPO = Path(__file__).resolve().parents[2]
 PAPER_STUDY = REPO / "studies" / "paper.toml"

@@ -16,7 +16,7 @@ import httpx
 import pytest
 
 from tests.app.conftest import study_text
-from tests.live_server import free_port
+from tests.support.live_server import free_port
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCES = ["app", "search", "migrations", "pyproject.toml", "README.md"]

@@ -9,7 +9,7 @@ import time
 import httpx
 
 from tests.app.conftest import REPO, study_text
-from tests.live_server import foil, free_port
+from tests.support.live_server import foil, free_port
 
 
 def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):

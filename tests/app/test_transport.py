@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 
 from tests.app.conftest import study_text
 from tests.app.test_admin import log_in
-from tests.live_server import LiveServer
+from tests.support.live_server import LiveServer
 
 PILOT = {"platform": '"none"'}
 ONE_DATABASE = pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)  # nothing here is per database

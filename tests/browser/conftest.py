@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from tests.app.conftest import ADMIN_PASSWORD, bundle_dir, clip_files, study_text  # noqa: F401  (fixtures)
-from tests.live_server import REPO, LiveServer
+from tests.support.live_server import REPO, LiveServer
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",

@@ -17,7 +17,7 @@ from tests.app.conftest import ADMIN_PASSWORD, study_text
 from tests.app.test_viewing import bundle_dir as long_bundle_dir  # noqa: F401  (fixture)
 from tests.browser.conftest import ARTIFACTS
 from tests.browser.test_participant import SERIOUS
-from tests.live_server import LiveServer
+from tests.support.live_server import LiveServer
 
 pytestmark = pytest.mark.browser
 PHONE = {"width": 360, "height": 800}

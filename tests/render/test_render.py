@@ -375,8 +375,8 @@ def test_render_options_are_checked():
 
 
 def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
-    """The survey pages' key beside a clip (app/templates/_macros.html, app/static/survey.css) draws Robot N in the colour
-    and shape the clip gives it."""
+    """The survey pages' key beside a clip (app/templates/_macros.html, app/static/survey.css) draws Robot N in the
+    colour and shape the clip gives it."""
     from jinja2 import Environment, FileSystemLoader
 
     root = Path(__file__).resolve().parents[2]

@@ -17,8 +17,8 @@ from app.database import Database
 from app.models import Participant
 from app.study import parse_study
 from tests.app.conftest import FormReader, study_text
-from tests.live_server import LiveServer
-from tests.robustness.crowd import LoopbackClient
+from tests.support.crowd import LoopbackClient
+from tests.support.live_server import LiveServer
 
 ARRIVALS = 500
 

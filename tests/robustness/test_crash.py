@@ -9,8 +9,8 @@ import time
 from app.assignment import conditions
 from app.study import parse_study
 from tests.app.conftest import study_text
-from tests.live_server import LiveServer
-from tests.robustness.crowd import Crowd, audit
+from tests.support.crowd import Crowd, audit
+from tests.support.live_server import LiveServer
 
 BOTS = 16
 

@@ -8,7 +8,7 @@ import shutil
 import pytest
 
 from tests.app.conftest import study_text
-from tests.live_server import foil
+from tests.support.live_server import foil
 
 
 def broken_checksum(bundle):
