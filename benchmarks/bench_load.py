@@ -45,10 +45,10 @@ sys.path.insert(0, str(REPO))
 from app.assignment import conditions  # noqa: E402
 from app.bots import Bot, ClipIndex, Observer  # noqa: E402
 from app.study import parse_study  # noqa: E402
-from tests.analysis.conftest import write_bot_bundle  # noqa: E402
-from tests.app.conftest import study_text  # noqa: E402
+from tests.support.analysis import write_bot_bundle  # noqa: E402
 from tests.support.crowd import Crowd, LoopbackClient, audit, page_type  # noqa: E402
 from tests.support.live_server import LiveServer, free_port  # noqa: E402
+from tests.support.survey import study_text  # noqa: E402
 
 CONSTANT_SERVER = """
 import sys, uvicorn

@@ -11,7 +11,7 @@ import torch
 from search.agents.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
 from search.agents.policies import SHIPPED_AGENTS, load_policy
 from search.sim.observation import ROBOT_NODE_FIELDS
-from tests.agents.conftest import make_net, random_observation
+from tests.support.agents import make_net, random_observation
 
 
 def act_once(policy, humans: int = 3) -> np.ndarray:

@@ -12,7 +12,7 @@ from search.agents.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_tor
 from search.sim.coupled import CoupledSimulator
 from search.sim.observation import ROBOT_NODE_SIZE
 from search.sim.scenarios import Scenario
-from tests.agents.conftest import SMALL, make_net, random_observation
+from tests.support.agents import SMALL, make_net, random_observation
 
 
 @pytest.mark.parametrize("humans", [0, 1, 4, 6])

@@ -11,17 +11,9 @@ import pytest
 from app.export_csv import export_study, neutralise
 from app.models import Participant, Response
 from app.study import parse_study
-from tests.analysis.conftest import add_participant
-from tests.app.conftest import ADMIN_PASSWORD, FormReader, answer_for, start, study_text
+from tests.support.analysis import add_participant
+from tests.support.survey import ADMIN_PASSWORD, ATTENTION, FormReader, answer_for, start, study_text
 
-ATTENTION = """
-[[attention_checks]]
-part = 1
-after = 2
-text = "This question checks attention. Please choose 'Agree'."
-options = ["Disagree", "Agree"]
-expected = "Agree"
-"""
 # Texts a spreadsheet would run, a reader would take for missing, or that test the escape itself.
 TRICKY = ["=HYPERLINK(\"http://x\",\"y\")", "+1+2", "-3", "@SUM(A1)", "\tTab first", "\rCarriage", "'quoted",
           "NA", "line one\nline two, with a comma and \"quotes\"", "plain words"]

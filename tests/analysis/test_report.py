@@ -11,9 +11,8 @@ import pytest
 from app.exclusions import ExclusionRules
 from app.report import ALL, render_report, tally_study
 from app.study import parse_study
-from tests.analysis.conftest import SCENARIOS, SCHEMES, SECRET_NAMES, add_participant, label_of
-from tests.analysis.test_statistics import fisher_two_sided
-from tests.app.conftest import study_text
+from tests.support.analysis import SCENARIOS, SCHEMES, add_participant, fisher_two_sided, label_of
+from tests.support.survey import SECRET_NAMES, study_text
 
 ADAPTIVE, NFIRST = SCHEMES
 LO = SECRET_NAMES["lo"]

@@ -21,9 +21,8 @@ from app.report import ALL, render_report, tally_study
 from app.settings import Settings
 from app.study import parse_study
 from search.cli import main
-from tests.analysis.conftest import AGENT_RANK, MISLEADING, SCHEMES, SECRET_NAMES
-from tests.analysis.test_export import ATTENTION
-from tests.app.conftest import study_text
+from tests.support.analysis import MISLEADING, SCHEMES
+from tests.support.survey import AGENT_RANK, ATTENTION, SECRET_NAMES, study_text
 
 
 @pytest.fixture

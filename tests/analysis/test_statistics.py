@@ -7,6 +7,7 @@ import math
 import pytest
 
 from app.statistics import accuracy_difference, ordinal_difference, wilson_interval
+from tests.support.analysis import fisher_two_sided
 
 
 def test_wilson_interval_textbook_values():
@@ -19,18 +20,6 @@ def test_wilson_interval_textbook_values():
     assert wilson_interval(0, 0) is None
     with pytest.raises(ValueError):
         wilson_interval(3, 2)
-
-
-def fisher_two_sided(a: int, b: int, c: int, d: int) -> float:
-    """Sum of the hypergeometric probabilities of every table with the same margins no more likely than this one."""
-    row1, col1, n = a + b, a + c, a + b + c + d
-
-    def prob(x: int) -> float:
-        return math.comb(col1, x) * math.comb(n - col1, row1 - x) / math.comb(n, row1)
-
-    observed = prob(a)
-    low, high = max(0, row1 + col1 - n), min(row1, col1)
-    return sum(prob(x) for x in range(low, high + 1) if prob(x) <= observed * (1 + 1e-7))
 
 
 @pytest.mark.parametrize("table", [((12, 0), (8, 4)), ((114, 6), (65, 55)), ((26, 14), (12, 28)), ((3, 1), (1, 3))])

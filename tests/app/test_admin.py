@@ -11,15 +11,9 @@ from fastapi.testclient import TestClient
 
 from app.models import Participant
 from app.settings import Settings
-from tests.app.conftest import ADMIN_PASSWORD, FormReader, answer_for, finish, start, stored
+from tests.support.survey import FormReader, answer_for, finish, log_in, start, stored
 
 BALANCED = {"platform": '"prolific"', "assignment": '"balanced"'}
-
-
-def log_in(client: TestClient, password: str = ADMIN_PASSWORD):
-    page = client.get("/admin/login")
-    return client.post("/admin/login", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
-                                             "password": password})
 
 
 def test_admin_is_off_without_a_password(make_client):

@@ -10,8 +10,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import Settings
-from tests.app.conftest import ADMIN_PASSWORD, FormReader
-from tests.app.test_admin import log_in
+from tests.support.survey import ADMIN_PASSWORD, FormReader, log_in
 
 PILOT = {"platform": '"none"'}
 

@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from app.models import Participant, Response
-from tests.app.conftest import FormReader, answer_for, start, stored
+from tests.support.survey import FormReader, answer_for, start, stored
 
 BALANCED = {"platform": '"none"', "assignment": '"balanced"'}
 

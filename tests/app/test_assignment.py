@@ -13,7 +13,7 @@ from app.models import Participant
 from app.plan import build_plan
 from app.screens import Pairwise, Ranking
 from app.study import load_study
-from tests.app.conftest import PAPER_STUDY, FormReader, start, stored
+from tests.support.survey import PAPER_STUDY, FormReader, start, stored
 
 
 def test_every_block_holds_each_condition_once():
@@ -80,7 +80,7 @@ def test_one_person_opening_the_link_twice_at_once_gets_one_record(make_client):
 
 def test_plan_is_seeded_and_randomises_order_and_answer_options(bundle_dir, tmp_path):
     from app.bundle import load_bundle
-    from tests.app.conftest import study_text
+    from tests.support.survey import study_text
 
     path = tmp_path / "study.toml"
     path.write_text(study_text())

@@ -9,7 +9,7 @@ import pytest
 
 from app.bundle import BundleError, check_study_against_bundle, load_bundle
 from app.study import parse_study
-from tests.app.conftest import study_text
+from tests.support.survey import VIDEO_CHECK, study_text
 
 
 @pytest.fixture
@@ -76,16 +76,6 @@ def test_ranking_clips_must_label_each_robot_once(bundle_copy):
     edit_manifest(bundle_copy, relabel)
     with pytest.raises(BundleError, match="a ranking needs one label per robot"):
         check_study_against_bundle(parse_study(study_text()), load_bundle(bundle_copy))
-
-
-VIDEO_CHECK = '''""
-[[attention_checks]]
-part = 1
-after = 1
-text = "Did one of the robots touch a person?"
-options = ["Yes", "No"]
-expected = "Yes"
-clip = {{scheme = "{scheme}", scenario = "scenarioexamplesecret", agents = ["agentlowsecret", "agenthighsecret"]}}'''
 
 
 def test_a_video_attention_checks_clip_must_be_in_the_bundle(bundle_dir):

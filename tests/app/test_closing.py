@@ -12,29 +12,7 @@ from fastapi.testclient import TestClient
 from app.export_csv import export_study, restore
 from app.models import Participant, Response
 from app.study import StudyError, load_study, parse_study
-from tests.app.conftest import ADMIN_PASSWORD, PAPER_STUDY, FormReader, answer_for, start, stored, study_text
-
-CLOSING = '''""
-[closing]
-questions = ["age_range", "robot_experience", "confidence"]
-feedback = "Anything you want to tell the researchers?"
-required = {required}
-
-[questions.age_range]
-type = "choice"
-text = "Your age"
-options = ["18-29", "30-49", "50 or older", "Prefer not to say"]
-
-[questions.robot_experience]
-type = "choice"
-text = "How much have you worked with robots?"
-options = ["Never", "A little", "A lot"]
-
-[questions.confidence]
-type = "scale"
-text = "How sure were you of your answers?"
-points = 5
-anchors = ["Not at all", "Completely"]'''
+from tests.support.survey import ADMIN_PASSWORD, CLOSING, PAPER_STUDY, FormReader, answer_for, start, stored, study_text
 
 
 def closing_client(make_client, required: str = "[]") -> TestClient:

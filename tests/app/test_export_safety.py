@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.export_csv import export_study, neutralise, restore
-from tests.app.conftest import answer_for, start
+from tests.support.survey import answer_for, start
 
 # What Excel, LibreOffice or Google Sheets may take for the start of a formula, fullwidth and small forms included.
 SIGNS = "=+-@\uff1d\uff0b\uff0d\uff20\ufe66\ufe62\ufe63\ufe6b\u2212"

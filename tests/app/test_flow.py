@@ -6,7 +6,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.models import Participant, Response
-from tests.app.conftest import SECRET_NAMES, FormReader, answer_for, finish, start, stored
+from tests.support.survey import SECRET_NAMES, FormReader, answer_for, finish, start, stored
 
 PROLIFIC = {"platform": '"prolific"', "assignment": '"balanced"',
             "redirect_url": '"https://app.prolific.com/submissions/complete?cc=FOIL-PAPER-7Q2K"'}

@@ -11,7 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.models import Participant, Response
-from tests.app.conftest import FormReader, answer_for, start, stored
+from tests.support.survey import FormReader, answer_for, start, stored
 
 PLATFORMS = {
     "prolific": ({"platform": '"prolific"', "assignment": '"balanced"'},

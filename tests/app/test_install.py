@@ -15,8 +15,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.app.conftest import study_text
 from tests.support.live_server import free_port
+from tests.support.survey import study_text
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCES = ["app", "search", "migrations", "pyproject.toml", "README.md"]

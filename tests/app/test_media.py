@@ -85,7 +85,7 @@ def test_secure_cookie_option(make_client):
 
 
 def test_clip_pages_are_gated_and_playable_inline(make_client):
-    from tests.app.conftest import answer_for, start
+    from tests.support.survey import answer_for, start
 
     client = make_client({"platform": '"none"', "assignment": '"balanced"'})
     page = client.post("/study", data=answer_for(start(client))).text

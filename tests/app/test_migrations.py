@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 
 from app.database import MIGRATIONS_DIR, DatabaseError, alembic_config, check_migrated, migrate
 from app.models import Base, Participant
-from tests.app.conftest import REPO
+from tests.support.live_server import REPO
 
 
 def test_migrations_match_the_models(database_url):

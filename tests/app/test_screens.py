@@ -14,9 +14,7 @@ from app.bundle import load_bundle
 from app.plan import build_plan
 from app.screens import Attention, Pairwise, Ranking, Watch, dump_plan, parse_plan
 from app.study import parse_study
-from tests.app.conftest import study_text
-from tests.app.test_bundle import VIDEO_CHECK
-from tests.app.test_closing import CLOSING
+from tests.support.survey import CLOSING, VIDEO_CHECK, study_text
 
 # One screen of each kind as the server stored them (a video attention check and a plain one), byte for byte.
 STORED = """[{"kind": "instructions", "position": [0, 18]}, \

@@ -8,8 +8,8 @@ import time
 
 import httpx
 
-from tests.app.conftest import REPO, study_text
-from tests.support.live_server import foil, free_port
+from tests.support.live_server import REPO, foil, free_port
+from tests.support.survey import study_text
 
 
 def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):

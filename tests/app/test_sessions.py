@@ -11,7 +11,7 @@ import time
 import itsdangerous
 import pytest
 
-from tests.app.conftest import FormReader, start
+from tests.support.survey import FormReader, start
 
 SECRET = "a secret for the session cookie tests"
 

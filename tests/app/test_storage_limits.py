@@ -9,8 +9,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import update
 
 from app.models import Participant, Response
-from tests.app.conftest import FormReader, answer_for, start, stored
-from tests.app.test_admin import log_in
+from tests.support.survey import FormReader, answer_for, log_in, start, stored
 
 PILOT = {"platform": '"none"', "assignment": '"balanced"'}
 

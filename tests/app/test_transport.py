@@ -11,9 +11,8 @@ import httpx
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.app.conftest import study_text
-from tests.app.test_admin import log_in
 from tests.support.live_server import LiveServer
+from tests.support.survey import log_in, study_text
 
 PILOT = {"platform": '"none"'}
 ONE_DATABASE = pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)  # nothing here is per database

@@ -4,11 +4,9 @@ with a bundle of 3-second clips (longer than the check's 1-second tolerance)."""
 from __future__ import annotations
 
 import json
-import subprocess
 import time
 from pathlib import Path
 
-import imageio_ffmpeg
 import pytest
 from sqlalchemy import select
 
@@ -18,34 +16,12 @@ from app.kinds import pilot_token
 from app.models import Participant, Response
 from app.report import tally_study
 from app.screens import parse_plan
-from tests.app.conftest import (
-    AGENT_RANK,
-    SECRET_NAMES,
-    FormReader,
-    answer_for,
-    finish,
-    start,
-    stored,
-    write_bundle,
-)
-
-CLIP_S = 3.0
+from tests.support.survey import CLIP_S, FormReader, answer_for, finish, start, stored, write_long_bundle
 
 
 @pytest.fixture(scope="module")
 def bundle_dir(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("long-clips")
-    files = []
-    for name, source in (("a", "testsrc"), ("b", "testsrc2")):
-        files.append(folder / f"{name}.mp4")
-        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i",
-                        f"{source}=size=72x88:rate=10:duration={CLIP_S}", "-c:v", "libx264", "-pix_fmt", "yuv420p",
-                        "-movflags", "+faststart", str(files[-1])], check=True)
-    names = SECRET_NAMES
-    return write_bundle(tmp_path_factory.mktemp("long-bundle"), files,
-                        schemes=[names["adaptive"], names["nfirst"]],
-                        scenarios=[names["paper-bl-tr"], names["paper-tl-br"]], agents=AGENT_RANK,
-                        example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])))
+    return write_long_bundle(tmp_path_factory.mktemp("long-clips"), tmp_path_factory.mktemp("long-bundle"))
 
 
 ANONYMOUS = {"platform": '"none"', "assignment": '"balanced"'}

@@ -6,24 +6,15 @@ Screenshots of every page go to test-artifacts/browser/. axe-core (installed fro
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from tests.app.conftest import ADMIN_PASSWORD, bundle_dir, clip_files, study_text  # noqa: F401  (fixtures)
-from tests.support.live_server import REPO, LiveServer
-
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync"]
-AXE = REPO / ".cache" / "axe" / "node_modules" / "axe-core" / "axe.min.js"
-ARTIFACTS = REPO / "test-artifacts" / "browser"
-DESKTOP = {"width": 1280, "height": 900}
-PHONE = {"width": 360, "height": 740}
+from tests.support.browser import AXE, CHROMIUM, CHROMIUM_ARGS, DESKTOP
+from tests.support.live_server import LiveServer
+from tests.support.survey import ADMIN_PASSWORD, study_text
 
 
 @pytest.fixture(scope="session")
-def server(tmp_path_factory, bundle_dir):  # noqa: F811
+def server(tmp_path_factory, bundle_dir):
     """One `foil serve` for the browser tests; each test uses its own MTurk worker ids."""
     work = tmp_path_factory.mktemp("browser-server")
     study = work / "study.toml"

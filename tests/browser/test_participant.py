@@ -17,15 +17,12 @@ from sqlalchemy import select
 
 from app.database import Database
 from app.models import Participant, Response
-from tests.app.conftest import ADMIN_PASSWORD, finish, start
-from tests.browser.conftest import ARTIFACTS, DESKTOP, PHONE
+from tests.support.browser import ARTIFACTS, DESKTOP, PHONE, SERIOUS
+from tests.support.survey import ADMIN_PASSWORD, finish, start
 
 pytestmark = pytest.mark.browser
 
 FREE_TEXT = "Robot 1 kept its distance — 距离 <script>alert('x')</script> & \"quotes\""
-SERIOUS = {"serious", "critical"}
-
-
 def link(worker: str) -> str:
     return f"/?workerId={worker}&assignmentId=A-{worker}&hitId=HIT1"
 

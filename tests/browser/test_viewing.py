@@ -13,11 +13,9 @@ from sqlalchemy import select
 from app.database import Database
 from app.kinds import pilot_token
 from app.models import Participant, Response
-from tests.app.conftest import ADMIN_PASSWORD, study_text
-from tests.app.test_viewing import bundle_dir as long_bundle_dir  # noqa: F401  (fixture)
-from tests.browser.conftest import ARTIFACTS
-from tests.browser.test_participant import SERIOUS
+from tests.support.browser import ARTIFACTS, SERIOUS
 from tests.support.live_server import LiveServer
+from tests.support.survey import ADMIN_PASSWORD, study_text, write_long_bundle
 
 pytestmark = pytest.mark.browser
 PHONE = {"width": 360, "height": 800}
@@ -27,10 +25,11 @@ NEXT = "fieldset[data-answers] button[type=submit]"
 
 
 @pytest.fixture(scope="module")
-def long_server(tmp_path_factory, long_bundle_dir):  # noqa: F811
+def long_server(tmp_path_factory):
     work = tmp_path_factory.mktemp("browser-viewing")
     study = work / "study.toml"
     study.write_text(study_text(platform='"none"', assignment='"balanced"'))
+    long_bundle_dir = write_long_bundle(work / "clips", work / "bundle")
     with LiveServer(bundle=long_bundle_dir, study=study, database_url=f"sqlite:///{work / 'survey.sqlite3'}",
                     workdir=work, admin_password=ADMIN_PASSWORD) as live:
         yield live

@@ -31,7 +31,7 @@ from search.clips.render import (
 )
 from search.clips.scene import SummaryError, load_scene, scene_from_summary
 from search.sim.scenarios import load_scenario
-from tests.render.conftest import summary_from_simulation, visible
+from tests.support.summaries import summary_from_simulation, visible
 
 FAST = RenderOptions(speed=4.0, hold_start=0.25, hold_end=0.25, event_hold=0.25)
 

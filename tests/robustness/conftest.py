@@ -1,5 +1,14 @@
-"""The robustness tests use the survey tests' fixtures with the analysis tests' bundle: every clip its own file
-with a summary, as the bots need."""
+"""The robustness tests use the analysis tests' bundle: every clip its own file with a summary, as the bots need."""
 
-from tests.analysis.conftest import bundle_dir  # noqa: F401  (fixtures used by name)
-from tests.app.conftest import database_url, make_client  # noqa: F401
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.support.analysis import write_bot_bundle
+
+
+@pytest.fixture(scope="session")
+def bundle_dir(tmp_path_factory) -> Path:
+    return write_bot_bundle(tmp_path_factory.mktemp("robustness-clips"), tmp_path_factory.mktemp("robustness-bundle"))

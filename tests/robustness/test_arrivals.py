@@ -16,9 +16,9 @@ from app.assignment import condition_for_slot, conditions, next_slot
 from app.database import Database
 from app.models import Participant
 from app.study import parse_study
-from tests.app.conftest import FormReader, study_text
 from tests.support.crowd import LoopbackClient
 from tests.support.live_server import LiveServer
+from tests.support.survey import FormReader, study_text
 
 ARRIVALS = 500
 

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.models import Participant, Response
-from tests.app.conftest import ADMIN_PASSWORD, WATCHED, FormReader, answer_for, start, stored
+from tests.support.survey import ADMIN_PASSWORD, WATCHED, FormReader, answer_for, start, stored
 
 BALANCED = {"platform": '"none"', "assignment": '"balanced"'}
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

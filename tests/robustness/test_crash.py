@@ -8,9 +8,9 @@ import time
 
 from app.assignment import conditions
 from app.study import parse_study
-from tests.app.conftest import study_text
 from tests.support.crowd import Crowd, audit
 from tests.support.live_server import LiveServer
+from tests.support.survey import study_text
 
 BOTS = 16
 

@@ -7,8 +7,8 @@ import shutil
 
 import pytest
 
-from tests.app.conftest import study_text
 from tests.support.live_server import foil
+from tests.support.survey import study_text
 
 
 def broken_checksum(bundle):

@@ -1,5 +1,5 @@
-"""Fixtures for the survey server: a real bundle of tiny H.264 clips, the shipped paper study (with names that are
-easy to search for in pages), a real database per test, and a bot that fills in whatever form a page shows."""
+"""The survey tests' world: the shipped paper study with names easy to search for in pages, bundles of tiny real
+H.264 clips, and a bot that reads and fills in whatever form a page shows."""
 
 from __future__ import annotations
 
@@ -12,14 +12,9 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import imageio_ffmpeg
-import pytest
 from fastapi.testclient import TestClient
 
-from app.database import migrate
 from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, manifest_json, sha256_file
-from app.main import create_app
-from app.settings import Settings
-from tests.support import postgres
 
 REPO = Path(__file__).resolve().parents[2]
 PAPER_STUDY = REPO / "studies" / "paper.toml"
@@ -67,25 +62,6 @@ def write_bundle(root: Path, clip_files: list[Path], *, schemes, scenarios, agen
     return root
 
 
-@pytest.fixture(scope="session")
-def clip_files(tmp_path_factory) -> list[Path]:
-    folder = tmp_path_factory.mktemp("clips")
-    files = [folder / "a.mp4", folder / "b.mp4"]
-    make_clip(files[0], "testsrc")
-    make_clip(files[1], "testsrc2")
-    return files
-
-
-@pytest.fixture(scope="session")
-def bundle_dir(tmp_path_factory, clip_files) -> Path:
-    names = SECRET_NAMES
-    return write_bundle(
-        tmp_path_factory.mktemp("bundle"), clip_files,
-        schemes=[names["adaptive"], names["nfirst"]], scenarios=[names["paper-bl-tr"], names["paper-tl-br"]],
-        agents=AGENT_RANK, example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])),
-    )
-
-
 def study_text(**changes: str) -> str:
     """The shipped paper study with secret names; `changes` replace whole `key = value` lines (key=new value)."""
     text_ = PAPER_STUDY.read_text()
@@ -97,36 +73,46 @@ def study_text(**changes: str) -> str:
     return text_
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
-def database_url(request, tmp_path) -> str:
-    """A fresh database per test: a SQLite file, and an emptied PostgreSQL database."""
-    if request.param == "sqlite":
-        return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
-    url = postgres.session_url(request.config)
-    if url is None:
-        pytest.skip("no PostgreSQL binaries (`make test` installs them; or set FOIL_TEST_DATABASE_URL)")
-    postgres.reset(url)
-    return url
 
+VIDEO_CHECK = '''""
+[[attention_checks]]
+part = 1
+after = 1
+text = "Did one of the robots touch a person?"
+options = ["Yes", "No"]
+expected = "Yes"
+clip = {{scheme = "{scheme}", scenario = "scenarioexamplesecret", agents = ["agentlowsecret", "agenthighsecret"]}}'''
 
-@pytest.fixture
-def make_client(tmp_path, bundle_dir, database_url):
-    """Build the real app on a migrated database; returns a function taking study-line changes and settings."""
-    apps = []
+CLOSING = '''""
+[closing]
+questions = ["age_range", "robot_experience", "confidence"]
+feedback = "Anything you want to tell the researchers?"
+required = {required}
 
-    def build(changes: dict | None = None, **settings) -> TestClient:
-        study = tmp_path / f"study-{len(apps)}.toml"
-        study.write_text(study_text(**(changes or {})))
-        migrate(database_url)
-        config = {"bundle_dir": bundle_dir, "study_file": study, "database_url": database_url,
-                  "admin_password": ADMIN_PASSWORD, **settings}
-        app = create_app(Settings(**config))
-        apps.append(app)
-        return TestClient(app, follow_redirects=True)
+[questions.age_range]
+type = "choice"
+text = "Your age"
+options = ["18-29", "30-49", "50 or older", "Prefer not to say"]
 
-    yield build
-    for app in apps:
-        app.state.context.db.dispose()
+[questions.robot_experience]
+type = "choice"
+text = "How much have you worked with robots?"
+options = ["Never", "A little", "A lot"]
+
+[questions.confidence]
+type = "scale"
+text = "How sure were you of your answers?"
+points = 5
+anchors = ["Not at all", "Completely"]'''
+
+ATTENTION = """
+[[attention_checks]]
+part = 1
+after = 2
+text = "This question checks attention. Please choose 'Agree'."
+options = ["Disagree", "Agree"]
+expected = "Agree"
+"""
 
 
 class FormReader(HTMLParser):
@@ -209,3 +195,27 @@ def stored(client: TestClient, model) -> list:
 
     with client.app.state.context.db.reading() as session:
         return list(session.scalars(select(model).order_by(model.id)))
+
+
+def log_in(client: TestClient, password: str = ADMIN_PASSWORD):
+    page = client.get("/admin/login")
+    return client.post("/admin/login", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
+                                             "password": password})
+
+
+CLIP_S = 3.0  # the long clips' playing time: longer than the server's 1-second viewing tolerance
+
+
+def write_long_bundle(clips: Path, root: Path) -> Path:
+    """The paper study's bundle in `root` with clips of CLIP_S seconds (made in `clips`), for the viewing check."""
+    clips.mkdir(parents=True, exist_ok=True)
+    files = []
+    for name, source in (("a", "testsrc"), ("b", "testsrc2")):
+        files.append(clips / f"{name}.mp4")
+        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i",
+                        f"{source}=size=72x88:rate=10:duration={CLIP_S}", "-c:v", "libx264", "-pix_fmt", "yuv420p",
+                        "-movflags", "+faststart", str(files[-1])], check=True)
+    names = SECRET_NAMES
+    return write_bundle(root, files, schemes=[names["adaptive"], names["nfirst"]],
+                        scenarios=[names["paper-bl-tr"], names["paper-tl-br"]], agents=AGENT_RANK,
+                        example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])))

@@ -1,0 +1,109 @@
+"""The analysis tests' world: a bundle the bots can judge (every clip its own file with a summary.json saying what
+it shows, one of them misleading), participants written straight into a database with real plans, and a textbook
+Fisher exact test to check the report against."""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import subprocess
+from pathlib import Path
+
+import imageio_ffmpeg
+
+from app.assignment import conditions
+from app.bundle import load_bundle
+from app.database import Database
+from app.models import Participant, Response
+from app.plan import build_plan
+from app.screens import dump_plan
+from tests.support.survey import AGENT_RANK, SECRET_NAMES, make_clip, write_bundle
+
+SCHEMES = [SECRET_NAMES["adaptive"], SECRET_NAMES["nfirst"]]
+SCENARIOS = [SECRET_NAMES["paper-bl-tr"], SECRET_NAMES["paper-tl-br"]]
+EXAMPLE = (SECRET_NAMES["nfirst"], SECRET_NAMES["paper-code"], (SECRET_NAMES["lo"], SECRET_NAMES["hi"]))
+# What each agent visibly does in the clips: the best one reaches the goal soonest, the worst one collides.
+SHOWN = {
+    SECRET_NAMES["hi"]: {"event": "success", "time": 9.0, "min_human_distance": 0.6},
+    SECRET_NAMES["med"]: {"event": "success", "time": 16.0, "min_human_distance": 0.4},
+    SECRET_NAMES["lo"]: {"event": "collision", "time": 6.0, "min_human_distance": 0.0},
+}
+# One clip where the worse robot looks better (its search found a scenario where `lo` does well): an observer
+# who judges what it sees gets it wrong, one who read the ground truth would not.
+MISLEADING = f"{SECRET_NAMES['nfirst']}-{SCENARIOS[0]}-{SECRET_NAMES['lo']}-{SECRET_NAMES['hi']}"
+
+
+def summary_for(agents: list[str], misleading: bool) -> dict:
+    """A small foil.summary/1 of two robots (in `agents` order) walking from (-4, -4) to (4, 4)."""
+    outcomes = [dict(SHOWN[agent]) for agent in agents]
+    if misleading:
+        outcomes = [{"event": "timeout", "time": 20.0, "min_human_distance": 0.5}
+                    if agent == SECRET_NAMES["hi"] else {"event": "success", "time": 8.0, "min_human_distance": 0.9}
+                    for agent in agents]
+    steps = [{"t": round(0.25 * (k + 1), 2), "humans": [[0.0, 1.0]], "robots": [[-4 + 0.3 * k, -4 + 0.3 * k]] * 2,
+              "robot_actions": [[0.3, 0.3]] * 2} for k in range(80)]
+    return {"format": "foil.summary/1", "agents": [{"name": a, "source": a} for a in agents],
+            "scenario": {"robot": {"start": [-4.0, -4.0], "goal": [4.0, 4.0]}}, "steps": steps,
+            "outcomes": outcomes, "reward": 1.0, "reward_terms": {}}
+
+
+def write_bot_bundle(folder: Path, root: Path) -> Path:
+    """The paper study's bundle in `root` with a distinct clip file (same picture, different metadata) per entry,
+    each with its summary; `folder` holds the clips made on the way."""
+    base = folder / "base.mp4"
+    make_clip(base, "testsrc")
+    n_clips = len(SCHEMES) * len(SCENARIOS) * 3 + 1
+    files = []
+    for n in range(n_clips):
+        files.append(folder / f"{n:03d}.mp4")
+        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(base), "-c", "copy",
+                        "-metadata", f"comment=clip {n}", str(files[-1])], check=True)
+    root = write_bundle(root, files, schemes=SCHEMES, scenarios=SCENARIOS, agents=AGENT_RANK, example=EXAMPLE)
+    manifest = json.loads((root / "manifest.json").read_text())
+    (root / "summaries").mkdir()
+    for clip in manifest["clips"]:
+        (root / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], clip["id"] == MISLEADING)))
+    return root
+
+
+def add_participant(db: Database, study, bundle_root: Path, *, condition: int, answer, status: str = "completed",
+                    seed: int = 0, minutes: float = 10.0, excluded: bool = False) -> Participant:
+    """A participant with a real plan (app.plan) and `answer(screen) -> answers dict` for every screen."""
+    from datetime import UTC, datetime, timedelta
+
+    bundle = load_bundle(bundle_root)
+    with db.writing() as session:
+        number = session.query(Participant).count()
+        start = datetime(2024, 5, 1, 12, 0, tzinfo=UTC) + timedelta(hours=number)
+        participant = Participant(code=f"hand{number:03d}", study=study.study.id, platform="none", status=status,
+                                  condition=condition, created_at=start, excluded=excluded,
+                                  completed_at=start + timedelta(minutes=minutes) if status == "completed" else None)
+        session.add(participant)
+        session.flush()
+        participant.plan = dump_plan(build_plan(study, bundle, conditions(study)[condition], random.Random(seed)))
+        for step, screen in enumerate(participant.plan):
+            answers = answer(screen)
+            if screen["kind"] == "attention" and answers["attention"] != screen["expected"]:
+                participant.attention_failures += 1
+            session.add(Response(participant_id=participant.id, step=step, kind=screen["kind"], answers=answers,
+                                 video_events=[], plays=1 if "media" in screen else 0, client_ms=1000 + step,
+                                 server_ms=900 + step, submitted_at=start + timedelta(seconds=10 * step)))
+        participant.step = len(participant.plan)
+    return participant
+
+
+def label_of(screen: dict, agent: str) -> str:
+    return next(robot["label"] for robot in screen["robots"] if robot["agent"] == agent)
+
+
+def fisher_two_sided(a: int, b: int, c: int, d: int) -> float:
+    """Sum of the hypergeometric probabilities of every table with the same margins no more likely than this one."""
+    row1, col1, n = a + b, a + c, a + b + c + d
+
+    def prob(x: int) -> float:
+        return math.comb(col1, x) * math.comb(n - col1, row1 - x) / math.comb(n, row1)
+
+    observed = prob(a)
+    low, high = max(0, row1 + col1 - n), min(row1, col1)
+    return sum(prob(x) for x in range(low, high + 1) if prob(x) <= observed * (1 + 1e-7))
