@@ -72,13 +72,14 @@ class MCTSConfig:
                 raise ValueError(f"invalid MCTS setting: {message}")
 
 
-# Columns of the tree's arrays.
-VISITS, FIRST, LAST, COUNT, PARENT, DEPTH, TERMINAL = range(7)  # Tree.states: a state's visits, its first and
-# last action and how many, the action that led to it (-1 at the initial state), its steps from the initial state,
-# whether it ends the trajectory
-CHILD, NEXT, COMPLETED, OPEN, STATE, KEPT = range(6)  # Tree.links: an action's child state, its state's next
-# action, returns backed up, whether its child goes on, its state, whether it is still in the tree (receding mode)
-Q, SELECTIONS, TOTAL, BEST = range(4)  # Tree.stats: q, selections, sum and best of the returns backed up
+# Columns of the tree's arrays. Tree.states: a state's visits, its first and last action and their count, the action
+# that led to it (-1 at the initial state), its steps from the initial state, whether it ends the trajectory.
+# Tree.links: an action's child state, the next action of its state, returns backed up, whether its child goes on,
+# its state, whether it is still in the tree (receding mode drops branches). Tree.stats: q, selections, sum and
+# best of the returns backed up.
+VISITS, FIRST, LAST, COUNT, PARENT, DEPTH, TERMINAL = range(7)
+CHILD, NEXT, COMPLETED, OPEN, STATE, KEPT = range(6)
+Q, SELECTIONS, TOTAL, BEST = range(4)
 
 
 class Tree:
@@ -146,8 +147,8 @@ class Tree:
         return float(self.stats[action, BEST] if backup == "max" else self.stats[action, TOTAL] / completed)
 
     def keep_only(self, state: int, action: int) -> None:
-        """Drop every other action of ``state`` and what lies below it (receding mode's commit), snapshots first,
-        so that a long search keeps only the snapshots it can still branch from."""
+        """Drop every other action of ``state`` and what lies below it (receding mode's commit), with their
+        snapshots, so that a long search keeps only the snapshots it can still branch from."""
         dropped = [a for a in self.children(state) if a != action]
         while dropped:
             other = dropped.pop()

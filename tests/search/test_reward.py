@@ -178,3 +178,9 @@ def test_the_compiled_reward_equals_the_numpy_formulas_bit_for_bit(agents, setti
     for combine in ("mean", "min"):
         assert np.array_equal(pairwise_divergence(positions, config.norm, combine),
                               numpy_divergence(positions, config.norm, combine))
+
+
+@pytest.mark.parametrize("shape", [(5, 1, 2), (5, 2, 3), (2,)])
+def test_a_divergence_of_other_than_planar_vectors_of_two_or_more_agents_is_refused(shape):
+    with pytest.raises(ValueError, match=r"two or more agents \(\.\.\., N >= 2, 2\), not an array of shape"):
+        pairwise_divergence(np.zeros(shape), "plain", "mean")
