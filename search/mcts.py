@@ -163,11 +163,7 @@ class Tree:
 
     def write_actions_to(self, state: int, out: np.ndarray) -> None:
         """Write the environment actions from the initial state to ``state`` into ``out[: depth]``, step by step."""
-        states, links = self.states, self.links
-        while (edge := states[state, PARENT]) >= 0:
-            parent = links[edge, STATE]
-            out[states[parent, DEPTH] : states[state, DEPTH]] = self.actions[edge]
-            state = parent
+        _write_actions(state, self.states, self.links, self.actions, out)
 
     def actions_to(self, state: int) -> np.ndarray:
         """The environment actions from the initial state to ``state``, step by step, (depth, *shape)."""
@@ -181,6 +177,17 @@ def _grown(array: np.ndarray) -> np.ndarray:
     grown = np.empty((2 * array.shape[0], *array.shape[1:]), array.dtype)
     grown[: array.shape[0]] = array
     return grown
+
+
+@numba.njit(cache=True)
+def _write_actions(state, states, links, actions, out):
+    """``Tree.write_actions_to``: each action on the path to ``state``, once for every step it is held."""
+    edge = states[state, PARENT]
+    while edge >= 0:
+        parent = links[edge, STATE]
+        for t in range(states[parent, DEPTH], states[state, DEPTH]):
+            out[t] = actions[edge]
+        state, edge = parent, states[parent, PARENT]
 
 
 @numba.njit(cache=True)

@@ -131,21 +131,20 @@ class DivergenceReward:
         return goal, end
 
     def divergence(self, robot_actions, robot_pos, human_pos, goal, end) -> np.ndarray:
-        """Each step's divergence term (...), from agent arrays (..., N, 2), humans (..., n, 2) and the step's
-        events: the goal term on a goal step, the end term on an end step, the action divergence otherwise."""
+        """Each step's divergence term (B,), from agent arrays (B, N, 2), humans (B, n, 2) and the step's events
+        (B,): the goal term on a goal step, the end term on an end step, the action divergence otherwise."""
         c = self.config
         heuristic = _STATE_DIVERGENCE
         if self.heuristic is not state_divergence and end.any():
-            heuristic = np.asarray(self.heuristic(robot_pos, human_pos, c), dtype=np.float64).reshape(-1)
-        reward = np.empty(goal.shape)
-        _step(_rows(robot_actions), _rows(robot_pos), goal.reshape(-1), end.reshape(-1), heuristic,
-              c.norm == "squared", c.combine == "min", c.goal_bonus, c.alpha, c.horizon_offset, c.beta,
-              reward.reshape(-1))
+            heuristic = np.asarray(self.heuristic(robot_pos, human_pos, c), dtype=np.float64)
+        reward = np.empty(len(goal))
+        _step(robot_actions, robot_pos, goal, end, heuristic, c.norm == "squared", c.combine == "min", c.goal_bonus,
+              c.alpha, c.horizon_offset, c.beta, reward)
         return reward
 
     def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:
-        """Each reward term of one step (...), from agent arrays (..., N, 2), humans (..., n, 2), the environment
-        action (..., n, 2) and the step's events."""
+        """Each reward term of one step (B,), from agent arrays (B, N, 2), humans (B, n, 2), the environment
+        action (B, n, 2) and the step's events (B,)."""
         c = self.config
         divergence = self.divergence(robot_actions, robot_pos, human_pos, goal, end)
         return {
@@ -157,7 +156,7 @@ class DivergenceReward:
         }
 
     def step(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> np.ndarray:
-        """One step's reward (...): the sum of its terms, of which only the divergence term and the plausibility
+        """One step's reward (B,): the sum of its terms, of which only the divergence term and the plausibility
         term can be nonzero (a step is a goal, an end or neither)."""
         c = self.config
         reward = self.divergence(robot_actions, robot_pos, human_pos, goal, end)
@@ -185,7 +184,7 @@ _STATE_DIVERGENCE = np.empty(0)  # _step's heuristic values when the heuristic i
 
 
 def _rows(values) -> np.ndarray:
-    """Agent arrays (..., N, 2) as rows (B, N, 2) of float64, as the kernels take them (no copy if they are)."""
+    """Agent vectors (..., N, 2) as rows (B, N, 2) of float64, as the kernels take them (no copy if they are)."""
     values = np.asarray(values, dtype=np.float64)
     if values.ndim < 2 or values.shape[-2] < 2 or values.shape[-1] != 2:
         raise ValueError(f"a divergence compares vectors in the plane of two or more agents (..., N >= 2, 2), "
