@@ -381,9 +381,9 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
 
 @numba.njit(cache=True, nogil=True)
 def _holonomic(action, v_pref, done, velocity, turns):
-    """Each action as a velocity rescaled to at most ``v_pref`` (numpy's ``action * (v_pref / max(speed,
-    1e-300))`` where the speed is over it, bit for bit); a robot that has finished stands still, and one that
-    moves turns to its velocity. Returns whether every action was finite."""
+    """Each action as a velocity rescaled to at most ``v_pref`` (``action * (v_pref / max(speed, 1e-300))`` where
+    the speed is over it, bit for bit as the tests' numpy formula computes it); a robot that has finished stands
+    still, and one that moves turns to its velocity. Returns whether every action was finite."""
     finite = True
     for w in range(action.shape[0]):
         for r in range(action.shape[1]):
@@ -428,10 +428,10 @@ def _move_and_judge(robot_pos, robot_goal, human_pos, human_radius, robot_vel, h
                     event_time, path_length, min_clearance, dt, robot_radius, time_limit, discomfort_dist,
                     discomfort_factor, progress_factor, success_reward, collision_penalty, reward):
     """Robots move, then humans, time advances; each robot's move is judged (collision, success, timeout) and
-    rewarded; the state's arrays are updated in place. Every float operation is numpy's ``step`` of the same
-    formulas, in the same order, so the results are bit-identical to it: closest approach along the relative
-    motion of this step, surface distance, discomfort below ``discomfort_dist``, otherwise progress towards the
-    goal."""
+    rewarded; the state's arrays are updated in place. The float operations are those of the formulas written
+    with numpy arrays in the tests, in the same order, so the results are bit-identical to them: closest approach
+    along the relative motion of this step, surface distance, discomfort below ``discomfort_dist``, otherwise
+    progress towards the goal."""
     worlds, robots, humans = robot_pos.shape[0], robot_pos.shape[1], human_pos.shape[1]
     threshold = time_limit - 1e-9
     before = np.empty((humans, 2))  # a world's humans before their move

@@ -72,40 +72,50 @@ class MCTSConfig:
                 raise ValueError(f"invalid MCTS setting: {message}")
 
 
-# Columns of the tree's arrays.
-VISITS, FIRST, LAST, COUNT = range(4)  # Tree.states: a state's visits, its first and last action, how many
-CHILD, NEXT, COMPLETED, OPEN = range(4)  # Tree.links: an action's child state, its state's next action, returns
-Q, SELECTIONS, TOTAL, BEST = range(4)  # Tree.stats: q, selections, sum and best of the returns backed up
+# Columns of the tree's arrays. Tree.states: a state's visits, its first and last action and their count, the action
+# that led to it (-1 at the initial state), its steps from the initial state, whether it ends the trajectory.
+# Tree.links: an action's child state, the next action of its state, returns backed up, whether its child goes on,
+# its state, whether it is still in the tree (receding mode drops branches). Tree.stats: q, selections, sum and
+# best of the returns backed up.
+VISITS, FIRST, LAST, COUNT, PARENT, DEPTH, TERMINAL = range(7)
+CHILD, NEXT, COMPLETED, OPEN, STATE, KEPT = range(6)
+Q, SELECTIONS, TOTAL, BEST = range(4)
 
 
 class Tree:
-    """What selection and backup read and write, in flat arrays (grown by doubling), so that each is one compiled
-    loop: an iteration of a few steps descends through a dozen states of dozens of actions, then backs up through
-    as many. Row ``node.id`` holds a state's or an action's numbers; a state's actions form a list through
-    ``NEXT``, in the order they were added. An action's child is -1 until it is expanded, its q -inf while no
-    return is back (its siblings go first), and it is open while its child does not end the trajectory."""
+    """The search tree in flat arrays (grown by doubling), so that selection and backup are each one compiled loop:
+    an iteration of a few steps descends through a dozen states of dozens of actions, then backs up through as
+    many. A state or an action is its row. A state's actions form a list through ``NEXT``, in the order they were
+    added. An action's child is -1 until it is expanded, its q -inf while no return is back (its siblings go
+    first), and it is open while its child does not end the trajectory. State 0 is the initial state."""
 
-    def __init__(self):
-        self.states = np.zeros((16, 4), np.int64)
-        self.links = np.zeros((16, 4), np.int64)
+    def __init__(self, action_shape: tuple[int, ...], snapshot):
+        self.states = np.zeros((16, 7), np.int64)
+        self.values = np.zeros(16)  # each state's reward accumulated from the initial state
+        self.snapshots: list = []  # each state's simulator row; None when branching by replay, terminal or dropped
+        self.links = np.zeros((16, 6), np.int64)
         self.stats = np.zeros((16, 4))
-        self.state_nodes: list[StateNode | None] = []  # by id; None once forgotten
-        self.action_nodes: list[ActionNode | None] = []
+        self.actions = np.zeros((16, *action_shape))  # each action's environment action, held ``repeat`` steps
+        self.n_actions = 0
+        self._add_state(-1, 0, 0.0, False, snapshot)
 
-    def add_state(self, node: StateNode) -> int:
-        index = len(self.state_nodes)
+    def _add_state(self, parent: int, depth: int, value: float, terminal: bool, snapshot) -> int:
+        index = len(self.snapshots)
         if index == self.states.shape[0]:
-            self.states = _grown(self.states)
-        self.states[index] = (0, -1, -1, 0)
-        self.state_nodes.append(node)
+            self.states, self.values = _grown(self.states), _grown(self.values)
+        self.states[index] = (0, -1, -1, 0, parent, depth, terminal)
+        self.values[index] = value
+        self.snapshots.append(snapshot)
         return index
 
-    def add_action(self, node: ActionNode, state: int) -> int:
-        index = len(self.action_nodes)
+    def add_action(self, state: int, action: np.ndarray) -> int:
+        """A new action of ``state``, not yet selected."""
+        index = self.n_actions
         if index == self.links.shape[0]:
-            self.links, self.stats = _grown(self.links), _grown(self.stats)
-        self.links[index] = (-1, -1, 0, 1)
+            self.links, self.stats, self.actions = _grown(self.links), _grown(self.stats), _grown(self.actions)
+        self.links[index] = (-1, -1, 0, 1, state, 1)
         self.stats[index] = (-math.inf, 0.0, 0.0, -math.inf)
+        self.actions[index] = action
         last = self.states[state, LAST]
         if last < 0:
             self.states[state, FIRST] = index
@@ -113,8 +123,53 @@ class Tree:
             self.links[last, NEXT] = index
         self.states[state, LAST] = index
         self.states[state, COUNT] += 1
-        self.action_nodes.append(node)
+        self.n_actions += 1
         return index
+
+    def expand(self, action: int, depth: int, value: float, terminal: bool, snapshot) -> None:
+        """Make the state ``action`` leads to (without its snapshot if the action was dropped meanwhile)."""
+        child = self._add_state(action, depth, value, terminal, snapshot if self.links[action, KEPT] else None)
+        self.links[action, CHILD] = child
+        self.links[action, OPEN] = not terminal
+
+    def children(self, state: int) -> list[int]:
+        """The state's actions, in the order they were added."""
+        out, action = [], int(self.states[state, FIRST])
+        while action >= 0:
+            out.append(action)
+            action = int(self.links[action, NEXT])
+        return out
+
+    def q(self, action: int, backup: str) -> float:
+        completed = self.links[action, COMPLETED]
+        if not completed:
+            return -math.inf  # still in flight: its siblings go first
+        return float(self.stats[action, BEST] if backup == "max" else self.stats[action, TOTAL] / completed)
+
+    def keep_only(self, state: int, action: int) -> None:
+        """Drop every other action of ``state`` and what lies below it (receding mode's commit), with their
+        snapshots, so that a long search keeps only the snapshots it can still branch from."""
+        dropped = [a for a in self.children(state) if a != action]
+        while dropped:
+            other = dropped.pop()
+            self.links[other, KEPT] = 0
+            child = self.links[other, CHILD]
+            if child >= 0:
+                self.snapshots[child] = None
+                dropped.extend(self.children(child))
+        self.states[state, FIRST] = self.states[state, LAST] = action
+        self.states[state, COUNT] = 1
+        self.links[action, NEXT] = -1
+
+    def write_actions_to(self, state: int, out: np.ndarray) -> None:
+        """Write the environment actions from the initial state to ``state`` into ``out[: depth]``, step by step."""
+        _write_actions(state, self.states, self.links, self.actions, out)
+
+    def actions_to(self, state: int) -> np.ndarray:
+        """The environment actions from the initial state to ``state``, step by step, (depth, *shape)."""
+        out = np.empty((self.states[state, DEPTH], *self.actions.shape[1:]))
+        self.write_actions_to(state, out)
+        return out
 
 
 def _grown(array: np.ndarray) -> np.ndarray:
@@ -124,78 +179,15 @@ def _grown(array: np.ndarray) -> np.ndarray:
     return grown
 
 
-class StateNode:
-    """A state of the tree; its numbers live in ``tree`` (row ``id``)."""
-
-    __slots__ = ("tree", "id", "parent", "depth", "value", "terminal", "children", "snapshot")
-
-    def __init__(self, tree: Tree, parent: ActionNode | None, depth: int, value: float, terminal: bool,
-                 snapshot=None):
-        self.tree = tree
-        self.id = tree.add_state(self)
-        self.parent = parent  # the action that led here
-        self.depth = depth  # steps from the initial state
-        self.value = value  # reward accumulated from the initial state
-        self.terminal = terminal
-        self.children: list[ActionNode] = []
-        self.snapshot = snapshot  # this state's simulator row; None when branching by replay or terminal
-
-    @property
-    def visits(self) -> int:
-        return int(self.tree.states[self.id, VISITS])
-
-    def add(self, action: np.ndarray) -> ActionNode:
-        """A new action of this state, not yet selected."""
-        self.children.append(ActionNode(self, action))
-        return self.children[-1]
-
-    def keep_only(self, action: ActionNode) -> None:
-        """Forget every other action and what lies below it (receding mode's commit), so that their snapshots go
-        once the iterations still running through them have finished."""
-        dropped = [a for a in self.children if a is not action]
-        while dropped:
-            other = dropped.pop()
-            self.tree.action_nodes[other.id] = None
-            if other.child is not None:
-                self.tree.state_nodes[other.child.id] = None
-                dropped.extend(other.child.children)
-        self.children = [action]
-        states = self.tree.states
-        states[self.id, FIRST] = states[self.id, LAST] = action.id
-        states[self.id, COUNT] = 1
-        self.tree.links[action.id, NEXT] = -1
-
-
-class ActionNode:
-    """An action of a state, held for ``repeat`` steps; its numbers live in ``tree`` (row ``id``)."""
-
-    __slots__ = ("tree", "id", "parent", "action", "child")
-
-    def __init__(self, parent: StateNode, action: np.ndarray):
-        self.tree = parent.tree
-        self.id = self.tree.add_action(self, parent.id)
-        self.parent = parent
-        self.action = action
-        self.child: StateNode | None = None
-
-    @property
-    def completed(self) -> int:
-        """Returns backed up so far."""
-        return int(self.tree.links[self.id, COMPLETED])
-
-    def q(self, backup: str) -> float:
-        if not self.completed:
-            return -math.inf  # still in flight: its siblings go first
-        stats = self.tree.stats[self.id]
-        return float(stats[BEST] if backup == "max" else stats[TOTAL] / self.completed)
-
-    def expand(self, depth: int, value: float, terminal: bool, snapshot) -> None:
-        """Make the state this action leads to."""
-        self.child = StateNode(self.tree, self, depth, value, terminal, snapshot)
-        self.tree.links[self.id, CHILD] = self.child.id
-        self.tree.links[self.id, OPEN] = not terminal
-        if self.tree.action_nodes[self.id] is None:  # in a branch dropped while this iteration ran
-            self.tree.state_nodes[self.child.id] = None
+@numba.njit(cache=True)
+def _write_actions(state, states, links, actions, out):
+    """``Tree.write_actions_to``: each action on the path to ``state``, once for every step it is held."""
+    edge = states[state, PARENT]
+    while edge >= 0:
+        parent = links[edge, STATE]
+        for t in range(states[parent, DEPTH], states[state, DEPTH]):
+            out[t] = actions[edge]
+        state, edge = parent, states[parent, PARENT]
 
 
 @numba.njit(cache=True)
@@ -259,31 +251,12 @@ def _record_step(held, reward, terminal, actions, lengths, returns, taken, count
     return expanded, ended
 
 
-def write_actions_to(node: StateNode, out: np.ndarray) -> None:
-    """Write the environment actions from the initial state to ``node`` into ``out[: node.depth]``."""
-    while node.parent is not None:
-        edge = node.parent
-        out[edge.parent.depth : node.depth] = edge.action
-        node = edge.parent
-
-
-def actions_to(node: StateNode) -> np.ndarray:
-    """The environment actions from the initial state to ``node``, step by step, (depth, *shape)."""
-    path = []
-    while node.parent is not None:
-        edge = node.parent
-        path.extend([edge.action] * (node.depth - edge.parent.depth))
-        node = edge.parent
-    return np.array(path[::-1])
-
-
 class MCTS:
     def __init__(self, problem: Problem, tracker: Tracker, rng: np.random.Generator, config: MCTSConfig):
         self.problem, self.tracker, self.rng, self.config = problem, tracker, rng, config
         problem.reset(1)
-        snapshot = problem.snapshot() if config.branch == "snapshot" else None
-        self.tree = Tree()
-        self.root = self.start = StateNode(self.tree, None, 0, 0.0, False, snapshot)
+        self.tree = Tree(problem.action_shape, problem.snapshot() if config.branch == "snapshot" else None)
+        self.root = 0  # the state selection starts from: the initial state (in receding mode, the last committed)
         self.replayed = 0  # simulator steps spent replaying prefixes from reset (branch="replay")
         self.rollouts = 0  # iterations finished (backed up)
         self.rollout_ends = 0  # their lengths from the initial state, summed
@@ -302,50 +275,51 @@ class MCTS:
         """Steps from the root to the end of the best trajectory so far (the horizon if none yet)."""
         ranked = self.tracker.queue.ranked()
         length = ranked[0].actions.shape[0] if ranked else self.problem.horizon
-        return length - self.root.depth
+        return length - int(self.tree.states[self.root, DEPTH])
 
     def maybe_commit(self) -> None:
         """Receding mode: once the root's share of the budget is spent and one of its actions has a value, move
         the root to the child of its best action and forget the other branches (iterations still running in
         them finish and count, but no longer steer the search)."""
-        if self.tracker.steps < self.until or self.root.terminal:
+        tree = self.tree
+        if self.tracker.steps < self.until or tree.states[self.root, TERMINAL]:
             return
-        done = [a for a in self.root.children if a.child is not None and a.completed]
+        done = [a for a in tree.children(self.root) if tree.links[a, CHILD] >= 0 and tree.links[a, COMPLETED]]
         if not done:
             return
-        best = max(done, key=lambda a: a.q(self.config.backup))
-        self.root.keep_only(best)
-        self.root = best.child
+        best = max(done, key=lambda a: tree.q(a, self.config.backup))
+        tree.keep_only(self.root, best)
+        self.root = int(tree.links[best, CHILD])
         self.until = self._commit_point()
 
     @property
     def open(self) -> bool:
         """Whether new iterations may start: budget left, and (receding) a root that does not end the search."""
-        return not self.tracker.exhausted and not self.root.terminal
+        return not self.tracker.exhausted and not self.tree.states[self.root, TERMINAL]
 
-    def select(self, path: np.ndarray) -> tuple[int, ActionNode]:
+    def select(self, path: np.ndarray) -> tuple[int, int]:
         """Descend from the root to an action whose child is new or in flight, counting visits and selections
-        (widening where due); the ids of the actions taken go into ``path``. Returns (their number, the last)."""
+        (widening where due); the actions taken go into ``path``. Returns (their number, the last)."""
         c, tree = self.config, self.tree
-        length, widen = _descend(self.root.id, tree.states, tree.links, tree.stats, c.k, c.alpha, c.exploration,
-                                 path)
+        length, widen = _descend(self.root, tree.states, tree.links, tree.stats, c.k, c.alpha, c.exploration, path)
         if widen < 0:
-            return length, tree.action_nodes[path[length - 1]]
-        action = tree.state_nodes[widen].add(self.problem.prior.sample(self.rng, 1)[0])
-        tree.stats[action.id, SELECTIONS] += 1
-        path[length] = action.id
+            return length, int(path[length - 1])
+        action = tree.add_action(widen, self.problem.prior.sample(self.rng, 1)[0])
+        tree.stats[action, SELECTIONS] += 1
+        path[length] = action
         return length + 1, action
 
     def backup(self, path: np.ndarray, value: float) -> None:
         _backup(path, value, self.config.backup == "mean", self.tree.links, self.tree.stats)
 
-    def state_of(self, node: StateNode):
-        """The node's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
+    def state_of(self, state: int):
+        """The state's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
         which leaves the problem holding that one row."""
-        if node.snapshot is not None:
-            return node.snapshot
+        snapshot = self.tree.snapshots[state]
+        if snapshot is not None:
+            return snapshot
         self.problem.reset(1)
-        for action in actions_to(node):
+        for action in self.tree.actions_to(state):
             self.problem.step(action[None])
             self.tracker.count(1)
             self.replayed += 1
@@ -372,13 +346,13 @@ class Rollouts:
         self.taken = np.zeros(width, dtype=np.int64)  # steps each iteration has taken
         self.countdown = np.zeros(width, dtype=np.int64)  # steps until its held action is renewed
         self.held = np.zeros((width, *problem.action_shape))  # the new edge's action, then the rollout's
-        # Each row's path through the tree (action ids; an action takes at least a step) and its new edge.
+        # Each row's path through the tree (actions; an action takes at least a step) and its new edge.
         self.paths = np.zeros((width, problem.horizon + 1), dtype=np.int64)
         self.path_lengths = np.zeros(width, dtype=np.int64)
-        self.edges: list[ActionNode | None] = [None] * width
+        self.edges = np.zeros(width, dtype=np.int64)
 
     def run(self) -> None:
-        search = self.search
+        search, tree = self.search, self.search.tree
         self._fill(np.zeros(0, dtype=np.int64))
         while self.n:
             terminal, ended = self._step()
@@ -388,7 +362,7 @@ class Rollouts:
             for i in ended.tolist():
                 if terminal[i]:
                     if search.tracker.queue.admits(self.returns[i]):  # only then its tree part is written out
-                        write_actions_to(self.edges[i].parent, self.actions[i])
+                        tree.write_actions_to(tree.links[self.edges[i], STATE], self.actions[i])
                     search.tracker.finish(self.returns[i], self.actions[i, : self.lengths[i]])
                 search.backup(self.paths[i, : self.path_lengths[i]], float(self.returns[i]))
                 search.rollouts += 1
@@ -411,19 +385,20 @@ class Rollouts:
         search.batch_steps += 1
         expanded, ended = _record_step(self.held, reward, terminal, self.actions, self.lengths, self.returns,
                                        self.taken, countdown, config.repeat, config.rollout_depth)
+        tree = search.tree
         for i in np.flatnonzero(expanded).tolist():
             action = self.edges[i]
-            if action.child is None:  # another row may have expanded it first
+            if tree.links[action, CHILD] < 0:  # another row may have expanded it first
                 keep = config.branch == "snapshot" and not terminal[i]
-                action.expand(int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
-                              problem.snapshot([i]) if keep else None)
+                tree.expand(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
+                            problem.snapshot([i]) if keep else None)
         return terminal, ended
 
     def _fill(self, ended: np.ndarray) -> None:
         """Start new iterations in the rows ``ended`` (their iterations are over), and in unused rows, while the
         budget is expected to allow them; drop the ended rows left over. The budget estimate: every iteration in
         flight or started runs to the mean length of those finished so far (all ``batch`` at the start)."""
-        search, problem, n = self.search, self.search.problem, self.n
+        search, problem, tree, n = self.search, self.search.problem, self.search.tree, self.n
         end = search.rollout_ends / search.rollouts if search.rollouts else 0.0  # iterations end near one depth
         if not search.rollouts or search.tracker.remaining > self.actions.shape[0] * problem.horizon:
             spare = math.inf  # the first batch, or far from the end of the budget: no estimate needed
@@ -437,15 +412,16 @@ class Rollouts:
         while len(snapshots) < len(places) and spare > 0 and search.open:
             i = places[len(snapshots)]
             self.path_lengths[i], edge = search.select(self.paths[i])
-            node = edge.parent
-            snapshots.append(search.state_of(node))  # a replay from reset replaces the batch (saved above)
+            state = tree.links[edge, STATE]
+            depth = int(tree.states[state, DEPTH])
+            snapshots.append(search.state_of(state))  # a replay from reset replaces the batch (saved above)
             self.edges[i] = edge
-            self.lengths[i] = node.depth
+            self.lengths[i] = depth
             self.taken[i] = 0
             self.countdown[i] = search.config.repeat
-            self.returns[i] = node.value
-            self.held[i] = edge.action
-            spare -= max(end - node.depth, 1.0)
+            self.returns[i] = tree.values[state]
+            self.held[i] = tree.actions[edge]
+            spare -= max(end - depth, 1.0)
         if saved is not None:
             problem.restore(saved)
         reused = min(len(snapshots), ended.size)
@@ -470,9 +446,8 @@ class Rollouts:
         """Keep rows ``keep`` (in order) as rows 0, 1, ..."""
         count = keep.size
         for array in (self.actions, self.lengths, self.returns, self.taken, self.countdown, self.held, self.paths,
-                      self.path_lengths):
+                      self.path_lengths, self.edges):
             array[:count] = array[keep]
-        self.edges[:count] = [self.edges[i] for i in keep.tolist()]
         self.n = count
 
 

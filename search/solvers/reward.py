@@ -18,14 +18,15 @@ all agent pairs by their mean or their minimum (the pair that differs least deci
 ``alpha = 1, goal_bonus = 100`` and ``beta = 1e4, horizon_offset = -1e5``; the defaults here are the plain
 ``alpha = beta = 1`` of the paper's formula.
 
-The same per-step function scores a batch of search rollouts and a replayed trajectory, step by step, so a
-summary's numbers are exactly the search's for the same simulated steps.
+One compiled kernel computes every divergence: it scores a batch of search rollouts and a replayed trajectory
+(summaries, ``foil verify``), step by step, so a summary's numbers are exactly the search's for the same simulated
+steps. The tests hold the formula written with numpy arrays, as the reference the kernel must match bit for bit.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
-from functools import cache
 from importlib import import_module
 
 import numba
@@ -82,22 +83,11 @@ class RewardConfig:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-@cache
-def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    return np.triu_indices(n, k=1)
-
-
 def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarray:
-    """Divergence of per-agent vectors (..., N, D) over all agent pairs, as (...)."""
-    if values.shape[-2] == 2:  # one pair (the mean or min of one number is that number): fewer array operations
-        diff = values[..., 0, :] - values[..., 1, :]
-        squared = np.sum(diff * diff, axis=-1)
-        return squared if norm == "squared" else np.sqrt(squared)
-    i, j = _pairs(values.shape[-2])
-    diff = values[..., i, :] - values[..., j, :]
-    squared = np.sum(diff * diff, axis=-1)
-    pairs = squared if norm == "squared" else np.sqrt(squared)
-    return pairs.mean(axis=-1) if combine == "mean" else pairs.min(axis=-1)
+    """Divergence of per-agent vectors in the plane (..., N, 2) over all agent pairs, as (...)."""
+    out = np.empty(values.shape[:-2])
+    _divergences(_rows(values), norm == "squared", combine == "min", out.reshape(-1))
+    return out
 
 
 def state_divergence(robot_pos: np.ndarray, human_pos: np.ndarray, config: RewardConfig) -> np.ndarray:
@@ -140,47 +130,37 @@ class DivergenceReward:
         end = ~goal & ((t >= self.config.horizon) | finished)
         return goal, end
 
-    def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:
-        """Each reward term of one step (...), from agent arrays (..., N, 2), humans (..., n, 2), the environment
-        action (..., n, 2) and the step's events."""
+    def divergence(self, robot_actions, robot_pos, human_pos, goal, end) -> np.ndarray:
+        """Each step's divergence term (B,), from agent arrays (B, N, 2), humans (B, n, 2) and the step's events
+        (B,): the goal term on a goal step, the end term on an end step, the action divergence otherwise."""
         c = self.config
-        running = ~goal & ~end
-        d_a = pairwise_divergence(robot_actions, c.norm, c.combine)
-        d_s = pairwise_divergence(robot_pos, c.norm, c.combine)
-        h = d_s if self.heuristic is state_divergence else self.heuristic(robot_pos, human_pos, c)
-        plausibility = c.plausibility * self.prior.log_prob(env_action) if c.plausibility else np.zeros_like(d_a)
+        heuristic = _STATE_DIVERGENCE
+        if self.heuristic is not state_divergence and end.any():
+            heuristic = np.asarray(self.heuristic(robot_pos, human_pos, c), dtype=np.float64)
+        reward = np.empty(len(goal))
+        _step(robot_actions, robot_pos, goal, end, heuristic, c.norm == "squared", c.combine == "min", c.goal_bonus,
+              c.alpha, c.horizon_offset, c.beta, reward)
+        return reward
+
+    def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:
+        """Each reward term of one step (B,), from agent arrays (B, N, 2), humans (B, n, 2), the environment
+        action (B, n, 2) and the step's events (B,)."""
+        c = self.config
+        divergence = self.divergence(robot_actions, robot_pos, human_pos, goal, end)
         return {
-            "action_divergence": np.where(running, d_a, 0.0),
-            "goal": np.where(goal, c.goal_bonus + c.alpha * d_s, 0.0),
-            "horizon": np.where(end, c.horizon_offset + c.beta * h, 0.0),
-            "plausibility": plausibility,
+            "action_divergence": np.where(~goal & ~end, divergence, 0.0),
+            "goal": np.where(goal, divergence, 0.0),
+            "horizon": np.where(end, divergence, 0.0),
+            "plausibility": c.plausibility * self.prior.log_prob(env_action) if c.plausibility
+            else np.zeros(goal.shape),
         }
 
     def step(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> np.ndarray:
-        """One step's reward (...): the sum of its terms in the order ``trajectory`` adds them. A step is either a
-        goal, an end or neither, so only one of the first three terms is nonzero: each row gets that one (plus
-        the plausibility term), the same number as the full sum, with the state divergence and the heuristic
-        computed only when some row needs them."""
+        """One step's reward (B,): the sum of its terms, of which only the divergence term and the plausibility
+        term can be nonzero (a step is a goal, an end or neither)."""
         c = self.config
-        pair = robot_actions.ndim == 3 and robot_actions.shape[1:] == (2, 2) == robot_pos.shape[1:]
-        if pair and robot_actions.dtype == robot_pos.dtype == np.float64 and self.heuristic is state_divergence:
-            reward = np.empty(goal.shape)  # a batch of one pair (the search's case): one compiled pass
-            _pair_step(robot_actions, robot_pos, goal, end, c.norm == "squared", c.goal_bonus, c.alpha,
-                       c.horizon_offset, c.beta, reward)
-            return reward + c.plausibility * self.prior.log_prob(env_action) if c.plausibility else reward
-        reward = np.where(goal | end, 0.0, pairwise_divergence(robot_actions, c.norm, c.combine))
-        if goal.any():
-            d_s = pairwise_divergence(robot_pos, c.norm, c.combine)
-            reward = np.where(goal, c.goal_bonus + c.alpha * d_s, reward)
-        if end.any():
-            if self.heuristic is state_divergence:
-                h = pairwise_divergence(robot_pos, c.norm, c.combine)
-            else:
-                h = self.heuristic(robot_pos, human_pos, c)
-            reward = np.where(end, c.horizon_offset + c.beta * h, reward)
-        if c.plausibility:
-            reward = reward + c.plausibility * self.prior.log_prob(env_action)
-        return reward
+        reward = self.divergence(robot_actions, robot_pos, human_pos, goal, end)
+        return reward + c.plausibility * self.prior.log_prob(env_action) if c.plausibility else reward
 
     def trajectory(self, trajectory, dt: float) -> tuple[float, dict[str, float], np.ndarray]:
         """Total reward, per-term totals and per-step terminal flags of a replayed ``coupled.Trajectory``.
@@ -200,22 +180,56 @@ class DivergenceReward:
         return sequential_sum(per_step), {k: sequential_sum(v) for k, v in terms.items()}, goal | end
 
 
+_STATE_DIVERGENCE = np.empty(0)  # _step's heuristic values when the heuristic is the state divergence
+
+
+def _rows(values) -> np.ndarray:
+    """Agent vectors (..., N, 2) as rows (B, N, 2) of float64, as the kernels take them (no copy if they are)."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim < 2 or values.shape[-2] < 2 or values.shape[-1] != 2:
+        raise ValueError(f"a divergence compares vectors in the plane of two or more agents (..., N >= 2, 2), "
+                         f"not an array of shape {values.shape}")
+    return values.reshape(-1, *values.shape[-2:])
+
+
 @numba.njit(cache=True)
-def _pair_step(robot_actions, robot_pos, goal, end, squared, goal_bonus, alpha, horizon_offset, beta, reward):
-    """``DivergenceReward.step`` for rows of two agents and the default heuristic, with numpy's operations in
-    numpy's order (the same numbers, bit for bit)."""
+def _divergence(values, row, squared, minimum):
+    """The divergence of row ``row`` of agent vectors (B, N, 2): the plain or squared norm of each pair's
+    difference, then their minimum or their mean (the pairs summed one by one, in the order (0, 1), (0, 2), ...,
+    (1, 2), ...)."""
+    agents, total, least = values.shape[1], 0.0, math.inf
+    for i in range(agents):
+        for j in range(i + 1, agents):
+            dx, dy = values[row, i, 0] - values[row, j, 0], values[row, i, 1] - values[row, j, 1]
+            d = dx * dx + dy * dy
+            if not squared:
+                d = np.sqrt(d)
+            total += d
+            least = min(least, d)
+    return least if minimum else total / (agents * (agents - 1) // 2)
+
+
+@numba.njit(cache=True)
+def _divergences(values, squared, minimum, out):
+    """``_divergence`` of every row of ``values`` (B, N, 2) into ``out`` (B,)."""
+    for b in range(out.shape[0]):
+        out[b] = _divergence(values, b, squared, minimum)
+
+
+@numba.njit(cache=True)
+def _step(robot_actions, robot_pos, goal, end, heuristic, squared, minimum, goal_bonus, alpha, horizon_offset,
+          beta, reward):
+    """Each row's divergence term into ``reward`` (B,): ``goal_bonus + alpha * d_s`` on a goal step,
+    ``horizon_offset + beta * h`` on an end step (h: ``heuristic[b]``, or d_s where ``heuristic`` is empty), the
+    action divergence d_a otherwise."""
     for b in range(reward.shape[0]):
-        source = robot_pos if goal[b] or end[b] else robot_actions
-        dx, dy = source[b, 0, 0] - source[b, 1, 0], source[b, 0, 1] - source[b, 1, 1]
-        d = dx * dx + dy * dy
-        if not squared:
-            d = np.sqrt(d)
         if goal[b]:
-            reward[b] = goal_bonus + alpha * d
+            reward[b] = goal_bonus + alpha * _divergence(robot_pos, b, squared, minimum)
         elif end[b]:
-            reward[b] = horizon_offset + beta * d
+            h = heuristic[b] if heuristic.size else _divergence(robot_pos, b, squared, minimum)
+            reward[b] = horizon_offset + beta * h
         else:
-            reward[b] = d
+            reward[b] = _divergence(robot_actions, b, squared, minimum)
 
 
 def sequential_sum(values: np.ndarray) -> float:

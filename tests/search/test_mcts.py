@@ -1,5 +1,3 @@
-import gc
-
 import numpy as np
 import pytest
 
@@ -8,7 +6,7 @@ from search.sim.coupled import replay
 from search.sim.scenarios import load_scenario
 from search.solvers.baselines import random_search
 from search.solvers.coupled_problem import CoupledProblem
-from search.solvers.mcts import MCTSConfig, StateNode, mcts
+from search.solvers.mcts import CHILD, DEPTH, PARENT, STATE, TERMINAL, VISITS, MCTSConfig, Tree, mcts
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from tests.search.synthetic import LockProblem
@@ -21,12 +19,13 @@ def coupled(horizon: int = 40) -> CoupledProblem:
                           reward=RewardConfig(horizon=horizon))
 
 
-def nodes(root: StateNode):
+def nodes(tree: Tree, root: int = 0):
+    """The states below ``root`` (itself included), through the actions the tree keeps."""
     stack = [root]
     while stack:
-        node = stack.pop()
-        yield node
-        stack.extend(a.child for a in node.children if a.child is not None)
+        state = stack.pop()
+        yield state
+        stack.extend(int(tree.links[a, CHILD]) for a in tree.children(state) if tree.links[a, CHILD] >= 0)
 
 
 def test_mcts_finds_the_lock_optimum_that_random_search_misses():
@@ -45,14 +44,15 @@ def test_mcts_finds_the_lock_optimum_that_random_search_misses():
 def test_widening_rule(problem, budget):
     config = MCTSConfig(k=0.5, alpha=0.5, batch=8, repeat=1)
     search = mcts(problem(), Tracker(budget, 5), np.random.default_rng(1), config)
-    checked = 0
-    for node in nodes(search.root):
-        limit = config.k * node.visits ** config.alpha
-        terminal = sum(a.child is not None and a.child.terminal for a in node.children)
-        assert limit <= len(node.children), "a node visited n times holds at least k * n**alpha actions"
+    tree, checked = search.tree, 0
+    for state in nodes(tree, search.root):
+        visits, children = tree.states[state, VISITS], tree.children(state)
+        limit = config.k * visits ** config.alpha
+        terminal = sum(tree.links[a, CHILD] >= 0 and tree.states[tree.links[a, CHILD], TERMINAL] for a in children)
+        assert limit <= len(children), "a node visited n times holds at least k * n**alpha actions"
         # beyond the limit only when every action so far ended the trajectory (then it must widen to go on)
-        assert len(node.children) < limit + 1 + terminal
-        checked += node.visits > 0
+        assert len(children) < limit + 1 + terminal
+        checked += visits > 0
     assert checked >= 5
 
 
@@ -95,7 +95,8 @@ def test_repeat_holds_each_action_for_its_steps():
     for found in tracker.queue.ranked():
         steps = np.arange(len(found.actions))
         assert np.array_equal(found.actions, found.actions[steps - steps % 4])
-    depths = {node.depth for node in nodes(search.root) if not node.terminal}
+    tree = search.tree
+    depths = {tree.states[state, DEPTH] for state in nodes(tree) if not tree.states[state, TERMINAL]}
     assert depths and all(depth % 4 == 0 for depth in depths)
 
 
@@ -103,15 +104,17 @@ def test_receding_horizon_commits_step_by_step_and_drops_other_branches():
     tracker = Tracker(2000, 5)
     search = mcts(coupled(horizon=20), tracker, np.random.default_rng(0),
                   MCTSConfig(mode="receding", batch=8, repeat=2))
-    assert search.root.depth >= 4
-    node = search.root
-    while node.parent is not None:  # every committed state kept only the action it committed
-        node = node.parent.parent
-        assert len(node.children) == 1
-    assert tracker.steps >= tracker.budget or search.root.terminal
-    gc.collect()  # the dropped branches are gone, snapshots and all: a long search does not keep them
-    alive = {id(o) for o in gc.get_objects() if type(o) is StateNode}
-    assert alive == {id(node) for node in nodes(search.start)}
+    tree = search.tree
+    assert tree.states[search.root, DEPTH] >= 4
+    state = search.root
+    while tree.states[state, PARENT] >= 0:  # every committed state kept only the action it committed
+        state = tree.links[tree.states[state, PARENT], STATE]
+        assert len(tree.children(state)) == 1
+    assert tracker.steps >= tracker.budget or tree.states[search.root, TERMINAL]
+    # the dropped branches' snapshots are gone: a long search keeps only those of the states it still holds
+    kept = set(nodes(tree))
+    assert len(kept) < len(tree.snapshots)
+    assert {i for i, snapshot in enumerate(tree.snapshots) if snapshot is not None} <= kept
 
 
 def test_bad_settings_say_what_is_wrong():
@@ -165,7 +168,7 @@ def test_rollout_depth_cuts_iterations_after_their_new_edge():
     search = mcts(problem, tracker, np.random.default_rng(0), MCTSConfig(batch=4, repeat=1, rollout_depth=3))
     assert tracker.steps <= 4 * search.rollouts  # every iteration: its new edge and at most 3 more steps
     assert tracker.trajectories < search.rollouts  # cut iterations back up without a finished trajectory
-    assert max(node.depth for node in nodes(search.root)) >= 5
+    assert max(search.tree.states[state, DEPTH] for state in nodes(search.tree)) >= 5
 
 
 class WithoutAssign(LockProblem):

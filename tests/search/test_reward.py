@@ -121,21 +121,66 @@ def far_humans(robot_pos, human_pos, config):
     return np.linalg.norm(human_pos - robot_pos[..., :1, :], axis=-1).mean(axis=-1)
 
 
-@pytest.mark.parametrize("agents", [2, 3])
+def numpy_divergence(values, norm, combine):
+    """The divergence as the paper writes it, with numpy arrays: the norm of each agent pair's difference, then
+    their mean or minimum."""
+    i, j = np.triu_indices(values.shape[-2], k=1)
+    diff = values[..., i, :] - values[..., j, :]
+    squared = np.sum(diff * diff, axis=-1)
+    pairs = squared if norm == "squared" else np.sqrt(squared)
+    if combine == "min":
+        return pairs.min(axis=-1)
+    # the pairs summed in order (numpy's own sum would add the pairs of one row pairwise from 8 on)
+    return sum(pairs[..., k] for k in range(pairs.shape[-1])) / pairs.shape[-1]
+
+
+def numpy_step_terms(config, heuristic, prior, robot_actions, robot_pos, human_pos, env_action, goal, end):
+    """The reward terms of a step with numpy arrays: the reference the compiled reward must match bit for bit."""
+    c = config
+    d_a = numpy_divergence(robot_actions, c.norm, c.combine)
+    d_s = numpy_divergence(robot_pos, c.norm, c.combine)
+    h = d_s if heuristic is None else heuristic(robot_pos, human_pos, c)
+    return {
+        "action_divergence": np.where(~goal & ~end, d_a, 0.0),
+        "goal": np.where(goal, c.goal_bonus + c.alpha * d_s, 0.0),
+        "horizon": np.where(end, c.horizon_offset + c.beta * h, 0.0),
+        "plausibility": c.plausibility * prior.log_prob(env_action) if c.plausibility else np.zeros_like(d_a),
+    }
+
+
+@pytest.mark.parametrize("agents", [2, 3, 5])
 @pytest.mark.parametrize("settings", [
     {}, {"norm": "squared", "combine": "min", "goal_bonus": 100.0, "beta": 1e4, "horizon_offset": -1e5},
     {"plausibility": 0.3, "prior": "gaussian", "heuristic": "tests.search.test_reward:far_humans"},
 ])
-def test_a_step_is_the_sum_of_its_terms_bit_for_bit(agents, settings):
+def test_the_compiled_reward_equals_the_numpy_formulas_bit_for_bit(agents, settings):
+    """Searches and replays score steps with one compiled kernel; it must give the numpy formulas' numbers to the
+    last bit (a summary is checked exactly), and a step's reward must be the sum of its terms."""
     config = RewardConfig(**settings)
-    r = DivergenceReward(config, ActionPrior((4, 2), 0.25, config.prior, config.prior_sigma))
+    prior = ActionPrior((4, 2), 0.25, config.prior, config.prior_sigma)
+    r = DivergenceReward(config, prior)
+    heuristic = far_humans if "heuristic" in settings else None
     rng = np.random.default_rng(agents)
     rows = 200
-    actions, positions = rng.normal(size=(rows, agents, 2)), rng.normal(size=(rows, agents, 2)) * 5
+    actions = rng.normal(size=(rows, agents, 2)) * np.exp(rng.normal(size=(rows, agents, 1)) * 3)
+    positions = rng.normal(size=(rows, agents, 2)) * 5
     humans, env = rng.normal(size=(rows, 4, 2)), rng.uniform(-0.25, 0.25, (rows, 4, 2))
     goal = rng.random(rows) < 0.1
     end = ~goal & (rng.random(rows) < 0.1)
     for g, e in [(goal, end), (goal & False, end & False), (goal, end & False), (goal & False, end)]:
+        expected = numpy_step_terms(config, heuristic, prior, actions, positions, humans, env, g, e)
         terms = r.step_terms(actions, positions, humans, env, g, e)
+        assert terms.keys() == expected.keys()
+        for name in terms:
+            assert np.array_equal(terms[name], expected[name]), name
         total = terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
         assert np.array_equal(r.step(actions, positions, humans, env, g, e), total)
+    for combine in ("mean", "min"):
+        assert np.array_equal(pairwise_divergence(positions, config.norm, combine),
+                              numpy_divergence(positions, config.norm, combine))
+
+
+@pytest.mark.parametrize("shape", [(5, 1, 2), (5, 2, 3), (2,)])
+def test_a_divergence_of_other_than_planar_vectors_of_two_or_more_agents_is_refused(shape):
+    with pytest.raises(ValueError, match=r"two or more agents \(\.\.\., N >= 2, 2\), not an array of shape"):
+        pairwise_divergence(np.zeros(shape), "plain", "mean")
