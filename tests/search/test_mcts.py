@@ -9,7 +9,7 @@ from search.solvers.coupled_problem import CoupledProblem
 from search.solvers.mcts import CHILD, DEPTH, PARENT, STATE, TERMINAL, VISITS, MCTSConfig, Tree, mcts
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-from tests.search.synthetic import LockProblem
+from tests.support.synthetic import LockProblem
 
 SEEDS = range(5)
 
