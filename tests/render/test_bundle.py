@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from app.bundle import BundleError
 from search.bundle.build import BuildError, build_bundle, load_build, parse_build, plan, search_inputs, search_job
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -188,11 +189,25 @@ def test_a_study_file_without_a_build_table_is_refused(tmp_path):
 
 @pytest.mark.parametrize("name", ["paper.toml", "demo.toml"])
 def test_shipped_study_files_build_and_serve(name):
+    """Every search of the shipped study files is valid (settings, scenarios), and the clips they plan are what
+    the server asks for: a manifest of them passes the server's start-up check, one label per robot in a round."""
+    from app.bundle import Bundle, check_study_against_bundle
+    from app.formats import ManifestClip
     from app.study import load_study
+    from search.clips.render import robot_label
 
     spec, _ = load_build(ROOT / "studies" / name)
-    assert plan(spec)
-    assert load_study(ROOT / "studies" / name).build is not None  # the server reads the same file
+    jobs = plan(spec)
+    assert all(search_inputs(search_job(job)) for job in jobs)
+    clips = {job.id: ManifestClip(id=job.id, file=f"clips/{job.id}.mp4", sha256=f"{n:064x}", scheme=job.scheme.name,
+                                  scenario=job.scenario, agents=list(job.pair),
+                                  labels=[robot_label(number) for number in job.numbers], better=job.pair[0])
+             for n, job in enumerate(jobs)}
+    study = load_study(ROOT / "studies" / name)  # the server reads the same file
+    check_study_against_bundle(study, Bundle(root=ROOT, clips=clips, paths={}))
+    without_one = dict(list(clips.items())[1:])
+    with pytest.raises(BundleError, match="needs a clip of"):
+        check_study_against_bundle(study, Bundle(root=ROOT, clips=without_one, paths={}))
 
 
 def test_paper_build_reproduces_the_papers_clip_set():
