@@ -81,6 +81,7 @@ def test_a_label_never_names_two_agents_in_a_participants_study(served):
     each agent has one label in all the round's clips and its ranking, and every round has labels of its own."""
     from app.assignment import conditions
     from app.plan import build_plan
+    from app.screens import Round
 
     study, bundle = served
     example = bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
@@ -88,13 +89,13 @@ def test_a_label_never_names_two_agents_in_a_participants_study(served):
         plan = build_plan(study, bundle, condition, random.Random(seed))
         agent_of = dict(zip(example.labels, example.agents, strict=True))
         for screen in plan:
-            for robot in screen.get("robots", []):
-                assert agent_of.setdefault(robot["label"], robot["agent"]) == robot["agent"], (condition, screen)
+            for robot in getattr(screen, "robots", []):
+                assert agent_of.setdefault(robot.label, robot.agent) == robot.agent, (condition, screen)
         rounds = {}
         for screen in plan:
-            if "block" in screen:
-                rounds.setdefault((screen["part"], screen["block"]), set()).update(
-                    (robot["label"], robot["agent"]) for robot in screen["robots"])
+            if isinstance(screen, Round):
+                rounds.setdefault((screen.part, screen.block), set()).update(
+                    (robot.label, robot.agent) for robot in screen.robots)
         assert len(rounds) == len(condition.schemes)
         for labelled in rounds.values():
             assert len(labelled) == len({label for label, _ in labelled}) == len({a for _, a in labelled}) == 3
