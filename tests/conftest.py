@@ -34,9 +34,10 @@ def bundle_dir(tmp_path_factory, clip_files) -> Path:
     )
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.slow)])
 def database_url(request, tmp_path) -> str:
-    """A fresh database per test: a SQLite file, and an emptied PostgreSQL database."""
+    """A fresh database per test: a SQLite file, and an emptied PostgreSQL database (with the slow tests: the fast
+    loop runs every database test on SQLite, `make test` on both)."""
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     url = postgres.session_url(request.config)

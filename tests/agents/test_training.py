@@ -12,6 +12,8 @@ from search.agents.evaluate import evaluate
 from search.agents.train import PROGRESS_COLUMNS, TrainConfig, load_train_config, train
 from search.sim.world import WorldConfig
 
+pytestmark = pytest.mark.slow  # PPO updates
+
 TINY_WORLD = WorldConfig(human_num=0, circle_radius=2.0, min_start_goal_distance=1.5, time_limit=5.0)
 TINY = TrainConfig.from_dict({
     "seed": 0, "total_steps": 16 * 20 * 14, "num_envs": 16, "num_steps": 20, "learning_rate": 3e-3,

@@ -24,6 +24,8 @@ from search.cli import main
 from tests.support.analysis import MISLEADING, SCHEMES
 from tests.support.survey import AGENT_RANK, ATTENTION, SECRET_NAMES, study_text
 
+pytestmark = pytest.mark.slow  # bots take the whole study through a real server
+
 
 @pytest.fixture
 def live_server(tmp_path, bundle_dir):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 
+import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
@@ -92,6 +93,7 @@ def test_password_guessing_is_slowed_per_client_with_growing_delays(make_client,
     assert log_in(guesser).status_code == 200  # a day later: the right password works again
 
 
+@pytest.mark.slow  # waits out the delays
 def test_password_guessing_from_many_addresses_is_slowed_overall(make_client):
     client = make_client(PILOT)
     client.app.state.login_throttle.clock = Clock()

@@ -7,9 +7,12 @@ import sys
 import time
 
 import httpx
+import pytest
 
 from tests.support.live_server import REPO, foil, free_port
 from tests.support.survey import study_text
+
+pytestmark = pytest.mark.slow  # foil serve processes
 
 
 def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):

@@ -82,6 +82,7 @@ def raw(server: LiveServer, request: bytes, *, wait_s: float = 30) -> bytes:
         return received
 
 
+@pytest.mark.slow  # a live server
 def test_header_size_and_count_limits(server):
     big = b"GET / HTTP/1.1\r\nHost: x\r\nX-Big: " + b"a" * (4 * 1024 * 1024) + b"\r\n\r\n"
     reply = raw(server, big)
@@ -91,6 +92,7 @@ def test_header_size_and_count_limits(server):
     assert httpx.get(server.url + "/", headers={"x-normal": "a" * 2000}).status_code == 200
 
 
+@pytest.mark.slow  # a live server
 def test_slow_and_silent_clients_are_cut_off(server):
     sockets = []
     for n in range(100):  # half send part of a request line and stop, half send nothing at all
@@ -110,6 +112,7 @@ def test_slow_and_silent_clients_are_cut_off(server):
     assert httpx.get(server.url + "/").status_code == 200  # and the server is still there for everyone else
 
 
+@pytest.mark.slow  # a live server
 def test_a_client_that_leaves_mid_request_is_one_line_in_the_log(server):
     landing = httpx.get(server.url + "/")
     cookie = landing.headers["set-cookie"].split(";")[0]

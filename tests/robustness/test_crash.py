@@ -6,11 +6,15 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
+
 from app.assignment import conditions
 from app.study import parse_study
 from tests.support.crowd import Crowd, audit
 from tests.support.live_server import LiveServer
 from tests.support.survey import study_text
+
+pytestmark = pytest.mark.slow  # a real server killed mid-study
 
 BOTS = 16
 

@@ -10,6 +10,8 @@ import pytest
 from tests.support.live_server import foil
 from tests.support.survey import study_text
 
+pytestmark = pytest.mark.slow  # a foil serve process per broken bundle
+
 
 def broken_checksum(bundle):
     clip = json.loads((bundle / "manifest.json").read_text())["clips"][3]
