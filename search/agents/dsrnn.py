@@ -31,14 +31,17 @@ import torch
 from torch import Tensor, nn
 
 from search.sim.observation import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
+from search.sim.settings import Settings
 
 CHECKPOINT_FORMAT = "foil.dsrnn/2"
 OBSERVATION_LAYOUT = {"robot_node": list(ROBOT_NODE_FIELDS)}
 
 
 @dataclass(frozen=True)
-class NetworkConfig:
+class NetworkConfig(Settings):
     """Layer sizes. Defaults: the paper's full-size DS-RNN."""
+
+    what = "network"
 
     max_humans: int = 10
     edge_hidden: int = 256
@@ -52,14 +55,6 @@ class NetworkConfig:
             value = getattr(self, f.name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"network setting {f.name} must be a positive integer, got {value!r}")
-
-    @classmethod
-    def from_dict(cls, values: dict) -> NetworkConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown network setting(s) {unknown}; known settings: {sorted(known)}")
-        return cls(**values)
 
 
 def _init(layer: nn.Linear, gain: float = math.sqrt(2)) -> nn.Linear:

@@ -17,13 +17,14 @@ A robot that has finished stays where it is; the crowd goes on.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from functools import cache
 
 import numba
 import numpy as np
 
 from search.sim.orca import crowd_velocities, orca_velocities
+from search.sim.settings import Settings
 from search.sim.social_force import social_force_velocities
 
 RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
@@ -42,8 +43,10 @@ ENV_ACTION_MODES = ("preferred", "velocity", "observation")
 
 
 @dataclass(frozen=True)
-class WorldConfig:
+class WorldConfig(Settings):
     """Everything that defines a world apart from its initial state. Defaults: the paper's setting."""
+
+    what = "world"
 
     human_num: int = 10
     human_radius: float = 0.3
@@ -95,16 +98,6 @@ class WorldConfig:
             if not ok:
                 raise ValueError(f"invalid world config: {message}")
 
-    @classmethod
-    def from_dict(cls, values: dict) -> WorldConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown world setting(s) {unknown}; known settings: {sorted(known)}")
-        return cls(**values)
-
-    def to_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def with_(self, **changes) -> WorldConfig:
         return replace(self, **changes)

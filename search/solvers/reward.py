@@ -26,12 +26,13 @@ steps. The tests hold the formula written with numpy arrays, as the reference th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from importlib import import_module
 
 import numba
 import numpy as np
 
+from search.sim.settings import Settings
 from search.sim.world import COLLISION, SUCCESS
 from search.solvers.prior import PRIOR_KINDS, ActionPrior
 
@@ -39,8 +40,10 @@ TERMS = ("action_divergence", "goal", "horizon", "plausibility")
 
 
 @dataclass(frozen=True)
-class RewardConfig:
+class RewardConfig(Settings):
     """Everything that defines the search objective. Defaults: the paper's formula with plain norms and T = 100."""
+
+    what = "reward"
 
     horizon: int = 100
     norm: str = "plain"  # "plain" ||x|| (paper code) or "squared" ||x||^2 (paper text)
@@ -71,16 +74,6 @@ class RewardConfig:
                 raise ValueError(f"invalid reward config: {message}")
         heuristic_function(self.heuristic)
 
-    @classmethod
-    def from_dict(cls, values: dict) -> RewardConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown reward setting(s) {unknown}; known settings: {sorted(known)}")
-        return cls(**values)
-
-    def to_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarray:
