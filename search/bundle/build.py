@@ -105,6 +105,37 @@ def _render_options(build: Build, text: str, source: str) -> RenderOptions:
         refuse(text, source, [(("build", "render"), str(error))])
 
 
+def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
+    """Each scheme's solver, reward and world settings checked against those settings' fields, and each set's
+    scenarios found, so that a bad one is refused at its line before any work."""
+    from search.sim.scenarios import load_scenario
+    from search.sim.world import WorldConfig
+    from search.solvers.reward import RewardConfig
+
+    problems = []
+    for name, scheme in build.schemes.items():
+        try:
+            solver = solver_config_class(scheme.solver)
+        except ValueError as error:
+            problems.append((("build", "schemes", name, "solver"), str(error)))
+            solver = None
+        for table, cls, what in (("settings", solver, "solver"), ("reward", RewardConfig, "reward"),
+                                 ("world", WorldConfig, "world")):
+            for key, value in getattr(scheme, table).items():
+                try:
+                    if cls is not None:
+                        check_settings(cls, {key: value}, what)
+                except ValueError as error:
+                    problems.append((("build", "schemes", name, table, key), str(error)))
+    for i, clip_set in enumerate(build.sets):
+        for j, scenario in enumerate(clip_set.scenarios):
+            try:
+                load_scenario(scenario)
+            except (ValueError, FileNotFoundError) as error:
+                problems.append((("build", "sets", i, "scenarios", j), str(error)))
+    return problems
+
+
 def parse_build(text: str, source: str = "study file") -> BuildSpec:
     """The `[build]` table of a study file's text as a BuildSpec, or BuildError naming the file, line and field as
     the server does (`app.study`); the survey tables are left to the server."""
@@ -115,6 +146,7 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
                                f"(one colour and shape each), got {len(clip_set.agents)}")
                               for i, clip_set in enumerate(build.sets)
                               if "ranking" in clip_set.parts and len(clip_set.agents) > len(ROBOT_STYLES)])
+        refuse(text, source, _setting_problems(build))
     except StudyError as error:
         raise BuildError(str(error)) from None
     return BuildSpec(

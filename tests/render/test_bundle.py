@@ -162,21 +162,30 @@ def test_scheme_settings_reach_the_search_as_the_fields_types():
     assert type(search.solver_settings["exploration"]) is float and type(search.reward_settings["alpha"]) is float
     assert search.reward_settings == {"alpha": 2.0} and search.world_settings == {"robot_visible": True}
     assert (search.agents, search.scenario, search.budget, search.seed) == (job.pair, job.scenario, 300, 1)
-    job = next(job for job in plan(parse_build(text + 'robot_visible = "yes"\n')) if job.scheme.name == "adaptive")
-    with pytest.raises(ValueError, match="bad world setting robot_visible = 'yes': robot_visible takes a bool"):
-        search_job(job)
+    with pytest.raises(BuildError, match=r"build\.schemes\.adaptive\.world\.robot_visible: bad world setting "
+                                         "robot_visible = 'yes': robot_visible takes a bool"):
+        parse_build(text + 'robot_visible = "yes"\n')
     with pytest.raises(BuildError, match=r"build\.schemes\.adaptive\.settings: must be a table of key = value "
                                          "settings"):
         parse_build(text.replace("exploration = 100", "nested = {x = 1}") + "robot_visible = true\n")
 
 
 def test_bad_search_settings_are_refused_before_any_work(tmp_path):
+    """Settings the solver, reward or world do not have, and scenarios that do not exist, are refused at their lines
+    before anything runs."""
     study = tmp_path / "study.toml"
     study.write_text('[build]\nseed = 1\n[build.schemes.a]\nsolver = "mcts"\nbudget = 10\nseed = 0\n'
-                     '[build.schemes.a.settings]\nexplorashun = 3\n[[build.sets]]\nparts = ["pairwise"]\n'
-                     'schemes = ["a"]\nscenarios = ["paper-bl-tr"]\npairs = [["goal", "orca"]]\n')
-    with pytest.raises(BuildError, match="bad solver setting 'explorashun'"):
+                     '[build.schemes.a.settings]\nexplorashun = 3\n[build.schemes.a.world]\nrobot_visible = "yes"\n'
+                     '[[build.sets]]\nparts = ["pairwise"]\nschemes = ["a"]\nscenarios = ["paper-bl-tr", "nowhere"]\n'
+                     'pairs = [["goal", "orca"]]\n')
+    with pytest.raises(BuildError) as refused:
         build_bundle(study, tmp_path / "out", log=lambda line: None)
+    lines = str(refused.value).splitlines()
+    assert lines[0].startswith(f"{study}, line 8, build.schemes.a.settings.explorashun: bad solver setting "
+                               "'explorashun': use a key among")
+    assert lines[1].startswith(f"{study}, line 10, build.schemes.a.world.robot_visible: bad world setting "
+                               "robot_visible = 'yes': robot_visible takes a bool")
+    assert lines[2].startswith(f"{study}, line 14, build.sets[0].scenarios[1]: ") and "nowhere" in lines[2]
     assert not (tmp_path / "out").exists()
 
 
