@@ -61,7 +61,7 @@ def test_a_changed_password_invalidates_earlier_admin_cookies(make_client, tmp_p
     finally:
         restarted.state.context.db.dispose()
 
-
+@pytest.mark.slow  # waits out the delays
 def test_password_guessing_is_slowed_per_client_with_growing_delays(make_client, caplog):
     client = make_client(PILOT)
     clock = client.app.state.login_throttle.clock = Clock()

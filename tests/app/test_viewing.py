@@ -34,7 +34,7 @@ def to_first_clip(client, query: str = "") -> str:
     assert response.status_code == 200
     return response.text
 
-
+@pytest.mark.slow  # waits out a clip's length
 def test_a_clip_answered_sooner_than_it_plays_is_refused_and_nothing_saved(make_client):
     client = make_client(ANONYMOUS)
     page = to_first_clip(client)
@@ -77,7 +77,7 @@ def test_pilot_and_bot_links_are_recorded_and_only_the_token_skips_the_wait(make
     versions = {p.consent_version for p in stored(client, Participant)}
     assert len(versions) == 1 and next(iter(versions)).startswith("sha256:")
 
-
+@pytest.mark.slow  # waits out a clip's length
 def test_the_report_and_export_leave_pilots_and_bots_out_by_default(make_client, tmp_path):
     token = None
     clients = []

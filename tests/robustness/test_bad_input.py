@@ -65,6 +65,7 @@ def valid_clip_answer(form: dict, labels: list[str]) -> bool:
             and ended)
 
 
+@pytest.mark.slow  # generated inputs
 @FUZZ
 @given(better=st.one_of(st.sampled_from(["Robot 1", "Robot 2", "Robot 3"]), MAYBE), justification=MAYBE,
        difficulty=st.one_of(MAYBE, st.integers(-3, 12).map(str)),
@@ -97,6 +98,7 @@ FIELDS = ["csrf_token", "choice", "number", "step", "better", "justification", "
           "ranking-2", "ranking-3", "video_events", "time_on_page_ms", "password", "excluded", "note"]
 
 
+@pytest.mark.slow  # generated inputs
 @FUZZ
 @given(path=st.sampled_from(FORMS), fields=st.dictionaries(st.sampled_from(FIELDS), st.lists(TEXT, max_size=2),
                                                             max_size=8), keep_token=st.booleans())
@@ -173,6 +175,7 @@ def test_replayed_csrf_tokens_are_refused(app_client):
     assert not stored(app_client, Participant)[0].excluded
 
 
+@pytest.mark.slow  # generated inputs
 @FUZZ
 @given(body=st.binary(max_size=3000), content_type=st.sampled_from([
     "application/x-www-form-urlencoded", "multipart/form-data", "multipart/form-data; boundary=x",
