@@ -14,7 +14,7 @@ from app.bundle import load_bundle
 from app.plan import build_plan
 from app.screens import Attention, Pairwise, Ranking, Watch, dump_plan, parse_plan
 from app.study import parse_study
-from tests.support.survey import CLOSING, VIDEO_CHECK, study_text
+from tests.support.survey import ATTENTION, CLOSING, VIDEO_CHECK, study_text
 
 # One screen of each kind as the server stored them (a video attention check and a plain one), byte for byte.
 STORED = """[{"kind": "instructions", "position": [0, 18]}, \
@@ -47,15 +47,6 @@ OLDER = """[{"kind": "instructions"}, \
 "robots": [{"label": "Robot 1", "agent": "lo"}, {"label": "Robot 2", "agent": "med"}], \
 "true_order": ["med", "lo"], "questions": ["ranking"], "progress": "Part 1 of 1, round 1 of 1, ranking"}]"""
 
-PLAIN_CHECK = """
-[[attention_checks]]
-part = 1
-after = 3
-text = "Please choose 'Agree'."
-options = ["Disagree", "Agree"]
-expected = "Agree"
-"""
-
 
 def variant(screen: dict) -> tuple[str, bool]:
     return screen["kind"], "media" in screen
@@ -70,7 +61,7 @@ def test_stored_plans_read_and_write_back_byte_for_byte():
 
 
 def test_a_new_plan_is_stored_with_the_keys_of_a_stored_one_in_the_same_order(bundle_dir):
-    text = study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret")) + PLAIN_CHECK + CLOSING.format(
+    text = study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret")) + ATTENTION + CLOSING.format(
         required="[]").removeprefix('""')
     study = parse_study(text)
     plan = build_plan(study, load_bundle(bundle_dir), conditions(study)[0], random.Random(4))
