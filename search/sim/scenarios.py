@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from search.sim.world import WorldConfig, WorldState, new_state
+from search.sim.world import HUMAN_RADIUS_RANGE, HUMAN_V_PREF_RANGE, WorldConfig, WorldState, new_state
 
 SHIPPED_DIR = Path(__file__).parent / "scenarios"
 
@@ -150,11 +150,15 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 def sample_training_states(config: WorldConfig, rng: np.random.Generator, n_worlds: int) -> WorldState:
     """CrowdNav_DSRNN's training distribution: robot start and goal uniform in the square, at least
     ``min_start_goal_distance`` apart; humans circle-crossing towards their antipodes, kept apart from each
-    other and from the robot's start and goal by their radii plus the discomfort distance."""
+    other and from the robot's start and goal by their radii plus the discomfort distance. With
+    ``randomize_attributes`` each human's v_pref and radius are drawn first (the placement noise scales with
+    that v_pref); with goal changes each world's random stream is seeded from ``rng`` last."""
     n, r = config.human_num, config.circle_radius
     humans = np.zeros((n_worlds, n, 2))
     robots = np.zeros((n_worlds, 1, 2))
     goals = np.zeros((n_worlds, 1, 2))
+    radii = np.full((n_worlds, n), config.human_radius)
+    v_prefs = np.full((n_worlds, n), config.human_v_pref)
     for w in range(n_worlds):
         while True:
             start, goal = rng.uniform(-r, r, 2), rng.uniform(-r, r, 2)
@@ -164,14 +168,18 @@ def sample_training_states(config: WorldConfig, rng: np.random.Generator, n_worl
         # Placed agents as (position, goal, radius); a human must keep clear of both ends of each.
         placed = [(start, goal, config.robot_radius)]
         for i in range(n):
+            if config.randomize_attributes:
+                v_prefs[w, i], radii[w, i] = rng.uniform(*HUMAN_V_PREF_RANGE), rng.uniform(*HUMAN_RADIUS_RANGE)
             while True:
                 angle = rng.random() * 2 * np.pi
-                noise = (rng.random(2) - 0.5) * config.human_v_pref
+                noise = (rng.random(2) - 0.5) * v_prefs[w, i]
                 p = np.array([r * np.cos(angle), r * np.sin(angle)]) + noise
-                min_dist = config.human_radius + config.discomfort_dist
+                min_dist = radii[w, i] + config.discomfort_dist
                 if all(np.linalg.norm(p - q) >= min_dist + rad and np.linalg.norm(p - g) >= min_dist + rad
                        for q, g, rad in placed):
                     break
             humans[w, i] = p
-            placed.append((p, -p, config.human_radius))
-    return new_state(humans, -humans, robots, goals, np.pi / 2, config)
+            placed.append((p, -p, radii[w, i]))
+    streams = rng.integers(0, 2**63, n_worlds).astype(np.uint64) if config.random_crowd else None
+    return new_state(humans, -humans, robots, goals, np.pi / 2, config, human_radius=radii, human_v_pref=v_prefs,
+                     rng=streams)

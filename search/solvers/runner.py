@@ -114,12 +114,12 @@ def check_settings(cls, values: dict, what: str) -> dict:
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
     ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
-    from search.agents.policies import load_policy
+    from search.agents.policies import comparison_world, load_policy
     from search.sim.scenarios import load_scenario
 
     started = time.perf_counter()
     policies = [load_policy(spec) for spec in job.agents]
-    scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
+    scenario = frozen_scenario(load_scenario(job.scenario), comparison_world(list(job.agents), job.world_settings))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)
