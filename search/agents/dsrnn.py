@@ -358,9 +358,9 @@ def read_checkpoint(path: str | Path, data=None) -> dict:
     data = _torch_file(path) if data is None else data
     if isinstance(data, dict) and data and all(isinstance(v, torch.Tensor) for v in data.values()):
         names = ", ".join(list(data)[:3])
-        raise ValueError(f"{path} is the state_dict of another network (parameters {names}, ...): Foil loads its "
-                         f"own checkpoints ({CHECKPOINT_FORMAT!r}) and CrowdNav_DSRNN's DS-RNN policy (parameters "
-                         "base.humanNodeRNN..., base.humanhumanEdgeRNN_spatial..., dist.fc_mean...)")
+        raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (format {CHECKPOINT_FORMAT!r}) nor CrowdNav_DSRNN's "
+                         f"DS-RNN policy (parameters base.humanNodeRNN..., dist.fc_mean...): it is the state_dict of "
+                         f"another network (parameters {names}, ...)")
     if not isinstance(data, dict) or not str(data.get("format", "")).startswith("foil.dsrnn/"):
         raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (expected format {CHECKPOINT_FORMAT!r})")
     if data["format"] != CHECKPOINT_FORMAT or data.get("observation") != OBSERVATION_LAYOUT:
@@ -376,6 +376,14 @@ def read_checkpoint(path: str | Path, data=None) -> dict:
 def load_dsrnn(path: str | Path, data=None) -> DSRNN:
     """The network stored in a checkpoint, with clear errors for wrong sizes."""
     data = read_checkpoint(path, data)
+    net = DSRNN(NetworkConfig.from_dict(data["network"]))
+    try:
+        net.load_state_dict(data["model"])
+    except RuntimeError as error:
+        raise ValueError(f"{path}: weights do not fit the network sizes {data['network']}: {error}") from None
+    return net
+
+
 def is_torchscript(path: str | Path) -> bool:
     """TorchScript archives carry compiled code next to their constants; torch.save files do not."""
     try:
