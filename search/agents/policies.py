@@ -121,10 +121,10 @@ def trained_world(spec: str) -> dict:
     return dict(read_crowdnav_config(spec).world) if is_crowdnav_file(spec) else {}
 
 
-def comparison_world(agents: list[str], explicit: dict) -> dict:
-    """The world settings agents are compared in: those their checkpoints were trained in, overridden by the
-    ``explicit`` ones (command line, study file). Agents trained in different worlds need the differing settings
-    given explicitly."""
+def comparison_world(agents: list[str], explicit: dict, scenario_world: dict | None = None) -> dict:
+    """The world settings agents are compared in: those their checkpoints were trained in, under the settings a
+    scenario file's ``[world]`` gives (``scenario_world``), under the ``explicit`` ones (command line, study file).
+    Agents trained in different worlds need the differing settings given explicitly."""
     world: dict = {}
     for agent in agents:
         for key, value in trained_world(agent).items():
@@ -132,4 +132,5 @@ def comparison_world(agents: list[str], explicit: dict) -> dict:
                 raise ValueError(f"agents {world[key][0]} and {agent} were trained in different worlds ({key} = "
                                  f"{world[key][1]!r} and {value!r}): choose one, e.g. --world {key}={value}")
             world.setdefault(key, (agent, value))
-    return {key: value for key, (_, value) in world.items()} | explicit
+    scenario_world = scenario_world or {}
+    return {key: value for key, (_, value) in world.items() if key not in scenario_world} | explicit

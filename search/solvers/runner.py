@@ -119,7 +119,8 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
 
     started = time.perf_counter()
     policies = [load_policy(spec) for spec in job.agents]
-    scenario = frozen_scenario(load_scenario(job.scenario), comparison_world(list(job.agents), job.world_settings))
+    scenario = load_scenario(job.scenario)
+    scenario = frozen_scenario(scenario, comparison_world(list(job.agents), job.world_settings, scenario.world))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)

@@ -202,6 +202,8 @@ def test_the_agent_brings_its_world_and_explicit_settings_win(tmp_path):
     assert trained_world("hi") == {} and trained_world("orca") == {}
     world = comparison_world(["hi", checkpoint], {"time_limit": 25.0})
     assert world["time_limit"] == 25.0 and world["goal_change_chance"] == 0.25
+    # a scenario file's own [world] settings come between the trained world and the explicit ones
+    assert "circle_radius" not in comparison_world([checkpoint], {}, {"circle_radius": 3.0})
     other = {**CONFIG, "sim": {**CONFIG["sim"], "circle_radius": 4}}
     second = str(write_model(tmp_path / "second", config=other))
     with pytest.raises(ValueError, match="trained in different worlds .*circle_radius"):
