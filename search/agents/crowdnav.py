@@ -27,6 +27,7 @@ import torch
 from torch import Tensor, nn
 
 from search.sim.observation import Observation, PolicyState
+from search.sim.world import WorldConfig
 
 UNSEEN_POSITION = (15.0, 15.0)  # CrowdNav's belief about a human not yet seen in an episode
 HOLONOMIC_THETA = math.pi / 2  # a holonomic CrowdNav robot keeps the heading it starts with
@@ -174,8 +175,6 @@ def _interpret(config: CrowdNavConfig) -> CrowdNavConfig:
         if get("humans", "end_goal_changing", False) else 0.0
     if world.get("kinematics") == "unicycle":
         world["unicycle_motion"] = "arc"
-    from search.sim.world import WorldConfig
-
     try:
         WorldConfig.from_dict(world)
     except (ValueError, TypeError) as error:

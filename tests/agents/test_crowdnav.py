@@ -227,3 +227,19 @@ def test_a_crowd_of_another_size_is_refused(tmp_path):
     obs.spatial_edges, obs.human_mask = obs.spatial_edges[:, :2], obs.human_mask[:, :2]
     with pytest.raises(ValueError, match=f"exactly {HUMANS} humans .*this world has 2"):
         policy.act(obs, policy.initial_state(1))
+
+
+def test_a_unicycle_agent_observes_its_heading_and_turns_in_an_arc_world(tmp_path, capsys):
+    unicycle = {**CONFIG, "action_space": {"kinematics": "unicycle"}}
+    checkpoint = str(write_model(tmp_path / "model", config=unicycle))
+    policy = load_policy(checkpoint)
+    assert policy.world["kinematics"] == "unicycle" and policy.world["unicycle_motion"] == "arc"
+    rng = np.random.default_rng(2)
+    obs = observation(rng, 2, np.ones((2, HUMANS), bool))
+    p = {name: value.double().numpy() for name, value in random_state_dict(0).items()}
+    state = np.zeros((2, 1 + HUMANS, SIZES["human_human_edge_rnn_size"])), np.zeros((2, SIZES["human_node_rnn_size"]))
+    expected, _, _ = reference_step(p, obs.robot_node[:, :7], obs.temporal_edges, obs.spatial_edges, *state)
+    action, _ = policy.act(obs, policy.initial_state(2))  # the unicycle's own heading, not pi/2
+    np.testing.assert_allclose(action, expected, atol=2e-5)
+    assert main(["eval", checkpoint, "--episodes", "2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["episodes"] == 2
