@@ -204,7 +204,7 @@ def _is_crowdnav_file(path: Path, mtime_ns: int) -> bool:
 
 def config_path(checkpoint: str | Path) -> Path:
     """Where a checkpoint's config lies: MODEL/checkpoints/N.pt -> MODEL/configs/config.py."""
-    return Path(checkpoint).resolve().parent.parent / "configs" / "config.py"
+    return Path(checkpoint).absolute().parent.parent / "configs" / "config.py"
 
 
 class _EdgeRNN(nn.Module):
