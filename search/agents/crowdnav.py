@@ -173,8 +173,8 @@ def _interpret(config: CrowdNavConfig) -> CrowdNavConfig:
         if get("humans", "random_goal_changing", False) else 0.0
     world["end_goal_change_chance"] = float(get("humans", "end_goal_change_chance", 0.0)) \
         if get("humans", "end_goal_changing", False) else 0.0
-    if world.get("kinematics") == "unicycle":
-        world["unicycle_motion"] = "arc"
+    if world.get("kinematics") == "unicycle":  # its own motion, and CrowdNav's start for a unicycle
+        world |= {"unicycle_motion": "arc", "robot_start": "circle"}
     try:
         WorldConfig.from_dict(world)
     except (ValueError, TypeError) as error:

@@ -10,7 +10,8 @@ Step order (CrowdNav_DSRNN's, except where marked):
   3. collision, success and timeout are judged on the move that just happened (CrowdNav judges the state
      *before* the move, so it reports every terminal event one step late; we do not copy that),
   4. reward: -20 collision, +10 success, 0 timeout, discomfort (d - 0.25) * 10 * dt when closer than 0.25 m,
-     otherwise 2 * progress towards the goal.
+     otherwise 2 * progress towards the goal;
+  5. humans' goal changes, when the world has them (CrowdNav_DSRNN's random and end-of-path goal changes).
 A robot that has finished stays where it is; the crowd goes on.
 """
 
@@ -31,6 +32,7 @@ RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
 OUTCOME_NAMES = ("running", "success", "collision", "timeout")
 
 UNICYCLE_MOTIONS = ("straight", "arc")
+ROBOT_STARTS = ("square", "circle")
 HUMAN_RADIUS_RANGE = (0.3, 0.5)  # CrowdNav's randomised human attributes
 HUMAN_V_PREF_RANGE = (0.5, 1.5)
 
@@ -87,6 +89,7 @@ class WorldConfig(Settings):
     # random training distribution
     circle_radius: float = 6.0
     min_start_goal_distance: float = 6.0
+    robot_start: str = "square"  # "square": start uniform in it, heading pi/2; "circle": CrowdNav's unicycle start
     # CrowdNav_DSRNN's world variations (all off by default; see docs/agents.md)
     randomize_attributes: bool = False  # human radius ~ U(0.3, 0.5) m and v_pref ~ U(0.5, 1.5) m/s
     goal_change_chance: float = 0.0  # every goal_change_interval seconds, each human's chance of a new goal
@@ -114,6 +117,7 @@ class WorldConfig(Settings):
             (self.human_fov == 360 or (self.human_policy == "orca" and not self.robot_visible),
              "human_fov below 360 needs ORCA humans and an invisible robot"),
             (self.unicycle_motion in UNICYCLE_MOTIONS, f"unicycle_motion must be one of {UNICYCLE_MOTIONS}"),
+            (self.robot_start in ROBOT_STARTS, f"robot_start must be one of {ROBOT_STARTS}"),
             (0 <= self.crowd_seed < 2**63, "crowd_seed must be between 0 and 2**63 - 1"),
         ]
         for ok, message in checks:
@@ -292,7 +296,7 @@ def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config:
     r = robot_pos.shape[1]
     if config.robot_visible and r != 1:
         raise ValueError("a visible robot changes its crowd, so each world can hold only one robot")
-    rng = np.full(w, seed_stream(config.crowd_seed), np.uint64) if rng is None else np.asarray(rng, np.uint64)
+    rng = np.full(w, seed_stream(config.crowd_seed), np.uint64) if rng is None else np.array(rng, np.uint64)
     if config.randomize_attributes and (human_radius is None or human_v_pref is None):
         drawn = np.empty((w, n, 2))
         _draw_attributes(rng, drawn)

@@ -140,7 +140,7 @@ def test_config_with_switches_off_and_a_unicycle(tmp_path):
     world = read_config(path).world
     assert world["goal_change_chance"] == 0.0 and world["end_goal_change_chance"] == 1.0
     assert (world["human_fov"], world["robot_fov"]) == (180.0, 90.0)
-    assert (world["kinematics"], world["unicycle_motion"]) == ("unicycle", "arc")
+    assert (world["kinematics"], world["unicycle_motion"], world["robot_start"]) == ("unicycle", "arc", "circle")
 
 
 @pytest.mark.parametrize(("section", "key", "value", "says"), [

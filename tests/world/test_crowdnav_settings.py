@@ -34,6 +34,16 @@ def test_randomised_humans_are_uniform_over_crowdnavs_ranges():
     assert (fixed.human_v_pref == 1.0).all() and (fixed.human_radius == 0.3).all()
 
 
+def test_the_circle_start_puts_the_robot_on_the_circle_facing_anywhere_with_humans_kept_away():
+    config = WorldConfig(human_num=5, human_v_pref=1.0, kinematics="unicycle", robot_start="circle")
+    state = sample_training_states(config, np.random.default_rng(0), 300)
+    np.testing.assert_allclose(np.linalg.norm(state.robot_pos[:, 0], axis=-1), 6.0)
+    assert np.linalg.norm(state.robot_goal[:, 0] - state.robot_pos[:, 0], axis=-1).min() >= 6.0
+    assert stats.kstest(state.robot_theta[:, 0], stats.uniform(0, 2 * np.pi).cdf).pvalue > 0.01
+    for end in (state.robot_pos, state.robot_goal):  # CrowdNav keeps humans half the circle radius away
+        assert np.linalg.norm(state.human_pos - end, axis=-1).min() >= 3.0
+
+
 def test_a_fixed_scenario_draws_its_humans_from_the_crowd_seed():
     scenario = Scenario("s", (-5.0, 0.0), (5.0, 0.0), ((0.0, 3.0), (0.0, -3.0)), ((0.0, -3.0), (0.0, 3.0)))
     config = scenario.config(WorldConfig(randomize_attributes=True))
