@@ -71,6 +71,9 @@ SIZES = {"human_node_rnn_size": ("base.humanNodeRNN.gru.weight_hh_l0", 1),
          "attention_size": ("base.attn.temporal_edge_layer.0.weight", 0)}
 
 
+KINDS = {float: "a number", int: "a whole number", bool: "True or False", str: "a string"}
+
+
 class ConfigError(ValueError):
     """A CrowdNav_DSRNN config that Foil cannot read or reproduce."""
 
@@ -138,7 +141,7 @@ def _interpret(config: CrowdNavConfig) -> CrowdNavConfig:
 
     for key in values:
         section, name = key
-        known = key in DIRECT or key in FIXED or key in COMPANIONS or section == "SRNN" or (
+        known = key in DIRECT or key in FIXED or key in COMPANIONS or (section == "SRNN" and name in SIZES) or (
             section in TRAINING_ONLY and (TRAINING_ONLY[section] is None or name in TRAINING_ONLY[section]))
         if not known:
             fail(key, "Foil does not know this setting, so it cannot reproduce the world it describes")
@@ -149,14 +152,22 @@ def _interpret(config: CrowdNavConfig) -> CrowdNavConfig:
         if key not in values:
             raise ConfigError(f"{path}: {key[0]}.{key[1]} is missing")
 
-    world = {name: values[key][0] for key, name in DIRECT.items() if key in values}
-    for name in ("dt", "success_reward", "collision_penalty", "discomfort_dist", "discomfort_factor",
-                 "circle_radius", "human_radius", "human_v_pref", "robot_radius", "robot_v_pref", "neighbor_dist",
-                 "safety_space", "time_horizon", "sf_a", "sf_b", "sf_ki"):
-        if name in world:
-            if isinstance(world[name], bool) or not isinstance(world[name], int | float):
-                fail(next(k for k, v in DIRECT.items() if v == name), "expected a number")
-            world[name] = float(world[name])
+    world, defaults = {}, WorldConfig()
+    for key, name in DIRECT.items():
+        if key not in values:
+            continue
+        value, kind = values[key][0], type(getattr(defaults, name))
+        if kind is float and isinstance(value, int | float) and not isinstance(value, bool):
+            value = float(value)
+        if type(value) is not kind:
+            fail(key, f"expected {KINDS[kind]} (Foil's world setting {name})")
+        try:
+            WorldConfig(**{name: value})
+        except ValueError as error:
+            fail(key, str(error))
+        world[name] = value
+    if not float(get("env", "time_limit")) > 1:
+        fail(("env", "time_limit"), "must be more than 1 s: CrowdNav ends an episode at time_limit - 1")
     # CrowdNav ends an episode once its clock reaches time_limit - 1 (checked before each move)
     world["time_limit"] = float(get("env", "time_limit")) - 1
     front, back = get("reward", "discomfort_dist_front"), get("reward", "discomfort_dist_back")
