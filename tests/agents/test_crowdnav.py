@@ -246,3 +246,12 @@ def test_a_unicycle_agent_observes_its_heading_and_turns_in_an_arc_world(tmp_pat
     np.testing.assert_allclose(action, expected, atol=2e-5)
     assert main(["eval", checkpoint, "--episodes", "2", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["episodes"] == 2
+
+
+def test_a_visible_robot_among_social_force_humans(tmp_path, capsys):
+    changed = {**CONFIG, "robot": {**CONFIG["robot"], "visible": True},
+               "humans": {**CONFIG["humans"], "policy": "social_force"}}
+    checkpoint = str(write_model(tmp_path / "model", config=changed))
+    assert trained_world(checkpoint)["robot_visible"] and trained_world(checkpoint)["human_policy"] == "social_force"
+    assert main(["eval", checkpoint, "--episodes", "2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["episodes"] == 2
