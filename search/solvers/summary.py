@@ -77,7 +77,8 @@ def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_
         "scenario": scenario.to_dict(),
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
-        "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist() for a in trajectory.env_actions[:searched]],
+        "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist()
+                        for a in trajectory.env_actions[:searched]],
         "steps": [{"t": float(trajectory.time[i]), "humans": _humans(trajectory.crowds[i]),
                    "robots": _pairs(trajectory.robot_pos[i]), "robot_actions": _pairs(trajectory.robot_actions[i])}
                   for i in range(len(trajectory.time))],
