@@ -135,6 +135,8 @@ class Manifest(BaseModel):
     clips: list[ManifestClip]
     agents: dict[str, dict] = {}  # each agent's `foil eval --json` object
     files: dict[str, str] = {}  # every file of the bundle (relative path) -> sha256
+    # per pair and fixed scenario: how representative it is of the task's distribution (researchers only)
+    representativeness: list[dict] = []
 
 
 def manifest_json(manifest: Manifest) -> str:

@@ -166,6 +166,59 @@ def roll_out(policies: list[Policy], scenarios: list[Scenario], reward_config: R
                     actions=[env[row, : searched[row]] for row in range(rows_total)], contrast=contrast)
 
 
+def roll_out_states(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig,
+                    config: RepresentativeConfig, rng: np.random.Generator, tracker: Tracker) -> tuple[Rollouts, int]:
+    """``roll_out`` over the scenarios in order, a batch of states at a time, while the budget lasts (the last
+    batch sized by the steps a state has cost so far); the rollouts and how many states they cover."""
+    parts, done_states = [], 0
+    while done_states < len(scenarios) and not tracker.exhausted:
+        per_state = tracker.steps / done_states if done_states else None
+        count = config.batch_states if per_state is None else \
+            max(1, min(config.batch_states, math.ceil(tracker.remaining / per_state)))
+        count = min(count, len(scenarios) - done_states)
+        part = roll_out(policies, scenarios[done_states: done_states + count], reward_config, config.pushes, rng,
+                        tracker)
+        part.state += done_states
+        parts.append(part)
+        done_states += count
+    return Rollouts(state=np.concatenate([p.state for p in parts]), actions=[a for p in parts for a in p.actions],
+                    contrast=np.concatenate([p.contrast for p in parts])), done_states
+
+
+def representativeness(policies: list[Policy], fixed: list[Scenario], drawn: list[Scenario],
+                       reward_config: RewardConfig, config: RepresentativeConfig,
+                       rng: np.random.Generator) -> list[dict]:
+    """How representative each fixed scenario is of the distribution ``drawn`` was drawn from, for two agents:
+    how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
+    pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
+    of rollouts that agree with the vote (0: none of the drawn states agrees less)."""
+    tracker = Tracker(2**62, 1)
+    rollouts, states = roll_out_states(policies, drawn, reward_config, config, rng, tracker)
+    result = vote(rollouts, states)
+    signs = np.sign(rollouts.contrast)
+    agreement = np.array([(signs[rollouts.state == s] == result.direction).mean() for s in range(states)])
+    reports = []
+    for scenario in fixed:
+        own = np.sign(roll_out(policies, [scenario], reward_config, config.pushes, rng, tracker).contrast)
+        share = float((own == result.direction).mean()) if result.direction else None
+        reports.append({
+            "scenario": scenario.name, "rollouts": len(own), "first_looks_better": float((own > 0).mean()),
+            "second_looks_better": float((own < 0).mean()), "no_difference": float((own == 0).mean()),
+            "majority": int(np.sign(own.sum())), "distribution_vote": result.record(rollouts),
+            "percentile": None if share is None else float(100 * (agreement < share).mean()),
+            "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction)})
+    return reports
+
+
+def largest_contrast(summaries: list[dict]) -> int:
+    """Which of a search's summaries (two agents, best reward first) shows the largest non-tie visible contrast,
+    in either direction: outcome-contrast selection. The first where none shows a visible difference."""
+    contrasts = [abs(visible_contrast(VisibleClip.of_summary(s, [a["name"] for a in s["agents"]], ["1", "2"])))
+                 for s in summaries]
+    best = max(range(len(contrasts)), key=contrasts.__getitem__)  # the first of equals
+    return best if contrasts[best] > 0 else 0
+
+
 def _clip(scenario: Scenario, outcome, event_time, min_clearance, robot_pos, end_s: float) -> VisibleClip:
     """What a rollout's clip shows, as `VisibleClip.of_summary` reads it from a summary."""
     outcomes = tuple({"event": OUTCOME_NAMES[int(o)], "time": float(e) if math.isfinite(e) else None,
@@ -184,20 +237,7 @@ def representative(policies: list[Policy], scenarios: list[Scenario], reward_con
     Returns the chosen replays in order and the record of the vote for run.json."""
     if len(policies) != 2:
         raise ValueError(f"the representative solver votes which of two agents looks better; got {len(policies)}")
-    parts, done_states = [], 0
-    while done_states < len(scenarios) and not tracker.exhausted:
-        per_state = tracker.steps / done_states if done_states else None
-        count = config.batch_states if per_state is None else \
-            max(1, min(config.batch_states, math.ceil(tracker.remaining / per_state)))
-        count = min(count, len(scenarios) - done_states)
-        part = roll_out(policies, scenarios[done_states: done_states + count], reward_config, config.pushes, rng,
-                        tracker)
-        part.state += done_states
-        parts.append(part)
-        done_states += count
-    rollouts = Rollouts(state=np.concatenate([p.state for p in parts]),
-                        actions=[a for p in parts for a in p.actions],
-                        contrast=np.concatenate([p.contrast for p in parts]))
+    rollouts, done_states = roll_out_states(policies, scenarios, reward_config, config, rng, tracker)
     result = vote(rollouts, done_states)
     order, how = candidates(rollouts, result), "voted direction"
     chosen = choose(order, result.direction,
