@@ -83,7 +83,7 @@ class Design(Strict):
     counterbalance_scheme_order: bool = True
     # a scheme whose clips come from other scenarios than `scenarios`, as many (e.g. a distribution of starting
     # states for the representative solver): scheme -> its scenario for each of the design's scenarios
-    scheme_scenarios: dict[Text, Names] = {}
+    scheme_scenarios: dict[Text, Annotated[list[Text], Field(min_length=1)]] = {}
 
     @model_validator(mode="after")
     def _scheme_scenarios(self) -> Design:
