@@ -82,8 +82,8 @@ def load_bundle(root: str | Path) -> Bundle:
     return Bundle(root=root, clips=clips, paths=paths)
 
 
-def _part_scenarios(study: Study, part_index: int) -> list[str]:
-    return list(dict.fromkeys(study.part_scenario(part_index, r) for r in study.rotations()))
+def _part_scenarios(study: Study, part_index: int, scheme: str) -> list[str]:
+    return list(dict.fromkeys(study.part_scenario(part_index, r, scheme) for r in study.rotations()))
 
 
 def required_clips(study: Study) -> list[tuple[ClipRef, str]]:
@@ -93,8 +93,8 @@ def required_clips(study: Study) -> list[tuple[ClipRef, str]]:
         refs.append((study.example, "[example]"))
     for p, part in enumerate(study.parts):
         pairs = part.pairs if part.kind == "pairwise" else list(itertools.combinations(part.agents, 2))
-        for scenario in _part_scenarios(study, p):
-            for scheme in study.design.schemes:
+        for scheme in study.design.schemes:
+            for scenario in _part_scenarios(study, p, scheme):
                 for pair in pairs:
                     refs.append((ClipRef(scheme=scheme, scenario=scenario, agents=tuple(pair)), f"parts[{p}]"))
     for c, check in enumerate(study.attention_checks):
@@ -116,7 +116,7 @@ def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
         if part.kind != "ranking":
             continue
         for scheme in study.design.schemes:
-            for scenario in _part_scenarios(study, p):
+            for scenario in _part_scenarios(study, p, scheme):
                 labels: dict[str, set[str]] = {}
                 for pair in itertools.combinations(part.agents, 2):
                     for clip in bundle.matching(scheme, scenario, pair):

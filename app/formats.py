@@ -138,6 +138,8 @@ class Manifest(BaseModel):
     # full world it was evaluated and searched in (a clip's summary holds its search's exact world)
     sources: dict[str, dict] = {}
     files: dict[str, str] = {}  # every file of the bundle (relative path) -> sha256
+    # per pair and fixed scenario: how representative it is of the task's distribution (researchers only)
+    representativeness: list[dict] = []
 
 
 def manifest_json(manifest: Manifest) -> str:

@@ -131,12 +131,12 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
     used: dict[str, str] = {}  # label -> the first agent it named for this participant
     for p, part in enumerate(study.parts):
         part_no = p + 1
-        scenario = study.part_scenario(p, condition.rotation)
+        scenario = {scheme: study.part_scenario(p, condition.rotation, scheme) for scheme in condition.schemes}
         screens: list[Screen] = []
         if part.kind == "pairwise":
             blocks = [
-                [Pairwise(kind="pairwise", **_clip_fields(part_no, _pick(bundle, scheme, scenario, tuple(pair), rng,
-                                                                         used), list(part.questions), rng, bundle))
+                [Pairwise(kind="pairwise", **_clip_fields(part_no, _pick(bundle, scheme, scenario[scheme], tuple(pair),
+                                                                         rng, used), list(part.questions), rng, bundle))
                  for pair in part.pairs]
                 for scheme in condition.schemes
             ]
@@ -147,7 +147,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                 screens += block
         else:
             for b, scheme in enumerate(condition.schemes):
-                screens += _ranking_screens(part, part_no, scheme, scenario, bundle, rng, block=b + 1)
+                screens += _ranking_screens(part, part_no, scheme, scenario[scheme], bundle, rng, block=b + 1)
         for c, check in reversed(list(enumerate(study.attention_checks))):
             if check.part == part_no:
                 video = {}

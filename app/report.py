@@ -75,7 +75,9 @@ class ReportData:
 
     def scopes(self) -> list[str]:
         seen = {scope for _, scope, _ in self.accuracy}
-        return [ALL] + [s for s in self.study.design.scenarios if s in seen]
+        design = self.study.design
+        named = [*design.scenarios, *(s for names in design.scheme_scenarios.values() for s in names)]
+        return [ALL] + [s for s in dict.fromkeys(named) if s in seen]
 
     def accuracy_test(self, task: str, scope: str) -> TestResult:
         return accuracy_difference({s: (self.tally(task, scope, s).correct, self.tally(task, scope, s).incorrect)

@@ -81,6 +81,19 @@ class Design(Strict):
     scenarios: Names
     counterbalance_scenarios: bool = True
     counterbalance_scheme_order: bool = True
+    # a scheme whose clips come from other scenarios than `scenarios`, as many (e.g. a distribution of starting
+    # states for the representative solver): scheme -> its scenario for each of the design's scenarios
+    scheme_scenarios: dict[Text, Annotated[list[Text], Field(min_length=1)]] = {}
+
+    @model_validator(mode="after")
+    def _scheme_scenarios(self) -> Design:
+        for scheme, names in self.scheme_scenarios.items():
+            if scheme not in self.schemes:
+                raise ValueError(f"scheme_scenarios names {scheme!r}, which is not one of schemes {self.schemes}")
+            if len(names) != len(self.scenarios):
+                raise ValueError(f"scheme_scenarios.{scheme} gives {len(names)} scenarios; the design has "
+                                 f"{len(self.scenarios)}, one for each")
+        return self
 
 
 class Texts(Strict):
@@ -288,10 +301,11 @@ class BuildScheme(Strict):
     """How one scheme's clips are found: a solver of `foil search` with its simulator-step budget, seed and top-K,
     and its solver, reward and world settings (checked against their fields by the bundle builder)."""
 
-    solver: Text  # mcts, nfirst, random, cem
+    solver: Text  # mcts, nfirst, random, cem, representative
     budget: _whole(1)
     seed: _whole(0)
     top_k: _whole(1) = 1
+    select: Literal["reward", "contrast"] = "reward"  # which of the top-K becomes the clip (docs/clips.md)
     settings: Settings = {}
     reward: Settings = {}
     world: Settings = {}
@@ -325,11 +339,21 @@ class BuildSet(Strict):
         return tuple(dict.fromkeys(a for pair in self.clip_pairs() for a in pair))
 
 
+class BuildRepresentativeness(Strict):
+    """How `foil bundle` measures the study's fixed scenarios against the task's distribution of starting states."""
+
+    distribution: Text = "training"
+    states: _whole(1) = 64  # starting states drawn from the distribution
+    pushes: _whole(1) = 32  # rollouts per state (and per fixed scenario) under uniform pushes
+    seed: _whole(0) = 0
+
+
 class Build(Strict):
     """The `[build]` table: which clips `foil bundle` searches for and renders (docs/clips.md)."""
 
     seed: _whole(0)  # seeds which robot number each agent gets in each clip
     eval: BuildEval = BuildEval()
+    representativeness: BuildRepresentativeness = BuildRepresentativeness()
     render: Settings = {}  # RenderOptions fields, checked by the renderer
     schemes: Annotated[dict[str, BuildScheme], Field(min_length=1)]
     sets: Annotated[list[BuildSet], Field(min_length=1)]
@@ -385,9 +409,11 @@ class Study(Strict):
         counterbalanced = self.design.counterbalance_scenarios
         return range(len(self.design.scenarios) if counterbalanced else 1)
 
-    def part_scenario(self, part_index: int, rotation: int) -> str:
-        """The scenario feeding a part: parts take the design's scenarios in turn, rotated per condition."""
-        return self.design.scenarios[(part_index + rotation) % len(self.design.scenarios)]
+    def part_scenario(self, part_index: int, rotation: int, scheme: str | None = None) -> str:
+        """The scenario feeding a part: parts take the design's scenarios in turn, rotated per condition; a scheme
+        with scenarios of its own takes its scenario at the same place."""
+        names = self.design.scheme_scenarios.get(scheme, self.design.scenarios)
+        return names[(part_index + rotation) % len(names)]
 
 
 def _reference_problems(study: Study) -> list[tuple[tuple, str]]:

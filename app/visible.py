@@ -78,8 +78,10 @@ class VisibleClip:
             text = f"{label} reached the goal after {float(outcome.get('time') or self.end_s):.0f} seconds"
         elif event == "collision":
             text = f"{label} bumped into a person"
-        else:
-            text = f"{label} did not reach the goal in time"
+        elif event == "timeout":
+            text = f"{label} ran out of time before reaching the goal"
+        else:  # still moving when the clip ends, as the clip's "still on its way"
+            text = f"{label} was still on its way when the clip ended"
         closest = outcome.get("min_human_distance")
         if closest is not None and event != "collision" and float(closest) < 0.5:
             text += " and came close to people"
@@ -107,5 +109,10 @@ def _progress(summary: dict, k: int) -> float:
         end = summary["steps"][-1]["robots"][k]
     except (KeyError, IndexError, TypeError):
         return 0.0
+    return progress_towards(start, goal, end)
+
+
+def progress_towards(start, goal, end) -> float:
+    """Share of the start-to-goal distance covered at ``end`` (none when farther from the goal than the start)."""
     total = math.dist(start, goal)
     return max(0.0, 1 - math.dist(end, goal) / total) if total > 0 else 1.0

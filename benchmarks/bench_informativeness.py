@@ -1,13 +1,23 @@
-"""Which search semantics and reward constants give clips that show the better robot.
+"""Which clip-generation scheme shows people the better robot: the representative solver, MCTS with outcome-contrast
+selection, and the paper's preset, judged against the ground truth.
 
-For every pair of the shipped agents on the paper's two study scenarios, with several search seeds, the best
-summary of an MCTS search is judged the way `foil bundle` audits a clip (`app.visible.audit`: who bumped into a
-person, who reached the goal and when, how far the others got) against the ground truth (the higher mean test
-reward of `foil eval`). The searches never see the ground truth; only this judge does.
+For every pair of the shipped agents and every search seed, each scheme's clip is judged the way `foil bundle`
+audits a clip (`app.visible.audit`: who bumped into a person, who reached the goal and when, how far the others
+got) against the ground truth (the higher mean test reward of `foil eval`). A seed's three clips of a scheme (on
+one scenario) rank the agents right when their visible winners order lo < med < hi as the ground truth does, i.e.
+when each shows its pair's better agent as better. The
+searches never see the ground truth; only this judge does.
 
-    python benchmarks/bench_informativeness.py [--budget 100000] [--seeds 0,1,2] [--jobs 2] [--out DIR]
+- **paper preset**: MCTS on the paper's two study scenarios with the paper's reading of the reward
+  (`finish=first` and its code's constants), the top-1 clip;
+- **MCTS, outcome selection**: MCTS on the same scenarios with the default reward, top-30, the clip with the
+  largest visible contrast (`select = "contrast"`);
+- **representative**: the representative solver on the training distribution, with the same budget.
 
-Prints one row per setting: clips that show the better robot as better, as worse, and no visible difference.
+    python benchmarks/bench_informativeness.py [--budget 100000] [--seeds 20] [--jobs 2] [--out DIR]
+
+Prints a table: clips showing the better robot (Wilson 95% interval), rankings right, and each scheme's mean
+simulator steps and wall time per search.
 """
 
 from __future__ import annotations
@@ -15,26 +25,25 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import platform
 import tempfile
 import time
 from pathlib import Path
 
+from app.statistics import wilson_interval
 from app.visible import VisibleClip, audit
 from search.agents.evaluate import evaluate
 from search.agents.policies import load_policy
+from search.bundle.build import clip_summary
 from search.solvers.runner import SearchJob, run_all
 
 AGENTS = ("lo", "med", "hi")
-SCENARIOS = ("paper-bl-tr", "paper-tl-br")
-PAPER_CONSTANTS = {"goal_bonus": 100.0, "alpha": 1.0, "beta": 1e4, "horizon_offset": -1e5}
-SETTINGS = {
-    "all, plain (earlier default)": {"finish": "all"},
-    "all, paper code's constants, collision is goal": {"finish": "all", "collision_is_goal": True,
-                                                        **PAPER_CONSTANTS},
-    "first, plain": {"finish": "first"},
-    "first, paper code's constants (paper preset)": {"finish": "first", **PAPER_CONSTANTS},
-    "first, paper code's constants, goal needs contrast": {"finish": "first", "goal_needs_contrast": True,
-                                                            **PAPER_CONSTANTS},
+PAPER_SCENARIOS = ("paper-bl-tr", "paper-tl-br")
+PAPER_PRESET = {"finish": "first", "goal_bonus": 100.0, "alpha": 1.0, "beta": 1e4, "horizon_offset": -1e5}
+SCHEMES = {  # name: (solver, scenarios, reward settings, top-k, clip selection)
+    "paper preset, top-1": ("mcts", PAPER_SCENARIOS, PAPER_PRESET, 1, "reward"),
+    "MCTS, outcome selection of top-30": ("mcts", PAPER_SCENARIOS, {}, 30, "contrast"),
+    "representative (training distribution)": ("representative", ("training",), {}, 1, "reward"),
 }
 
 
@@ -42,56 +51,70 @@ def ground_truth(episodes: int = 500) -> dict[str, float]:
     return {name: evaluate(load_policy(name), episodes, seed=0)["reward_mean"] for name in AGENTS}
 
 
-def judge(folder: Path, rewards: dict[str, float]) -> dict:
-    summary = json.loads((folder / "summary-001.json").read_text())
+def judge(folder: Path, select: str, rewards: dict[str, float]) -> dict:
+    summary = json.loads(clip_summary(folder, select).read_text())
     agents = [a["name"] for a in summary["agents"]]
     labels = [f"Robot {k + 1}" for k in range(len(agents))]
     better = max(agents, key=rewards.get)
     verdict = audit(VisibleClip.of_summary(summary, agents, labels), labels[agents.index(better)])
-    return verdict | {"events": [o["event"] for o in summary["outcomes"]], "end_s": summary["steps"][-1]["t"]}
+    return verdict | {"events": [o["event"] for o in summary["outcomes"]],
+                      "end_s": summary["steps"][-1]["t"], "scenario": summary["scenario"]["name"]}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--budget", type=int, default=100_000)
-    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--out", type=Path, help="keep the searches here (default: a temporary folder)")
-    parser.add_argument("--settings", help="only the settings whose names contain this text")
+    parser.add_argument("--episodes", type=int, default=500, help="evaluation episodes for the ground truth")
+    parser.add_argument("--out", type=Path, help="keep the searches and verdicts here (default: a temporary folder)")
+    parser.add_argument("--schemes", help="only the schemes whose names contain this text")
     args = parser.parse_args()
-    seeds = [int(s) for s in args.seeds.split(",")]
-    rewards = ground_truth()
+    rewards = ground_truth(args.episodes)
     print("ground truth (mean test reward):", {k: round(v, 2) for k, v in rewards.items()}, flush=True)
     out = args.out or Path(tempfile.mkdtemp(prefix="informativeness-"))
+    pairs = list(itertools.combinations(AGENTS, 2))
     rows = []
-    for name, reward in SETTINGS.items():
-        if args.settings and args.settings not in name:
+    for name, (solver, scenarios, reward, top_k, select) in SCHEMES.items():
+        if args.schemes and args.schemes not in name:
             continue
-        jobs = [SearchJob(agents=pair, scenario=scenario, budget=args.budget, seed=seed, top_k=1,
-                          reward_settings=reward)
-                for pair in itertools.combinations(AGENTS, 2) for scenario in SCENARIOS for seed in seeds]
-        started = time.perf_counter()
-        folder = out / name.split(" (")[0].replace(", ", "-").replace(" ", "_").replace("'", "")
-        # run_all writes one folder per (solver, agents, scenario): one call per seed keeps seeds apart
-        verdicts = []
-        for seed in seeds:
-            seed_jobs = [job for job in jobs if job.seed == seed]
-            run_all(seed_jobs, folder / f"seed{seed}", workers=args.jobs, progress=False)
-            verdicts += [judge(folder / f"seed{seed}" / job.solver / job.label, rewards) | {"job": job.label,
-                                                                                          "seed": seed}
-                         for job in seed_jobs]
-        counts = {shows: sum(v["shows"] == shows for v in verdicts) for shows in ("better", "worse", "tie")}
-        rows.append((name, counts, len(verdicts), time.perf_counter() - started))
-        print(f"{name}: {counts} of {len(verdicts)} in {rows[-1][3]:.0f} s", flush=True)
-        for v in verdicts:
-            print(f"    seed {v['seed']} {v['job']:<28} {v['shows']:<6} ends {v['end_s']:5.2f} s "
-                  f"{'/'.join(v['events']):<20} {v['why']}", flush=True)
-    print(f"\nMCTS, {args.budget:,} steps per search, seeds {args.seeds}, 3 pairs x 2 scenarios\n")
-    print("| setting | shows the better robot | shows it as worse | no visible difference |")
-    print("|---|---:|---:|---:|")
-    for name, counts, total, _ in rows:
-        print(f"| {name} | {counts['better']} of {total} ({counts['better'] / total:.0%}) | {counts['worse']} | "
-              f"{counts['tie']} |")
+        verdicts, rankings, steps, walls = [], [], [], []
+        for seed in range(args.seeds):
+            jobs = [SearchJob(agents=pair, scenario=scenario, solver=solver, budget=args.budget, seed=seed,
+                              top_k=top_k, reward_settings=reward) for scenario in scenarios for pair in pairs]
+            folder = out / name.split(" ")[0].replace(",", "") / solver / f"seed{seed}"
+            study = run_all(jobs, folder, workers=args.jobs, progress=False)
+            steps += [job["sim_steps"] for job in study["jobs"]]
+            walls += [job["wall_s"] for job in study["jobs"]]
+            for scenario in scenarios:
+                found = [judge(folder / solver / job.label, select, rewards) | {"seed": seed, "job": job.label}
+                         for job in jobs if job.scenario == scenario]
+                verdicts += found
+                # the three clips rank the agents right exactly when each shows its pair's better agent winning
+                rankings.append(all(v["shows"] == "better" for v in found))
+                for v in found:
+                    print(f"  {name[:14]:<14} seed {seed:>2} {v['job']:<24} {v['shows']:<6} {v['scenario']:<12} "
+                          f"ends {v['end_s']:5.2f} s {'/'.join(v['events']):<17} {v['why']}", flush=True)
+        better = sum(v["shows"] == "better" for v in verdicts)
+        rows.append({"scheme": name, "clips": len(verdicts), "better": better,
+                     "worse": sum(v["shows"] == "worse" for v in verdicts),
+                     "tie": sum(v["shows"] == "tie" for v in verdicts),
+                     "better_ci": wilson_interval(better, len(verdicts)), "rankings": len(rankings),
+                     "rankings_right": sum(rankings), "rankings_ci": wilson_interval(sum(rankings), len(rankings)),
+                     "sim_steps": sum(steps) / len(steps), "wall_s": sum(walls) / len(walls)})
+        (out / "rows.json").write_text(json.dumps(rows, indent=1))
+    print(f"\n{args.seeds} seeds x {len(pairs)} pairs, budget {args.budget:,} simulator steps per search; "
+          f"{platform.machine()}, {time.strftime('%Y-%m-%d')}\n")
+    print("| scheme | shows the better robot [95% CI] | worse | tie | ranking right [95% CI] | "
+          "steps per search | wall s per search |")
+    print("|---|---|---:|---:|---|---:|---:|")
+    for r in rows:
+        low, high = r["better_ci"]
+        rlow, rhigh = r["rankings_ci"]
+        print(f"| {r['scheme']} | {r['better']} of {r['clips']} ({r['better'] / r['clips']:.0%}) "
+              f"[{low:.0%}, {high:.0%}] | {r['worse']} | {r['tie']} | {r['rankings_right']} of {r['rankings']} "
+              f"({r['rankings_right'] / r['rankings']:.0%}) [{rlow:.0%}, {rhigh:.0%}] | {r['sim_steps']:,.0f} | "
+              f"{r['wall_s']:.1f} |")
 
 
 if __name__ == "__main__":

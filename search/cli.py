@@ -232,8 +232,10 @@ def build_parser() -> argparse.ArgumentParser:
     _search_arguments(search)
     search.add_argument("--agents", required=True, help="two or more agents, comma-separated: A,B[,C] (more "
                         "than two are searched jointly, their pairwise divergences combined)")
-    search.add_argument("--scenario", required=True, help="shipped scenario name or TOML file")
-    search.add_argument("--solver", default="mcts", help="mcts (default), nfirst, random or cem")
+    search.add_argument("--scenario", required=True, help="shipped scenario name or TOML file; for the "
+                        "representative solver a distribution of starting states (training: the agents' own)")
+    search.add_argument("--solver", default="mcts", help="mcts (default), nfirst, random, cem or representative "
+                        "(votes over states drawn from --scenario which agent looks better; docs/search.md)")
     search.set_defaults(handler=_search)
 
     search_all = sub.add_parser("search-all", help="search every agent pair on every scenario, in parallel")

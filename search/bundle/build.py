@@ -26,7 +26,7 @@ import os
 import random
 import shutil
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
@@ -59,6 +59,7 @@ class Scheme:
     budget: int
     seed: int
     top_k: int
+    select: str = "reward"  # the clip is the search's best summary by "reward", or its largest visible "contrast"
     settings: dict = field(default_factory=dict)  # the solver's
     reward: dict = field(default_factory=dict)
     world: dict = field(default_factory=dict)
@@ -81,6 +82,16 @@ class ClipSet:
 
 
 @dataclass(frozen=True)
+class Representativeness:
+    """How the study's fixed scenarios are measured against the task's distribution (`[build.representativeness]`)."""
+
+    distribution: str = "training"
+    states: int = 64
+    pushes: int = 32
+    seed: int = 0
+
+
+@dataclass(frozen=True)
 class BuildSpec:
     seed: int  # seeds the agent-to-robot-number mapping of every clip
     eval_episodes: int
@@ -88,6 +99,7 @@ class BuildSpec:
     render: RenderOptions
     schemes: dict[str, Scheme]
     sets: tuple[ClipSet, ...]
+    representativeness: Representativeness = Representativeness()
 
     @property
     def agents(self) -> list[str]:
@@ -108,7 +120,7 @@ def _render_options(build: Build, text: str, source: str) -> RenderOptions:
 def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
     """Each scheme's solver, reward and world settings checked against those settings' fields, and each set's
     scenarios found, so that a bad one is refused at its line before any work."""
-    from search.sim.scenarios import load_scenario
+    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
     from search.sim.world import WorldConfig
     from search.solvers.reward import RewardConfig
 
@@ -130,9 +142,23 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
     for i, clip_set in enumerate(build.sets):
         for j, scenario in enumerate(clip_set.scenarios):
             try:
-                load_scenario(scenario)
+                found = load_scenario_or_distribution(scenario)
             except (ValueError, FileNotFoundError) as error:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
+                continue
+            solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
+            if isinstance(found, ScenarioDistribution) != (solvers == {"representative"}):
+                problems.append((("build", "sets", i, "scenarios", j), f"{scenario!r} is a "
+                                 f"{'distribution' if isinstance(found, ScenarioDistribution) else 'fixed scenario'}: "
+                                 f"the representative solver draws from a distribution (such as 'training'), the "
+                                 f"other solvers search from a fixed scenario; give each kind a set of its own"))
+    distribution = build.representativeness.distribution
+    try:
+        if not isinstance(load_scenario_or_distribution(distribution), ScenarioDistribution):
+            problems.append((("build", "representativeness", "distribution"), f"{distribution!r} is one fixed "
+                             f"scenario; give a distribution of starting states such as 'training'"))
+    except (ValueError, FileNotFoundError) as error:
+        problems.append((("build", "representativeness", "distribution"), str(error)))
     return problems
 
 
@@ -153,7 +179,8 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
         seed=build.seed, eval_episodes=build.eval.episodes, eval_seed=build.eval.seed, render=options,
         schemes={name: Scheme(name=name, **scheme.model_dump()) for name, scheme in build.schemes.items()},
         sets=tuple(ClipSet(parts=tuple(s.parts), schemes=tuple(s.schemes), scenarios=tuple(s.scenarios),
-                           pairs=s.clip_pairs(), agents=s.all_agents()) for s in build.sets))
+                           pairs=s.clip_pairs(), agents=s.all_agents()) for s in build.sets),
+        representativeness=Representativeness(**build.representativeness.model_dump()))
 
 
 def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
@@ -221,13 +248,12 @@ def agent_identity(agent: str) -> dict:
 def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
     """The search behind a clip, its settings checked against the solver's, reward's and world's fields; ``world``
     is the study's comparison world (``study_world``), under the scenario file's and the scheme's world settings."""
-    from search.sim.scenarios import load_scenario
+    from search.sim.scenarios import load_scenario_or_distribution
     from search.sim.world import WorldConfig
     from search.solvers.reward import RewardConfig
 
     scheme = job.scheme
-    scenario_world = load_scenario(job.scenario).world if world else {}
-    world = {key: value for key, value in (world or {}).items() if key not in scenario_world}
+    world = under(world, load_scenario_or_distribution(job.scenario).world if world else {})
     return SearchJob(agents=job.pair, scenario=job.scenario, solver=scheme.solver, budget=scheme.budget,
                      seed=scheme.seed, top_k=scheme.top_k,
                      solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
@@ -241,6 +267,17 @@ def study_world(spec: BuildSpec) -> dict:
     from search.agents.policies import comparison_world
 
     return comparison_world(spec.agents, {})
+
+
+def under(world: dict | None, own: dict) -> dict:
+    """The study's ``world`` settings that a scenario's ``own`` settings leave as they are."""
+    return {key: value for key, value in (world or {}).items() if key not in own}
+
+
+def beneath(scenario, world: dict | None):
+    """A scenario or distribution with the study's ``world`` settings beneath its own."""
+    world = under(world, scenario.world)
+    return replace(scenario, world=world | scenario.world) if world else scenario
 
 
 def agent_source(agent: str, world: dict) -> dict:
@@ -264,12 +301,15 @@ def agent_source(agent: str, world: dict) -> dict:
 def search_inputs(search: SearchJob) -> dict:
     """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
     input."""
-    from search.sim.scenarios import load_scenario
+    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
     from search.solvers.reward import RewardConfig
     from search.solvers.summary import frozen_scenario
 
+    scenario = load_scenario_or_distribution(search.scenario)
+    frozen = replace(scenario, world=scenario.world | search.world_settings) \
+        if isinstance(scenario, ScenarioDistribution) else frozen_scenario(scenario, search.world_settings)
     return {"agents": [agent_identity(a) for a in search.agents],
-            "scenario": frozen_scenario(load_scenario(search.scenario), search.world_settings).to_dict(),
+            "scenario": asdict(frozen) if isinstance(frozen, ScenarioDistribution) else frozen.to_dict(),
             "solver": search.solver, "solver_settings": asdict(solver_config_class(search.solver)(
                 **search.solver_settings)),
             "reward": RewardConfig(**search.reward_settings).to_dict(),
@@ -431,10 +471,11 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log, world)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
+    scenario_reports = representativeness(spec, cache, log, world)
     clips = []
     for job, search in zip(jobs, inputs, strict=True):
         summary = out / "summaries" / f"{job.id}.json"
-        shutil.copyfile(cache.path("search", search) / "summary-001.json", summary)
+        shutil.copyfile(clip_summary(cache.path("search", search), job.scheme.select), summary)
         clip = out / "clips" / f"{job.id}.mp4"
         render_clip(job, summary, clip, spec.render, cache, log)
         order = sorted(range(2), key=lambda k: job.numbers[k])
@@ -457,20 +498,100 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
-    write_gallery(out, clips, evaluations)
+    write_gallery(out, clips, evaluations, scenario_reports)
     manifest = Manifest(format=MANIFEST_FORMAT, label_seed=spec.seed, clips=clips, agents=evaluations,
                         sources={agent: agent_source(agent, world) for agent in spec.agents},
-                        files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})})
+                        files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
+                        representativeness=scenario_reports)
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
     return manifest
 
 
-def write_gallery(out: Path, clips: list[ManifestClip], evaluations: dict[str, dict]) -> None:
+def clip_summary(folder: Path, select: str) -> Path:
+    """The summary of a search that becomes the clip: the best by reward, or with ``select = "contrast"`` the one
+    of the search's top-K whose clip shows the largest visible difference (no ground truth is read)."""
+    from search.solvers.representative import largest_contrast
+
+    first = folder / "summary-001.json"
+    if select == "reward":
+        return first
+    paths = sorted(folder.glob("summary-[0-9][0-9][0-9].json"))
+    return paths[largest_contrast([json.loads(p.read_text()) for p in paths])]
+
+
+def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None) -> list[dict]:
+    """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
+    there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`), with
+    a warning line when the scenario's majority disagrees with the distribution's vote. ``world`` is the study's
+    comparison world (``study_world``), beneath each scenario's and the distribution's own settings."""
+    import numpy as np
+
+    from search.agents.policies import load_policy
+    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
+    from search.solvers.representative import RepresentativeConfig
+    from search.solvers.representative import representativeness as measure
+    from search.solvers.reward import RewardConfig
+    from search.solvers.summary import frozen_scenario
+
+    settings = spec.representativeness
+    distribution = beneath(load_scenario_or_distribution(settings.distribution), world)
+    scenarios_of: dict[tuple[str, str], list[str]] = {}
+    for clip_set in spec.sets:
+        if {"pairwise", "ranking"} & set(clip_set.parts):
+            for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
+                if not isinstance(load_scenario_or_distribution(name), ScenarioDistribution):
+                    scenarios_of.setdefault(pair, []).append(name)
+    reports = []
+    for pair, names in scenarios_of.items():
+        names = list(dict.fromkeys(names))
+        fixed = [frozen_scenario(beneath(load_scenario_or_distribution(name), world), {}) for name in names]
+        inputs = {"agents": [agent_identity(a) for a in pair], "scenarios": [s.to_dict() for s in fixed],
+                  "distribution": asdict(distribution), "states": settings.states, "pushes": settings.pushes,
+                  "seed": settings.seed, "reward": RewardConfig().to_dict()}
+        folder = cache.path("representativeness", inputs)
+        if not cache.valid("representativeness", inputs, "report.json"):
+            started = time.perf_counter()
+            rng = np.random.default_rng(settings.seed)
+            drawn = [frozen_scenario(s, {}) for s in distribution.sample(rng, settings.states)]
+            found = measure([load_policy(a) for a in pair], fixed, drawn, RewardConfig(),
+                            RepresentativeConfig(states=settings.states, pushes=settings.pushes), rng)
+            folder = cache.store("representativeness", inputs)
+            (folder / "report.json").write_text(json.dumps(found, indent=1))
+            cache.seal("representativeness", inputs)
+            log(f"representativeness {pair[0]}-{pair[1]}: {time.perf_counter() - started:.1f} s")
+        for name, found in zip(names, json.loads((folder / "report.json").read_text()), strict=True):
+            report = {"agents": list(pair), "scenario": name, "distribution": settings.distribution} | {
+                key: value for key, value in found.items() if key != "scenario"}
+            reports.append(report)
+            log(describe_representativeness(report))
+    return reports
+
+
+def describe_representativeness(report: dict) -> str:
+    """One line on a fixed scenario against the distribution, a warning when their majorities disagree."""
+    first, second = report["agents"]
+    vote = report["distribution_vote"]
+    voted = {1: first, -1: second, 0: "neither"}[vote["direction"]]
+    line = (f"{report['scenario']}, {first} vs {second}: {first} looks better in {report['first_looks_better']:.0%} "
+            f"of {report['rollouts']} nominal rollouts, {second} in {report['second_looks_better']:.0%}; "
+            f"{report['distribution']}'s {vote['states']} states vote {voted} ({vote['for_first']} for {first}, "
+            f"{vote['for_second']} for {second})")
+    if report["percentile"] is not None:
+        line += f"; percentile {report['percentile']:.0f} of its states"
+    if report["disagrees"]:
+        return f"warning: unrepresentative scenario {line}: its clips tend to show what most starting states do not"
+    return f"representativeness {line}"
+
+
+def write_gallery(out: Path, clips: list[ManifestClip], evaluations: dict[str, dict],
+                  scenario_reports: list[dict]) -> None:
     """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
     templates = Environment(loader=FileSystemLoader(Path(__file__).parent), autoescape=True, undefined=StrictUndefined,
                             keep_trailing_newline=True)
-    page = templates.get_template("gallery.html").render(clips=clips, evaluations=evaluations, zip=zip)
+    page = templates.get_template("gallery.html").render(clips=clips, evaluations=evaluations, zip=zip,
+                                                         scenarios=scenario_reports,
+                                                         describe=describe_representativeness)
     (out / "index.html").write_text(page, encoding="utf-8")

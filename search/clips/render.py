@@ -292,7 +292,7 @@ STATUS_RUNNING = "on its way"
 
 def status_text(event: str, when: float) -> str:
     """The legend line for an outcome, short enough for one side-by-side panel on a phone."""
-    words = {"success": "reached goal", "collision": "CRASHED", "timeout": "out of time", "running": "not there yet"}
+    words = {"success": "reached goal", "collision": "CRASHED", "timeout": "out of time", "running": "still on its way"}
     return f"{words[event]} · {when:.1f} s" if event != "running" else words[event]
 
 

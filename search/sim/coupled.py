@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
@@ -196,6 +196,11 @@ class Trajectory:
     min_clearance: np.ndarray  # (N,)
     time: np.ndarray  # (T,)
 
+    def head(self, steps: int) -> Trajectory:
+        """The first ``steps`` steps (the per-robot totals stay those of the whole run; events carry their time)."""
+        per_step = ("env_actions", "robot_actions", "robot_pos", "human_pos", "crowds", "rewards", "time")
+        return replace(self, **{name: getattr(self, name)[:steps] for name in per_step})
+
 
 @cache
 def _crowd_worker() -> ThreadPoolExecutor | None:
@@ -208,8 +213,12 @@ os.register_at_fork(after_in_child=_crowd_worker.cache_clear)  # a forked child 
 
 
 def replay(policies: list[Policy], scenario: Scenario, env_actions, config: WorldConfig | None = None,
-           stop_when_done: bool = True) -> Trajectory:
-    """Run one coupled scenario from its initial state under a sequence of environment actions."""
+           stop_when_done: bool = True, coda_to: int = 0) -> Trajectory:
+    """Run one coupled scenario from its initial state under a sequence of environment actions.
+
+    With ``coda_to`` the run goes on after the last action without pushes (zero environment actions) until every
+    robot's episode has ended or ``coda_to`` steps have been taken in all: a clip's coda, which shows how the
+    robots still on their way fare after the search's trajectory ended."""
     sim = CoupledSimulator(policies, scenario, config, batch=1)
     env_actions = np.asarray(env_actions, dtype=np.float64)
     n = sim.config.human_num
@@ -222,6 +231,10 @@ def replay(policies: list[Policy], scenario: Scenario, env_actions, config: Worl
         if stop_when_done and sim.all_done[0]:
             break
     used = env_actions[: len(steps)]
+    no_push = np.zeros((1, n, 2))
+    while len(steps) < coda_to and not sim.all_done[0]:
+        steps.append(sim.step(no_push))
+    used = np.concatenate([used, np.zeros((len(steps) - len(used), n, 2))])
     state = sim.state
     return Trajectory(
         env_actions=used,

@@ -128,12 +128,83 @@ class Scenario:
         return scenario
 
 
+DISTRIBUTION_KINDS = ("circle-crossing",)
+
+
+@dataclass(frozen=True)
+class ScenarioDistribution:
+    """A task's distribution of starting states, from which concrete scenarios are drawn with a seeded generator.
+
+    A distribution file has a ``[distribution]`` table instead of ``[robot]`` and ``[[humans]]``::
+
+        name = "training"
+        description = "the agents' training distribution"
+
+        [distribution]
+        kind = "circle-crossing"   # CrowdNav_DSRNN's: robot start and goal uniform in the square of half-width
+                                   # circle_radius, humans on that circle heading for their antipodes
+        [world]                    # optional WorldConfig settings (human_num, circle_radius, ...)
+        human_num = 10
+    """
+
+    name: str
+    kind: str = "circle-crossing"
+    description: str = ""
+    world: dict = field(default_factory=dict)
+
+    def config(self, base: WorldConfig | None = None) -> WorldConfig:
+        return WorldConfig.from_dict((base or WorldConfig()).to_dict() | self.world)
+
+    def sample(self, rng: np.random.Generator, count: int) -> list[Scenario]:
+        """``count`` starting states, each a fixed scenario named after its draw (``training#3``)."""
+        state = sample_training_states(self.config(), rng, count)
+        return [Scenario(name=f"{self.name}#{i}", description=f"starting state {i} drawn from {self.name}",
+                         robot_start=tuple(state.robot_pos[i, 0].tolist()),
+                         robot_goal=tuple(state.robot_goal[i, 0].tolist()),
+                         human_positions=tuple(map(tuple, state.human_pos[i].tolist())),
+                         human_goals=tuple(map(tuple, state.human_goal[i].tolist())),
+                         robot_heading=float(state.robot_theta[i, 0]), world=dict(self.world))
+                for i in range(count)]
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "scenario distribution") -> ScenarioDistribution:
+        unknown = sorted(set(data) - {"name", "description", "distribution", "world"})
+        if unknown:
+            raise ValueError(f"{source}: unknown key(s) {unknown}; a distribution has name, description, "
+                             f"[distribution] and [world]")
+        table = data["distribution"]
+        kind = table.get("kind") if isinstance(table, dict) else None
+        if kind not in DISTRIBUTION_KINDS or set(table) != {"kind"}:
+            raise ValueError(f"{source}: [distribution] takes one key, kind, one of {list(DISTRIBUTION_KINDS)}")
+        world = data.get("world", {})
+        if not isinstance(world, dict):
+            raise ValueError(f"{source}: [world] must be a table of world settings")
+        distribution = cls(name=str(data.get("name", source)), kind=kind, description=str(data.get("description", "")),
+                           world=dict(world))
+        try:
+            distribution.config()
+        except (ValueError, TypeError) as error:
+            raise ValueError(f"{source}: [world]: {error}") from None
+        return distribution
+
+
 def shipped_scenarios() -> list[str]:
     return sorted(p.stem for p in SHIPPED_DIR.glob("*.toml"))
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
-    """A shipped scenario by name (``paper-bl-tr``, ``paper-tl-br``, ``paper-code``) or a TOML file."""
+    """A fixed scenario: shipped by name (``paper-bl-tr``, ``paper-tl-br``, ``paper-code``) or a TOML file."""
+    scenario = load_scenario_or_distribution(name_or_path)
+    if isinstance(scenario, ScenarioDistribution):
+        raise ValueError(f"{str(name_or_path)!r} is a distribution of starting states, not one scenario: the "
+                         f"representative solver draws from it (--solver representative); other solvers search "
+                         f"from a fixed scenario such as paper-bl-tr")
+    return scenario
+
+
+def load_scenario_or_distribution(name_or_path: str | Path) -> Scenario | ScenarioDistribution:
+    """A shipped scenario or distribution by name (``training`` is the agents' training distribution) or a TOML
+    file of either kind."""
     path = Path(name_or_path)
     if not path.suffix and (SHIPPED_DIR / f"{name_or_path}.toml").exists():
         path = SHIPPED_DIR / f"{name_or_path}.toml"
@@ -144,6 +215,8 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"{path}: not valid TOML: {error}") from None
+    if "distribution" in data:
+        return ScenarioDistribution.from_dict(data, source=str(path))
     return Scenario.from_dict(data, source=str(path))
 
 

@@ -13,15 +13,17 @@ import json
 import os
 import re
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from app.formats import summary_json
+from app.visible import VisibleClip
 from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
 from search.solvers.coupled_problem import CoupledProblem
 from search.solvers.mcts import MCTSConfig, mcts
+from search.solvers.representative import RepresentativeConfig, representative, visible_contrast
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.summary import build_summary, frozen_scenario
@@ -31,6 +33,7 @@ SOLVERS = {
     "nfirst": (n_first, SamplingConfig),
     "random": (random_search, SamplingConfig),
     "cem": (cem, CEMConfig),
+    "representative": (representative, RepresentativeConfig),  # draws its own states: see _representative
 }
 
 
@@ -115,31 +118,38 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
     ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
     from search.agents.policies import comparison_world, load_policy
-    from search.sim.scenarios import load_scenario
+    from search.sim.scenarios import load_scenario, load_scenario_or_distribution
 
     started = time.perf_counter()
     policies = [load_policy(spec) for spec in job.agents]
-    scenario = load_scenario(job.scenario)
-    scenario = frozen_scenario(scenario, comparison_world(list(job.agents), job.world_settings, scenario.world))
+    # the agents' trained worlds (an imported checkpoint's), under the scenario's own settings and the job's
+    scenario_world = load_scenario_or_distribution(job.scenario).world
+    job = replace(job, world_settings=comparison_world(list(job.agents), job.world_settings, scenario_world))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)
-    problem = CoupledProblem(policies, scenario, reward=reward_config)
     tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
+    rng = np.random.default_rng(job.seed)
+    solver = {"name": job.solver, "parameters": asdict(solver_config), "seed": job.seed, "budget": job.budget}
+    vote = None
     try:
-        solve(problem, tracker, np.random.default_rng(job.seed), solver_config)
+        if job.solver == "representative":
+            distribution = load_scenario_or_distribution(job.scenario)
+            distribution = replace(distribution, world=distribution.world | job.world_settings)
+            summaries, vote = _representative(job, policies, distribution, reward_config, tracker, rng,
+                                              solver_config, solver)
+        else:
+            scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
+            solve(CoupledProblem(policies, scenario, reward=reward_config), tracker, rng, solver_config)
     finally:
         tracker.close()
     search_time = time.perf_counter() - started
-
-    solver = {"name": job.solver, "parameters": asdict(solver_config), "seed": job.seed, "budget": job.budget,
-              "budget_used": tracker.steps}
-    summaries = []
-    for found in tracker.queue.ranked():
-        summary = build_summary(list(job.agents), policies, scenario, reward_config, found.actions,
-                                solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
-        summaries.append(summary)
-    summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
+    solver["budget_used"] = tracker.steps
+    if vote is None:
+        summaries = [build_summary(list(job.agents), policies, scenario, reward_config, found.actions,
+                                   solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
+                     for found in tracker.queue.ranked()]
+        summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
     files = {}
     for rank, summary in enumerate(summaries, start=1):
         summary["solver"]["rank"] = rank
@@ -147,7 +157,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     record = {
         "format": "foil.run/1",
         "agents": list(job.agents),
-        "scenario": scenario.name,
+        "scenario": job.scenario if vote else scenario.name,
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
         "top_k": job.top_k,
@@ -158,11 +168,38 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
         "steps_per_s": tracker.steps / max(search_time, 1e-9),
         "best_reward": summaries[0]["reward"] if summaries else None,
         "curve": [[steps, reward] for steps, reward in tracker.curve],
-        "summaries": [{"file": name, "reward": s["reward"], "search_reward": s["solver"]["search_reward"]}
+        "summaries": [{"file": name, "reward": s["reward"], "search_reward": s["solver"].get("search_reward")}
                       for name, s in zip(files, summaries, strict=True)],
     }
+    if vote is not None:
+        record["vote"] = vote
     files["run.json"] = json.dumps(record, indent=1) + "\n"
     return files
+
+
+def _representative(job: SearchJob, policies: list, distribution, reward_config: RewardConfig, tracker: Tracker,
+                    rng: np.random.Generator, config: RepresentativeConfig, solver: dict) -> tuple[list, dict]:
+    """The representative solver's summaries (in its order: the chosen clip first) and the record of its vote.
+    Each summary's scenario is the starting state it was drawn as; its solver entry says which state and what
+    contrast the search saw."""
+    from search.sim.scenarios import ScenarioDistribution
+
+    if not isinstance(distribution, ScenarioDistribution):
+        raise ValueError(f"the representative solver draws starting states from a distribution (such as "
+                         f"'training'); {job.scenario!r} is one fixed scenario")
+    drawn = distribution.sample(rng, config.states)
+    scenarios = [frozen_scenario(s, s.world | job.world_settings) for s in drawn]
+    agents = list(job.agents)
+
+    def replay(scenario, actions) -> tuple[float, dict]:
+        summary = build_summary(agents, policies, scenario, reward_config, actions, solver)
+        return visible_contrast(VisibleClip.of_summary(summary, agents, ["first", "second"])), summary
+
+    summaries, vote = representative(policies, scenarios, reward_config, tracker, rng, config, replay)
+    for summary, chosen in zip(summaries, vote["chosen"], strict=True):
+        summary["solver"] = summary["solver"] | {"budget_used": tracker.steps, "state": chosen["state"],
+                                                 "search_contrast": chosen["contrast"]}
+    return summaries, vote
 
 
 def write_outputs(out: str | Path, files: dict[str, str]) -> Path:

@@ -56,11 +56,17 @@ def _humans(crowds: np.ndarray) -> list:
 
 def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_config: RewardConfig,
                   env_actions: np.ndarray, solver: dict) -> dict:
-    """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs."""
+    """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs.
+
+    The reward is the search's, over the searched steps. What the clip shows goes on after them: where the
+    trajectory ended before every robot's episode did (a robot reached its goal first, or ``finish = "first"``),
+    the robots go on without pushes until each has ended or the horizon is reached (the coda: ``steps`` beyond
+    ``env_actions``), and ``outcomes`` are those at the clip's end."""
     config = scenario.config()
-    trajectory = replay(policies, scenario, env_actions, stop_when_done=False)
+    searched = len(env_actions)
+    trajectory = replay(policies, scenario, env_actions, stop_when_done=False, coda_to=reward_config.horizon)
     prior = ActionPrior((config.human_num, 2), config.env_action_bound, reward_config.prior, reward_config.prior_sigma)
-    total, terms, terminal = DivergenceReward(reward_config, prior).trajectory(trajectory, config.dt)
+    total, terms, terminal = DivergenceReward(reward_config, prior).trajectory(trajectory.head(searched), config.dt)
     ends = np.flatnonzero(terminal)
     if ends.size == 0 or ends[0] != len(terminal) - 1:
         where = "never ends" if ends.size == 0 else f"ends at step {ends[0] + 1} of {len(terminal)}"
@@ -71,7 +77,8 @@ def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_
         "scenario": scenario.to_dict(),
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
-        "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist() for a in trajectory.env_actions],
+        "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist()
+                        for a in trajectory.env_actions[:searched]],
         "steps": [{"t": float(trajectory.time[i]), "humans": _humans(trajectory.crowds[i]),
                    "robots": _pairs(trajectory.robot_pos[i]), "robot_actions": _pairs(trajectory.robot_actions[i])}
                   for i in range(len(trajectory.time))],

@@ -44,3 +44,18 @@ def test_audit_names_what_happened():
                                              "Robot 1 bumped into a person.")
     with pytest.raises(ValueError, match="compares two robots"):
         audit(clip, "Robot 3")
+
+
+def test_the_audit_says_what_the_clip_says_of_a_robot_still_moving_at_its_end():
+    """A robot still moving when the clip ends is "still on its way" in the clip's legend and in the audit, never
+    "did not reach the goal in time"; one whose episode ran out of time is "out of time" in both."""
+    from search.clips.render import status_text
+
+    clip = VisibleClip.of_summary(summary(RUNNING, LATE, ends=((0, 0), (5, 5))), ["lo", "hi"], ["Robot 1", "Robot 2"])
+    why = audit(clip, "Robot 2")["why"]
+    assert "Robot 1 was still on its way when the clip ended" in why and "in time" not in why
+    assert status_text("running", 25.0) == "still on its way"
+    timed_out = {"event": "timeout", "time": 50.0, "min_human_distance": 0.8}
+    clip = VisibleClip.of_summary(summary(timed_out, LATE, ends=((0, 0), (5, 5))), ["lo", "hi"], ["A", "B"])
+    assert "A ran out of time before reaching the goal" in audit(clip, "B")["why"]
+    assert status_text("timeout", 50.0).startswith("out of time")

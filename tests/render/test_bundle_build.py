@@ -29,20 +29,38 @@ hold_start = 0.2
 hold_end = 0.2
 event_hold = 0.2
 
+[build.representativeness]
+states = 3
+pushes = 3
+
 [build.schemes.adaptive]
 solver = "mcts"
 budget = 300
 seed = 1
+top_k = 5
+select = "contrast"
 
 [build.schemes.nfirst]
 solver = "nfirst"
 budget = 300
 seed = 1
 
+[build.schemes.representative]
+solver = "representative"
+budget = 600
+seed = 1
+settings = { states = 3, pushes = 3 }
+
 [[build.sets]]
 parts = ["pairwise", "ranking"]
 schemes = ["adaptive", "nfirst"]
 scenarios = ["paper-bl-tr"]
+agents = ["goal", "orca"]
+
+[[build.sets]]
+parts = ["pairwise"]
+schemes = ["representative"]
+scenarios = ["training"]
 agents = ["goal", "orca"]
 
 [[build.sets]]
@@ -67,7 +85,7 @@ def test_manifest_matches_files_and_checksums(built):
     out, manifest, _, _ = built
     assert manifest == json.loads((out / "manifest.json").read_text())
     assert manifest["format"] == "foil.bundle/1"
-    assert len(manifest["clips"]) == 3
+    assert len(manifest["clips"]) == 4
     agent_of = {}
     for clip in manifest["clips"]:
         assert sha256_file(out / clip["file"]) == clip["sha256"]
@@ -134,7 +152,7 @@ def test_a_rebuild_reuses_cached_searches_and_clips(built):
     again = []
     assert build_bundle(study, out, log=again.append).model_dump(mode="json") == manifest
     searches = [line for line in again if line.startswith("search ")]
-    assert len(searches) == 3 and all(line.endswith(": cached") for line in searches)
+    assert len(searches) == 4 and all(line.endswith(": cached") for line in searches)
     assert all(line.endswith(": cached") for line in again if line.startswith(("render ", "eval ")))
 
 
@@ -145,7 +163,7 @@ def test_a_changed_input_reruns_only_the_searches_it_touches(built):
     log = []
     manifest = build_bundle(changed, out, log=log.append).model_dump(mode="json")
     searches = [line for line in log if line.startswith("search ")]
-    assert sorted(line.endswith(": cached") for line in searches) == [False, True, True]
+    assert sorted(line.endswith(": cached") for line in searches) == [False, True, True, True]
     assert [line for line in searches if not line.endswith(": cached")][0].startswith("search adaptive")
     assert json.loads((out / "manifest.json").read_text()) == manifest
 
@@ -162,3 +180,47 @@ def test_a_cached_search_that_no_longer_reproduces_is_run_again(built):
     again = [line for line in log if "no longer re-simulates exactly" in line]
     assert len(again) == 1 and "steps[3].robots[0][0]" in again[0]
     assert json.loads(cached.read_text())["steps"][3]["robots"][0][0] != summary["steps"][3]["robots"][0][0]
+
+
+def test_outcome_selection_shows_the_top_k_summary_with_the_largest_visible_contrast(built):
+    """With select = "contrast" the clip is the summary of the search's top-K whose clip shows the largest
+    visible difference (either way, no ground truth), not necessarily the best by reward."""
+    from app.visible import Observer, VisibleClip
+
+    out, manifest, _, _ = built
+    clip = next(c for c in manifest["clips"] if c["scheme"] == "adaptive")
+    shown = json.loads((out / clip["summary"]).read_text())
+    [folder] = [folder for folder in (out / "cache" / "search").iterdir()
+                if json.loads((folder / "inputs.json").read_text())["solver"] == "mcts"
+                and json.loads((folder / "inputs.json").read_text())["budget"] == 300]
+    searched = [json.loads(p.read_text()) for p in sorted(folder.glob("summary-*.json"))]
+    assert len(searched) == 5
+
+    def contrast(summary):
+        first, second = VisibleClip.of_summary(summary, ["goal", "orca"], ["a", "b"]).scores(Observer()).values()
+        return abs(first - second) if abs(first - second) >= Observer().tie_margin else 0.0
+
+    assert contrast(shown) == max(contrast(s) for s in searched)
+    assert shown == next(s for s in searched if contrast(s) == contrast(shown)) | {"solver": shown["solver"]}
+
+
+def test_the_representative_clip_and_the_representativeness_of_the_fixed_scenario(built):
+    """The representative scheme's clip comes from a drawn starting state and re-simulates exactly; the fixed
+    scenario is measured against the training distribution, in the manifest, the log and the gallery."""
+    from search.solvers.summary import verify
+
+    out, manifest, log, _ = built
+    clip = next(c for c in manifest["clips"] if c["scheme"] == "representative")
+    assert clip["scenario"] == "training" and clip["solver"] == "representative"
+    summary = json.loads((out / clip["summary"]).read_text())
+    assert summary["scenario"]["name"].startswith("training#") and verify(out / clip["summary"]) == []
+    [report] = manifest["representativeness"]
+    assert report["agents"] == ["goal", "orca"] and report["scenario"] == "paper-bl-tr"
+    assert report["rollouts"] == 4 and report["distribution_vote"]["states"] == 3
+    shares = report["first_looks_better"] + report["second_looks_better"] + report["no_difference"]
+    assert shares == pytest.approx(1.0)
+    direction = report["distribution_vote"]["direction"]
+    assert report["disagrees"] == bool(direction and report["majority"] != direction)
+    line = next(line for line in log if "paper-bl-tr, goal vs orca" in line)
+    assert line.startswith("warning: unrepresentative" if report["disagrees"] else "representativeness")
+    assert "How representative the study" in (out / "index.html").read_text()

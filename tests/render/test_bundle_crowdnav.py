@@ -60,6 +60,8 @@ def test_a_bundle_records_the_checkpoint_and_the_world_each_agent_was_compared_i
     for source in (imported, scripted):  # both compared in the imported agent's world
         assert source["world"]["goal_change_chance"] == 0.25 and source["world"]["human_v_pref"] == 1.0
     assert manifest["agents"]["goal"]["time_limit"] == 49.0
+    # the scenario's representativeness is measured in that world too (the imported agent takes its 3 humans)
+    assert [report["scenario"] for report in manifest["representativeness"]] == [str(scenario)]
     [clip] = manifest["clips"]
     summary = out / clip["summary"]
     assert json.loads(summary.read_text())["scenario"]["world"]["randomize_attributes"] is True

@@ -42,10 +42,26 @@ solver = "nfirst"
 budget = 200
 seed = 1
 
+[build.schemes.representative]
+solver = "representative"
+budget = 400
+seed = 1
+settings = { states = 2, pushes = 2 }
+
+[build.representativeness]
+states = 2
+pushes = 2
+
 [[build.sets]]
 parts = ["pairwise", "ranking"]
 schemes = ["adaptive", "nfirst"]
 scenarios = ["paper-bl-tr", "paper-tl-br"]
+agents = ["goal", "orca", "social_force"]
+
+[[build.sets]]
+parts = ["pairwise", "ranking"]
+schemes = ["representative"]
+scenarios = ["training"]
 agents = ["goal", "orca", "social_force"]
 
 [[build.sets]]
@@ -58,8 +74,9 @@ pairs = [["goal", "social_force"]]
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    """The demo study (two schemes within, two scenarios counterbalanced, a pairwise and a ranking part and an
-    example clip) with scripted agents, its bundle built, loaded as the server loads them."""
+    """The demo study (three schemes within, two scenarios counterbalanced, the representative scheme's from the
+    training distribution, a pairwise and a ranking part and an example clip) with scripted agents, its bundle
+    built, loaded as the server loads them."""
     from app.bundle import check_study_against_bundle, load_bundle
     from app.study import load_study
 

@@ -32,7 +32,7 @@ def test_search_writes_ranked_summaries_and_a_run_record(searched):
     first = summaries[0]
     assert first["format"] == "foil.summary/1"
     assert [a["name"] for a in first["agents"]] == ["goal", "orca"]
-    assert len(first["steps"]) == len(first["env_actions"]) <= 30
+    assert len(first["env_actions"]) <= len(first["steps"]) <= 30  # a coda may follow the searched steps
     assert all(len(a) == 20 for a in first["env_actions"])
     assert set(first["steps"][0]) == {"t", "humans", "robots", "robot_actions"}
     assert {o["event"] for o in first["outcomes"]} <= {"success", "collision", "timeout", "running"}
@@ -149,20 +149,26 @@ def test_search_all_on_a_local_ray_instance(tmp_path):
 
 
 def test_first_finish_ends_every_trajectory_at_the_first_robots_end(tmp_path):
-    """With --reward finish=first a summary ends on the step the first robot collides or arrives (the other is
-    still running), a collision earns no goal term, and replay reproduces every summary exactly."""
+    """With --reward finish=first a summary's searched steps end on the step the first robot collides or arrives,
+    a collision earns no goal term; the clip plays on without pushes (its coda) until the other robot's episode
+    ends too or the horizon is reached, and replay reproduces every summary, coda included, exactly."""
     assert search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "3000",
                   "--top-k", "5") == 0
-    ends = set()
+    ends, codas = set(), 0
     for path in sorted(tmp_path.glob("summary-*.json")):
         summary = json.loads(path.read_text())
         assert summary["reward_parameters"]["finish"] == "first"
-        events = [o["event"] for o in summary["outcomes"]]
-        finished = [o for o in summary["outcomes"] if o["event"] != "running"]
-        assert finished and "running" in events  # one robot ended it, the other was still on its way
-        assert summary["steps"][-1]["t"] == min(o["time"] for o in finished)
-        if finished[0]["event"] == "collision":
+        searched, steps = len(summary["env_actions"]), summary["steps"]
+        first = min(summary["outcomes"], key=lambda o: o["time"] if o["time"] is not None else float("inf"))
+        assert first["event"] in ("collision", "success") and steps[searched - 1]["t"] == first["time"]
+        others = [o for o in summary["outcomes"] if o is not first]
+        # the coda: no pushes, until every robot's episode has ended or the 60-step horizon is reached
+        assert len(steps) == 60 or all(o["event"] != "running" for o in others)
+        assert all(o["event"] == "running" or o["time"] <= steps[-1]["t"] for o in others)
+        codas += len(steps) > searched
+        if first["event"] == "collision":
             assert summary["reward_terms"]["goal"] == 0.0 and summary["reward_terms"]["horizon"] > 0
-        ends.add(finished[0]["event"])
+        ends.add(first["event"])
         assert main(["verify", str(path)]) == 0
     assert ends == {"collision", "success"}  # both kinds of end occur among the goal robot's summaries
+    assert codas == 5  # the other robot was still on its way in every one

@@ -8,16 +8,23 @@ from gymnasium.utils.env_checker import check_env
 
 from search.cli import main
 from search.sim.gym_env import CrowdNavEnv
-from search.sim.scenarios import Scenario, load_scenario, sample_training_states, shipped_scenarios
+from search.sim.scenarios import (
+    Scenario,
+    ScenarioDistribution,
+    load_scenario,
+    load_scenario_or_distribution,
+    sample_training_states,
+    shipped_scenarios,
+)
 from search.sim.world import WorldConfig
 
 
 def test_shipped_scenarios_load_with_ten_humans():
-    assert shipped_scenarios() == ["paper-bl-tr", "paper-code", "paper-tl-br"]
+    assert shipped_scenarios() == ["paper-bl-tr", "paper-code", "paper-tl-br", "training"]
     code = load_scenario("paper-code")
     assert code.robot_start == (-5.0, 4.0) and code.robot_goal == (7.0, -2.0)
     assert code.human_goals[0] == tuple(-np.array(code.human_positions[0]))  # antipode by default
-    for name in shipped_scenarios():
+    for name in ("paper-bl-tr", "paper-code", "paper-tl-br"):
         scenario = load_scenario(name)
         assert len(scenario.human_positions) == 10 and scenario.config().human_num == 10
         humans = np.array(scenario.human_positions)
@@ -87,3 +94,35 @@ def test_gymnasium_episode_ends_with_terminated_or_truncated():
 def test_cli_reports_bad_scenarios_without_a_traceback(capsys, tmp_path):
     assert main(["search", "--agents", "goal,orca", "--scenario", "nowhere.toml", "--out", str(tmp_path)]) == 2
     assert "no scenario" in capsys.readouterr().err
+
+
+def test_training_distribution_draws_seeded_fixed_scenarios_from_the_training_states():
+    training = load_scenario_or_distribution("training")
+    assert isinstance(training, ScenarioDistribution)
+    drawn = training.sample(np.random.default_rng(3), 5)
+    assert drawn == training.sample(np.random.default_rng(3), 5)  # the seed fixes the draw
+    assert [s.name for s in drawn] == [f"training#{i}" for i in range(5)]
+    states = sample_training_states(WorldConfig(), np.random.default_rng(3), 5)
+    for i, scenario in enumerate(drawn):
+        assert np.array_equal(scenario.human_positions, states.human_pos[i])
+        assert np.array_equal(scenario.robot_start, states.robot_pos[i, 0])
+        assert np.array_equal(scenario.robot_goal, states.robot_goal[i, 0])
+        assert Scenario.from_dict(scenario.to_dict()) == scenario  # a summary can record it
+        state = scenario.initial_state(scenario.config())
+        assert np.array_equal(state.human_goal[0], states.human_goal[i])
+
+
+def test_a_distribution_is_refused_where_one_scenario_is_needed_and_bad_files_are_named(tmp_path):
+    with pytest.raises(ValueError, match="distribution of starting states.*representative"):
+        load_scenario("training")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\n[distribution]\nkind = "grid"\n')
+    with pytest.raises(ValueError, match=r"bad.toml: \[distribution\] takes one key, kind"):
+        load_scenario_or_distribution(bad)
+    bad.write_text('name = "x"\n[distribution]\nkind = "circle-crossing"\n[world]\nhuman_num = -1\n')
+    with pytest.raises(ValueError, match=r"bad.toml: \[world\]: .*human_num"):
+        load_scenario_or_distribution(bad)
+    dense = tmp_path / "dense.toml"
+    dense.write_text('name = "dense"\n[distribution]\nkind = "circle-crossing"\n[world]\nhuman_num = 4\n')
+    assert [len(s.human_positions) for s in load_scenario_or_distribution(dense).sample(
+        np.random.default_rng(0), 2)] == [4, 4]

@@ -1,0 +1,257 @@
+"""The representative solver: a clip that shows what usually happens between two agents, chosen without any ground
+truth (no evaluation result and no agent's identity is read).
+
+1. Draw M starting states from a scenario distribution (seeded).
+2. Roll each out once without pushes and R times under environment actions drawn uniformly within their bound,
+   under the search's end rules; each rollout's clip plays on without pushes after that end (its coda), as a
+   summary's clip does.
+3. Score each clip's visible contrast with the viewer's rule (`app.visible.Observer`, no perception noise): the
+   first agent's visible score minus the second's, none (0) under the observer's tie margin.
+4. Each state votes by the sign of its majority; the direction is the sign of the summed votes.
+5. Candidates are the rollouts that agree with the direction, from states that voted that way, largest contrast
+   first. The clip is the first candidate whose exact replay (batch size 1, as `foil verify` replays it) is still a
+   non-tie in that direction; the top-K are the first K such.
+
+A tied vote is reported and falls back to the largest contrast in either direction; so does a vote none of whose
+candidates survives its replay.
+
+Why: a divergence search leans towards rare states where the worse agent looks better; the paper's fixed study
+scenarios can be the least representative states there are. Voting over the task's distribution shows the
+contrast that most states show (docs/search.md, "The representative solver").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.visible import Observer, VisibleClip, progress_towards
+from search.sim.coupled import CoupledSimulator
+from search.sim.observation import Policy
+from search.sim.scenarios import Scenario
+from search.sim.world import OUTCOME_NAMES
+from search.solvers.coupled_problem import concat_snapshots
+from search.solvers.prior import ActionPrior
+from search.solvers.reward import DivergenceReward, RewardConfig
+from search.solvers.rollout import Tracker
+
+OBSERVER = Observer()
+
+
+@dataclass(frozen=True)
+class RepresentativeConfig:
+    states: int = 64  # starting states drawn from the distribution (M)
+    pushes: int = 32  # rollouts per state under uniform pushes (R), besides the one without pushes
+    batch_states: int = 8  # states rolled out together
+
+    def __post_init__(self):
+        if self.states < 1 or self.pushes < 0 or self.batch_states < 1:
+            raise ValueError("invalid representative setting: states and batch_states must be >= 1, pushes >= 0")
+
+
+@dataclass
+class Rollouts:
+    """Every rollout: the state it started from, its searched environment actions and its visible contrast."""
+
+    state: np.ndarray  # (K,) index of the starting state
+    actions: list[np.ndarray]  # K arrays (L_k, n, 2): the environment actions up to the search's end
+    contrast: np.ndarray  # (K,) first agent's visible score minus the second's; 0 under the tie margin
+
+
+@dataclass(frozen=True)
+class Vote:
+    """How the states voted: +1 when the first agent looks better, -1 when the second does, 0 for no majority."""
+
+    state_votes: np.ndarray  # (M,) one vote per state rolled out
+    direction: int  # the sign of the summed votes
+
+    @property
+    def margin(self) -> int:
+        return int(abs(self.state_votes.sum()))
+
+    def record(self, rollouts: Rollouts) -> dict:
+        """What run.json says of the vote."""
+        signs = np.sign(rollouts.contrast)
+        return {"states": len(self.state_votes), "rollouts": len(signs),
+                "for_first": int((self.state_votes > 0).sum()), "for_second": int((self.state_votes < 0).sum()),
+                "no_majority": int((self.state_votes == 0).sum()), "direction": self.direction,
+                "margin": self.margin, "tied": self.direction == 0,
+                "agreeing_share": float((signs == self.direction).mean()) if self.direction else None}
+
+
+def vote(rollouts: Rollouts, states: int) -> Vote:
+    """Each state's majority sign over its rollouts, and the sign of their sum."""
+    signs = np.sign(rollouts.contrast)
+    state_votes = np.array([int(np.sign(signs[rollouts.state == s].sum())) for s in range(states)], dtype=np.int64)
+    return Vote(state_votes, int(np.sign(state_votes.sum())))
+
+
+def candidates(rollouts: Rollouts, result: Vote) -> list[int]:
+    """Rollouts in the voted direction from states that voted that way, largest contrast first (ties: draw order);
+    with a tied vote, every non-tie rollout, largest contrast first."""
+    signs = np.sign(rollouts.contrast)
+    if result.direction:
+        chosen = (signs == result.direction) & (result.state_votes[rollouts.state] == result.direction)
+    else:
+        chosen = signs != 0
+    index = np.flatnonzero(chosen)
+    return index[np.argsort(-np.abs(rollouts.contrast[index]), kind="stable")].tolist()
+
+
+def choose(order: list[int], direction: int, replayed_contrast: Callable[[int], tuple[float, object]],
+           top_k: int) -> list[tuple[int, object]]:
+    """The first ``top_k`` candidates whose exact replay is a non-tie in ``direction`` (any direction when it is
+    0), as (rollout, replay). ``replayed_contrast(i)`` gives the replay's contrast and the replay itself."""
+    kept = []
+    for i in order:
+        contrast, replay = replayed_contrast(i)
+        if contrast != 0 and (direction == 0 or np.sign(contrast) == direction):
+            kept.append((i, replay))
+            if len(kept) == top_k:
+                break
+    return kept
+
+
+def visible_contrast(clip: VisibleClip) -> float:
+    """First agent's visible score minus the second's as the viewer sees the clip; 0 under the tie margin."""
+    first, second = clip.scores(OBSERVER).values()
+    difference = first - second
+    return difference if abs(difference) >= OBSERVER.tie_margin else 0.0
+
+
+def roll_out(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig, pushes: int,
+             rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+    """One rollout without pushes and ``pushes`` under uniform pushes from each scenario, all in one batch, each
+    followed by its coda; scored by their visible contrast."""
+    copies = pushes + 1
+    sims = [CoupledSimulator(policies, scenario, batch=copies) for scenario in scenarios]
+    sim, config = sims[0], sims[0].config
+    sim.restore(concat_snapshots([s.snapshot() for s in sims]))
+    rows_total, horizon, n = len(scenarios) * copies, reward_config.horizon, config.human_num
+    prior = ActionPrior((n, 2), config.env_action_bound, "uniform")
+    env = np.zeros((rows_total, horizon, n, 2))
+    pushed = np.arange(rows_total) % copies != 0
+    env[pushed] = rng.uniform(-config.env_action_bound, config.env_action_bound, (int(pushed.sum()), horizon, n, 2))
+    events = DivergenceReward(reward_config, prior)
+    searched = np.full(rows_total, horizon)  # steps until the search's end rule ended each rollout
+    in_search = np.ones(rows_total, dtype=bool)
+    final = {}  # row -> (outcome, event_time, min_clearance, robot_pos, time) when its clip ended
+    rows = np.arange(rows_total)
+    for t in range(1, horizon + 1):
+        _, _, newly_done = sim.advance(np.where(in_search[rows, None, None], env[rows, t - 1], 0.0))
+        tracker.count(rows.size)
+        state = sim.state
+        outcome, done = sim.gather(state.outcome), sim.gather(state.done)
+        goal, end = events.events(newly_done, outcome, done.all(axis=1), np.full(rows.size, t))
+        ended = in_search[rows] & (goal | end)
+        searched[rows[ended]] = t
+        in_search[rows[ended]] = False
+        over = done.all(axis=1) | (t >= horizon)
+        if over.any():
+            event_time, clearance = sim.gather(state.event_time), sim.gather(state.min_clearance)
+            robot_pos = sim.gather(state.robot_pos)
+            for k in np.flatnonzero(over):
+                final[int(rows[k])] = (outcome[k].copy(), event_time[k].copy(), clearance[k].copy(),
+                                       robot_pos[k].copy(), float(state.time[k]))
+        keep = np.flatnonzero(~over)
+        if not keep.size:
+            break
+        sim.restore(sim.snapshot(keep))
+        rows = rows[keep]
+    contrast = np.array([visible_contrast(_clip(scenarios[row // copies], *final[row])) for row in range(rows_total)])
+    return Rollouts(state=np.arange(rows_total) // copies,
+                    actions=[env[row, : searched[row]] for row in range(rows_total)], contrast=contrast)
+
+
+def roll_out_states(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig,
+                    config: RepresentativeConfig, rng: np.random.Generator, tracker: Tracker) -> tuple[Rollouts, int]:
+    """``roll_out`` over the scenarios in order, a batch of states at a time, while the budget lasts (the last
+    batch sized by the steps a state has cost so far); the rollouts and how many states they cover."""
+    parts, done_states = [], 0
+    while done_states < len(scenarios) and not tracker.exhausted:
+        per_state = tracker.steps / done_states if done_states else None
+        count = config.batch_states if per_state is None else \
+            max(1, min(config.batch_states, math.ceil(tracker.remaining / per_state)))
+        count = min(count, len(scenarios) - done_states)
+        part = roll_out(policies, scenarios[done_states: done_states + count], reward_config, config.pushes, rng,
+                        tracker)
+        part.state += done_states
+        parts.append(part)
+        done_states += count
+    return Rollouts(state=np.concatenate([p.state for p in parts]), actions=[a for p in parts for a in p.actions],
+                    contrast=np.concatenate([p.contrast for p in parts])), done_states
+
+
+def representativeness(policies: list[Policy], fixed: list[Scenario], drawn: list[Scenario],
+                       reward_config: RewardConfig, config: RepresentativeConfig,
+                       rng: np.random.Generator) -> list[dict]:
+    """How representative each fixed scenario is of the distribution ``drawn`` was drawn from, for two agents:
+    how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
+    pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
+    of rollouts that agree with the vote (0: none of the drawn states agrees less)."""
+    tracker = Tracker(2**62, 1)
+    rollouts, states = roll_out_states(policies, drawn, reward_config, config, rng, tracker)
+    result = vote(rollouts, states)
+    signs = np.sign(rollouts.contrast)
+    agreement = np.array([(signs[rollouts.state == s] == result.direction).mean() for s in range(states)])
+    reports = []
+    for scenario in fixed:
+        own = np.sign(roll_out(policies, [scenario], reward_config, config.pushes, rng, tracker).contrast)
+        share = float((own == result.direction).mean()) if result.direction else None
+        reports.append({
+            "scenario": scenario.name, "rollouts": len(own), "first_looks_better": float((own > 0).mean()),
+            "second_looks_better": float((own < 0).mean()), "no_difference": float((own == 0).mean()),
+            "majority": int(np.sign(own.sum())), "distribution_vote": result.record(rollouts),
+            "percentile": None if share is None else float(100 * (agreement < share).mean()),
+            "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction)})
+    return reports
+
+
+def largest_contrast(summaries: list[dict]) -> int:
+    """Which of a search's summaries (two agents, best reward first) shows the largest non-tie visible contrast,
+    in either direction: outcome-contrast selection. The first where none shows a visible difference."""
+    contrasts = [abs(visible_contrast(VisibleClip.of_summary(s, [a["name"] for a in s["agents"]], ["1", "2"])))
+                 for s in summaries]
+    best = max(range(len(contrasts)), key=contrasts.__getitem__)  # the first of equals
+    return best if contrasts[best] > 0 else 0
+
+
+def _clip(scenario: Scenario, outcome, event_time, min_clearance, robot_pos, end_s: float) -> VisibleClip:
+    """What a rollout's clip shows, as `VisibleClip.of_summary` reads it from a summary."""
+    outcomes = tuple({"event": OUTCOME_NAMES[int(o)], "time": float(e) if math.isfinite(e) else None,
+                      "min_human_distance": float(c) if math.isfinite(c) else None}
+                     for o, e, c in zip(outcome, event_time, min_clearance, strict=True))
+    progress = tuple(progress_towards(scenario.robot_start, scenario.robot_goal, end) for end in robot_pos.tolist())
+    return VisibleClip(labels=tuple(str(k) for k in range(len(outcomes))), outcomes=outcomes, progress=progress,
+                       end_s=max(end_s, 1e-6))
+
+
+def representative(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig,
+                   tracker: Tracker, rng: np.random.Generator, config: RepresentativeConfig,
+                   replay: Callable[[Scenario, np.ndarray], tuple[float, object]]) -> tuple[list, dict]:
+    """Roll out the drawn ``scenarios`` a batch of states at a time while the budget lasts, vote, and choose the
+    top-K clips. ``replay(scenario, actions)`` gives an exact replay's contrast and the replay (a summary).
+    Returns the chosen replays in order and the record of the vote for run.json."""
+    if len(policies) != 2:
+        raise ValueError(f"the representative solver votes which of two agents looks better; got {len(policies)}")
+    rollouts, done_states = roll_out_states(policies, scenarios, reward_config, config, rng, tracker)
+    result = vote(rollouts, done_states)
+    order, how = candidates(rollouts, result), "voted direction"
+    chosen = choose(order, result.direction,
+                    lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]), tracker.queue.k)
+    if not chosen:  # a tied vote, or no candidate of the vote survived its replay: the largest contrast
+        how = "largest contrast (tied vote)" if not result.direction else "largest contrast (no candidate of the " \
+                                                                          "vote survived its replay)"
+        everything = candidates(rollouts, Vote(result.state_votes, 0))
+        chosen = choose(everything, 0, lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]),
+                        tracker.queue.k)
+    if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
+        how = "no visible contrast anywhere: the first state without pushes"
+        chosen = [(0, replay(scenarios[0], rollouts.actions[0])[1])]
+    record = result.record(rollouts) | {"drawn": len(scenarios), "candidates": len(order), "selection": how,
+                                        "chosen": [{"state": int(rollouts.state[i]), "rollout": i,
+                                                    "contrast": float(rollouts.contrast[i])} for i, _ in chosen]}
+    return [summary for _, summary in chosen], record

@@ -1,0 +1,108 @@
+"""The representative solver: its vote and selection on hand-made rollouts, and whole searches through the real
+command line (determinism, `foil verify`, the vote in run.json, the refusals)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from search.cli import main
+from search.solvers.representative import Rollouts, Vote, candidates, choose, vote
+
+
+def rollouts(contrast_by_state: list[list[float]]) -> Rollouts:
+    contrast = [c for row in contrast_by_state for c in row]
+    state = [s for s, row in enumerate(contrast_by_state) for _ in row]
+    return Rollouts(state=np.array(state), actions=[np.zeros((1, 1, 2))] * len(contrast),
+                    contrast=np.array(contrast, dtype=float))
+
+
+def test_states_vote_by_their_majority_and_candidates_agree_with_the_direction():
+    found = rollouts([[-1.0, -0.5, 0.8], [-2.0, 0.0, 0.0], [3.0, 0.6, -0.4], [-0.9, -0.7, -0.3]])
+    result = vote(found, 4)
+    assert result.state_votes.tolist() == [-1, -1, 1, -1] and result.direction == -1 and result.margin == 2
+    # the largest agreeing contrast (3.0 of state 2 disagrees; -0.4 comes from a state that voted the other way)
+    assert candidates(found, result) == [3, 0, 9, 10, 1, 11]
+    record = result.record(found)
+    assert record["for_first"] == 1 and record["for_second"] == 3 and not record["tied"]
+    assert record["agreeing_share"] == pytest.approx(7 / 12)
+
+
+def test_a_tied_vote_is_reported_and_falls_back_to_the_largest_contrast():
+    found = rollouts([[1.0, 0.5], [-2.0, -0.2], [0.0, 0.0]])
+    result = vote(found, 3)
+    assert result.state_votes.tolist() == [1, -1, 0] and result.direction == 0
+    assert result.record(found)["tied"] and result.record(found)["agreeing_share"] is None
+    assert candidates(found, result) == [2, 0, 1, 3]  # every non-tie rollout, largest contrast first
+
+
+def test_a_replay_that_turns_into_a_tie_or_the_other_way_is_passed_over():
+    replays = {0: -3.0, 1: 0.0, 2: 1.5, 3: -0.5}  # the exact replay of rollout 1 shows no difference, 2 flips
+    chosen = choose([1, 2, 0, 3], -1, lambda i: (replays[i], f"summary {i}"), top_k=2)
+    assert chosen == [(0, "summary 0"), (3, "summary 3")]
+    assert choose([1, 2], -1, lambda i: (replays[i], i), top_k=1) == []  # no agreeing candidate survives
+    assert choose([1, 2], 0, lambda i: (replays[i], i), top_k=1) == [(2, 2)]  # a tied vote takes either way
+
+
+def test_no_agreeing_candidate_leaves_an_empty_list_for_the_fallback():
+    found = rollouts([[-1.0, -1.0], [-1.0, 2.0, 2.0, -1.0, -1.0]])
+    result = Vote(np.array([-1, -1]), -1)
+    assert candidates(found, result) == [0, 1, 2, 5, 6]
+    assert candidates(found, Vote(np.array([1, 1]), 1)) == [3, 4]
+
+
+def representative_search(out, seed="0", budget="4000"):
+    return main(["search", "--agents", "goal,orca", "--scenario", "training", "--solver", "representative",
+                 "--seed", seed, "--budget", budget, "--top-k", "2", "--set", "states=6", "--set", "pushes=5",
+                 "--set", "batch_states=3", "--reward", "horizon=60", "--out", str(out), "--quiet"])
+
+
+@pytest.fixture(scope="module")
+def searched(tmp_path_factory):
+    out = tmp_path_factory.mktemp("representative")
+    assert representative_search(out) == 0
+    return out
+
+
+def test_a_representative_search_records_its_vote_and_the_chosen_starting_state(searched):
+    run = json.loads((searched / "run.json").read_text())
+    vote_record = run["vote"]
+    assert run["scenario"] == "training" and vote_record["drawn"] == 6
+    assert 1 <= vote_record["states"] <= 6 and vote_record["rollouts"] == 6 * vote_record["states"]
+    assert vote_record["for_first"] + vote_record["for_second"] + vote_record["no_majority"] == vote_record["states"]
+    summary = json.loads((searched / "summary-001.json").read_text())
+    state = summary["solver"]["state"]
+    assert summary["scenario"]["name"] == f"training#{state}" and summary["solver"]["name"] == "representative"
+    assert vote_record["chosen"][0]["state"] == state
+    contrast = summary["solver"]["search_contrast"]
+    if vote_record["direction"]:  # the clip shows what the vote says
+        assert np.sign(contrast) == vote_record["direction"]
+    assert summary["scenario"]["world"]["human_num"] == 10
+    assert summary["solver"]["budget_used"] == run["sim_steps"] <= 4000 and vote_record["states"] == 6
+
+
+def test_the_budget_bounds_the_states_rolled_out(tmp_path):
+    assert representative_search(tmp_path, budget="500") == 0
+    run = json.loads((tmp_path / "run.json").read_text())
+    per_state = run["sim_steps"] / run["vote"]["states"]
+    assert run["vote"]["states"] < 6 and run["sim_steps"] < 500 + 3 * per_state  # at most one batch over
+
+
+def test_representative_summaries_verify_and_the_same_seed_gives_the_same_clip(searched, tmp_path, capsys):
+    assert main(["verify", *(str(p) for p in sorted(searched.glob("summary-*.json")))]) == 0
+    assert "reproduced exactly" in capsys.readouterr().out
+    assert representative_search(tmp_path) == 0
+    for name in ("summary-001.json", "summary-002.json"):
+        assert (tmp_path / name).read_text() == (searched / name).read_text()
+
+
+def test_the_representative_solver_and_a_distribution_are_refused_where_they_do_not_fit(tmp_path, capsys):
+    assert main(["search", "--agents", "goal,orca", "--scenario", "training", "--solver", "mcts", "--out",
+                 str(tmp_path), "--quiet"]) != 0
+    assert "distribution of starting states" in capsys.readouterr().err
+    assert main(["search", "--agents", "goal,orca", "--scenario", "paper-bl-tr", "--solver", "representative",
+                 "--out", str(tmp_path), "--quiet"]) != 0
+    assert "draws starting states from a distribution" in capsys.readouterr().err
+    assert main(["search", "--agents", "goal,orca,social_force", "--scenario", "training", "--solver",
+                 "representative", "--out", str(tmp_path), "--quiet"]) != 0
+    assert "two agents" in capsys.readouterr().err
