@@ -37,7 +37,7 @@ $(AXE):
 # The demo: build the demo study's bundle from the shipped agents (small search budgets; searches and clips
 # already built are reused), then serve it at http://127.0.0.1:8000/.
 demo: install
-	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE)
+	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE) --jobs 2
 	$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
 
 test: install browser postgres

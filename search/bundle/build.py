@@ -579,8 +579,12 @@ def describe_representativeness(report: dict) -> str:
             f"{vote['for_second']} for {second})")
     if report["percentile"] is not None:
         line += f"; percentile {report['percentile']:.0f} of its states"
+    if report["disagrees"] and report["majority"] == 0:
+        return (f"warning: unrepresentative scenario {line}: its clips tend to show no difference where most "
+                f"starting states show one")
     if report["disagrees"]:
-        return f"warning: unrepresentative scenario {line}: its clips tend to show what most starting states do not"
+        return (f"warning: unrepresentative scenario {line}: its clips tend to show the other robot as better than "
+                f"most starting states do")
     return f"representativeness {line}"
 
 

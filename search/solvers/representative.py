@@ -168,14 +168,17 @@ def roll_out(policies: list[Policy], scenarios: list[Scenario], reward_config: R
 
 def roll_out_states(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig,
                     config: RepresentativeConfig, rng: np.random.Generator, tracker: Tracker) -> tuple[Rollouts, int]:
-    """``roll_out`` over the scenarios in order, a batch of states at a time, while the budget lasts (the last
-    batch sized by the steps a state has cost so far); the rollouts and how many states they cover."""
+    """``roll_out`` over the scenarios in order, a batch of states at a time, while the budget lasts: a batch is cut
+    to the states that fit in what is left at the steps a state has cost so far (the first batch always runs);
+    the rollouts and how many states they cover."""
     parts, done_states = [], 0
-    while done_states < len(scenarios) and not tracker.exhausted:
+    while done_states < len(scenarios):
         per_state = tracker.steps / done_states if done_states else None
-        count = config.batch_states if per_state is None else \
-            max(1, min(config.batch_states, math.ceil(tracker.remaining / per_state)))
+        count = config.batch_states if per_state is None else min(config.batch_states,
+                                                                   math.floor(tracker.remaining / per_state))
         count = min(count, len(scenarios) - done_states)
+        if count < 1:
+            break
         part = roll_out(policies, scenarios[done_states: done_states + count], reward_config, config.pushes, rng,
                         tracker)
         part.state += done_states

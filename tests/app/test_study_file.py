@@ -102,3 +102,23 @@ def test_completion_needs_a_code_or_an_https_redirect():
     text = PAPER.replace('redirect_url = ""', 'redirect_url = "javascript:alert(1)"')
     with pytest.raises(StudyError, match="completion.redirect_url"):
         parse_study(text)
+
+
+def test_a_scheme_with_scenarios_of_its_own_takes_them_part_by_part():
+    """The demo's representative scheme draws its clips from the training distribution, the others from the
+    paper's two scenarios; a scheme_scenarios entry for an unknown scheme, or of the wrong length, is refused."""
+    from tests.support.survey import PAPER_STUDY as paper
+
+    demo = load_study(paper.parent / "demo.toml")
+    assert [demo.part_scenario(p, 1, "representative") for p in (0, 1)] == ["training", "training"]
+    assert [demo.part_scenario(p, 1, "adaptive") for p in (0, 1)] == ["paper-tl-br", "paper-bl-tr"]
+    text = (paper.parent / "demo.toml").read_text()
+    right = 'representative = ["training", "training"]'
+    for wrong, message in (('representativ = ["training", "training"]', "scheme_scenarios names 'representativ', "
+                                                                         "which is not one of schemes"),
+                           ('representative = ["training"]', "scheme_scenarios.representative gives 1 scenarios; "
+                                                             "the design has 2, one for each")):
+        bad = text.replace(right, wrong)
+        with pytest.raises(StudyError) as error:
+            parse_study(bad, "demo.toml")
+        assert str(error.value).startswith(f"demo.toml, line {line_of(bad, '[design]')}, design: {message}")

@@ -236,3 +236,24 @@ def test_paper_build_reproduces_the_papers_clip_set():
         "collision_is_goal": False}
     assert all(search_inputs(search_job(job))["reward"]["finish"] == "first"
                for job in main if job.scheme.name == "nfirst")
+
+
+@pytest.mark.parametrize("majority, disagrees, start, end", [
+    (1, False, "representativeness paper-bl-tr, lo vs hi:", "percentile 40 of its states"),
+    (-1, True, "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
+     "its clips tend to show the other robot as better than most starting states do"),
+    (0, True, "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
+     "its clips tend to show no difference where most starting states show one"),
+])
+def test_the_representativeness_line_warns_when_the_scenario_disagrees_with_the_distribution(
+        majority, disagrees, start, end):
+    from search.bundle.build import describe_representativeness
+
+    report = {"agents": ["lo", "hi"], "scenario": "paper-bl-tr", "distribution": "training", "rollouts": 33,
+              "first_looks_better": 0.1, "second_looks_better": 0.7, "no_difference": 0.2, "majority": majority,
+              "percentile": 40.0, "disagrees": disagrees,
+              "distribution_vote": {"direction": 1, "states": 64, "for_first": 50, "for_second": 4}}
+    line = describe_representativeness(report)
+    assert line.startswith(start) and line.endswith(end)
+    assert "lo looks better in 10% of 33 nominal rollouts, hi in 70%" in line
+    assert "training's 64 states vote lo (50 for lo, 4 for hi)" in line

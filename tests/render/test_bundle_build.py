@@ -105,12 +105,13 @@ def test_manifest_matches_files_and_checksums(built):
     listed = set(manifest["files"])
     on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.parts[len(out.parts)] != "cache"}
     assert on_disk - {"manifest.json"} == listed
-    assert sorted(agent_of) == [f"Robot {n}" for n in range(1, 7)]  # two rounds of two, then the example's two
+    # two rounds of two, the representative scheme's pair, then the example's two
+    assert sorted(agent_of, key=lambda label: int(label.split()[1])) == [f"Robot {n}" for n in range(1, 9)]
     gallery = (out / "index.html").read_text()
     assert all(clip["id"] in gallery for clip in manifest["clips"])
     # no browser controls over the picture (they cover the clip's status lines): a play button below each clip
     assert "controls" not in gallery
-    assert gallery.count("<video ") == gallery.count('<button type="button">Play</button>') == 3
+    assert gallery.count("<video ") == gallery.count('<button type="button">Play</button>') == 4
 
 
 def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(built):
@@ -135,7 +136,7 @@ def test_searches_in_parallel_give_the_same_bundle(built, tmp_path):
     _, manifest, _, study = built
     log = []
     assert build_bundle(study, tmp_path / "parallel", log=log.append, workers=2).model_dump(mode="json") == manifest
-    assert len([line for line in log if line.startswith("search ") and not line.endswith("cached")]) == 3
+    assert len([line for line in log if line.startswith("search ") and not line.endswith("cached")]) == 4
 
 
 def test_the_survey_server_accepts_the_bundle(built):
