@@ -30,8 +30,11 @@ def _release(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from search.agents.evaluate import run_eval
+    from search.sim.world import WorldConfig
+    from search.solvers.runner import parse_settings
 
-    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit)
+    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit,
+                    world=parse_settings(WorldConfig, args.world, "world"))
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -165,6 +168,9 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
                           help="seconds an episode may last (default: the training time limit, 50); 25 judges "
                           "agents at the horizon of the paper's clips")
+    evaluate.add_argument("--world", action="append", default=[], metavar="KEY=VALUE",
+                          help="world setting over the agent's (an imported CrowdNav_DSRNN agent brings the world of "
+                          "its config; others the paper's), e.g. human_num=5")
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)
 

@@ -222,6 +222,8 @@ def test_foil_eval_runs_the_agent_in_its_own_world(tmp_path, capsys):
     assert result["episodes"] == 3
     assert main(["eval", checkpoint, "--episodes", "3", "--json", "--time-limit", "5"]) == 0
     assert json.loads(capsys.readouterr().out)["time_limit"] == 5.0
+    assert main(["eval", checkpoint, "--episodes", "3", "--world", "human_num=2"]) == 2  # the command line wins
+    assert f"exactly {HUMANS} humans" in capsys.readouterr().err
 
 
 def test_a_crowd_of_another_size_is_refused(tmp_path):
