@@ -161,8 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     release.set_defaults(handler=_release)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
-    evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint or "
-                          "TorchScript file, or module:attribute")
+    evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint (Foil's or "
+                          "CrowdNav_DSRNN's) or TorchScript file, or module:attribute")
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
     evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
