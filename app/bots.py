@@ -165,6 +165,7 @@ class Bot:
         self.fast = fast  # with the pilot token the server does not hold answers for the clip's playing time
         self.run = BotRun(external_id=external_id)
         self.block: list[tuple[str, dict[str, float]]] = []  # (clip, perceived scores) since the last ranking
+        self.refused: dict[str, set[str]] = {}  # question -> answers the server refused (a wrong comprehension answer)
 
     def _ok(self, response) -> str:
         if response.status_code != 200:
@@ -194,7 +195,11 @@ class Bot:
                 if form.video and not self.fast:  # watch the clip: the server's clock checks it
                     wait = self.clips.lengths_ms.get(self.clips.at(form.video)[0], 0) / 1000 + 0.2
                     time.sleep(max(0.0, shown + wait - time.monotonic()))
-                page = self._ok(self.client.post("/study", data=data))
+                response = self.client.post("/study", data=data)
+                if response.status_code == 422 and self._choose_again(form, data):
+                    page = response.text  # the same screen, saying what to change: answer it again
+                    continue
+                page = self._ok(response)
                 if form.selects:  # the ranking is saved; forget its clips only now, so a lost reply can be retried
                     self.block = []
             else:
@@ -236,6 +241,14 @@ class Bot:
         data["time_on_page_ms"] = str(clip_ms + 800 + self.rng.randint(3000, 15000))
         return data
 
+    def _choose_again(self, form: PageForm, data: dict) -> bool:
+        """After a refused answer, as a person who reads the error: rule out the choices just refused, and say
+        whether every refused choice question still has another option to try."""
+        for name in form.radios:
+            self.refused.setdefault(name, set()).add(data[name])
+        return bool(form.radios) and all(len(self.refused[name]) < len(options)
+                                         for name, options in form.radios.items())
+
     def _ranking(self) -> list[str]:
         """Best first: most clips won, then the higher mean perceived score."""
         wins: dict[str, int] = {}
@@ -265,7 +278,7 @@ class Bot:
         asked = [value for value in values if value in quoted]
         if self.attentive and asked:  # an instructed-response item: do what it says
             return asked[0]
-        return self.rng.choice(values)
+        return self.rng.choice([value for value in values if value not in self.refused.get(name, ())] or values)
 
     def _scale_point(self, options: list[tuple[str, str]], legend: str, seen: dict[str, float],
                      ranked: list[str]) -> int:

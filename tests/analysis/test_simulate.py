@@ -27,12 +27,30 @@ from tests.support.survey import AGENT_RANK, ATTENTION, SECRET_NAMES, study_text
 pytestmark = pytest.mark.slow  # bots take the whole study through a real server
 
 
+COMPREHENSION = """
+[[comprehension]]
+text = "What makes a robot good in this study?"
+options = ["Reaching its goal first", "Reaching its goal without touching anyone", "Staying far from people"]
+expected = "Reaching its goal without touching anyone"
+"""
+
+
 @pytest.fixture
 def live_server(tmp_path, bundle_dir):
     """The real app under uvicorn on 127.0.0.1 (a free port) in a thread, with the paper study as shipped
     (MTurk, self-selected condition) plus an attention check; stopped at the end of the test."""
+    yield from serve(tmp_path, bundle_dir, study_text() + ATTENTION)
+
+
+@pytest.fixture
+def comprehension_server(tmp_path, bundle_dir):
+    """The same with a comprehension question on the instructions page instead of the attention check."""
+    yield from serve(tmp_path, bundle_dir, study_text() + COMPREHENSION)
+
+
+def serve(tmp_path, bundle_dir, text: str):
     study_file = tmp_path / "study.toml"
-    study_file.write_text(study_text() + ATTENTION)
+    study_file.write_text(text)
     url = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     migrate(url)
     app = create_app(Settings(bundle_dir=bundle_dir, study_file=study_file, database_url=url))
@@ -100,6 +118,14 @@ def test_bots_take_the_study_and_the_report_counts_their_answers(live_server, bu
     # The misleading clip shows the worst robot doing well; bots judge what they see, not the ground truth.
     assert misleading_answers and set(misleading_answers) == {SECRET_NAMES["lo"]}
     render_report(data, tmp_path / "report")
+
+
+def test_bots_choose_again_after_a_wrong_comprehension_answer(comprehension_server, bundle_dir):
+    """The server refuses a wrong comprehension answer with the same page; a bot, like a person who reads the
+    error, answers again with another option instead of giving up."""
+    url, _, _ = comprehension_server
+    runs = simulate(url, bundle_dir, 4, noise=0.3, seed=3)
+    assert all(run.completed for run in runs)
 
 
 def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
