@@ -134,6 +134,9 @@ class Manifest(BaseModel):
     label_seed: int | None = None  # seeds the agent-to-robot-number mapping of the clips
     clips: list[ManifestClip]
     agents: dict[str, dict] = {}  # each agent's `foil eval --json` object
+    # each agent's kind, checkpoint (path, sha256; a CrowdNav_DSRNN model's config and trained world) and the
+    # full world it was evaluated and searched in (a clip's summary holds its search's exact world)
+    sources: dict[str, dict] = {}
     files: dict[str, str] = {}  # every file of the bundle (relative path) -> sha256
     # per pair and fixed scenario: how representative it is of the task's distribution (researchers only)
     representativeness: list[dict] = []

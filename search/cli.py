@@ -30,8 +30,11 @@ def _release(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from search.agents.evaluate import run_eval
+    from search.sim.world import WorldConfig
+    from search.solvers.runner import parse_settings
 
-    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit)
+    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit,
+                    world=parse_settings(WorldConfig, args.world, "world"))
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -158,13 +161,16 @@ def build_parser() -> argparse.ArgumentParser:
     release.set_defaults(handler=_release)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
-    evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint or "
-                          "TorchScript file, or module:attribute")
+    evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint (Foil's or "
+                          "CrowdNav_DSRNN's) or TorchScript file, or module:attribute")
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
     evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
                           help="seconds an episode may last (default: the training time limit, 50); 25 judges "
                           "agents at the horizon of the paper's clips")
+    evaluate.add_argument("--world", action="append", default=[], metavar="KEY=VALUE",
+                          help="world setting over the agent's (an imported CrowdNav_DSRNN agent brings the world of "
+                          "its config; others the paper's), e.g. human_num=5")
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)
 

@@ -343,15 +343,24 @@ def save_checkpoint(path: str | Path, net: DSRNN, **extra) -> None:
     partial.replace(path)
 
 
-def read_checkpoint(path: str | Path) -> dict:
-    """A checkpoint's contents, after checking it is one."""
+def _torch_file(path: str | Path):
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no checkpoint at {str(path)!r}")
     try:
-        data = torch.load(path, map_location="cpu", weights_only=False)
+        return torch.load(path, map_location="cpu", weights_only=False)
     except Exception as error:  # torch raises many kinds for a file that is not a checkpoint
         raise ValueError(f"{path} is not a readable torch checkpoint: {error}") from None
+
+
+def read_checkpoint(path: str | Path, data=None) -> dict:
+    """A checkpoint's contents (``data``, when already loaded from ``path``), after checking it is one."""
+    data = _torch_file(path) if data is None else data
+    if isinstance(data, dict) and data and all(isinstance(v, torch.Tensor) for v in data.values()):
+        names = ", ".join(list(data)[:3])
+        raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (format {CHECKPOINT_FORMAT!r}) nor CrowdNav_DSRNN's "
+                         f"DS-RNN policy (parameters base.humanNodeRNN..., dist.fc_mean...): it is the state_dict of "
+                         f"another network (parameters {names}, ...)")
     if not isinstance(data, dict) or not str(data.get("format", "")).startswith("foil.dsrnn/"):
         raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (expected format {CHECKPOINT_FORMAT!r})")
     if data["format"] != CHECKPOINT_FORMAT or data.get("observation") != OBSERVATION_LAYOUT:
@@ -364,9 +373,9 @@ def read_checkpoint(path: str | Path) -> dict:
     return data
 
 
-def load_dsrnn(path: str | Path) -> DSRNN:
+def load_dsrnn(path: str | Path, data=None) -> DSRNN:
     """The network stored in a checkpoint, with clear errors for wrong sizes."""
-    data = read_checkpoint(path)
+    data = read_checkpoint(path, data)
     net = DSRNN(NetworkConfig.from_dict(data["network"]))
     try:
         net.load_state_dict(data["model"])
@@ -401,12 +410,18 @@ def load_torchscript(path: str | Path, name: str) -> TorchPolicy:
     return TorchPolicy(module, name, getattr(module, "max_humans", None))
 
 
-def load_checkpoint_policy(path: str | Path, name: str | None = None) -> TorchPolicy:
-    """A policy from a checkpoint or TorchScript file."""
+def load_checkpoint_policy(path: str | Path, name: str | None = None):
+    """A policy from a Foil checkpoint, a TorchScript file or a CrowdNav_DSRNN checkpoint (recognised by its
+    parameter names; see ``search.agents.crowdnav``)."""
+    from search.agents.crowdnav import is_crowdnav_state_dict, load_crowdnav
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no agent file at {str(path)!r}")
     name = name or path.stem
     if is_torchscript(path):
         return load_torchscript(path, name)
-    return DSRNNPolicy(load_dsrnn(path), name)
+    data = _torch_file(path)
+    if is_crowdnav_state_dict(data):
+        return load_crowdnav(path, data, name)
+    return DSRNNPolicy(load_dsrnn(path, data), name)

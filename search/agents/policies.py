@@ -109,3 +109,28 @@ def load_policy(spec: str) -> Policy:
         return policy
     raise ValueError(f"unknown agent {spec!r}: use one of {sorted(SCRIPTED) + list(SHIPPED_AGENTS)}, a checkpoint "
                      "file or module:attribute")
+
+
+def trained_world(spec: str) -> dict:
+    """The world settings an agent brings with it: a CrowdNav_DSRNN checkpoint's, read from its model folder's
+    config; none for every other agent."""
+    if spec in SCRIPTED or spec in SHIPPED_AGENTS or not Path(spec).suffix or not Path(spec).is_file():
+        return {}
+    from search.agents.crowdnav import is_crowdnav_file, read_crowdnav_config
+
+    return dict(read_crowdnav_config(spec).world) if is_crowdnav_file(spec) else {}
+
+
+def comparison_world(agents: list[str], explicit: dict, scenario_world: dict | None = None) -> dict:
+    """The world settings agents are compared in: those their checkpoints were trained in, under the settings a
+    scenario file's ``[world]`` gives (``scenario_world``), under the ``explicit`` ones (command line, study file).
+    Agents trained in different worlds need the differing settings given explicitly."""
+    world: dict = {}
+    for agent in agents:
+        for key, value in trained_world(agent).items():
+            if key in world and world[key][1] != value and key not in explicit:
+                raise ValueError(f"agents {world[key][0]} and {agent} were trained in different worlds ({key} = "
+                                 f"{world[key][1]!r} and {value!r}): choose one, e.g. --world {key}={value}")
+            world.setdefault(key, (agent, value))
+    scenario_world = scenario_world or {}
+    return {key: value for key, (_, value) in world.items() if key not in scenario_world} | explicit

@@ -245,17 +245,57 @@ def agent_identity(agent: str) -> dict:
     return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
 
 
-def search_job(job: ClipJob) -> SearchJob:
-    """The search behind a clip, its settings checked against the solver's, reward's and world's fields."""
+def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
+    """The search behind a clip, its settings checked against the solver's, reward's and world's fields; ``world``
+    is the study's comparison world (``study_world``), under the scenario file's and the scheme's world settings."""
+    from search.sim.scenarios import load_scenario_or_distribution
     from search.sim.world import WorldConfig
     from search.solvers.reward import RewardConfig
 
     scheme = job.scheme
+    world = under(world, load_scenario_or_distribution(job.scenario).world if world else {})
     return SearchJob(agents=job.pair, scenario=job.scenario, solver=scheme.solver, budget=scheme.budget,
                      seed=scheme.seed, top_k=scheme.top_k,
                      solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
                      reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
-                     world_settings=check_settings(WorldConfig, scheme.world, "world"))
+                     world_settings=world | check_settings(WorldConfig, scheme.world, "world"))
+
+
+def study_world(spec: BuildSpec) -> dict:
+    """The world settings a study compares its agents in: those its imported checkpoints were trained in (a
+    CrowdNav_DSRNN model's config), for every agent, in the evaluation and in every search alike."""
+    from search.agents.policies import comparison_world
+
+    return comparison_world(spec.agents, {})
+
+
+def under(world: dict | None, own: dict) -> dict:
+    """The study's ``world`` settings that a scenario's ``own`` settings leave as they are."""
+    return {key: value for key, value in (world or {}).items() if key not in own}
+
+
+def beneath(scenario, world: dict | None):
+    """A scenario or distribution with the study's ``world`` settings beneath its own."""
+    world = under(world, scenario.world)
+    return replace(scenario, world=world | scenario.world) if world else scenario
+
+
+def agent_source(agent: str, world: dict) -> dict:
+    """Where an agent came from and the world it was compared in, for the manifest: its kind, its checkpoint file
+    and checksum, a CrowdNav_DSRNN model's config and trained world, and the full world of its evaluation."""
+    from search.agents.crowdnav import config_path, is_crowdnav_file
+    from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS, trained_world
+    from search.sim.world import WorldConfig
+
+    source = {"kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"}
+    path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
+    if agent not in SCRIPTED and path.is_file():
+        source |= {"kind": source["kind"] if agent in SHIPPED_AGENTS else "checkpoint", "checkpoint": str(path),
+                   "sha256": sha256_file(path)}
+        if is_crowdnav_file(path):
+            source |= {"kind": "crowdnav_dsrnn", "config": str(config_path(path)),
+                       "trained_world": trained_world(agent)}
+    return source | {"world": WorldConfig.from_dict(world).to_dict()}
 
 
 def search_inputs(search: SearchJob) -> dict:
@@ -305,20 +345,25 @@ class Cache:
         (self.path(kind, inputs) / "inputs.json").write_text(json.dumps(inputs, sort_keys=True, indent=1))
 
 
-def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, log) -> dict[str, dict]:
-    """Each agent's `foil eval --json` object (the manifest's ground truth), computed once per input."""
+def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, log,
+                    world: dict | None = None) -> dict[str, dict]:
+    """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
+    per input."""
     from search.agents.evaluate import evaluate
     from search.agents.policies import load_policy
+    from search.sim.world import WorldConfig
 
     results = {}
     for agent in agents:
-        inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed}
+        inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed} | (
+            {"world": world} if world else {})
         folder = cache.path("eval", inputs)
         if cache.valid("eval", inputs, "eval.json"):
             log(f"eval {agent}: cached")
         else:
             started = time.perf_counter()
-            result = evaluate(load_policy(agent), episodes=episodes, seed=seed) | {"agent": agent}
+            result = evaluate(load_policy(agent), episodes=episodes, seed=seed,
+                              config=WorldConfig.from_dict(world or {})) | {"agent": agent}
             folder = cache.store("eval", inputs)
             (folder / "eval.json").write_text(json.dumps(result, indent=1))
             cache.seal("eval", inputs)
@@ -414,7 +459,8 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     spec, text = load_build(study)
     jobs = plan(spec)
     try:  # bad settings or scenarios fail here, before any work
-        searches = [search_job(job) for job in jobs]
+        world = study_world(spec)
+        searches = [search_job(job, world) for job in jobs]
         inputs = [search_inputs(search) for search in searches]
     except (ValueError, FileNotFoundError) as error:
         raise BuildError(f"{study}: [build]: {error}") from None
@@ -423,9 +469,9 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         (out / folder).mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
-    evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log)
+    evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log, world)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
-    scenario_reports = representativeness(spec, cache, log)
+    scenario_reports = representativeness(spec, cache, log, world)
     clips = []
     for job, search in zip(jobs, inputs, strict=True):
         summary = out / "summaries" / f"{job.id}.json"
@@ -454,6 +500,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
             stale.unlink()
     write_gallery(out, clips, evaluations, scenario_reports)
     manifest = Manifest(format=MANIFEST_FORMAT, label_seed=spec.seed, clips=clips, agents=evaluations,
+                        sources={agent: agent_source(agent, world) for agent in spec.agents},
                         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
                         representativeness=scenario_reports)
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
@@ -473,10 +520,11 @@ def clip_summary(folder: Path, select: str) -> Path:
     return paths[largest_contrast([json.loads(p.read_text()) for p in paths])]
 
 
-def representativeness(spec: BuildSpec, cache: Cache, log) -> list[dict]:
+def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None) -> list[dict]:
     """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
     there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`), with
-    a warning line when the scenario's majority disagrees with the distribution's vote."""
+    a warning line when the scenario's majority disagrees with the distribution's vote. ``world`` is the study's
+    comparison world (``study_world``), beneath each scenario's and the distribution's own settings."""
     import numpy as np
 
     from search.agents.policies import load_policy
@@ -487,7 +535,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log) -> list[dict]:
     from search.solvers.summary import frozen_scenario
 
     settings = spec.representativeness
-    distribution = load_scenario_or_distribution(settings.distribution)
+    distribution = beneath(load_scenario_or_distribution(settings.distribution), world)
     scenarios_of: dict[tuple[str, str], list[str]] = {}
     for clip_set in spec.sets:
         if {"pairwise", "ranking"} & set(clip_set.parts):
@@ -497,7 +545,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log) -> list[dict]:
     reports = []
     for pair, names in scenarios_of.items():
         names = list(dict.fromkeys(names))
-        fixed = [frozen_scenario(load_scenario_or_distribution(name), {}) for name in names]
+        fixed = [frozen_scenario(beneath(load_scenario_or_distribution(name), world), {}) for name in names]
         inputs = {"agents": [agent_identity(a) for a in pair], "scenarios": [s.to_dict() for s in fixed],
                   "distribution": asdict(distribution), "states": settings.states, "pushes": settings.pushes,
                   "seed": settings.seed, "reward": RewardConfig().to_dict()}

@@ -12,7 +12,7 @@ from typing import Protocol
 import numba
 import numpy as np
 
-from search.sim.world import WorldConfig, WorldState
+from search.sim.world import WorldConfig, WorldState, in_view
 
 PolicyState = dict[str, np.ndarray]
 
@@ -33,7 +33,7 @@ class Observation:
     spatial_edges: np.ndarray  # (B, n, 2): human position minus robot position
     human_velocities: np.ndarray  # (B, n, 2)
     human_radii: np.ndarray  # (B, n)
-    human_mask: np.ndarray  # (B, n) bool: the human exists (crowds smaller than a policy's maximum are padded)
+    human_mask: np.ndarray  # (B, n) bool: the human is observed (it exists, within the robot's field of view)
     done: np.ndarray  # (B,) bool: this robot has finished (its action is ignored)
 
     @property
@@ -65,6 +65,10 @@ def observe_agents(state: WorldState, config: WorldConfig, agents: list[tuple[in
              state.human_vel, state.human_radius, where, position_noise, float(config.robot_radius),
              float(config.robot_v_pref), robot_node, temporal_edges, spatial_edges, human_velocities, human_radii,
              done)
+    if config.robot_fov < 360:  # CrowdNav's robot faces its velocity (holonomic) or its heading (unicycle)
+        heading = robot_node[..., 6] if config.kinematics == "unicycle" else \
+            np.arctan2(temporal_edges[..., 1], temporal_edges[..., 0])
+        human_mask = in_view(heading, spatial_edges, config.robot_fov)
     return [Observation(robot_node[i], temporal_edges[i], spatial_edges[i], human_velocities[i], human_radii[i],
                         human_mask[i], done[i]) for i in range(k)]
 

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from search.sim.world import WorldConfig, WorldState, new_state
+from search.sim.world import HUMAN_RADIUS_RANGE, HUMAN_V_PREF_RANGE, WorldConfig, WorldState, new_state
 
 SHIPPED_DIR = Path(__file__).parent / "scenarios"
 
@@ -222,29 +222,47 @@ def load_scenario_or_distribution(name_or_path: str | Path) -> Scenario | Scenar
 
 def sample_training_states(config: WorldConfig, rng: np.random.Generator, n_worlds: int) -> WorldState:
     """CrowdNav_DSRNN's training distribution: robot start and goal uniform in the square, at least
-    ``min_start_goal_distance`` apart; humans circle-crossing towards their antipodes, kept apart from each
-    other and from the robot's start and goal by their radii plus the discomfort distance."""
+    ``min_start_goal_distance`` apart, heading pi/2 (with ``robot_start = "circle"``, CrowdNav's unicycle start:
+    on the circle with a uniform heading, humans kept half the circle radius from its start and goal); humans
+    circle-crossing towards their antipodes, kept apart from each other and from the robot's start and goal by
+    their radii plus the discomfort distance. With ``randomize_attributes`` each human's v_pref and radius are
+    drawn first (the placement noise scales with that v_pref); with goal changes each world's random stream is
+    seeded from ``rng`` last."""
     n, r = config.human_num, config.circle_radius
     humans = np.zeros((n_worlds, n, 2))
     robots = np.zeros((n_worlds, 1, 2))
     goals = np.zeros((n_worlds, 1, 2))
+    headings = np.full(n_worlds, np.pi / 2)
+    radii = np.full((n_worlds, n), config.human_radius)
+    v_prefs = np.full((n_worlds, n), config.human_v_pref)
+    on_circle = config.robot_start == "circle"
     for w in range(n_worlds):
+        if on_circle:
+            angle = rng.uniform(0, 2 * np.pi)
+            start = np.array([r * np.cos(angle), r * np.sin(angle)])
         while True:
-            start, goal = rng.uniform(-r, r, 2), rng.uniform(-r, r, 2)
+            if not on_circle:
+                start = rng.uniform(-r, r, 2)
+            goal = rng.uniform(-r, r, 2)
             if np.linalg.norm(start - goal) >= config.min_start_goal_distance:
                 break
+        if on_circle:
+            headings[w] = rng.uniform(0, 2 * np.pi)
         robots[w, 0], goals[w, 0] = start, goal
-        # Placed agents as (position, goal, radius); a human must keep clear of both ends of each.
-        placed = [(start, goal, config.robot_radius)]
         for i in range(n):
+            if config.randomize_attributes:
+                v_prefs[w, i], radii[w, i] = rng.uniform(*HUMAN_V_PREF_RANGE), rng.uniform(*HUMAN_RADIUS_RANGE)
+            # (position, goal, distance) of every agent placed so far: the human keeps that far from both ends
+            min_dist = radii[w, i] + config.discomfort_dist
+            placed = [(start, goal, r / 2 if on_circle else min_dist + config.robot_radius)]
+            placed += [(humans[w, j], -humans[w, j], min_dist + radii[w, j]) for j in range(i)]
             while True:
                 angle = rng.random() * 2 * np.pi
-                noise = (rng.random(2) - 0.5) * config.human_v_pref
+                noise = (rng.random(2) - 0.5) * v_prefs[w, i]
                 p = np.array([r * np.cos(angle), r * np.sin(angle)]) + noise
-                min_dist = config.human_radius + config.discomfort_dist
-                if all(np.linalg.norm(p - q) >= min_dist + rad and np.linalg.norm(p - g) >= min_dist + rad
-                       for q, g, rad in placed):
+                if all(np.linalg.norm(p - q) >= d and np.linalg.norm(p - g) >= d for q, g, d in placed):
                     break
             humans[w, i] = p
-            placed.append((p, -p, config.human_radius))
-    return new_state(humans, -humans, robots, goals, np.pi / 2, config)
+    streams = rng.integers(0, 2**63, n_worlds).astype(np.uint64) if config.random_crowd else None
+    return new_state(humans, -humans, robots, goals, headings[:, None], config, human_radius=radii,
+                     human_v_pref=v_prefs, rng=streams)

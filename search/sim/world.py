@@ -10,7 +10,8 @@ Step order (CrowdNav_DSRNN's, except where marked):
   3. collision, success and timeout are judged on the move that just happened (CrowdNav judges the state
      *before* the move, so it reports every terminal event one step late; we do not copy that),
   4. reward: -20 collision, +10 success, 0 timeout, discomfort (d - 0.25) * 10 * dt when closer than 0.25 m,
-     otherwise 2 * progress towards the goal.
+     otherwise 2 * progress towards the goal;
+  5. humans' goal changes, when the world has them (CrowdNav_DSRNN's random and end-of-path goal changes).
 A robot that has finished stays where it is; the crowd goes on.
 """
 
@@ -29,6 +30,11 @@ from search.sim.social_force import social_force_velocities
 
 RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
 OUTCOME_NAMES = ("running", "success", "collision", "timeout")
+
+UNICYCLE_MOTIONS = ("straight", "arc")
+ROBOT_STARTS = ("square", "circle")
+HUMAN_RADIUS_RANGE = (0.3, 0.5)  # CrowdNav's randomised human attributes
+HUMAN_V_PREF_RANGE = (0.5, 1.5)
 
 ENV_ACTION_MODES = ("preferred", "velocity", "observation")
 """How the environment action (an (x, y) per human) acts on the world:
@@ -83,6 +89,16 @@ class WorldConfig(Settings):
     # random training distribution
     circle_radius: float = 6.0
     min_start_goal_distance: float = 6.0
+    robot_start: str = "square"  # "square": start uniform in it, heading pi/2; "circle": CrowdNav's unicycle start
+    # CrowdNav_DSRNN's world variations (all off by default; see docs/agents.md)
+    randomize_attributes: bool = False  # human radius ~ U(0.3, 0.5) m and v_pref ~ U(0.5, 1.5) m/s
+    goal_change_chance: float = 0.0  # every goal_change_interval seconds, each human's chance of a new goal
+    goal_change_interval: float = 5.0
+    end_goal_change_chance: float = 0.0  # a human's chance of a new goal on reaching its goal
+    robot_fov: float = 360.0  # degrees; humans outside the robot's view are not observed
+    human_fov: float = 360.0  # degrees; humans avoid only the humans in their view
+    unicycle_motion: str = "straight"  # "straight": turn, then move; "arc": CrowdNav's differential drive
+    crowd_seed: int = 0  # seeds a fixed scenario's random attributes and goal changes
 
     def __post_init__(self):
         checks = [
@@ -93,6 +109,16 @@ class WorldConfig(Settings):
             (self.dt > 0 and self.time_limit > 0, "dt and time_limit must be positive"),
             (self.env_action_bound >= 0, "env_action_bound must be >= 0"),
             (self.human_radius > 0 and self.robot_radius > 0, "radii must be positive"),
+            (0 <= self.goal_change_chance <= 1 and 0 <= self.end_goal_change_chance <= 1,
+             "goal_change_chance and end_goal_change_chance must be between 0 and 1"),
+            (self.goal_change_interval > 0, "goal_change_interval must be positive"),
+            (0 < self.robot_fov <= 360 and 0 < self.human_fov <= 360,
+             "robot_fov and human_fov must be in degrees, above 0 and at most 360"),
+            (self.human_fov == 360 or (self.human_policy == "orca" and not self.robot_visible),
+             "human_fov below 360 needs ORCA humans and an invisible robot"),
+            (self.unicycle_motion in UNICYCLE_MOTIONS, f"unicycle_motion must be one of {UNICYCLE_MOTIONS}"),
+            (self.robot_start in ROBOT_STARTS, f"robot_start must be one of {ROBOT_STARTS}"),
+            (0 <= self.crowd_seed < 2**63, "crowd_seed must be between 0 and 2**63 - 1"),
         ]
         for ok, message in checks:
             if not ok:
@@ -102,10 +128,15 @@ class WorldConfig(Settings):
     def with_(self, **changes) -> WorldConfig:
         return replace(self, **changes)
 
+    @property
+    def random_crowd(self) -> bool:
+        """Whether the crowd draws random numbers while it walks (goal changes)."""
+        return self.goal_change_chance > 0 or self.end_goal_change_chance > 0
+
 
 STATE_FIELDS = ("human_pos", "human_vel", "human_goal", "human_radius", "human_v_pref", "robot_pos", "robot_vel",
                 "robot_theta", "robot_speed", "robot_goal", "time", "done", "outcome", "event_time", "path_length",
-                "min_clearance")
+                "min_clearance", "rng")
 
 
 class WorldState:
@@ -116,7 +147,9 @@ class WorldState:
       ``robot_speed`` (signed forward speed, unicycle) (W, R);
     - ``time`` (W,); ``done`` (W, R) bool; ``outcome`` (W, R) int8: RUNNING, SUCCESS, COLLISION, TIMEOUT;
       ``event_time`` (W, R), nan while running; ``path_length`` (W, R); ``min_clearance`` (W, R), the smallest
-      surface distance to any human so far.
+      surface distance to any human so far;
+    - ``rng`` (W,) uint64: the state of the world's own random stream (splitmix64), which the crowd's random
+      events draw from, so a snapshot or a copied world carries its future random numbers with it.
 
     Every field is a view into one buffer with a row of bytes per world (``rows``), so copying, taking or
     overwriting worlds is one array operation, however many fields (a search branches and refills worlds many
@@ -126,7 +159,9 @@ class WorldState:
     __slots__ = ("rows", "layout", *STATE_FIELDS)
 
     def __init__(self, **values: np.ndarray):
-        """Worlds from every field of STATE_FIELDS, given by name, each copied into the rows."""
+        """Worlds from every field of STATE_FIELDS, given by name, each copied into the rows (``rng`` may be
+        left out: zero, as states saved before it existed had)."""
+        values.setdefault("rng", np.zeros(np.shape(values.get("time", ())), np.uint64))
         if values.keys() != set(STATE_FIELDS):
             raise TypeError(f"WorldState takes every field by name: missing {sorted(set(STATE_FIELDS) - values.keys())}"
                             f", unknown {sorted(values.keys() - set(STATE_FIELDS))}")
@@ -222,8 +257,8 @@ def _layout(humans: int, robots: int) -> _Layout:
               "human_radius": (humans,), "human_v_pref": (humans,), "robot_pos": (robots, 2),
               "robot_vel": (robots, 2), "robot_theta": (robots,), "robot_speed": (robots,),
               "robot_goal": (robots, 2), "time": (), "done": (robots,), "outcome": (robots,),
-              "event_time": (robots,), "path_length": (robots,), "min_clearance": (robots,)}
-    dtypes = {"done": np.dtype(np.bool_), "outcome": np.dtype(np.int8)}
+              "event_time": (robots,), "path_length": (robots,), "min_clearance": (robots,), "rng": ()}
+    dtypes = {"done": np.dtype(np.bool_), "outcome": np.dtype(np.int8), "rng": np.dtype(np.uint64)}
     fields, offset = {}, 0
     for name in sorted(STATE_FIELDS, key=lambda name: -dtypes.get(name, np.dtype(np.float64)).itemsize):
         dtype = dtypes.get(name, np.dtype(np.float64))  # widest first: every field stays aligned
@@ -248,20 +283,31 @@ def assign_rows(pairs: list[tuple[np.ndarray, np.ndarray]], rows: list[int]) -> 
             target[rows] = values
 
 
-def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig) -> WorldState:
-    """A state at time 0 with resting agents, from (W, n, 2) humans and (W, R, 2) robots."""
+def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig,
+              human_radius=None, human_v_pref=None, rng=None) -> WorldState:
+    """A state at time 0 with resting agents, from (W, n, 2) humans and (W, R, 2) robots.
+
+    Human radii and preferred speeds are the config's unless given (W, n). ``rng`` (W,) seeds each world's random
+    stream; by default every world's comes from ``config.crowd_seed``, and with ``randomize_attributes`` the
+    attributes not given are drawn from it."""
     human_pos = np.array(human_pos, dtype=np.float64)
     robot_pos = np.array(robot_pos, dtype=np.float64)
     w, n = human_pos.shape[:2]
     r = robot_pos.shape[1]
     if config.robot_visible and r != 1:
         raise ValueError("a visible robot changes its crowd, so each world can hold only one robot")
+    rng = np.full(w, seed_stream(config.crowd_seed), np.uint64) if rng is None else np.array(rng, np.uint64)
+    if config.randomize_attributes and (human_radius is None or human_v_pref is None):
+        drawn = np.empty((w, n, 2))
+        _draw_attributes(rng, drawn)
+        human_v_pref = drawn[..., 0] if human_v_pref is None else human_v_pref
+        human_radius = drawn[..., 1] if human_radius is None else human_radius
     return WorldState(
         human_pos=human_pos,
         human_vel=np.zeros((w, n, 2)),
         human_goal=np.array(human_goal, dtype=np.float64),
-        human_radius=np.full((w, n), config.human_radius),
-        human_v_pref=np.full((w, n), config.human_v_pref),
+        human_radius=np.full((w, n), config.human_radius) if human_radius is None else human_radius,
+        human_v_pref=np.full((w, n), config.human_v_pref) if human_v_pref is None else human_v_pref,
         robot_pos=robot_pos,
         robot_vel=np.zeros((w, r, 2)),
         robot_theta=np.array(np.broadcast_to(robot_theta, (w, r)), dtype=np.float64),
@@ -273,7 +319,37 @@ def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config:
         event_time=np.full((w, r), np.nan),
         path_length=np.zeros((w, r)),
         min_clearance=np.full((w, r), np.inf),
+        rng=rng,
     )
+
+
+def seed_stream(seed: int) -> np.uint64:
+    """A random stream's starting state from a seed (one splitmix64 output, so nearby seeds start far apart)."""
+    state = np.array([seed], np.uint64)
+    return np.uint64(_next_random(state, 0) * 2.0**53)
+
+
+@numba.njit(cache=True, nogil=True)
+def _next_random(rng, w):
+    """The next uniform number in [0, 1) of world ``w``'s splitmix64 stream, advancing ``rng[w]``."""
+    state = rng[w] + np.uint64(0x9E3779B97F4A7C15)
+    rng[w] = state
+    z = (state ^ (state >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _draw_attributes(rng, out):
+    """CrowdNav's randomised humans: (v_pref, radius) per human, uniform over their ranges, from each world's
+    stream."""
+    for w in range(out.shape[0]):
+        for h in range(out.shape[1]):
+            v_low, v_high = HUMAN_V_PREF_RANGE
+            r_low, r_high = HUMAN_RADIUS_RANGE
+            out[w, h, 0] = v_low + (v_high - v_low) * _next_random(rng, w)
+            out[w, h, 1] = r_low + (r_high - r_low) * _next_random(rng, w)
 
 
 def check_env_action(env_action, n_worlds: int, config: WorldConfig) -> np.ndarray:
@@ -313,7 +389,9 @@ def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndar
     mode = config.env_action_mode
     padding = 0.01 + config.safety_space
     offset = env_action if env_action is not None and mode == "preferred" else np.zeros_like(state.human_pos)
-    if config.human_policy == "orca" and not config.robot_visible:
+    if config.human_fov < 360:
+        velocity = _crowd_velocities_in_view(state, config, offset, padding)
+    elif config.human_policy == "orca" and not config.robot_visible:
         velocity = crowd_velocities(state.human_pos, state.human_vel, state.human_goal, state.human_radius,
                                     state.human_v_pref, offset, padding=padding,
                                     neighbor_dist=config.neighbor_dist, max_neighbors=config.max_neighbors,
@@ -343,11 +421,47 @@ def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndar
     return velocity
 
 
+DUMMY_HUMAN_POSITION = (7.0, 7.0)  # where CrowdNav puts a human that another one does not see
+
+
+def in_view(heading: np.ndarray, offsets: np.ndarray, fov_degrees: float) -> np.ndarray:
+    """Whether each offset (..., m, 2) lies within ``fov_degrees`` centred on ``heading`` (...), as CrowdNav's
+    ``detect_visible`` decides it (an offset of zero length is not seen)."""
+    direction = np.stack([np.cos(heading), np.sin(heading)], axis=-1)[..., None, :]
+    length = np.linalg.norm(offsets, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cosine = np.sum(direction * offsets, axis=-1) / length
+        return np.arccos(np.clip(cosine, -1.0, 1.0)) <= np.radians(fov_degrees) / 2
+
+
+def _crowd_velocities_in_view(state: WorldState, config: WorldConfig, offset: np.ndarray,
+                              padding: float) -> np.ndarray:
+    """ORCA humans that see only the humans within ``human_fov`` of their walking direction: as CrowdNav, each
+    human solves its own program in which a human it does not see stands still at DUMMY_HUMAN_POSITION."""
+    w, n = state.human_pos.shape[:2]
+    heading = np.arctan2(state.human_vel[..., 1], state.human_vel[..., 0])
+    seen = in_view(heading, state.human_pos[:, None, :, :] - state.human_pos[:, :, None, :], config.human_fov)
+    order = np.array([[a, *(b for b in range(n) if b != a)] for a in range(n)])  # each human first, then the rest
+    pos = state.human_pos[:, order]  # (W, n, n, 2): world, ego, agents
+    seen = np.take_along_axis(seen, order[None], axis=2)
+    seen[:, :, 0] = True
+    pos = np.where(seen[..., None], pos, DUMMY_HUMAN_POSITION)
+    vel = np.where(seen[..., None], state.human_vel[:, order], 0.0)
+    radii = np.where(seen, state.human_radius[:, order], config.human_radius) + padding
+    pref = (preferred_velocities(state) + offset)[:, order]
+    speed = state.human_v_pref[:, order]
+    velocity = orca_velocities(*(a.reshape(w * n, *a.shape[2:]) for a in (pos, vel, pref, radii, speed)),
+                               neighbor_dist=config.neighbor_dist, max_neighbors=config.max_neighbors,
+                               time_horizon=config.time_horizon, dt=config.dt, n_ego=1)
+    return velocity.reshape(w, n, 2)
+
+
 def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.ndarray) -> np.ndarray:
-    """Apply the robots' kinematics to their actions: the velocities (W, R, 2) they move with this step.
+    """Apply the robots' kinematics to their actions: the velocities (W, R, 2) they have after this step.
 
     Holonomic: the action is a velocity, rescaled to at most v_pref. Unicycle: the action is (dv, dtheta),
-    each clipped to its per-step limit; speed accumulates within ±v_pref and the robot turns, then moves.
+    each clipped to its per-step limit; speed accumulates within ±v_pref and the robot turns, then moves
+    (``unicycle_motion`` "straight") or turns while it moves ("arc", see ``arc_velocities``).
     Updates heading and speed in place.
     """
     action = np.asarray(robot_action, dtype=np.float64)
@@ -370,6 +484,23 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
     state.robot_theta[...] = np.where(active, theta, state.robot_theta)
     velocity = speed[..., None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
     return np.where(active[..., None], velocity, 0.0)
+
+
+def arc_velocities(state: WorldState, config: WorldConfig, robot_action: np.ndarray, heading_before: np.ndarray,
+                   velocity: np.ndarray) -> np.ndarray:
+    """The unicycle's move over one step on an arc, as a velocity (W, R, 2): CrowdNav_DSRNN's differential drive
+    turns at the constant rate dtheta / dt while moving at the new speed, so the robot moves along the chord
+    v / dtheta * (sin(theta + dtheta) - sin(theta), cos(theta) - cos(theta + dtheta)). A turn under 1e-4 rad
+    moves straight (CrowdNav does not move the robot at all then; a policy trained there rarely turns that
+    little). ``velocity`` is ``robot_velocities``' result, ``heading_before`` the heading before it."""
+    dtheta = np.clip(np.asarray(robot_action, np.float64)[..., 1], -config.unicycle_max_dtheta,
+                     config.unicycle_max_dtheta)
+    turning = np.abs(dtheta) >= 1e-4
+    rate = state.robot_speed / np.where(turning, dtheta, 1.0)
+    chord = np.stack([np.sin(heading_before + dtheta) - np.sin(heading_before),
+                      np.cos(heading_before) - np.cos(heading_before + dtheta)], axis=-1)
+    moved = np.where(turning[..., None], rate[..., None] * chord, velocity)
+    return np.where(state.done[..., None], 0.0, moved)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -404,16 +535,73 @@ def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) 
 
 def advance(state: WorldState, config: WorldConfig, robot_action, new_human_vel: np.ndarray) -> np.ndarray:
     """``step`` with the humans' new velocities already computed (``human_velocities``)."""
+    arc = config.kinematics == "unicycle" and config.unicycle_motion == "arc"
+    heading_before = state.robot_theta.copy() if arc else None
     new_robot_vel = robot_velocities(state, config, robot_action)
+    moved = arc_velocities(state, config, robot_action, heading_before, new_robot_vel) if arc else new_robot_vel
     reward = np.empty(state.done.shape)
-    _move_and_judge(state.robot_pos, state.robot_goal, state.human_pos, state.human_radius, new_robot_vel,
+    _move_and_judge(state.robot_pos, state.robot_goal, state.human_pos, state.human_radius, moved,
                     new_human_vel, state.time, state.done, state.outcome, state.event_time, state.path_length,
                     state.min_clearance, float(config.dt), float(config.robot_radius), float(config.time_limit),
                     float(config.discomfort_dist), float(config.discomfort_factor), float(config.progress_factor),
                     float(config.success_reward), float(config.collision_penalty), reward)
     state.robot_vel[...] = new_robot_vel
     state.human_vel[...] = new_human_vel
+    if config.random_crowd:
+        _change_goals(state.human_pos, state.human_goal, state.human_radius, state.human_v_pref, state.robot_goal,
+                      state.time, state.rng, float(config.goal_change_chance), float(config.goal_change_interval),
+                      float(config.end_goal_change_chance), float(config.circle_radius), float(config.robot_radius),
+                      float(config.discomfort_dist))
     return reward
+
+
+@numba.njit(cache=True, nogil=True)
+def _change_goals(human_pos, human_goal, human_radius, human_v_pref, robot_goal, time, rng, chance, interval,
+                  end_chance, circle_radius, robot_radius, discomfort_dist):
+    """CrowdNav_DSRNN's goal changes, after a move: every ``interval`` seconds each walking human takes a new
+    goal with ``chance``; then each human within its radius of its goal takes one with ``end_chance``. A new goal
+    lies on the circle (plus noise scaled by the human's v_pref), clear of the other humans' positions and goals
+    and of the robots' goals. Unlike CrowdNav it need not be clear of the robots' positions: an invisible
+    robot must not change its crowd (several robots share one)."""
+    for w in range(human_pos.shape[0]):
+        periods = time[w] / interval
+        if chance > 0 and abs(periods - np.round(periods)) < 1e-9:
+            for h in range(human_pos.shape[1]):
+                if human_v_pref[w, h] != 0 and _next_random(rng, w) <= chance:
+                    _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng, w, h,
+                              circle_radius, robot_radius, discomfort_dist)
+        if end_chance > 0:
+            for h in range(human_pos.shape[1]):
+                dx, dy = human_goal[w, h, 0] - human_pos[w, h, 0], human_goal[w, h, 1] - human_pos[w, h, 1]
+                if (human_v_pref[w, h] != 0 and np.sqrt(dx * dx + dy * dy) < human_radius[w, h]
+                        and _next_random(rng, w) <= end_chance):
+                    _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng, w, h,
+                              circle_radius, robot_radius, discomfort_dist)
+
+
+@numba.njit(cache=True, nogil=True)
+def _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng, w, h, circle_radius,
+              robot_radius, discomfort_dist):
+    """Draw human ``h``'s new goal as CrowdNav does, retrying while it is too close to another agent (at most
+    1000 tries; the last one stands)."""
+    for _ in range(1000):
+        angle = _next_random(rng, w) * 2 * np.pi
+        gx = circle_radius * np.cos(angle) + (_next_random(rng, w) - 0.5) * human_v_pref[w, h]
+        gy = circle_radius * np.sin(angle) + (_next_random(rng, w) - 0.5) * human_v_pref[w, h]
+        clear = True
+        for r in range(robot_goal.shape[1]):
+            min_dist = human_radius[w, h] + robot_radius + discomfort_dist
+            if np.hypot(gx - robot_goal[w, r, 0], gy - robot_goal[w, r, 1]) < min_dist:
+                clear = False
+        for other in range(human_pos.shape[1]):
+            if other != h:
+                min_dist = human_radius[w, h] + human_radius[w, other] + discomfort_dist
+                if (np.hypot(gx - human_pos[w, other, 0], gy - human_pos[w, other, 1]) < min_dist
+                        or np.hypot(gx - human_goal[w, other, 0], gy - human_goal[w, other, 1]) < min_dist):
+                    clear = False
+        if clear:
+            break
+    human_goal[w, h, 0], human_goal[w, h, 1] = gx, gy
 
 
 @numba.njit(cache=True, nogil=True)

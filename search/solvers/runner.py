@@ -13,7 +13,7 @@ import json
 import os
 import re
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -117,11 +117,14 @@ def check_settings(cls, values: dict, what: str) -> dict:
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
     ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
-    from search.agents.policies import load_policy
+    from search.agents.policies import comparison_world, load_policy
     from search.sim.scenarios import load_scenario, load_scenario_or_distribution
 
     started = time.perf_counter()
     policies = [load_policy(spec) for spec in job.agents]
+    # the agents' trained worlds (an imported checkpoint's), under the scenario's own settings and the job's
+    scenario_world = load_scenario_or_distribution(job.scenario).world
+    job = replace(job, world_settings=comparison_world(list(job.agents), job.world_settings, scenario_world))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)
@@ -131,8 +134,10 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     vote = None
     try:
         if job.solver == "representative":
-            summaries, vote = _representative(job, policies, load_scenario_or_distribution(job.scenario),
-                                              reward_config, tracker, rng, solver_config, solver)
+            distribution = load_scenario_or_distribution(job.scenario)
+            distribution = replace(distribution, world=distribution.world | job.world_settings)
+            summaries, vote = _representative(job, policies, distribution, reward_config, tracker, rng,
+                                              solver_config, solver)
         else:
             scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
             solve(CoupledProblem(policies, scenario, reward=reward_config), tracker, rng, solver_config)
