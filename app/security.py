@@ -157,8 +157,11 @@ class LoginThrottle:
     """Failed admin logins in this process, per client address and overall. After `free` failures (per client:
     `free_per_client`; from everyone together: `free_overall`) each further attempt must wait a delay that starts
     at `delay_s` and doubles with every failure, up to `max_delay_s`; an attempt during the delay is refused
-    without checking the password. A success clears its client's count; counts are forgotten a day after their
-    last failure. With several worker processes each keeps its own counts."""
+    without checking the password. The overall delay holds back only addresses that have failed before: a
+    researcher's first attempt from an address of their own is always checked, so guessing from many addresses
+    cannot lock them out (each new address gets one guess, then waits). A success clears its client's count;
+    counts are forgotten a day after their last failure. With several worker processes each keeps its own
+    counts."""
 
     FORGET_S = 24 * 3600
     MAX_CLIENTS = 10_000
@@ -181,8 +184,10 @@ class LoginThrottle:
     def wait_s(self, client: str) -> float:
         """Seconds before `client` may try a password again (0: now)."""
         now = self.clock()
-        return max(self._wait(self.clients.get(client, (0, 0.0)), self.free_per_client, now),
-                   self._wait(self.overall, self.free_overall, now))
+        own = self.clients.get(client)
+        if own is None or now - own[1] > self.FORGET_S:
+            return 0.0
+        return max(self._wait(own, self.free_per_client, now), self._wait(self.overall, self.free_overall, now))
 
     def failed(self, client: str) -> int:
         """Count a wrong password; returns the client's failures so far."""
