@@ -71,25 +71,33 @@ async def _too_large(send: Send, limit: int) -> None:
     await send({"type": "http.response.body", "body": body})
 
 
+def security_headers(frame_ancestors: str = "'none'") -> list[tuple[bytes, bytes]]:
+    """What every reply carries, the app's (SecurityHeadersMiddleware) and the HTTP server's own (app.transport):
+    no sniffing, no framing (unless allowed), only our own scripts and media. HSTS is the reverse proxy's, which
+    terminates HTTPS (docs/survey.md)."""
+    policy = (
+        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; media-src 'self'; "
+        f"object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors {frame_ancestors}"
+    )
+    headers = [
+        (b"content-security-policy", policy.encode()),
+        (b"x-content-type-options", b"nosniff"),
+        (b"referrer-policy", b"no-referrer"),  # platform ids in our URLs must not leak to other sites
+        (b"permissions-policy", b"camera=(), microphone=(), geolocation=()"),
+        (b"cross-origin-opener-policy", b"same-origin"),
+    ]
+    if frame_ancestors == "'none'":
+        headers.append((b"x-frame-options", b"DENY"))
+    headers.append((b"cache-control", b"no-store"))  # pages show private state; clips set their own
+    return headers
+
+
 class SecurityHeadersMiddleware:
-    """Headers on every response: no sniffing, no framing (unless allowed), only our own scripts and media."""
+    """`security_headers` on every response of the app."""
 
     def __init__(self, app: ASGIApp, frame_ancestors: str):
         self.app = app
-        policy = (
-            "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; media-src 'self'; "
-            f"object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors {frame_ancestors}"
-        )
-        self.headers = [
-            (b"content-security-policy", policy.encode()),
-            (b"x-content-type-options", b"nosniff"),
-            (b"referrer-policy", b"no-referrer"),  # platform ids in our URLs must not leak to other sites
-            (b"permissions-policy", b"camera=(), microphone=(), geolocation=()"),
-            (b"cross-origin-opener-policy", b"same-origin"),
-        ]
-        if frame_ancestors == "'none'":
-            self.headers.append((b"x-frame-options", b"DENY"))
-        self.headers.append((b"cache-control", b"no-store"))  # pages show private state; clips set their own
+        self.headers = security_headers(frame_ancestors)
         self.names = {name for name, _ in self.headers}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
