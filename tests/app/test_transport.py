@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.support.live_server import LiveServer
-from tests.support.survey import log_in, study_text
+from tests.support.survey import FormReader, answer_for, log_in, study_text
 
 PILOT = {"platform": '"none"'}
 ONE_DATABASE = pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)  # nothing here is per database
@@ -142,3 +142,16 @@ def test_requests_the_http_parser_refuses_get_the_security_headers(server):
                     b"GET /\x00 HTTP/1.1\r\nHost: x\r\n\r\n"):
         reply = raw(server, request)
         assert reply.startswith(b"HTTP/1.1 400 ") and has_security_headers(head_of(reply)), reply[:300]
+
+
+@pytest.mark.slow  # a live server
+def test_a_deeply_nested_viewing_record_neither_fails_nor_drops_the_connection(server):
+    participant = httpx.Client(base_url=server.url, follow_redirects=True)
+    page = participant.get("/").text
+    page = participant.post("/consent", data={"csrf_token": FormReader(page).hidden["csrf_token"],
+                                              "choice": "agree"}).text
+    page = participant.post("/study", data=answer_for(page)).text  # the instructions: now at the first clip
+    for depth in (3_000, 15_000):
+        reply = participant.post("/study", data={**answer_for(page), "video_events": "[" * depth})
+        assert reply.status_code == 422 and "malformed record" in reply.text
+    assert "Traceback" not in server.log.read_text()
