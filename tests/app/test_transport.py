@@ -150,6 +150,8 @@ def test_a_deeply_nested_viewing_record_neither_fails_nor_drops_the_connection(s
     page = participant.get("/").text
     page = participant.post("/consent", data={"csrf_token": FormReader(page).hidden["csrf_token"],
                                               "choice": "agree"}).text
+    page = participant.post("/condition", data={"csrf_token": FormReader(page).hidden["csrf_token"],
+                                                "number": "1"}).text
     page = participant.post("/study", data=answer_for(page)).text  # the instructions: now at the first clip
     for depth in (3_000, 15_000):
         reply = participant.post("/study", data={**answer_for(page), "video_events": "[" * depth})
