@@ -89,9 +89,16 @@ def _plan(session: Session, participant: Row) -> list[Screen] | None:
     return None if stored is None else parse_plan(stored)
 
 
-def _current_screens(session: Session, ctx: Context, request: Request) -> tuple[Row, list[Screen] | None]:
+def _current_screens(session: Session, ctx: Context, request: Request,
+                     kept) -> tuple[Row, list[Screen] | None, str]:
+    """The participant, their screens while they take part, and the notice for screen `kept` (a step whose first
+    answers were kept when it was sent again; "" for none)."""
     participant = _current(session, ctx, request)
-    return participant, _plan(session, participant) if participant.status == "started" else None
+    plan = _plan(session, participant) if participant.status == "started" else None
+    if plan is None or not isinstance(kept, int) or not 0 <= kept < participant.step:
+        return participant, plan, ""
+    saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": kept})
+    return participant, plan, "" if saved is None else _kept_notice(ctx, plan[kept], saved)
 
 
 def _see_current() -> RedirectResponse:
@@ -320,14 +327,13 @@ def _status_page(request: Request, ctx: Context, participant: Row):
 
 @router.get("/study")
 def current_page(request: Request, ctx: ContextDep):
-    participant, plan = _read(_current_screens, ctx, request)
+    kept = request.session.pop("kept", None) if "kept" in request.session else None
+    participant, plan, notice = _read(_current_screens, ctx, request, kept)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
     if participant.condition is None:
         return ctx.render(request, "choose.html", n_conditions=len(ctx.conditions), error="")
-    notice = request.session.pop("notice", "") if "notice" in request.session else ""
-    return _render_screen(request, ctx, plan[participant.step], participant.step,
-                          notice=notice if isinstance(notice, str) else "")
+    return _render_screen(request, ctx, plan[participant.step], participant.step, notice=notice)
 
 
 DETAILS = select(PARTICIPANT.c.details).where(PARTICIPANT.c.id == bindparam("participant"))
@@ -337,17 +343,22 @@ SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bi
                                                  RESPONSE.c.step == bindparam("step"))
 
 
+NOTICE_ANSWER_CHARS = 60  # a saved text answer in the notice: its beginning
+
+
 def _kept_notice(ctx: Context, screen: Screen, saved: dict) -> str:
-    """What the participant is told when a screen they had already answered is sent again with other answers."""
+    """What the participant is told when a screen they had already answered is sent again with other answers
+    (the back button, then another choice): short, with the kept choices and the start of any text."""
     shown = []
     for name, value in saved.items():
-        question = ctx.study.questions.get(name)
-        text = question.text if question is not None else ("Your feedback" if name == FEEDBACK else "Check question")
-        shown.append(f"{text} {' > '.join(value) if isinstance(value, list) else value}")
+        if name not in ctx.study.questions and name != FEEDBACK:
+            continue  # comprehension and attention answers: only one is right, nothing to remind of
+        value = " > ".join(value) if isinstance(value, list) else str(value)
+        shown.append(value if len(value) <= NOTICE_ANSWER_CHARS else value[:NOTICE_ANSWER_CHARS] + "…")
     where = screen.progress or "that screen"
-    kept = (" Your saved answers: " + "; ".join(shown) + ".") if shown else ""
-    return (f"You had already answered {where}. Answers cannot be changed once sent, so your first answers are "
-            f"kept and the new ones were not saved.{kept} Please continue with the screen below.")
+    kept = f" ({'; '.join(shown)})" if shown else ""
+    return (f"You had already answered {where}: answers cannot be changed, so your first answers{kept} are kept. "
+            "Please continue below.")
 
 
 def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime, now: datetime) -> str | None:
@@ -364,9 +375,12 @@ def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime,
             "saved. Please play the clip from the start to the end, then answer again.")
 
 
+KEPT = "kept"  # what `_save` says when a screen answered before was sent again with other answers
+
+
 def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Screen, Checked] | str | None:
-    """Save the answers to screen `step`: None when saved or nothing is left to save, a notice for the next page
-    when the screen had been answered before with other answers, else the screen to show again and why."""
+    """Save the answers to screen `step`: None when saved or nothing is left to save, KEPT when the screen had been
+    answered before with other answers (the first are kept), else the screen to show again and why."""
     try:
         with ctx.db.writing() as session:
             participant = _current(session, ctx, request)
@@ -376,9 +390,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Sc
             if step < participant.step:  # already answered: a double click or the back button; keep the first
                 saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
                 sent = check_screen(ctx.study, plan[step], form)
-                if saved is not None and not sent.errors and sent.answers != saved:
-                    return _kept_notice(ctx, plan[step], saved)
-                return None
+                return KEPT if saved is not None and not sent.errors and sent.answers != saved else None
             if step > participant.step:
                 raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
             screen = plan[step]
@@ -431,8 +443,8 @@ def submit(request: Request, ctx: ContextDep, form: FormDep):
     refused = _save(ctx, request, int(step), form)
     if refused is None:
         return _see_current()
-    if isinstance(refused, str):
-        request.session["notice"] = refused
+    if refused == KEPT:  # the session cookie holds only the step: the notice is built from the database
+        request.session["kept"] = int(step)
         return _see_current()
     screen, checked = refused
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
