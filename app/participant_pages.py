@@ -382,51 +382,57 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Sc
     """Save the answers to screen `step`: None when saved or nothing is left to save, KEPT when the screen had been
     answered before with other answers (the first are kept), else the screen to show again and why."""
     try:
-        with ctx.db.writing() as session:
-            participant = _current(session, ctx, request)
-            plan = _plan(session, participant)
-            if participant.status != "started" or plan is None:
-                return None
-            if step < participant.step:  # already answered: a double click or the back button; keep the first
-                saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
-                sent = check_screen(ctx.study, plan[step], form)
-                return KEPT if saved is not None and not sent.errors and sent.answers != saved else None
-            if step > participant.step:
-                raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
-            screen = plan[step]
-            checked = check_screen(ctx.study, screen, form)
-            now = datetime.now(UTC)
-            fast = request.session.get("fast") is True and participant.kind in ("pilot", "bot")
-            if shows_clip(screen) and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
-                problem = _viewing_problem(screen, participant.step_started_at, now)
-                if problem:
-                    checked.errors["video"] = problem
-            if checked.errors:
-                if any(name.startswith("understand") for name in checked.errors):
-                    details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
-                    details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
-                    session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
-                return screen, checked
-            if isinstance(screen, Instructions) and ctx.study.comprehension:
+        return _save_once(ctx, request, step, form)
+    except IntegrityError:
+        # A concurrent submission saved this screen first (PostgreSQL; SQLite's writers take turns): this one is
+        # now a resubmit, answered as one.
+        return _save_once(ctx, request, step, form)
+
+
+def _save_once(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Screen, Checked] | str | None:
+    with ctx.db.writing() as session:
+        participant = _current(session, ctx, request)
+        plan = _plan(session, participant)
+        if participant.status != "started" or plan is None:
+            return None
+        if step < participant.step:  # already answered: a double click or the back button; keep the first
+            saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
+            sent = check_screen(ctx.study, plan[step], form)
+            return KEPT if saved is not None and not sent.errors and sent.answers != saved else None
+        if step > participant.step:
+            raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
+        screen = plan[step]
+        checked = check_screen(ctx.study, screen, form)
+        now = datetime.now(UTC)
+        fast = request.session.get("fast") is True and participant.kind in ("pilot", "bot")
+        if shows_clip(screen) and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
+            problem = _viewing_problem(screen, participant.step_started_at, now)
+            if problem:
+                checked.errors["video"] = problem
+        if checked.errors:
+            if any(name.startswith("understand") for name in checked.errors):
                 details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
                 details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
                 session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
-            viewport = _one_value(form, "viewport")
-            session.execute(SAVE_RESPONSE, {
-                "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
-                "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
-                "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
-                "submitted_at": now,
-                "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
-            })
-            done = step + 1 == len(plan)
-            failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
-            session.execute(NEXT_STEP, {
-                "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
-                "to_status": "completed" if done else "started", "completed": now if done else None,
-            })
-    except IntegrityError:
-        pass  # the same screen was saved by a concurrent submission
+            return screen, checked
+        if isinstance(screen, Instructions) and ctx.study.comprehension:
+            details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
+            details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
+            session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
+        viewport = _one_value(form, "viewport")
+        session.execute(SAVE_RESPONSE, {
+            "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
+            "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
+            "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+            "submitted_at": now,
+            "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
+        })
+        done = step + 1 == len(plan)
+        failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
+        session.execute(NEXT_STEP, {
+            "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
+            "to_status": "completed" if done else "started", "completed": now if done else None,
+        })
     return None
 
 
