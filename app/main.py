@@ -23,6 +23,7 @@ from app.bundle import check_study_against_bundle, load_bundle
 from app.context import Context
 from app.database import Database, check_migrated
 from app.security import (
+    ArrivalLimit,
     BodyLimitMiddleware,
     LoginThrottle,
     SecurityHeadersMiddleware,
@@ -71,6 +72,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.login_throttle = LoginThrottle(
         free_per_client=settings.login_free_attempts, free_overall=settings.login_free_attempts_overall,
         delay_s=settings.login_delay_s, max_delay_s=settings.login_max_delay_s)
+    app.state.arrivals = ArrivalLimit(burst=settings.arrivals_burst, per_minute=settings.arrivals_per_minute)
     app.include_router(participant_pages.router)
     app.include_router(media.router)
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
@@ -84,10 +86,11 @@ def create_app(settings: Settings) -> FastAPI:
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, error: HTTPException):
         titles = {400: "Bad request", 403: "Not allowed", 404: "Page not found", 405: "Not allowed",
-                  409: "Not available yet", 413: "Too large"}
+                  409: "Not available yet", 413: "Too large", 429: "Please wait a moment", 503: "Busy"}
         text = error.detail if isinstance(error.detail, str) else "The request could not be handled."
-        return context.message(request, titles.get(error.status_code, "Error"), text,
-                               status_code=error.status_code)
+        page = context.message(request, titles.get(error.status_code, "Error"), text, status_code=error.status_code)
+        page.headers.update(error.headers or {})
+        return page
 
     @app.exception_handler(admin_pages.LoginRequired)
     async def _login_first(request: Request, error: admin_pages.LoginRequired):

@@ -12,6 +12,7 @@ import random
 import re
 import secrets
 from datetime import UTC, datetime
+from math import ceil
 
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import RedirectResponse
@@ -249,6 +250,10 @@ def consent(request: Request, ctx: ContextDep, form: FormDep):
         if not isinstance(identity, dict) or not identity.get("external_id"):
             raise HTTPException(400, "Please open the study from the link you were given.")
     kind = request.session.get("kind") if request.session.get("kind") in ("pilot", "bot") else "real"
+    if (wait := request.app.state.arrivals.take(request.client.host if request.client else "unknown")) > 0:
+        raise HTTPException(429, "Many people have just started the study from your network. Please wait "
+                                 f"{ceil(wait)} seconds, then press the button again.",
+                            headers={"retry-after": str(ceil(wait))})
     code = _enter(ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
     request.session["participant"] = code
     request.session.pop("identity", None)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hmac
 import secrets
+import threading
 import time
 from typing import Annotated
 from urllib.parse import parse_qsl
@@ -212,6 +213,35 @@ class LoginThrottle:
 
     def succeeded(self, client: str) -> None:
         self.clients.pop(client, None)
+
+
+class ArrivalLimit:
+    """New participants (consent answers) per client address in this process: a token bucket of `burst` arrivals
+    that refills at `per_minute`. A lab whose participants all start at once behind one address passes; a script
+    creating thousands of participants is held to the refill rate. With several worker processes each keeps its
+    own buckets."""
+
+    MAX_CLIENTS = 10_000
+
+    def __init__(self, *, burst: int = 100, per_minute: float = 60.0, clock=time.monotonic):
+        self.burst, self.per_s = burst, per_minute / 60.0
+        self.clock = clock
+        self.buckets: dict[str, tuple[float, float]] = {}  # address -> (arrivals left, time they were counted)
+        self.lock = threading.Lock()  # the consent endpoint runs in the thread pool
+
+    def take(self, client: str) -> float:
+        """Count one arrival from `client`: 0 when it may arrive now, else the seconds until it may."""
+        with self.lock:
+            now = self.clock()
+            left, then = self.buckets.pop(client, (float(self.burst), now))
+            left = min(float(self.burst), left + (now - then) * self.per_s)
+            if len(self.buckets) >= self.MAX_CLIENTS:
+                self.buckets.pop(next(iter(self.buckets)))  # the longest unseen
+            if left >= 1.0:
+                self.buckets[client] = (left - 1.0, now)
+                return 0.0
+            self.buckets[client] = (left, now)
+            return (1.0 - left) / self.per_s
 
 
 ADMIN_SESSIONS = "admin_sessions"

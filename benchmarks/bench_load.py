@@ -47,7 +47,7 @@ from app.bots import Bot, ClipIndex, Observer  # noqa: E402
 from app.study import parse_study  # noqa: E402
 from tests.support.analysis import write_bot_bundle  # noqa: E402
 from tests.support.crowd import Crowd, LoopbackClient, audit, page_type  # noqa: E402
-from tests.support.live_server import LiveServer, free_port  # noqa: E402
+from tests.support.live_server import CROWD_FROM_ONE_ADDRESS, LiveServer, free_port  # noqa: E402
 from tests.support.survey import study_text  # noqa: E402
 
 CONSTANT_SERVER = """
@@ -60,7 +60,8 @@ async def constant():
 uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, server_header=False,
             access_log=False)
 """
-SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0"}  # as the constant server: a reverse proxy keeps the access log
+# As the constant server: a reverse proxy keeps the access log. The bots all come from 127.0.0.1.
+SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS}
 # The ceiling's and the burst's server on one core, their load generator on the others: the way a load test keeps
 # its generator from taking the CPU of the system under test when both must share one machine.
 CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
