@@ -52,13 +52,13 @@ from app.study import FEEDBACK, TextQuestion
 # Every request of a participant runs these Core statements in a Session: loading ORM objects and flushing them
 # cost several times what the statements do. The INSERTs name every column.
 router = APIRouter()
+IDENTITY = ("external_id", "platform_study_id", "platform_session_id")  # the ids a platform's link carries
 PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
-_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind"]).where(
-    PARTICIPANT.c.study == bindparam("study"))
+_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind",
+                              "external_id"]).where(PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
-BY_IDENTITY = _SHOWN.add_columns(PARTICIPANT.c.platform_study_id, PARTICIPANT.c.platform_session_id).where(
-    PARTICIPANT.c.platform == bindparam("platform"),
-                           PARTICIPANT.c.external_id == bindparam("external_id"))
+BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
+                           *(PARTICIPANT.c[name] == bindparam(name) for name in IDENTITY))
 SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
 ENTER = insert(PARTICIPANT).values(
     {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
@@ -116,20 +116,7 @@ def _platform_identity(platform: str, params) -> dict:
     for name, value in zip(names, values, strict=True):
         if value and not ID_VALUE.match(value):
             raise HTTPException(400, f"The link's {name} is not a valid identifier.")
-    return {"external_id": values[0], "platform_study_id": values[1] or None,
-            "platform_session_id": values[2] or None}
-
-
-NOT_YOURS = ("The study cannot be started from this link. Please open the study from its page on the platform "
-             "where you signed up; if this message comes again, contact the researcher.")
-
-
-def _same_person(known: Row, identity: dict, own_code) -> bool:
-    """Whether the visitor with this link (and this session cookie's participant code) is the participant `known`
-    found by its platform id: only with the participant's own platform study and session ids, or cookie."""
-    ids = (identity["platform_study_id"], identity["platform_session_id"])
-    return own_code == known.code or (None not in ids and ids == (known.platform_study_id,
-                                                                    known.platform_session_id))
+    return dict(zip(IDENTITY, values, strict=True))
 
 
 def _by_code(session: Session, ctx: Context, code) -> Row | None:
@@ -138,10 +125,11 @@ def _by_code(session: Session, ctx: Context, code) -> Row | None:
     return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first()
 
 
-def _by_identity(session: Session, ctx: Context, external_id: str) -> Row | None:
+def _by_identity(session: Session, ctx: Context, identity: dict) -> Row | None:
+    """The participant who started from a link with these three platform ids (see docs/survey.md, Recruiting: a
+    platform id alone binds nothing)."""
     info = ctx.study.study
-    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform,
-                                         "external_id": external_id}).first()
+    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform, **identity}).first()
 
 
 def _current(session: Session, ctx: Context, request: Request) -> Row:
@@ -179,9 +167,10 @@ def landing(request: Request, ctx: ContextDep):
         request.session["kind"], request.session["fast"] = kind, fast
     if info.platform != "none":
         identity = _platform_identity(info.platform, request.query_params)
-        known = _read(_by_identity, ctx, identity["external_id"])
-        if known is not None and not _same_person(known, identity, request.session.get("participant")):
-            known = None  # someone else's id: the consent page any new id gets, which tells nothing
+        known = _read(_by_identity, ctx, identity)
+        if known is None:  # the same browser, the same platform id: the link's other ids may have changed
+            own = _read(_by_code, ctx, request.session.get("participant"))
+            known = own if own is not None and own.external_id == identity["external_id"] else None
         request.session["identity"] = identity
     else:
         known = _read(_by_code, ctx, request.session.get("participant"))
@@ -200,12 +189,8 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
     for _ in range(50):
         try:
             with ctx.db.writing() as session:
-                if identity.get("external_id"):
-                    known = _by_identity(session, ctx, identity["external_id"])
-                    if known is not None:
-                        if not _same_person(known, identity, None):
-                            raise HTTPException(400, NOT_YOURS)
-                        return known.code
+                if identity and (known := _by_identity(session, ctx, identity)) is not None:
+                    return known.code
                 now = datetime.now(UTC)
                 values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
                           "external_id": None, "platform_study_id": None, "platform_session_id": None,
