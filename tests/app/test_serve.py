@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
 import time
@@ -46,6 +47,22 @@ def test_foil_serve_refuses_a_bad_study_with_its_line(tmp_path, bundle_dir):
     output, _ = server.communicate(timeout=30)
     assert server.returncode == 2
     assert "foil serve: error:" in output and "unknown_table: unknown key" in output and ", line " in output
+
+
+def test_a_port_in_use_is_one_line_with_the_port_hint_and_changes_no_database(tmp_path, bundle_dir):
+    study = tmp_path / "study.toml"
+    study.write_text(study_text(platform='"none"'))
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", str(port),
+                      "--db", f"sqlite:///{tmp_path / 'survey.sqlite3'}", cwd=tmp_path)
+        output, _ = server.communicate(timeout=60)
+    assert server.returncode == 2
+    assert output.strip().splitlines() == [f"foil serve: error: port {port} on 127.0.0.1 is already in use (another "
+                                           "foil serve?): stop that server or choose another port with --port"]
+    assert not (tmp_path / "survey.sqlite3").exists()  # nothing migrated
 
 
 def test_the_server_never_imports_search_or_torch():
