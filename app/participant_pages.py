@@ -54,15 +54,19 @@ from app.study import FEEDBACK, TextQuestion
 router = APIRouter()
 IDENTITY = ("external_id", "platform_study_id", "platform_session_id")  # the ids a platform's link carries
 PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
-_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind",
-                              "external_id"]).where(PARTICIPANT.c.study == bindparam("study"))
+_COLUMNS = PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind", "external_id"]
+_SHOWN = select(*_COLUMNS).where(PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
+# The participant and their plan in one statement: every page and answer needs both, and on PostgreSQL each
+# statement is a round trip to the server.
+WITH_PLAN = select(*_COLUMNS, PLANS.c.plan).select_from(
+    PARTICIPANT.outerjoin(PLANS, PLANS.c.participant_id == PARTICIPANT.c.id)).where(
+    PARTICIPANT.c.study == bindparam("study"), PARTICIPANT.c.code == bindparam("code"))
 BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
                            *(PARTICIPANT.c[name] == bindparam(name) for name in IDENTITY))
 SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
 ENTER = insert(PARTICIPANT).values(
     {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
-PLAN = select(PLANS.c.plan).where(PLANS.c.participant_id == bindparam("participant"))
 SAVE_PLAN = insert(PLANS).values(participant_id=bindparam("participant"), plan=bindparam("plan"))
 NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
     step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
@@ -82,20 +86,18 @@ VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
 VIEW_TOLERANCE_MS = 1000
 
 
-def _plan(session: Session, participant: Row) -> list[Screen] | None:
-    """The participant's screens (None before a condition is assigned)."""
-    if participant.condition is None:
-        return None
-    stored = session.scalar(PLAN, {"participant": participant.id})
-    return None if stored is None else parse_plan(stored)
+def _current_plan(session: Session, ctx: Context, request: Request) -> tuple[Row, list[Screen] | None]:
+    """The current participant and their screens (None before a condition is assigned)."""
+    participant = _current(session, ctx, request, WITH_PLAN)
+    return participant, None if participant.plan is None else parse_plan(participant.plan)
 
 
 def _current_screens(session: Session, ctx: Context, request: Request,
                      kept) -> tuple[Row, list[Screen] | None, str]:
     """The participant, their screens while they take part, and the notice for screen `kept` (a step whose first
     answers were kept when it was sent again; "" for none)."""
-    participant = _current(session, ctx, request)
-    plan = _plan(session, participant) if participant.status == "started" else None
+    participant, plan = _current_plan(session, ctx, request)
+    plan = plan if participant.status == "started" else None
     if plan is None or not isinstance(kept, int) or not 0 <= kept < participant.step:
         return participant, plan, ""
     saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": kept})
@@ -119,10 +121,10 @@ def _platform_identity(platform: str, params) -> dict:
     return dict(zip(IDENTITY, values, strict=True))
 
 
-def _by_code(session: Session, ctx: Context, code) -> Row | None:
+def _by_code(session: Session, ctx: Context, code, query=BY_CODE) -> Row | None:
     if not isinstance(code, str):
         return None
-    return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first()
+    return session.execute(query, {"study": ctx.study.study.id, "code": code}).first()
 
 
 def _by_identity(session: Session, ctx: Context, identity: dict) -> Row | None:
@@ -132,8 +134,8 @@ def _by_identity(session: Session, ctx: Context, identity: dict) -> Row | None:
     return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform, **identity}).first()
 
 
-def _current(session: Session, ctx: Context, request: Request) -> Row:
-    participant = _by_code(session, ctx, request.session.get("participant"))
+def _current(session: Session, ctx: Context, request: Request, query=BY_CODE) -> Row:
+    participant = _by_code(session, ctx, request.session.get("participant"), query)
     if participant is None:
         raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
                                  "expired). Please open the study again from the link you were given.")
@@ -381,8 +383,7 @@ def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Sc
 
 def _save_once(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Screen, Checked] | str | None:
     with ctx.db.writing() as session:
-        participant = _current(session, ctx, request)
-        plan = _plan(session, participant)
+        participant, plan = _current_plan(session, ctx, request)
         if participant.status != "started" or plan is None:
             return None
         if step < participant.step:  # already answered: a double click or the back button; keep the first
