@@ -1,6 +1,6 @@
 """A flood of arrivals: new participants are limited per client address, at a rate that a lab whose participants
-all start at once behind one address still passes, and the admin overview reads one page of participants, however
-many there are."""
+all start at once behind one address still passes, the admin overview reads one page of participants, however
+many there are, and a participant's page and answer take few statements (round trips, on PostgreSQL)."""
 
 from __future__ import annotations
 
@@ -69,3 +69,28 @@ def test_the_admin_overview_loads_one_page_of_participants(make_client, status):
     assert "<td>60</td><td>0</td><td>0</td><td>0</td>" in first.text.split("<tfoot>")[1]
     newest = max(stored(client, Participant), key=lambda p: p.id).code
     assert newest[:10] in first.text and newest[:10] not in second.text
+
+
+def test_a_page_and_an_answer_cost_few_statements(make_client):
+    """Every statement is a round trip to PostgreSQL, and under load each wait costs milliseconds (BENCHMARKS.md):
+    a participant's page is one statement, an answer three (read, insert, update), besides BEGIN and COMMIT."""
+    from sqlalchemy import event as events
+
+    from tests.support.survey import answer_for, start
+
+    client = make_client(ANONYMOUS)
+    page = start(client)
+    statements: list[str] = []
+    engine = client.app.state.context.db.engine
+    listener = lambda _c, _cursor, statement, *_rest: statements.append(statement.split()[0])  # noqa: E731
+    events.listen(engine, "before_cursor_execute", listener)
+    try:
+        client.get("/study")
+        shown = list(statements)
+        statements.clear()
+        client.post("/study", data=answer_for(page), follow_redirects=False)
+        answered = list(statements)
+    finally:
+        events.remove(engine, "before_cursor_execute", listener)
+    assert shown == ["SELECT"]
+    assert answered == ["SELECT", "INSERT", "UPDATE"]
