@@ -58,7 +58,7 @@ def create_app(settings: Settings) -> FastAPI:
     check_study_against_bundle(study, bundle)
     db = Database(settings.database_url, synchronous=settings.sqlite_synchronous)
     check_migrated(db.engine)
-    remember_study(db, settings.study_path().read_text(encoding="utf-8"), study)  # for foil export/report
+    remember_study(db, settings.study_path().read_text(encoding="utf-8"), study, bundle.root)  # for foil report
 
     # Templates are compiled once per process: no check for changed files on every page.
     templates = Environment(loader=FileSystemLoader(settings.templates_dir), autoescape=True, auto_reload=False)
