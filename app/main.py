@@ -77,7 +77,8 @@ def create_app(settings: Settings) -> FastAPI:
     app.include_router(media.router)
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
     if settings.admin_password is None:
-        log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off")
+        log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off (set it, 8 characters or more, and "
+                    "restart the server)")
         app.include_router(admin_pages.disabled_router)
     else:
         app.include_router(admin_pages.router)

@@ -30,9 +30,10 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
         raise ValueError(f"cannot use the database {_shown(settings.database_url)}: {error}") from None
     app = create_app(settings)
     logging.getLogger("foil.server").info(
-        "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/",
+        "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/%s",
         app.state.context.study.study.id, settings.study_path(), settings.bundle_dir,
-        _shown(settings.database_url), host, port)
+        _shown(settings.database_url), host, port,
+        f", the admin pages are at http://{host}:{port}/admin" if settings.admin_password is not None else "")
     limits = TransportLimits()
     config = uvicorn.Config(app, host=host, port=port, proxy_headers=True, server_header=False,
                             access_log=settings.access_log, http=survey_protocol(limits),
