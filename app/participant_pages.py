@@ -8,6 +8,7 @@ The endpoints are plain functions, which FastAPI runs in its thread pool; they r
 
 from __future__ import annotations
 
+import json
 import random
 import re
 import secrets
@@ -48,6 +49,7 @@ from app.screens import (
 )
 from app.security import FormDep
 from app.study import FEEDBACK, TextQuestion
+from app.visible import VisibleClip
 
 # Every request of a participant runs these Core statements in a Session: loading ORM objects and flushing them
 # cost several times what the statements do. The INSERTs name every column.
@@ -253,6 +255,20 @@ def _clip_view(sha: str, shape: Shape | Pairwise | Watch | Attention) -> dict:
             "seconds": round((shape.clip_ms or 0) / 1000, 1)}
 
 
+def _outcomes(ctx: Context, sha: str) -> list[str]:
+    """How each robot of a clip visibly ends, in words by its label (what the clip itself shows, from its
+    summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
+    clip = next((clip for clip in ctx.bundle.clips.values() if clip.sha256.lower() == sha), None)
+    if clip is None or not clip.summary:
+        return []
+    try:
+        summary = json.loads((ctx.bundle.root / clip.summary).read_text(encoding="utf-8"))
+        shown = VisibleClip.of_summary(summary, clip.agents, clip.labels)
+    except (OSError, ValueError, KeyError, IndexError, TypeError):
+        return []
+    return [shown.describe(label) for label in clip.labels]
+
+
 def screen_view(ctx: Context, screen: Screen) -> dict:
     """What a page may know about a screen: labels and the clip's address, never agent names or ground truth."""
     study = ctx.study
@@ -272,8 +288,8 @@ def screen_view(ctx: Context, screen: Screen) -> dict:
     match screen:
         case Ranking() if screen.media_list:
             shapes = screen.shapes or [Shape()] * len(screen.media_list)
-            view["round_clips"] = [_clip_view(sha, shape) for sha, shape in zip(screen.media_list, shapes,
-                                                                                  strict=True)]
+            view["round_clips"] = [_clip_view(sha, shape) | {"outcomes": _outcomes(ctx, sha)}
+                                   for sha, shape in zip(screen.media_list, shapes, strict=True)]
         case Attention():
             check = study.attention_checks[screen.check]
             view["attention_text"], view["options"] = check.text, screen.options
