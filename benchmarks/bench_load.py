@@ -2,7 +2,7 @@
 tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback, clips included, on the
 same machine as the server.
 
-Five runs, each bounded in time and count (--runs picks some):
+Six runs, each bounded in time and count (--runs picks some):
   ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves here (uvicorn, one
            process, httptools and uvloop, no access log), hammered by --concurrency clients for --seconds;
   burst    --concurrency bots with no pauses, new ones taking the place of those finished, for --seconds: page
