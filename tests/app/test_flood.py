@@ -8,6 +8,7 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import event
 
+from app.kinds import pilot_token
 from app.models import Participant
 from tests.support.survey import FormReader, log_in, stored
 
@@ -22,9 +23,9 @@ class Clock:
         return self.now
 
 
-def consent(client: TestClient, address: str):
+def consent(client: TestClient, address: str, query: str = ""):
     person = TestClient(client.app, client=(address, 50000), raise_server_exceptions=False)
-    token = FormReader(person.get("/").text).hidden["csrf_token"]
+    token = FormReader(person.get(f"/{query}").text).hidden["csrf_token"]
     return person.post("/consent", data={"csrf_token": token, "choice": "agree"}, follow_redirects=False)
 
 
@@ -47,6 +48,10 @@ def test_a_flood_of_arrivals_from_one_address_is_held_to_the_refill_rate(make_cl
     clock.now += 2
     assert consent(client, "198.51.100.1").status_code == 303  # refilled: one more
     assert consent(client, "198.51.100.1").status_code == 429
+    # the researcher's pilot link (and `foil simulate` bots with it) is not held to the limit
+    token = pilot_token(client.app.state.context.db, "paper")
+    assert [consent(client, "198.51.100.1", f"?pilot={token}&bot=1").status_code for _ in range(8)] == [303] * 8
+    assert consent(client, "198.51.100.1", "?bot=1").status_code == 429  # a bot link without the token is held
 
 
 @pytest.mark.parametrize("status", ["", "started", "real"])
