@@ -9,7 +9,7 @@ BIN = $(VENV)/bin
 AXE = .cache/axe/node_modules/axe-core/axe.min.js
 DEMO_BUNDLE ?= bundles/demo
 
-.PHONY: demo test check install browser postgres
+.PHONY: demo demo-password test check install browser postgres
 
 install: $(VENV)/.installed
 
@@ -35,10 +35,25 @@ $(AXE):
 	npm install --silent --no-audit --no-fund --prefix .cache/axe axe-core@4
 
 # The demo: build the demo study's bundle from the shipped agents (small search budgets; searches and clips
-# already built are reused), then serve it at http://127.0.0.1:8000/.
+# already built are reused), then serve it at http://127.0.0.1:8000/, with the admin pages at /admin.
 demo: install
 	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE) --jobs 2
-	$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
+	@$(MAKE) -s demo-password
+	FOIL_ADMIN_PASSWORD="$${FOIL_ADMIN_PASSWORD:-$$(cat $(DEMO_BUNDLE).admin-password)}" \
+		$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
+
+# The demo's admin password: FOIL_ADMIN_PASSWORD when set; otherwise one generated on the first `make demo`, kept
+# in $(DEMO_BUNDLE).admin-password (readable by its owner only) and printed when the demo starts.
+demo-password:
+	@if [ -n "$$FOIL_ADMIN_PASSWORD" ]; then \
+		echo "Admin pages: http://127.0.0.1:8000/admin with the password in FOIL_ADMIN_PASSWORD"; \
+	else \
+		mkdir -p "$$(dirname $(DEMO_BUNDLE))"; \
+		[ -s $(DEMO_BUNDLE).admin-password ] || (umask 077; \
+			python3 -c "import secrets; print(secrets.token_urlsafe(12))" > $(DEMO_BUNDLE).admin-password); \
+		echo "Admin pages: http://127.0.0.1:8000/admin, password: $$(cat $(DEMO_BUNDLE).admin-password)"; \
+		echo "(kept in $(DEMO_BUNDLE).admin-password; set FOIL_ADMIN_PASSWORD to choose your own)"; \
+	fi
 
 test: install browser postgres
 	$(BIN)/python -m pytest -q

@@ -13,7 +13,7 @@ from math import ceil
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import select
+from sqlalchemy import func, select
 
 from app.answer_table import ParticipantRecord, long_rows
 from app.context import Context, ContextDep
@@ -91,14 +91,19 @@ def logout(request: Request, ctx: ContextDep, form: FormDep):
     return RedirectResponse("/admin/login", status_code=303)
 
 
-def _overview(ctx: Context, participants: list[Participant]) -> dict:
-    counts = Counter((p.condition, p.status) for p in participants)
+def _overview(ctx: Context, session) -> dict:
+    """Counts per condition and status, and the median duration, computed without loading the participants."""
+    study = Participant.study == ctx.study.study.id
+    counts = Counter({(condition, status): n for condition, status, n in session.execute(
+        select(Participant.condition, Participant.status, func.count()).where(study)
+        .group_by(Participant.condition, Participant.status))})
     rows = [(c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions]
     unassigned = [counts[(None, s)] for s in STATUSES]
     if any(unassigned):
         rows.append(("-", "not assigned yet", unassigned))
-    durations = [(as_utc(p.completed_at) - as_utc(p.created_at)).total_seconds()
-                 for p in participants if p.status == "completed" and p.completed_at]
+    durations = [(as_utc(completed) - as_utc(created)).total_seconds() for created, completed in session.execute(
+        select(Participant.created_at, Participant.completed_at).where(
+            study, Participant.status == "completed", Participant.completed_at.is_not(None)))]
     return {"rows": rows, "totals": [sum(row[2][i] for row in rows) for i in range(len(STATUSES))],
             "median_minutes": statistics.median(durations) / 60 if durations else None,
             "n_completed": len(durations)}
@@ -109,18 +114,22 @@ PAGE_SIZE = 50
 
 @router.get("", dependencies=[Admin])
 def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1):
+    """The progress table and one page of the participants list, newest first (`status`: a status or a kind)."""
     from app.kinds import pilot_token
 
+    shown = Participant.study == ctx.study.study.id
+    if status:
+        shown = shown & ((Participant.status == status) | (Participant.kind == status))
     with ctx.db.reading() as session:
-        participants = list(session.scalars(
-            select(Participant).where(Participant.study == ctx.study.study.id).order_by(Participant.id.desc())))
-    shown = [p for p in participants if not status or p.status == status or p.kind == status]
-    pages = max(1, -(-len(shown) // PAGE_SIZE))
-    page = min(max(1, page), pages)
+        n_shown = session.scalar(select(func.count()).select_from(Participant).where(shown))
+        pages = max(1, -(-n_shown // PAGE_SIZE))
+        page = min(max(1, page), pages)
+        listed = list(session.scalars(select(Participant).where(shown).order_by(Participant.id.desc())
+                                      .limit(PAGE_SIZE).offset((page - 1) * PAGE_SIZE)))
+        summary = _overview(ctx, session)
     pilot = f"{str(request.base_url).rstrip('/')}/?pilot={pilot_token(ctx.db, ctx.study.study.id)}"
-    return ctx.render(request, "admin/overview.html", statuses=STATUSES, participants=participants,
-                      shown=shown[(page - 1) * PAGE_SIZE:page * PAGE_SIZE], status=status, page=page, pages=pages,
-                      n_shown=len(shown), pilot_link=pilot, **_overview(ctx, participants))
+    return ctx.render(request, "admin/overview.html", statuses=STATUSES, shown=listed, status=status, page=page,
+                      pages=pages, n_shown=n_shown, pilot_link=pilot, **summary)
 
 
 def _participant(session, ctx: Context, code: str) -> Participant:

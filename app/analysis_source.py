@@ -32,21 +32,32 @@ def analysis_database(url: str) -> Database:
 
 
 STUDY_KEY = "study-file:"  # server_setting key prefix: the text of each study file the server was started with
+BUNDLE_KEY = "study-bundle:"  # and the folder of the bundle it served, for the report's per-clip audit
 
 
-def remember_study(db: Database, study_text: str, study: Study) -> None:
-    """Keep the study file's text in the database, so that `foil export` and `foil report` need only the
-    database. The server calls this at start-up; the latest start wins."""
-    key = STUDY_KEY + study.study.id
+def remember_study(db: Database, study_text: str, study: Study, bundle_root: Path | None = None) -> None:
+    """Keep the study file's text and the served bundle's folder in the database, so that `foil export` and
+    `foil report` need only the database. The server calls this at start-up; the latest start wins."""
+    kept = {STUDY_KEY + study.study.id: study_text}
+    if bundle_root is not None:
+        kept[BUNDLE_KEY + study.study.id] = str(Path(bundle_root).resolve())
     try:
         with db.writing() as session:
-            row = session.get(ServerSetting, key)
-            if row is None:
-                session.add(ServerSetting(key=key, value=study_text))
-            else:
-                row.value = study_text
+            for key, value in kept.items():
+                row = session.get(ServerSetting, key)
+                if row is None:
+                    session.add(ServerSetting(key=key, value=value))
+                else:
+                    row.value = value
     except IntegrityError:  # another worker stored it at the same moment
         pass
+
+
+def served_bundle(db: Database, study_id: str) -> str | None:
+    """The folder of the bundle the server last served the study from (`remember_study`), if known."""
+    with db.reading() as session:
+        row = session.get(ServerSetting, BUNDLE_KEY + study_id)
+    return None if row is None else row.value
 
 
 def analysis_study(db: Database, study: str | Path | None) -> Study:

@@ -16,6 +16,7 @@ from datetime import UTC, datetime
 
 from sqlalchemy import Row, select
 
+from app.assignment import Condition
 from app.database import Database, as_utc
 from app.exclusions import duration_s, viewing_problems
 from app.models import Participant, ParticipantPlan, Response
@@ -107,7 +108,8 @@ LONG_COLUMNS = [
     Column("labels", "string", "their on-screen labels (e.g. Robot 1), in the same order as `agents`"),
     Column("question", "string", "question name from the study file; 'attention' for an attention check; "
                                  f"'{FEEDBACK}' for the closing feedback box; empty on a screen without questions"),
-    Column("question_type", "string", "choose, text, scale, rank, choice or attention; empty without a question"),
+    Column("question_type", "string", "choose, text, scale, rank, choice, attention or comprehension (a check "
+                                      "question of the instructions); empty without a question"),
     Column("answer", "string", "what was submitted: the robot label chosen, the option chosen, the text, the scale "
                                f"point, or the ranking's labels best first joined by '{ORDER_SEPARATOR}'; an "
                                "optional closing question left unanswered has no row"),
@@ -188,6 +190,8 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
     trials = _trials(plan)
     types = {name: question.type for name, question in study.questions.items()} | {"attention": "attention"}
     types[FEEDBACK] = types.get(FEEDBACK, "text")
+    checks = {f"understand{n}": check for n, check in enumerate(study.comprehension, start=1)}
+    types |= dict.fromkeys(checks, "comprehension")
     for response in record.responses:
         screen = plan[response.step] if response.step < len(plan) else None
         robots = _robots(screen)
@@ -217,6 +221,8 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
         for question, value in answers.items():
             question_type = types.get(question, "unknown")
             scored = _scored(question_type, value, screen)
+            if question in checks:  # only a right answer is ever saved; the truth says which it was
+                scored |= {"truth": checks[question].expected, "correct": int(value == checks[question].expected)}
             yield common | {"question": question, "question_type": question_type} | scored
 
 
@@ -233,7 +239,9 @@ PARTICIPANT_COLUMNS = [
     Column("platform_session_id", "string", "Prolific SESSION_ID or MTurk assignmentId"),
     Column("status", "string", "started, completed, returned (left the study) or declined (no consent)"),
     Column("condition", "Int64", "condition number, 1-based; empty before assignment"),
-    Column("schemes", "string", f"schemes in the order this participant saw them, '{LIST_SEPARATOR}'-separated"),
+    Column("schemes", "string", "the schemes of the participant's condition, in the condition's order (the "
+                                "codebook's `conditions`; with clips shuffled within a part they are mixed, blocked "
+                                f"they come in this order), '{LIST_SEPARATOR}'-separated; empty before assignment"),
     Column("scenarios", "string", f"scenario of each part, part 1 first, '{LIST_SEPARATOR}'-separated"),
     Column("slot", "Int64", "arrival number used by balanced assignment; empty when self-selected"),
     Column("created_at", "datetime", "consent given (UTC)"),
@@ -254,17 +262,12 @@ PARTICIPANT_COLUMNS = [
 ]
 
 
-def _schemes(plan: list[Screen]) -> list[str]:
-    """The schemes in the order the participant saw them."""
-    return list(dict.fromkeys(screen.scheme for screen in plan if isinstance(screen, WithRobots) and screen.scheme))
-
-
 def part_scenarios(plan: list[Screen]) -> list[str]:
     by_part = {screen.part: screen.scenario for screen in plan if isinstance(screen, WithRobots)}
     return [by_part[part] for part in sorted(by_part)]
 
 
-def participant_row(record: ParticipantRecord, flags: dict[str, bool]) -> dict:
+def participant_row(record: ParticipantRecord, flags: dict[str, bool], conditions: list[Condition]) -> dict:
     p = record.participant
     plan = record.plan
     duration = duration_s(p)
@@ -273,7 +276,7 @@ def participant_row(record: ParticipantRecord, flags: dict[str, bool]) -> dict:
         "kind": getattr(p, "kind", None) or "real", "consent_version": getattr(p, "consent_version", None) or None,
         "platform_study_id": p.platform_study_id, "platform_session_id": p.platform_session_id,
         "status": p.status, "condition": None if p.condition is None else p.condition + 1,
-        "schemes": LIST_SEPARATOR.join(_schemes(plan)) or None,
+        "schemes": None if p.condition is None else LIST_SEPARATOR.join(conditions[p.condition].schemes),
         "scenarios": LIST_SEPARATOR.join(part_scenarios(plan)) or None, "slot": p.slot,
         "created_at": iso_utc(p.created_at), "completed_at": iso_utc(p.completed_at),
         "duration_s": None if duration is None else round(duration, 3),

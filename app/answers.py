@@ -96,7 +96,7 @@ def _video_events(raw: str | None) -> list[dict] | None:
         return []
     try:
         events = json.loads(raw)
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: nested deeper than the parser's limit
         return None
     if not isinstance(events, list) or len(events) > MAX_VIDEO_EVENTS:
         return None

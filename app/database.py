@@ -51,7 +51,10 @@ def make_engine(url: str, *, synchronous: str = "full") -> Engine:
             cursor.close()
 
         return engine
-    return create_engine(url, pool_pre_ping=True)
+    # No pool_pre_ping: its SELECT 1 (and the BEGIN psycopg sends before it) cost two round trips on every request,
+    # and each wait gives up the interpreter lock, which under load is not had back for milliseconds (BENCHMARKS.md).
+    # A connection that died with a server restart fails one request, and SQLAlchemy then replaces the whole pool.
+    return create_engine(url)
 
 
 class Database:
@@ -63,11 +66,15 @@ class Database:
         self.engine = make_engine(url, synchronous=synchronous)
         self._sessions = sessionmaker(self.engine, expire_on_commit=False)
         self.sqlite = self.engine.dialect.name == "sqlite"
+        # PostgreSQL reads without BEGIN and COMMIT, two round trips to the server of the three a page's read
+        # takes. Under READ COMMITTED, its default, a transaction gives each statement its own snapshot anyway.
+        self._read_sessions = self._sessions if self.sqlite else sessionmaker(
+            self.engine.execution_options(isolation_level="AUTOCOMMIT"), expire_on_commit=False)
         self._write_turn = threading.Lock() if self.sqlite else nullcontext()
 
     @contextmanager
     def reading(self) -> Iterator[Session]:
-        with self._sessions() as session, session.begin():
+        with self._read_sessions() as session, session.begin():
             self._begin(session.connection(), "BEGIN")
             yield session
 

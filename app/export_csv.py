@@ -235,6 +235,7 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     tables = {name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols)
               for name, cols in columns.items()}
     excluded = 0
+    study_conditions = conditions(study)
     try:
         for record in participant_records(db, study.study.id, batch=batch):
             flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
@@ -243,7 +244,7 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
             for row in long:
                 tables["long.csv"].write(row)
             tables["wide.csv"].write(layout.row(record, long, flags))
-            tables["participants.csv"].write(participant_row(record, flags))
+            tables["participants.csv"].write(participant_row(record, flags, study_conditions))
     finally:
         for table in tables.values():
             table.close()

@@ -23,6 +23,7 @@ from app.bundle import check_study_against_bundle, load_bundle
 from app.context import Context
 from app.database import Database, check_migrated
 from app.security import (
+    ArrivalLimit,
     BodyLimitMiddleware,
     LoginThrottle,
     SecurityHeadersMiddleware,
@@ -57,7 +58,7 @@ def create_app(settings: Settings) -> FastAPI:
     check_study_against_bundle(study, bundle)
     db = Database(settings.database_url, synchronous=settings.sqlite_synchronous)
     check_migrated(db.engine)
-    remember_study(db, settings.study_path().read_text(encoding="utf-8"), study)  # for foil export/report
+    remember_study(db, settings.study_path().read_text(encoding="utf-8"), study, bundle.root)  # for foil report
 
     # Templates are compiled once per process: no check for changed files on every page.
     templates = Environment(loader=FileSystemLoader(settings.templates_dir), autoescape=True, auto_reload=False)
@@ -71,11 +72,13 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.login_throttle = LoginThrottle(
         free_per_client=settings.login_free_attempts, free_overall=settings.login_free_attempts_overall,
         delay_s=settings.login_delay_s, max_delay_s=settings.login_max_delay_s)
+    app.state.arrivals = ArrivalLimit(burst=settings.arrivals_burst, per_minute=settings.arrivals_per_minute)
     app.include_router(participant_pages.router)
     app.include_router(media.router)
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
     if settings.admin_password is None:
-        log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off")
+        log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off (set it, 8 characters or more, and "
+                    "restart the server)")
         app.include_router(admin_pages.disabled_router)
     else:
         app.include_router(admin_pages.router)
@@ -84,10 +87,11 @@ def create_app(settings: Settings) -> FastAPI:
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, error: HTTPException):
         titles = {400: "Bad request", 403: "Not allowed", 404: "Page not found", 405: "Not allowed",
-                  409: "Not available yet", 413: "Too large"}
+                  409: "Not available yet", 413: "Too large", 429: "Please wait a moment", 503: "Busy"}
         text = error.detail if isinstance(error.detail, str) else "The request could not be handled."
-        return context.message(request, titles.get(error.status_code, "Error"), text,
-                               status_code=error.status_code)
+        page = context.message(request, titles.get(error.status_code, "Error"), text, status_code=error.status_code)
+        page.headers.update(error.headers or {})
+        return page
 
     @app.exception_handler(admin_pages.LoginRequired)
     async def _login_first(request: Request, error: admin_pages.LoginRequired):

@@ -50,8 +50,10 @@ class Participant(Base):
 
     __tablename__ = "participant"
     __table_args__ = (
-        # One record per platform identity: coming back resumes it, concurrent first arrivals cannot duplicate it.
-        UniqueConstraint("study", "platform", "external_id", name="uq_participant_identity"),
+        # One record per platform identity (a link's three ids): coming back resumes it, concurrent first arrivals
+        # cannot duplicate it. A platform id with other study or session ids is another record (docs/survey.md).
+        UniqueConstraint("study", "platform", "external_id", "platform_study_id", "platform_session_id",
+                         name="uq_participant_identity"),
         # One arrival per slot: the balanced assignment's counter, safe across processes.
         UniqueConstraint("study", "slot", name="uq_participant_slot"),
     )

@@ -8,10 +8,12 @@ The endpoints are plain functions, which FastAPI runs in its thread pool; they r
 
 from __future__ import annotations
 
+import json
 import random
 import re
 import secrets
 from datetime import UTC, datetime
+from math import ceil
 
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import RedirectResponse
@@ -47,21 +49,26 @@ from app.screens import (
 )
 from app.security import FormDep
 from app.study import FEEDBACK, TextQuestion
+from app.visible import VisibleClip
 
 # Every request of a participant runs these Core statements in a Session: loading ORM objects and flushing them
 # cost several times what the statements do. The INSERTs name every column.
 router = APIRouter()
+IDENTITY = ("external_id", "platform_study_id", "platform_session_id")  # the ids a platform's link carries
 PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
-_SHOWN = select(*PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind"]).where(
-    PARTICIPANT.c.study == bindparam("study"))
+_COLUMNS = PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind", "external_id"]
+_SHOWN = select(*_COLUMNS).where(PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
-BY_IDENTITY = _SHOWN.add_columns(PARTICIPANT.c.platform_study_id, PARTICIPANT.c.platform_session_id).where(
-    PARTICIPANT.c.platform == bindparam("platform"),
-                           PARTICIPANT.c.external_id == bindparam("external_id"))
+# The participant and their plan in one statement: every page and answer needs both, and on PostgreSQL each
+# statement is a round trip to the server.
+WITH_PLAN = select(*_COLUMNS, PLANS.c.plan).select_from(
+    PARTICIPANT.outerjoin(PLANS, PLANS.c.participant_id == PARTICIPANT.c.id)).where(
+    PARTICIPANT.c.study == bindparam("study"), PARTICIPANT.c.code == bindparam("code"))
+BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
+                           *(PARTICIPANT.c[name] == bindparam(name) for name in IDENTITY))
 SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
 ENTER = insert(PARTICIPANT).values(
     {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
-PLAN = select(PLANS.c.plan).where(PLANS.c.participant_id == bindparam("participant"))
 SAVE_PLAN = insert(PLANS).values(participant_id=bindparam("participant"), plan=bindparam("plan"))
 NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
     step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
@@ -81,17 +88,22 @@ VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
 VIEW_TOLERANCE_MS = 1000
 
 
-def _plan(session: Session, participant: Row) -> list[Screen] | None:
-    """The participant's screens (None before a condition is assigned)."""
-    if participant.condition is None:
-        return None
-    stored = session.scalar(PLAN, {"participant": participant.id})
-    return None if stored is None else parse_plan(stored)
+def _current_plan(session: Session, ctx: Context, request: Request) -> tuple[Row, list[Screen] | None]:
+    """The current participant and their screens (None before a condition is assigned)."""
+    participant = _current(session, ctx, request, WITH_PLAN)
+    return participant, None if participant.plan is None else parse_plan(participant.plan)
 
 
-def _current_screens(session: Session, ctx: Context, request: Request) -> tuple[Row, list[Screen] | None]:
-    participant = _current(session, ctx, request)
-    return participant, _plan(session, participant) if participant.status == "started" else None
+def _current_screens(session: Session, ctx: Context, request: Request,
+                     kept) -> tuple[Row, list[Screen] | None, str]:
+    """The participant, their screens while they take part, and the notice for screen `kept` (a step whose first
+    answers were kept when it was sent again; "" for none)."""
+    participant, plan = _current_plan(session, ctx, request)
+    plan = plan if participant.status == "started" else None
+    if plan is None or not isinstance(kept, int) or not 0 <= kept < participant.step:
+        return participant, plan, ""
+    saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": kept})
+    return participant, plan, "" if saved is None else _kept_notice(ctx, plan[kept], saved)
 
 
 def _see_current() -> RedirectResponse:
@@ -108,36 +120,24 @@ def _platform_identity(platform: str, params) -> dict:
     for name, value in zip(names, values, strict=True):
         if value and not ID_VALUE.match(value):
             raise HTTPException(400, f"The link's {name} is not a valid identifier.")
-    return {"external_id": values[0], "platform_study_id": values[1] or None,
-            "platform_session_id": values[2] or None}
+    return dict(zip(IDENTITY, values, strict=True))
 
 
-NOT_YOURS = ("The study cannot be started from this link. Please open the study from its page on the platform "
-             "where you signed up; if this message comes again, contact the researcher.")
-
-
-def _same_person(known: Row, identity: dict, own_code) -> bool:
-    """Whether the visitor with this link (and this session cookie's participant code) is the participant `known`
-    found by its platform id: only with the participant's own platform study and session ids, or cookie."""
-    ids = (identity["platform_study_id"], identity["platform_session_id"])
-    return own_code == known.code or (None not in ids and ids == (known.platform_study_id,
-                                                                    known.platform_session_id))
-
-
-def _by_code(session: Session, ctx: Context, code) -> Row | None:
+def _by_code(session: Session, ctx: Context, code, query=BY_CODE) -> Row | None:
     if not isinstance(code, str):
         return None
-    return session.execute(BY_CODE, {"study": ctx.study.study.id, "code": code}).first()
+    return session.execute(query, {"study": ctx.study.study.id, "code": code}).first()
 
 
-def _by_identity(session: Session, ctx: Context, external_id: str) -> Row | None:
+def _by_identity(session: Session, ctx: Context, identity: dict) -> Row | None:
+    """The participant who started from a link with these three platform ids (see docs/survey.md, Recruiting: a
+    platform id alone binds nothing)."""
     info = ctx.study.study
-    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform,
-                                         "external_id": external_id}).first()
+    return session.execute(BY_IDENTITY, {"study": info.id, "platform": info.platform, **identity}).first()
 
 
-def _current(session: Session, ctx: Context, request: Request) -> Row:
-    participant = _by_code(session, ctx, request.session.get("participant"))
+def _current(session: Session, ctx: Context, request: Request, query=BY_CODE) -> Row:
+    participant = _by_code(session, ctx, request.session.get("participant"), query)
     if participant is None:
         raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
                                  "expired). Please open the study again from the link you were given.")
@@ -171,9 +171,10 @@ def landing(request: Request, ctx: ContextDep):
         request.session["kind"], request.session["fast"] = kind, fast
     if info.platform != "none":
         identity = _platform_identity(info.platform, request.query_params)
-        known = _read(_by_identity, ctx, identity["external_id"])
-        if known is not None and not _same_person(known, identity, request.session.get("participant")):
-            known = None  # someone else's id: the consent page any new id gets, which tells nothing
+        known = _read(_by_identity, ctx, identity)
+        if known is None:  # the same browser, the same platform id: the link's other ids may have changed
+            own = _read(_by_code, ctx, request.session.get("participant"))
+            known = own if own is not None and own.external_id == identity["external_id"] else None
         request.session["identity"] = identity
     else:
         known = _read(_by_code, ctx, request.session.get("participant"))
@@ -192,12 +193,8 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
     for _ in range(50):
         try:
             with ctx.db.writing() as session:
-                if identity.get("external_id"):
-                    known = _by_identity(session, ctx, identity["external_id"])
-                    if known is not None:
-                        if not _same_person(known, identity, None):
-                            raise HTTPException(400, NOT_YOURS)
-                        return known.code
+                if identity and (known := _by_identity(session, ctx, identity)) is not None:
+                    return known.code
                 now = datetime.now(UTC)
                 values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
                           "external_id": None, "platform_study_id": None, "platform_session_id": None,
@@ -242,6 +239,12 @@ def consent(request: Request, ctx: ContextDep, form: FormDep):
         if not isinstance(identity, dict) or not identity.get("external_id"):
             raise HTTPException(400, "Please open the study from the link you were given.")
     kind = request.session.get("kind") if request.session.get("kind") in ("pilot", "bot") else "real"
+    researchers = kind != "real" and request.session.get("fast") is True  # the pilot link, with its token
+    if not researchers and (wait := request.app.state.arrivals.take(
+            request.client.host if request.client else "unknown")) > 0:
+        raise HTTPException(429, "Many people have just started the study from your network. Please wait "
+                                 f"{ceil(wait)} seconds, then press the button again.",
+                            headers={"retry-after": str(ceil(wait))})
     code = _enter(ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
     request.session["participant"] = code
     request.session.pop("identity", None)
@@ -252,6 +255,20 @@ def _clip_view(sha: str, shape: Shape | Pairwise | Watch | Attention) -> dict:
     """A clip's address and box; `shape` is anything with its `clip_ms`, `width` and `height` (a clip screen)."""
     return {"url": f"/clips/{sha}.mp4", "width": shape.width or 720, "height": shape.height or 880,
             "seconds": round((shape.clip_ms or 0) / 1000, 1)}
+
+
+def _outcomes(ctx: Context, sha: str) -> list[str]:
+    """How each robot of a clip visibly ends, in words by its label (what the clip itself shows, from its
+    summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
+    clip = next((clip for clip in ctx.bundle.clips.values() if clip.sha256.lower() == sha), None)
+    if clip is None or not clip.summary:
+        return []
+    try:
+        summary = json.loads((ctx.bundle.root / clip.summary).read_text(encoding="utf-8"))
+        shown = VisibleClip.of_summary(summary, clip.agents, clip.labels)
+    except (OSError, ValueError, KeyError, IndexError, TypeError):
+        return []
+    return [shown.describe(label) for label in clip.labels]
 
 
 def screen_view(ctx: Context, screen: Screen) -> dict:
@@ -273,8 +290,8 @@ def screen_view(ctx: Context, screen: Screen) -> dict:
     match screen:
         case Ranking() if screen.media_list:
             shapes = screen.shapes or [Shape()] * len(screen.media_list)
-            view["round_clips"] = [_clip_view(sha, shape) for sha, shape in zip(screen.media_list, shapes,
-                                                                                  strict=True)]
+            view["round_clips"] = [_clip_view(sha, shape) | {"outcomes": _outcomes(ctx, sha)}
+                                   for sha, shape in zip(screen.media_list, shapes, strict=True)]
         case Attention():
             check = study.attention_checks[screen.check]
             view["attention_text"], view["options"] = check.text, screen.options
@@ -320,14 +337,13 @@ def _status_page(request: Request, ctx: Context, participant: Row):
 
 @router.get("/study")
 def current_page(request: Request, ctx: ContextDep):
-    participant, plan = _read(_current_screens, ctx, request)
+    kept = request.session.pop("kept", None) if "kept" in request.session else None
+    participant, plan, notice = _read(_current_screens, ctx, request, kept)
     if participant.status != "started":
         return _status_page(request, ctx, participant)
     if participant.condition is None:
         return ctx.render(request, "choose.html", n_conditions=len(ctx.conditions), error="")
-    notice = request.session.pop("notice", "") if "notice" in request.session else ""
-    return _render_screen(request, ctx, plan[participant.step], participant.step,
-                          notice=notice if isinstance(notice, str) else "")
+    return _render_screen(request, ctx, plan[participant.step], participant.step, notice=notice)
 
 
 DETAILS = select(PARTICIPANT.c.details).where(PARTICIPANT.c.id == bindparam("participant"))
@@ -337,17 +353,22 @@ SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bi
                                                  RESPONSE.c.step == bindparam("step"))
 
 
+NOTICE_ANSWER_CHARS = 60  # a saved text answer in the notice: its beginning
+
+
 def _kept_notice(ctx: Context, screen: Screen, saved: dict) -> str:
-    """What the participant is told when a screen they had already answered is sent again with other answers."""
+    """What the participant is told when a screen they had already answered is sent again with other answers
+    (the back button, then another choice): short, with the kept choices and the start of any text."""
     shown = []
     for name, value in saved.items():
-        question = ctx.study.questions.get(name)
-        text = question.text if question is not None else ("Your feedback" if name == FEEDBACK else "Check question")
-        shown.append(f"{text} {' > '.join(value) if isinstance(value, list) else value}")
+        if name not in ctx.study.questions and name != FEEDBACK:
+            continue  # comprehension and attention answers: only one is right, nothing to remind of
+        value = " > ".join(value) if isinstance(value, list) else str(value)
+        shown.append(value if len(value) <= NOTICE_ANSWER_CHARS else value[:NOTICE_ANSWER_CHARS] + "…")
     where = screen.progress or "that screen"
-    kept = (" Your saved answers: " + "; ".join(shown) + ".") if shown else ""
-    return (f"You had already answered {where}. Answers cannot be changed once sent, so your first answers are "
-            f"kept and the new ones were not saved.{kept} Please continue with the screen below.")
+    kept = f" ({'; '.join(shown)})" if shown else ""
+    return (f"You had already answered {where}: answers cannot be changed, so your first answers{kept} are kept. "
+            "Please continue below.")
 
 
 def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime, now: datetime) -> str | None:
@@ -364,57 +385,63 @@ def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime,
             "saved. Please play the clip from the start to the end, then answer again.")
 
 
+KEPT = "kept"  # what `_save` says when a screen answered before was sent again with other answers
+
+
 def _save(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Screen, Checked] | str | None:
-    """Save the answers to screen `step`: None when saved or nothing is left to save, a notice for the next page
-    when the screen had been answered before with other answers, else the screen to show again and why."""
+    """Save the answers to screen `step`: None when saved or nothing is left to save, KEPT when the screen had been
+    answered before with other answers (the first are kept), else the screen to show again and why."""
     try:
-        with ctx.db.writing() as session:
-            participant = _current(session, ctx, request)
-            plan = _plan(session, participant)
-            if participant.status != "started" or plan is None:
-                return None
-            if step < participant.step:  # already answered: a double click or the back button; keep the first
-                saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
-                sent = check_screen(ctx.study, plan[step], form)
-                if saved is not None and not sent.errors and sent.answers != saved:
-                    return _kept_notice(ctx, plan[step], saved)
-                return None
-            if step > participant.step:
-                raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
-            screen = plan[step]
-            checked = check_screen(ctx.study, screen, form)
-            now = datetime.now(UTC)
-            fast = request.session.get("fast") is True and participant.kind in ("pilot", "bot")
-            if shows_clip(screen) and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
-                problem = _viewing_problem(screen, participant.step_started_at, now)
-                if problem:
-                    checked.errors["video"] = problem
-            if checked.errors:
-                if any(name.startswith("understand") for name in checked.errors):
-                    details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
-                    details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
-                    session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
-                return screen, checked
-            if isinstance(screen, Instructions) and ctx.study.comprehension:
+        return _save_once(ctx, request, step, form)
+    except IntegrityError:
+        # A concurrent submission saved this screen first (PostgreSQL; SQLite's writers take turns): this one is
+        # now a resubmit, answered as one.
+        return _save_once(ctx, request, step, form)
+
+
+def _save_once(ctx: Context, request: Request, step: int, form: FormData) -> tuple[Screen, Checked] | str | None:
+    with ctx.db.writing() as session:
+        participant, plan = _current_plan(session, ctx, request)
+        if participant.status != "started" or plan is None:
+            return None
+        if step < participant.step:  # already answered: a double click or the back button; keep the first
+            saved = session.scalar(SAVED_ANSWERS, {"participant": participant.id, "step": step})
+            sent = check_screen(ctx.study, plan[step], form)
+            return KEPT if saved is not None and not sent.errors and sent.answers != saved else None
+        if step > participant.step:
+            raise HTTPException(409, "That page is not open yet. Please continue where you left off.")
+        screen = plan[step]
+        checked = check_screen(ctx.study, screen, form)
+        now = datetime.now(UTC)
+        fast = request.session.get("fast") is True and participant.kind in ("pilot", "bot")
+        if shows_clip(screen) and ctx.study.study.require_full_view and not fast and "video" not in checked.errors:
+            problem = _viewing_problem(screen, participant.step_started_at, now)
+            if problem:
+                checked.errors["video"] = problem
+        if checked.errors:
+            if any(name.startswith("understand") for name in checked.errors):
                 details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
                 details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
                 session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
-            viewport = _one_value(form, "viewport")
-            session.execute(SAVE_RESPONSE, {
-                "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
-                "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
-                "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
-                "submitted_at": now,
-                "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
-            })
-            done = step + 1 == len(plan)
-            failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
-            session.execute(NEXT_STEP, {
-                "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
-                "to_status": "completed" if done else "started", "completed": now if done else None,
-            })
-    except IntegrityError:
-        pass  # the same screen was saved by a concurrent submission
+            return screen, checked
+        if isinstance(screen, Instructions) and ctx.study.comprehension:
+            details = dict(session.scalar(DETAILS, {"participant": participant.id}) or {})
+            details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
+            session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
+        viewport = _one_value(form, "viewport")
+        session.execute(SAVE_RESPONSE, {
+            "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
+            "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
+            "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+            "submitted_at": now,
+            "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
+        })
+        done = step + 1 == len(plan)
+        failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
+        session.execute(NEXT_STEP, {
+            "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
+            "to_status": "completed" if done else "started", "completed": now if done else None,
+        })
     return None
 
 
@@ -431,8 +458,8 @@ def submit(request: Request, ctx: ContextDep, form: FormDep):
     refused = _save(ctx, request, int(step), form)
     if refused is None:
         return _see_current()
-    if isinstance(refused, str):
-        request.session["notice"] = refused
+    if refused == KEPT:  # the session cookie holds only the step: the notice is built from the database
+        request.session["kept"] = int(step)
         return _see_current()
     screen, checked = refused
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}

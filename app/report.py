@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+import sys
 import textwrap
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field, replace
@@ -16,7 +17,7 @@ from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 
-from app.analysis_source import analysis_database, analysis_study
+from app.analysis_source import analysis_database, analysis_study, served_bundle
 from app.answer_table import long_rows, participant_records
 from app.database import Database
 from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
@@ -133,23 +134,14 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
             elif kind == "scale" and row["scheme"] in ratings[row["question"]]:
                 ratings[row["question"]][row["scheme"]][row["value"]] += 1
     return ReportData(study=study, exclusions=exclusions, accuracy=dict(accuracy), unscored_rankings=unscored,
-                      ratings=ratings, per_clip=dict(sorted(per_clip.items())), audits=_audits())
+                      ratings=ratings, per_clip=dict(sorted(per_clip.items())))
 
 
-def _audits(bundle_dir: str | None = None) -> dict[str, dict]:
-    """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest, when the
-    bundle is known (FOIL_BUNDLE_DIR, or the served bundle on the admin pages)."""
-    import os
-
+def _audits(bundle_dir: str) -> dict[str, dict]:
+    """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest."""
     from app.formats import Manifest
 
-    folder = bundle_dir or os.environ.get("FOIL_BUNDLE_DIR")
-    if not folder:
-        return {}
-    try:
-        manifest = Manifest.model_validate_json((Path(folder) / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
+    manifest = Manifest.model_validate_json((Path(bundle_dir) / "manifest.json").read_text(encoding="utf-8"))
     return {clip.id: clip.audit.model_dump() for clip in manifest.clips if clip.audit is not None}
 
 
@@ -378,17 +370,22 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
 
 def run_report(*, database_url: str, study: str | None, out: str, rules: ExclusionRules,
                bundle: str | None = None) -> int:
-    """`foil report`: prints Table 1 in short and where the report went. With the study's ``bundle`` the
-    per-clip table shows each clip's audit."""
+    """`foil report`: prints Table 1 in short and where the report went. The per-clip table shows each clip's
+    audit from the manifest of ``bundle``, by default the bundle the server last served the study from."""
     if bundle and not (Path(bundle) / "manifest.json").is_file():
         raise ValueError(f"no manifest.json in bundle {bundle}: give the bundle the study was served from")
     db = analysis_database(database_url)
     try:
         data = tally_study(db, analysis_study(db, study), rules)
+        bundle = bundle or served_bundle(db, data.study.study.id)
     finally:
         db.dispose()
-    if bundle:
+    if bundle is not None and (Path(bundle) / "manifest.json").is_file():
         data = replace(data, audits=_audits(bundle))
+    else:
+        print(f"warning: the bundle the study was served from {'is not known' if bundle is None else 'is gone: '}"
+              f"{bundle or ''}; give it with --bundle (or FOIL_BUNDLE_DIR) to fill the per-clip audit column",
+              file=sys.stderr)
     render_report(data, Path(out))
     e = data.exclusions
     print(f"{e.before} participants, {e.after} analysed after exclusions")

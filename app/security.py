@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hmac
 import secrets
+import threading
 import time
 from typing import Annotated
 from urllib.parse import parse_qsl
@@ -71,25 +72,33 @@ async def _too_large(send: Send, limit: int) -> None:
     await send({"type": "http.response.body", "body": body})
 
 
+def security_headers(frame_ancestors: str = "'none'") -> list[tuple[bytes, bytes]]:
+    """What every reply carries, the app's (SecurityHeadersMiddleware) and the HTTP server's own (app.transport):
+    no sniffing, no framing (unless allowed), only our own scripts and media. HSTS is the reverse proxy's, which
+    terminates HTTPS (docs/survey.md)."""
+    policy = (
+        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; media-src 'self'; "
+        f"object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors {frame_ancestors}"
+    )
+    headers = [
+        (b"content-security-policy", policy.encode()),
+        (b"x-content-type-options", b"nosniff"),
+        (b"referrer-policy", b"no-referrer"),  # platform ids in our URLs must not leak to other sites
+        (b"permissions-policy", b"camera=(), microphone=(), geolocation=()"),
+        (b"cross-origin-opener-policy", b"same-origin"),
+    ]
+    if frame_ancestors == "'none'":
+        headers.append((b"x-frame-options", b"DENY"))
+    headers.append((b"cache-control", b"no-store"))  # pages show private state; clips set their own
+    return headers
+
+
 class SecurityHeadersMiddleware:
-    """Headers on every response: no sniffing, no framing (unless allowed), only our own scripts and media."""
+    """`security_headers` on every response of the app."""
 
     def __init__(self, app: ASGIApp, frame_ancestors: str):
         self.app = app
-        policy = (
-            "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; media-src 'self'; "
-            f"object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors {frame_ancestors}"
-        )
-        self.headers = [
-            (b"content-security-policy", policy.encode()),
-            (b"x-content-type-options", b"nosniff"),
-            (b"referrer-policy", b"no-referrer"),  # platform ids in our URLs must not leak to other sites
-            (b"permissions-policy", b"camera=(), microphone=(), geolocation=()"),
-            (b"cross-origin-opener-policy", b"same-origin"),
-        ]
-        if frame_ancestors == "'none'":
-            self.headers.append((b"x-frame-options", b"DENY"))
-        self.headers.append((b"cache-control", b"no-store"))  # pages show private state; clips set their own
+        self.headers = security_headers(frame_ancestors)
         self.names = {name for name, _ in self.headers}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -157,8 +166,11 @@ class LoginThrottle:
     """Failed admin logins in this process, per client address and overall. After `free` failures (per client:
     `free_per_client`; from everyone together: `free_overall`) each further attempt must wait a delay that starts
     at `delay_s` and doubles with every failure, up to `max_delay_s`; an attempt during the delay is refused
-    without checking the password. A success clears its client's count; counts are forgotten a day after their
-    last failure. With several worker processes each keeps its own counts."""
+    without checking the password. The overall delay holds back only addresses that have failed before: a
+    researcher's first attempt from an address of their own is always checked, so guessing from many addresses
+    cannot lock them out (each new address gets one guess, then waits). A success clears its client's count;
+    counts are forgotten a day after their last failure. With several worker processes each keeps its own
+    counts."""
 
     FORGET_S = 24 * 3600
     MAX_CLIENTS = 10_000
@@ -181,8 +193,10 @@ class LoginThrottle:
     def wait_s(self, client: str) -> float:
         """Seconds before `client` may try a password again (0: now)."""
         now = self.clock()
-        return max(self._wait(self.clients.get(client, (0, 0.0)), self.free_per_client, now),
-                   self._wait(self.overall, self.free_overall, now))
+        own = self.clients.get(client)
+        if own is None or now - own[1] > self.FORGET_S:
+            return 0.0
+        return max(self._wait(own, self.free_per_client, now), self._wait(self.overall, self.free_overall, now))
 
     def failed(self, client: str) -> int:
         """Count a wrong password; returns the client's failures so far."""
@@ -199,6 +213,35 @@ class LoginThrottle:
 
     def succeeded(self, client: str) -> None:
         self.clients.pop(client, None)
+
+
+class ArrivalLimit:
+    """New participants (consent answers) per client address in this process: a token bucket of `burst` arrivals
+    that refills at `per_minute`. A lab whose participants all start at once behind one address passes; a script
+    creating thousands of participants is held to the refill rate. With several worker processes each keeps its
+    own buckets."""
+
+    MAX_CLIENTS = 10_000
+
+    def __init__(self, *, burst: int = 100, per_minute: float = 60.0, clock=time.monotonic):
+        self.burst, self.per_s = burst, per_minute / 60.0
+        self.clock = clock
+        self.buckets: dict[str, tuple[float, float]] = {}  # address -> (arrivals left, time they were counted)
+        self.lock = threading.Lock()  # the consent endpoint runs in the thread pool
+
+    def take(self, client: str) -> float:
+        """Count one arrival from `client`: 0 when it may arrive now, else the seconds until it may."""
+        with self.lock:
+            now = self.clock()
+            left, then = self.buckets.pop(client, (float(self.burst), now))
+            left = min(float(self.burst), left + (now - then) * self.per_s)
+            if len(self.buckets) >= self.MAX_CLIENTS:
+                self.buckets.pop(next(iter(self.buckets)))  # the longest unseen
+            if left >= 1.0:
+                self.buckets[client] = (left - 1.0, now)
+                return 0.0
+            self.buckets[client] = (left, now)
+            return (1.0 - left) / self.per_s
 
 
 ADMIN_SESSIONS = "admin_sessions"

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import logging
+import socket
 from pathlib import Path
 
 from sqlalchemy.engine import make_url
@@ -21,19 +23,44 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
     given = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
     settings = Settings(**{key: value for key, value in given.items() if value is not None})
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
+    listening = _bind(host, port)  # before anything is changed: a port in use touches no database
     try:
         migrate(settings.database_url)
     except (ArgumentError, OperationalError, NoSuchModuleError) as error:
         raise ValueError(f"cannot use the database {_shown(settings.database_url)}: {error}") from None
     app = create_app(settings)
     logging.getLogger("foil.server").info(
-        "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/",
+        "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/%s",
         app.state.context.study.study.id, settings.study_path(), settings.bundle_dir,
-        _shown(settings.database_url), host, port)
+        _shown(settings.database_url), host, port,
+        f", the admin pages are at http://{host}:{port}/admin" if settings.admin_password is not None else "")
     limits = TransportLimits()
-    uvicorn.run(app, host=host, port=port, proxy_headers=True, server_header=False, access_log=settings.access_log,
-                http=survey_protocol(limits), timeout_keep_alive=limits.keep_alive_s)
+    config = uvicorn.Config(app, host=host, port=port, proxy_headers=True, server_header=False,
+                            access_log=settings.access_log, http=survey_protocol(limits),
+                            timeout_keep_alive=limits.keep_alive_s)
+    uvicorn.Server(config).run(sockets=[listening])
     return 0
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """The server's listening socket, bound now, as uvicorn would bind it; a clear error when it cannot be."""
+    try:
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+    except socket.gaierror as error:
+        raise ValueError(f"cannot listen on {host}: {error.strerror}; check --host") from None
+    listening = socket.socket(family, socket.SOCK_STREAM)
+    listening.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        listening.bind((host, port))
+    except OSError as error:
+        listening.close()
+        if error.errno == errno.EADDRINUSE:
+            raise ValueError(f"port {port} on {host} is already in use (another foil serve?): stop that server or "
+                             f"choose another port with --port") from None
+        raise ValueError(f"cannot listen on {host}:{port}: {error.strerror}; choose another --host or --port") \
+            from None
+    listening.listen(2048)  # uvicorn's backlog
+    return listening
 
 
 def _shown(url: str) -> str:

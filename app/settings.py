@@ -54,6 +54,10 @@ class Settings(BaseSettings):
     login_free_attempts_overall: int = Field(default=100, ge=1)
     login_delay_s: float = Field(default=1.0, gt=0, allow_inf_nan=False)
     login_max_delay_s: float = Field(default=900.0, gt=0, allow_inf_nan=False)
+    # New participants per client address (a lab behind one address included): `arrivals_burst` at once, then
+    # `arrivals_per_minute`; beyond that the consent page answers 429 with the seconds to wait.
+    arrivals_burst: int = Field(default=100, ge=1)
+    arrivals_per_minute: float = Field(default=60.0, gt=0, allow_inf_nan=False)
     # Host names the server answers to (Starlette's TrustedHostMiddleware; other Host headers get 400), as a JSON
     # list: FOIL_ALLOWED_HOSTS='["survey.example.org"]'. No reply is built from the Host header in any case.
     allowed_hosts: list[str] = ["*"]

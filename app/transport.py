@@ -13,14 +13,14 @@ import logging
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
+from app.security import security_headers
 from app.settings import TransportLimits
 
 log = logging.getLogger("foil.server")
-# What every reply written here carries, as the app's replies do (app.security.SecurityHeadersMiddleware).
-HEADERS = (b"content-type: text/plain; charset=utf-8\r\nconnection: close\r\nx-content-type-options: nosniff\r\n"
-           b"content-security-policy: default-src 'none'; frame-ancestors 'none'\r\ncache-control: no-store\r\n"
-           b"referrer-policy: no-referrer\r\nx-frame-options: DENY\r\n")
-REASONS = {408: b"Request Timeout", 431: b"Request Header Fields Too Large"}
+# What every reply written here carries: the app's security headers.
+HEADERS = b"content-type: text/plain; charset=utf-8\r\nconnection: close\r\n" + b"".join(
+    name + b": " + value + b"\r\n" for name, value in security_headers())
+REASONS = {400: b"Bad Request", 408: b"Request Timeout", 431: b"Request Header Fields Too Large"}
 
 
 class _HeadTooLarge(Exception):
@@ -107,8 +107,9 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
         raise _HeadTooLarge  # the parser stops and reports an error: see send_400_response
 
     def send_400_response(self, msg: str) -> None:
+        """uvicorn's reply to a request its parser refuses, with the security headers; 431 for our limits."""
         if self._refused is None:
-            super().send_400_response(msg)
+            self._reply(400, msg)
             return
         log.info("%s: refused with 431: %s", "{}:{}".format(*self.client) if self.client else "a client",
                  self._refused)

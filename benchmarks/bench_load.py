@@ -2,7 +2,7 @@
 tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback, clips included, on the
 same machine as the server.
 
-Five runs, each bounded in time and count (--runs picks some):
+Six runs, each bounded in time and count (--runs picks some):
   ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves here (uvicorn, one
            process, httptools and uvloop, no access log), hammered by --concurrency clients for --seconds;
   burst    --concurrency bots with no pauses, new ones taking the place of those finished, for --seconds: page
@@ -13,12 +13,16 @@ Five runs, each bounded in time and count (--runs picks some):
            completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
            the bots reopen their links and finish; then the database is audited;
+  postgres the paced run again on a throwaway PostgreSQL server (tests/support/postgres.py; Debian's postgresql,
+           durable settings: fsync and synchronous_commit on, as SQLite's synchronous=FULL), right after a paced
+           run on SQLite in the same invocation: p95 and p99 per page type on both, and their ratio;
   cpu      server CPU per request, by kind: --cpu-sessions bots one at a time against `foil serve` (with its
            access log, as deployed) and 2,000 requests to the constant endpoint, reading the CPU time of all the
            server's threads from /proc/PID/task/*/schedstat around every request (Linux only; much less
            sensitive to the machine's load than latency is).
 
     .venv/bin/python benchmarks/bench_load.py [--participants 300] [--runs ceiling,burst] [--write]
+    .venv/bin/python benchmarks/bench_load.py --runs paced,postgres  # PostgreSQL against SQLite
 """
 
 from __future__ import annotations
@@ -45,9 +49,10 @@ sys.path.insert(0, str(REPO))
 from app.assignment import conditions  # noqa: E402
 from app.bots import Bot, ClipIndex, Observer  # noqa: E402
 from app.study import parse_study  # noqa: E402
+from tests.support import postgres  # noqa: E402
 from tests.support.analysis import write_bot_bundle  # noqa: E402
 from tests.support.crowd import Crowd, LoopbackClient, audit, page_type  # noqa: E402
-from tests.support.live_server import LiveServer, free_port  # noqa: E402
+from tests.support.live_server import CROWD_FROM_ONE_ADDRESS, LiveServer, free_port  # noqa: E402
 from tests.support.survey import study_text  # noqa: E402
 
 CONSTANT_SERVER = """
@@ -60,13 +65,14 @@ async def constant():
 uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[1]), proxy_headers=True, server_header=False,
             access_log=False)
 """
-SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0"}  # as the constant server: a reverse proxy keeps the access log
+# As the constant server: a reverse proxy keeps the access log. The bots all come from 127.0.0.1.
+SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS}
 # The ceiling's and the burst's server on one core, their load generator on the others: the way a load test keeps
 # its generator from taking the CPU of the system under test when both must share one machine.
 CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
 SERVER_CPUS, CLIENT_CPUS = (set(CPUS[:1]), set(CPUS[1:])) if len(CPUS) > 1 else (set(), set())
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
-RUNS = ["ceiling", "burst", "paced", "crash", "cpu"]
+RUNS = ["ceiling", "burst", "paced", "postgres", "crash", "cpu"]
 
 
 def quantile(values: list[float], q: float) -> float:
@@ -163,10 +169,10 @@ def run_in_threads(target, count: int) -> float:
     return time.monotonic() - started
 
 
-def serve(bundle: Path, study: Path, workdir: Path) -> LiveServer:
+def serve(bundle: Path, study: Path, workdir: Path, database_url: str | None = None) -> LiveServer:
     workdir.mkdir()
-    return LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{workdir / 'survey.sqlite3'}",
-                      workdir=workdir, env=SURVEY_SETTINGS)
+    return LiveServer(bundle=bundle, study=study, workdir=workdir, env=SURVEY_SETTINGS,
+                      database_url=database_url or f"sqlite:///{workdir / 'survey.sqlite3'}")
 
 
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
@@ -203,8 +209,9 @@ def _burst_lanes(part: int, processes: int, concurrency: int, seconds: float, ur
             "completed": sum(crowd.completed for crowd in crowds), "errors": sum(len(c.errors) for c in crowds)}
 
 
-def paced(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float) -> dict:
-    with serve(bundle, study, workdir) as server:
+def paced(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float,
+          database_url: str | None = None) -> dict:
+    with serve(bundle, study, workdir, database_url) as server:
         crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=1)
         wall = crowd.run()
     return {"crowd": crowd, "wall": wall}
@@ -278,6 +285,26 @@ def cpu_per_request(bundle: Path, study: Path, workdir: Path, sessions: int) -> 
         server.terminate()
         server.wait(timeout=30)
     return {kind: (len(v), sum(v) / len(v) * 1000) for kind, v in cpu.items()}
+
+
+def by_kind_ms(crowd: Crowd) -> dict[str, list[float]]:
+    by_kind: dict[str, list[float]] = defaultdict(list)
+    for exchange in crowd.log:
+        by_kind[exchange.kind].append(exchange.seconds * 1000)
+    return by_kind
+
+
+def database_table(crowds: dict[str, Crowd]) -> list[str]:
+    """p95 and p99 per page type on each database, and PostgreSQL's p95 over SQLite's."""
+    times = {name: by_kind_ms(crowd) for name, crowd in crowds.items()}
+    rows = ["| request | SQLite p95 ms | SQLite p99 ms | PostgreSQL p95 ms | PostgreSQL p99 ms | p95 ratio |",
+            "|---|---:|---:|---:|---:|---:|"]
+    for kind in ORDER:
+        lite, pg = times["sqlite"].get(kind), times["postgresql"].get(kind)
+        if lite and pg:
+            rows.append(f"| {kind} | {quantile(lite, .95):.1f} | {quantile(lite, .99):.1f} | {quantile(pg, .95):.1f} | "
+                        f"{quantile(pg, .99):.1f} | {quantile(pg, .95) / quantile(lite, .95):.2f} |")
+    return rows
 
 
 def latency_table(crowd: Crowd) -> list[str]:
@@ -355,6 +382,7 @@ def main() -> int:
             print("paced ...", flush=True)
             slow = paced(bundle, study, work / "paced", args.participants, args.pause, args.ramp)
             crowd, wall = slow["crowd"], slow["wall"]
+            sqlite_crowd = crowd
             non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
             bad_status = sum(e.status >= 400 for e in crowd.log)
             ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
@@ -367,6 +395,29 @@ def main() -> int:
                       f"{quantile(non_video, .95):.0f} ms.", "", *latency_table(crowd)]
             for error in crowd.errors[:10]:
                 print("error:", error)
+        if "postgres" in runs:
+            if "paced" not in runs:
+                parser.error("--runs postgres compares with the paced run on SQLite: add paced")
+            bin_dir = postgres.binaries()
+            if bin_dir is None:
+                parser.error("no PostgreSQL binaries (initdb, pg_ctl): apt-get install postgresql")
+            server = postgres.ThrowawayServer(bin_dir)
+            try:
+                server.start(durable=True)
+                load = os.getloadavg()[0]
+                print("paced on PostgreSQL ...", flush=True)
+                slow = paced(bundle, study, work / "paced-postgres", args.participants, args.pause, args.ramp,
+                             database_url=server.url)
+            finally:
+                server.stop()
+            crowd, wall = slow["crowd"], slow["wall"]
+            bad_status = sum(e.status >= 400 for e in crowd.log)
+            ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
+            lines += ["", f"Paced on PostgreSQL (the same bots right after the paced run on SQLite; PostgreSQL "
+                      f"{bin_dir.parent.name} on loopback, fsync and synchronous_commit on; load average {load:.1f} "
+                      f"before): {crowd.completed} of {args.participants} completed in {wall:.0f} s, "
+                      f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors.", "",
+                      *database_table({"sqlite": sqlite_crowd, "postgresql": crowd})]
         if "crash" in runs:
             print("crash ...", flush=True)
             killed = crash(bundle, study, work / "crash", args.crash_participants, args.pause, args.ramp)

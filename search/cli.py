@@ -195,8 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
                              help="exclude completions faster than this fraction of the median (default 1/3)")
         if name == "report":
             command.add_argument("--bundle", default=os.environ.get("FOIL_BUNDLE_DIR"),
-                                 help="the bundle the study was served from (default FOIL_BUNDLE_DIR): each clip's "
-                                 "accuracy is shown beside its audit")
+                                 help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
+                                 "the server recorded in the database): each clip's accuracy is shown beside its audit")
         command.add_argument("--include", default="", metavar="KINDS",
                              help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
                              "(default: none; pilots and bots are left out)")

@@ -104,6 +104,7 @@
     const status = box.querySelector("[data-status]");
     const fill = box.querySelector("[data-fill]");
     const gated = box.hasAttribute("data-gated");
+    const nextOnly = box.hasAttribute("data-next-only");  // a clip to watch, no questions: only Next unlocks
     const width = parseFloat(video.getAttribute("width")), height = parseFloat(video.getAttribute("height"));
     if (width > 0 && height > 0) box.style.setProperty("--ratio", String(width / height));
     let watched = box.hasAttribute("data-watched") || (gated && state.watched && !box.hasAttribute("data-refused"));
@@ -111,6 +112,9 @@
     let loaded = false;
     let furthest = 0;  // the furthest point reached by playing, on a first viewing
     let undoing = false;
+    // A ranking round's clips show their last frame (how they ended) until played; those seeks are not logged.
+    const showsEnd = video.hasAttribute("data-round");
+    let atEnd = false;
 
     function say(text, failed) {
       status.textContent = text;
@@ -131,7 +135,12 @@
       loaded = true;
       clearTimeout(timer);
       record("loaded");
-      say(gated && !watched ? "Press Play clip (or tap the picture). You can answer when the clip ends."
+      if (showsEnd && video.duration) {
+        atEnd = undoing = true;
+        video.currentTime = Math.max(0, video.duration - 0.05);
+      }
+      say(gated && !watched ? "Press Play clip (or tap the picture). " + (nextOnly ? "The Next button unlocks when the clip ends."
+                                                                               : "You can answer when the clip ends.")
                             : "Ready. You can replay the clip.");
     });
     video.addEventListener("error", function () {
@@ -175,14 +184,16 @@
       watched = true;
       if (gated) { state.watched = true; save(); }
       button.textContent = "Replay clip";
-      say(gated ? "Clip finished. You can now answer, or replay the clip." : "Clip finished. You can replay it.");
+      say(!gated ? "Clip finished. You can replay it." : nextOnly ? "Clip finished. Press Next to go on, or replay the clip."
+                                                            : "Clip finished. You can now answer, or replay the clip.");
       if (gated) unlock();
     });
     video.addEventListener("contextmenu", function (event) { event.preventDefault(); });  // no "Show controls"
 
     function toggle() {
       if (video.paused || video.ended) {
-        if (video.ended) video.currentTime = 0;
+        if (atEnd) { atEnd = false; undoing = true; video.currentTime = 0; }  // from the start, not logged
+        else if (video.ended) video.currentTime = 0;
         const played = video.play();
         if (played && played.catch) played.catch(function () { say("Press Play clip again to start the clip.", true); });
       } else {
@@ -235,10 +246,23 @@
     check();
   });
 
-  // Back to this page from the browser's history (back/forward cache): ask the server for the current screen.
+  // Back to this page from the browser's history: the server shows the current screen (from the back/forward
+  // cache, after asking it again), with a short notice saying why.
   window.addEventListener("pageshow", function (event) {
-    if (event.persisted && form) window.location.reload();
+    if (!event.persisted || !form) return;
+    try { window.sessionStorage.setItem("foil:back", "1"); } catch (e) { /* storage off: no notice */ }
+    window.location.reload();
   });
+  const backNotice = document.querySelector("[data-back-notice]");
+  if (backNotice) {
+    const navigation = performance.getEntriesByType ? performance.getEntriesByType("navigation")[0] : null;
+    let reloadedAfterBack = false;
+    try {
+      reloadedAfterBack = window.sessionStorage.getItem("foil:back") === "1";
+      window.sessionStorage.removeItem("foil:back");
+    } catch (e) { reloadedAfterBack = false; }
+    if (reloadedAfterBack || (navigation && navigation.type === "back_forward")) backNotice.hidden = false;
+  }
 
   document.querySelectorAll("form[data-step-form]").forEach(function (stepForm) {
     stepForm.addEventListener("submit", function (event) {

@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
-from app.study import Build, StudyError, refuse
+from app.study import Build, StudyError, parse_study, refuse
 from app.study import parse_build as parse_build_table
 from app.visible import VisibleClip, audit
 from search.clips.render import ROBOT_STYLES, RenderOptions, render, robot_label
@@ -184,13 +184,19 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
 
 
 def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
-    """The build spec of a study file, and the file's text (copied into the bundle for the server)."""
+    """The build spec of a study file, and the file's text (copied into the bundle for the server). The whole file
+    is checked, every table, as `foil serve` will check it: a misspelt key fails now, not after the searches."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FileNotFoundError(f"no study file {path}") from None
-    return parse_build(text, source=str(path)), text
+    spec = parse_build(text, source=str(path))
+    try:
+        parse_study(text, source=str(path))
+    except StudyError as error:
+        raise BuildError(str(error)) from None
+    return spec, text
 
 
 @dataclass(frozen=True)

@@ -105,6 +105,17 @@ def test_every_answer_round_trips(answered):
     assert len(long) == expected_rows == result.answers
 
 
+def test_participants_schemes_are_the_conditions_in_its_order(answered):
+    """`schemes` says the participant's condition as the codebook lists it, whatever order the shuffled clips of
+    a part came in."""
+    result, study, participants, responses = answered
+    people = pd.read_csv(result.out / "participants.csv")
+    book = json.loads((result.out / "codebook.json").read_text())
+    of_condition = {c["number"]: ";".join(c["schemes"]) for c in book["conditions"]}
+    assert list(people.schemes) == [of_condition[p.condition + 1] for p in participants]
+    assert len(set(people.schemes)) == 2  # both counterbalanced orders occur
+
+
 def test_wide_and_participants_files(answered):
     result, study, participants, responses = answered
     wide = pd.read_csv(result.out / "wide.csv")
@@ -246,5 +257,6 @@ expected = "The one that reaches its goal without touching anyone"
     long = pd.read_csv(result.out / "long.csv")
     (row,) = long[long.step == 0].itertuples()
     assert (row.screen, row.question, row.answer) == ("instructions", "understand1", understood["understand1"])
+    assert (row.question_type, row.truth, row.correct) == ("comprehension", understood["understand1"], 1)
     wide = pd.read_csv(result.out / "wide.csv")
     assert not any("understand" in column for column in wide.columns) and len(wide) == 1

@@ -155,3 +155,35 @@ def test_figure_text_and_legends_are_at_least_12_px_where_the_report_shows_them(
         figure.savefig(buffer, format="svg")
         plt.close(figure)
         assert smallest_text_px(buffer.getvalue()) >= 12
+
+
+def test_foil_report_finds_the_served_bundle_for_the_audit_column(known_db, paper_study, bundle_dir, tmp_path,
+                                                                  monkeypatch, capsys):
+    """The server records the bundle it serves; `foil report` with only the database fills the per-clip audit
+    column from it, and says so when that bundle is gone."""
+    import json
+    import shutil
+
+    from app.main import create_app
+    from app.settings import Settings
+    from search.cli import main
+
+    db, study = known_db
+    served = tmp_path / "served-bundle"
+    shutil.copytree(bundle_dir, served)
+    manifest = json.loads((served / "manifest.json").read_text())
+    for clip in manifest["clips"]:
+        clip["audit"] = {"shows": "better", "why": f"what {clip['id']} shows"}
+    (served / "manifest.json").write_text(json.dumps(manifest))
+    path, _ = paper_study
+    create_app(Settings(bundle_dir=served, study_file=path, database_url=db.url)).state.context.db.dispose()
+    monkeypatch.delenv("FOIL_BUNDLE_DIR", raising=False)
+    assert main(["report", "--db", db.url, "--out", str(tmp_path / "report")]) == 0
+    html = (tmp_path / "report" / "report.html").read_text()
+    clips = re.findall(r'<tr><td class="text">([^<]+)</td>', html.split('id="per-clip"')[1])
+    assert clips and all(f"shows better: what {clip} shows" in html for clip in clips)
+    assert "warning" not in capsys.readouterr().err
+
+    shutil.rmtree(served)
+    assert main(["report", "--db", db.url, "--out", str(tmp_path / "again")]) == 0
+    assert f"the bundle the study was served from is gone: {served}" in capsys.readouterr().err

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import httpx
 import pytest
@@ -37,6 +40,7 @@ def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):
     finally:
         server.terminate()
         server.wait(timeout=10)
+    assert f"the admin pages are at http://127.0.0.1:{port}/admin" in server.stdout.read()
 
 
 def test_foil_serve_refuses_a_bad_study_with_its_line(tmp_path, bundle_dir):
@@ -46,6 +50,44 @@ def test_foil_serve_refuses_a_bad_study_with_its_line(tmp_path, bundle_dir):
     output, _ = server.communicate(timeout=30)
     assert server.returncode == 2
     assert "foil serve: error:" in output and "unknown_table: unknown key" in output and ", line " in output
+
+
+def test_a_port_in_use_is_one_line_with_the_port_hint_and_changes_no_database(tmp_path, bundle_dir):
+    study = tmp_path / "study.toml"
+    study.write_text(study_text(platform='"none"'))
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", str(port),
+                      "--db", f"sqlite:///{tmp_path / 'survey.sqlite3'}", cwd=tmp_path)
+        output, _ = server.communicate(timeout=60)
+    assert server.returncode == 2
+    assert output.strip().splitlines() == [f"foil serve: error: port {port} on 127.0.0.1 is already in use (another "
+                                           "foil serve?): stop that server or choose another port with --port"]
+    assert not (tmp_path / "survey.sqlite3").exists()  # nothing migrated
+
+
+def test_make_demo_prints_a_generated_admin_password_and_serves_with_it(tmp_path):
+    """A newcomer's `make demo` says how to open the admin pages: a password generated once, kept beside the bundle
+    (readable by its owner only) and printed at every start; FOIL_ADMIN_PASSWORD, when set, wins."""
+    demo = tmp_path / "bundles" / "demo"
+    env = {key: value for key, value in os.environ.items() if key != "FOIL_ADMIN_PASSWORD"}
+
+    def make(*args: str, **extra: str) -> str:
+        return subprocess.run(["make", "-s", *args, f"DEMO_BUNDLE={demo}"], cwd=REPO, env={**env, **extra},
+                              capture_output=True, text=True, check=True).stdout
+
+    first = make("demo-password")
+    saved = Path(f"{demo}.admin-password")
+    password = saved.read_text().strip()
+    assert len(password) >= 12 and (saved.stat().st_mode & 0o777) == 0o600
+    assert f"Admin pages: http://127.0.0.1:8000/admin, password: {password}" in first
+    assert make("demo-password") == first  # the same password at every start
+    assert "FOIL_ADMIN_PASSWORD" in make("demo-password", FOIL_ADMIN_PASSWORD="chosen by me")
+    served = make("-n", "demo", f"VENV={Path(sys.executable).parent.parent}")
+    assert f'FOIL_ADMIN_PASSWORD="${{FOIL_ADMIN_PASSWORD:-$(cat {saved})}}"' in served
+    assert "foil serve --bundle" in served.split("FOIL_ADMIN_PASSWORD=", 1)[1]
 
 
 def test_the_server_never_imports_search_or_torch():

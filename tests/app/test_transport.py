@@ -12,11 +12,12 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.support.live_server import LiveServer
-from tests.support.survey import log_in, study_text
+from tests.support.survey import FormReader, answer_for, log_in, study_text
 
 PILOT = {"platform": '"none"'}
 ONE_DATABASE = pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)  # nothing here is per database
-SECURITY_HEADERS = ("content-security-policy", "x-content-type-options", "referrer-policy", "cache-control")
+SECURITY_HEADERS = ("content-security-policy", "x-content-type-options", "referrer-policy", "cache-control",
+                    "permissions-policy", "cross-origin-opener-policy", "x-frame-options")
 
 
 def has_security_headers(headers) -> bool:
@@ -82,11 +83,17 @@ def raw(server: LiveServer, request: bytes, *, wait_s: float = 30) -> bytes:
         return received
 
 
+def head_of(reply: bytes) -> httpx.Headers:
+    """The header fields of a raw HTTP reply."""
+    lines = reply.split(b"\r\n\r\n", 1)[0].decode("latin-1").split("\r\n")[1:]
+    return httpx.Headers([line.split(": ", 1) for line in lines])
+
+
 @pytest.mark.slow  # a live server
 def test_header_size_and_count_limits(server):
     big = b"GET / HTTP/1.1\r\nHost: x\r\nX-Big: " + b"a" * (4 * 1024 * 1024) + b"\r\n\r\n"
     reply = raw(server, big)
-    assert reply.startswith(b"HTTP/1.1 431 ") and b"x-content-type-options: nosniff" in reply.lower()
+    assert reply.startswith(b"HTTP/1.1 431 ") and has_security_headers(head_of(reply))
     many = b"GET / HTTP/1.1\r\nHost: x\r\n" + b"".join(b"X-%d: 1\r\n" % n for n in range(200)) + b"\r\n"
     assert raw(server, many).startswith(b"HTTP/1.1 431 ")
     assert httpx.get(server.url + "/", headers={"x-normal": "a" * 2000}).status_code == 200
@@ -105,7 +112,8 @@ def test_slow_and_silent_clients_are_cut_off(server):
             received = b""
             while chunk := sock.recv(65536):
                 received += chunk
-            assert received == b"" or received.startswith(b"HTTP/1.1 408 ")
+            assert received == b"" or (received.startswith(b"HTTP/1.1 408 ")
+                                        and has_security_headers(head_of(received)))
     finally:
         for sock in sockets:
             sock.close()
@@ -126,3 +134,26 @@ def test_a_client_that_leaves_mid_request_is_one_line_in_the_log(server):
     log = server.log.read_text()
     assert log.count("did not send the body of POST /consent") == 3
     assert "Traceback" not in log and "ClientDisconnect" not in log
+
+
+@pytest.mark.slow  # a live server
+def test_requests_the_http_parser_refuses_get_the_security_headers(server):
+    for request in (b"NOT HTTP AT ALL\r\n\r\n", b"GET / HTTP/1.1\r\nHost: x\r\nContent-Length: -5\r\n\r\n",
+                    b"GET /\x00 HTTP/1.1\r\nHost: x\r\n\r\n"):
+        reply = raw(server, request)
+        assert reply.startswith(b"HTTP/1.1 400 ") and has_security_headers(head_of(reply)), reply[:300]
+
+
+@pytest.mark.slow  # a live server
+def test_a_deeply_nested_viewing_record_neither_fails_nor_drops_the_connection(server):
+    participant = httpx.Client(base_url=server.url, follow_redirects=True)
+    page = participant.get("/").text
+    page = participant.post("/consent", data={"csrf_token": FormReader(page).hidden["csrf_token"],
+                                              "choice": "agree"}).text
+    page = participant.post("/condition", data={"csrf_token": FormReader(page).hidden["csrf_token"],
+                                                "number": "1"}).text
+    page = participant.post("/study", data=answer_for(page)).text  # the instructions: now at the first clip
+    for depth in (3_000, 15_000):
+        reply = participant.post("/study", data={**answer_for(page), "video_events": "[" * depth})
+        assert reply.status_code == 422 and "malformed record" in reply.text
+    assert "Traceback" not in server.log.read_text()

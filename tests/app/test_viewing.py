@@ -4,6 +4,7 @@ with a bundle of 3-second clips (longer than the check's 1-second tolerance)."""
 from __future__ import annotations
 
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -121,13 +122,29 @@ def test_an_answered_screen_sent_again_with_other_answers_says_the_first_is_kept
     first = answer_for(page, choice=0)
     client.post("/study", data=first)
     again = client.post("/study", data=first)  # a double click: same answers, nothing to say
-    assert "first answers are kept" not in again.text
+    assert "first answers" not in again.text
     changed = client.post("/study", data=answer_for(page, choice=1))  # the back button, then another choice
     assert changed.status_code == 200 and FormReader(changed.text).hidden["step"] == "2"
-    assert "first answers are kept" in changed.text and first["better"] in changed.text
+    assert "first answers" in changed.text and first["better"] in changed.text
     saved = [r for r in stored(client, Response) if r.step == 1]
     assert len(saved) == 1 and saved[0].answers["better"] == first["better"]
-    assert "first answers are kept" not in client.get("/study").text  # said once
+    assert "first answers" not in client.get("/study").text  # said once
+
+
+def test_the_kept_answers_notice_keeps_the_cookie_small_whatever_was_typed(make_client):
+    """Browsers drop a cookie over 4 KB, and then every later request would fail: the cookie holds only which
+    screen's answers were kept, and the page reads them from the database."""
+    client = make_client(ANONYMOUS)
+    token = pilot_token(client.app.state.context.db, "paper")
+    page = to_first_clip(client, f"?pilot={token}")
+    first = {**answer_for(page, choice=0), "justification": "é" * 2000}
+    assert client.post("/study", data=first).status_code == 200
+    changed = client.post("/study", data={**answer_for(page, choice=1), "justification": "è" * 2000})
+    assert changed.status_code == 200 and "first answers" in changed.text and first["better"] in changed.text
+    notice = changed.text.split("data-notice>", 1)[1].split("</div>", 1)[0]
+    assert "é" * 60 + "…" in notice and len(notice) < 400  # short, with the start of the text that was kept
+    assert max(len(value) for value in client.cookies.values()) < 4096 - 100
+    assert client.get("/study").status_code == 200
 
 
 def test_events_of_the_new_kinds_are_kept_with_their_values(make_client):
@@ -150,3 +167,49 @@ def test_events_of_the_new_kinds_are_kept_with_their_values(make_client):
     viewing = viewing_problems(response, plan[1])
     assert viewing["seeks_blocked"] == 1 and viewing["hidden_ms"] == 500 and viewing["reloads"] == 1
     assert viewing["skipped"]  # sped up before the first end
+
+
+@pytest.mark.slow  # PostgreSQL
+@pytest.mark.parametrize("database_url", ["postgresql"], indirect=True)
+def test_a_concurrent_resubmit_with_other_answers_gets_the_kept_notice_on_postgresql(make_client, database_url):
+    """Two submissions of the same screen at once (two tabs, a double click with a change in between): PostgreSQL
+    lets both read the screen as open, and the second insert fails on the unique (participant, step). The losing
+    one is a resubmit and must say so, as on SQLite, where writers take turns. The race is made certain by holding
+    inserts into `response` until both requests wait at theirs."""
+    from sqlalchemy import create_engine, text
+    from starlette.testclient import TestClient
+
+    client = make_client(ANONYMOUS)
+    token = pilot_token(client.app.state.context.db, "paper")
+    page = to_first_clip(client, f"?pilot={token}")
+    other_tab = TestClient(client.app, follow_redirects=True)
+    other_tab.cookies.update(client.cookies)
+    answers = [answer_for(page, choice=0), answer_for(page, choice=1)]
+    assert answers[0]["better"] != answers[1]["better"]
+    engine = create_engine(database_url)
+    replies = [None, None]
+    try:
+        with engine.connect() as holder, engine.connect() as watcher:
+            holder.execute(text("BEGIN"))
+            holder.execute(text("LOCK TABLE response IN EXCLUSIVE MODE"))  # reads go on, inserts wait
+            threads = [threading.Thread(target=lambda n=n, tab=tab: replies.__setitem__(
+                n, tab.post("/study", data=answers[n]))) for n, tab in enumerate((client, other_tab))]
+            for thread in threads:
+                thread.start()
+            deadline = time.monotonic() + 30
+            while watcher.scalar(text("SELECT count(*) FROM pg_locks WHERE NOT granted AND relation = "
+                                      "'response'::regclass")) < 2:
+                assert time.monotonic() < deadline, "the two submissions did not both reach their insert"
+                time.sleep(0.05)
+                watcher.rollback()
+            holder.execute(text("COMMIT"))
+            for thread in threads:
+                thread.join(30)
+    finally:
+        engine.dispose()
+    assert all(reply.status_code == 200 and FormReader(reply.text).hidden["step"] == "2" for reply in replies)
+    saved = [r for r in stored(client, Response) if r.step == 1]
+    assert len(saved) == 1
+    winner = next(n for n in (0, 1) if answers[n]["better"] == saved[0].answers["better"])
+    assert "first answers" not in replies[winner].text
+    assert "first answers" in replies[1 - winner].text and answers[winner]["better"] in replies[1 - winner].text

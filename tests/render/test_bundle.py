@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -136,7 +137,7 @@ def test_bad_build_tables_give_clear_errors_with_their_line(old, new, message):
 
 
 def test_the_server_and_the_bundle_builder_report_a_bad_build_line_alike(tmp_path):
-    """The server validates the whole study file, `foil bundle` only its [build] table, with the same models."""
+    """The server and `foil bundle` validate the study file with the same models and report alike."""
     from app.study import StudyError, load_study
 
     study = tmp_path / "study.toml"
@@ -186,6 +187,27 @@ def test_bad_search_settings_are_refused_before_any_work(tmp_path):
     assert lines[1].startswith(f"{study}, line 10, build.schemes.a.world.robot_visible: bad world setting "
                                "robot_visible = 'yes': robot_visible takes a bool")
     assert lines[2].startswith(f"{study}, line 14, build.sets[0].scenarios[1]: ") and "nowhere" in lines[2]
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("old, new, field", [
+    ('seed = 1\nrequire_full_view', 'sead = 1\nrequire_full_view', r"study\.sead: unknown key"),
+    ('[[comprehension]]', '[[comprehensionn]]', r"comprehensionn: unknown key"),
+])
+def test_foil_bundle_checks_every_table_before_any_search(tmp_path, capsys, old, new, field):
+    """A misspelt key anywhere in the study file stops `foil bundle` at once with its line, as `foil serve` would
+    after the whole build; nothing is searched or written."""
+    from search.cli import main
+
+    text = (ROOT / "studies" / "demo.toml").read_text()
+    assert old in text
+    study = tmp_path / "study.toml"
+    study.write_text(text.replace(old, new, 1))
+    assert main(["bundle", str(study), "--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err
+    line = line_of(study.read_text(), new.split("\n")[0])
+    assert error.startswith("foil bundle: error: ")
+    assert re.search(rf"{re.escape(str(study))}, line {line}, {field}", error), error
     assert not (tmp_path / "out").exists()
 
 

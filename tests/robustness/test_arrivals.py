@@ -17,7 +17,7 @@ from app.database import Database
 from app.models import Participant
 from app.study import parse_study
 from tests.support.crowd import LoopbackClient
-from tests.support.live_server import LiveServer
+from tests.support.live_server import CROWD_FROM_ONE_ADDRESS, LiveServer
 from tests.support.survey import FormReader, study_text
 
 ARRIVALS = 500
@@ -56,7 +56,7 @@ def test_500_arrivals_at_once_all_get_a_plan_and_balance_is_exact(tmp_path, bund
             client.close()
 
     with LiveServer(bundle=bundle_dir, study=study_file, database_url=database_url, workdir=tmp_path,
-                    env={"FOIL_ACCESS_LOG": "0"}) as server:
+                    env={"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS}) as server:
         threads = [threading.Thread(target=arrive, args=(n, server.url)) for n in range(ARRIVALS)]
         for thread in threads:
             thread.start()

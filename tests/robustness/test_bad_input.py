@@ -26,6 +26,11 @@ INJECTION = ["<script>alert(1)</script>", '"><img src=x onerror=alert(1)>', "{{ 
 # Text as a browser can send it (any code point but surrogates), plus the classic attacks.
 TEXT = st.one_of(st.text(st.characters(exclude_categories=["Cs"]), max_size=300), st.sampled_from(INJECTION))
 MAYBE = st.one_of(st.none(), TEXT)  # None: the field is left out
+# Viewing records nested far deeper than the JSON parser's recursion limit, opened only or closed too (at most
+# 19,000 characters: URL-encoded, a form of them stays under the 64 KB body limit).
+DEEP = st.builds(lambda n, unit, closed: unit * n + ("" if not closed else "]" * n if unit == "[" else "1" + "}" * n),
+                 st.integers(500, 30_000), st.sampled_from(["[", '{"t":', '[{"type":']), st.booleans()).filter(
+    lambda text: len(text) <= 19_000)
 
 
 @pytest.fixture
@@ -58,7 +63,7 @@ def valid_clip_answer(form: dict, labels: list[str]) -> bool:
         events = json.loads(form.get("video_events") or "[]")
         ended = any(isinstance(e, dict) and e.get("type") == "ended" and isinstance(e.get("t"), int | float)
                     and not isinstance(e.get("t"), bool) for e in events) if isinstance(events, list) else False
-    except ValueError:
+    except (ValueError, RecursionError):
         ended = False
     return (form.get("better") in labels and text is not None and text.strip() != "" and len(text) <= 2000
             and difficulty is not None and difficulty.isdigit() and difficulty.isascii() and 1 <= int(difficulty) <= 9
@@ -69,7 +74,7 @@ def valid_clip_answer(form: dict, labels: list[str]) -> bool:
 @FUZZ
 @given(better=st.one_of(st.sampled_from(["Robot 1", "Robot 2", "Robot 3"]), MAYBE), justification=MAYBE,
        difficulty=st.one_of(MAYBE, st.integers(-3, 12).map(str)),
-       events=st.one_of(st.just(WATCHED), MAYBE), extra=st.dictionaries(TEXT, TEXT, max_size=3))
+       events=st.one_of(st.just(WATCHED), MAYBE, DEEP), extra=st.dictionaries(TEXT, TEXT, max_size=3))
 def test_fuzzed_answers_are_refused_clearly_or_stored_exactly(app_client, better, justification, difficulty,
                                                               events, extra):
     person, page = newcomer(app_client)
@@ -98,14 +103,29 @@ FIELDS = ["csrf_token", "choice", "number", "step", "better", "justification", "
           "ranking-2", "ranking-3", "video_events", "time_on_page_ms", "password", "excluded", "note"]
 
 
+@pytest.mark.parametrize("depth", [3_000, 15_000])
+@pytest.mark.parametrize("unit", ["[", '{"t":', '[{"type":'])
+def test_deeply_nested_viewing_records_are_refused_clearly(app_client, depth, unit):
+    """JSON nested deeper than the parser's recursion limit is a malformed record like any other: a 422 page."""
+    person, page = newcomer(app_client)
+    before = counts(app_client)
+    nested = (unit * depth)[:19_000]
+    response = person.post("/study", data={**answer_for(page), "video_events": nested})
+    assert_clear_refusal(response, allowed=(422,))
+    assert "malformed record" in response.text and counts(app_client) == before
+
+
 @pytest.mark.slow  # generated inputs
 @FUZZ
 @given(path=st.sampled_from(FORMS), fields=st.dictionaries(st.sampled_from(FIELDS), st.lists(TEXT, max_size=2),
-                                                            max_size=8), keep_token=st.booleans())
-def test_every_form_survives_random_fields(app_client, path, fields, keep_token):
+                                                            max_size=8), keep_token=st.booleans(),
+       deep=st.one_of(st.none(), DEEP))
+def test_every_form_survives_random_fields(app_client, path, fields, keep_token, deep):
     person, page = newcomer(app_client)
     token = FormReader(page).hidden["csrf_token"]
     data = {name: values for name, values in fields.items() if name != "csrf_token"}
+    if deep is not None:
+        data["video_events"] = deep
     if keep_token:
         data["csrf_token"] = token
     code = stored(app_client, Participant)[-1].code

@@ -11,7 +11,7 @@ import pytest
 from app.assignment import conditions
 from app.study import parse_study
 from tests.support.crowd import Crowd, audit
-from tests.support.live_server import LiveServer
+from tests.support.live_server import CROWD_FROM_ONE_ADDRESS, LiveServer
 from tests.support.survey import study_text
 
 pytestmark = pytest.mark.slow  # a real server killed mid-study
@@ -28,7 +28,8 @@ def test_sigkill_mid_study_loses_no_acknowledged_answer(tmp_path, bundle_dir):
     study_file.write_text(study_text(assignment='"balanced"'))
     study = parse_study(study_file.read_text())
     url = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
-    server = LiveServer(bundle=bundle_dir, study=study_file, database_url=url, workdir=tmp_path)
+    server = LiveServer(bundle=bundle_dir, study=study_file, database_url=url, workdir=tmp_path,
+                        env=CROWD_FROM_ONE_ADDRESS)
     with server:
         crowd = Crowd(server.url, str(bundle_dir), BOTS, pause_s=0.2, ramp_s=1.0, outage_s=60)
         runner = threading.Thread(target=crowd.run)

@@ -64,12 +64,13 @@ class ThrowawayServer:
             raise RuntimeError(f"{args[0]} failed ({result.returncode}):\n{result.stdout}\n{result.stderr}")
         return result
 
-    def start(self) -> ThrowawayServer:
+    def start(self, *, durable: bool = False) -> ThrowawayServer:
+        """`durable`: commits reach the disk as on a deployed server (for benchmarks). Without it, as in the tests,
+        where durability is not under test: no fsync makes creating and dropping tables fast."""
         self._run("initdb", "-D", str(self.data), "-U", "foil", "--auth=trust", "-E", "UTF8", "--locale=C.UTF-8",
                   "--no-sync")
-        # Durability is not under test here: no fsync makes creating and dropping tables fast.
-        options = (f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.folder} -c fsync=off "
-                   "-c synchronous_commit=off -c full_page_writes=off -c max_connections=200")
+        options = (f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.folder} -c max_connections=200"
+                   + ("" if durable else " -c fsync=off -c synchronous_commit=off -c full_page_writes=off"))
         self._run("pg_ctl", "-D", str(self.data), "-o", options, "-l", str(self.folder / "server.log"), "-w",
                   "-t", "60", "start")
         deadline = time.monotonic() + 30

@@ -1,0 +1,204 @@
+"""In Chromium, against `foil serve` with 3-second clips whose summaries say how each robot ends: on a desktop the
+whole clip and its controls are in the first view at 1366x768, 1280x720 and 1440x900 (the phone keeps one column);
+a ranking round's clips are large, show how they ended and say it in words; a watch-only screen says what its
+clip unlocks; the back button leads to the current screen with a short notice; the admin's answers table uses the
+page's width. Screenshots go to test-artifacts/browser/layout/."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+
+from app.database import Database
+from app.kinds import pilot_token
+from tests.support.analysis import summary_for
+from tests.support.browser import ARTIFACTS
+from tests.support.live_server import LiveServer
+from tests.support.survey import ADMIN_PASSWORD, finish, start, study_text, write_long_bundle
+
+pytestmark = pytest.mark.browser
+DESKTOPS = [{"width": 1366, "height": 768}, {"width": 1280, "height": 720}, {"width": 1440, "height": 900}]
+PHONE = {"width": 360, "height": 740}
+SHOTS = ARTIFACTS / "layout"
+NEXT = "fieldset[data-answers] button[type=submit]"
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    work = tmp_path_factory.mktemp("browser-layout")
+    study = work / "study.toml"
+    study.write_text(study_text(platform='"none"', assignment='"balanced"'))
+    bundle = write_long_bundle(work / "clips", work / "bundle")
+    (bundle / "summaries").mkdir()
+    for clip in json.loads((bundle / "manifest.json").read_text())["clips"]:
+        (bundle / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], misleading=False)))
+    with LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{work / 'survey.sqlite3'}", workdir=work,
+                    admin_password=ADMIN_PASSWORD) as live:
+        yield live
+
+
+def shoot(page, name: str) -> None:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / f"{name}.png"))  # the first view only: what is above the fold
+
+
+def pilot(server) -> str:
+    db = Database(server.database_url)
+    try:
+        return f"?pilot={pilot_token(db, 'paper')}"
+    finally:
+        db.dispose()
+
+
+def to_first_clip(page, server) -> None:
+    page.goto(server.url + "/" + pilot(server))
+    with page.expect_navigation():
+        page.click("button[value=agree]")
+    with page.expect_navigation():  # a pilot is not held to the example's playing time
+        page.evaluate("() => { document.querySelector('fieldset[data-answers]').disabled = false; "
+                      "document.querySelector('form[data-step-form]').requestSubmit(); }")
+    assert page.locator("input[name=step]").get_attribute("value") == "1"
+    page.wait_for_function("() => document.querySelector('video').readyState >= 2")
+
+
+def answer_unwatched(page) -> None:
+    """A pilot's answer to the screen shown, without playing its clip (the server does not hold pilots to it)."""
+    page.evaluate("""() => {
+        document.querySelector('fieldset[data-answers]').disabled = false;
+        document.querySelector('[data-events]').value = JSON.stringify([{type: 'ended', t: 1}]);
+        for (const name of ['better', 'difficulty', 'attention']) {
+            const first = document.querySelector(`input[name=${name}]`); if (first) first.checked = true; }
+        const text = document.querySelector('textarea'); if (text) text.value = 'a reason';
+    }""")
+    with page.expect_navigation():
+        page.click(NEXT)
+
+
+def box(page, selector: str) -> dict:
+    return page.evaluate(f"""() => {{ const r = document.querySelector({json.dumps(selector)}).getBoundingClientRect();
+        return {{top: r.top, bottom: r.bottom, left: r.left, width: r.width, height: r.height}}; }}""")
+
+
+@pytest.mark.parametrize("viewport", DESKTOPS, ids=lambda v: f"{v['width']}x{v['height']}")
+def test_the_whole_clip_and_its_controls_are_in_the_first_view_on_a_desktop(server, new_context, viewport):
+    page = new_context(viewport).new_page()
+    to_first_clip(page, server)
+    shoot(page, f"clip-{viewport['width']}x{viewport['height']}")
+    assert page.evaluate("window.scrollY") == 0
+    video, play, status = box(page, ".screen-clip video"), box(page, "[data-play]"), box(page, "[data-status]")
+    assert video["top"] >= 0 and video["bottom"] <= viewport["height"]
+    assert play["bottom"] <= viewport["height"] and status["bottom"] <= viewport["height"]
+    assert video["height"] >= 0.55 * viewport["height"]  # large, not shrunk to fit below the text
+    assert page.evaluate("document.documentElement.scrollWidth") <= viewport["width"]
+    question = box(page, "input[name=better]")
+    assert question["left"] > video["left"] + video["width"]  # the questions beside the clip
+
+
+def test_the_phone_keeps_one_column(server, new_context):
+    page = new_context(PHONE).new_page()
+    to_first_clip(page, server)
+    shoot(page, "clip-phone")
+    title, video, question = box(page, "h1"), box(page, ".screen-clip video"), box(page, "input[name=better]")
+    assert title["bottom"] <= video["top"] < question["top"]  # text, clip, questions, one under the other
+    assert video["width"] >= PHONE["width"] - 40
+    assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
+
+
+def test_the_back_button_shows_the_current_screen_with_a_short_notice(server, new_context):
+    page = new_context(DESKTOPS[0]).new_page()
+    to_first_clip(page, server)
+    notice = page.locator("[data-back-notice]")
+    assert not notice.is_visible()
+    answer_unwatched(page)
+    assert page.locator("input[name=step]").get_attribute("value") == "2" and not notice.is_visible()
+    page.go_back()
+    page.wait_for_load_state("load")
+    assert page.locator("input[name=step]").get_attribute("value") == "2"
+    assert notice.is_visible() and "cannot be changed" in notice.inner_text()
+    assert len(notice.inner_text()) < 120
+    shoot(page, "back-notice")
+    page.reload()
+    assert not page.locator("[data-back-notice]").is_visible()  # said once
+
+
+def test_watch_only_screens_ranking_clips_and_places(server, new_context):
+    page = new_context(DESKTOPS[0]).new_page()
+    to_first_clip(page, server)
+    for _ in range(20):  # through part one to the first clip that is only watched
+        if page.locator("video").count() and not page.locator("input[name=better]").count() and \
+                not page.locator("input[name=attention]").count():
+            break
+        answer_unwatched(page)
+    status = page.locator("[data-status]")
+    page.wait_for_function("() => document.querySelector('video').readyState >= 2")
+    assert "The Next button unlocks when the clip ends." in status.inner_text()
+    assert "answer" not in status.inner_text()
+    shoot(page, "watch-only")
+    page.click("[data-play]")
+    page.wait_for_function("() => document.querySelector('video').ended", timeout=20_000)
+    assert "Press Next to go on" in status.inner_text() and page.locator(NEXT).is_enabled()
+    with page.expect_navigation():
+        page.click(NEXT)
+    for _ in range(5):
+        if page.locator("select[name^=ranking]").count():
+            break
+        answer_unwatched(page)
+    page.wait_for_function("() => [...document.querySelectorAll('.round-clips video')].every("
+                           "v => v.readyState >= 2 && v.currentTime > v.duration - 0.2)")
+    shoot(page, "ranking")
+    videos = page.locator(".round-clips video")
+    assert videos.count() == 3
+    for k in range(3):  # large enough to read the labels drawn in the clip: well over the 220 px of before
+        assert videos.nth(k).bounding_box()["width"] >= 360
+    ended = page.evaluate("() => [...document.querySelectorAll('.round-clips video')].map("
+                          "v => [v.paused, v.duration - v.currentTime])")
+    assert all(paused and left < 0.2 for paused, left in ended)  # each shows its last frame: how it ended
+    outcomes = [page.locator(".round-clips figure").nth(k).locator(".outcomes li").all_inner_texts()
+                for k in range(3)]
+    assert all(len(texts) == 2 for texts in outcomes)
+    assert all(text.startswith("Robot ") and text.endswith(".") for texts in outcomes for text in texts)
+    assert any("bumped into a person" in text for texts in outcomes for text in texts)  # the worst robot
+    places = page.locator(".rank-place label").all_inner_texts()
+    assert places == ["1. best", "2. middle", "3. worst"]
+    page.locator(".round-clips [data-play]").first.click()
+    page.wait_for_timeout(600)
+    assert 0 < page.evaluate("document.querySelector('.round-clips video').currentTime") < 2.0  # from the start
+    assert {e["type"] for e in json.loads(page.locator("[data-events]").input_value())} <= {"loaded", "play"}
+
+
+def test_the_admin_answers_table_uses_the_page_width_and_the_site_has_an_icon(server, new_context):
+    with httpx.Client(base_url=server.url, follow_redirects=True) as client:
+        finish(client, start(client, pilot(server)))
+    page = new_context(DESKTOPS[0]).new_page()
+    page.goto(server.url + "/admin/login")
+    page.fill("#password", ADMIN_PASSWORD)
+    with page.expect_navigation():
+        page.click("button[type=submit]")
+    with page.expect_navigation():
+        page.locator("table.participants a").first.click()
+    shoot(page, "admin-participant")
+    page.screenshot(path=str(SHOTS / "admin-participant-full.png"), full_page=True)
+    broken = page.evaluate("""() => {
+        const broken = [];
+        for (const cell of document.querySelectorAll('table.answers td')) {
+            const walker = document.createTreeWalker(cell, NodeFilter.SHOW_TEXT);
+            for (let node = walker.nextNode(); node; node = walker.nextNode()) {
+                for (const match of node.data.matchAll(/\\S+/g)) {
+                    const range = document.createRange();
+                    range.setStart(node, match.index); range.setEnd(node, match.index + match[0].length);
+                    const lines = new Set([...range.getClientRects()].map(r => Math.round(r.top)));
+                    if (lines.size > 1) broken.push(match[0]);
+                }
+            }
+        }
+        return broken;
+    }""")
+    assert broken == []
+    wrap = page.evaluate("() => { const w = document.querySelector('table.answers').parentElement;"
+                         " return [w.scrollWidth, w.clientWidth, w.getBoundingClientRect().width]; }")
+    assert wrap[0] <= wrap[1] and wrap[2] > 1000  # the page's width, no sideways scrolling
+    icon = page.evaluate("document.querySelector('link[rel=icon]').href")
+    reply = httpx.get(icon)
+    assert reply.status_code == 200 and reply.headers["content-type"].startswith("image/svg+xml")
