@@ -8,14 +8,11 @@ import pytest
 
 from app.formats import sha256_file
 from search.bundle.build import build_bundle
+from tests.support.survey import survey_tables
 
 pytestmark = pytest.mark.slow
 
-SMALL_STUDY = """
-# the survey server's tables, which the builder copies without reading
-[study]
-id = "t"
-
+SMALL_STUDY = survey_tables() + """
 [build]
 seed = 7
 

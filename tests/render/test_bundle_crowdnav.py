@@ -11,15 +11,12 @@ from app.bundle import load_bundle
 from app.formats import sha256_file
 from search.bundle.build import build_bundle
 from search.cli import main
-from tests.search.test_crowdnav_search import SCENARIO
-from tests.support.crowdnav import HUMANS, write_model
+from tests.support.crowdnav import HUMANS, SCENARIO, write_model
+from tests.support.survey import survey_tables
 
 pytestmark = pytest.mark.slow
 
-STUDY = """
-[study]
-id = "t"
-
+STUDY = survey_tables() + """
 [build]
 seed = 3
 

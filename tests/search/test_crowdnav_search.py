@@ -4,19 +4,7 @@ world its config describes."""
 import json
 
 from search.cli import main
-from tests.support.crowdnav import HUMANS, write_model
-
-SCENARIO = """name = "three"
-[robot]
-start = [-4.0, -4.0]
-goal = [4.0, 4.0]
-[[humans]]
-position = [6.0, 0.0]
-[[humans]]
-position = [-3.0, 5.2]
-[[humans]]
-position = [0.0, -6.0]
-"""
+from tests.support.crowdnav import HUMANS, SCENARIO, write_model
 
 
 def test_search_and_verify_with_an_imported_agent(tmp_path, capsys):

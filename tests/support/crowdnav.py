@@ -103,3 +103,17 @@ def write_model(folder: Path, seed: int = 0, legacy: bool = True, config: dict =
     torch.save(random_state_dict(seed) if state_dict is None else state_dict, checkpoint,
                _use_new_zipfile_serialization=not legacy)
     return checkpoint
+
+
+# A three-human scenario for the imported agents' searches and bundles.
+SCENARIO = """name = "three"
+[robot]
+start = [-4.0, -4.0]
+goal = [4.0, 4.0]
+[[humans]]
+position = [6.0, 0.0]
+[[humans]]
+position = [-3.0, 5.2]
+[[humans]]
+position = [0.0, -6.0]
+"""

@@ -62,6 +62,13 @@ def write_bundle(root: Path, clip_files: list[Path], *, schemes, scenarios, agen
     return root
 
 
+def survey_tables() -> str:
+    """The paper study's survey tables without its [build] table: what a study file for a test bundle starts with,
+    since `foil bundle` checks the whole file before any search."""
+    text_ = PAPER_STUDY.read_text()
+    return text_[:text_.index("\n[build]\n")] + "\n"
+
+
 def study_text(**changes: str) -> str:
     """The shipped paper study with secret names; `changes` replace whole `key = value` lines (key=new value)."""
     text_ = PAPER_STUDY.read_text()
