@@ -121,9 +121,18 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     policies = [load_policy(spec) for spec in job.agents]
     scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
     reward_config = RewardConfig.from_dict(job.reward_settings)
+    problem = CoupledProblem(policies, scenario, reward=reward_config)
+    return search_files(job, problem, scenario.name, reward_config, started, progress,
+                        lambda actions, solver: build_summary(list(job.agents), policies, scenario, reward_config,
+                                                              actions, solver))
+
+
+def search_files(job: SearchJob, problem, scenario_name: str, reward_config: RewardConfig, started: float,
+                 progress: bool, summarize) -> dict[str, str]:
+    """Search ``problem`` with the job's solver and write its files; ``summarize(env_actions, solver)`` builds the
+    summary of a kept trajectory (any domain's)."""
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)
-    problem = CoupledProblem(policies, scenario, reward=reward_config)
     tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
     try:
         solve(problem, tracker, np.random.default_rng(job.seed), solver_config)
@@ -135,9 +144,8 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
               "budget_used": tracker.steps}
     summaries = []
     for found in tracker.queue.ranked():
-        summary = build_summary(list(job.agents), policies, scenario, reward_config, found.actions,
-                                solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
-        summaries.append(summary)
+        summaries.append(summarize(found.actions,
+                                   solver | {"search_reward": found.reward, "found_at_step": found.sim_steps}))
     summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
     files = {}
     for rank, summary in enumerate(summaries, start=1):
@@ -146,7 +154,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     record = {
         "format": "foil.run/1",
         "agents": list(job.agents),
-        "scenario": scenario.name,
+        "scenario": scenario_name,
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
         "top_k": job.top_k,
