@@ -10,9 +10,14 @@ from pathlib import Path
 
 
 def _train(args: argparse.Namespace) -> int:
-    from search.agents.train import load_train_config, train
+    from search.highway.train import is_highway_config
 
-    last = train(load_train_config(args.config), args.out)
+    if is_highway_config(args.config):
+        from search.highway.train import load_config, train
+    else:
+        from search.agents.train import load_train_config as load_config
+        from search.agents.train import train
+    last = train(load_config(args.config), args.out)
     print(f"last checkpoint: {last}")
     return 0
 
@@ -20,7 +25,16 @@ def _train(args: argparse.Namespace) -> int:
 def _release(args: argparse.Namespace) -> int:
     from search.agents.policies import AGENTS_DIR
     from search.agents.release import release, validate_run
+    from search.highway.release import is_highway_run
 
+    if is_highway_run(args.run_dir):
+        from search.highway import release as highway
+
+        if args.validate_only:
+            highway.validate_run(args.run_dir, args.every)
+        else:
+            print(json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every), indent=1))
+        return 0
     if args.validate_only:
         validate_run(args.run_dir, args.episodes, args.every)
     else:
@@ -30,6 +44,12 @@ def _release(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from search.agents.evaluate import run_eval
+    from search.highway.domain import CROWD, infer_domain
+
+    if infer_domain([args.agent]) != CROWD:
+        from search.highway.evaluate import run_eval as run_highway_eval
+
+        return run_highway_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json)
 
     return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit)
 
@@ -97,11 +117,22 @@ def _search_job_settings(args: argparse.Namespace) -> dict:
 
 
 def _search(args: argparse.Namespace) -> int:
+    from search.highway.domain import CROWD, infer_domain, load_gym_scenario
     from search.solvers.runner import SearchJob, run_search, write_outputs
 
-    job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
-                    **_search_job_settings(args))
-    out = write_outputs(args.out, run_search(job, progress=not args.quiet))
+    if infer_domain(_names(args.agents), args.scenario) != CROWD:
+        from search.gym.summary import run_gym_search
+
+        scenario = load_gym_scenario(args.scenario)
+        settings = _search_job_settings(argparse.Namespace(**{**vars(args), "world": []}))
+        job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
+                        **settings | {"world_settings": _json_settings(args.world)})
+        files = run_gym_search(job, scenario, progress=not args.quiet)
+    else:
+        job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
+                        **_search_job_settings(args))
+        files = run_search(job, progress=not args.quiet)
+    out = write_outputs(args.out, files)
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
     return 0
 
@@ -121,14 +152,30 @@ def _search_all(args: argparse.Namespace) -> int:
 
 
 def _verify(args: argparse.Namespace) -> int:
+    from app.formats import load_summary
+    from search.gym.summary import is_gym_summary, verify_gym
     from search.solvers.summary import verify
 
     failed = 0
     for path in args.summaries:
-        problems = verify(path)
+        problems = verify_gym(path) if is_gym_summary(load_summary(path)) else verify(path)
         failed += bool(problems)
         print(f"{path}: " + ("reproduced exactly" if not problems else "DIFFERS\n  " + "\n  ".join(problems)))
     return 1 if failed else 0
+
+
+def _json_settings(items: list[str]) -> dict:
+    """``key=value`` settings of an environment adapter, each value read as JSON where it is (else text)."""
+    settings = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"bad world setting {item!r}: use key=value, e.g. vehicles_density=2")
+        try:
+            settings[key.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            settings[key.strip()] = text
+    return settings
 
 
 def _names(text: str) -> list[str]:

@@ -48,9 +48,10 @@ def test_foil_serve_refuses_a_bad_study_with_its_line(tmp_path, bundle_dir):
     assert "foil serve: error:" in output and "unknown_table: unknown key" in output and ", line " in output
 
 
-def test_the_server_never_imports_search_or_torch():
+def test_the_server_never_imports_search_torch_or_the_highway_packages():
     code = ("import sys, app.main, app.serve; "
-            "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch')]; print(bad); "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch', 'highway_env', 'pygame', "
+            "'stable_baselines3', 'gymnasium')]; print(bad); "
             "sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
