@@ -92,6 +92,11 @@ def _render(args: argparse.Namespace) -> int:
 
     options = RenderOptions(fps=args.fps, speed=args.speed, width=args.width, crf=args.crf)
     numbers = [int(n) for n in args.numbers.split(",")] if args.numbers else None
+    from app.formats import load_summary
+    from search.gym.summary import is_gym_summary
+
+    if is_gym_summary(load_summary(args.summary)):
+        from search.highway.clips import render_highway as render_file
     result = render_file(args.summary, args.out, numbers=numbers, options=options)
     print(f"{result.clip}: {result.frames} frames, {result.seconds:.1f} s, {result.width}x{result.height}, "
           f"rendered in {result.render_s:.2f} s; poster {result.poster.name}, contact sheet {result.sheet.name}")

@@ -135,7 +135,7 @@ class GymCoupledProblem:
     """The agents under comparison, one environment instance each, under one environment action (a `Problem`)."""
 
     def __init__(self, agents: list[GymAgent], scenario: GymScenario, reward: RewardConfig | None = None,
-                 adapter: Adapter | None = None):
+                 adapter: Adapter | None = None, render: bool = False):
         if len(agents) < 2:
             raise ValueError("a comparison needs at least two agents")
         self.agents, self.scenario = agents, scenario
@@ -148,7 +148,7 @@ class GymCoupledProblem:
         self.horizon = self.reward_config.horizon
         self.prior = ActionPrior(self.action_shape, 1.0, self.reward_config.prior, self.reward_config.prior_sigma)
         self.reward = DivergenceReward(self.reward_config, self.prior)
-        env = self.adapter.make()
+        env = self.adapter.make(render=render)
         observation, _ = env.reset(seed=scenario.seed)
         self.divergence = Divergence(env.action_space, self.reward_config)
         self._initial = [Instance(env, np.asarray(observation))]

@@ -31,10 +31,12 @@ def _floats(value) -> list:
     return np.asarray(value, dtype=np.float64).tolist()
 
 
-def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_step=None) -> dict:
+def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -> dict:
     """Step a batch-1 problem through ``env_actions``; per step the record a summary holds, and the reward terms.
-    ``on_step(problem)`` sees the problem after each step (the clips render its instances there)."""
+    ``on_state(problem)`` sees the problem after the reset and after each step (the clips render it there)."""
     problem.reset(1)
+    if on_state is not None:
+        on_state(problem)
     c = problem.reward_config
     steps, rewards, terms = [], [], {name: [] for name in TERMS}
     terminal_at = None
@@ -52,8 +54,8 @@ def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_step=None) ->
                       "humans": [_floats(problem.adapter.others(instance.env)) for instance in row],
                       "robots": [_floats(problem.adapter.position(instance.env)) for instance in row],
                       "robot_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]]})
-        if on_step is not None:
-            on_step(problem)
+        if on_state is not None:
+            on_state(problem)
         if terminal[0]:
             terminal_at = i
             break

@@ -22,11 +22,13 @@ META_CONFIG = CONFIG | {"action": {"type": "DiscreteMetaAction"}}  # the discret
 
 
 def make_env(discrete: bool = False, render: bool = False, config: dict | None = None):
-    """A fresh highway environment (no display needed: pygame draws offscreen when rendering)."""
-    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    """A fresh highway environment. Rendering needs no display: pygame draws on SDL's "offscreen" video driver
+    (highway-env switches its drawing off under the "dummy" driver, so that one is replaced)."""
+    if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":
+        os.environ["SDL_VIDEODRIVER"] = "offscreen"
     os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
     import gymnasium as gym
     import highway_env  # noqa: F401  (registers the environments)
 
-    base = META_CONFIG if discrete else CONFIG
+    base = (META_CONFIG if discrete else CONFIG) | {"offscreen_rendering": True}
     return gym.make(ENV_ID, config=base | (config or {}), render_mode="rgb_array" if render else None)
