@@ -33,13 +33,12 @@ from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, mani
 from app.study import Build, StudyError, refuse
 from app.study import parse_build as parse_build_table
 from app.visible import VisibleClip, audit
-from search.clips.render import ROBOT_STYLES, RenderOptions, render, robot_label
-from search.clips.scene import load_scene
+from search.bundle import worlds
+from search.clips.render import ROBOT_STYLES, RenderOptions, robot_label
 from search.solvers.runner import (
     SearchJob,
     check_settings,
     limit_threads,
-    run_search,
     solver_config_class,
     write_outputs,
 )
@@ -108,19 +107,24 @@ def _render_options(build: Build, text: str, source: str) -> RenderOptions:
 def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
     """Each scheme's solver, reward and world settings checked against those settings' fields, and each set's
     scenarios found, so that a bad one is refused at its line before any work."""
-    from search.sim.scenarios import load_scenario
     from search.sim.world import WorldConfig
     from search.solvers.reward import RewardConfig
 
     problems = []
+    try:
+        crowd = worlds.is_crowd([a for clip_set in build.sets for a in clip_set.all_agents()])
+    except ValueError as error:
+        problems.append((("build", "sets"), str(error)))
+        crowd = True
     for name, scheme in build.schemes.items():
         try:
             solver = solver_config_class(scheme.solver)
         except ValueError as error:
             problems.append((("build", "schemes", name, "solver"), str(error)))
             solver = None
+        world = WorldConfig if crowd else None  # an environment adapter's settings are its own
         for table, cls, what in (("settings", solver, "solver"), ("reward", RewardConfig, "reward"),
-                                 ("world", WorldConfig, "world")):
+                                 ("world", world, "world")):
             for key, value in getattr(scheme, table).items():
                 try:
                     if cls is not None:
@@ -130,7 +134,7 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
     for i, clip_set in enumerate(build.sets):
         for j, scenario in enumerate(clip_set.scenarios):
             try:
-                load_scenario(scenario)
+                worlds.scenario_dict(clip_set.all_agents(), scenario, {})
             except (ValueError, FileNotFoundError) as error:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
     return problems
@@ -214,7 +218,7 @@ def agent_identity(agent: str) -> dict:
 
     if agent in SCRIPTED:
         return {"agent": agent}
-    path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
+    path = worlds.agent_file(agent) or (AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent))
     return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
 
 
@@ -228,18 +232,17 @@ def search_job(job: ClipJob) -> SearchJob:
                      seed=scheme.seed, top_k=scheme.top_k,
                      solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
                      reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
-                     world_settings=check_settings(WorldConfig, scheme.world, "world"))
+                     world_settings=check_settings(WorldConfig, scheme.world, "world")
+                     if worlds.is_crowd(job.pair, job.scenario) else dict(scheme.world))
 
 
 def search_inputs(search: SearchJob) -> dict:
     """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
     input."""
-    from search.sim.scenarios import load_scenario
     from search.solvers.reward import RewardConfig
-    from search.solvers.summary import frozen_scenario
 
     return {"agents": [agent_identity(a) for a in search.agents],
-            "scenario": frozen_scenario(load_scenario(search.scenario), search.world_settings).to_dict(),
+            "scenario": worlds.scenario_dict(search.agents, search.scenario, search.world_settings),
             "solver": search.solver, "solver_settings": asdict(solver_config_class(search.solver)(
                 **search.solver_settings)),
             "reward": RewardConfig(**search.reward_settings).to_dict(),
@@ -277,9 +280,6 @@ class Cache:
 
 def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, log) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth), computed once per input."""
-    from search.agents.evaluate import evaluate
-    from search.agents.policies import load_policy
-
     results = {}
     for agent in agents:
         inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed}
@@ -288,7 +288,7 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
             log(f"eval {agent}: cached")
         else:
             started = time.perf_counter()
-            result = evaluate(load_policy(agent), episodes=episodes, seed=seed) | {"agent": agent}
+            result = worlds.evaluate(agent, episodes, seed) | {"agent": agent}
             folder = cache.store("eval", inputs)
             (folder / "eval.json").write_text(json.dumps(result, indent=1))
             cache.seal("eval", inputs)
@@ -305,11 +305,9 @@ def _describe(job: ClipJob) -> str:
 def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
     """A cached search is reused while its inputs are unchanged and its summary still re-simulates exactly
     (`foil verify`), so changes to the simulator or the policies' code are caught too."""
-    from search.solvers.summary import verify
-
     if not cache.valid("search", inputs, "summary-001.json"):
         return False
-    problems = verify(cache.path("search", inputs) / "summary-001.json")
+    problems = worlds.verify(cache.path("search", inputs) / "summary-001.json")
     if problems:
         log(f"{_describe(job)}: the cached summary no longer re-simulates exactly ({problems[0]}); searching again")
         return False
@@ -320,7 +318,7 @@ def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
 def _run_search(search: SearchJob, folder: Path) -> float:
     """Run one search and write its files into ``folder``; the seconds it took."""
     started = time.perf_counter()
-    write_outputs(folder, run_search(search))
+    write_outputs(folder, worlds.search_files(search))
     return time.perf_counter() - started
 
 
@@ -362,16 +360,14 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
 
 def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
     """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
-    import search.clips.render
-
     inputs = {"summary": sha256_file(summary), "numbers": list(job.numbers), "options": asdict(options),
-              "renderer": sha256_file(Path(search.clips.render.__file__)), "clip": out.name}
+              "renderer": sha256_file(worlds.renderer_file(summary)), "clip": out.name}
     folder = cache.path("render", inputs)
     if cache.valid("render", inputs, "sha256") and out.is_file() \
             and (folder / "sha256").read_text() == sha256_file(out):
         log(f"render {job.id}: cached")
         return
-    result = render(load_scene(summary), out, list(job.numbers), options)
+    result = worlds.render(summary, out, list(job.numbers), options)
     folder = cache.store("render", inputs)
     (folder / "sha256").write_text(sha256_file(out))
     cache.seal("render", inputs)

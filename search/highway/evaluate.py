@@ -44,6 +44,7 @@ def evaluate(agent: GymAgent, episodes: int, seed: int = 0, adapter: HighwayAdap
     half = 1.96 * rewards.std(ddof=1) / math.sqrt(episodes)
     return {"agent": agent.name, "domain": "highway", "episodes": episodes, "seed": seed,
             "collision_rate": collisions / episodes, "collision_ci95": list(wilson(collisions, episodes)),
+            "timeout_rate": 0.0,  # an episode ends in a crash or lasts the whole drive
             "success_rate": 1 - collisions / episodes, "reward_mean": float(rewards.mean()),
             "reward_ci95": [float(rewards.mean() - half), float(rewards.mean() + half)],
             "length_mean": float(np.mean(lengths))}
