@@ -33,7 +33,8 @@ def _release(args: argparse.Namespace) -> int:
         if args.validate_only:
             highway.validate_run(args.run_dir, args.every)
         else:
-            print(json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every), indent=1))
+            print(json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every, jobs=args.jobs),
+                             indent=1))
         return 0
     if args.validate_only:
         validate_run(args.run_dir, args.episodes, args.every)
@@ -207,6 +208,8 @@ def build_parser() -> argparse.ArgumentParser:
     release.add_argument("--episodes", type=int, default=500, help="validation and test episodes (default 500)")
     release.add_argument("--every", type=int, default=2, help="validate every N-th checkpoint (default 2)")
     release.add_argument("--validate-only", action="store_true", help="print the validation curve, ship nothing")
+    release.add_argument("--jobs", type=int, default=1, help="highway runs: test the three agents in this many "
+                         "processes (default 1)")
     release.set_defaults(handler=_release)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")

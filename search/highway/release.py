@@ -1,6 +1,6 @@
 """Pick highway-lo, highway-med and highway-hi from one highway training run; write their files and model cards.
 
-    foil release runs/highway [--out DIR] [--episodes 500] [--every 2]
+    foil release runs/highway [--out DIR] [--episodes 500] [--every 2] [--jobs 3]
 
 Every ``every``-th checkpoint (and the last) is validated on ``VALIDATION_EPISODES`` episodes of evaluation seed
 1. hi is the snapshot with the best validation reward; lo is the earliest validated snapshot, and med the one
@@ -26,7 +26,7 @@ VALIDATION_SEED, TEST_SEED = 1, 0
 COLUMNS = ("checkpoint", "env_steps", "episodes", "reward_mean", "reward_low", "reward_high", "collision_rate",
            "collision_low", "collision_high")
 REPRODUCE = ("foil train --config search/highway/train.toml --out runs/highway\n"
-             "foil release runs/highway --out search/highway/agents")
+             "foil release runs/highway --out search/highway/agents --every 1 --jobs 3")
 
 
 class ReleaseError(ValueError):
@@ -146,17 +146,28 @@ validation; deterministic action; an episode ends with a crash, leaving the road
 """
 
 
-def release(run_dir: Path, out: Path | None, episodes: int, every: int, log=print) -> dict[str, dict]:
-    """Choose lo, med and hi from ``run_dir`` and write ``out``/{lo,med,hi}.zip with their model cards."""
+def _test(name: str, path: Path, episodes: int) -> dict:
+    return evaluate(GymAgent(f"highway-{name}", str(path), load_sb3(path)), episodes, TEST_SEED, HighwayAdapter())
+
+
+def release(run_dir: Path, out: Path | None, episodes: int, every: int, log=print, jobs: int = 1) -> dict[str, dict]:
+    """Choose lo, med and hi from ``run_dir`` and write ``out``/{lo,med,hi}.zip with their model cards; the three
+    test evaluations run in ``jobs`` processes."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
     run_dir, out = Path(run_dir), Path(out or AGENTS_DIR)
     chosen = choose(validate_run(run_dir, every, log))
-    adapter = HighwayAdapter()
-    tests = {}
-    for name, row in chosen.items():
-        path = run_dir / "checkpoints" / row["checkpoint"]
-        tests[name] = evaluate(GymAgent(f"highway-{name}", str(path), load_sb3(path)), episodes, TEST_SEED, adapter)
-        log(f"highway-{name} = {row['checkpoint']}: test reward {tests[name]['reward_mean']:.2f}, collisions "
-            f"{tests[name]['collision_rate']:.3f}")
+    paths = {name: run_dir / "checkpoints" / row["checkpoint"] for name, row in chosen.items()}
+    if jobs > 1:
+        with ProcessPoolExecutor(min(jobs, 3), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {name: pool.submit(_test, name, path, episodes) for name, path in paths.items()}
+            tests = {name: future.result() for name, future in futures.items()}
+    else:
+        tests = {name: _test(name, path, episodes) for name, path in paths.items()}
+    for name, test in tests.items():
+        log(f"highway-{name} = {chosen[name]['checkpoint']}: test reward {test['reward_mean']:.2f}, collisions "
+            f"{test['collision_rate']:.3f}")
     rows = {name: _row(Path(chosen[name]["checkpoint"]), tests[name]) for name in chosen}
     clashes = [f"{a}/{b}" for a, b in (("lo", "med"), ("med", "hi"), ("lo", "hi")) if not apart(rows[a], rows[b])]
     if clashes:

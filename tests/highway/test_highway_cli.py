@@ -80,3 +80,16 @@ def test_foil_train_writes_a_highway_run_that_release_recognises(tmp_path, capsy
     config.write_text('domain = "highway"\nlearning_rat = 1\n')
     assert main(["train", "--config", str(config), "--out", str(run)]) == 2
     assert "unknown highway training settings ['learning_rat']" in capsys.readouterr().err
+
+
+def test_the_shipped_highway_agents_search_verify_and_evaluate(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["search", "--agents", "highway-lo,highway-hi", "--scenario", "highway-dense", "--out", str(out),
+                 "--budget", "12", "--top-k", "1", "--solver", "mcts", "--set", "batch=2", "--quiet"]) == 0
+    summary = json.loads((out / "summary-001.json").read_text())
+    assert [a["name"] for a in summary["agents"]] == ["highway-lo", "highway-hi"]
+    assert summary["agents"][1]["source"].endswith("search/highway/agents/hi.zip")
+    assert main(["verify", str(out / "summary-001.json")]) == 0
+    capsys.readouterr()
+    assert main(["eval", "highway-lo", "--episodes", "2", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["collision_rate"] == 1.0  # the untrained snapshot always crashes
