@@ -144,15 +144,23 @@ def _search(args: argparse.Namespace) -> int:
 
 
 def _search_all(args: argparse.Namespace) -> int:
+    from search.highway.domain import infer_domain
     from search.solvers.runner import run_all, study_jobs
 
     solvers = _names(args.solvers)
-    settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0]}))
+    crowd = all(infer_domain(_names(args.agents), scenario) == "crowd" for scenario in _names(args.scenarios))
+    settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0],
+                                                          "world": args.world if crowd else []}))
+    if not crowd:
+        settings["world_settings"] = _json_settings(args.world)
     if len(solvers) > 1 and args.set:
         raise ValueError("--set applies to one solver: give a single --solvers with it")
     jobs = study_jobs(_names(args.agents), _names(args.scenarios), solvers, joint=args.joint, **settings)
+    search = None
+    if not crowd:
+        from search.bundle.worlds import search_files as search
     study = run_all(jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address,
-                    progress=not args.quiet)
+                    progress=not args.quiet, search=search)
     print(f"{args.out}: {len(jobs)} searches in {study['wall_s']:.1f} s; study.json lists them")
     return 0
 

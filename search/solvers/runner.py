@@ -197,15 +197,16 @@ def limit_threads() -> None:
         os.environ.setdefault(name, "1")
 
 
-def _job_in_worker(job: SearchJob) -> dict[str, str]:
+def _job_in_worker(job: SearchJob, search=None) -> dict[str, str]:
     limit_threads()
-    return run_search(job)
+    return (search or run_search)(job)
 
 
 def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, backend: str = "process",
-            ray_address: str | None = None, progress: bool = True) -> dict:
+            ray_address: str | None = None, progress: bool = True, search=None) -> dict:
     """Run jobs in parallel and write each one's files to ``out/<solver>/<agents>/<scenario>/``; also writes
-    ``out/study.json`` with every job's record. Returns that record."""
+    ``out/study.json`` with every job's record. Returns that record. ``search`` runs one job (default
+    ``run_search``, the crowd world's; another world passes its own top-level function)."""
     from tqdm import tqdm
 
     started = time.perf_counter()
@@ -213,13 +214,13 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)
     results: dict[int, dict[str, str]] = {}
     if backend == "ray":
-        for index, files in _run_ray(jobs, ray_address, workers):
+        for index, files in _run_ray(jobs, ray_address, workers, search):
             results[index] = files
             bar.update()
     elif backend == "process":
         if workers == 1:
             for index, job in enumerate(jobs):
-                results[index] = run_search(job)
+                results[index] = (search or run_search)(job)
                 bar.update()
         else:
             import multiprocessing
@@ -227,7 +228,7 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
 
             context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
             with ProcessPoolExecutor(workers, mp_context=context, initializer=limit_threads) as pool:
-                futures = {pool.submit(_job_in_worker, job): index for index, job in enumerate(jobs)}
+                futures = {pool.submit(_job_in_worker, job, search): index for index, job in enumerate(jobs)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
@@ -248,7 +249,7 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
     return study
 
 
-def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
+def _run_ray(jobs: list[SearchJob], address: str | None, workers: int, search=None):
     """Yield (index, files) as Ray tasks finish; a local Ray instance when no address is given."""
     try:
         import ray
@@ -262,7 +263,7 @@ def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
         task = ray.remote(num_cpus=1)(_job_in_worker)
-        pending = {task.remote(job): index for index, job in enumerate(jobs)}
+        pending = {task.remote(job, search): index for index, job in enumerate(jobs)}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:

@@ -93,3 +93,13 @@ def test_the_shipped_highway_agents_search_verify_and_evaluate(tmp_path, capsys)
     capsys.readouterr()
     assert main(["eval", "highway-lo", "--episodes", "2", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["collision_rate"] == 1.0  # the untrained snapshot always crashes
+
+
+def test_foil_search_all_runs_highway_pairs(tmp_path):
+    out = tmp_path / "all"
+    assert main(["search-all", "--agents", DRIVERS, "--scenarios", "highway-light", "--solvers", "random",
+                 "--budget", "6", "--top-k", "1", "--set", "batch=1", "--jobs", "1", "--quiet", "--out",
+                 str(out)]) == 0
+    study = json.loads((out / "study.json").read_text())
+    assert len(study["jobs"]) == 1
+    assert main(["verify", str(out / study["jobs"][0]["dir"] / "summary-001.json")]) == 0
