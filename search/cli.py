@@ -203,7 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out)")
+    train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out); a config "
+                           "with domain = \"highway\" trains a highway agent with Stable-Baselines3")
     train.add_argument("--config", required=True, help="TOML file of training settings (see docs/agents.md)")
     train.add_argument("--out", required=True, help="run directory: progress.csv and checkpoints/")
     train.set_defaults(handler=_train)
@@ -222,7 +223,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
     evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint or "
-                          "TorchScript file, or module:attribute")
+                          "TorchScript file, or module:attribute; or a highway agent: highway-lo, highway-med, "
+                          "highway-hi or a Stable-Baselines3 .zip (docs/highway.md)")
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
     evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
@@ -295,7 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
     _search_arguments(search)
     search.add_argument("--agents", required=True, help="two or more agents, comma-separated: A,B[,C] (more "
                         "than two are searched jointly, their pairwise divergences combined)")
-    search.add_argument("--scenario", required=True, help="shipped scenario name or TOML file")
+    search.add_argument("--scenario", required=True, help="shipped scenario name (crowd or highway-...) or TOML "
+                        "file; the world is inferred from it and the agents")
     search.add_argument("--solver", default="mcts", help="mcts (default), nfirst, random or cem")
     search.set_defaults(handler=_search)
 
