@@ -73,7 +73,7 @@ class Instance:
 
 @dataclass
 class GymSnapshot:
-    rows: list[list[Instance]]
+    rows: list[list[Instance]]  # saved instances: ``env`` holds the adapter's snapshot of the environment
     steps: np.ndarray  # (B,) steps taken from the initial state
 
     @property
@@ -151,8 +151,8 @@ class GymCoupledProblem:
         env = self.adapter.make(render=render)
         observation, _ = env.reset(seed=scenario.seed)
         self.divergence = Divergence(env.action_space, self.reward_config)
-        self._initial = [Instance(env, np.asarray(observation))]
-        self._initial += [Instance(self.adapter.restore_env(env), np.asarray(observation)) for _ in agents[1:]]
+        saved = self.adapter.snapshot_env(env)
+        self._initial = [Instance(saved, np.asarray(observation)) for _ in agents]  # every agent from one state
         self.rows: list[list[Instance]] = []
         self.t = np.zeros(0, dtype=np.int64)
         self.last_agent_actions: list[list[np.ndarray]] = []  # the last step's, per row and agent (for replays)
@@ -162,12 +162,18 @@ class GymCoupledProblem:
     def batch(self) -> int:
         return len(self.rows)
 
-    def _copy(self, row: list[Instance]) -> list[Instance]:
+    def _save(self, row: list[Instance]) -> list[Instance]:
+        """A row as saved instances (``env`` holds the adapter's snapshot of the environment)."""
+        return [Instance(self.adapter.snapshot_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
+                for i in row]
+
+    def _load(self, row: list[Instance]) -> list[Instance]:
+        """Live instances from a saved row, which stays usable."""
         return [Instance(self.adapter.restore_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
                 for i in row]
 
     def reset(self, batch: int) -> None:
-        self.rows = [self._copy(self._initial) for _ in range(batch)]
+        self.rows = [self._load(self._initial) for _ in range(batch)]
         self.t = np.zeros(batch, dtype=np.int64)
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -230,15 +236,15 @@ class GymCoupledProblem:
     def snapshot(self, index=None) -> GymSnapshot:
         rows = self.rows if index is None else [self.rows[i] for i in np.asarray(index).reshape(-1)]
         steps = self.t.copy() if index is None else self.t[np.asarray(index).reshape(-1)]
-        return GymSnapshot([self._copy(row) for row in rows], steps)
+        return GymSnapshot([self._save(row) for row in rows], steps)
 
     def restore(self, snapshot: GymSnapshot) -> None:
-        self.rows = [self._copy(row) for row in snapshot.rows]
+        self.rows = [self._load(row) for row in snapshot.rows]
         self.t = snapshot.steps.copy()
 
     def assign(self, index, snapshot: GymSnapshot) -> None:
         for i, row, t in zip(np.asarray(index).reshape(-1), snapshot.rows, snapshot.steps, strict=True):
-            self.rows[i] = self._copy(row)
+            self.rows[i] = self._load(row)
             self.t[i] = t
 
     def concat(self, snapshots: list[GymSnapshot]) -> GymSnapshot:

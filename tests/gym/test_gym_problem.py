@@ -20,12 +20,12 @@ BOX = ("tests.gym.corridor:straight", "tests.gym.corridor:dodging")
 DISCRETE = ("tests.gym.corridor:straight_moves", "tests.gym.corridor:dodging_moves")
 
 
-def scenario(discrete: bool = False, seed: int = 3) -> GymScenario:
-    return GymScenario("corridor", ADAPTER, seed, {"discrete": discrete})
+def scenario(discrete: bool = False, seed: int = 3, adapter: str = ADAPTER) -> GymScenario:
+    return GymScenario("corridor", adapter, seed, {"discrete": discrete})
 
 
-def problem(discrete: bool = False, **reward) -> GymCoupledProblem:
-    chosen = scenario(discrete)
+def problem(discrete: bool = False, adapter: str = ADAPTER, **reward) -> GymCoupledProblem:
+    chosen = scenario(discrete, adapter=adapter)
     adapter = chosen.load_adapter()
     return GymCoupledProblem([load_agent(spec, adapter) for spec in (DISCRETE if discrete else BOX)], chosen,
                              RewardConfig(**reward))
@@ -35,9 +35,10 @@ def walkers(p: GymCoupledProblem) -> np.ndarray:
     return np.array([[instance.env.walker for instance in row] for row in p.rows])
 
 
+@pytest.mark.parametrize("adapter", [ADAPTER, "tests.gym.corridor:FastCorridorAdapter"])
 @pytest.mark.parametrize("discrete", [False, True])
-def test_restore_continues_exactly_as_the_original_did(discrete):
-    p = problem(discrete)
+def test_restore_continues_exactly_as_the_original_did(discrete, adapter):
+    p = problem(discrete, adapter)
     p.reset(3)
     rng = np.random.default_rng(0)
     for _ in range(3):
@@ -150,3 +151,11 @@ def test_bad_adapters_and_agents_are_refused_with_how_to_fix():
         load_adapter("tests.gym.corridor:Corridor")
     with pytest.raises(ValueError, match="Stable-Baselines3 .zip file or module:attribute"):
         load_agent("nobody", load_adapter(ADAPTER))
+
+
+def test_a_faster_state_hook_gives_the_same_search_as_deep_copies():
+    job = SearchJob(agents=BOX, scenario="corridor", budget=300, top_k=2, reward_settings={"horizon": 40})
+    deep = run_gym_search(job, scenario())
+    fast = run_gym_search(job, scenario(adapter="tests.gym.corridor:FastCorridorAdapter"))
+    strip = lambda files: {k: json.loads(v) | {"scenario": None} for k, v in files.items() if k != "run.json"}  # noqa: E731
+    assert strip(deep) == strip(fast)
