@@ -188,11 +188,12 @@ class GymCoupledProblem:
             row_scaled, row_positions = [], []
             for k, instance in enumerate(row):
                 if instance.outcome == RUNNING:
-                    before = np.asarray(self.adapter.position(instance.env), dtype=np.float64)
+                    # copies: an environment may move its position array in place
+                    before = np.array(self.adapter.position(instance.env), dtype=np.float64)
                     self.adapter.apply(instance.env, np.clip(actions[b], -1.0, 1.0))
                     observation, _, terminated, truncated, info = instance.env.step(agent_actions[k][b])
                     instance.observation = np.asarray(observation)
-                    after = np.asarray(self.adapter.position(instance.env), dtype=np.float64)
+                    after = np.array(self.adapter.position(instance.env), dtype=np.float64)
                     instance.path_length += float(np.linalg.norm(after - before))
                     if terminated or truncated:
                         event = self.adapter.outcome(bool(terminated), bool(truncated), info)
@@ -203,7 +204,7 @@ class GymCoupledProblem:
                     row_scaled.append(self.divergence.scaled(agent_actions[k][b]))
                 else:
                     row_scaled.append(self.divergence.finished())
-                row_positions.append(np.asarray(self.adapter.position(instance.env), dtype=np.float64))
+                row_positions.append(np.array(self.adapter.position(instance.env), dtype=np.float64))
                 outcome[b, k] = instance.outcome
             scaled.append(row_scaled)
             positions.append(row_positions)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -92,6 +94,10 @@ def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, disc
     assert {k: v for k, v in files.items() if k != "run.json"} == {k: v for k, v in again.items() if k != "run.json"}
     for path in sorted(write_outputs(tmp_path, files).glob("summary-*.json")):
         assert verify_gym(path) == []
+        summary = json.loads(path.read_text())
+        for k, outcome in enumerate(summary["outcomes"]):  # the path driven, from the positions it went through
+            xs = [step["robots"][k][0] for step in summary["steps"]]
+            assert outcome["path_length"] >= xs[-1] - xs[0] > 0
 
 
 @pytest.mark.parametrize("algorithm,discrete", [("SAC", False), ("PPO", False), ("DQN", True)])
