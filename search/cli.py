@@ -10,9 +10,14 @@ from pathlib import Path
 
 
 def _train(args: argparse.Namespace) -> int:
-    from search.agents.train import load_train_config, train
+    from search.highway.train import is_highway_config
 
-    last = train(load_train_config(args.config), args.out)
+    if is_highway_config(args.config):
+        from search.highway.train import load_config, train
+    else:
+        from search.agents.train import load_train_config as load_config
+        from search.agents.train import train
+    last = train(load_config(args.config), args.out)
     print(f"last checkpoint: {last}")
     return 0
 
@@ -20,7 +25,17 @@ def _train(args: argparse.Namespace) -> int:
 def _release(args: argparse.Namespace) -> int:
     from search.agents.policies import AGENTS_DIR
     from search.agents.release import release, validate_run
+    from search.highway.release import is_highway_run
 
+    if is_highway_run(args.run_dir):
+        from search.highway import release as highway
+
+        if args.validate_only:
+            highway.validate_run(args.run_dir, args.every)
+        else:
+            print(json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every, jobs=args.jobs),
+                             indent=1))
+        return 0
     if args.validate_only:
         validate_run(args.run_dir, args.episodes, args.every)
     else:
@@ -30,8 +45,14 @@ def _release(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from search.agents.evaluate import run_eval
+    from search.highway.domain import CROWD, infer_domain
     from search.sim.world import WorldConfig
     from search.solvers.runner import parse_settings
+
+    if infer_domain([args.agent]) != CROWD:
+        from search.highway.evaluate import run_eval as run_highway_eval
+
+        return run_highway_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json)
 
     return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit,
                     world=parse_settings(WorldConfig, args.world, "world"))
@@ -75,6 +96,11 @@ def _render(args: argparse.Namespace) -> int:
 
     options = RenderOptions(fps=args.fps, speed=args.speed, width=args.width, crf=args.crf)
     numbers = [int(n) for n in args.numbers.split(",")] if args.numbers else None
+    from app.formats import load_summary
+    from search.gym.summary import is_gym_summary
+
+    if is_gym_summary(load_summary(args.summary)):
+        from search.highway.clips import render_highway as render_file
     result = render_file(args.summary, args.out, numbers=numbers, options=options)
     print(f"{result.clip}: {result.frames} frames, {result.seconds:.1f} s, {result.width}x{result.height}, "
           f"rendered in {result.render_s:.2f} s; poster {result.poster.name}, contact sheet {result.sheet.name}")
@@ -100,38 +126,73 @@ def _search_job_settings(args: argparse.Namespace) -> dict:
 
 
 def _search(args: argparse.Namespace) -> int:
+    from search.highway.domain import CROWD, infer_domain, load_gym_scenario
     from search.solvers.runner import SearchJob, run_search, write_outputs
 
-    job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
-                    **_search_job_settings(args))
-    out = write_outputs(args.out, run_search(job, progress=not args.quiet))
+    if infer_domain(_names(args.agents), args.scenario) != CROWD:
+        from search.gym.summary import run_gym_search
+
+        scenario = load_gym_scenario(args.scenario)
+        settings = _search_job_settings(argparse.Namespace(**{**vars(args), "world": []}))
+        job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
+                        **settings | {"world_settings": _json_settings(args.world)})
+        files = run_gym_search(job, scenario, progress=not args.quiet)
+    else:
+        job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
+                        **_search_job_settings(args))
+        files = run_search(job, progress=not args.quiet)
+    out = write_outputs(args.out, files)
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
     return 0
 
 
 def _search_all(args: argparse.Namespace) -> int:
+    from search.highway.domain import infer_domain
     from search.solvers.runner import run_all, study_jobs
 
     solvers = _names(args.solvers)
-    settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0]}))
+    crowd = all(infer_domain(_names(args.agents), scenario) == "crowd" for scenario in _names(args.scenarios))
+    settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0],
+                                                          "world": args.world if crowd else []}))
+    if not crowd:
+        settings["world_settings"] = _json_settings(args.world)
     if len(solvers) > 1 and args.set:
         raise ValueError("--set applies to one solver: give a single --solvers with it")
     jobs = study_jobs(_names(args.agents), _names(args.scenarios), solvers, joint=args.joint, **settings)
+    search = None
+    if not crowd:
+        from search.bundle.worlds import search_files as search
     study = run_all(jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address,
-                    progress=not args.quiet)
+                    progress=not args.quiet, search=search)
     print(f"{args.out}: {len(jobs)} searches in {study['wall_s']:.1f} s; study.json lists them")
     return 0
 
 
 def _verify(args: argparse.Namespace) -> int:
+    from app.formats import load_summary
+    from search.gym.summary import is_gym_summary, verify_gym
     from search.solvers.summary import verify
 
     failed = 0
     for path in args.summaries:
-        problems = verify(path)
+        problems = verify_gym(path) if is_gym_summary(load_summary(path)) else verify(path)
         failed += bool(problems)
         print(f"{path}: " + ("reproduced exactly" if not problems else "DIFFERS\n  " + "\n  ".join(problems)))
     return 1 if failed else 0
+
+
+def _json_settings(items: list[str]) -> dict:
+    """``key=value`` settings of an environment adapter, each value read as JSON where it is (else text)."""
+    settings = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"bad world setting {item!r}: use key=value, e.g. vehicles_density=2")
+        try:
+            settings[key.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            settings[key.strip()] = text
+    return settings
 
 
 def _names(text: str) -> list[str]:
@@ -145,7 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out)")
+    train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out); a config "
+                           "with domain = \"highway\" trains a highway agent with Stable-Baselines3")
     train.add_argument("--config", required=True, help="TOML file of training settings (see docs/agents.md)")
     train.add_argument("--out", required=True, help="run directory: progress.csv and checkpoints/")
     train.set_defaults(handler=_train)
@@ -158,11 +220,14 @@ def build_parser() -> argparse.ArgumentParser:
     release.add_argument("--episodes", type=int, default=500, help="validation and test episodes (default 500)")
     release.add_argument("--every", type=int, default=2, help="validate every N-th checkpoint (default 2)")
     release.add_argument("--validate-only", action="store_true", help="print the validation curve, ship nothing")
+    release.add_argument("--jobs", type=int, default=1, help="highway runs: test the three agents in this many "
+                         "processes (default 1)")
     release.set_defaults(handler=_release)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
     evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint (Foil's or "
-                          "CrowdNav_DSRNN's) or TorchScript file, or module:attribute")
+                          "CrowdNav_DSRNN's) or TorchScript file, or module:attribute; or a highway agent: "
+                          "highway-lo, highway-med, highway-hi or a Stable-Baselines3 .zip (docs/highway.md)")
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
     evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
@@ -238,8 +303,9 @@ def build_parser() -> argparse.ArgumentParser:
     _search_arguments(search)
     search.add_argument("--agents", required=True, help="two or more agents, comma-separated: A,B[,C] (more "
                         "than two are searched jointly, their pairwise divergences combined)")
-    search.add_argument("--scenario", required=True, help="shipped scenario name or TOML file; for the "
-                        "representative solver a distribution of starting states (training: the agents' own)")
+    search.add_argument("--scenario", required=True, help="shipped scenario name (crowd or highway-...) or TOML "
+                        "file, the world inferred from it and the agents; for the representative solver a "
+                        "distribution of starting states (training: the crowd agents' own)")
     search.add_argument("--solver", default="mcts", help="mcts (default), nfirst, random, cem or representative "
                         "(votes over states drawn from --scenario which agent looks better; docs/search.md)")
     search.set_defaults(handler=_search)

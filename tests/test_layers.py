@@ -6,7 +6,7 @@ from pathlib import Path
 
 import search
 
-LAYERS = ("sim", "agents", "solvers", "clips", "bundle", "cli")
+LAYERS = ("sim", "agents", "solvers", "gym", "clips", "highway", "bundle", "cli")
 ROOT = Path(search.__file__).parent
 
 

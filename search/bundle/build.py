@@ -33,13 +33,12 @@ from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, mani
 from app.study import Build, StudyError, parse_study, refuse
 from app.study import parse_build as parse_build_table
 from app.visible import VisibleClip, audit
-from search.clips.render import ROBOT_STYLES, RenderOptions, render, robot_label
-from search.clips.scene import load_scene
+from search.bundle import worlds
+from search.clips.render import ROBOT_STYLES, RenderOptions, robot_label
 from search.solvers.runner import (
     SearchJob,
     check_settings,
     limit_threads,
-    run_search,
     solver_config_class,
     write_outputs,
 )
@@ -125,14 +124,20 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
     from search.solvers.reward import RewardConfig
 
     problems = []
+    try:
+        crowd = worlds.is_crowd([a for clip_set in build.sets for a in clip_set.all_agents()])
+    except ValueError as error:
+        problems.append((("build", "sets"), str(error)))
+        crowd = True
     for name, scheme in build.schemes.items():
         try:
             solver = solver_config_class(scheme.solver)
         except ValueError as error:
             problems.append((("build", "schemes", name, "solver"), str(error)))
             solver = None
+        world = WorldConfig if crowd else None  # an environment adapter's settings are its own
         for table, cls, what in (("settings", solver, "solver"), ("reward", RewardConfig, "reward"),
-                                 ("world", WorldConfig, "world")):
+                                 ("world", world, "world")):
             for key, value in getattr(scheme, table).items():
                 try:
                     if cls is not None:
@@ -142,10 +147,13 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
     for i, clip_set in enumerate(build.sets):
         for j, scenario in enumerate(clip_set.scenarios):
             try:
-                found = load_scenario_or_distribution(scenario)
+                worlds.scenario_dict(clip_set.all_agents(), scenario, {})
             except (ValueError, FileNotFoundError) as error:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
                 continue
+            if not worlds.is_crowd(clip_set.all_agents(), scenario):
+                continue
+            found = load_scenario_or_distribution(scenario)
             solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
             if isinstance(found, ScenarioDistribution) != (solvers == {"representative"}):
                 problems.append((("build", "sets", i, "scenarios", j), f"{scenario!r} is a "
@@ -247,7 +255,7 @@ def agent_identity(agent: str) -> dict:
 
     if agent in SCRIPTED:
         return {"agent": agent}
-    path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
+    path = worlds.agent_file(agent) or (AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent))
     return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
 
 
@@ -264,7 +272,8 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
                      seed=scheme.seed, top_k=scheme.top_k,
                      solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
                      reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
-                     world_settings=world | check_settings(WorldConfig, scheme.world, "world"))
+                     world_settings=world | check_settings(WorldConfig, scheme.world, "world")
+                     if worlds.is_crowd(job.pair, job.scenario) else dict(scheme.world))
 
 
 def study_world(spec: BuildSpec) -> dict:
@@ -272,7 +281,7 @@ def study_world(spec: BuildSpec) -> dict:
     CrowdNav_DSRNN model's config), for every agent, in the evaluation and in every search alike."""
     from search.agents.policies import comparison_world
 
-    return comparison_world(spec.agents, {})
+    return comparison_world([agent for agent in spec.agents if worlds.is_crowd([agent])], {})
 
 
 def under(world: dict | None, own: dict) -> dict:
@@ -293,6 +302,10 @@ def agent_source(agent: str, world: dict) -> dict:
     from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS, trained_world
     from search.sim.world import WorldConfig
 
+    if not worlds.is_crowd([agent]):  # a Gymnasium world's agent (highway driving): its model file
+        path = worlds.agent_file(agent) or Path(agent)
+        return {"kind": "gymnasium"} | ({"checkpoint": str(path), "sha256": sha256_file(path)} if path.is_file()
+                                       else {})
     source = {"kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"}
     path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
     if agent not in SCRIPTED and path.is_file():
@@ -307,15 +320,10 @@ def agent_source(agent: str, world: dict) -> dict:
 def search_inputs(search: SearchJob) -> dict:
     """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
     input."""
-    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
     from search.solvers.reward import RewardConfig
-    from search.solvers.summary import frozen_scenario
 
-    scenario = load_scenario_or_distribution(search.scenario)
-    frozen = replace(scenario, world=scenario.world | search.world_settings) \
-        if isinstance(scenario, ScenarioDistribution) else frozen_scenario(scenario, search.world_settings)
     return {"agents": [agent_identity(a) for a in search.agents],
-            "scenario": asdict(frozen) if isinstance(frozen, ScenarioDistribution) else frozen.to_dict(),
+            "scenario": worlds.scenario_dict(search.agents, search.scenario, search.world_settings),
             "solver": search.solver, "solver_settings": asdict(solver_config_class(search.solver)(
                 **search.solver_settings)),
             "reward": RewardConfig(**search.reward_settings).to_dict(),
@@ -355,10 +363,6 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
                     world: dict | None = None) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
     per input."""
-    from search.agents.evaluate import evaluate
-    from search.agents.policies import load_policy
-    from search.sim.world import WorldConfig
-
     results = {}
     for agent in agents:
         inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed} | (
@@ -368,8 +372,7 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
             log(f"eval {agent}: cached")
         else:
             started = time.perf_counter()
-            result = evaluate(load_policy(agent), episodes=episodes, seed=seed,
-                              config=WorldConfig.from_dict(world or {})) | {"agent": agent}
+            result = worlds.evaluate(agent, episodes, seed, world) | {"agent": agent}
             folder = cache.store("eval", inputs)
             (folder / "eval.json").write_text(json.dumps(result, indent=1))
             cache.seal("eval", inputs)
@@ -386,11 +389,9 @@ def _describe(job: ClipJob) -> str:
 def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
     """A cached search is reused while its inputs are unchanged and its summary still re-simulates exactly
     (`foil verify`), so changes to the simulator or the policies' code are caught too."""
-    from search.solvers.summary import verify
-
     if not cache.valid("search", inputs, "summary-001.json"):
         return False
-    problems = verify(cache.path("search", inputs) / "summary-001.json")
+    problems = worlds.verify(cache.path("search", inputs) / "summary-001.json")
     if problems:
         log(f"{_describe(job)}: the cached summary no longer re-simulates exactly ({problems[0]}); searching again")
         return False
@@ -401,7 +402,7 @@ def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
 def _run_search(search: SearchJob, folder: Path) -> float:
     """Run one search and write its files into ``folder``; the seconds it took."""
     started = time.perf_counter()
-    write_outputs(folder, run_search(search))
+    write_outputs(folder, worlds.search_files(search))
     return time.perf_counter() - started
 
 
@@ -443,16 +444,14 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
 
 def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
     """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
-    import search.clips.render
-
     inputs = {"summary": sha256_file(summary), "numbers": list(job.numbers), "options": asdict(options),
-              "renderer": sha256_file(Path(search.clips.render.__file__)), "clip": out.name}
+              "renderer": sha256_file(worlds.renderer_file(summary)), "clip": out.name}
     folder = cache.path("render", inputs)
     if cache.valid("render", inputs, "sha256") and out.is_file() \
             and (folder / "sha256").read_text() == sha256_file(out):
         log(f"render {job.id}: cached")
         return
-    result = render(load_scene(summary), out, list(job.numbers), options)
+    result = worlds.render(summary, out, list(job.numbers), options)
     folder = cache.store("render", inputs)
     (folder / "sha256").write_text(sha256_file(out))
     cache.seal("render", inputs)
@@ -546,7 +545,8 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
     for clip_set in spec.sets:
         if {"pairwise", "ranking"} & set(clip_set.parts):
             for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
-                if not isinstance(load_scenario_or_distribution(name), ScenarioDistribution):
+                if worlds.is_crowd(pair, name) and not isinstance(load_scenario_or_distribution(name),
+                                                                   ScenarioDistribution):
                     scenarios_of.setdefault(pair, []).append(name)
     reports = []
     for pair, names in scenarios_of.items():

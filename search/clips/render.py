@@ -599,14 +599,19 @@ def contact_sheet(renderer: ClipRenderer, columns: int = 3) -> Image.Image:
 def render(scene: Scene, out: str | os.PathLike, numbers: list[int] | None = None,
            options: RenderOptions | None = None) -> RenderResult:
     """Draw and encode a clip with its poster and contact sheet; the clip appears only once complete."""
+    started = time.perf_counter()
+    return encode(ClipRenderer(scene, numbers, options), out, started)
+
+
+def encode(renderer, out: str | os.PathLike, started: float) -> RenderResult:
+    """Encode a renderer's frames (anything with ``options``, ``layout.width/height``, ``frames``, ``draw`` and
+    the ``scene`` a contact sheet reads) as the clip, its poster and its contact sheet."""
     import imageio_ffmpeg
 
-    started = time.perf_counter()
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise ValueError(f"the clip must be an .mp4 file, got {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
-    renderer = ClipRenderer(scene, numbers, options)
     o, lay = renderer.options, renderer.layout
     frames = renderer.frames
     partial = out.with_name(f".{out.stem}.partial.mp4")

@@ -126,28 +126,42 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     scenario_world = load_scenario_or_distribution(job.scenario).world
     job = replace(job, world_settings=comparison_world(list(job.agents), job.world_settings, scenario_world))
     reward_config = RewardConfig.from_dict(job.reward_settings)
+    if job.solver == "representative":
+        distribution = load_scenario_or_distribution(job.scenario)
+        distribution = replace(distribution, world=distribution.world | job.world_settings)
+        return search_files(job, None, job.scenario, reward_config, started, progress, None,
+                            vote=lambda tracker, rng, config, solver: _representative(
+                                job, policies, distribution, reward_config, tracker, rng, config, solver))
+    scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
+    problem = CoupledProblem(policies, scenario, reward=reward_config)
+    return search_files(job, problem, scenario.name, reward_config, started, progress,
+                        lambda actions, solver: build_summary(list(job.agents), policies, scenario, reward_config,
+                                                              actions, solver))
+
+
+def search_files(job: SearchJob, problem, scenario_name: str, reward_config: RewardConfig, started: float,
+                 progress: bool, summarize, vote=None) -> dict[str, str]:
+    """Search ``problem`` with the job's solver and write its files; ``summarize(env_actions, solver)`` builds the
+    summary of a kept trajectory (any domain's). ``vote(tracker, rng, solver_config, solver)`` (the representative
+    solver) replaces both: it gives the summaries in its own order and the record of its vote."""
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)
     tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
     rng = np.random.default_rng(job.seed)
     solver = {"name": job.solver, "parameters": asdict(solver_config), "seed": job.seed, "budget": job.budget}
-    vote = None
+    voted = None
     try:
-        if job.solver == "representative":
-            distribution = load_scenario_or_distribution(job.scenario)
-            distribution = replace(distribution, world=distribution.world | job.world_settings)
-            summaries, vote = _representative(job, policies, distribution, reward_config, tracker, rng,
-                                              solver_config, solver)
+        if vote is not None:
+            summaries, voted = vote(tracker, rng, solver_config, solver)
         else:
-            scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
-            solve(CoupledProblem(policies, scenario, reward=reward_config), tracker, rng, solver_config)
+            solve(problem, tracker, rng, solver_config)
     finally:
         tracker.close()
     search_time = time.perf_counter() - started
     solver["budget_used"] = tracker.steps
-    if vote is None:
-        summaries = [build_summary(list(job.agents), policies, scenario, reward_config, found.actions,
-                                   solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
+    if voted is None:
+        summaries = [summarize(found.actions, solver | {"search_reward": found.reward,
+                                                        "found_at_step": found.sim_steps})
                      for found in tracker.queue.ranked()]
         summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
     files = {}
@@ -157,7 +171,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     record = {
         "format": "foil.run/1",
         "agents": list(job.agents),
-        "scenario": job.scenario if vote else scenario.name,
+        "scenario": scenario_name,
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
         "top_k": job.top_k,
@@ -171,8 +185,8 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
         "summaries": [{"file": name, "reward": s["reward"], "search_reward": s["solver"].get("search_reward")}
                       for name, s in zip(files, summaries, strict=True)],
     }
-    if vote is not None:
-        record["vote"] = vote
+    if voted is not None:
+        record["vote"] = voted
     files["run.json"] = json.dumps(record, indent=1) + "\n"
     return files
 
@@ -227,15 +241,16 @@ def limit_threads() -> None:
         os.environ.setdefault(name, "1")
 
 
-def _job_in_worker(job: SearchJob) -> dict[str, str]:
+def _job_in_worker(job: SearchJob, search=None) -> dict[str, str]:
     limit_threads()
-    return run_search(job)
+    return (search or run_search)(job)
 
 
 def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, backend: str = "process",
-            ray_address: str | None = None, progress: bool = True) -> dict:
+            ray_address: str | None = None, progress: bool = True, search=None) -> dict:
     """Run jobs in parallel and write each one's files to ``out/<solver>/<agents>/<scenario>/``; also writes
-    ``out/study.json`` with every job's record. Returns that record."""
+    ``out/study.json`` with every job's record. Returns that record. ``search`` runs one job (default
+    ``run_search``, the crowd world's; another world passes its own top-level function)."""
     from tqdm import tqdm
 
     started = time.perf_counter()
@@ -243,13 +258,13 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)
     results: dict[int, dict[str, str]] = {}
     if backend == "ray":
-        for index, files in _run_ray(jobs, ray_address, workers):
+        for index, files in _run_ray(jobs, ray_address, workers, search):
             results[index] = files
             bar.update()
     elif backend == "process":
         if workers == 1:
             for index, job in enumerate(jobs):
-                results[index] = run_search(job)
+                results[index] = (search or run_search)(job)
                 bar.update()
         else:
             import multiprocessing
@@ -257,7 +272,7 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
 
             context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
             with ProcessPoolExecutor(workers, mp_context=context, initializer=limit_threads) as pool:
-                futures = {pool.submit(_job_in_worker, job): index for index, job in enumerate(jobs)}
+                futures = {pool.submit(_job_in_worker, job, search): index for index, job in enumerate(jobs)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
@@ -278,7 +293,7 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
     return study
 
 
-def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
+def _run_ray(jobs: list[SearchJob], address: str | None, workers: int, search=None):
     """Yield (index, files) as Ray tasks finish; a local Ray instance when no address is given."""
     try:
         import ray
@@ -292,7 +307,7 @@ def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
         task = ray.remote(num_cpus=1)(_job_in_worker)
-        pending = {task.remote(job): index for index, job in enumerate(jobs)}
+        pending = {task.remote(job, search): index for index, job in enumerate(jobs)}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:

@@ -90,9 +90,10 @@ def test_make_demo_prints_a_generated_admin_password_and_serves_with_it(tmp_path
     assert "foil serve --bundle" in served.split("FOIL_ADMIN_PASSWORD=", 1)[1]
 
 
-def test_the_server_never_imports_search_or_torch():
+def test_the_server_never_imports_search_torch_or_the_highway_packages():
     code = ("import sys, app.main, app.serve; "
-            "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch')]; print(bad); "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch', 'highway_env', 'pygame', "
+            "'stable_baselines3', 'gymnasium')]; print(bad); "
             "sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr

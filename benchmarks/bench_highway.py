@@ -1,0 +1,106 @@
+"""Highway benchmarks: the search's simulator steps per second against Agent Disagreements-style branching, and
+the highway study's bundle build time.
+
+    .venv/bin/python benchmarks/bench_highway.py                   # search speed (a few minutes on 2 cores)
+    .venv/bin/python benchmarks/bench_highway.py --bundle          # and a fresh build of studies/highway.toml
+
+Speed: coupled simulator steps (one step of every agent's environment under one environment action, the unit of
+a search budget) per second of the whole MCTS loop on highway-dense with highway-lo and highway-hi, against the
+way Agent Disagreements branches: at every step a deep copy of each agent's environment (the branch) and one
+environment stepped at a time, each agent acting on a single observation. Both run in the same process on the
+same scenario and agents, with the same budget; the table gives the ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from search.gym.agents import load_agent  # noqa: E402
+from search.gym.problem import GymCoupledProblem  # noqa: E402
+from search.highway.scenarios import SCENARIOS  # noqa: E402
+from search.solvers.mcts import MCTSConfig, mcts  # noqa: E402
+from search.solvers.reward import RewardConfig  # noqa: E402
+from search.solvers.rollout import Tracker  # noqa: E402
+
+
+def foil_search(agents, scenario, budget: int, batch: int) -> float:
+    """Coupled steps per second of MCTS (batched agents, snapshots at tree nodes)."""
+    problem = GymCoupledProblem(agents, scenario, RewardConfig())
+    tracker = Tracker(budget, 5)
+    started = time.perf_counter()
+    mcts(problem, tracker, np.random.default_rng(0), MCTSConfig(batch=batch))
+    return tracker.steps / (time.perf_counter() - started)
+
+
+def disagreement_branching(agents, scenario, budget: int) -> float:
+    """Coupled steps per second when every step branches by deep copy and steps one environment at a time."""
+    adapter = scenario.load_adapter()
+    rng = np.random.default_rng(0)
+    steps, started = 0, time.perf_counter()
+    while steps < budget:
+        envs, observations = [], []
+        for _ in agents:
+            env = adapter.make()
+            observation, _ = env.reset(seed=scenario.seed)
+            envs.append(env)
+            observations.append(observation)
+        running = [True] * len(agents)
+        while any(running) and steps < budget:
+            action = rng.uniform(-1.0, 1.0, adapter.env_action_shape)
+            for k, agent in enumerate(agents):
+                if not running[k]:
+                    continue
+                envs[k] = copy.deepcopy(envs[k])  # the branch
+                adapter.apply(envs[k], action)
+                observations[k], _, terminated, truncated, _ = envs[k].step(agent.act(observations[k][None])[0])
+                running[k] = not (terminated or truncated)
+            steps += 1
+    return steps / (time.perf_counter() - started)
+
+
+def bundle_build() -> float:
+    from search.bundle.build import build_bundle
+
+    study = Path(__file__).resolve().parent.parent / "studies" / "highway.toml"
+    with tempfile.TemporaryDirectory() as out:
+        started = time.perf_counter()
+        build_bundle(study, out, log=lambda line: print(f"  {line}", flush=True))
+        return time.perf_counter() - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--budget", type=int, default=600, help="coupled steps per measurement (default 600)")
+    parser.add_argument("--batch", type=int, default=8, help="MCTS batch (default 8)")
+    parser.add_argument("--agents", default="highway-lo,highway-hi")
+    parser.add_argument("--scenario", default="highway-dense")
+    parser.add_argument("--bundle", action="store_true", help="also time a fresh build of studies/highway.toml")
+    args = parser.parse_args()
+    scenario = SCENARIOS[args.scenario]
+    adapter = scenario.load_adapter()
+    agents = [load_agent(name, adapter) for name in args.agents.split(",")]
+    reference = disagreement_branching(agents, scenario, args.budget)
+    ours = foil_search(agents, scenario, args.budget, args.batch)
+    load = os.getloadavg()[0]
+    print(f"\n{time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, load average {load:.1f}; {args.agents} on "
+          f"{args.scenario}, {args.budget} coupled steps each\n")
+    print("| method | coupled steps/s | vs Agent Disagreements-style branching |")
+    print("|---|---:|---:|")
+    print(f"| deep copy at every branch, one environment at a time | {reference:,.1f} | 1.0 |")
+    print(f"| Foil MCTS, batch {args.batch} | {ours:,.1f} | {ours / reference:.2f} |")
+    if args.bundle:
+        print(f"\nfoil bundle studies/highway.toml from a fresh folder: {bundle_build() / 60:.1f} min")
+
+
+if __name__ == "__main__":
+    main()

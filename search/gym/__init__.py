@@ -1,0 +1,1 @@
+"""Comparing agents in any Gymnasium environment that can be snapshotted: the coupled problem and its summaries."""

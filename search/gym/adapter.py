@@ -1,0 +1,106 @@
+"""The adapter a researcher writes to compare agents in their own Gymnasium environment.
+
+An adapter says four things Foil cannot guess: how to make the environment, what the environment action is and
+how it acts on the world (never on the agents), where an agent is (for the state divergence), and how an
+episode's end reads as Foil's events. Copy this template and fill it in (docs/gym.md walks through it)::
+
+    from search.gym.adapter import Adapter
+
+    class PushTheObstacle(Adapter):
+        env_action_shape = (2,)   # every entry in [-1, 1]; the searches sample and perturb in that box
+        dt = 0.1                  # simulated seconds per step, for event times and clips
+
+        def make(self, render=False):                       # render: frames from env.render() for clips
+            return gymnasium.make("MyEnv-v0", render_mode="rgb_array" if render else None, **self.settings)
+
+        def apply(self, env, action):
+            env.unwrapped.obstacle_velocity = 0.5 * action   # the world moves; the agent's own state is untouched
+
+        def position(self, env):
+            return env.unwrapped.agent_xy                   # where the agent is, as a vector
+
+        def outcome(self, terminated, truncated, info):     # optional: the default reads info["crashed"]
+            ...
+
+``snapshot_env``/``restore_env`` may be overridden with a faster state get/set where the environment has one; by
+default a snapshot is a deep copy of the environment (wrappers, the unwrapped environment and its random
+generator).
+"""
+
+from __future__ import annotations
+
+import copy
+from importlib import import_module
+
+import numpy as np
+
+EVENTS = ("success", "collision", "timeout")
+
+
+class Adapter:
+    """Base class of environment adapters; ``settings`` (a JSON-able dict) are the scenario's own settings."""
+
+    env_action_shape: tuple[int, ...] = ()
+    dt: float = 1.0
+
+    def __init__(self, settings: dict | None = None):
+        self.settings = dict(settings or {})
+
+    def make(self, render: bool = False):
+        """A fresh environment (gymnasium.Env); with ``render``, one whose ``render()`` returns RGB frames."""
+        raise NotImplementedError
+
+    def apply(self, env, action: np.ndarray) -> None:
+        """Act on the world with an environment action (shape ``env_action_shape``, entries in [-1, 1]) before
+        the agent's step. Must never change the agent itself: the agents are what is compared."""
+        raise NotImplementedError
+
+    def position(self, env) -> np.ndarray:
+        """Where the agent is, as a float vector: the state divergence compares these between agents."""
+        raise NotImplementedError
+
+    def outcome(self, terminated: bool, truncated: bool, info: dict) -> str:
+        """Foil's event for an episode that ended: ``success``, ``collision`` (a crash or any failure) or
+        ``timeout``. Default: a crash (``info["crashed"]``) or any other termination is a collision unless
+        ``info["is_success"]`` says it reached its goal; a truncation is a timeout."""
+        if terminated:
+            return "success" if info.get("is_success") and not info.get("crashed") else "collision"
+        return "timeout"
+
+    def snapshot_env(self, env):
+        """A copy of ``env`` that later steps of ``env`` cannot change."""
+        return copy.deepcopy(env)
+
+    def restore_env(self, saved):
+        """An environment in the saved state; ``saved`` itself must stay usable for further restores."""
+        return copy.deepcopy(saved)
+
+    def agent_names(self) -> list[str]:
+        """The agents this domain ships (default: none)."""
+        return []
+
+    def agent_file(self, name: str):
+        """The model file of a shipped agent ``name``, or None when it is not one."""
+        return None
+
+    def others(self, env) -> list:
+        """What else a clip or a summary shows of the world, as [[x, y], ...] (default: nothing)."""
+        return []
+
+
+def load_adapter(spec: str, settings: dict | None = None) -> Adapter:
+    """An adapter from ``module:Class`` and its settings."""
+    module_name, sep, attribute = spec.partition(":")
+    if not sep:
+        raise ValueError(f"adapter {spec!r}: give it as module:Class, e.g. search.highway.adapter:HighwayAdapter")
+    try:
+        cls = getattr(import_module(module_name), attribute)
+    except (ImportError, AttributeError) as error:
+        raise ValueError(f"cannot load adapter {spec!r}: {error}") from None
+    if not (isinstance(cls, type) and issubclass(cls, Adapter)):
+        raise ValueError(f"adapter {spec!r} is not a subclass of search.gym.adapter.Adapter")
+    adapter = cls(settings)
+    shape = tuple(adapter.env_action_shape)
+    if not shape or int(np.prod(shape)) < 1:
+        raise ValueError(f"adapter {spec!r} defines no environment action: set env_action_shape, e.g. (2,)")
+    return adapter

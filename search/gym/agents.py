@@ -1,0 +1,72 @@
+"""Agents in a Gymnasium domain: deterministic functions from a batch of observations to a batch of actions.
+
+An agent is named by a Stable-Baselines3 model file (``.zip``, any algorithm), by ``module:attribute`` (a
+callable ``observations -> actions``, or an object with such an ``act`` method), or by a name the domain's
+adapter ships (``highway-lo``). Agents keep no memory between steps: a snapshot of the world is all a search
+needs to branch.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass
+from importlib import import_module
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# SB3 algorithms by the module of their saved policy class; A2C and PPO share "common" (both load as PPO)
+SB3_ALGORITHMS = {"sac": "SAC", "td3": "TD3", "ddpg": "DDPG", "dqn": "DQN", "common": "PPO"}
+
+
+@dataclass
+class GymAgent:
+    """A named policy: ``act(observations (B, ...)) -> actions (B, ...)``, deterministic."""
+
+    name: str
+    source: str
+    policy: Any
+
+    def act(self, observations: np.ndarray) -> np.ndarray:
+        if hasattr(self.policy, "predict"):
+            return np.asarray(self.policy.predict(observations, deterministic=True)[0])
+        act = getattr(self.policy, "act", self.policy)
+        return np.asarray(act(observations))
+
+
+def load_sb3(path: str | Path):
+    """Any Stable-Baselines3 model file, its algorithm read from the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no model file {str(path)!r}")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            module = json.loads(archive.read("data"))["policy_class"]["__module__"]
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as error:
+        raise ValueError(f"{path}: not a Stable-Baselines3 model file ({error})") from None
+    family = module.split(".")[1] if module.startswith("stable_baselines3.") else ""
+    if family not in SB3_ALGORITHMS:
+        raise ValueError(f"{path}: a policy of {module!r}; Foil loads Stable-Baselines3's "
+                         f"{sorted(SB3_ALGORITHMS.values())}")
+    import stable_baselines3
+
+    return getattr(stable_baselines3, SB3_ALGORITHMS[family]).load(path, device="cpu")
+
+
+def load_agent(spec: str, adapter) -> GymAgent:
+    """The agent ``spec`` names (see the module docstring)."""
+    shipped = adapter.agent_file(spec)
+    if shipped is not None:
+        return GymAgent(spec, str(shipped), load_sb3(shipped))
+    if spec.endswith(".zip"):
+        return GymAgent(spec, str(Path(spec).resolve()), load_sb3(spec))
+    module_name, sep, attribute = spec.partition(":")
+    if sep:
+        try:
+            return GymAgent(spec, spec, getattr(import_module(module_name), attribute))
+        except (ImportError, AttributeError) as error:
+            raise ValueError(f"cannot load agent {spec!r}: {error}") from None
+    raise ValueError(f"unknown agent {spec!r}: give a shipped name ({', '.join(adapter.agent_names()) or 'none'}), "
+                     "a Stable-Baselines3 .zip file or module:attribute")

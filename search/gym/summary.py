@@ -1,0 +1,121 @@
+"""Searches, summaries and `foil verify` in a Gymnasium domain.
+
+A summary (``foil.summary/1``, as in the crowd world) is built from a replay of its environment actions at batch
+size 1; its scenario holds the adapter, its settings and the seed, so ``verify`` needs nothing else. Per step it
+records each agent's ``position`` (as ``robots``), its action (``robot_actions``) and what else the adapter shows
+of its instance's world (``humans``: one list per agent). ``min_human_distance`` is null: a generic environment
+has no people to measure against.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from app.formats import SUMMARY_FORMAT
+from search.gym.agents import GymAgent, load_agent
+from search.gym.problem import GymCoupledProblem, GymScenario
+from search.sim.world import OUTCOME_NAMES
+from search.solvers.reward import TERMS, RewardConfig, sequential_sum
+from search.solvers.runner import SearchJob, search_files
+from search.solvers.summary import verify
+
+
+def is_gym_summary(data: dict) -> bool:
+    return isinstance(data.get("scenario"), dict) and data["scenario"].get("domain") == "gym"
+
+
+def _floats(value) -> list:
+    return np.asarray(value, dtype=np.float64).tolist()
+
+
+def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -> dict:
+    """Step a batch-1 problem through ``env_actions``; per step the record a summary holds, and the reward terms.
+    ``on_state(problem)`` sees the problem after the reset and after each step (the clips render it there)."""
+    problem.reset(1)
+    if on_state is not None:
+        on_state(problem)
+    c = problem.reward_config
+    steps, rewards, terms = [], [], {name: [] for name in TERMS}
+    terminal_at = None
+    for i, action in enumerate(np.asarray(env_actions, dtype=np.float64)):
+        reward, terminal = problem.step(action[None])
+        goal, end = problem.last_events
+        plausibility = c.plausibility * float(problem.prior.log_prob(action)) if c.plausibility else 0.0
+        divergence = float(reward[0]) - plausibility if c.plausibility else float(reward[0])
+        for name, value in zip(TERMS, (0.0 if goal[0] or end[0] else divergence, divergence if goal[0] else 0.0,
+                                       divergence if end[0] else 0.0, plausibility), strict=True):
+            terms[name].append(value)
+        rewards.append(float(reward[0]))
+        row = problem.rows[0]
+        steps.append({"t": float((i + 1) * problem.adapter.dt),
+                      "humans": [_floats(problem.adapter.others(instance.env)) for instance in row],
+                      "robots": [_floats(problem.adapter.position(instance.env)) for instance in row],
+                      "robot_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]]})
+        if on_state is not None:
+            on_state(problem)
+        if terminal[0]:
+            terminal_at = i
+            break
+    if terminal_at is None or terminal_at != len(env_actions) - 1:
+        where = "never ends" if terminal_at is None else f"ends at step {terminal_at + 1} of {len(env_actions)}"
+        raise ValueError(f"the trajectory {where}: a summary holds exactly one complete trajectory")
+    return {"steps": steps, "reward": sequential_sum(rewards),
+            "reward_terms": {name: sequential_sum(values) for name, values in terms.items()}}
+
+
+def build_gym_summary(agents: list[GymAgent], scenario: GymScenario, reward_config: RewardConfig,
+                      env_actions: np.ndarray, solver: dict) -> dict:
+    problem = GymCoupledProblem(agents, scenario, reward_config)
+    record = replay(problem, env_actions)
+    dt = problem.adapter.dt
+    return {
+        "format": SUMMARY_FORMAT,
+        "agents": [{"name": agent.name, "source": agent.source} for agent in agents],
+        "scenario": scenario.to_dict(),
+        "solver": solver,
+        "reward_parameters": reward_config.to_dict(),
+        "env_actions": [_floats(np.asarray(a).reshape(-1)) for a in env_actions],
+        "steps": record["steps"],
+        "outcomes": [{"event": OUTCOME_NAMES[instance.outcome],
+                      "time": float(instance.event_step * dt) if instance.event_step else None,
+                      "path_length": instance.path_length, "min_human_distance": None}
+                     for instance in problem.rows[0]],
+        "reward": record["reward"],
+        "reward_terms": record["reward_terms"],
+    }
+
+
+def run_gym_search(job: SearchJob, scenario: GymScenario, progress: bool = False) -> dict[str, str]:
+    """``foil search`` in a Gymnasium domain: the same solvers, top-K and files as in the crowd world."""
+    if job.solver == "representative":
+        raise ValueError("the representative solver draws starting states from a crowd distribution (such as "
+                         "'training'); in a Gymnasium world use mcts, nfirst, random or cem")
+    started = time.perf_counter()
+    if job.world_settings:
+        scenario = GymScenario(scenario.name, scenario.adapter, scenario.seed,
+                               scenario.settings | job.world_settings, scenario.description)
+    adapter = scenario.load_adapter()
+    agents = [load_agent(spec, adapter) for spec in job.agents]
+    reward_config = RewardConfig.from_dict(job.reward_settings)
+    problem = GymCoupledProblem(agents, scenario, reward_config, adapter)
+    shape = problem.action_shape
+    return search_files(job, problem, scenario.name, reward_config, started, progress,
+                        lambda actions, solver: build_gym_summary(agents, scenario, reward_config,
+                                                                  np.asarray(actions).reshape(-1, *shape), solver))
+
+
+def rebuild(data: dict) -> dict:
+    scenario = GymScenario.from_dict(data["scenario"])
+    adapter = scenario.load_adapter()
+    agents = [load_agent(entry["name"], adapter) for entry in data["agents"]]
+    env_actions = np.array(data["env_actions"], dtype=np.float64).reshape(-1, *adapter.env_action_shape)
+    return build_gym_summary(agents, scenario, RewardConfig.from_dict(data["reward_parameters"]), env_actions,
+                             data["solver"])
+
+
+def verify_gym(path: str | Path) -> list[str]:
+    """Re-simulate a Gymnasium summary; empty when every number is reproduced exactly."""
+    return verify(path, rebuild)

@@ -1,0 +1,87 @@
+"""Highway driving's environment action: the other drivers' intentions, within bounds.
+
+The environment action is an array (PERTURBED, 2) in [-1, 1], one row per other vehicle in the order highway-env
+created them (the ``PERTURBED`` nearest ahead of the ego at the start; a row always means the same vehicle, in
+every agent's instance). Per vehicle:
+
+- ``[0]`` sets its **target speed** to its own initial target speed plus up to +-``SPEED_RANGE`` m/s (IDM then
+  accelerates or brakes towards it, and never above the lane's speed limit);
+- ``[1]`` beyond +-``LANE_THRESHOLD`` **commands a lane change** to the right (positive) or left (negative) lane
+  where one exists and the vehicle is not changing lanes already; in between, MOBIL decides as usual.
+
+Why: a driver's wish for a speed and a lane is what differs between real drivers, so these are the levers that
+make a traffic situation hard for one ego policy and easy for another (cut-ins, slow-downs ahead). The physics is
+left alone: IDM still keeps the gap to the vehicle ahead and aborts a lane change into a vehicle changing into the
+same lane, so a searched scenario stays one that traffic could produce. The bounds keep speeds in the traffic's
+range, and the dead zone makes a commanded lane change a deliberate choice of the search (about one step in ten
+under the uniform prior) rather than constant weaving. The ego vehicle is never touched.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from search.gym.adapter import Adapter
+from search.highway.env import make_env
+
+PERTURBED = 8
+SPEED_RANGE = 5.0  # m/s either side of a vehicle's own target speed
+LANE_THRESHOLD = 0.8
+AGENTS_DIR = Path(__file__).parent / "agents"
+AGENT_PREFIX = "highway-"
+
+
+class HighwayAdapter(Adapter):
+    """highway-env's highway with the other drivers' intentions as the environment action. Settings: any
+    highway-env config keys over Foil's (search.highway.env), and ``discrete`` for the meta-action agents."""
+
+    env_action_shape = (PERTURBED, 2)
+    dt = 1.0  # one decision per simulated second
+
+    def make(self, render: bool = False):
+        settings = dict(self.settings)
+        discrete = bool(settings.pop("discrete", False))
+        return make_env(discrete=discrete, render=render, config=settings)
+
+    def apply(self, env, action: np.ndarray) -> None:
+        road, ego = env.unwrapped.road, env.unwrapped.vehicle
+        others = [v for v in road.vehicles if v is not ego][:PERTURBED]
+        for vehicle, (speed, lane) in zip(others, np.asarray(action).reshape(-1, 2), strict=False):
+            if not hasattr(vehicle, "foil_target_speed"):
+                vehicle.foil_target_speed = vehicle.target_speed  # its own wish, before any perturbation
+            vehicle.target_speed = vehicle.foil_target_speed + SPEED_RANGE * float(speed)
+            if abs(lane) > LANE_THRESHOLD and vehicle.lane_index == vehicle.target_lane_index:
+                _, _, index = vehicle.lane_index
+                wanted = index + (1 if lane > 0 else -1)
+                lanes = road.network.graph[vehicle.lane_index[0]][vehicle.lane_index[1]]
+                if 0 <= wanted < len(lanes):
+                    vehicle.target_lane_index = (vehicle.lane_index[0], vehicle.lane_index[1], wanted)
+
+    def position(self, env) -> np.ndarray:
+        return np.asarray(env.unwrapped.vehicle.position, dtype=np.float64)
+
+    def others(self, env) -> list:
+        ego = env.unwrapped.vehicle
+        return [np.asarray(v.position, dtype=np.float64).tolist() for v in env.unwrapped.road.vehicles
+                if v is not ego]
+
+    def outcome(self, terminated: bool, truncated: bool, info: dict) -> str:
+        """A crash, or leaving the road, is a collision; lasting the whole drive is a success (there is no goal
+        to reach on a highway: getting through the traffic is it)."""
+        if terminated:
+            return "collision"
+        return "success" if truncated else "timeout"
+
+    def agent_names(self) -> list[str]:
+        return sorted(AGENT_PREFIX + path.stem for path in AGENTS_DIR.glob("*.zip"))
+
+    def agent_file(self, name: str):
+        if not name.startswith(AGENT_PREFIX):
+            return None
+        path = AGENTS_DIR / f"{name.removeprefix(AGENT_PREFIX)}.zip"
+        if not path.is_file():
+            raise ValueError(f"unknown highway agent {name!r}: the shipped ones are {self.agent_names()}")
+        return path
+

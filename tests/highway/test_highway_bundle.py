@@ -1,0 +1,72 @@
+"""The highway study: studies/highway.toml plans and checks against the server, and a tiny highway bundle builds
+(evaluations, searches, clips, manifest, gallery) and serves."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from search.bundle.build import build_bundle, load_build, plan, search_inputs, search_job
+
+ROOT = Path(__file__).resolve().parents[2]
+STUDY = ROOT / "studies" / "highway.toml"
+
+
+def test_the_highway_study_plans_highway_searches_the_server_accepts():
+    from app.bundle import Bundle, check_study_against_bundle
+    from app.formats import ManifestClip
+    from app.study import load_study
+    from search.clips.render import robot_label
+
+    spec, _ = load_build(STUDY)
+    jobs = plan(spec)
+    inputs = [search_inputs(search_job(job)) for job in jobs]
+    assert {i["scenario"]["domain"] for i in inputs} == {"gym"}
+    assert all(len(agent["sha256"]) == 64 for i in inputs for agent in i["agents"])  # the shipped files' checksums
+    clips = {job.id: ManifestClip(id=job.id, file=f"clips/{job.id}.mp4", sha256=f"{n:064x}", scheme=job.scheme.name,
+                                  scenario=job.scenario, agents=list(job.pair),
+                                  labels=[robot_label(number) for number in job.numbers], better=job.pair[0])
+             for n, job in enumerate(jobs)}
+    check_study_against_bundle(load_study(STUDY), Bundle(root=ROOT, clips=clips, paths={}))
+
+
+def test_a_highway_study_mixing_worlds_is_refused_at_its_line(tmp_path):
+    from search.bundle.build import BuildError
+
+    study = tmp_path / "study.toml"
+    study.write_text(STUDY.read_text().replace('pairs = [["highway-lo", "highway-hi"]]', 'pairs = [["lo", "hi"]]'))
+    with pytest.raises(BuildError, match="cannot mix worlds"):
+        build_bundle(study, tmp_path / "out", log=lambda line: None)
+
+
+@pytest.mark.slow
+def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
+    from app.database import migrate
+    from app.main import create_app
+    from app.settings import Settings
+
+    text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
+    text = text.replace("[build.eval]", "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\n"
+                        "event_hold = 0.2\nwidth = 480\n\n[build.eval]")
+    study = tmp_path / "highway.toml"
+    study.write_text(text)
+    log = []
+    manifest = build_bundle(study, tmp_path / "bundle", log=log.append)
+    out = tmp_path / "bundle"
+    assert len(manifest.clips) == 13 and set(manifest.agents) == {"highway-lo", "highway-med", "highway-hi"}
+    for clip in manifest.clips:
+        assert (out / clip.file).is_file() and (out / clip.poster).is_file() and clip.audit is not None
+        assert json.loads((out / clip.summary).read_text())["scenario"]["domain"] == "gym"
+    assert "highway-hi" in (out / "index.html").read_text()
+    database = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
+    migrate(database)
+    app = create_app(Settings(bundle_dir=out, study_file=out / "study.toml", database_url=database,
+                              admin_password="a-long-admin-password"))
+    try:
+        page = TestClient(app, follow_redirects=True).get("/")
+        assert page.status_code == 200 and "Which self-driving car handles the highway better?" in page.text
+    finally:
+        app.state.context.db.dispose()
