@@ -30,6 +30,7 @@ generator).
 from __future__ import annotations
 
 import copy
+from abc import ABC, abstractmethod
 from importlib import import_module
 
 import numpy as np
@@ -37,7 +38,7 @@ import numpy as np
 EVENTS = ("success", "collision", "timeout")
 
 
-class Adapter:
+class Adapter(ABC):
     """Base class of environment adapters; ``settings`` (a JSON-able dict) are the scenario's own settings."""
 
     env_action_shape: tuple[int, ...] = ()
@@ -46,18 +47,18 @@ class Adapter:
     def __init__(self, settings: dict | None = None):
         self.settings = dict(settings or {})
 
+    @abstractmethod
     def make(self, render: bool = False):
         """A fresh environment (gymnasium.Env); with ``render``, one whose ``render()`` returns RGB frames."""
-        raise NotImplementedError
 
+    @abstractmethod
     def apply(self, env, action: np.ndarray) -> None:
         """Act on the world with an environment action (shape ``env_action_shape``, entries in [-1, 1]) before
         the agent's step. Must never change the agent itself: the agents are what is compared."""
-        raise NotImplementedError
 
+    @abstractmethod
     def position(self, env) -> np.ndarray:
         """Where the agent is, as a float vector: the state divergence compares these between agents."""
-        raise NotImplementedError
 
     def outcome(self, terminated: bool, truncated: bool, info: dict) -> str:
         """Foil's event for an episode that ended: ``success``, ``collision`` (a crash or any failure) or

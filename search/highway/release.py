@@ -17,6 +17,7 @@ import re
 import shutil
 from pathlib import Path
 
+from search.agents.release import ReleaseError
 from search.gym.agents import GymAgent, load_sb3
 from search.highway.adapter import AGENTS_DIR, HighwayAdapter
 from search.highway.evaluate import evaluate
@@ -27,10 +28,6 @@ COLUMNS = ("checkpoint", "env_steps", "episodes", "reward_mean", "reward_low", "
            "collision_low", "collision_high")
 REPRODUCE = ("foil train --config search/highway/train.toml --out runs/highway\n"
              "foil release runs/highway --out search/highway/agents --every 1 --jobs 3")
-
-
-class ReleaseError(ValueError):
-    """A run from which the three agents cannot be chosen; the message says why and what to do."""
 
 
 def is_highway_run(run_dir: Path) -> bool:
