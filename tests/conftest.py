@@ -42,7 +42,8 @@ def database_url(request, tmp_path) -> str:
         return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     url = postgres.session_url(request.config)
     if url is None:
-        pytest.skip("no PostgreSQL binaries (`make test` installs them; or set FOIL_TEST_DATABASE_URL)")
+        pytest.fail("no PostgreSQL binaries: `make test` and `make check` install them (or set "
+                    "FOIL_TEST_DATABASE_URL); the database tests run on both databases")
     postgres.reset(url)
     return url
 

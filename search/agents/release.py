@@ -65,11 +65,16 @@ def validate_run(run_dir: Path, episodes: int, every: int, log=print) -> list[di
             log(f"{path.name}: {int(data['env_steps']):>9,} steps  reward {result['reward_mean']:6.2f}  "
                 f"success {result['success_rate']:.3f}  timeout {result['timeout_rate']:.3f}")
         rows.append(done[path.name])
-    with cache.open("w", newline="") as f:
-        writer = csv.DictWriter(f, COLUMNS)
+    write_rows(cache, COLUMNS, rows)
+    return rows
+
+
+def write_rows(path: Path, columns: tuple[str, ...], rows: list[dict]) -> None:
+    """A validation table as CSV, so a later release reuses the snapshots already validated."""
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, columns)
         writer.writeheader()
         writer.writerows(rows)
-    return rows
 
 
 def success_interval(row: dict) -> tuple[float, float]:

@@ -17,7 +17,7 @@ import re
 import shutil
 from pathlib import Path
 
-from search.agents.release import ReleaseError
+from search.agents.release import ReleaseError, write_rows
 from search.gym.agents import GymAgent, load_sb3
 from search.highway.adapter import AGENTS_DIR, HighwayAdapter
 from search.highway.evaluate import evaluate
@@ -69,10 +69,7 @@ def validate_run(run_dir: Path, every: int, log=print) -> list[dict]:
             done[path.name] = _row(path, result)
             log(f"{path.name}: reward {result['reward_mean']:6.2f}  collisions {result['collision_rate']:.3f}")
         rows.append(done[path.name])
-    with cache.open("w", newline="") as f:
-        writer = csv.DictWriter(f, COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows(cache, COLUMNS, rows)
     return rows
 
 

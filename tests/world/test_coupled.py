@@ -192,7 +192,6 @@ def _steps_in_child(queue) -> None:
     queue.put(np.stack([sim.step(a).crowds for a in env_actions(5, batch=2, seed=1)]))
 
 
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
 def test_a_forked_child_gets_its_own_crowd_helper():
     """A child forked after the parent used the helper thread has no such thread: it must make its own, not
     wait for ever on the parent's."""
