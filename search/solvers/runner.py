@@ -123,12 +123,11 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     started = time.perf_counter()
     policies = [load_policy(spec) for spec in job.agents]
     # the agents' trained worlds (an imported checkpoint's), under the scenario's own settings and the job's
-    scenario_world = load_scenario_or_distribution(job.scenario).world
-    job = replace(job, world_settings=comparison_world(list(job.agents), job.world_settings, scenario_world))
+    loaded = load_scenario_or_distribution(job.scenario)
+    job = replace(job, world_settings=comparison_world(list(job.agents), job.world_settings, loaded.world))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     if job.solver == "representative":
-        distribution = load_scenario_or_distribution(job.scenario)
-        distribution = replace(distribution, world=distribution.world | job.world_settings)
+        distribution = replace(loaded, world=loaded.world | job.world_settings)
         return search_files(job, None, job.scenario, reward_config, started, progress, None,
                             vote=lambda tracker, rng, config, solver: _representative(
                                 job, policies, distribution, reward_config, tracker, rng, config, solver))

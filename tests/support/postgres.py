@@ -1,7 +1,7 @@
 """A throwaway PostgreSQL server for the tests: `initdb` and `pg_ctl` on a free loopback port in a temporary folder,
 stopped and deleted at the end of the session. `FOIL_TEST_DATABASE_URL` points the tests at an existing server
-instead. Without either (no PostgreSQL binaries installed; `make test` and `make check` install Debian's), the PostgreSQL
-variants of the tests fail with a message saying so: they are never skipped."""
+instead. Without either (no PostgreSQL binaries installed; `make test` and `make check` install Debian's), the
+PostgreSQL variants of the tests fail with a message saying so: they are never skipped."""
 
 from __future__ import annotations
 
