@@ -48,9 +48,12 @@ Admin = Depends(admin_only)
 
 @disabled_router.api_route("/admin{rest:path}", methods=["GET", "POST"])
 def admin_disabled(request: Request, ctx: ContextDep):
-    return ctx.message(request, "Admin pages are off",
-                       "Set FOIL_ADMIN_PASSWORD (8 characters or more) and restart the server to use them.",
-                       status_code=404)
+    return ctx.message(
+        request,
+        "Admin pages are off",
+        "Set FOIL_ADMIN_PASSWORD (8 characters or more) and restart the server to use them.",
+        status_code=404,
+    )
 
 
 @router.get("/login")
@@ -63,10 +66,15 @@ def login(request: Request, ctx: ContextDep, form: FormDep):
     throttle: LoginThrottle = request.app.state.login_throttle
     client = request.client.host if request.client else "unknown"
     if (wait := throttle.wait_s(client)) > 0:
-        log.warning("admin login from %s refused without checking: too many wrong passwords, %.0f s to wait",
-                    client, wait)
-        refused = ctx.render(request, "admin/login.html", status_code=429,
-                             error=f"Too many wrong passwords. Try again in {ceil(wait)} seconds.")
+        log.warning(
+            "admin login from %s refused without checking: too many wrong passwords, %.0f s to wait", client, wait
+        )
+        refused = ctx.render(
+            request,
+            "admin/login.html",
+            status_code=429,
+            error=f"Too many wrong passwords. Try again in {ceil(wait)} seconds.",
+        )
         refused.headers["retry-after"] = str(ceil(wait))
         return refused
     typed = form.get("password")
@@ -94,19 +102,34 @@ def logout(request: Request, ctx: ContextDep, form: FormDep):
 def _overview(ctx: Context, session) -> dict:
     """Counts per condition and status, and the median duration, computed without loading the participants."""
     study = Participant.study == ctx.study.study.id
-    counts = Counter({(condition, status): n for condition, status, n in session.execute(
-        select(Participant.condition, Participant.status, func.count()).where(study)
-        .group_by(Participant.condition, Participant.status))})
+    counts = Counter(
+        {
+            (condition, status): n
+            for condition, status, n in session.execute(
+                select(Participant.condition, Participant.status, func.count())
+                .where(study)
+                .group_by(Participant.condition, Participant.status)
+            )
+        }
+    )
     rows = [(c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions]
     unassigned = [counts[(None, s)] for s in STATUSES]
     if any(unassigned):
         rows.append(("-", "not assigned yet", unassigned))
-    durations = [(as_utc(completed) - as_utc(created)).total_seconds() for created, completed in session.execute(
-        select(Participant.created_at, Participant.completed_at).where(
-            study, Participant.status == "completed", Participant.completed_at.is_not(None)))]
-    return {"rows": rows, "totals": [sum(row[2][i] for row in rows) for i in range(len(STATUSES))],
-            "median_minutes": statistics.median(durations) / 60 if durations else None,
-            "n_completed": len(durations)}
+    durations = [
+        (as_utc(completed) - as_utc(created)).total_seconds()
+        for created, completed in session.execute(
+            select(Participant.created_at, Participant.completed_at).where(
+                study, Participant.status == "completed", Participant.completed_at.is_not(None)
+            )
+        )
+    ]
+    return {
+        "rows": rows,
+        "totals": [sum(row[2][i] for row in rows) for i in range(len(STATUSES))],
+        "median_minutes": statistics.median(durations) / 60 if durations else None,
+        "n_completed": len(durations),
+    }
 
 
 PAGE_SIZE = 50
@@ -124,17 +147,35 @@ def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1)
         n_shown = session.scalar(select(func.count()).select_from(Participant).where(shown))
         pages = max(1, -(-n_shown // PAGE_SIZE))
         page = min(max(1, page), pages)
-        listed = list(session.scalars(select(Participant).where(shown).order_by(Participant.id.desc())
-                                      .limit(PAGE_SIZE).offset((page - 1) * PAGE_SIZE)))
+        listed = list(
+            session.scalars(
+                select(Participant)
+                .where(shown)
+                .order_by(Participant.id.desc())
+                .limit(PAGE_SIZE)
+                .offset((page - 1) * PAGE_SIZE)
+            )
+        )
         summary = _overview(ctx, session)
     pilot = f"{str(request.base_url).rstrip('/')}/?pilot={pilot_token(ctx.db, ctx.study.study.id)}"
-    return ctx.render(request, "admin/overview.html", statuses=STATUSES, shown=listed, status=status, page=page,
-                      pages=pages, n_shown=n_shown, pilot_link=pilot, **summary)
+    return ctx.render(
+        request,
+        "admin/overview.html",
+        statuses=STATUSES,
+        shown=listed,
+        status=status,
+        page=page,
+        pages=pages,
+        n_shown=n_shown,
+        pilot_link=pilot,
+        **summary,
+    )
 
 
 def _participant(session, ctx: Context, code: str) -> Participant:
     participant = session.scalar(
-        select(Participant).where(Participant.study == ctx.study.study.id, Participant.code == code))
+        select(Participant).where(Participant.study == ctx.study.study.id, Participant.code == code)
+    )
     if participant is None:
         raise HTTPException(404, "No participant with that code.")
     return participant
@@ -167,9 +208,15 @@ def participant_page(code: str, request: Request, ctx: ContextDep):
     for row in rows:
         row["shown_as"] = shown_as(plan, row["step"])
     condition = None if participant.condition is None else ctx.conditions[participant.condition]
-    return ctx.render(request, "admin/participant.html", participant=participant, rows=rows,
-                      condition=condition.describe(ctx.study) if condition else "not assigned yet",
-                      steps=len(plan), current=shown_as(plan, participant.step) if plan else "")
+    return ctx.render(
+        request,
+        "admin/participant.html",
+        participant=participant,
+        rows=rows,
+        condition=condition.describe(ctx.study) if condition else "not assigned yet",
+        steps=len(plan),
+        current=shown_as(plan, participant.step) if plan else "",
+    )
 
 
 @router.post("/participants/{code}/exclusion", dependencies=[Admin])
@@ -179,8 +226,11 @@ def set_exclusion(code: str, request: Request, ctx: ContextDep, form: FormDep):
     if excluded not in ("0", "1") or not isinstance(note, str) or len(note) > 2000:
         raise HTTPException(400, "Send excluded as 0 or 1 and a note of at most 2000 characters.")
     if (problem := unstorable(note)) is not None:
-        raise HTTPException(400, f"The note contains {problem}, which cannot be saved: remove it and send the note "
-                                 "again (nothing was changed).")
+        raise HTTPException(
+            400,
+            f"The note contains {problem}, which cannot be saved: remove it and send the note "
+            "again (nothing was changed).",
+        )
     with ctx.db.writing() as session:
         participant = _participant(session, ctx, code)
         participant.excluded, participant.exclusion_note = excluded == "1", note

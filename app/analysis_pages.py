@@ -21,8 +21,10 @@ from app.report import render_report, tally_study
 
 router = APIRouter(prefix="/admin", dependencies=[Admin])
 # The report inlines its styles and SVG figures and has no scripts: allow exactly that, on this page only.
-REPORT_POLICY = ("default-src 'none'; style-src 'unsafe-inline'; img-src data:; base-uri 'none'; "
-                 "form-action 'none'; frame-ancestors 'none'")
+REPORT_POLICY = (
+    "default-src 'none'; style-src 'unsafe-inline'; img-src data:; base-uri 'none'; "
+    "form-action 'none'; frame-ancestors 'none'"
+)
 
 
 # Numbers from the query string: finite and in range, or the request is refused with a message naming the field.
@@ -40,8 +42,11 @@ def _rules(min_seconds: float | None, median_fraction: float) -> ExclusionRules:
 @router.get("/report")
 def report_page(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3):
     data = tally_study(ctx.db, ctx.study, _rules(min_seconds, median_fraction))
-    data.audits = {clip.id: clip.audit.model_dump() for clip in ctx.bundle.clips.values()
-                   if getattr(clip, "audit", None) is not None}
+    data.audits = {
+        clip.id: clip.audit.model_dump()
+        for clip in ctx.bundle.clips.values()
+        if getattr(clip, "audit", None) is not None
+    }
     html = render_report(data)
     return HTMLResponse(html, headers={"content-security-policy": REPORT_POLICY})
 
@@ -49,8 +54,11 @@ def report_page(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction
 @router.get("/export.csv")
 def long_csv(ctx: ContextDep):
     filename = f"{ctx.study.study.id}-long.csv"
-    return StreamingResponse(long_csv_chunks(ctx.db, ctx.study), media_type="text/csv; charset=utf-8",
-                             headers={"content-disposition": f'attachment; filename="{filename}"'})
+    return StreamingResponse(
+        long_csv_chunks(ctx.db, ctx.study),
+        media_type="text/csv; charset=utf-8",
+        headers={"content-disposition": f'attachment; filename="{filename}"'},
+    )
 
 
 @router.get("/export.zip")
@@ -68,5 +76,9 @@ def export_zip(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction:
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
-    return FileResponse(archive, media_type="application/zip", filename=archive.name,
-                        background=BackgroundTask(shutil.rmtree, folder, ignore_errors=True))
+    return FileResponse(
+        archive,
+        media_type="application/zip",
+        filename=archive.name,
+        background=BackgroundTask(shutil.rmtree, folder, ignore_errors=True),
+    )

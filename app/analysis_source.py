@@ -66,15 +66,22 @@ def analysis_study(db: Database, study: str | Path | None) -> Study:
     if study is not None and Path(study).is_file():
         return load_study(study)
     with db.reading() as session:
-        stored = dict(session.execute(
-            select(ServerSetting.key, ServerSetting.value).where(ServerSetting.key.startswith(STUDY_KEY))).all())
+        stored = dict(
+            session.execute(
+                select(ServerSetting.key, ServerSetting.value).where(ServerSetting.key.startswith(STUDY_KEY))
+            ).all()
+        )
     texts = {key.removeprefix(STUDY_KEY): text for key, text in stored.items()}
     if study is None and len(texts) == 1:
         study = next(iter(texts))
     if study is not None and str(study) in texts:
         return parse_study(texts[str(study)], source=f"the study file stored in the database for {study!r}")
     if study is not None:
-        raise ValueError(f"no study file {study} and no study {str(study)!r} stored in the database "
-                         f"(stored: {sorted(texts) or 'none'})")
-    raise ValueError("give the study: --study FILE (the study file the survey was served with) or --study ID of one "
-                     f"stored in the database (stored: {sorted(texts) or 'none'})")
+        raise ValueError(
+            f"no study file {study} and no study {str(study)!r} stored in the database "
+            f"(stored: {sorted(texts) or 'none'})"
+        )
+    raise ValueError(
+        "give the study: --study FILE (the study file the survey was served with) or --study ID of one "
+        f"stored in the database (stored: {sorted(texts) or 'none'})"
+    )

@@ -67,13 +67,20 @@ def participant_records(db: Database, study_id: str, batch: int = 500) -> Iterat
     while True:
         with db.reading() as session:
             participants = session.execute(
-                select(people, plans.c.plan).outerjoin(plans, plans.c.participant_id == people.c.id)
-                .where(people.c.study == study_id, people.c.id > last_id).order_by(people.c.id).limit(batch)).all()
+                select(people, plans.c.plan)
+                .outerjoin(plans, plans.c.participant_id == people.c.id)
+                .where(people.c.study == study_id, people.c.id > last_id)
+                .order_by(people.c.id)
+                .limit(batch)
+            ).all()
             if not participants:
                 return
             responses: dict[int, list[Row]] = {p.id: [] for p in participants}
-            query = (select(answers).where(answers.c.participant_id.in_(list(responses)))
-                     .order_by(answers.c.participant_id, answers.c.step))
+            query = (
+                select(answers)
+                .where(answers.c.participant_id.in_(list(responses)))
+                .order_by(answers.c.participant_id, answers.c.step)
+            )
             for response in session.execute(query):
                 responses[response.participant_id].append(response)
         for participant in participants:
@@ -96,27 +103,50 @@ LONG_COLUMNS = [
     Column("condition", "Int64", "condition number, 1-based (see `conditions` in the codebook)"),
     Column("step", "Int64", "index of the screen in the participant's plan (0 is the instructions)"),
     Column("part", "Int64", "part of the study, 1-based; empty for the instructions"),
-    Column("screen", "string", "kind of screen: instructions, pairwise, watch, ranking, attention or closing (the "
-                               "closing questions and feedback box after the last part)"),
+    Column(
+        "screen",
+        "string",
+        "kind of screen: instructions, pairwise, watch, ranking, attention or closing (the "
+        "closing questions and feedback box after the last part)",
+    ),
     Column("trial", "Int64", "position of the screen within its part, 1-based, in the order it was shown"),
     Column("block", "Int64", "in a ranking part: which of the participant's ranking blocks (1 = first shown)"),
     Column("clip", "string", "clip id in the bundle; on a ranking screen, the clips of its block"),
     Column("scheme", "string", "scheme that generated the clip (e.g. adaptive, nfirst)"),
     Column("scenario", "string", "scenario of the clip"),
-    Column("agents", "string", f"real agents on the screen, '{LIST_SEPARATOR}'-separated, in the order the robots "
-                               "were offered as answers"),
+    Column(
+        "agents",
+        "string",
+        f"real agents on the screen, '{LIST_SEPARATOR}'-separated, in the order the robots were offered as answers",
+    ),
     Column("labels", "string", "their on-screen labels (e.g. Robot 1), in the same order as `agents`"),
-    Column("question", "string", "question name from the study file; 'attention' for an attention check; "
-                                 f"'{FEEDBACK}' for the closing feedback box; empty on a screen without questions"),
-    Column("question_type", "string", "choose, text, scale, rank, choice, attention or comprehension (a check "
-                                      "question of the instructions); empty without a question"),
-    Column("answer", "string", "what was submitted: the robot label chosen, the option chosen, the text, the scale "
-                               f"point, or the ranking's labels best first joined by '{ORDER_SEPARATOR}'; an "
-                               "optional closing question left unanswered has no row"),
+    Column(
+        "question",
+        "string",
+        "question name from the study file; 'attention' for an attention check; "
+        f"'{FEEDBACK}' for the closing feedback box; empty on a screen without questions",
+    ),
+    Column(
+        "question_type",
+        "string",
+        "choose, text, scale, rank, choice, attention or comprehension (a check "
+        "question of the instructions); empty without a question",
+    ),
+    Column(
+        "answer",
+        "string",
+        "what was submitted: the robot label chosen, the option chosen, the text, the scale "
+        f"point, or the ranking's labels best first joined by '{ORDER_SEPARATOR}'; an "
+        "optional closing question left unanswered has no row",
+    ),
     Column("answer_agent", "string", "the real agent behind a chosen label; for a ranking, the agents best first"),
     Column("value", "Int64", "the scale point (1 to the number of points) for a scale question"),
-    Column("truth", "string", "the right answer: the better agent, the true order best first, or the expected "
-                              "attention-check option; empty when there is none"),
+    Column(
+        "truth",
+        "string",
+        "the right answer: the better agent, the true order best first, or the expected "
+        "attention-check option; empty when there is none",
+    ),
     Column("correct", "Int64", "1 when the answer equals `truth`, 0 when not, empty when there is no right answer"),
     Column("time_on_page_ms", "Int64", "time on the page measured by the browser, in ms"),
     Column("server_ms", "Int64", "time from the screen becoming current to its submission, measured by the server"),
@@ -144,15 +174,21 @@ def _scored(question_type: str, value, screen: Screen | None) -> dict:
     if question_type == "choose":
         agent = agent_of.get(value)
         better = screen.better if isinstance(screen, Pairwise | Watch) else None
-        return {"answer": value, "answer_agent": agent, "truth": better,
-                "correct": None if agent is None else int(agent == better)}
+        return {
+            "answer": value,
+            "answer_agent": agent,
+            "truth": better,
+            "correct": None if agent is None else int(agent == better),
+        }
     if question_type == "rank":
         agents = [agent_of.get(label) for label in value]
         truth = screen.true_order if isinstance(screen, Ranking) else None
-        return {"answer": ORDER_SEPARATOR.join(value),
-                "answer_agent": None if None in agents else ORDER_SEPARATOR.join(agents),
-                "truth": None if truth is None else ORDER_SEPARATOR.join(truth),
-                "correct": None if truth is None or None in agents else int(agents == truth)}
+        return {
+            "answer": ORDER_SEPARATOR.join(value),
+            "answer_agent": None if None in agents else ORDER_SEPARATOR.join(agents),
+            "truth": None if truth is None else ORDER_SEPARATOR.join(truth),
+            "correct": None if truth is None or None in agents else int(agents == truth),
+        }
     if question_type == "scale":
         return {"answer": str(value), "value": int(value)}
     if question_type == "attention" and isinstance(screen, Attention):
@@ -197,24 +233,37 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
         robots = _robots(screen)
         scheme, scenario = (screen.scheme, screen.scenario) if isinstance(screen, WithRobots) else (None, None)
         common = {
-            "study": participant.study, "participant": participant.code,
+            "study": participant.study,
+            "participant": participant.code,
             "condition": None if participant.condition is None else participant.condition + 1,
-            "step": response.step, "part": screen.part if isinstance(screen, InPart) else None,
-            "screen": response.kind, "trial": trials[response.step] if response.step < len(trials) else None,
-            "block": screen.block if isinstance(screen, Round) else None, "clip": _clips(screen),
-            "scheme": scheme, "scenario": scenario,
+            "step": response.step,
+            "part": screen.part if isinstance(screen, InPart) else None,
+            "screen": response.kind,
+            "trial": trials[response.step] if response.step < len(trials) else None,
+            "block": screen.block if isinstance(screen, Round) else None,
+            "clip": _clips(screen),
+            "scheme": scheme,
+            "scenario": scenario,
             "agents": LIST_SEPARATOR.join(r.agent for r in robots) or None,
             "labels": LIST_SEPARATOR.join(r.label for r in robots) or None,
-            "time_on_page_ms": response.client_ms, "server_ms": response.server_ms, "plays": response.plays,
+            "time_on_page_ms": response.client_ms,
+            "server_ms": response.server_ms,
+            "plays": response.plays,
             "submitted_at": iso_utc(response.submitted_at),
             "viewport": (getattr(response, "details", None) or {}).get("viewport"),
         }
         if shows_clip(screen):
             viewing = viewing_problems(response, screen)
-            common |= {"clip_ms": viewing["clip_ms"], "time_on_screen_ms": response.server_ms,
-                       "seeks": viewing["seeks"], "seeks_blocked": viewing["seeks_blocked"],
-                       "rate_changes": viewing["rate_changes"], "hidden_ms": viewing["hidden_ms"],
-                       "reloads": viewing["reloads"], "skipped_viewing": int(viewing["skipped"])}
+            common |= {
+                "clip_ms": viewing["clip_ms"],
+                "time_on_screen_ms": response.server_ms,
+                "seeks": viewing["seeks"],
+                "seeks_blocked": viewing["seeks_blocked"],
+                "rate_changes": viewing["rate_changes"],
+                "hidden_ms": viewing["hidden_ms"],
+                "reloads": viewing["reloads"],
+                "skipped_viewing": int(viewing["skipped"]),
+            }
         answers = response.answers or {}
         if not answers:
             yield common
@@ -239,9 +288,13 @@ PARTICIPANT_COLUMNS = [
     Column("platform_session_id", "string", "Prolific SESSION_ID or MTurk assignmentId"),
     Column("status", "string", "started, completed, returned (left the study) or declined (no consent)"),
     Column("condition", "Int64", "condition number, 1-based; empty before assignment"),
-    Column("schemes", "string", "the schemes of the participant's condition, in the condition's order (the "
-                                "codebook's `conditions`; with clips shuffled within a part they are mixed, blocked "
-                                f"they come in this order), '{LIST_SEPARATOR}'-separated; empty before assignment"),
+    Column(
+        "schemes",
+        "string",
+        "the schemes of the participant's condition, in the condition's order (the "
+        "codebook's `conditions`; with clips shuffled within a part they are mixed, blocked "
+        f"they come in this order), '{LIST_SEPARATOR}'-separated; empty before assignment",
+    ),
     Column("scenarios", "string", f"scenario of each part, part 1 first, '{LIST_SEPARATOR}'-separated"),
     Column("slot", "Int64", "arrival number used by balanced assignment; empty when self-selected"),
     Column("created_at", "datetime", "consent given (UTC)"),
@@ -272,17 +325,28 @@ def participant_row(record: ParticipantRecord, flags: dict[str, bool], condition
     plan = record.plan
     duration = duration_s(p)
     return {
-        "study": p.study, "participant": p.code, "platform": p.platform, "external_id": p.external_id,
-        "kind": getattr(p, "kind", None) or "real", "consent_version": getattr(p, "consent_version", None) or None,
-        "platform_study_id": p.platform_study_id, "platform_session_id": p.platform_session_id,
-        "status": p.status, "condition": None if p.condition is None else p.condition + 1,
+        "study": p.study,
+        "participant": p.code,
+        "platform": p.platform,
+        "external_id": p.external_id,
+        "kind": getattr(p, "kind", None) or "real",
+        "consent_version": getattr(p, "consent_version", None) or None,
+        "platform_study_id": p.platform_study_id,
+        "platform_session_id": p.platform_session_id,
+        "status": p.status,
+        "condition": None if p.condition is None else p.condition + 1,
         "schemes": None if p.condition is None else LIST_SEPARATOR.join(conditions[p.condition].schemes),
-        "scenarios": LIST_SEPARATOR.join(part_scenarios(plan)) or None, "slot": p.slot,
-        "created_at": iso_utc(p.created_at), "completed_at": iso_utc(p.completed_at),
+        "scenarios": LIST_SEPARATOR.join(part_scenarios(plan)) or None,
+        "slot": p.slot,
+        "created_at": iso_utc(p.created_at),
+        "completed_at": iso_utc(p.completed_at),
         "duration_s": None if duration is None else round(duration, 3),
-        "screens": len(plan), "screens_answered": len(record.responses),
-        "attention_failures": p.attention_failures, "exclusion_note": p.exclusion_note or None,
-        "user_agent": p.user_agent or None, **{name: int(flag) for name, flag in flags.items()},
+        "screens": len(plan),
+        "screens_answered": len(record.responses),
+        "attention_failures": p.attention_failures,
+        "exclusion_note": p.exclusion_note or None,
+        "user_agent": p.user_agent or None,
+        **{name: int(flag) for name, flag in flags.items()},
     }
 
 
@@ -298,8 +362,13 @@ def _slug(name: str) -> str:
 
 def _answer_columns(question: str, kind: str, prefix: str, what: str) -> list[Column]:
     dtype = {"scale": "Int64"}.get(kind, "string")
-    meaning = {"choose": "the agent chosen", "rank": f"the agents ranked, best first, joined by '{ORDER_SEPARATOR}'",
-               "scale": "the scale point", "text": "the text written", "choice": "the option chosen"}[kind]
+    meaning = {
+        "choose": "the agent chosen",
+        "rank": f"the agents ranked, best first, joined by '{ORDER_SEPARATOR}'",
+        "scale": "the scale point",
+        "text": "the text written",
+        "choice": "the option chosen",
+    }[kind]
     columns = [Column(f"{prefix}_{question}", dtype, f"{what}, question {question}: {meaning}")]
     if kind in ("choose", "rank"):
         columns.append(Column(f"{prefix}_{question}_correct", "Int64", f"{what}, question {question}: 1 if right"))
@@ -324,8 +393,11 @@ class WideLayout:
                         self._pairs[(p, frozenset((a, b)))] = f"{_slug(a)}_{_slug(b)}"
                         for name in part.questions:
                             self.columns += _answer_columns(
-                                name, study.questions[name].type, f"p{p}_{_slug(scheme)}_{_slug(a)}_{_slug(b)}",
-                                f"part {p}, scheme {scheme}, clip of {a} and {b}")
+                                name,
+                                study.questions[name].type,
+                                f"p{p}_{_slug(scheme)}_{_slug(a)}_{_slug(b)}",
+                                f"part {p}, scheme {scheme}, clip of {a} and {b}",
+                            )
                 else:
                     what = f"part {p}, scheme {scheme}, ranking of {', '.join(part.agents)}"
                     for name in part.questions:
@@ -348,9 +420,14 @@ class WideLayout:
     def row(self, record: ParticipantRecord, long: list[dict], flags: dict[str, bool]) -> dict:
         p = record.participant
         duration = duration_s(p)
-        row = {"study": p.study, "participant": p.code, "condition": None if p.condition is None else p.condition + 1,
-               "status": p.status, "excluded": int(flags["excluded"]),
-               "duration_s": None if duration is None else round(duration, 3)}
+        row = {
+            "study": p.study,
+            "participant": p.code,
+            "condition": None if p.condition is None else p.condition + 1,
+            "status": p.status,
+            "excluded": int(flags["excluded"]),
+            "duration_s": None if duration is None else round(duration, 3),
+        }
         for part, scenario in enumerate(part_scenarios(record.plan), start=1):
             row[f"p{part}_scenario"] = scenario
         for answer in long:
@@ -376,11 +453,14 @@ class WideLayout:
                     continue
             key = f"{prefix}_{answer['question']}"
             if key not in self.names:
-                raise ValueError(f"participant {p.code} answered {answer['question']!r} on a {screen.kind} screen "
-                                 f"of scheme {screen.scheme!r} that the study file does not define: is it the "
-                                 "study file the survey was served with?")
+                raise ValueError(
+                    f"participant {p.code} answered {answer['question']!r} on a {screen.kind} screen "
+                    f"of scheme {screen.scheme!r} that the study file does not define: is it the "
+                    "study file the survey was served with?"
+                )
             value_key = {"choose": "answer_agent", "rank": "answer_agent", "scale": "value"}.get(
-                answer["question_type"], "answer")
+                answer["question_type"], "answer"
+            )
             row[key] = answer[value_key]
             if f"{key}_correct" in self.names:
                 row[f"{key}_correct"] = answer["correct"]

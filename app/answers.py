@@ -13,8 +13,23 @@ from app.study import FEEDBACK, ChoiceQuestion, ChooseQuestion, RankQuestion, Sc
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
 # seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being
 # hidden or shown again, and `reload` (the page was reloaded; the events before it come from the earlier load).
-VIDEO_EVENT_TYPES = {"play", "pause", "ended", "error", "stalled", "waiting", "seeking", "loaded", "timeout",
-                     "seek", "seek_blocked", "ratechange", "hidden", "visible", "reload"}
+VIDEO_EVENT_TYPES = {
+    "play",
+    "pause",
+    "ended",
+    "error",
+    "stalled",
+    "waiting",
+    "seeking",
+    "loaded",
+    "timeout",
+    "seek",
+    "seek_blocked",
+    "ratechange",
+    "hidden",
+    "visible",
+    "reload",
+}
 MAX_VIDEO_EVENTS = 500
 
 
@@ -64,8 +79,11 @@ def _check_question(name: str, question, screen: Screen, form: FormData, out: Ch
     elif isinstance(question, TextQuestion):
         value = _one(form, name) or ""
         if len(value.strip()) < question.min_length:
-            out.errors[name] = "Please write an answer." if question.min_length == 1 else (
-                f"Please write at least {question.min_length} characters.")
+            out.errors[name] = (
+                "Please write an answer."
+                if question.min_length == 1
+                else (f"Please write at least {question.min_length} characters.")
+            )
         elif len(value) > question.max_length:
             out.errors[name] = f"Please keep this under {question.max_length} characters (you wrote {len(value)})."
         else:
@@ -122,8 +140,11 @@ def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
         if required is not None and name not in required and _unanswered(form, name):
             continue  # a closing question left unanswered: allowed unless the study requires it
         _check_question(name, study.questions[name], screen, form, out)
-    if (isinstance(screen, Closing) and screen.feedback
-            and not (FEEDBACK not in (required or []) and _unanswered(form, FEEDBACK))):
+    if (
+        isinstance(screen, Closing)
+        and screen.feedback
+        and not (FEEDBACK not in (required or []) and _unanswered(form, FEEDBACK))
+    ):
         _check_question(FEEDBACK, TextQuestion(type="text", text="feedback"), screen, form, out)
     if isinstance(screen, Instructions):
         for number, check in enumerate(study.comprehension, start=1):
@@ -131,8 +152,9 @@ def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
             if value not in check.options:
                 out.errors[f"understand{number}"] = "Choose one of the answers."
             elif value != check.expected:
-                out.errors[f"understand{number}"] = ("That is not right. Read the instructions above again, then "
-                                                     "choose another answer.")
+                out.errors[f"understand{number}"] = (
+                    "That is not right. Read the instructions above again, then choose another answer."
+                )
             else:
                 out.answers[f"understand{number}"] = value
     if isinstance(screen, Attention):

@@ -27,9 +27,7 @@ class Condition:
     rotation: int  # how far the scenarios are rotated across the parts
 
     def describe(self, study: Study) -> str:
-        scenarios = ", ".join(
-            f"part {p + 1}: {study.part_scenario(p, self.rotation)}" for p in range(len(study.parts))
-        )
+        scenarios = ", ".join(f"part {p + 1}: {study.part_scenario(p, self.rotation)}" for p in range(len(study.parts)))
         return f"{' then '.join(self.schemes)}; {scenarios}"
 
 

@@ -54,8 +54,11 @@ class ClipIndex:
 # single quotes or none). The server's pages are well-formed and have no inline scripts, so a bot need not parse
 # the rest: html.parser, which reads every tag and text, costs several times as much, and under load the bots share
 # the machine with the server.
-FORM_TAG = re.compile(r"<(/?)(form|fieldset|legend|label|input|select|option|textarea|video)\b"
-                      r"((?:[^>\"']|\"[^\"]*\"|'[^']*')*)>", re.IGNORECASE)
+FORM_TAG = re.compile(
+    r"<(/?)(form|fieldset|legend|label|input|select|option|textarea|video)\b"
+    r"((?:[^>\"']|\"[^\"]*\"|'[^']*')*)>",
+    re.IGNORECASE,
+)
 HTML_ATTRIBUTE = re.compile(r"""([^\s=/>"']+)(?:\s*=\s*(?:"([^"]*)"|'([^']*)'|([^\s>"']+)))?""")
 ANY_TAG = re.compile(r"<[^>]*>")
 COMPLETION_CODE = re.compile(r"""\sid=["']?completion-code\b[^>]*>""")  # the rest of the tag with this id
@@ -97,10 +100,10 @@ class PageForm:
             tag = tag.lower()
             if closing:
                 if tag == "legend" and legend_at >= 0:
-                    legend, legend_at = _text(page[legend_at:match.start()]), -1
+                    legend, legend_at = _text(page[legend_at : match.start()]), -1
                 elif tag == "label" and label_at >= 0:
                     if radio:
-                        self.radios[radio[0]].append((radio[1], _text(page[label_at:match.start()])))
+                        self.radios[radio[0]].append((radio[1], _text(page[label_at : match.start()])))
                     label_at = -1
                 elif tag == "select":
                     select = None
@@ -135,8 +138,13 @@ class PageForm:
             elif tag == "video" and "data-example" not in a and "data-round" not in a:
                 self.video = a.get("src", "")  # the screen's clip; not the instructions' example or a replay
         code = COMPLETION_CODE.search(page)
-        self.code = "".join(html.unescape(piece).strip() for piece in ANY_TAG.split(
-            page[code.end():page.find("</", code.end())])) if code else ""
+        self.code = (
+            "".join(
+                html.unescape(piece).strip() for piece in ANY_TAG.split(page[code.end() : page.find("</", code.end())])
+            )
+            if code
+            else ""
+        )
 
 
 class BotError(RuntimeError):
@@ -157,8 +165,19 @@ class Bot:
     """One participant: a fresh cookie jar, its own seeded randomness, and memory of the clips of the current
     ranking block."""
 
-    def __init__(self, client, clips: ClipIndex, observer: Observer, rng: random.Random, *, number: int,
-                 external_id: str, attentive: bool = True, link: dict | None = None, fast: bool = False):
+    def __init__(
+        self,
+        client,
+        clips: ClipIndex,
+        observer: Observer,
+        rng: random.Random,
+        *,
+        number: int,
+        external_id: str,
+        attentive: bool = True,
+        link: dict | None = None,
+        fast: bool = False,
+    ):
         self.client, self.clips, self.observer, self.rng = client, clips, observer, rng
         self.number, self.attentive = number, attentive
         self.link = {"bot": "1", **(link or {})}  # marks the participant as a bot; `pilot=TOKEN` for the fast mode
@@ -170,25 +189,37 @@ class Bot:
     def _ok(self, response) -> str:
         if response.status_code != 200:
             text = re.sub(r"<[^>]+>", " ", response.text)
-            raise BotError(f"{response.request.method} {response.request.url.path}: HTTP {response.status_code}: "
-                           f"{' '.join(text.split())[:300]}")
+            raise BotError(
+                f"{response.request.method} {response.request.url.path}: HTTP {response.status_code}: "
+                f"{' '.join(text.split())[:300]}"
+            )
         return response.text
 
     def take_study(self, max_pages: int = 500) -> BotRun:
         """Open the study link and answer every page to the end. Calling it again (after a lost connection, say)
         reopens the link, which resumes where the server says this participant is."""
-        ids = {"PROLIFIC_PID": self.run.external_id, "STUDY_ID": "simulated", "SESSION_ID": self.run.external_id,
-               "workerId": self.run.external_id, "hitId": "simulated", "assignmentId": self.run.external_id}
+        ids = {
+            "PROLIFIC_PID": self.run.external_id,
+            "STUDY_ID": "simulated",
+            "SESSION_ID": self.run.external_id,
+            "workerId": self.run.external_id,
+            "hitId": "simulated",
+            "assignmentId": self.run.external_id,
+        }
         page = self._ok(self.client.get("/", params=ids | self.link))
         for _ in range(max_pages):
             form = PageForm(page)
             if form.action == "/consent":
-                page = self._ok(self.client.post("/consent", data={"csrf_token": form.hidden["csrf_token"],
-                                                                   "choice": "agree"}))
+                page = self._ok(
+                    self.client.post("/consent", data={"csrf_token": form.hidden["csrf_token"], "choice": "agree"})
+                )
             elif form.action == "/condition":
                 n = len(form.radios["number"])
-                page = self._ok(self.client.post("/condition", data={"csrf_token": form.hidden["csrf_token"],
-                                                                     "number": str(self.number % n + 1)}))
+                page = self._ok(
+                    self.client.post(
+                        "/condition", data={"csrf_token": form.hidden["csrf_token"], "number": str(self.number % n + 1)}
+                    )
+                )
             elif "step" in form.hidden:
                 shown = time.monotonic()
                 data = self.answer(form)
@@ -222,8 +253,9 @@ class Bot:
         sha, clip, seen, clip_ms = None, None, {}, 0
         if form.video:
             sha, clip, seen, clip_ms = self._watch(form)
-            data["video_events"] = json.dumps([{"type": "loaded", "t": 40}, {"type": "play", "t": 800},
-                                               {"type": "ended", "t": 800 + clip_ms}])
+            data["video_events"] = json.dumps(
+                [{"type": "loaded", "t": 40}, {"type": "play", "t": 800}, {"type": "ended", "t": 800 + clip_ms}]
+            )
             if form.answerable and not (form.radios or form.textareas):
                 self.block.append((sha, seen))  # a clip of a ranking block: remember it for the ranking
         ranked = self._ranking() if form.selects else []
@@ -232,8 +264,15 @@ class Bot:
         for prefix in {name.rsplit("-", 1)[0] for name in form.selects}:
             for place, label in enumerate(ranked, start=1):
                 data[f"{prefix}-{place}"] = label
-            self.run.answers.append({"step": step, "clip": None, "clips": [sha for sha, _ in self.block],
-                                     "question": prefix, "value": ranked})
+            self.run.answers.append(
+                {
+                    "step": step,
+                    "clip": None,
+                    "clips": [sha for sha, _ in self.block],
+                    "question": prefix,
+                    "value": ranked,
+                }
+            )
         for name in form.textareas:
             data[name] = self._explain(clip, seen, ranked)
         for name in form.radios:
@@ -246,8 +285,9 @@ class Bot:
         whether every refused choice question still has another option to try."""
         for name in form.radios:
             self.refused.setdefault(name, set()).add(data[name])
-        return bool(form.radios) and all(len(self.refused[name]) < len(options)
-                                         for name, options in form.radios.items())
+        return bool(form.radios) and all(
+            len(self.refused[name]) < len(options) for name, options in form.radios.items()
+        )
 
     def _ranking(self) -> list[str]:
         """Best first: most clips won, then the higher mean perceived score."""
@@ -267,8 +307,9 @@ class Bot:
         mean = {label: [s[label] for _, s in self.block if label in s] for label in (a, b)}
         return contrast(*(sum(values) / len(values) if values else 0.0 for values in mean.values()))
 
-    def _radio(self, name: str, options: list[tuple[str, str]], legend: str, seen: dict[str, float],
-               ranked: list[str]) -> str:
+    def _radio(
+        self, name: str, options: list[tuple[str, str]], legend: str, seen: dict[str, float], ranked: list[str]
+    ) -> str:
         values = [value for value, _ in options]
         if seen and set(values) <= set(seen):  # which robot is better
             return max(values, key=seen.get)
@@ -280,8 +321,9 @@ class Bot:
             return asked[0]
         return self.rng.choice([value for value in values if value not in self.refused.get(name, ())] or values)
 
-    def _scale_point(self, options: list[tuple[str, str]], legend: str, seen: dict[str, float],
-                     ranked: list[str]) -> int:
+    def _scale_point(
+        self, options: list[tuple[str, str]], legend: str, seen: dict[str, float], ranked: list[str]
+    ) -> int:
         """Read the scale's ends and the question: 'hard' at the top means high contrast answers low; a statement
         to agree with ('easy to distinguish between the worst and middle ...') is about the pair it names."""
         top = options[-1][1].lower()
@@ -309,8 +351,17 @@ class Bot:
         return "It looked that way in the clips."
 
 
-def simulate(url: str, bundle_dir: str | Path, participants: int, *, noise: float = 0.5, seed: int = 0,
-             inattentive: float = 0.0, first: int = 0, pilot_token: str = "") -> list[BotRun]:
+def simulate(
+    url: str,
+    bundle_dir: str | Path,
+    participants: int,
+    *,
+    noise: float = 0.5,
+    seed: int = 0,
+    inattentive: float = 0.0,
+    first: int = 0,
+    pilot_token: str = "",
+) -> list[BotRun]:
     """Run `participants` bots against the server at `url`; bot k is `bot-SEED-k`, recorded as a bot.
 
     With the study's pilot token (in `url` as `?pilot=TOKEN`, the admin overview's pilot link, or given) the
@@ -341,8 +392,17 @@ def simulate(url: str, bundle_dir: str | Path, participants: int, *, noise: floa
         rng = random.Random(f"{seed}:bot:{k}")
         attentive = rng.random() >= inattentive
         with httpx.Client(base_url=base, follow_redirects=True, timeout=60) as client:
-            bot = Bot(client, clips, observer, rng, number=k, external_id=f"bot-{seed}-{k}", attentive=attentive,
-                      link=link, fast=fast)
+            bot = Bot(
+                client,
+                clips,
+                observer,
+                rng,
+                number=k,
+                external_id=f"bot-{seed}-{k}",
+                attentive=attentive,
+                link=link,
+                fast=fast,
+            )
             return bot.take_study()
 
     numbers = range(first, first + participants)
@@ -352,8 +412,9 @@ def simulate(url: str, bundle_dir: str | Path, participants: int, *, noise: floa
         return list(pool.map(one, numbers))
 
 
-def run_simulate(*, url: str, bundle: str | None, participants: int, noise: float, seed: int, inattentive: float,
-                 first: int) -> int:
+def run_simulate(
+    *, url: str, bundle: str | None, participants: int, noise: float, seed: int, inattentive: float, first: int
+) -> int:
     """`foil simulate`: prints how many bots finished."""
     import os
 
@@ -361,14 +422,26 @@ def run_simulate(*, url: str, bundle: str | None, participants: int, noise: floa
 
     bundle = bundle or os.environ.get("FOIL_BUNDLE_DIR")
     if not bundle:
-        raise ValueError("give the study bundle the server serves (--bundle DIR or FOIL_BUNDLE_DIR): the bots "
-                         "look at its clips' summaries")
+        raise ValueError(
+            "give the study bundle the server serves (--bundle DIR or FOIL_BUNDLE_DIR): the bots "
+            "look at its clips' summaries"
+        )
     try:
-        runs = simulate(url, bundle, participants, noise=noise, seed=seed, inattentive=inattentive, first=first,
-                        pilot_token=os.environ.get("FOIL_PILOT_TOKEN", ""))
+        runs = simulate(
+            url,
+            bundle,
+            participants,
+            noise=noise,
+            seed=seed,
+            inattentive=inattentive,
+            first=first,
+            pilot_token=os.environ.get("FOIL_PILOT_TOKEN", ""),
+        )
     except (httpx.HTTPError, BotError) as error:
         raise ValueError(f"the bots could not take the study at {url}: {error}") from None
     done = sum(run.completed for run in runs)
-    print(f"{done} of {len(runs)} bots completed the study at {url} (noise {noise}, seed {seed}); "
-          f"now run `foil report` on the server's database")
+    print(
+        f"{done} of {len(runs)} bots completed the study at {url} (noise {noise}, seed {seed}); "
+        f"now run `foil report` on the server's database"
+    )
     return 0 if done == len(runs) else 1

@@ -26,10 +26,10 @@ CONTAINERS = {b"moov", b"trak", b"mdia", b"minf", b"stbl", b"edts"}
 def _boxes(data: bytes, start: int, end: int):
     at = start
     while at + 8 <= end:
-        size, kind = struct.unpack(">I4s", data[at:at + 8])
+        size, kind = struct.unpack(">I4s", data[at : at + 8])
         header = 8
         if size == 1:
-            size, header = struct.unpack(">Q", data[at + 8:at + 16])[0], 16
+            size, header = struct.unpack(">Q", data[at + 8 : at + 16])[0], 16
         elif size == 0:
             size = end - at
         if size < header or at + size > end:
@@ -73,12 +73,12 @@ def clip_shape(path: str | Path) -> ClipShape:
             if kind == b"mvhd":
                 version = data[body]
                 if version == 1:
-                    timescale, duration = struct.unpack(">IQ", data[body + 20:body + 32])
+                    timescale, duration = struct.unpack(">IQ", data[body + 20 : body + 32])
                 else:
-                    timescale, duration = struct.unpack(">II", data[body + 12:body + 20])
+                    timescale, duration = struct.unpack(">II", data[body + 12 : body + 20])
                 ms = round(1000 * duration / timescale) if timescale else 0
             elif kind == b"tkhd" and not width:
-                w, h = struct.unpack(">II", data[stop - 8:stop])
+                w, h = struct.unpack(">II", data[stop - 8 : stop])
                 width, height = w >> 16, h >> 16
             elif kind in CONTAINERS:
                 walk(body, stop)

@@ -46,7 +46,8 @@ class Context:
         pieces = self.pages.get(key)
         if pieces is None:
             html = self.templates.get_template(name).render(
-                request=None, study=self.study, csrf_token=lambda _request: self.csrf_slot, **context())
+                request=None, study=self.study, csrf_token=lambda _request: self.csrf_slot, **context()
+            )
             if len(self.pages) >= MAX_PAGES:
                 self.pages.clear()
             pieces = self.pages[key] = html.split(self.csrf_slot)

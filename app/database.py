@@ -68,8 +68,11 @@ class Database:
         self.sqlite = self.engine.dialect.name == "sqlite"
         # PostgreSQL reads without BEGIN and COMMIT, two round trips to the server of the three a page's read
         # takes. Under READ COMMITTED, its default, a transaction gives each statement its own snapshot anyway.
-        self._read_sessions = self._sessions if self.sqlite else sessionmaker(
-            self.engine.execution_options(isolation_level="AUTOCOMMIT"), expire_on_commit=False)
+        self._read_sessions = (
+            self._sessions
+            if self.sqlite
+            else sessionmaker(self.engine.execution_options(isolation_level="AUTOCOMMIT"), expire_on_commit=False)
+        )
         self._write_turn = threading.Lock() if self.sqlite else nullcontext()
 
     @contextmanager

@@ -35,8 +35,9 @@ class ExclusionRules:
 
     def __post_init__(self):
         if self.min_seconds is not None and not 0 <= self.min_seconds < math.inf:
-            raise ValueError(f"the minimum duration must be a finite number of seconds, 0 or more, got "
-                             f"{self.min_seconds}")
+            raise ValueError(
+                f"the minimum duration must be a finite number of seconds, 0 or more, got {self.min_seconds}"
+            )
         if not 0 <= self.median_fraction < 1:
             raise ValueError(f"the fraction of the median duration must be in [0, 1), got {self.median_fraction}")
         unknown = set(self.include_kinds) - {"pilot", "bot"}
@@ -75,8 +76,11 @@ def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("re
     """Median completion time of the study's completed participants of these kinds (pilots and bots would drag
     the "too fast" threshold down), one float each in memory."""
     query = select(Participant.created_at, Participant.completed_at).where(
-        Participant.study == study_id, Participant.status == "completed", Participant.completed_at.is_not(None),
-        Participant.kind.in_(kinds))
+        Participant.study == study_id,
+        Participant.status == "completed",
+        Participant.completed_at.is_not(None),
+        Participant.kind.in_(kinds),
+    )
     with db.reading() as session:
         durations = [(as_utc(done) - as_utc(start)).total_seconds() for start, done in session.execute(query)]
     return statistics.median(durations) if durations else None
@@ -100,21 +104,34 @@ def viewing_problems(response, screen: Pairwise | Watch | Attention) -> dict:
     before_end = events if first_end is None else events[:first_end]
     sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
     skipped = bool(shows_clip(screen) and (sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
-    return {"clip_ms": clip_ms, "seeks": sum(e["type"] == "seek" for e in events),
-            "seeks_blocked": sum(e["type"] == "seek_blocked" for e in events),
-            "rate_changes": sum(e["type"] == "ratechange" for e in events),
-            "hidden_ms": hidden_ms, "reloads": sum(e["type"] == "reload" for e in events), "skipped": skipped}
+    return {
+        "clip_ms": clip_ms,
+        "seeks": sum(e["type"] == "seek" for e in events),
+        "seeks_blocked": sum(e["type"] == "seek_blocked" for e in events),
+        "rate_changes": sum(e["type"] == "ratechange" for e in events),
+        "hidden_ms": hidden_ms,
+        "reloads": sum(e["type"] == "reload" for e in events),
+        "skipped": skipped,
+    }
 
 
-def exclusion_flags(participant: Participant | Row, threshold_s: float | None, responses: list | None = None,
-                    rules: ExclusionRules | None = None, plan: list[Screen] | None = None) -> dict[str, bool]:
+def exclusion_flags(
+    participant: Participant | Row,
+    threshold_s: float | None,
+    responses: list | None = None,
+    rules: ExclusionRules | None = None,
+    plan: list[Screen] | None = None,
+) -> dict[str, bool]:
     """One flag per reason in REASONS, plus `excluded` when any of them holds. `responses` with the
     participant's `plan` give the viewing flag; without them it is not set."""
     duration = duration_s(participant)
     kinds = (rules or ExclusionRules()).kinds
     plan = plan or []
-    skipped = any(viewing_problems(r, plan[r.step])["skipped"] for r in responses or [] if r.step < len(plan)
-                  and shows_clip(plan[r.step]))
+    skipped = any(
+        viewing_problems(r, plan[r.step])["skipped"]
+        for r in responses or []
+        if r.step < len(plan) and shows_clip(plan[r.step])
+    )
     flags = {
         "pilot_or_bot": (getattr(participant, "kind", None) or "real") not in kinds,
         "incomplete": participant.status != "completed",

@@ -33,8 +33,26 @@ from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_dura
 from app.study import FEEDBACK, ChoiceQuestion, ScaleQuestion, Study
 
 # Whole cells that pandas (by default) or R read as a missing value, though a participant may type them.
-MISSING_TOKENS = {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND", "1.#QNAN", "<NA>",
-                  "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null"}
+MISSING_TOKENS = {
+    "#N/A",
+    "#N/A N/A",
+    "#NA",
+    "-1.#IND",
+    "-1.#QNAN",
+    "-NaN",
+    "-nan",
+    "1.#IND",
+    "1.#QNAN",
+    "<NA>",
+    "N/A",
+    "NA",
+    "NULL",
+    "NaN",
+    "None",
+    "n/a",
+    "nan",
+    "null",
+}
 FILES = ("long.csv", "wide.csv", "participants.csv")
 
 # What a spreadsheet may take for the start of a formula: = + - @, their fullwidth and small forms (which some
@@ -153,8 +171,13 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
     files = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
     return {
         "format": "foil.export/1",
-        "study": {"id": study.study.id, "title": study.study.title, "schemes": list(study.design.schemes),
-                  "scheme_factor": study.design.scheme_factor, "scenarios": list(study.design.scenarios)},
+        "study": {
+            "id": study.study.id,
+            "title": study.study.title,
+            "schemes": list(study.design.schemes),
+            "scheme_factor": study.design.scheme_factor,
+            "scenarios": list(study.design.scenarios),
+        },
         "files": {
             name: {
                 "columns": [asdict(c) for c in columns],
@@ -166,36 +189,52 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
             for name, columns in files.items()
         },
         "questions": _question_codes(study),
-        "conditions": [{"number": c.index + 1, "schemes": list(c.schemes),
-                        "part_scenarios": [study.part_scenario(p, c.rotation) for p in range(len(study.parts))]}
-                       for c in conditions(study)],
-        "exclusion_rules": {"reasons": REASONS, "too_fast": rules.describe(median_s),
-                            "analysed_kinds": list(rules.kinds),
-                            "too_fast_threshold_s": rules.threshold_s(median_s),
-                            "median_duration_s": median_s},
+        "conditions": [
+            {
+                "number": c.index + 1,
+                "schemes": list(c.schemes),
+                "part_scenarios": [study.part_scenario(p, c.rotation) for p in range(len(study.parts))],
+            }
+            for c in conditions(study)
+        ],
+        "exclusion_rules": {
+            "reasons": REASONS,
+            "too_fast": rules.describe(median_s),
+            "analysed_kinds": list(rules.kinds),
+            "too_fast_threshold_s": rules.threshold_s(median_s),
+            "median_duration_s": median_s,
+        },
         "neutralised_cells": "no piece of a cell can start a formula in a spreadsheet, however it splits cells (on a "
-                             "comma, semicolon, tab or line break) or trims spaces: an apostrophe is put at the "
-                             "start of the cell and right after each of those characters where the text then "
-                             "starts, after any spaces, with = + - @ (or their fullwidth forms, or the minus sign) or "
-                             "with an apostrophe; also in front of a cell that starts with a tab or line break or "
-                             "reads as a missing value (NA, null, None, ...). A NUL character is written as U+2400 "
-                             "followed by 0, and a typed U+2400 is doubled. To restore the text as typed: remove the "
-                             "apostrophe at the start of the cell and right after each comma, semicolon, tab or "
-                             "line break (pandas: series.str.replace(r\"(^|[,;\\t\\n\\r])'\", r\"\\1\", "
-                             "regex=True)), then replace U+2400 0 by NUL and U+2400 U+2400 by U+2400 "
-                             "(app.export_csv.restore does both)",
+        "comma, semicolon, tab or line break) or trims spaces: an apostrophe is put at the "
+        "start of the cell and right after each of those characters where the text then "
+        "starts, after any spaces, with = + - @ (or their fullwidth forms, or the minus sign) or "
+        "with an apostrophe; also in front of a cell that starts with a tab or line break or "
+        "reads as a missing value (NA, null, None, ...). A NUL character is written as U+2400 "
+        "followed by 0, and a typed U+2400 is doubled. To restore the text as typed: remove the "
+        "apostrophe at the start of the cell and right after each comma, semicolon, tab or "
+        'line break (pandas: series.str.replace(r"(^|[,;\\t\\n\\r])\'", r"\\1", '
+        "regex=True)), then replace U+2400 0 by NUL and U+2400 U+2400 by U+2400 "
+        "(app.export_csv.restore does both)",
     }
 
 
 def codebook_markdown(book: dict) -> str:
     study = book["study"]
-    lines = [f"# Codebook: study `{study['id']}`", "", study["title"], "",
-             f"Schemes: {', '.join(study['schemes'])} ({study['scheme_factor']}-subjects). "
-             f"Scenarios: {', '.join(study['scenarios'])}.", "",
-             "All files are UTF-8 CSV with a header row; times are ISO 8601 in UTC; empty cells are missing values. "
-             "`pd.read_csv(path)` reads them; for exact types pass "
-             "`**codebook['files'][name]['read_csv']` from codebook.json.", "",
-             f"Spreadsheet safety: {book['neutralised_cells']}.", ""]
+    lines = [
+        f"# Codebook: study `{study['id']}`",
+        "",
+        study["title"],
+        "",
+        f"Schemes: {', '.join(study['schemes'])} ({study['scheme_factor']}-subjects). "
+        f"Scenarios: {', '.join(study['scenarios'])}.",
+        "",
+        "All files are UTF-8 CSV with a header row; times are ISO 8601 in UTC; empty cells are missing values. "
+        "`pd.read_csv(path)` reads them; for exact types pass "
+        "`**codebook['files'][name]['read_csv']` from codebook.json.",
+        "",
+        f"Spreadsheet safety: {book['neutralised_cells']}.",
+        "",
+    ]
     for name, spec in book["files"].items():
         lines += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
         lines += [f"| `{c['name']}` | {c['dtype']} | {c['description']} |" for c in spec["columns"]]
@@ -206,23 +245,29 @@ def codebook_markdown(book: dict) -> str:
         if q.get("options"):
             points = "options: " + "; ".join(q["options"])
         if q.get("asked") == "closing":
-            points = "; ".join(filter(None, [points, "closing screen, " + (
-                "required" if q["required"] else "optional")]))
+            points = "; ".join(
+                filter(None, [points, "closing screen, " + ("required" if q["required"] else "optional")])
+            )
         lines.append(f"| `{name}` | {q['type']} | {q['text']} | {points} |")
     lines += ["", "## Conditions", "", "| condition | schemes in order | scenario of each part |", "|---|---|---|"]
-    lines += [f"| {c['number']} | {', '.join(c['schemes'])} | {', '.join(c['part_scenarios'])} |"
-              for c in book["conditions"]]
+    lines += [
+        f"| {c['number']} | {', '.join(c['schemes'])} | {', '.join(c['part_scenarios'])} |" for c in book["conditions"]
+    ]
     rules = book["exclusion_rules"]
     lines += ["", "## Exclusion flags", ""]
     lines += [f"- `{reason}`: {text}" for reason, text in rules["reasons"].items()]
-    lines += [f"- time threshold of this export: {rules['too_fast']}",
-              f"- participant kinds analysed (the others are flagged `pilot_or_bot`): "
-              f"{', '.join(rules.get('analysed_kinds', ['real']))}", ""]
+    lines += [
+        f"- time threshold of this export: {rules['too_fast']}",
+        f"- participant kinds analysed (the others are flagged `pilot_or_bot`): "
+        f"{', '.join(rules.get('analysed_kinds', ['real']))}",
+        "",
+    ]
     return "\n".join(lines)
 
 
-def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRules | None = None,
-                 batch: int = 500) -> ExportResult:
+def export_study(
+    db: Database, study: Study, out: str | Path, rules: ExclusionRules | None = None, batch: int = 500
+) -> ExportResult:
     """Write the three CSV files and the codebook into `out`, reading `batch` participants at a time."""
     started = time.perf_counter()
     rules = rules or ExclusionRules()
@@ -232,8 +277,9 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     median_s = median_duration_s(db, study.study.id, rules.kinds)
     threshold = rules.threshold_s(median_s)
     columns = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
-    tables = {name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols)
-              for name, cols in columns.items()}
+    tables = {
+        name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols) for name, cols in columns.items()
+    }
     excluded = 0
     study_conditions = conditions(study)
     try:
@@ -251,8 +297,13 @@ def export_study(db: Database, study: Study, out: str | Path, rules: ExclusionRu
     book = codebook(study, layout, rules, median_s)
     (out / "codebook.json").write_text(json.dumps(book, indent=1) + "\n", encoding="utf-8")
     (out / "codebook.md").write_text(codebook_markdown(book), encoding="utf-8")
-    return ExportResult(out=out, participants=tables["participants.csv"].rows, answers=tables["long.csv"].rows,
-                        excluded=excluded, seconds=time.perf_counter() - started)
+    return ExportResult(
+        out=out,
+        participants=tables["participants.csv"].rows,
+        answers=tables["long.csv"].rows,
+        excluded=excluded,
+        seconds=time.perf_counter() - started,
+    )
 
 
 def run_export(*, database_url: str, study: str | None, out: str, rules: ExclusionRules) -> int:
@@ -262,6 +313,8 @@ def run_export(*, database_url: str, study: str | None, out: str, rules: Exclusi
         result = export_study(db, analysis_study(db, study), out, rules)
     finally:
         db.dispose()
-    print(f"{result.participants} participants ({result.excluded} excluded by the rules), {result.answers} answer "
-          f"rows in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json in {result.out}")
+    print(
+        f"{result.participants} participants ({result.excluded} excluded by the rules), {result.answers} answer "
+        f"rows in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json in {result.out}"
+    )
     return 0

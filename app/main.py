@@ -64,21 +64,27 @@ def create_app(settings: Settings) -> FastAPI:
     templates = Environment(loader=FileSystemLoader(settings.templates_dir), autoescape=True, auto_reload=False)
     templates.globals["csrf_token"] = csrf_token
     templates.filters["paragraphs"] = _paragraphs
-    context = Context(settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db,
-                      templates=templates)
+    context = Context(
+        settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db, templates=templates
+    )
 
     app = FastAPI(title="Foil survey", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.context = context
     app.state.login_throttle = LoginThrottle(
-        free_per_client=settings.login_free_attempts, free_overall=settings.login_free_attempts_overall,
-        delay_s=settings.login_delay_s, max_delay_s=settings.login_max_delay_s)
+        free_per_client=settings.login_free_attempts,
+        free_overall=settings.login_free_attempts_overall,
+        delay_s=settings.login_delay_s,
+        max_delay_s=settings.login_max_delay_s,
+    )
     app.state.arrivals = ArrivalLimit(burst=settings.arrivals_burst, per_minute=settings.arrivals_per_minute)
     app.include_router(participant_pages.router)
     app.include_router(media.router)
     app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
     if settings.admin_password is None:
-        log.warning("FOIL_ADMIN_PASSWORD is not set: the admin pages are off (set it, 8 characters or more, and "
-                    "restart the server)")
+        log.warning(
+            "FOIL_ADMIN_PASSWORD is not set: the admin pages are off (set it, 8 characters or more, and "
+            "restart the server)"
+        )
         app.include_router(admin_pages.disabled_router)
     else:
         app.include_router(admin_pages.router)
@@ -86,8 +92,16 @@ def create_app(settings: Settings) -> FastAPI:
 
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, error: HTTPException):
-        titles = {400: "Bad request", 403: "Not allowed", 404: "Page not found", 405: "Not allowed",
-                  409: "Not available yet", 413: "Too large", 429: "Please wait a moment", 503: "Busy"}
+        titles = {
+            400: "Bad request",
+            403: "Not allowed",
+            404: "Page not found",
+            405: "Not allowed",
+            409: "Not available yet",
+            413: "Too large",
+            429: "Please wait a moment",
+            503: "Busy",
+        }
         text = error.detail if isinstance(error.detail, str) else "The request could not be handled."
         page = context.message(request, titles.get(error.status_code, "Error"), text, status_code=error.status_code)
         page.headers.update(error.headers or {})
@@ -100,13 +114,18 @@ def create_app(settings: Settings) -> FastAPI:
     @app.exception_handler(RequestValidationError)
     async def _bad_request(request: Request, error: RequestValidationError):
         fields = "; ".join(f"{e['loc'][-1]} ({e['msg'].lower()})" for e in error.errors())
-        return context.message(request, "Bad request", f"The request is missing or has invalid fields: {fields}.",
-                               status_code=400)
+        return context.message(
+            request, "Bad request", f"The request is missing or has invalid fields: {fields}.", status_code=400
+        )
 
     @app.exception_handler(ClientDisconnect)
     async def _gone(request: Request, error: ClientDisconnect):
-        log.info("%s %s from %s: the client left before its request had arrived", request.method, request.url.path,
-                 request.client.host if request.client else "?")
+        log.info(
+            "%s %s from %s: the client left before its request had arrived",
+            request.method,
+            request.url.path,
+            request.client.host if request.client else "?",
+        )
         return Response(status_code=400)  # nobody reads it
 
     security_headers = SecurityHeadersMiddleware(app, frame_ancestors=settings.frame_ancestors)
@@ -114,16 +133,24 @@ def create_app(settings: Settings) -> FastAPI:
     @app.exception_handler(Exception)
     async def _server_error(request: Request, error: Exception):
         # Starlette's outermost layer sends this (and logs the error): the middlewares below never see it.
-        return PlainTextResponse("Something went wrong on the server. What you had already submitted is saved; "
-                                 "please go back and try again in a moment.", status_code=500,
-                                 headers={name.decode(): value.decode() for name, value in security_headers.headers})
+        return PlainTextResponse(
+            "Something went wrong on the server. What you had already submitted is saved; "
+            "please go back and try again in a moment.",
+            status_code=500,
+            headers={name.decode(): value.decode() for name, value in security_headers.headers},
+        )
 
     app.router.redirect_slashes = False  # its redirect is built from the Host header
     # Innermost first: every reply, the body limit's 413 and the host check's 400 included, gets the headers.
     # Clips and static files never touch the session, so their replies carry no cookie and no Vary: Cookie.
-    app.add_middleware(SessionMiddleware, secret_key=_cookie_secret(settings, db), session_cookie="foil_session",
-                       max_age=settings.session_max_age_s, same_site=settings.cookie_samesite,
-                       https_only=settings.cookie_secure)
+    app.add_middleware(
+        SessionMiddleware,
+        secret_key=_cookie_secret(settings, db),
+        session_cookie="foil_session",
+        max_age=settings.session_max_age_s,
+        same_site=settings.cookie_samesite,
+        https_only=settings.cookie_secure,
+    )
     app.add_middleware(BodyLimitMiddleware, limit=settings.max_body_bytes)
     if settings.allowed_hosts != ["*"]:
         app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.allowed_hosts, www_redirect=False)

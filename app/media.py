@@ -51,8 +51,12 @@ def _small_range(data: bytes, request: Request, headers: dict) -> Response | Non
     start, end = int(match.group(1)), min(int(match.group(2) or size - 1), size - 1)
     if start > end:
         return None  # unsatisfiable: FileResponse answers 416
-    return Response(data[start:end + 1], status_code=206, media_type="video/mp4", headers={
-        **headers, "accept-ranges": "bytes", "content-range": f"bytes {start}-{end}/{size}"})
+    return Response(
+        data[start : end + 1],
+        status_code=206,
+        media_type="video/mp4",
+        headers={**headers, "accept-ranges": "bytes", "content-range": f"bytes {start}-{end}/{size}"},
+    )
 
 
 @router.api_route("/clips/{name}", methods=["GET", "HEAD"])
@@ -66,5 +70,5 @@ async def clip(name: str, request: Request):  # no blocking call on the usual pa
         return Response(status_code=304, headers=headers)
     data = request.app.state.context.kept_clips.get(path)
     return (data is not None and _small_range(data, request, headers)) or FileResponse(
-        path, media_type="video/mp4", headers=headers)
-
+        path, media_type="video/mp4", headers=headers
+    )

@@ -52,8 +52,14 @@ class Participant(Base):
     __table_args__ = (
         # One record per platform identity (a link's three ids): coming back resumes it, concurrent first arrivals
         # cannot duplicate it. A platform id with other study or session ids is another record (docs/survey.md).
-        UniqueConstraint("study", "platform", "external_id", "platform_study_id", "platform_session_id",
-                         name="uq_participant_identity"),
+        UniqueConstraint(
+            "study",
+            "platform",
+            "external_id",
+            "platform_study_id",
+            "platform_session_id",
+            name="uq_participant_identity",
+        ),
         # One arrival per slot: the balanced assignment's counter, safe across processes.
         UniqueConstraint("study", "slot", name="uq_participant_slot"),
     )
@@ -81,10 +87,12 @@ class Participant(Base):
     details: Mapped[dict | None] = mapped_column(JSON)  # comprehension attempts, viewport, ...
 
     responses: Mapped[list[Response]] = relationship(back_populates="participant", order_by="Response.step")
-    plan_row: Mapped[ParticipantPlan | None] = relationship(lazy="selectin", cascade="all, delete-orphan",
-                                                            passive_deletes=True)
+    plan_row: Mapped[ParticipantPlan | None] = relationship(
+        lazy="selectin", cascade="all, delete-orphan", passive_deletes=True
+    )
     plan: AssociationProxy[list | None] = association_proxy(
-        "plan_row", "plan", creator=lambda plan: ParticipantPlan(plan=plan))
+        "plan_row", "plan", creator=lambda plan: ParticipantPlan(plan=plan)
+    )
 
 
 class ParticipantPlan(Base):

@@ -61,18 +61,32 @@ _SHOWN = select(*_COLUMNS).where(PARTICIPANT.c.study == bindparam("study"))
 BY_CODE = _SHOWN.where(PARTICIPANT.c.code == bindparam("code"))
 # The participant and their plan in one statement: every page and answer needs both, and on PostgreSQL each
 # statement is a round trip to the server.
-WITH_PLAN = select(*_COLUMNS, PLANS.c.plan).select_from(
-    PARTICIPANT.outerjoin(PLANS, PLANS.c.participant_id == PARTICIPANT.c.id)).where(
-    PARTICIPANT.c.study == bindparam("study"), PARTICIPANT.c.code == bindparam("code"))
-BY_IDENTITY = _SHOWN.where(PARTICIPANT.c.platform == bindparam("platform"),
-                           *(PARTICIPANT.c[name] == bindparam(name) for name in IDENTITY))
+WITH_PLAN = (
+    select(*_COLUMNS, PLANS.c.plan)
+    .select_from(PARTICIPANT.outerjoin(PLANS, PLANS.c.participant_id == PARTICIPANT.c.id))
+    .where(PARTICIPANT.c.study == bindparam("study"), PARTICIPANT.c.code == bindparam("code"))
+)
+BY_IDENTITY = _SHOWN.where(
+    PARTICIPANT.c.platform == bindparam("platform"), *(PARTICIPANT.c[name] == bindparam(name) for name in IDENTITY)
+)
 SAVE_RESPONSE = insert(RESPONSE).values({name: bindparam(name) for name in RESPONSE.c.keys() if name != "id"})
-ENTER = insert(PARTICIPANT).values(
-    {name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"}).returning(PARTICIPANT.c.id)
+ENTER = (
+    insert(PARTICIPANT)
+    .values({name: bindparam(name) for name in PARTICIPANT.c.keys() if name != "id"})
+    .returning(PARTICIPANT.c.id)
+)
 SAVE_PLAN = insert(PLANS).values(participant_id=bindparam("participant"), plan=bindparam("plan"))
-NEXT_STEP = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
-    step=bindparam("to_step"), step_started_at=bindparam("now"), status=bindparam("to_status"),
-    completed_at=bindparam("completed"), attention_failures=PARTICIPANT.c.attention_failures + bindparam("failed"))
+NEXT_STEP = (
+    update(PARTICIPANT)
+    .where(PARTICIPANT.c.id == bindparam("participant"))
+    .values(
+        step=bindparam("to_step"),
+        step_started_at=bindparam("now"),
+        status=bindparam("to_status"),
+        completed_at=bindparam("completed"),
+        attention_failures=PARTICIPANT.c.attention_failures + bindparam("failed"),
+    )
+)
 
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 PLATFORM_PARAMS = {  # external id, platform study id, platform session id
@@ -94,8 +108,7 @@ def _current_plan(session: Session, ctx: Context, request: Request) -> tuple[Row
     return participant, None if participant.plan is None else parse_plan(participant.plan)
 
 
-def _current_screens(session: Session, ctx: Context, request: Request,
-                     kept) -> tuple[Row, list[Screen] | None, str]:
+def _current_screens(session: Session, ctx: Context, request: Request, kept) -> tuple[Row, list[Screen] | None, str]:
     """The participant, their screens while they take part, and the notice for screen `kept` (a step whose first
     answers were kept when it was sent again; "" for none)."""
     participant, plan = _current_plan(session, ctx, request)
@@ -115,8 +128,11 @@ def _platform_identity(platform: str, params) -> dict:
     values = [params.get(name, "") for name in names]
     # All three, or the link cannot tell its participant from someone who only knows their platform id.
     if missing := [name for name, value in zip(names, values, strict=True) if not value]:
-        raise HTTPException(400, f"This link must be opened from {PLATFORM_NAMES[platform]}: it lacks "
-                                 f"{' and '.join(missing)}. Please go back to the study's page there and use its link.")
+        raise HTTPException(
+            400,
+            f"This link must be opened from {PLATFORM_NAMES[platform]}: it lacks "
+            f"{' and '.join(missing)}. Please go back to the study's page there and use its link.",
+        )
     for name, value in zip(names, values, strict=True):
         if value and not ID_VALUE.match(value):
             raise HTTPException(400, f"The link's {name} is not a valid identifier.")
@@ -139,8 +155,11 @@ def _by_identity(session: Session, ctx: Context, identity: dict) -> Row | None:
 def _current(session: Session, ctx: Context, request: Request, query=BY_CODE) -> Row:
     participant = _by_code(session, ctx, request.session.get("participant"), query)
     if participant is None:
-        raise HTTPException(400, "We could not find your place in the study (cookies may be blocked or have "
-                                 "expired). Please open the study again from the link you were given.")
+        raise HTTPException(
+            400,
+            "We could not find your place in the study (cookies may be blocked or have "
+            "expired). Please open the study again from the link you were given.",
+        )
     return participant
 
 
@@ -156,14 +175,20 @@ def landing(request: Request, ctx: ContextDep):
     if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return ctx.render_form(request, ("consent.html", True), "consent.html", lambda: {"preview": True})
     if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
-        return ctx.message(request, "Please use a computer",
-                           "This study needs a laptop or desktop computer. Please open the link there.")
+        return ctx.message(
+            request,
+            "Please use a computer",
+            "This study needs a laptop or desktop computer. Please open the link there.",
+        )
     kind, fast = "real", False
     if "pilot" in request.query_params or "bot" in request.query_params:
         kind, fast = kind_from_link(request.query_params, pilot_token(ctx.db, info.id))
         if "pilot" in request.query_params and not fast:
-            raise HTTPException(400, "This preview link is not valid for this study (it may be from an older "
-                                     "server). Copy the pilot link again from the admin overview.")
+            raise HTTPException(
+                400,
+                "This preview link is not valid for this study (it may be from an older "
+                "server). Copy the pilot link again from the admin overview.",
+            )
     if kind == "real":  # the session holds a kind only for pilots and bots
         request.session.pop("kind", None)
         request.session.pop("fast", None)
@@ -196,21 +221,40 @@ def _enter(ctx: Context, identity: dict, agreed: bool, user_agent: str, kind: st
                 if identity and (known := _by_identity(session, ctx, identity)) is not None:
                     return known.code
                 now = datetime.now(UTC)
-                values = {"code": secrets.token_hex(16), "study": info.id, "platform": info.platform,
-                          "external_id": None, "platform_study_id": None, "platform_session_id": None,
-                          "status": "started" if agreed else "declined", "slot": None, "condition": None,
-                          "step": 0, "step_started_at": now, "user_agent": user_agent[:512],
-                          "created_at": now, "completed_at": None, "excluded": False, "exclusion_note": "",
-                          "attention_failures": 0, "kind": kind,
-                          "consent_version": ctx.study.consent_version(), "details": None, **identity}
+                values = {
+                    "code": secrets.token_hex(16),
+                    "study": info.id,
+                    "platform": info.platform,
+                    "external_id": None,
+                    "platform_study_id": None,
+                    "platform_session_id": None,
+                    "status": "started" if agreed else "declined",
+                    "slot": None,
+                    "condition": None,
+                    "step": 0,
+                    "step_started_at": now,
+                    "user_agent": user_agent[:512],
+                    "created_at": now,
+                    "completed_at": None,
+                    "excluded": False,
+                    "exclusion_note": "",
+                    "attention_failures": 0,
+                    "kind": kind,
+                    "consent_version": ctx.study.consent_version(),
+                    "details": None,
+                    **identity,
+                }
                 if agreed and info.assignment == "balanced":
                     values["slot"] = next_slot(session, study=info.id)
-                    values["condition"] = condition_for_slot(seed=info.seed, n_conditions=len(ctx.conditions),
-                                                             slot=values["slot"])
+                    values["condition"] = condition_for_slot(
+                        seed=info.seed, n_conditions=len(ctx.conditions), slot=values["slot"]
+                    )
                 participant_id = session.scalar(ENTER, values)
                 if values["condition"] is not None:
-                    session.execute(SAVE_PLAN, {"participant": participant_id,
-                                                "plan": _new_plan(ctx, participant_id, values["condition"])})
+                    session.execute(
+                        SAVE_PLAN,
+                        {"participant": participant_id, "plan": _new_plan(ctx, participant_id, values["condition"])},
+                    )
                 return values["code"]
         except IntegrityError:
             continue
@@ -240,11 +284,16 @@ def consent(request: Request, ctx: ContextDep, form: FormDep):
             raise HTTPException(400, "Please open the study from the link you were given.")
     kind = request.session.get("kind") if request.session.get("kind") in ("pilot", "bot") else "real"
     researchers = kind != "real" and request.session.get("fast") is True  # the pilot link, with its token
-    if not researchers and (wait := request.app.state.arrivals.take(
-            request.client.host if request.client else "unknown")) > 0:
-        raise HTTPException(429, "Many people have just started the study from your network. Please wait "
-                                 f"{ceil(wait)} seconds, then press the button again.",
-                            headers={"retry-after": str(ceil(wait))})
+    if (
+        not researchers
+        and (wait := request.app.state.arrivals.take(request.client.host if request.client else "unknown")) > 0
+    ):
+        raise HTTPException(
+            429,
+            "Many people have just started the study from your network. Please wait "
+            f"{ceil(wait)} seconds, then press the button again.",
+            headers={"retry-after": str(ceil(wait))},
+        )
     code = _enter(ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
     request.session["participant"] = code
     request.session.pop("identity", None)
@@ -253,8 +302,12 @@ def consent(request: Request, ctx: ContextDep, form: FormDep):
 
 def _clip_view(sha: str, shape: Shape | Pairwise | Watch | Attention) -> dict:
     """A clip's address and box; `shape` is anything with its `clip_ms`, `width` and `height` (a clip screen)."""
-    return {"url": f"/clips/{sha}.mp4", "width": shape.width or 720, "height": shape.height or 880,
-            "seconds": round((shape.clip_ms or 0) / 1000, 1)}
+    return {
+        "url": f"/clips/{sha}.mp4",
+        "width": shape.width or 720,
+        "height": shape.height or 880,
+        "seconds": round((shape.clip_ms or 0) / 1000, 1),
+    }
 
 
 def _outcomes(ctx: Context, sha: str) -> list[str]:
@@ -275,12 +328,16 @@ def screen_view(ctx: Context, screen: Screen) -> dict:
     """What a page may know about a screen: labels and the clip's address, never agent names or ground truth."""
     study = ctx.study
     robots = screen.robots if isinstance(screen, WithRobots) else []
-    view = {"kind": screen.kind, "progress": screen.progress, "position": screen.position,
-            "labels": [robot.label for robot in robots],
-            "questions": [(name, study.questions[name]) for name in screen.questions] if isinstance(screen, Asking)
-            else [],
-            "block": screen.block if isinstance(screen, Round) else None,
-            "round_start": isinstance(screen, Watch) and screen.round_start, "optional": []}
+    view = {
+        "kind": screen.kind,
+        "progress": screen.progress,
+        "position": screen.position,
+        "labels": [robot.label for robot in robots],
+        "questions": [(name, study.questions[name]) for name in screen.questions] if isinstance(screen, Asking) else [],
+        "block": screen.block if isinstance(screen, Round) else None,
+        "round_start": isinstance(screen, Watch) and screen.round_start,
+        "optional": [],
+    }
     if isinstance(screen, InPart):
         part = study.parts[screen.part - 1]
         view["part_title"], view["part_intro"], view["part_kind"] = part.title, part.intro, part.kind
@@ -290,8 +347,10 @@ def screen_view(ctx: Context, screen: Screen) -> dict:
     match screen:
         case Ranking() if screen.media_list:
             shapes = screen.shapes or [Shape()] * len(screen.media_list)
-            view["round_clips"] = [_clip_view(sha, shape) | {"outcomes": _outcomes(ctx, sha)}
-                                   for sha, shape in zip(screen.media_list, shapes, strict=True)]
+            view["round_clips"] = [
+                _clip_view(sha, shape) | {"outcomes": _outcomes(ctx, sha)}
+                for sha, shape in zip(screen.media_list, shapes, strict=True)
+            ]
         case Attention():
             check = study.attention_checks[screen.check]
             view["attention_text"], view["options"] = check.text, screen.options
@@ -310,17 +369,46 @@ def screen_view(ctx: Context, screen: Screen) -> dict:
     return view
 
 
-def _render_screen(request: Request, ctx: Context, screen: Screen, step: int, *, errors=None, values=None,
-                   events: str = "", status_code: int = 200, notice: str = "", watched: bool | None = None):
+def _render_screen(
+    request: Request,
+    ctx: Context,
+    screen: Screen,
+    step: int,
+    *,
+    errors=None,
+    values=None,
+    events: str = "",
+    status_code: int = 200,
+    notice: str = "",
+    watched: bool | None = None,
+):
     name = "instructions.html" if isinstance(screen, Instructions) else "screen.html"
     if not (errors or values or events or notice):  # as first shown: the same page for everyone at this step
-        return ctx.render_form(request, (name, step, screen.text), name, lambda: {
-            "screen": screen_view(ctx, screen), "step": step, "errors": {}, "values": {}, "video_events": "",
-            "watched": False, "notice": ""})
+        return ctx.render_form(
+            request,
+            (name, step, screen.text),
+            name,
+            lambda: {
+                "screen": screen_view(ctx, screen),
+                "step": step,
+                "errors": {},
+                "values": {},
+                "video_events": "",
+                "watched": False,
+                "notice": "",
+            },
+        )
     return ctx.render(
-        request, name, status_code=status_code, screen=screen_view(ctx, screen), step=step,
-        errors=errors or {}, values=values or {}, video_events=events,
-        watched=('"ended"' in events) if watched is None else watched, notice=notice,
+        request,
+        name,
+        status_code=status_code,
+        screen=screen_view(ctx, screen),
+        step=step,
+        errors=errors or {},
+        values=values or {},
+        video_events=events,
+        watched=('"ended"' in events) if watched is None else watched,
+        notice=notice,
     )
 
 
@@ -329,9 +417,12 @@ def _status_page(request: Request, ctx: Context, participant: Row):
     if participant.status == "declined":
         return ctx.message(request, "Thank you", texts.declined)
     if participant.status == "returned":
-        return ctx.message(request, "You have left the study",
-                           "You chose to stop taking part, so the study cannot be taken again from this link. "
-                           "If you came from Prolific, please return your submission there.")
+        return ctx.message(
+            request,
+            "You have left the study",
+            "You chose to stop taking part, so the study cannot be taken again from this link. "
+            "If you came from Prolific, please return your submission there.",
+        )
     return ctx.render(request, "complete.html", completion=ctx.study.completion)
 
 
@@ -347,10 +438,12 @@ def current_page(request: Request, ctx: ContextDep):
 
 
 DETAILS = select(PARTICIPANT.c.details).where(PARTICIPANT.c.id == bindparam("participant"))
-SAVE_DETAILS = update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(
-    details=bindparam("details"))
-SAVED_ANSWERS = select(RESPONSE.c.answers).where(RESPONSE.c.participant_id == bindparam("participant"),
-                                                 RESPONSE.c.step == bindparam("step"))
+SAVE_DETAILS = (
+    update(PARTICIPANT).where(PARTICIPANT.c.id == bindparam("participant")).values(details=bindparam("details"))
+)
+SAVED_ANSWERS = select(RESPONSE.c.answers).where(
+    RESPONSE.c.participant_id == bindparam("participant"), RESPONSE.c.step == bindparam("step")
+)
 
 
 NOTICE_ANSWER_CHARS = 60  # a saved text answer in the notice: its beginning
@@ -367,8 +460,10 @@ def _kept_notice(ctx: Context, screen: Screen, saved: dict) -> str:
         shown.append(value if len(value) <= NOTICE_ANSWER_CHARS else value[:NOTICE_ANSWER_CHARS] + "…")
     where = screen.progress or "that screen"
     kept = f" ({'; '.join(shown)})" if shown else ""
-    return (f"You had already answered {where}: answers cannot be changed, so your first answers{kept} are kept. "
-            "Please continue below.")
+    return (
+        f"You had already answered {where}: answers cannot be changed, so your first answers{kept} are kept. "
+        "Please continue below."
+    )
 
 
 def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime, now: datetime) -> str | None:
@@ -380,9 +475,11 @@ def _viewing_problem(screen: Pairwise | Watch | Attention, started_at: datetime,
     open_ms = (now - as_utc(started_at)).total_seconds() * 1000
     if open_ms + VIEW_TOLERANCE_MS >= need:
         return None
-    return (f"The clip plays for {need / 1000:.0f} seconds, but this page has been open for only "
-            f"{open_ms / 1000:.0f} seconds, so it cannot have been watched to the end at normal speed. Nothing was "
-            "saved. Please play the clip from the start to the end, then answer again.")
+    return (
+        f"The clip plays for {need / 1000:.0f} seconds, but this page has been open for only "
+        f"{open_ms / 1000:.0f} seconds, so it cannot have been watched to the end at normal speed. Nothing was "
+        "saved. Please play the clip from the start to the end, then answer again."
+    )
 
 
 KEPT = "kept"  # what `_save` says when a screen answered before was sent again with other answers
@@ -429,19 +526,34 @@ def _save_once(ctx: Context, request: Request, step: int, form: FormData) -> tup
             details["comprehension_attempts"] = details.get("comprehension_attempts", 0) + 1
             session.execute(SAVE_DETAILS, {"participant": participant.id, "details": details})
         viewport = _one_value(form, "viewport")
-        session.execute(SAVE_RESPONSE, {
-            "participant_id": participant.id, "step": step, "kind": screen.kind, "answers": checked.answers,
-            "video_events": checked.video_events, "plays": checked.plays, "client_ms": checked.client_ms,
-            "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
-            "submitted_at": now,
-            "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
-        })
+        session.execute(
+            SAVE_RESPONSE,
+            {
+                "participant_id": participant.id,
+                "step": step,
+                "kind": screen.kind,
+                "answers": checked.answers,
+                "video_events": checked.video_events,
+                "plays": checked.plays,
+                "client_ms": checked.client_ms,
+                "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+                "submitted_at": now,
+                "details": {"viewport": viewport} if viewport and VIEWPORT.match(viewport) else None,
+            },
+        )
         done = step + 1 == len(plan)
         failed = isinstance(screen, Attention) and checked.answers["attention"] != screen.expected
-        session.execute(NEXT_STEP, {
-            "participant": participant.id, "to_step": step + 1, "now": now, "failed": int(failed),
-            "to_status": "completed" if done else "started", "completed": now if done else None,
-        })
+        session.execute(
+            NEXT_STEP,
+            {
+                "participant": participant.id,
+                "to_step": step + 1,
+                "now": now,
+                "failed": int(failed),
+                "to_status": "completed" if done else "started",
+                "completed": now if done else None,
+            },
+        )
     return None
 
 
@@ -463,9 +575,17 @@ def submit(request: Request, ctx: ContextDep, form: FormDep):
         return _see_current()
     screen, checked = refused
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
-    return _render_screen(request, ctx, screen, int(step), errors=checked.errors, values=values,
-                          events=str(form.get("video_events") or "")[:20000], status_code=422,
-                          watched=False if "video" in checked.errors else None)
+    return _render_screen(
+        request,
+        ctx,
+        screen,
+        int(step),
+        errors=checked.errors,
+        values=values,
+        events=str(form.get("video_events") or "")[:20000],
+        status_code=422,
+        watched=False if "video" in checked.errors else None,
+    )
 
 
 @router.post("/condition")
@@ -475,8 +595,9 @@ def choose_condition(request: Request, ctx: ContextDep, form: FormDep):
     n = len(ctx.conditions)
     participant_id = _read(_current, ctx, request).id
     if not isinstance(number, str) or not digits(number) or not 1 <= int(number) <= n:
-        return ctx.render(request, "choose.html", status_code=422, n_conditions=n,
-                          error=f"Please choose a number from 1 to {n}.")
+        return ctx.render(
+            request, "choose.html", status_code=422, n_conditions=n, error=f"Please choose a number from 1 to {n}."
+        )
     with ctx.db.writing() as session:
         participant = session.get(Participant, participant_id)
         if participant.status == "started" and participant.condition is None:
@@ -499,4 +620,3 @@ def leave(request: Request, ctx: ContextDep, form: FormDep):
         if participant.status == "started":
             participant.status = "returned"
     return _see_current()
-

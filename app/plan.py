@@ -30,14 +30,23 @@ from app.screens import (
 from app.study import RankingPart, Study
 
 
-def _pick(bundle: Bundle, scheme: str, scenario: str, pair: tuple[str, str], rng: random.Random,
-          used: dict[str, str] | None = None) -> ManifestClip:
+def _pick(
+    bundle: Bundle,
+    scheme: str,
+    scenario: str,
+    pair: tuple[str, str],
+    rng: random.Random,
+    used: dict[str, str] | None = None,
+) -> ManifestClip:
     """One of the matching clips (in id order), at random; where several match, preferring one whose labels
     name no other agent than they already named for this participant (`used`: label -> agent)."""
     options = bundle.matching(scheme, scenario, pair)
     if used:
-        clean = [c for c in options if all(used.get(label, agent) == agent
-                                           for agent, label in zip(c.agents, c.labels, strict=True))]
+        clean = [
+            c
+            for c in options
+            if all(used.get(label, agent) == agent for agent, label in zip(c.agents, c.labels, strict=True))
+        ]
         options = clean or options
     return rng.choice(options)
 
@@ -58,8 +67,7 @@ def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[Robot]:
     return robots
 
 
-def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random,
-                 bundle: Bundle) -> dict:
+def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random, bundle: Bundle) -> dict:
     """The fields of a pairwise or watch screen showing `clip`."""
     return {
         "part": part_no,
@@ -84,26 +92,31 @@ def _true_order(clips: list[ManifestClip], agents: list[str]) -> list[str] | Non
     return sorted(agents, key=lambda agent: -wins[agent])
 
 
-def _ranking_screens(part: RankingPart, part_no: int, scheme: str, scenario: str, bundle: Bundle,
-                     rng: random.Random, block: int) -> list[Screen]:
+def _ranking_screens(
+    part: RankingPart, part_no: int, scheme: str, scenario: str, bundle: Bundle, rng: random.Random, block: int
+) -> list[Screen]:
     clips = [_pick(bundle, scheme, scenario, pair, rng) for pair in itertools.combinations(part.agents, 2)]
     rng.shuffle(clips)
-    screens: list[Screen] = [Watch(kind="watch", **_clip_fields(part_no, clip, [], rng, bundle), block=block,
-                                   round_start=k == 0) for k, clip in enumerate(clips)]
+    screens: list[Screen] = [
+        Watch(kind="watch", **_clip_fields(part_no, clip, [], rng, bundle), block=block, round_start=k == 0)
+        for k, clip in enumerate(clips)
+    ]
     labels = [(agent, label) for clip in clips for agent, label in zip(clip.agents, clip.labels, strict=True)]
-    screens.append(Ranking(
-        kind="ranking",
-        part=part_no,
-        block=block,
-        scheme=scheme,
-        scenario=scenario,
-        clips=[clip.id for clip in clips],
-        media_list=[clip.sha256.lower() for clip in clips],
-        shapes=[_shape(bundle, clip) for clip in clips],
-        robots=_robots(labels, rng),
-        true_order=_true_order(clips, part.agents),
-        questions=list(part.questions),
-    ))
+    screens.append(
+        Ranking(
+            kind="ranking",
+            part=part_no,
+            block=block,
+            scheme=scheme,
+            scenario=scenario,
+            clips=[clip.id for clip in clips],
+            media_list=[clip.sha256.lower() for clip in clips],
+            shapes=[_shape(bundle, clip) for clip in clips],
+            robots=_robots(labels, rng),
+            true_order=_true_order(clips, part.agents),
+            questions=list(part.questions),
+        )
+    )
     return screens
 
 
@@ -117,8 +130,9 @@ def _label_progress(screens: list[Screen], part_no: int, n_parts: int) -> None:
             case Watch() | Ranking():
                 in_round = [s for s in screens if isinstance(s, Watch) and s.block == screen.block]
                 what = f"round {rounds.index(screen.block) + 1} of {len(rounds)}, "
-                what += (f"clip {in_round.index(screen) + 1} of {len(in_round)}" if isinstance(screen, Watch)
-                         else "ranking")
+                what += (
+                    f"clip {in_round.index(screen) + 1} of {len(in_round)}" if isinstance(screen, Watch) else "ranking"
+                )
             case Pairwise():
                 what = f"clip {clips.index(screen) + 1} of {len(clips)}"
             case _:
@@ -135,9 +149,19 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
         screens: list[Screen] = []
         if part.kind == "pairwise":
             blocks = [
-                [Pairwise(kind="pairwise", **_clip_fields(part_no, _pick(bundle, scheme, scenario[scheme], tuple(pair),
-                                                                         rng, used), list(part.questions), rng, bundle))
-                 for pair in part.pairs]
+                [
+                    Pairwise(
+                        kind="pairwise",
+                        **_clip_fields(
+                            part_no,
+                            _pick(bundle, scheme, scenario[scheme], tuple(pair), rng, used),
+                            list(part.questions),
+                            rng,
+                            bundle,
+                        ),
+                    )
+                    for pair in part.pairs
+                ]
                 for scheme in condition.schemes
             ]
             if part.order == "shuffled":
@@ -153,10 +177,19 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                 video = {}
                 if check.clip is not None:  # a video attention check: its clip, watched like any other
                     clip = bundle.matching(check.clip.scheme, check.clip.scenario, check.clip.agents)[0]
-                    video = {"clip": clip.id, "media": clip.sha256.lower(),
-                             **_shape(bundle, clip).model_dump(exclude_unset=True)}
-                screen = Attention(kind="attention", part=part_no, check=c, options=list(check.options),
-                                   expected=check.expected, **video)
+                    video = {
+                        "clip": clip.id,
+                        "media": clip.sha256.lower(),
+                        **_shape(bundle, clip).model_dump(exclude_unset=True),
+                    }
+                screen = Attention(
+                    kind="attention",
+                    part=part_no,
+                    check=c,
+                    options=list(check.options),
+                    expected=check.expected,
+                    **video,
+                )
                 screens.insert(min(check.after, len(screens)), screen)
         _label_progress(screens, part_no, len(study.parts))
         for screen in screens:
@@ -165,8 +198,14 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                     used.setdefault(robot.label, robot.agent)
         plan += screens
     if study.closing is not None:  # the closing questions and feedback box, after the last part
-        plan.append(Closing(kind="closing", questions=list(study.closing.questions),
-                            feedback=bool(study.closing.feedback), progress="Last screen: closing questions"))
+        plan.append(
+            Closing(
+                kind="closing",
+                questions=list(study.closing.questions),
+                feedback=bool(study.closing.feedback),
+                progress="Last screen: closing questions",
+            )
+        )
     for number, screen in enumerate(plan):
         screen.position = (number, len(plan))
     return plan

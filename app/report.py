@@ -26,8 +26,10 @@ from app.statistics import TestResult, accuracy_difference, ordinal_difference, 
 from app.study import ScaleQuestion, Study
 
 ALL = "all scenarios"
-TASKS = {"pairwise": "part one: pairwise (which robot is better)",
-         "ranking": "part two: global ranking (all robots in the right order)"}
+TASKS = {
+    "pairwise": "part one: pairwise (which robot is better)",
+    "ranking": "part two: global ranking (all robots in the right order)",
+}
 # The paper's Figure 4: orange for disagreement, blue for agreement, grey for the middle.
 DISAGREE, NEUTRAL, AGREE = ("#e66101", "#fdb863"), "#d9d9d9", ("#92c5de", "#0571b0")
 
@@ -81,20 +83,21 @@ class ReportData:
         return [ALL] + [s for s in dict.fromkeys(named) if s in seen]
 
     def accuracy_test(self, task: str, scope: str) -> TestResult:
-        return accuracy_difference({s: (self.tally(task, scope, s).correct, self.tally(task, scope, s).incorrect)
-                                    for s in self.schemes})
+        return accuracy_difference(
+            {s: (self.tally(task, scope, s).correct, self.tally(task, scope, s).incorrect) for s in self.schemes}
+        )
 
     def tally(self, task: str, scope: str, scheme: str) -> Tally:
         return self.accuracy.get((task, scope, scheme), Tally())
 
     def rating_test(self, question: str) -> TestResult:
-        return ordinal_difference({scheme: sorted(self.ratings[question][scheme].elements())
-                                   for scheme in self.schemes})
+        return ordinal_difference(
+            {scheme: sorted(self.ratings[question][scheme].elements()) for scheme in self.schemes}
+        )
 
     def scale_questions(self) -> list[tuple[str, ScaleQuestion]]:
         asked = self.study.part_questions()  # not the closing screen's scales: they rate no scheme
-        return [(name, q) for name, q in self.study.questions.items()
-                if isinstance(q, ScaleQuestion) and name in asked]
+        return [(name, q) for name, q in self.study.questions.items() if isinstance(q, ScaleQuestion) and name in asked]
 
 
 def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None) -> ReportData:
@@ -103,8 +106,11 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     threshold = rules.threshold_s(median_s)
     exclusions = Exclusions(rule=rules.describe(median_s))
     accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)
-    ratings = {name: {scheme: Counter() for scheme in study.design.schemes}
-               for name, q in study.questions.items() if isinstance(q, ScaleQuestion)}
+    ratings = {
+        name: {scheme: Counter() for scheme in study.design.schemes}
+        for name, q in study.questions.items()
+        if isinstance(q, ScaleQuestion)
+    }
     unscored = 0
     per_clip: dict[str, dict] = {}
     for record in participant_records(db, study.study.id):
@@ -122,9 +128,16 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                     continue
                 task = "pairwise" if kind == "choose" else "ranking"
                 if task == "pairwise" and row.get("clip"):
-                    entry = per_clip.setdefault(row["clip"], {"scheme": row["scheme"], "scenario": row["scenario"],
-                                                             "agents": " vs ".join(sorted(row["agents"].split(";"))),
-                                                             "better": row["truth"], "tally": Tally()})
+                    entry = per_clip.setdefault(
+                        row["clip"],
+                        {
+                            "scheme": row["scheme"],
+                            "scenario": row["scenario"],
+                            "agents": " vs ".join(sorted(row["agents"].split(";"))),
+                            "better": row["truth"],
+                            "tally": Tally(),
+                        },
+                    )
                     entry["tally"].correct += row["correct"]
                     entry["tally"].incorrect += 1 - row["correct"]
                 for scope in (ALL, row["scenario"]):
@@ -133,8 +146,14 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                     tally.incorrect += 1 - row["correct"]
             elif kind == "scale" and row["scheme"] in ratings[row["question"]]:
                 ratings[row["question"]][row["scheme"]][row["value"]] += 1
-    return ReportData(study=study, exclusions=exclusions, accuracy=dict(accuracy), unscored_rankings=unscored,
-                      ratings=ratings, per_clip=dict(sorted(per_clip.items())))
+    return ReportData(
+        study=study,
+        exclusions=exclusions,
+        accuracy=dict(accuracy),
+        unscored_rankings=unscored,
+        ratings=ratings,
+        per_clip=dict(sorted(per_clip.items())),
+    )
 
 
 def _audits(bundle_dir: str) -> dict[str, dict]:
@@ -146,6 +165,7 @@ def _audits(bundle_dir: str) -> dict[str, dict]:
 
 
 # Tables ------------------------------------------------------------------------------------------------------
+
 
 def _number(value: float | None, digits: int = 4) -> str | float:
     return "" if value is None else round(value, digits)
@@ -164,9 +184,14 @@ def table1_rows(data: ReportData) -> list[dict]:
             for task in TASKS:
                 tally = data.tally(task, scope, scheme)
                 low, high = tally.interval or (None, None)
-                row |= {f"{task}_correct": tally.correct, f"{task}_incorrect": tally.incorrect, f"{task}_n": tally.n,
-                        f"{task}_accuracy": _number(tally.accuracy), f"{task}_ci95_low": _number(low),
-                        f"{task}_ci95_high": _number(high)}
+                row |= {
+                    f"{task}_correct": tally.correct,
+                    f"{task}_incorrect": tally.incorrect,
+                    f"{task}_n": tally.n,
+                    f"{task}_accuracy": _number(tally.accuracy),
+                    f"{task}_ci95_low": _number(low),
+                    f"{task}_ci95_high": _number(high),
+                }
             rows.append(row)
     return rows
 
@@ -176,8 +201,16 @@ def accuracy_test_rows(data: ReportData) -> list[dict]:
     for scope in data.scopes():
         for task in TASKS:
             result = data.accuracy_test(task, scope)
-            rows.append({"scope": scope, "task": task, "test": result.test, "statistic": _number(result.statistic),
-                         "p_value": _significant(result.p_value), "odds_ratio": _number(result.effect)})
+            rows.append(
+                {
+                    "scope": scope,
+                    "task": task,
+                    "test": result.test,
+                    "statistic": _number(result.statistic),
+                    "p_value": _significant(result.p_value),
+                    "odds_ratio": _number(result.effect),
+                }
+            )
     return rows
 
 
@@ -190,8 +223,16 @@ def rating_rows(data: ReportData) -> list[dict]:
             total = sum(counts.values())
             for point in range(1, question.points + 1):
                 share = 100 * counts[point] / total if total else None
-                rows.append({"question": name, "scheme": scheme, "point": point, "label": labels[point - 1],
-                             "answers": counts[point], "percent": _number(share, 2)})
+                rows.append(
+                    {
+                        "question": name,
+                        "scheme": scheme,
+                        "point": point,
+                        "label": labels[point - 1],
+                        "answers": counts[point],
+                        "percent": _number(share, 2),
+                    }
+                )
     return rows
 
 
@@ -200,16 +241,29 @@ def rating_test_rows(data: ReportData) -> list[dict]:
     for name, _ in data.scale_questions():
         result = data.rating_test(name)
         counts = {f"n_{scheme}": sum(data.ratings[name][scheme].values()) for scheme in data.schemes}
-        rows.append({"question": name, "test": result.test, "statistic": _number(result.statistic),
-                     "p_value": _significant(result.p_value), "rank_biserial": _number(result.effect), **counts})
+        rows.append(
+            {
+                "question": name,
+                "test": result.test,
+                "statistic": _number(result.statistic),
+                "p_value": _significant(result.p_value),
+                "rank_biserial": _number(result.effect),
+                **counts,
+            }
+        )
     return rows
 
 
 def exclusion_rows(data: ReportData) -> list[dict]:
     e = data.exclusions
     rows = [{"rule": "participants in the database", "participants": e.before}]
-    rows += [{"rule": f"excluded: {text}" + (f" ({e.rule})" if reason == "too_fast" else ""),
-              "participants": e.per_reason[reason]} for reason, text in REASONS.items()]
+    rows += [
+        {
+            "rule": f"excluded: {text}" + (f" ({e.rule})" if reason == "too_fast" else ""),
+            "participants": e.per_reason[reason],
+        }
+        for reason, text in REASONS.items()
+    ]
     rows.append({"rule": "analysed (no rule applies)", "participants": e.after})
     return rows
 
@@ -223,6 +277,7 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
 
 
 # Figures -----------------------------------------------------------------------------------------------------
+
 
 def _pyplot():
     import matplotlib
@@ -248,8 +303,10 @@ def distribution_figure(data: ReportData, name: str, question: ScaleQuestion):
         shares = [100 * counts[p] / total if total else 0 for p in range(1, question.points + 1)]
         positions = [p + (k - (len(data.schemes) - 1) / 2) * width for p in range(1, question.points + 1)]
         axes.bar(positions, shares, width=width, label=f"{scheme} (n = {total})")
-    axes.set_xticks(range(1, question.points + 1),
-                    [f"{p}\n{label}" if not label.isdigit() else str(p) for p, label in enumerate(labels, 1)])
+    axes.set_xticks(
+        range(1, question.points + 1),
+        [f"{p}\n{label}" if not label.isdigit() else str(p) for p, label in enumerate(labels, 1)],
+    )
     axes.set_ylabel("% of answers")
     axes.set_title(textwrap.fill(question.text, 60), fontsize=12)
     if any_answers:
@@ -281,8 +338,9 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
     n = max(1, len(questions))
     columns = min(n, LIKERT_COLUMNS)
     rows = -(-n // columns)
-    figure, axes_grid = plt.subplots(rows, columns, figsize=(6.0 * columns, (2.6 + 0.7 * len(data.schemes)) * rows),
-                                     squeeze=False)
+    figure, axes_grid = plt.subplots(
+        rows, columns, figsize=(6.0 * columns, (2.6 + 0.7 * len(data.schemes)) * rows), squeeze=False
+    )
     axes_list = [axes for row in axes_grid for axes in row]
     for axes in axes_list[n:]:
         axes.set_visible(False)
@@ -296,10 +354,17 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
             ticks.append(f"{scheme}\n(n = {total})")
             shares = [100 * counts[p] / total if total else 0 for p in range(1, question.points + 1)]
             left = -sum(s for p, s in enumerate(shares, 1) if p < middle) - (
-                shares[int(middle) - 1] / 2 if middle == int(middle) else 0)
+                shares[int(middle) - 1] / 2 if middle == int(middle) else 0
+            )
             for p, share in enumerate(shares, 1):
-                axes.barh(row, share, left=left, color=colours[p - 1], edgecolor="white",
-                          label=question.point_labels()[p - 1] if row == 0 else None)
+                axes.barh(
+                    row,
+                    share,
+                    left=left,
+                    color=colours[p - 1],
+                    edgecolor="white",
+                    label=question.point_labels()[p - 1] if row == 0 else None,
+                )
                 left += share
         axes.axvline(0, color="black", linewidth=0.6)
         axes.set_yticks(range(len(data.schemes)), ticks)
@@ -325,10 +390,11 @@ def _save(figure, out: Path, stem: str) -> str:
 
     plt.close(figure)
     svg = buffer.getvalue()
-    return svg[svg.index("<svg"):]
+    return svg[svg.index("<svg") :]
 
 
 # The report --------------------------------------------------------------------------------------------------
+
 
 def _template_env() -> Environment:
     env = Environment(loader=FileSystemLoader(str(PACKAGE_DIR / "templates")), autoescape=select_autoescape())
@@ -347,29 +413,58 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
         folder.mkdir(parents=True, exist_ok=True)
         scales = data.scale_questions()
         labelled = [(name, q) for name, q in scales if q.labels is not None]
-        figures = [(f"distribution-{name}", f"Answers to “{q.text}” per scheme", name,
-                    _save(distribution_figure(data, name, q), folder, f"distribution-{name}"))
-                   for name, q in scales if q.labels is None]
+        figures = [
+            (
+                f"distribution-{name}",
+                f"Answers to “{q.text}” per scheme",
+                name,
+                _save(distribution_figure(data, name, q), folder, f"distribution-{name}"),
+            )
+            for name, q in scales
+            if q.labels is None
+        ]
         if labelled:
-            figures.append(("likert", "Agreement per scheme (diverging stacked bars)", None,
-                            _save(likert_figure(data, labelled), folder, "likert")))
-        tables = {"table1.csv": table1_rows(data), "accuracy_tests.csv": accuracy_test_rows(data),
-                  "ratings.csv": rating_rows(data), "rating_tests.csv": rating_test_rows(data),
-                  "exclusions.csv": exclusion_rows(data)}
+            figures.append(
+                (
+                    "likert",
+                    "Agreement per scheme (diverging stacked bars)",
+                    None,
+                    _save(likert_figure(data, labelled), folder, "likert"),
+                )
+            )
+        tables = {
+            "table1.csv": table1_rows(data),
+            "accuracy_tests.csv": accuracy_test_rows(data),
+            "ratings.csv": rating_rows(data),
+            "rating_tests.csv": rating_test_rows(data),
+            "exclusions.csv": exclusion_rows(data),
+        }
         if out is not None:
             for name, rows in tables.items():
                 _write_csv(folder / name, rows)
-        html = _template_env().get_template("report.html").render(
-            data=data, tasks=TASKS, all_scopes=ALL, figures=figures, exclusion_rows=tables["exclusions.csv"],
-            rating_tests=tables["rating_tests.csv"], tables=list(tables) if out is not None else [],
-            files=out is not None, likert=bool(labelled))
+        html = (
+            _template_env()
+            .get_template("report.html")
+            .render(
+                data=data,
+                tasks=TASKS,
+                all_scopes=ALL,
+                figures=figures,
+                exclusion_rows=tables["exclusions.csv"],
+                rating_tests=tables["rating_tests.csv"],
+                tables=list(tables) if out is not None else [],
+                files=out is not None,
+                likert=bool(labelled),
+            )
+        )
         if out is not None:
             (folder / "report.html").write_text(html, encoding="utf-8")
     return html
 
 
-def run_report(*, database_url: str, study: str | None, out: str, rules: ExclusionRules,
-               bundle: str | None = None) -> int:
+def run_report(
+    *, database_url: str, study: str | None, out: str, rules: ExclusionRules, bundle: str | None = None
+) -> int:
     """`foil report`: prints Table 1 in short and where the report went. The per-clip table shows each clip's
     audit from the manifest of ``bundle``, by default the bundle the server last served the study from."""
     if bundle and not (Path(bundle) / "manifest.json").is_file():
@@ -383,15 +478,19 @@ def run_report(*, database_url: str, study: str | None, out: str, rules: Exclusi
     if bundle is not None and (Path(bundle) / "manifest.json").is_file():
         data = replace(data, audits=_audits(bundle))
     else:
-        print(f"warning: the bundle the study was served from {'is not known' if bundle is None else 'is gone: '}"
-              f"{bundle or ''}; give it with --bundle (or FOIL_BUNDLE_DIR) to fill the per-clip audit column",
-              file=sys.stderr)
+        print(
+            f"warning: the bundle the study was served from {'is not known' if bundle is None else 'is gone: '}"
+            f"{bundle or ''}; give it with --bundle (or FOIL_BUNDLE_DIR) to fill the per-clip audit column",
+            file=sys.stderr,
+        )
     render_report(data, Path(out))
     e = data.exclusions
     print(f"{e.before} participants, {e.after} analysed after exclusions")
     for row in table1_rows(data):
         if row["scope"] == ALL:
-            print(f"{row['scheme']}: pairwise {row['pairwise_correct']}/{row['pairwise_n']}, "
-                  f"ranking {row['ranking_correct']}/{row['ranking_n']}")
+            print(
+                f"{row['scheme']}: pairwise {row['pairwise_correct']}/{row['pairwise_n']}, "
+                f"ranking {row['ranking_correct']}/{row['ranking_n']}"
+            )
     print(f"report: {Path(out) / 'report.html'}")
     return 0

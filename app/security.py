@@ -66,9 +66,13 @@ class _BodyTooLarge(Exception):
 
 async def _too_large(send: Send, limit: int) -> None:
     body = f"Request too large: at most {limit} bytes are accepted.".encode()
-    await send({"type": "http.response.start", "status": 413,
-                "headers": [(b"content-type", b"text/plain; charset=utf-8"),
-                            (b"content-length", str(len(body)).encode())]})
+    await send(
+        {
+            "type": "http.response.start",
+            "status": 413,
+            "headers": [(b"content-type", b"text/plain; charset=utf-8"), (b"content-length", str(len(body)).encode())],
+        }
+    )
     await send({"type": "http.response.body", "body": body})
 
 
@@ -110,8 +114,11 @@ class SecurityHeadersMiddleware:
             if message["type"] == "http.response.start":
                 headers = message.get("headers", [])
                 names = {name.lower() for name, _ in headers}  # a response's own headers win
-                extra = self.headers if names.isdisjoint(self.names) else [
-                    (name, value) for name, value in self.headers if name not in names]
+                extra = (
+                    self.headers
+                    if names.isdisjoint(self.names)
+                    else [(name, value) for name, value in self.headers if name not in names]
+                )
                 message = {**message, "headers": [*headers, *extra]}
             await send(message)
 
@@ -150,8 +157,13 @@ async def _form(request: Request) -> FormData:
     if request.headers.get("content-type", "").partition(";")[0].strip().lower() != "application/x-www-form-urlencoded":
         return await request.form(max_files=0, max_fields=MAX_FIELDS, max_part_size=MAX_FIELD_CHARS)
     try:
-        fields = parse_qsl((await request.body()).decode("latin-1"), keep_blank_values=True,
-                           max_num_fields=MAX_FIELDS, encoding="utf-8", errors="replace")
+        fields = parse_qsl(
+            (await request.body()).decode("latin-1"),
+            keep_blank_values=True,
+            max_num_fields=MAX_FIELDS,
+            encoding="utf-8",
+            errors="replace",
+        )
     except ValueError:
         raise HTTPException(400, f"Too many fields. Maximum number of fields is {MAX_FIELDS}.") from None
     if any(len(name) + len(value) > MAX_FIELD_CHARS for name, value in fields):
@@ -175,8 +187,15 @@ class LoginThrottle:
     FORGET_S = 24 * 3600
     MAX_CLIENTS = 10_000
 
-    def __init__(self, *, free_per_client: int = 5, free_overall: int = 100, delay_s: float = 1.0,
-                 max_delay_s: float = 900.0, clock=time.monotonic):
+    def __init__(
+        self,
+        *,
+        free_per_client: int = 5,
+        free_overall: int = 100,
+        delay_s: float = 1.0,
+        max_delay_s: float = 900.0,
+        clock=time.monotonic,
+    ):
         self.free_per_client, self.free_overall = free_per_client, free_overall
         self.delay_s, self.max_delay_s = delay_s, max_delay_s
         self.clock = clock

@@ -31,13 +31,25 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
     app = create_app(settings)
     logging.getLogger("foil.server").info(
         "study %r from %s, bundle %s, database %s; participants start at http://%s:%d/%s",
-        app.state.context.study.study.id, settings.study_path(), settings.bundle_dir,
-        _shown(settings.database_url), host, port,
-        f", the admin pages are at http://{host}:{port}/admin" if settings.admin_password is not None else "")
+        app.state.context.study.study.id,
+        settings.study_path(),
+        settings.bundle_dir,
+        _shown(settings.database_url),
+        host,
+        port,
+        f", the admin pages are at http://{host}:{port}/admin" if settings.admin_password is not None else "",
+    )
     limits = TransportLimits()
-    config = uvicorn.Config(app, host=host, port=port, proxy_headers=True, server_header=False,
-                            access_log=settings.access_log, http=survey_protocol(limits),
-                            timeout_keep_alive=limits.keep_alive_s)
+    config = uvicorn.Config(
+        app,
+        host=host,
+        port=port,
+        proxy_headers=True,
+        server_header=False,
+        access_log=settings.access_log,
+        http=survey_protocol(limits),
+        timeout_keep_alive=limits.keep_alive_s,
+    )
     uvicorn.Server(config).run(sockets=[listening])
     return 0
 
@@ -55,10 +67,11 @@ def _bind(host: str, port: int) -> socket.socket:
     except OSError as error:
         listening.close()
         if error.errno == errno.EADDRINUSE:
-            raise ValueError(f"port {port} on {host} is already in use (another foil serve?): stop that server or "
-                             f"choose another port with --port") from None
-        raise ValueError(f"cannot listen on {host}:{port}: {error.strerror}; choose another --host or --port") \
-            from None
+            raise ValueError(
+                f"port {port} on {host} is already in use (another foil serve?): stop that server or "
+                f"choose another port with --port"
+            ) from None
+        raise ValueError(f"cannot listen on {host}:{port}: {error.strerror}; choose another --host or --port") from None
     listening.listen(2048)  # uvicorn's backlog
     return listening
 

@@ -48,8 +48,13 @@ def accuracy_difference(counts: dict[str, tuple[int, int]]) -> TestResult:
         if 0 in (a, b, c, d):  # Haldane-Anscombe: add 0.5 to every cell, so the odds ratio is finite
             a, b, c, d = a + 0.5, b + 0.5, c + 0.5, d + 0.5
         effect = (a * d) / (b * c)
-        return TestResult("Fisher's exact test, two-sided; odds ratio with the Haldane-Anscombe correction (0.5 "
-                          "added to every cell) when a cell is 0", statistic=effect, p_value=float(p), effect=effect)
+        return TestResult(
+            "Fisher's exact test, two-sided; odds ratio with the Haldane-Anscombe correction (0.5 "
+            "added to every cell) when a cell is 0",
+            statistic=effect,
+            p_value=float(p),
+            effect=effect,
+        )
     if all(c == 0 for c, _ in table) or all(i == 0 for _, i in table):
         return TestResult("Pearson's chi-square test: every answer is in one column, so no difference", 0.0, 1.0)
     chi2, p, dof, _ = stats.chi2_contingency(table, correction=False)
@@ -76,7 +81,11 @@ def ordinal_difference(samples: dict[str, list[int]]) -> TestResult:
         (_, a), (_, b) = groups
         result = stats.mannwhitneyu(a, b, alternative="two-sided", use_continuity=True, method="asymptotic")
         u = float(result.statistic)
-        return TestResult("Mann-Whitney U, two-sided, normal approximation with tie and continuity correction",
-                          statistic=u, p_value=float(result.pvalue), effect=2 * u / (len(a) * len(b)) - 1)
+        return TestResult(
+            "Mann-Whitney U, two-sided, normal approximation with tie and continuity correction",
+            statistic=u,
+            p_value=float(result.pvalue),
+            effect=2 * u / (len(a) * len(b)) - 1,
+        )
     h, p = stats.kruskal(*(group for _, group in groups))
     return TestResult(f"Kruskal-Wallis H, {len(groups) - 1} degrees of freedom", float(h), float(p))

@@ -91,8 +91,10 @@ class Design(Strict):
             if scheme not in self.schemes:
                 raise ValueError(f"scheme_scenarios names {scheme!r}, which is not one of schemes {self.schemes}")
             if len(names) != len(self.scenarios):
-                raise ValueError(f"scheme_scenarios.{scheme} gives {len(names)} scenarios; the design has "
-                                 f"{len(self.scenarios)}, one for each")
+                raise ValueError(
+                    f"scheme_scenarios.{scheme} gives {len(names)} scenarios; the design has "
+                    f"{len(self.scenarios)}, one for each"
+                )
         return self
 
 
@@ -107,14 +109,19 @@ class Texts(Strict):
     preview: Text = "Accept the HIT to start the study."
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
-    example_caption: Text = ("An example: two robots, each with its own colour, shape and name, walk through a crowd "
-                             "to the same goal.")
-    robot_names: Text = ("Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
-                         "for two different robots in this study, and in a ranking round each name is one robot in "
-                         "all of the round's clips. Each new round brings robots with new names.")
+    example_caption: Text = (
+        "An example: two robots, each with its own colour, shape and name, walk through a crowd to the same goal."
+    )
+    robot_names: Text = (
+        "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
+        "for two different robots in this study, and in a ranking round each name is one robot in "
+        "all of the round's clips. Each new round brings robots with new names."
+    )
     names_in_round: Text = "In this round each name, colour and shape is one robot in all three clips."
-    new_round: Text = ("A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
-                       "from this round's clips.")
+    new_round: Text = (
+        "A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
+        "from this round's clips."
+    )
 
 
 class Completion(Strict):
@@ -325,8 +332,10 @@ class BuildSet(Strict):
         if (self.agents is None) == (self.pairs is None):
             raise ValueError("give either agents = [...] (every pair of them) or pairs = [[a, b], ...]")
         if self.agents is None and "ranking" in self.parts:
-            raise ValueError("a set that feeds a ranking part lists its agents (agents = [...]), so each agent "
-                             "keeps one robot number in all its clips")
+            raise ValueError(
+                "a set that feeds a ranking part lists its agents (agents = [...]), so each agent "
+                "keeps one robot number in all its clips"
+            )
         return self
 
     def clip_pairs(self) -> tuple[tuple[str, str], ...]:
@@ -366,13 +375,19 @@ def _build_problems(build: Build) -> list[tuple[tuple, str]]:
     for i, clip_set in enumerate(build.sets):
         for j, name in enumerate(clip_set.schemes):
             if name not in build.schemes:
-                problems.append((("build", "sets", i, "schemes", j),
-                                 f"no scheme {name!r}; defined: {sorted(build.schemes)}"))
+                problems.append(
+                    (("build", "sets", i, "schemes", j), f"no scheme {name!r}; defined: {sorted(build.schemes)}")
+                )
         for scheme, scenario, pair in itertools.product(clip_set.schemes, clip_set.scenarios, clip_set.clip_pairs()):
             key = (scheme, scenario, frozenset(pair))
             if key in seen:
-                problems.append((("build", "sets", i), f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} "
-                                 f"is already in sets[{seen[key]}]; list each clip once, with every part it feeds"))
+                problems.append(
+                    (
+                        ("build", "sets", i),
+                        f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} "
+                        f"is already in sets[{seen[key]}]; list each clip once, with every part it feeds",
+                    )
+                )
                 break
             seen[key] = i
     return problems
@@ -449,8 +464,12 @@ def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
         if len(set(closing.questions)) != len(closing.questions):
             problems.append((("closing", "questions"), "questions must not repeat"))
         if closing.feedback and (FEEDBACK in study.questions):
-            problems.append((("closing", "feedback"), f"the feedback box's answers are named {FEEDBACK!r}: rename "
-                                                      f"[questions.{FEEDBACK}]"))
+            problems.append(
+                (
+                    ("closing", "feedback"),
+                    f"the feedback box's answers are named {FEEDBACK!r}: rename [questions.{FEEDBACK}]",
+                )
+            )
         for r, name in enumerate(closing.required):
             if name not in closing.asks():
                 problems.append((("closing", "required", r), f"{name!r} is not asked on the closing screen"))
@@ -566,8 +585,9 @@ def parse_build(text: str, source: str = "study file") -> Build:
     study whose survey tables are not final yet."""
     data = _toml(text, source)
     if "build" not in data:
-        raise StudyError(f"{source}: no [build] table: it says which clips to search for and render (see "
-                         "docs/clips.md)")
+        raise StudyError(
+            f"{source}: no [build] table: it says which clips to search for and render (see docs/clips.md)"
+        )
     return _validated(Build, data["build"], text, source, ("build",), _build_problems)
 
 

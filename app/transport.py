@@ -19,7 +19,8 @@ from app.settings import TransportLimits
 log = logging.getLogger("foil.server")
 # What every reply written here carries: the app's security headers.
 HEADERS = b"content-type: text/plain; charset=utf-8\r\nconnection: close\r\n" + b"".join(
-    name + b": " + value + b"\r\n" for name, value in security_headers())
+    name + b": " + value + b"\r\n" for name, value in security_headers()
+)
 REASONS = {400: b"Bad Request", 408: b"Request Timeout", 431: b"Request Header Fields Too Large"}
 
 
@@ -78,12 +79,16 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
             return
         client = "{}:{}".format(*self.client) if self.client else "a client"
         if self._in_head:
-            log.info("%s sent no complete request within %s s: closed with 408", client,
-                     self.limits.request_timeout_s)
+            log.info("%s sent no complete request within %s s: closed with 408", client, self.limits.request_timeout_s)
             self._reply(408, f"The request did not arrive within {self.limits.request_timeout_s} seconds.")
         else:  # the app is waiting for the rest of the body: it sees the client leave
-            log.info("%s did not send the body of %s %s within %s s: closed", client, self.scope.get("method"),
-                     self.scope.get("path"), self.limits.request_timeout_s)
+            log.info(
+                "%s did not send the body of %s %s within %s s: closed",
+                client,
+                self.scope.get("method"),
+                self.scope.get("path"),
+                self.limits.request_timeout_s,
+            )
             self.transport.close()
 
     # The size of the request line and header fields.
@@ -111,15 +116,18 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
         if self._refused is None:
             self._reply(400, msg)
             return
-        log.info("%s: refused with 431: %s", "{}:{}".format(*self.client) if self.client else "a client",
-                 self._refused)
+        log.info("%s: refused with 431: %s", "{}:{}".format(*self.client) if self.client else "a client", self._refused)
         self._reply(431, self._refused)
 
     def _reply(self, status: int, text: str) -> None:
         self._disarm()
         body = text.encode()
-        self.transport.write(b"HTTP/1.1 %d %s\r\n" % (status, REASONS[status]) + HEADERS
-                             + b"content-length: %d\r\n\r\n" % len(body) + body)
+        self.transport.write(
+            b"HTTP/1.1 %d %s\r\n" % (status, REASONS[status])
+            + HEADERS
+            + b"content-length: %d\r\n\r\n" % len(body)
+            + body
+        )
         self.transport.close()
 
 

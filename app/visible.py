@@ -64,12 +64,18 @@ class VisibleClip:
         names = [agent["name"] for agent in summary["agents"]]
         order = [names.index(agent) for agent in agents]  # the summary's index of each label's robot
         steps = summary.get("steps") or [{"t": 1.0}]
-        return cls(labels=tuple(labels), outcomes=tuple(summary["outcomes"][k] for k in order),
-                   progress=tuple(_progress(summary, k) for k in order), end_s=max(float(steps[-1]["t"]), 1e-6))
+        return cls(
+            labels=tuple(labels),
+            outcomes=tuple(summary["outcomes"][k] for k in order),
+            progress=tuple(_progress(summary, k) for k in order),
+            end_s=max(float(steps[-1]["t"]), 1e-6),
+        )
 
     def scores(self, observer: Observer) -> dict[str, float]:
-        return {label: observer.visible_score(outcome, self.end_s, progress)
-                for label, outcome, progress in zip(self.labels, self.outcomes, self.progress, strict=True)}
+        return {
+            label: observer.visible_score(outcome, self.end_s, progress)
+            for label, outcome, progress in zip(self.labels, self.outcomes, self.progress, strict=True)
+        }
 
     def describe(self, label: str) -> str:
         outcome = self.outcomes[self.labels.index(label)]

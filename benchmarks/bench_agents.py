@@ -84,7 +84,7 @@ def network_bound(config: TrainConfig, updates: int) -> float:
         hidden = initial
         with torch.no_grad(), config.autocast():
             for i in range(t + 1):
-                _, _, hidden = net(*(x[i % t: i % t + 1] for x in sequence), starts[:1], hidden)
+                _, _, hidden = net(*(x[i % t : i % t + 1] for x in sequence), starts[:1], hidden)
         for _ in range(config.epochs):
             for k in range(config.minibatches):
                 parts = torch.arange(k * per_batch, (k + 1) * per_batch).tensor_split(min(config.threads, per_batch))
@@ -126,8 +126,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
-    print(f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, torch {torch.__version__}, "
-          f"load average {load:.1f}\n")
+    print(
+        f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, torch {torch.__version__}, "
+        f"load average {load:.1f}\n"
+    )
 
     if not args.skip_inference:
         print(f"Inference (torch threads {torch.get_num_threads()}), agent-steps/s:\n")
@@ -138,16 +140,24 @@ def main() -> None:
                 print(f"| {label} | {batch} | {policy:,.0f} | {bare:,.0f} | {policy / bare:.2f} |", flush=True)
 
     print("\nTraining, env-steps/s:\n")
-    print("| network | worlds x steps | precision | threads | trainer | network-pass bound | fraction | "
-          "trainer / 922 |\n|---|---|---|---:|---:|---:|---:|---:|")
+    print(
+        "| network | worlds x steps | precision | threads | trainer | network-pass bound | fraction | "
+        "trainer / 922 |\n|---|---|---|---:|---:|---:|---:|---:|"
+    )
     shipped_run = TrainConfig(num_envs=32, learning_rate=3e-4, network=SHIPPED, precision="float32")
-    runs = [("full size", TrainConfig(precision=precision, threads=threads))
-            for precision in ("bfloat16", "float32") for threads in (1, 2)] + [("shipped (small)", shipped_run)]
+    runs = [
+        ("full size", TrainConfig(precision=precision, threads=threads))
+        for precision in ("bfloat16", "float32")
+        for threads in (1, 2)
+    ] + [("shipped (small)", shipped_run)]
     for label, config in runs:
         config = replace(config, save_every=10_000)
         trained, bound, fraction = training_against_bound(config, args.updates, args.rounds)
-        print(f"| {label} | {config.num_envs} x {config.num_steps} | {config.precision} | {config.threads} | "
-              f"{trained:,.0f} | {bound:,.0f} | {fraction:.2f} | {trained / CROWDNAV_ENV_STEPS:.2f} |", flush=True)
+        print(
+            f"| {label} | {config.num_envs} x {config.num_steps} | {config.precision} | {config.threads} | "
+            f"{trained:,.0f} | {bound:,.0f} | {fraction:.2f} | {trained / CROWDNAV_ENV_STEPS:.2f} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -43,15 +43,25 @@ WORDS = ["robot", "faster", "collided", "slow", "=SUM(A1)", "-closer", "smooth",
 def paper_bundle(study) -> Bundle:
     """Manifest entries for every clip the paper study can show (no files: plans only name clips)."""
     clips = {}
-    keys = [(s, c, pair) for s in study.design.schemes for c in study.design.scenarios
-            for pair in itertools.combinations(RANK, 2)]
+    keys = [
+        (s, c, pair)
+        for s in study.design.schemes
+        for c in study.design.scenarios
+        for pair in itertools.combinations(RANK, 2)
+    ]
     keys.append((study.example.scheme, study.example.scenario, study.example.agents))
     for n, (scheme, scenario, pair) in enumerate(keys):
         clip_id = f"{scheme}-{scenario}-{pair[0]}-{pair[1]}"
         clips[clip_id] = ManifestClip(
-            id=clip_id, file=f"clips/{n}.mp4", sha256=f"{n:064x}", scheme=scheme, scenario=scenario,
-            agents=list(pair), labels=[f"Robot {RANK.index(a) + 1}" for a in pair],
-            better=max(pair, key=RANK.index))
+            id=clip_id,
+            file=f"clips/{n}.mp4",
+            sha256=f"{n:064x}",
+            scheme=scheme,
+            scenario=scenario,
+            agents=list(pair),
+            labels=[f"Robot {RANK.index(a) + 1}" for a in pair],
+            better=max(pair, key=RANK.index),
+        )
     return Bundle(root=REPO, clips=clips, paths={})
 
 
@@ -84,17 +94,35 @@ def fill(url: str, n: int, seed: int = 0, chunk: int = 500) -> None:
             condition = pid % len(options)
             plan = dump_plan(build_plan(study, bundle, options[condition], random.Random(f"{seed}:{pid}")))
             created = start + timedelta(minutes=pid)
-            people.append({"id": pid, "code": f"p{pid:06d}", "study": study.study.id, "platform": "mturk",
-                           "external_id": f"W{pid}", "status": "completed", "condition": condition,
-                           "step": len(plan), "created_at": created,
-                           "completed_at": created + timedelta(seconds=rng.randint(300, 1500))})
+            people.append(
+                {
+                    "id": pid,
+                    "code": f"p{pid:06d}",
+                    "study": study.study.id,
+                    "platform": "mturk",
+                    "external_id": f"W{pid}",
+                    "status": "completed",
+                    "condition": condition,
+                    "step": len(plan),
+                    "created_at": created,
+                    "completed_at": created + timedelta(seconds=rng.randint(300, 1500)),
+                }
+            )
             plans.append({"participant_id": pid, "plan": plan})
             for step, screen in enumerate(plan):
-                responses.append({"participant_id": pid, "step": step, "kind": screen["kind"],
-                                  "answers": random_answers(screen, rng), "video_events": [],
-                                  "plays": 1 if "media" in screen else 0, "client_ms": rng.randint(2000, 60000),
-                                  "server_ms": rng.randint(2000, 60000),
-                                  "submitted_at": created + timedelta(seconds=30 * step)})
+                responses.append(
+                    {
+                        "participant_id": pid,
+                        "step": step,
+                        "kind": screen["kind"],
+                        "answers": random_answers(screen, rng),
+                        "video_events": [],
+                        "plays": 1 if "media" in screen else 0,
+                        "client_ms": rng.randint(2000, 60000),
+                        "server_ms": rng.randint(2000, 60000),
+                        "submitted_at": created + timedelta(seconds=30 * step),
+                    }
+                )
         with db.writing() as session:
             session.execute(insert(Participant), people)
             session.execute(insert(ParticipantPlan), plans)
@@ -137,11 +165,18 @@ def main() -> None:
             migrate(url)
             fill(url, n)
             for what in ("export", "report"):
-                output = subprocess.run([sys.executable, __file__, "--child", url, f"{folder}/{what}", what],
-                                        check=True, capture_output=True, text=True).stdout
+                output = subprocess.run(
+                    [sys.executable, __file__, "--child", url, f"{folder}/{what}", what],
+                    check=True,
+                    capture_output=True,
+                    text=True,
+                ).stdout
                 result = json.loads(output.strip().splitlines()[-1])
-                print(f"| {n:,} | {result['rows']:,} | {what} | {result['seconds']:.1f} s | "
-                      f"{result['peak_mib']:.0f} MiB |", flush=True)
+                print(
+                    f"| {n:,} | {result['rows']:,} | {what} | {result['seconds']:.1f} s | "
+                    f"{result['peak_mib']:.0f} MiB |",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

@@ -92,8 +92,10 @@ def main() -> None:
     reference = disagreement_branching(agents, scenario, args.budget)
     ours = foil_search(agents, scenario, args.budget, args.batch)
     load = os.getloadavg()[0]
-    print(f"\n{time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, load average {load:.1f}; {args.agents} on "
-          f"{args.scenario}, {args.budget} coupled steps each\n")
+    print(
+        f"\n{time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, load average {load:.1f}; {args.agents} on "
+        f"{args.scenario}, {args.budget} coupled steps each\n"
+    )
     print("| method | coupled steps/s | vs Agent Disagreements-style branching |")
     print("|---|---:|---:|")
     print(f"| deep copy at every branch, one environment at a time | {reference:,.1f} | 1.0 |")

@@ -57,8 +57,11 @@ def judge(folder: Path, select: str, rewards: dict[str, float]) -> dict:
     labels = [f"Robot {k + 1}" for k in range(len(agents))]
     better = max(agents, key=rewards.get)
     verdict = audit(VisibleClip.of_summary(summary, agents, labels), labels[agents.index(better)])
-    return verdict | {"events": [o["event"] for o in summary["outcomes"]],
-                      "end_s": summary["steps"][-1]["t"], "scenario": summary["scenario"]["name"]}
+    return verdict | {
+        "events": [o["event"] for o in summary["outcomes"]],
+        "end_s": summary["steps"][-1]["t"],
+        "scenario": summary["scenario"]["name"],
+    }
 
 
 def main() -> None:
@@ -80,41 +83,73 @@ def main() -> None:
             continue
         verdicts, rankings, steps, walls = [], [], [], []
         for seed in range(args.seeds):
-            jobs = [SearchJob(agents=pair, scenario=scenario, solver=solver, budget=args.budget, seed=seed,
-                              top_k=top_k, reward_settings=reward) for scenario in scenarios for pair in pairs]
+            jobs = [
+                SearchJob(
+                    agents=pair,
+                    scenario=scenario,
+                    solver=solver,
+                    budget=args.budget,
+                    seed=seed,
+                    top_k=top_k,
+                    reward_settings=reward,
+                )
+                for scenario in scenarios
+                for pair in pairs
+            ]
             folder = out / name.split(" ")[0].replace(",", "") / solver / f"seed{seed}"
             study = run_all(jobs, folder, workers=args.jobs, progress=False)
             steps += [job["sim_steps"] for job in study["jobs"]]
             walls += [job["wall_s"] for job in study["jobs"]]
             for scenario in scenarios:
-                found = [judge(folder / solver / job.label, select, rewards) | {"seed": seed, "job": job.label}
-                         for job in jobs if job.scenario == scenario]
+                found = [
+                    judge(folder / solver / job.label, select, rewards) | {"seed": seed, "job": job.label}
+                    for job in jobs
+                    if job.scenario == scenario
+                ]
                 verdicts += found
                 # the three clips rank the agents right exactly when each shows its pair's better agent winning
                 rankings.append(all(v["shows"] == "better" for v in found))
                 for v in found:
-                    print(f"  {name[:14]:<14} seed {seed:>2} {v['job']:<24} {v['shows']:<6} {v['scenario']:<12} "
-                          f"ends {v['end_s']:5.2f} s {'/'.join(v['events']):<17} {v['why']}", flush=True)
+                    print(
+                        f"  {name[:14]:<14} seed {seed:>2} {v['job']:<24} {v['shows']:<6} {v['scenario']:<12} "
+                        f"ends {v['end_s']:5.2f} s {'/'.join(v['events']):<17} {v['why']}",
+                        flush=True,
+                    )
         better = sum(v["shows"] == "better" for v in verdicts)
-        rows.append({"scheme": name, "clips": len(verdicts), "better": better,
-                     "worse": sum(v["shows"] == "worse" for v in verdicts),
-                     "tie": sum(v["shows"] == "tie" for v in verdicts),
-                     "better_ci": wilson_interval(better, len(verdicts)), "rankings": len(rankings),
-                     "rankings_right": sum(rankings), "rankings_ci": wilson_interval(sum(rankings), len(rankings)),
-                     "sim_steps": sum(steps) / len(steps), "wall_s": sum(walls) / len(walls)})
+        rows.append(
+            {
+                "scheme": name,
+                "clips": len(verdicts),
+                "better": better,
+                "worse": sum(v["shows"] == "worse" for v in verdicts),
+                "tie": sum(v["shows"] == "tie" for v in verdicts),
+                "better_ci": wilson_interval(better, len(verdicts)),
+                "rankings": len(rankings),
+                "rankings_right": sum(rankings),
+                "rankings_ci": wilson_interval(sum(rankings), len(rankings)),
+                "sim_steps": sum(steps) / len(steps),
+                "wall_s": sum(walls) / len(walls),
+            }
+        )
         (out / "rows.json").write_text(json.dumps(rows, indent=1))
-    print(f"\n{args.seeds} seeds x {len(pairs)} pairs, budget {args.budget:,} simulator steps per search; "
-          f"{platform.machine()}, {time.strftime('%Y-%m-%d')}\n")
-    print("| scheme | shows the better robot [95% CI] | worse | tie | ranking right [95% CI] | "
-          "steps per search | wall s per search |")
+    print(
+        f"\n{args.seeds} seeds x {len(pairs)} pairs, budget {args.budget:,} simulator steps per search; "
+        f"{platform.machine()}, {time.strftime('%Y-%m-%d')}\n"
+    )
+    print(
+        "| scheme | shows the better robot [95% CI] | worse | tie | ranking right [95% CI] | "
+        "steps per search | wall s per search |"
+    )
     print("|---|---|---:|---:|---|---:|---:|")
     for r in rows:
         low, high = r["better_ci"]
         rlow, rhigh = r["rankings_ci"]
-        print(f"| {r['scheme']} | {r['better']} of {r['clips']} ({r['better'] / r['clips']:.0%}) "
-              f"[{low:.0%}, {high:.0%}] | {r['worse']} | {r['tie']} | {r['rankings_right']} of {r['rankings']} "
-              f"({r['rankings_right'] / r['rankings']:.0%}) [{rlow:.0%}, {rhigh:.0%}] | {r['sim_steps']:,.0f} | "
-              f"{r['wall_s']:.1f} |")
+        print(
+            f"| {r['scheme']} | {r['better']} of {r['clips']} ({r['better'] / r['clips']:.0%}) "
+            f"[{low:.0%}, {high:.0%}] | {r['worse']} | {r['tie']} | {r['rankings_right']} of {r['rankings']} "
+            f"({r['rankings_right'] / r['rankings']:.0%}) [{rlow:.0%}, {rhigh:.0%}] | {r['sim_steps']:,.0f} | "
+            f"{r['wall_s']:.1f} |"
+        )
 
 
 if __name__ == "__main__":

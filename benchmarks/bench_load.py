@@ -83,8 +83,9 @@ def quantile(values: list[float], q: float) -> float:
 def start_constant_server(workdir: Path) -> tuple[subprocess.Popen, int]:
     port = free_port()
     with (workdir / "constant.log").open("w") as log:
-        server = subprocess.Popen([sys.executable, "-c", CONSTANT_SERVER, str(port)], stdout=log,
-                                  stderr=subprocess.STDOUT)
+        server = subprocess.Popen(
+            [sys.executable, "-c", CONSTANT_SERVER, str(port)], stdout=log, stderr=subprocess.STDOUT
+        )
     probe = LoopbackClient(f"http://127.0.0.1:{port}")
     for _ in range(100):
         try:
@@ -132,8 +133,10 @@ def in_processes(work, processes: int, *args) -> tuple[list, float]:
     had returned."""
     context = multiprocessing.get_context("spawn")
     ready, results = context.Barrier(processes + 1), context.Queue()
-    workers = [context.Process(target=_work_in_process, args=(work, part, processes, args, ready, results))
-               for part in range(processes)]
+    workers = [
+        context.Process(target=_work_in_process, args=(work, part, processes, args, ready, results))
+        for part in range(processes)
+    ]
     for worker in workers:
         worker.start()
     ready.wait(timeout=120)
@@ -171,8 +174,13 @@ def run_in_threads(target, count: int) -> float:
 
 def serve(bundle: Path, study: Path, workdir: Path, database_url: str | None = None) -> LiveServer:
     workdir.mkdir()
-    return LiveServer(bundle=bundle, study=study, workdir=workdir, env=SURVEY_SETTINGS,
-                      database_url=database_url or f"sqlite:///{workdir / 'survey.sqlite3'}")
+    return LiveServer(
+        bundle=bundle,
+        study=study,
+        workdir=workdir,
+        env=SURVEY_SETTINGS,
+        database_url=database_url or f"sqlite:///{workdir / 'survey.sqlite3'}",
+    )
 
 
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
@@ -183,9 +191,13 @@ def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: f
         parts, wall = in_processes(_burst_lanes, processes, concurrency, seconds, server.url, str(bundle))
         cpu_s = thread_cpu_s(server.process.pid) - before
     pages = sum(part["pages"] for part in parts)
-    return {"pages_per_s": pages / wall, "cpu_ms": cpu_s / pages * 1000,
-            "sessions_per_min": sum(part["completed"] for part in parts) / wall * 60,
-            "errors": sum(part["errors"] for part in parts), "requests": sum(part["requests"] for part in parts)}
+    return {
+        "pages_per_s": pages / wall,
+        "cpu_ms": cpu_s / pages * 1000,
+        "sessions_per_min": sum(part["completed"] for part in parts) / wall * 60,
+        "errors": sum(part["errors"] for part in parts),
+        "requests": sum(part["requests"] for part in parts),
+    }
 
 
 def _burst_lanes(part: int, processes: int, concurrency: int, seconds: float, url: str, bundle: str) -> dict:
@@ -205,12 +217,23 @@ def _burst_lanes(part: int, processes: int, concurrency: int, seconds: float, ur
 
     run_in_threads(lane, len(lanes))
     log = [exchange for crowd in crowds for exchange in crowd.log]
-    return {"pages": sum(exchange.kind != "clip" for exchange in log), "requests": len(log),
-            "completed": sum(crowd.completed for crowd in crowds), "errors": sum(len(c.errors) for c in crowds)}
+    return {
+        "pages": sum(exchange.kind != "clip" for exchange in log),
+        "requests": len(log),
+        "completed": sum(crowd.completed for crowd in crowds),
+        "errors": sum(len(c.errors) for c in crowds),
+    }
 
 
-def paced(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float,
-          database_url: str | None = None) -> dict:
+def paced(
+    bundle: Path,
+    study: Path,
+    workdir: Path,
+    participants: int,
+    pause: float,
+    ramp: float,
+    database_url: str | None = None,
+) -> dict:
     with serve(bundle, study, workdir, database_url) as server:
         crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=1)
         wall = crowd.run()
@@ -268,8 +291,9 @@ def cpu_per_request(bundle: Path, study: Path, workdir: Path, sessions: int) -> 
     cpu: dict[str, list[float]] = defaultdict(list)
     clips = ClipIndex(bundle)
     workdir.mkdir()
-    with LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{workdir / 'cpu.sqlite3'}",
-                    workdir=workdir) as server:  # the access log on, as `foil serve` runs by default
+    with LiveServer(
+        bundle=bundle, study=study, database_url=f"sqlite:///{workdir / 'cpu.sqlite3'}", workdir=workdir
+    ) as server:  # the access log on, as `foil serve` runs by default
         for k in range(sessions + 3):  # the first three warm the server up
             client = MeteredClient(server.url, server.process.pid, cpu if k >= 3 else defaultdict(list))
             Bot(client, clips, Observer(), random.Random(k), number=k, external_id=f"cpu-{k}").take_study()
@@ -297,13 +321,17 @@ def by_kind_ms(crowd: Crowd) -> dict[str, list[float]]:
 def database_table(crowds: dict[str, Crowd]) -> list[str]:
     """p95 and p99 per page type on each database, and PostgreSQL's p95 over SQLite's."""
     times = {name: by_kind_ms(crowd) for name, crowd in crowds.items()}
-    rows = ["| request | SQLite p95 ms | SQLite p99 ms | PostgreSQL p95 ms | PostgreSQL p99 ms | p95 ratio |",
-            "|---|---:|---:|---:|---:|---:|"]
+    rows = [
+        "| request | SQLite p95 ms | SQLite p99 ms | PostgreSQL p95 ms | PostgreSQL p99 ms | p95 ratio |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
     for kind in ORDER:
         lite, pg = times["sqlite"].get(kind), times["postgresql"].get(kind)
         if lite and pg:
-            rows.append(f"| {kind} | {quantile(lite, .95):.1f} | {quantile(lite, .99):.1f} | {quantile(pg, .95):.1f} | "
-                        f"{quantile(pg, .99):.1f} | {quantile(pg, .95) / quantile(lite, .95):.2f} |")
+            rows.append(
+                f"| {kind} | {quantile(lite, 0.95):.1f} | {quantile(lite, 0.99):.1f} | {quantile(pg, 0.95):.1f} | "
+                f"{quantile(pg, 0.99):.1f} | {quantile(pg, 0.95) / quantile(lite, 0.95):.2f} |"
+            )
     return rows
 
 
@@ -314,11 +342,15 @@ def latency_table(crowd: Crowd) -> list[str]:
     rows = ["| request | count | p50 ms | p95 ms | p99 ms | max ms |", "|---|---:|---:|---:|---:|---:|"]
     for kind in sorted(by_kind, key=lambda k: ORDER.index(k) if k in ORDER else len(ORDER)):
         v = by_kind[kind]
-        rows.append(f"| {kind} | {len(v):,} | {quantile(v, .5):.1f} | {quantile(v, .95):.1f} | "
-                    f"{quantile(v, .99):.1f} | {max(v):.1f} |")
+        rows.append(
+            f"| {kind} | {len(v):,} | {quantile(v, 0.5):.1f} | {quantile(v, 0.95):.1f} | "
+            f"{quantile(v, 0.99):.1f} | {max(v):.1f} |"
+        )
     non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
-    rows.append(f"| all non-video | {len(non_video):,} | {quantile(non_video, .5):.1f} | "
-                f"{quantile(non_video, .95):.1f} | {quantile(non_video, .99):.1f} | {max(non_video):.1f} |")
+    rows.append(
+        f"| all non-video | {len(non_video):,} | {quantile(non_video, 0.5):.1f} | "
+        f"{quantile(non_video, 0.95):.1f} | {quantile(non_video, 0.99):.1f} | {max(non_video):.1f} |"
+    )
     return rows
 
 
@@ -331,12 +363,20 @@ def main() -> int:
     parser.add_argument("--concurrency", type=int, default=32, help="clients of the ceiling and burst runs")
     parser.add_argument("--seconds", type=float, default=20.0, help="length of the ceiling and burst runs")
     parser.add_argument("--rounds", type=int, default=3, help="ceiling-then-burst rounds (default 3)")
-    parser.add_argument("--processes", type=int, default=os.cpu_count(),
-                        help="load generator processes of the ceiling and burst runs, sharing the clients")
+    parser.add_argument(
+        "--processes",
+        type=int,
+        default=os.cpu_count(),
+        help="load generator processes of the ceiling and burst runs, sharing the clients",
+    )
     parser.add_argument("--crash-participants", type=int, default=100)
     parser.add_argument("--cpu-sessions", type=int, default=30, help="bots of the cpu run")
-    parser.add_argument("--sqlite-synchronous", choices=["full", "normal"], default="full",
-                        help="FOIL_SQLITE_SYNCHRONOUS of the survey server (default full, as deployed)")
+    parser.add_argument(
+        "--sqlite-synchronous",
+        choices=["full", "normal"],
+        default="full",
+        help="FOIL_SQLITE_SYNCHRONOUS of the survey server (default full, as deployed)",
+    )
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
     args = parser.parse_args()
     runs = set(args.runs.split(","))
@@ -344,9 +384,11 @@ def main() -> int:
     if not runs <= set(RUNS) or {"ceiling", "burst"} & runs and not {"ceiling", "burst"} <= runs:
         parser.error(f"--runs takes some of {', '.join(RUNS)}; ceiling and burst go together (their ratio)")
 
-    lines = [f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, SQLite synchronous="
-             f"{args.sqlite_synchronous}; server and bots on the same machine (other work running; load averages from "
-             "os.getloadavg() before each run)."]
+    lines = [
+        f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, SQLite synchronous="
+        f"{args.sqlite_synchronous}; server and bots on the same machine (other work running; load averages from "
+        "os.getloadavg() before each run)."
+    ]
     ok = True
     with tempfile.TemporaryDirectory(prefix="foil-load-") as tmp:
         work = Path(tmp)
@@ -357,12 +399,16 @@ def main() -> int:
         study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
 
         if "ceiling" in runs:
-            lines += ["", f"Burst against ceiling, no pauses, {args.concurrency} bots or clients at a time, "
-                      f"{args.seconds:.0f} s each, alternating ({args.rounds} rounds; the machine's speed drifts, so "
-                      "each burst is compared with the ceiling measured just before it):", "",
-                      "| round | load average | constant endpoint req/s | its server CPU ms/req | burst non-video "
-                      "req/s | completed sessions/min | its server CPU ms/req | errors | ratio |",
-                      "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+            lines += [
+                "",
+                f"Burst against ceiling, no pauses, {args.concurrency} bots or clients at a time, "
+                f"{args.seconds:.0f} s each, alternating ({args.rounds} rounds; the machine's speed drifts, so "
+                "each burst is compared with the ceiling measured just before it):",
+                "",
+                "| round | load average | constant endpoint req/s | its server CPU ms/req | burst non-video "
+                "req/s | completed sessions/min | its server CPU ms/req | errors | ratio |",
+                "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            ]
             ratios = []
             for round_ in range(1, args.rounds + 1):
                 load = os.getloadavg()[0]
@@ -372,11 +418,16 @@ def main() -> int:
                 fast = burst(bundle, study, work / f"burst{round_}", args.concurrency, args.seconds, args.processes)
                 ok &= not fast["errors"]
                 ratios.append(fast["pages_per_s"] / constant["per_s"])
-                lines.append(f"| {round_} | {load:.1f} | {constant['per_s']:,.0f} | {constant['cpu_ms']:.3f} | "
-                             f"{fast['pages_per_s']:,.0f} | {fast['sessions_per_min']:,.0f} | {fast['cpu_ms']:.3f} | "
-                             f"{fast['errors']} | {ratios[-1]:.2f} |")
-            lines += ["", f"Ratio, median of the rounds: **{statistics.median(ratios):.2f}** (range "
-                      f"{min(ratios):.2f}-{max(ratios):.2f})."]
+                lines.append(
+                    f"| {round_} | {load:.1f} | {constant['per_s']:,.0f} | {constant['cpu_ms']:.3f} | "
+                    f"{fast['pages_per_s']:,.0f} | {fast['sessions_per_min']:,.0f} | {fast['cpu_ms']:.3f} | "
+                    f"{fast['errors']} | {ratios[-1]:.2f} |"
+                )
+            lines += [
+                "",
+                f"Ratio, median of the rounds: **{statistics.median(ratios):.2f}** (range "
+                f"{min(ratios):.2f}-{max(ratios):.2f}).",
+            ]
         if "paced" in runs:
             load = os.getloadavg()[0]
             print("paced ...", flush=True)
@@ -386,13 +437,18 @@ def main() -> int:
             non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
             bad_status = sum(e.status >= 400 for e in crowd.log)
             ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
-            lines += ["", f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
-                      f"before every form (the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests "
-                      f"per participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
-                      f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min, "
-                      f"{len(non_video) / wall:.0f} non-video requests/s), "
-                      f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "
-                      f"{quantile(non_video, .95):.0f} ms.", "", *latency_table(crowd)]
+            lines += [
+                "",
+                f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
+                f"before every form (the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests "
+                f"per participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
+                f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min, "
+                f"{len(non_video) / wall:.0f} non-video requests/s), "
+                f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "
+                f"{quantile(non_video, 0.95):.0f} ms.",
+                "",
+                *latency_table(crowd),
+            ]
             for error in crowd.errors[:10]:
                 print("error:", error)
         if "postgres" in runs:
@@ -406,40 +462,63 @@ def main() -> int:
                 server.start(durable=True)
                 load = os.getloadavg()[0]
                 print("paced on PostgreSQL ...", flush=True)
-                slow = paced(bundle, study, work / "paced-postgres", args.participants, args.pause, args.ramp,
-                             database_url=server.url)
+                slow = paced(
+                    bundle,
+                    study,
+                    work / "paced-postgres",
+                    args.participants,
+                    args.pause,
+                    args.ramp,
+                    database_url=server.url,
+                )
             finally:
                 server.stop()
             crowd, wall = slow["crowd"], slow["wall"]
             bad_status = sum(e.status >= 400 for e in crowd.log)
             ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
-            lines += ["", f"Paced on PostgreSQL (the same bots right after the paced run on SQLite; PostgreSQL "
-                      f"{bin_dir.parent.name} on loopback, fsync and synchronous_commit on; load average {load:.1f} "
-                      f"before): {crowd.completed} of {args.participants} completed in {wall:.0f} s, "
-                      f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors.", "",
-                      *database_table({"sqlite": sqlite_crowd, "postgresql": crowd})]
+            lines += [
+                "",
+                f"Paced on PostgreSQL (the same bots right after the paced run on SQLite; PostgreSQL "
+                f"{bin_dir.parent.name} on loopback, fsync and synchronous_commit on; load average {load:.1f} "
+                f"before): {crowd.completed} of {args.participants} completed in {wall:.0f} s, "
+                f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors.",
+                "",
+                *database_table({"sqlite": sqlite_crowd, "postgresql": crowd}),
+            ]
         if "crash" in runs:
             print("crash ...", flush=True)
             killed = crash(bundle, study, work / "crash", args.crash_participants, args.pause, args.ramp)
             result = killed["audit"]
             ok &= result.ok and killed["crowd"].completed == args.crash_participants
-            lines += ["", f"Crash: {args.crash_participants} paced bots; SIGKILL after {killed['killed_at']} "
-                      f"acknowledged answers, restarted in {killed['restart_s']:.1f} s; {killed['crowd'].completed} "
-                      f"of {args.crash_participants} completed ({sum(p.interruptions for p in killed['crowd'].people)} "
-                      f"bot interruptions, {len(killed['crowd'].errors)} errors); {result.acknowledged} acknowledged "
-                      f"answers, {len(result.missing)} missing from the database; {result.participants} participants, "
-                      f"{len(result.duplicated)} duplicated; per condition {result.conditions} "
-                      f"({'balanced' if not result.balance_problems else '; '.join(result.balance_problems)})."]
+            lines += [
+                "",
+                f"Crash: {args.crash_participants} paced bots; SIGKILL after {killed['killed_at']} "
+                f"acknowledged answers, restarted in {killed['restart_s']:.1f} s; {killed['crowd'].completed} "
+                f"of {args.crash_participants} completed ({sum(p.interruptions for p in killed['crowd'].people)} "
+                f"bot interruptions, {len(killed['crowd'].errors)} errors); {result.acknowledged} acknowledged "
+                f"answers, {len(result.missing)} missing from the database; {result.participants} participants, "
+                f"{len(result.duplicated)} duplicated; per condition {result.conditions} "
+                f"({'balanced' if not result.balance_problems else '; '.join(result.balance_problems)}).",
+            ]
             for error in killed["crowd"].errors[:10]:
                 print("error:", error)
         if "cpu" in runs:
             load = os.getloadavg()[0]
             print("cpu ...", flush=True)
             cpu = cpu_per_request(bundle, study, work / "cpu", args.cpu_sessions)
-            lines += ["", f"Server CPU per request ({args.cpu_sessions} bots one at a time, load average {load:.1f} "
-                      "before):", "", "| request | count | CPU ms |", "|---|---:|---:|"]
-            lines += [f"| {kind} | {n:,} | {ms:.2f} |" for kind, (n, ms) in sorted(
-                cpu.items(), key=lambda item: ORDER.index(item[0]) if item[0] in ORDER else len(ORDER))]
+            lines += [
+                "",
+                f"Server CPU per request ({args.cpu_sessions} bots one at a time, load average {load:.1f} before):",
+                "",
+                "| request | count | CPU ms |",
+                "|---|---:|---:|",
+            ]
+            lines += [
+                f"| {kind} | {n:,} | {ms:.2f} |"
+                for kind, (n, ms) in sorted(
+                    cpu.items(), key=lambda item: ORDER.index(item[0]) if item[0] in ORDER else len(ORDER)
+                )
+            ]
 
     text = "\n".join(lines)
     print(text)
@@ -447,8 +526,7 @@ def main() -> int:
         path = REPO / "BENCHMARKS.md"
         current = path.read_text()
         heading = "## Survey server under load (`bench_load.py`)"
-        intro = (f"{heading}\n\n{__doc__.split(chr(10) + chr(10))[1].strip()}\n\n" if heading not in current
-                 else "")
+        intro = f"{heading}\n\n{__doc__.split(chr(10) + chr(10))[1].strip()}\n\n" if heading not in current else ""
         path.write_text(current.rstrip("\n") + "\n\n" + intro + text + "\n")
     return 0 if ok else 1
 

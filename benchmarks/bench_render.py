@@ -47,9 +47,14 @@ def horizon_scene(seed: int = 0) -> Scene:
         humans=np.concatenate([humans[None], trajectory.human_pos])[:, None],
         starts=start,
         goals=np.tile(np.asarray(scenario.robot_goal, dtype=float), (2, 1)),
-        outcomes=tuple((OUTCOME_NAMES[o], float(t) if np.isfinite(t) else float(trajectory.time[-1]))
-                       for o, t in zip(trajectory.outcome, trajectory.event_time, strict=True)),
-        robot_radius=config.robot_radius, human_radius=config.human_radius, dt=config.dt)
+        outcomes=tuple(
+            (OUTCOME_NAMES[o], float(t) if np.isfinite(t) else float(trajectory.time[-1]))
+            for o, t in zip(trajectory.outcome, trajectory.event_time, strict=True)
+        ),
+        robot_radius=config.robot_radius,
+        human_radius=config.human_radius,
+        dt=config.dt,
+    )
 
 
 def cpu_seconds() -> float:
@@ -79,15 +84,20 @@ def main() -> None:
             full_times.append(result.render_s)
         size_kb = result.clip.stat().st_size / 1024
     draw, full, cpu = (statistics.median(t) for t in (draw_times, full_times, cpu_times))
-    print(f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, load average "
-          f"{os.getloadavg()[0]:.1f}; median of {REPEATS}")
-    print(f"clip: {result.seconds:.1f} s of video, {result.frames} frames at {options.fps} fps, "
-          f"{result.width}x{result.height}, crf {options.crf}, preset {options.preset}, {size_kb:.0f} KiB")
+    print(
+        f"{date.today()}, {os.cpu_count()} cores {platform.machine()}, load average "
+        f"{os.getloadavg()[0]:.1f}; median of {REPEATS}"
+    )
+    print(
+        f"clip: {result.seconds:.1f} s of video, {result.frames} frames at {options.fps} fps, "
+        f"{result.width}x{result.height}, crf {options.crf}, preset {options.preset}, {size_kb:.0f} KiB"
+    )
     print("| stage | time | frames/s |")
     print("|---|---:|---:|")
     print(f"| drawing frames only (Pillow) | {draw:.2f} s | {len(frames) / draw:.0f} |")
-    print(f"| whole clip: frames + H.264 encoding + poster + contact sheet | {full:.2f} s | "
-          f"{result.frames / full:.0f} |")
+    print(
+        f"| whole clip: frames + H.264 encoding + poster + contact sheet | {full:.2f} s | {result.frames / full:.0f} |"
+    )
     print(f"| whole clip, CPU time (this process and ffmpeg) | {cpu:.2f} s | {result.frames / cpu:.0f} |")
 
 

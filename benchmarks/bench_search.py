@@ -106,8 +106,11 @@ def timed_search(policies, scenario, budget: int, config: MCTSConfig) -> tuple[f
 
 def speed(budget: int, speed_agents: str, batch: int, repeats: int = 5) -> None:
     scenario = load_scenario("paper-bl-tr")
-    label = ("DS-RNN vs DS-RNN (untrained weights)" if speed_agents == "untrained"
-             else f"{' vs '.join(speed_agents.split(','))} (DS-RNN)")
+    label = (
+        "DS-RNN vs DS-RNN (untrained weights)"
+        if speed_agents == "untrained"
+        else f"{' vs '.join(speed_agents.split(','))} (DS-RNN)"
+    )
     pairs = {"goal vs orca (scripted)": [load_policy("goal"), load_policy("orca")], label: dsrnn_pair(speed_agents)}
     loop_config = MCTSConfig(batch=batch)
     loop_name = f"batch {batch}" + (" (default" if batch == MCTSConfig().batch else " (not the default")
@@ -115,14 +118,19 @@ def speed(budget: int, speed_agents: str, batch: int, repeats: int = 5) -> None:
         ("MCTS tree, snapshots, batch 1", MCTSConfig(batch=1), 0.25),
         ("MCTS tree, replay from reset, batch 1", MCTSConfig(batch=1, branch="replay"), 0.25),
         ("MCTS receding, snapshots, batch 1", MCTSConfig(batch=1, mode="receding", repeat=1), 0.25),
-        ("MCTS receding, replay from reset, batch 1 (the AST toolbox's way)",
-         MCTSConfig(batch=1, mode="receding", repeat=1, branch="replay"), 0.25),
+        (
+            "MCTS receding, replay from reset, batch 1 (the AST toolbox's way)",
+            MCTSConfig(batch=1, mode="receding", repeat=1, branch="replay"),
+            0.25,
+        ),
     ]
     print(f"\n### Throughput (coupled steps/s, paper-bl-tr, T = 100, budget {budget:,} steps)\n")
-    print(f"New simulator steps per second (replayed prefixes not counted; in brackets with them). The bound is "
-          f"every agent's act() alone on batches of {batch} observations, the loop's batch; the bound and the "
-          f"loop are each measured {repeats} times, alternately (about a second each), and the share is the median "
-          f"of the {repeats} pairs' shares.\n")
+    print(
+        f"New simulator steps per second (replayed prefixes not counted; in brackets with them). The bound is "
+        f"every agent's act() alone on batches of {batch} observations, the loop's batch; the bound and the "
+        f"loop are each measured {repeats} times, alternately (about a second each), and the share is the median "
+        f"of the {repeats} pairs' shares.\n"
+    )
     print("| agents | search loop | steps/s | share of policy-only bound |")
     print("|---|---|---|---|")
     for label, policies in pairs.items():
@@ -137,8 +145,11 @@ def speed(budget: int, speed_agents: str, batch: int, repeats: int = 5) -> None:
         pair_shares = np.array(loops) / np.array(bounds)
         shares = [f"{share:.0%}" for share in sorted(pair_shares)]
         print(f"| {label} | policy-only bound, batch {batch} | {bound:,.0f} | 100% |")
-        print(f"| {label} | MCTS tree, snapshots, {loop_name}; {np.mean(rows):.1f} rows per step on average) "
-              f"| {loop:,.0f} | {np.median(pair_shares):.0%} (runs: {', '.join(shares)}) |", flush=True)
+        print(
+            f"| {label} | MCTS tree, snapshots, {loop_name}; {np.mean(rows):.1f} rows per step on average) "
+            f"| {loop:,.0f} | {np.median(pair_shares):.0%} (runs: {', '.join(shares)}) |",
+            flush=True,
+        )
         for name, config, share in runs:
             new, total, _ = timed_search(policies, scenario, int(budget * share), config)
             extra = f" ({total:,.0f})" if config.branch == "replay" else ""
@@ -186,21 +197,31 @@ def quality(agents: list[str], budget: int, seeds: int, plot: Path, jobs: int) -
     cases = list(itertools.product(pairs, SCENARIOS))
     settings = dataclasses.asdict(MCTS_CONFIG)
     with ProcessPoolExecutor(jobs, initializer=init_worker, initargs=(settings,)) as pool:
-        futures = {(pair, scenario_name, solver, seed):
-                   pool.submit(one_search, pair, scenario_name, solver, seed, budget, grid)
-                   for pair, scenario_name in cases for solver in SOLVERS for seed in range(seeds)}
+        futures = {
+            (pair, scenario_name, solver, seed): pool.submit(
+                one_search, pair, scenario_name, solver, seed, budget, grid
+            )
+            for pair, scenario_name in cases
+            for solver in SOLVERS
+            for seed in range(seeds)
+        }
         for pair, scenario_name in cases:
             for solver in SOLVERS:
                 results[pair, scenario_name, solver] = np.array(
-                    [futures[pair, scenario_name, solver, seed].result() for seed in range(seeds)])
+                    [futures[pair, scenario_name, solver, seed].result() for seed in range(seeds)]
+                )
             print(f"  {'-'.join(pair)} {scenario_name}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
 
     changed = {k: v for k, v in settings.items() if v != getattr(MCTSConfig(), k)}
-    print(f"\n### Search quality ({', '.join(agents)}, budget {budget:,} simulator steps, {seeds} seeds"
-          f"{', MCTS ' + str(changed) if changed else ''}; {time.perf_counter() - started:.0f} s on {jobs} "
-          f"processes)\n")
-    print("Best reward at the full budget, mean ± 95% CI; AUC = mean best-so-far over the budget "
-          "(9 points from 20% to 100% of the budget).\n")
+    print(
+        f"\n### Search quality ({', '.join(agents)}, budget {budget:,} simulator steps, {seeds} seeds"
+        f"{', MCTS ' + str(changed) if changed else ''}; {time.perf_counter() - started:.0f} s on {jobs} "
+        f"processes)\n"
+    )
+    print(
+        "Best reward at the full budget, mean ± 95% CI; AUC = mean best-so-far over the budget "
+        "(9 points from 20% to 100% of the budget).\n"
+    )
     print("| pair | scenario | " + " | ".join(f"{s} best | {s} AUC" for s in SOLVERS) + " |")
     print("|---|---|" + "---|---|" * len(SOLVERS))
     wins = {s: 0 for s in SOLVERS if s != "mcts"}
@@ -213,11 +234,14 @@ def quality(agents: list[str], budget: int, seeds: int, plot: Path, jobs: int) -
         print(f"| {' vs '.join(pair)} | {scenario_name} | " + " | ".join(cells) + " |")
         mcts_final = results[pair, scenario_name, "mcts"][:, -1]
         for other in wins:
-            wins[other] += bool(np.mean(mcts_final) - ci95(mcts_final)
-                                > np.mean(results[pair, scenario_name, other][:, -1]))
+            wins[other] += bool(
+                np.mean(mcts_final) - ci95(mcts_final) > np.mean(results[pair, scenario_name, other][:, -1])
+            )
     cases = len(pairs) * len(SCENARIOS)
-    print("\nMCTS's lower 95% bound above the other's mean: "
-          + ", ".join(f"{other} in {n}/{cases}" for other, n in wins.items()))
+    print(
+        "\nMCTS's lower 95% bound above the other's mean: "
+        + ", ".join(f"{other} in {n}/{cases}" for other, n in wins.items())
+    )
     draw(results, grid, pairs, plot)
 
 
@@ -227,8 +251,9 @@ def draw(results, grid, pairs, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(SCENARIOS), len(pairs), figsize=(4.2 * len(pairs), 3.4 * len(SCENARIOS)),
-                             sharex=True, squeeze=False)
+    fig, axes = plt.subplots(
+        len(SCENARIOS), len(pairs), figsize=(4.2 * len(pairs), 3.4 * len(SCENARIOS)), sharex=True, squeeze=False
+    )
     for (row, scenario_name), (col, pair) in itertools.product(enumerate(SCENARIOS), enumerate(pairs)):
         ax = axes[row, col]
         for solver in SOLVERS:
@@ -258,16 +283,22 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--agents", default=",".join(SCRIPTED), help="agents whose every pair is searched (quality)")
     parser.add_argument("--speed-agents", default="lo,med", help="DS-RNN pair timed (speed), or 'untrained'")
-    parser.add_argument("--speed-batch", type=int, default=MCTSConfig().batch,
-                        help="MCTS batch of the timed default loop and of the policy-only bound (speed)")
+    parser.add_argument(
+        "--speed-batch",
+        type=int,
+        default=MCTSConfig().batch,
+        help="MCTS batch of the timed default loop and of the policy-only bound (speed)",
+    )
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (quality)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="MCTS setting (quality)")
     parser.add_argument("--plot", type=Path, default=Path(__file__).with_name("search_quality.png"))
     args = parser.parse_args()
     global MCTS_CONFIG
     MCTS_CONFIG = MCTSConfig(**parse_settings(MCTSConfig, args.set, "MCTS"))
-    print(f"machine: {os.cpu_count()} cores; numpy {np.__version__}; load average "
-          + " ".join(f"{x:.2f}" for x in os.getloadavg()))
+    print(
+        f"machine: {os.cpu_count()} cores; numpy {np.__version__}; load average "
+        + " ".join(f"{x:.2f}" for x in os.getloadavg())
+    )
     if args.part in ("speed", "both"):
         speed(args.speed_budget, args.speed_agents, args.speed_batch)
     if args.part in ("quality", "both"):

@@ -38,11 +38,20 @@ def crowdnav_reference(config: WorldConfig, seconds: float) -> float:
     radius = config.human_radius + 0.01 + config.safety_space
     sims = []
     for _ in range(n):
-        sim = pyrvo.RVOSimulator(config.dt, config.neighbor_dist, config.max_neighbors, config.time_horizon,
-                                 config.time_horizon, radius, 1.0)
+        sim = pyrvo.RVOSimulator(
+            config.dt, config.neighbor_dist, config.max_neighbors, config.time_horizon, config.time_horizon, radius, 1.0
+        )
         for _ in range(n):
-            sim.add_agent((0.0, 0.0), config.neighbor_dist, config.max_neighbors, config.time_horizon,
-                          config.time_horizon, radius, 1.0, (0.0, 0.0))
+            sim.add_agent(
+                (0.0, 0.0),
+                config.neighbor_dist,
+                config.max_neighbors,
+                config.time_horizon,
+                config.time_horizon,
+                radius,
+                1.0,
+                (0.0, 0.0),
+            )
         sims.append(sim)
     pos, vel, goal = state.human_pos[0].copy(), state.human_vel[0].copy(), state.human_goal[0]
 
@@ -81,8 +90,10 @@ def main():
     args = parser.parse_args()
     config = WorldConfig()
     reference = crowdnav_reference(config, args.seconds)
-    print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {date.today()}, "
-          f"load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, {date.today()}, "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
     print("| setting | world-steps/s | vs CrowdNav reference |")
     print("|---|---:|---:|")
     print(f"| CrowdNav reference (RVO2 doStep per human, 1 world) | {reference:,.0f} | 1.0 |")

@@ -12,8 +12,7 @@ URL = context.get_x_argument(as_dictionary=True).get("url") or config.get_main_o
 
 
 def run_migrations_offline() -> None:
-    context.configure(url=URL, target_metadata=target_metadata,
-                      literal_binds=True, render_as_batch=True)
+    context.configure(url=URL, target_metadata=target_metadata, literal_binds=True, render_as_batch=True)
     with context.begin_transaction():
         context.run_migrations()
 
@@ -22,8 +21,9 @@ def run_migrations_online() -> None:
     engine = create_engine(URL)
     with engine.connect() as connection:
         # Batch mode rebuilds tables where SQLite's ALTER TABLE cannot change them; PostgreSQL alters in place.
-        context.configure(connection=connection, target_metadata=target_metadata,
-                          render_as_batch=connection.dialect.name == "sqlite")
+        context.configure(
+            connection=connection, target_metadata=target_metadata, render_as_batch=connection.dialect.name == "sqlite"
+        )
         with context.begin_transaction():
             context.run_migrations()
     engine.dispose()

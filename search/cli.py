@@ -33,8 +33,9 @@ def _release(args: argparse.Namespace) -> int:
         if args.validate_only:
             highway.validate_run(args.run_dir, args.every)
         else:
-            print(json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every, jobs=args.jobs),
-                             indent=1))
+            print(
+                json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every, jobs=args.jobs), indent=1)
+            )
         return 0
     if args.validate_only:
         validate_run(args.run_dir, args.episodes, args.every)
@@ -54,8 +55,14 @@ def _eval(args: argparse.Namespace) -> int:
 
         return run_highway_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json)
 
-    return run_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json, time_limit=args.time_limit,
-                    world=parse_settings(WorldConfig, args.world, "world"))
+    return run_eval(
+        args.agent,
+        episodes=args.episodes,
+        seed=args.seed,
+        as_json=args.json,
+        time_limit=args.time_limit,
+        world=parse_settings(WorldConfig, args.world, "world"),
+    )
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -67,8 +74,9 @@ def _serve(args: argparse.Namespace) -> int:
 def _exclusion_rules(args: argparse.Namespace):
     from app.exclusions import ExclusionRules
 
-    return ExclusionRules(min_seconds=args.min_seconds, median_fraction=args.median_fraction,
-                          include_kinds=tuple(_names(args.include)))
+    return ExclusionRules(
+        min_seconds=args.min_seconds, median_fraction=args.median_fraction, include_kinds=tuple(_names(args.include))
+    )
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -80,15 +88,23 @@ def _export(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from app.report import run_report
 
-    return run_report(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args),
-                      bundle=args.bundle)
+    return run_report(
+        database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args), bundle=args.bundle
+    )
 
 
 def _simulate(args: argparse.Namespace) -> int:
     from app.bots import run_simulate
 
-    return run_simulate(url=args.url, bundle=args.bundle, participants=args.participants, noise=args.noise,
-                        seed=args.seed, inattentive=args.inattentive, first=args.first)
+    return run_simulate(
+        url=args.url,
+        bundle=args.bundle,
+        participants=args.participants,
+        noise=args.noise,
+        seed=args.seed,
+        inattentive=args.inattentive,
+        first=args.first,
+    )
 
 
 def _render(args: argparse.Namespace) -> int:
@@ -102,8 +118,10 @@ def _render(args: argparse.Namespace) -> int:
     if is_gym_summary(load_summary(args.summary)):
         from search.highway.clips import render_highway as render_file
     result = render_file(args.summary, args.out, numbers=numbers, options=options)
-    print(f"{result.clip}: {result.frames} frames, {result.seconds:.1f} s, {result.width}x{result.height}, "
-          f"rendered in {result.render_s:.2f} s; poster {result.poster.name}, contact sheet {result.sheet.name}")
+    print(
+        f"{result.clip}: {result.frames} frames, {result.seconds:.1f} s, {result.width}x{result.height}, "
+        f"rendered in {result.render_s:.2f} s; poster {result.poster.name}, contact sheet {result.sheet.name}"
+    )
     return 0
 
 
@@ -119,10 +137,14 @@ def _search_job_settings(args: argparse.Namespace) -> dict:
     from search.solvers.reward import RewardConfig
     from search.solvers.runner import parse_settings, solver_config_class
 
-    return {"budget": args.budget, "seed": args.seed, "top_k": args.top_k,
-            "solver_settings": parse_settings(solver_config_class(args.solver), args.set, "solver"),
-            "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
-            "world_settings": parse_settings(WorldConfig, args.world, "world")}
+    return {
+        "budget": args.budget,
+        "seed": args.seed,
+        "top_k": args.top_k,
+        "solver_settings": parse_settings(solver_config_class(args.solver), args.set, "solver"),
+        "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
+        "world_settings": parse_settings(WorldConfig, args.world, "world"),
+    }
 
 
 def _search(args: argparse.Namespace) -> int:
@@ -134,12 +156,17 @@ def _search(args: argparse.Namespace) -> int:
 
         scenario = load_gym_scenario(args.scenario)
         settings = _search_job_settings(argparse.Namespace(**{**vars(args), "world": []}))
-        job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
-                        **settings | {"world_settings": _json_settings(args.world)})
+        job = SearchJob(
+            agents=tuple(_names(args.agents)),
+            scenario=args.scenario,
+            solver=args.solver,
+            **settings | {"world_settings": _json_settings(args.world)},
+        )
         files = run_gym_search(job, scenario, progress=not args.quiet)
     else:
-        job = SearchJob(agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver,
-                        **_search_job_settings(args))
+        job = SearchJob(
+            agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver, **_search_job_settings(args)
+        )
         files = run_search(job, progress=not args.quiet)
     out = write_outputs(args.out, files)
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
@@ -152,8 +179,9 @@ def _search_all(args: argparse.Namespace) -> int:
 
     solvers = _names(args.solvers)
     crowd = all(infer_domain(_names(args.agents), scenario) == "crowd" for scenario in _names(args.scenarios))
-    settings = _search_job_settings(argparse.Namespace(**{**vars(args), "solver": solvers[0],
-                                                          "world": args.world if crowd else []}))
+    settings = _search_job_settings(
+        argparse.Namespace(**{**vars(args), "solver": solvers[0], "world": args.world if crowd else []})
+    )
     if not crowd:
         settings["world_settings"] = _json_settings(args.world)
     if len(solvers) > 1 and args.set:
@@ -162,8 +190,15 @@ def _search_all(args: argparse.Namespace) -> int:
     search = None
     if not crowd:
         from search.bundle.worlds import search_files as search
-    study = run_all(jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address,
-                    progress=not args.quiet, search=search)
+    study = run_all(
+        jobs,
+        args.out,
+        workers=args.jobs,
+        backend=args.backend,
+        ray_address=args.ray_address,
+        progress=not args.quiet,
+        search=search,
+    )
     print(f"{args.out}: {len(jobs)} searches in {study['wall_s']:.1f} s; study.json lists them")
     return 0
 
@@ -206,36 +241,59 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    train = sub.add_parser("train", help="train a DS-RNN robot with PPO (resumes a run found in --out); a config "
-                           "with domain = \"highway\" trains a highway agent with Stable-Baselines3")
+    train = sub.add_parser(
+        "train",
+        help="train a DS-RNN robot with PPO (resumes a run found in --out); a config "
+        'with domain = "highway" trains a highway agent with Stable-Baselines3',
+    )
     train.add_argument("--config", required=True, help="TOML file of training settings (see docs/agents.md)")
     train.add_argument("--out", required=True, help="run directory: progress.csv and checkpoints/")
     train.set_defaults(handler=_train)
 
-    release = sub.add_parser("release", help="choose lo, med and hi from a training run and write their "
-                             "checkpoints and model cards (see docs/agents.md)")
+    release = sub.add_parser(
+        "release",
+        help="choose lo, med and hi from a training run and write their "
+        "checkpoints and model cards (see docs/agents.md)",
+    )
     release.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="the run directory of foil train")
-    release.add_argument("--out", type=Path, help="where the checkpoints and cards go (default: the shipped "
-                         "agents' folder of the installed package)")
+    release.add_argument(
+        "--out",
+        type=Path,
+        help="where the checkpoints and cards go (default: the shipped agents' folder of the installed package)",
+    )
     release.add_argument("--episodes", type=int, default=500, help="validation and test episodes (default 500)")
     release.add_argument("--every", type=int, default=2, help="validate every N-th checkpoint (default 2)")
     release.add_argument("--validate-only", action="store_true", help="print the validation curve, ship nothing")
-    release.add_argument("--jobs", type=int, default=1, help="highway runs: test the three agents in this many "
-                         "processes (default 1)")
+    release.add_argument(
+        "--jobs", type=int, default=1, help="highway runs: test the three agents in this many processes (default 1)"
+    )
     release.set_defaults(handler=_release)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
-    evaluate.add_argument("agent", metavar="AGENT", help="lo, med, hi, a scripted policy, a checkpoint (Foil's or "
-                          "CrowdNav_DSRNN's) or TorchScript file, or module:attribute; or a highway agent: "
-                          "highway-lo, highway-med, highway-hi or a Stable-Baselines3 .zip (docs/highway.md)")
+    evaluate.add_argument(
+        "agent",
+        metavar="AGENT",
+        help="lo, med, hi, a scripted policy, a checkpoint (Foil's or "
+        "CrowdNav_DSRNN's) or TorchScript file, or module:attribute; or a highway agent: "
+        "highway-lo, highway-med, highway-hi or a Stable-Baselines3 .zip (docs/highway.md)",
+    )
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
-    evaluate.add_argument("--time-limit", type=float, metavar="SECONDS",
-                          help="seconds an episode may last (default: the training time limit, 50); 25 judges "
-                          "agents at the horizon of the paper's clips")
-    evaluate.add_argument("--world", action="append", default=[], metavar="KEY=VALUE",
-                          help="world setting over the agent's (an imported CrowdNav_DSRNN agent brings the world of "
-                          "its config; others the paper's), e.g. human_num=5")
+    evaluate.add_argument(
+        "--time-limit",
+        type=float,
+        metavar="SECONDS",
+        help="seconds an episode may last (default: the training time limit, 50); 25 judges "
+        "agents at the horizon of the paper's clips",
+    )
+    evaluate.add_argument(
+        "--world",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="world setting over the agent's (an imported CrowdNav_DSRNN agent brings the world of "
+        "its config; others the paper's), e.g. human_num=5",
+    )
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)
 
@@ -247,43 +305,72 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     serve.set_defaults(handler=_serve)
 
-    for name, handler, what in (("export", _export, "long.csv, wide.csv, participants.csv and the codebook"),
-                                ("report", _report, "report.html with Table 1, the rating figures and tests")):
+    for name, handler, what in (
+        ("export", _export, "long.csv, wide.csv, participants.csv and the codebook"),
+        ("report", _report, "report.html with Table 1, the rating figures and tests"),
+    ):
         command = sub.add_parser(name, help=f"the survey's answers as {what}")
         command.add_argument("--db", required=True, help="the survey's database URL, e.g. sqlite:///foil.sqlite3")
-        command.add_argument("--study", help="the study file the survey was served with, or the id of a study "
-                             "whose file the server stored in the database (default: the only one stored)")
+        command.add_argument(
+            "--study",
+            help="the study file the survey was served with, or the id of a study "
+            "whose file the server stored in the database (default: the only one stored)",
+        )
         command.add_argument("--out", required=True, help="output directory")
-        command.add_argument("--min-seconds", type=float, help="exclude completions faster than this (default: a "
-                             "fraction of the median, see --median-fraction; 0: no time rule)")
-        command.add_argument("--median-fraction", type=float, default=1 / 3,
-                             help="exclude completions faster than this fraction of the median (default 1/3)")
+        command.add_argument(
+            "--min-seconds",
+            type=float,
+            help="exclude completions faster than this (default: a "
+            "fraction of the median, see --median-fraction; 0: no time rule)",
+        )
+        command.add_argument(
+            "--median-fraction",
+            type=float,
+            default=1 / 3,
+            help="exclude completions faster than this fraction of the median (default 1/3)",
+        )
         if name == "report":
-            command.add_argument("--bundle", default=os.environ.get("FOIL_BUNDLE_DIR"),
-                                 help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
-                                 "the server recorded in the database): each clip's accuracy is shown beside its audit")
-        command.add_argument("--include", default="", metavar="KINDS",
-                             help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
-                             "(default: none; pilots and bots are left out)")
+            command.add_argument(
+                "--bundle",
+                default=os.environ.get("FOIL_BUNDLE_DIR"),
+                help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
+                "the server recorded in the database): each clip's accuracy is shown beside its audit",
+            )
+        command.add_argument(
+            "--include",
+            default="",
+            metavar="KINDS",
+            help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
+            "(default: none; pilots and bots are left out)",
+        )
         command.set_defaults(handler=handler)
 
     simulate = sub.add_parser("simulate", help="bot participants take the study through a running server")
     simulate.add_argument("--url", required=True, help="the server's address, e.g. http://127.0.0.1:8000")
     simulate.add_argument("--participants", type=int, required=True, help="how many bots")
-    simulate.add_argument("--bundle", help="the bundle the server serves (default FOIL_BUNDLE_DIR): the bots read "
-                          "what each clip shows from its summary.json")
-    simulate.add_argument("--noise", type=float, default=0.5,
-                          help="perception noise (default 0.5; see docs/analysis.md)")
-    simulate.add_argument("--inattentive", type=float, default=0.0,
-                          help="share of bots that answer attention checks at random (default 0)")
+    simulate.add_argument(
+        "--bundle",
+        help="the bundle the server serves (default FOIL_BUNDLE_DIR): the bots read "
+        "what each clip shows from its summary.json",
+    )
+    simulate.add_argument(
+        "--noise", type=float, default=0.5, help="perception noise (default 0.5; see docs/analysis.md)"
+    )
+    simulate.add_argument(
+        "--inattentive",
+        type=float,
+        default=0.0,
+        help="share of bots that answer attention checks at random (default 0)",
+    )
     simulate.add_argument("--seed", type=int, default=0, help="seed of the bots (default 0); bot k is bot-SEED-k")
     simulate.add_argument("--first", type=int, default=0, help="number of the first bot (default 0)")
     simulate.set_defaults(handler=_simulate)
 
     render = sub.add_parser("render", help="render a summary.json as an H.264 clip with a poster and contact sheet")
     render.add_argument("summary", metavar="SUMMARY.json", help="a summary written by foil search")
-    render.add_argument("--out", required=True, help="the clip to write (.mp4); NAME.poster.png and "
-                        "NAME.sheet.png go next to it")
+    render.add_argument(
+        "--out", required=True, help="the clip to write (.mp4); NAME.poster.png and NAME.sheet.png go next to it"
+    )
     render.add_argument("--speed", type=float, default=1.0, help="simulated seconds per second of video (default 1)")
     render.add_argument("--fps", type=int, default=24, help="frames per second, at least 20 (default 24)")
     render.add_argument("--width", type=int, help="width in px (default 720, or 960 side by side)")
@@ -293,21 +380,37 @@ def build_parser() -> argparse.ArgumentParser:
 
     bundle = sub.add_parser("bundle", help="evaluate, search, render and write manifest.json for a study's clips")
     bundle.add_argument("study", metavar="STUDY.toml", help="study file with a [build] table (see docs/clips.md)")
-    bundle.add_argument("--out", required=True, help="bundle directory; searches already there are reused while "
-                        "their inputs are unchanged")
-    bundle.add_argument("--jobs", type=int, default=1, help="searches to run at once, each in its own process "
-                        "(default 1)")
+    bundle.add_argument(
+        "--out",
+        required=True,
+        help="bundle directory; searches already there are reused while their inputs are unchanged",
+    )
+    bundle.add_argument(
+        "--jobs", type=int, default=1, help="searches to run at once, each in its own process (default 1)"
+    )
     bundle.set_defaults(handler=_bundle)
 
     search = sub.add_parser("search", help="search the scenarios in which agents differ most; write summaries")
     _search_arguments(search)
-    search.add_argument("--agents", required=True, help="two or more agents, comma-separated: A,B[,C] (more "
-                        "than two are searched jointly, their pairwise divergences combined)")
-    search.add_argument("--scenario", required=True, help="shipped scenario name (crowd or highway-...) or TOML "
-                        "file, the world inferred from it and the agents; for the representative solver a "
-                        "distribution of starting states (training: the crowd agents' own)")
-    search.add_argument("--solver", default="mcts", help="mcts (default), nfirst, random, cem or representative "
-                        "(votes over states drawn from --scenario which agent looks better; docs/search.md)")
+    search.add_argument(
+        "--agents",
+        required=True,
+        help="two or more agents, comma-separated: A,B[,C] (more "
+        "than two are searched jointly, their pairwise divergences combined)",
+    )
+    search.add_argument(
+        "--scenario",
+        required=True,
+        help="shipped scenario name (crowd or highway-...) or TOML "
+        "file, the world inferred from it and the agents; for the representative solver a "
+        "distribution of starting states (training: the crowd agents' own)",
+    )
+    search.add_argument(
+        "--solver",
+        default="mcts",
+        help="mcts (default), nfirst, random, cem or representative "
+        "(votes over states drawn from --scenario which agent looks better; docs/search.md)",
+    )
     search.set_defaults(handler=_search)
 
     search_all = sub.add_parser("search-all", help="search every agent pair on every scenario, in parallel")
@@ -317,8 +420,12 @@ def build_parser() -> argparse.ArgumentParser:
     search_all.add_argument("--solvers", default="mcts", help="solvers, comma-separated (default mcts)")
     search_all.add_argument("--joint", action="store_true", help="search all agents together, not pair by pair")
     search_all.add_argument("--jobs", type=int, help="parallel searches (default: one per core)")
-    search_all.add_argument("--backend", choices=("process", "ray"), default="process",
-                            help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]')")
+    search_all.add_argument(
+        "--backend",
+        choices=("process", "ray"),
+        default="process",
+        help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]')",
+    )
     search_all.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray instance)")
     search_all.set_defaults(handler=_search_all)
 
@@ -333,12 +440,27 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
     parser.add_argument("--top-k", type=int, default=30, help="trajectories to keep (default 30; for nfirst: N)")
     parser.add_argument("--out", required=True, help="output directory: summary-001.json ... and run.json")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="solver setting, e.g. exploration=10 or mode=receding (see docs/search.md)")
-    parser.add_argument("--reward", action="append", default=[], metavar="KEY=VALUE",
-                        help="reward setting, e.g. norm=squared, alpha=2, horizon=100")
-    parser.add_argument("--world", action="append", default=[], metavar="KEY=VALUE",
-                        help="world setting over the scenario's, e.g. env_action_mode=preferred")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="solver setting, e.g. exploration=10 or mode=receding (see docs/search.md)",
+    )
+    parser.add_argument(
+        "--reward",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="reward setting, e.g. norm=squared, alpha=2, horizon=100",
+    )
+    parser.add_argument(
+        "--world",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="world setting over the scenario's, e.g. env_action_mode=preferred",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

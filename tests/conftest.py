@@ -28,9 +28,12 @@ def clip_files(tmp_path_factory) -> list[Path]:
 def bundle_dir(tmp_path_factory, clip_files) -> Path:
     names = SECRET_NAMES
     return write_bundle(
-        tmp_path_factory.mktemp("bundle"), clip_files,
-        schemes=[names["adaptive"], names["nfirst"]], scenarios=[names["paper-bl-tr"], names["paper-tl-br"]],
-        agents=AGENT_RANK, example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])),
+        tmp_path_factory.mktemp("bundle"),
+        clip_files,
+        schemes=[names["adaptive"], names["nfirst"]],
+        scenarios=[names["paper-bl-tr"], names["paper-tl-br"]],
+        agents=AGENT_RANK,
+        example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])),
     )
 
 
@@ -42,8 +45,10 @@ def database_url(request, tmp_path) -> str:
         return f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     url = postgres.session_url(request.config)
     if url is None:
-        pytest.fail("no PostgreSQL binaries: `make test` and `make check` install them (or set "
-                    "FOIL_TEST_DATABASE_URL); the database tests run on both databases")
+        pytest.fail(
+            "no PostgreSQL binaries: `make test` and `make check` install them (or set "
+            "FOIL_TEST_DATABASE_URL); the database tests run on both databases"
+        )
     postgres.reset(url)
     return url
 
@@ -57,8 +62,13 @@ def make_client(tmp_path, bundle_dir, database_url):
         study = tmp_path / f"study-{len(apps)}.toml"
         study.write_text(study_text(**(changes or {})))
         migrate(database_url)
-        config = {"bundle_dir": bundle_dir, "study_file": study, "database_url": database_url,
-                  "admin_password": ADMIN_PASSWORD, **settings}
+        config = {
+            "bundle_dir": bundle_dir,
+            "study_file": study,
+            "database_url": database_url,
+            "admin_password": ADMIN_PASSWORD,
+            **settings,
+        }
         app = create_app(Settings(**config))
         apps.append(app)
         return TestClient(app, follow_redirects=True)

@@ -11,8 +11,10 @@ ROOT = Path(search.__file__).parent
 
 
 def _modules() -> dict[str, Path]:
-    return {".".join(path.relative_to(ROOT.parent).with_suffix("").parts).removesuffix(".__init__"): path
-            for path in ROOT.rglob("*.py")}
+    return {
+        ".".join(path.relative_to(ROOT.parent).with_suffix("").parts).removesuffix(".__init__"): path
+        for path in ROOT.rglob("*.py")
+    }
 
 
 def _imports(path: Path, top_level_only: bool) -> set[str]:
@@ -57,8 +59,9 @@ def test_no_import_circles():
         state[module] = 1
         for nxt in sorted(graph[module]):
             if state.get(nxt) == 1:
-                circles.append(" -> ".join(trail[trail.index(nxt):] + [module, nxt]) if nxt in trail else
-                               f"{module} -> {nxt}")
+                circles.append(
+                    " -> ".join(trail[trail.index(nxt) :] + [module, nxt]) if nxt in trail else f"{module} -> {nxt}"
+                )
             elif nxt not in state:
                 visit(nxt, trail + [module])
         state[module] = 2

@@ -56,8 +56,9 @@ def upgrade() -> None:
         sa.Column("client_ms", sa.Integer(), nullable=True),
         sa.Column("server_ms", sa.Integer(), nullable=False),
         sa.Column("submitted_at", sa.DateTime(timezone=True), nullable=False),
-        sa.ForeignKeyConstraint(["participant_id"], ["participant.id"], ondelete="CASCADE",
-                                name="fk_response_participant_id_participant"),
+        sa.ForeignKeyConstraint(
+            ["participant_id"], ["participant.id"], ondelete="CASCADE", name="fk_response_participant_id_participant"
+        ),
         sa.PrimaryKeyConstraint("id", name="pk_response"),
         sa.UniqueConstraint("participant_id", "step", name="uq_response_step"),
     )

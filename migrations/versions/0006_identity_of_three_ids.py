@@ -20,7 +20,8 @@ def upgrade() -> None:
     with op.batch_alter_table("participant") as batch:
         batch.drop_constraint("uq_participant_identity", type_="unique")
         batch.create_unique_constraint(
-            "uq_participant_identity", ["study", "platform", "external_id", "platform_study_id", "platform_session_id"])
+            "uq_participant_identity", ["study", "platform", "external_id", "platform_study_id", "platform_session_id"]
+        )
 
 
 def downgrade() -> None:  # fails if an id has records with other study or session ids: remove those first

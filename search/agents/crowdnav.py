@@ -33,42 +33,79 @@ UNSEEN_POSITION = (15.0, 15.0)  # CrowdNav's belief about a human not yet seen i
 HOLONOMIC_THETA = math.pi / 2  # a holonomic CrowdNav robot keeps the heading it starts with
 
 # Keys of the config that only training, logging or rendering read: parsed, then left alone.
-TRAINING_ONLY = {"env": {"val_size", "test_size", "seed"}, "reward": {"gamma"}, "sim": {"render"},
-                 "orca": {"time_horizon_obst"}, "ppo": None, "training": None}
+TRAINING_ONLY = {
+    "env": {"val_size", "test_size", "seed"},
+    "reward": {"gamma"},
+    "sim": {"render"},
+    "orca": {"time_horizon_obst"},
+    "ppo": None,
+    "training": None,
+}
 
 # config key -> Foil world setting, for keys whose values carry over unchanged
-DIRECT = {("env", "time_step"): "dt", ("env", "randomize_attributes"): "randomize_attributes",
-          ("reward", "success_reward"): "success_reward", ("reward", "collision_penalty"): "collision_penalty",
-          ("reward", "discomfort_dist_back"): "discomfort_dist",
-          ("reward", "discomfort_penalty_factor"): "discomfort_factor", ("sim", "circle_radius"): "circle_radius",
-          ("sim", "human_num"): "human_num", ("humans", "policy"): "human_policy",
-          ("humans", "radius"): "human_radius", ("humans", "v_pref"): "human_v_pref",
-          ("robot", "visible"): "robot_visible", ("robot", "radius"): "robot_radius",
-          ("robot", "v_pref"): "robot_v_pref", ("action_space", "kinematics"): "kinematics",
-          ("orca", "neighbor_dist"): "neighbor_dist", ("orca", "safety_space"): "safety_space",
-          ("orca", "time_horizon"): "time_horizon", ("sf", "A"): "sf_a", ("sf", "B"): "sf_b", ("sf", "KI"): "sf_ki"}
+DIRECT = {
+    ("env", "time_step"): "dt",
+    ("env", "randomize_attributes"): "randomize_attributes",
+    ("reward", "success_reward"): "success_reward",
+    ("reward", "collision_penalty"): "collision_penalty",
+    ("reward", "discomfort_dist_back"): "discomfort_dist",
+    ("reward", "discomfort_penalty_factor"): "discomfort_factor",
+    ("sim", "circle_radius"): "circle_radius",
+    ("sim", "human_num"): "human_num",
+    ("humans", "policy"): "human_policy",
+    ("humans", "radius"): "human_radius",
+    ("humans", "v_pref"): "human_v_pref",
+    ("robot", "visible"): "robot_visible",
+    ("robot", "radius"): "robot_radius",
+    ("robot", "v_pref"): "robot_v_pref",
+    ("action_space", "kinematics"): "kinematics",
+    ("orca", "neighbor_dist"): "neighbor_dist",
+    ("orca", "safety_space"): "safety_space",
+    ("orca", "time_horizon"): "time_horizon",
+    ("sf", "A"): "sf_a",
+    ("sf", "B"): "sf_b",
+    ("sf", "KI"): "sf_ki",
+}
 
 # config key -> the only value Foil reproduces (the feature it would switch on is not simulated)
-FIXED = {("env", "env_name"): "CrowdSimDict-v0", ("sim", "group_human"): False, ("humans", "visible"): True,
-         ("humans", "random_radii"): False, ("humans", "random_v_pref"): False,
-         ("humans", "random_unobservability"): False, ("humans", "random_policy_changing"): False,
-         ("robot", "policy"): "srnn", ("noise", "add_noise"): False}
+FIXED = {
+    ("env", "env_name"): "CrowdSimDict-v0",
+    ("sim", "group_human"): False,
+    ("humans", "visible"): True,
+    ("humans", "random_radii"): False,
+    ("humans", "random_v_pref"): False,
+    ("humans", "random_unobservability"): False,
+    ("humans", "random_policy_changing"): False,
+    ("robot", "policy"): "srnn",
+    ("noise", "add_noise"): False,
+}
 
 # keys read together with another one (a chance only counts when its switch is on, ...)
-COMPANIONS = {("env", "time_limit"), ("reward", "discomfort_dist_front"), ("humans", "FOV"), ("robot", "FOV"),
-              ("humans", "random_goal_changing"), ("humans", "goal_change_chance"), ("humans", "end_goal_changing"),
-              ("humans", "end_goal_change_chance"), ("humans", "unobservable_chance"), ("noise", "type"),
-              ("noise", "magnitude")}
+COMPANIONS = {
+    ("env", "time_limit"),
+    ("reward", "discomfort_dist_front"),
+    ("humans", "FOV"),
+    ("robot", "FOV"),
+    ("humans", "random_goal_changing"),
+    ("humans", "goal_change_chance"),
+    ("humans", "end_goal_changing"),
+    ("humans", "end_goal_change_chance"),
+    ("humans", "unobservable_chance"),
+    ("noise", "type"),
+    ("noise", "magnitude"),
+}
 
 # SRNN sizes -> (parameter, axis) that holds them in the state_dict
-SIZES = {"human_node_rnn_size": ("base.humanNodeRNN.gru.weight_hh_l0", 1),
-         "human_human_edge_rnn_size": ("base.humanhumanEdgeRNN_spatial.gru.weight_hh_l0", 1),
-         "human_node_input_size": ("base.humanNodeRNN.encoder_linear.weight", 1),
-         "human_human_edge_input_size": ("base.humanhumanEdgeRNN_spatial.encoder_linear.weight", 1),
-         "human_node_output_size": ("base.humanNodeRNN.output_linear.weight", 0),
-         "human_node_embedding_size": ("base.humanNodeRNN.encoder_linear.weight", 0),
-         "human_human_edge_embedding_size": ("base.humanhumanEdgeRNN_spatial.encoder_linear.weight", 0),
-         "attention_size": ("base.attn.temporal_edge_layer.0.weight", 0)}
+SIZES = {
+    "human_node_rnn_size": ("base.humanNodeRNN.gru.weight_hh_l0", 1),
+    "human_human_edge_rnn_size": ("base.humanhumanEdgeRNN_spatial.gru.weight_hh_l0", 1),
+    "human_node_input_size": ("base.humanNodeRNN.encoder_linear.weight", 1),
+    "human_human_edge_input_size": ("base.humanhumanEdgeRNN_spatial.encoder_linear.weight", 1),
+    "human_node_output_size": ("base.humanNodeRNN.output_linear.weight", 0),
+    "human_node_embedding_size": ("base.humanNodeRNN.encoder_linear.weight", 0),
+    "human_human_edge_embedding_size": ("base.humanhumanEdgeRNN_spatial.encoder_linear.weight", 0),
+    "attention_size": ("base.attn.temporal_edge_layer.0.weight", 0),
+}
 
 
 KINDS = {float: "a number", int: "a whole number", bool: "True or False", str: "a string"}
@@ -96,8 +133,10 @@ def read_config(path: str | Path) -> CrowdNavConfig:
     without executing it, and map it to Foil's world settings; refuse what Foil cannot reproduce."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"no CrowdNav_DSRNN config at {str(path)!r}: a model folder holds "
-                                "checkpoints/N.pt and configs/config.py (as CrowdNav_DSRNN's training writes it)")
+        raise FileNotFoundError(
+            f"no CrowdNav_DSRNN config at {str(path)!r}: a model folder holds "
+            "checkpoints/N.pt and configs/config.py (as CrowdNav_DSRNN's training writes it)"
+        )
     try:
         tree = ast.parse(path.read_text(), str(path))
     except SyntaxError as error:
@@ -118,14 +157,17 @@ def read_config(path: str | Path) -> CrowdNavConfig:
                 raise ConfigError(f"{where}: expected `{target.id} = BaseConfig()`")
             sections.add(target.id)
             continue
-        if not (isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name)
-                and target.value.id in sections):
+        if not (
+            isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name) and target.value.id in sections
+        ):
             raise ConfigError(f"{where}: expected `section.key = value` for a section made by BaseConfig()")
         try:
             value = ast.literal_eval(node.value)
         except ValueError:
-            raise ConfigError(f"{where}: {target.value.id}.{target.attr} is not a plain value (number, string, "
-                              "True/False/None); Foil reads the config without running it") from None
+            raise ConfigError(
+                f"{where}: {target.value.id}.{target.attr} is not a plain value (number, string, "
+                "True/False/None); Foil reads the config without running it"
+            ) from None
         values[target.value.id, target.attr] = (value, node.lineno)
     return _interpret(CrowdNavConfig(path, values, {}, {}))
 
@@ -141,8 +183,13 @@ def _interpret(config: CrowdNavConfig) -> CrowdNavConfig:
 
     for key in values:
         section, name = key
-        known = key in DIRECT or key in FIXED or key in COMPANIONS or (section == "SRNN" and name in SIZES) or (
-            section in TRAINING_ONLY and (TRAINING_ONLY[section] is None or name in TRAINING_ONLY[section]))
+        known = (
+            key in DIRECT
+            or key in FIXED
+            or key in COMPANIONS
+            or (section == "SRNN" and name in SIZES)
+            or (section in TRAINING_ONLY and (TRAINING_ONLY[section] is None or name in TRAINING_ONLY[section]))
+        )
         if not known:
             fail(key, "Foil does not know this setting, so it cannot reproduce the world it describes")
     for key, wanted in FIXED.items():
@@ -172,18 +219,22 @@ def _interpret(config: CrowdNavConfig) -> CrowdNavConfig:
     world["time_limit"] = float(get("env", "time_limit")) - 1
     front, back = get("reward", "discomfort_dist_front"), get("reward", "discomfort_dist_back")
     if front is not None and back is not None and front != back:
-        fail(("reward", "discomfort_dist_front"), f"Foil has one discomfort distance; this differs from "
-             f"discomfort_dist_back = {back!r}")
+        fail(
+            ("reward", "discomfort_dist_front"),
+            f"Foil has one discomfort distance; this differs from discomfort_dist_back = {back!r}",
+        )
     for section, name in (("humans", "human_fov"), ("robot", "robot_fov")):
         if (section, "FOV") in values:
             fov = get(section, "FOV")
             if isinstance(fov, bool) or not isinstance(fov, int | float) or not 0 < fov <= 2:
                 fail((section, "FOV"), "expected a field of view in multiples of pi, above 0 and at most 2")
             world[name] = float(fov) * 180.0
-    world["goal_change_chance"] = float(get("humans", "goal_change_chance", 0.0)) \
-        if get("humans", "random_goal_changing", False) else 0.0
-    world["end_goal_change_chance"] = float(get("humans", "end_goal_change_chance", 0.0)) \
-        if get("humans", "end_goal_changing", False) else 0.0
+    world["goal_change_chance"] = (
+        float(get("humans", "goal_change_chance", 0.0)) if get("humans", "random_goal_changing", False) else 0.0
+    )
+    world["end_goal_change_chance"] = (
+        float(get("humans", "end_goal_change_chance", 0.0)) if get("humans", "end_goal_changing", False) else 0.0
+    )
     if world.get("kinematics") == "unicycle":  # its own motion, and CrowdNav's start for a unicycle
         world |= {"unicycle_motion": "arc", "robot_start": "circle"}
     try:
@@ -251,10 +302,12 @@ class _SRNN(nn.Module):
         super().__init__()
         edge, node, out = s["human_human_edge_rnn_size"], s["human_node_rnn_size"], s["human_node_output_size"]
         self.humanNodeRNN = _NodeRNN(s["human_node_input_size"], s["human_node_embedding_size"], edge, node, out)
-        self.humanhumanEdgeRNN_spatial = _EdgeRNN(s["human_human_edge_input_size"],
-                                                  s["human_human_edge_embedding_size"], edge)
-        self.humanhumanEdgeRNN_temporal = _EdgeRNN(s["human_human_edge_input_size"],
-                                                   s["human_human_edge_embedding_size"], edge)
+        self.humanhumanEdgeRNN_spatial = _EdgeRNN(
+            s["human_human_edge_input_size"], s["human_human_edge_embedding_size"], edge
+        )
+        self.humanhumanEdgeRNN_temporal = _EdgeRNN(
+            s["human_human_edge_input_size"], s["human_human_edge_embedding_size"], edge
+        )
         self.attn = _Attention(edge, s["attention_size"])
         self.actor = nn.Sequential(nn.Linear(out, out), nn.Tanh(), nn.Linear(out, out), nn.Tanh())
         self.critic = nn.Sequential(nn.Linear(out, out), nn.Tanh(), nn.Linear(out, out), nn.Tanh())
@@ -287,16 +340,25 @@ class CrowdNavNetwork(nn.Module):
 
     def initial_state(self, batch: int) -> tuple[Tensor, Tensor]:
         """Zero hidden states: edges (B, 1 + human_num, edge size; the temporal edge first), node (B, node)."""
-        return (torch.zeros(batch, 1 + self.human_num, self.sizes["human_human_edge_rnn_size"]),
-                torch.zeros(batch, self.sizes["human_node_rnn_size"]))
+        return (
+            torch.zeros(batch, 1 + self.human_num, self.sizes["human_human_edge_rnn_size"]),
+            torch.zeros(batch, self.sizes["human_node_rnn_size"]),
+        )
 
-    def forward(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, edge_hidden: Tensor,
-                node_hidden: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    def forward(
+        self,
+        robot_node: Tensor,
+        temporal_edges: Tensor,
+        spatial_edges: Tensor,
+        edge_hidden: Tensor,
+        node_hidden: Tensor,
+    ) -> tuple[Tensor, Tensor, Tensor]:
         """(B, 7), (B, 2), (B, human_num, 2) and hidden states -> action means (B, 2) and new hidden states."""
         base, (b, n) = self.base, spatial_edges.shape[:2]
         temporal = base.humanhumanEdgeRNN_temporal(temporal_edges, edge_hidden[:, 0])
-        spatial = base.humanhumanEdgeRNN_spatial(spatial_edges.reshape(b * n, -1),
-                                                 edge_hidden[:, 1:].reshape(b * n, -1)).reshape(b, n, -1)
+        spatial = base.humanhumanEdgeRNN_spatial(
+            spatial_edges.reshape(b * n, -1), edge_hidden[:, 1:].reshape(b * n, -1)
+        ).reshape(b, n, -1)
         query = base.attn.temporal_edge_layer[0](temporal)
         keys = base.attn.spatial_edge_layer[0](spatial)
         scores = (query[:, None, :] * keys).sum(-1) * (n / np.sqrt(self.sizes["attention_size"]))
@@ -321,8 +383,12 @@ class CrowdNavPolicy:
 
     def initial_state(self, batch: int) -> PolicyState:
         edges, node = self.net.initial_state(batch)
-        return {"edges": edges.numpy(), "node": node.numpy(), "believed": np.zeros((batch, self.human_num, 4)),
-                "started": np.zeros(batch, bool)}
+        return {
+            "edges": edges.numpy(),
+            "node": node.numpy(),
+            "believed": np.zeros((batch, self.human_num, 4)),
+            "started": np.zeros(batch, bool),
+        }
 
     def act(self, observation: Observation, state: PolicyState) -> tuple[np.ndarray, PolicyState]:
         n = observation.human_mask.shape[1]
@@ -330,7 +396,8 @@ class CrowdNavPolicy:
             raise ValueError(
                 f"agent {self.name} was trained by CrowdNav_DSRNN with exactly {self.human_num} humans (sim.human_num "
                 f"at {self.config.path}:{self.config.line('sim', 'human_num')}), and its network takes that many; "
-                f"this world has {n}: use a scenario with {self.human_num} humans")
+                f"this world has {n}: use a scenario with {self.human_num} humans"
+            )
         robot = observation.robot_node[:, :7].copy()
         if self.holonomic:
             robot[:, 6] = HOLONOMIC_THETA
@@ -341,12 +408,19 @@ class CrowdNavPolicy:
         unseen = np.where(state["started"][:, None, None], moved_on, [*UNSEEN_POSITION, 0.0, 0.0])
         believed = np.where(observation.human_mask[..., None], observed, unseen)
         with torch.no_grad():
-            action, edges, node = self.net(torch.from_numpy(robot.astype(np.float32)),
-                                           torch.from_numpy(observation.temporal_edges.astype(np.float32)),
-                                           torch.from_numpy((believed[..., :2] - position).astype(np.float32)),
-                                           torch.from_numpy(state["edges"]), torch.from_numpy(state["node"]))
-        return action.numpy().astype(np.float64), {"edges": edges.numpy(), "node": node.numpy(),
-                                                   "believed": believed, "started": np.ones_like(state["started"])}
+            action, edges, node = self.net(
+                torch.from_numpy(robot.astype(np.float32)),
+                torch.from_numpy(observation.temporal_edges.astype(np.float32)),
+                torch.from_numpy((believed[..., :2] - position).astype(np.float32)),
+                torch.from_numpy(state["edges"]),
+                torch.from_numpy(state["node"]),
+            )
+        return action.numpy().astype(np.float64), {
+            "edges": edges.numpy(),
+            "node": node.numpy(),
+            "believed": believed,
+            "started": np.ones_like(state["started"]),
+        }
 
 
 def network_sizes(state_dict: dict, config: CrowdNavConfig) -> dict:
@@ -355,8 +429,10 @@ def network_sizes(state_dict: dict, config: CrowdNavConfig) -> dict:
     for name, size in sizes.items():
         written = config.sizes.get(name)
         if written is not None and written != size:
-            raise ConfigError(f"{config.path}:{config.line('SRNN', name)}: SRNN.{name} = {written!r}, but the "
-                              f"checkpoint's weights have {size}: the config is not this checkpoint's")
+            raise ConfigError(
+                f"{config.path}:{config.line('SRNN', name)}: SRNN.{name} = {written!r}, but the "
+                f"checkpoint's weights have {size}: the config is not this checkpoint's"
+            )
     return sizes
 
 
@@ -369,8 +445,9 @@ def load_crowdnav(path: str | Path, state_dict: dict, name: str) -> CrowdNavPoli
         net = CrowdNavNetwork(sizes, int(config.world["human_num"]))
         net.load_state_dict(state_dict)
     except (KeyError, RuntimeError) as error:
-        raise ValueError(f"{path}: looks like a CrowdNav_DSRNN checkpoint but its weights do not fit the DS-RNN "
-                         f"network: {error}") from None
+        raise ValueError(
+            f"{path}: looks like a CrowdNav_DSRNN checkpoint but its weights do not fit the DS-RNN network: {error}"
+        ) from None
     return CrowdNavPolicy(net, config, name, path)
 
 
@@ -378,10 +455,12 @@ def read_crowdnav_config(checkpoint: str | Path) -> CrowdNavConfig:
     """The config of the model folder a checkpoint lies in."""
     where = config_path(checkpoint)
     if not where.is_file():
-        raise FileNotFoundError(f"{checkpoint} is a CrowdNav_DSRNN checkpoint, but its model folder has no "
-                                f"configs/config.py (looked for {where}); Foil needs it to rebuild the world the "
-                                "agent was trained in: keep the folder as CrowdNav_DSRNN writes it (MODEL/"
-                                "checkpoints/N.pt beside MODEL/configs/config.py)")
+        raise FileNotFoundError(
+            f"{checkpoint} is a CrowdNav_DSRNN checkpoint, but its model folder has no "
+            f"configs/config.py (looked for {where}); Foil needs it to rebuild the world the "
+            "agent was trained in: keep the folder as CrowdNav_DSRNN writes it (MODEL/"
+            "checkpoints/N.pt beside MODEL/configs/config.py)"
+        )
     return _cached_config(where, where.stat().st_mtime_ns)
 
 

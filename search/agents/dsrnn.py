@@ -74,9 +74,19 @@ def _mlp(inputs: int, hidden: int) -> nn.Sequential:
     return nn.Sequential(_init(nn.Linear(inputs, hidden)), nn.Tanh(), _init(nn.Linear(hidden, hidden)), nn.Tanh())
 
 
-def _gru_forward_steps(gates_in: Tensor, h0: Tensor, weight_t: Tensor, bias_hh: Tensor, keep: Tensor,
-                       out_mask: Tensor | None, previous: Tensor, outputs: Tensor, rz: Tensor, n: Tensor,
-                       gh_n: Tensor) -> None:
+def _gru_forward_steps(
+    gates_in: Tensor,
+    h0: Tensor,
+    weight_t: Tensor,
+    bias_hh: Tensor,
+    keep: Tensor,
+    out_mask: Tensor | None,
+    previous: Tensor,
+    outputs: Tensor,
+    rz: Tensor,
+    n: Tensor,
+    gh_n: Tensor,
+) -> None:
     """The forward recurrence of ``_GRUSequence``, filling the (T, R, ...) buffers it is given."""
     hidden = h0.shape[1]
     h = h0
@@ -84,16 +94,26 @@ def _gru_forward_steps(gates_in: Tensor, h0: Tensor, weight_t: Tensor, bias_hh: 
         h_prev = previous[t]
         torch.mul(h, keep[t, :, None], out=h_prev)
         gh = torch.mm(h_prev.to(weight_t.dtype), weight_t).float().add_(bias_hh)
-        torch.sigmoid(gates_in[t, :, :2 * hidden] + gh[:, :2 * hidden], out=rz[t])
-        torch.tanh(torch.addcmul(gates_in[t, :, 2 * hidden:], rz[t, :, :hidden], gh[:, 2 * hidden:]), out=n[t])
+        torch.sigmoid(gates_in[t, :, : 2 * hidden] + gh[:, : 2 * hidden], out=rz[t])
+        torch.tanh(torch.addcmul(gates_in[t, :, 2 * hidden :], rz[t, :, :hidden], gh[:, 2 * hidden :]), out=n[t])
         h = torch.lerp(n[t], h_prev, rz[t, :, hidden:], out=outputs[t])  # (1 - z) n + z h_prev
         if out_mask is not None:
             h.mul_(out_mask[t, :, None])
-        gh_n[t] = gh[:, 2 * hidden:]
+        gh_n[t] = gh[:, 2 * hidden :]
 
 
-def _gru_backward_steps(grad_outputs: Tensor, dn_dh: Tensor, dz_dh: Tensor, dr_dn: Tensor, r: Tensor,
-                        z_masked: Tensor, keep: Tensor, weight: Tensor, grad_gh: Tensor, grad_n: Tensor) -> Tensor:
+def _gru_backward_steps(
+    grad_outputs: Tensor,
+    dn_dh: Tensor,
+    dz_dh: Tensor,
+    dr_dn: Tensor,
+    r: Tensor,
+    z_masked: Tensor,
+    keep: Tensor,
+    weight: Tensor,
+    grad_gh: Tensor,
+    grad_n: Tensor,
+) -> Tensor:
     """The backward recurrence of ``_GRUSequence``: fills ``grad_gh`` and ``grad_n``, returns the gradient at h0."""
     steps, rows, hidden = grad_n.shape
     carry = torch.zeros_like(grad_n[0])
@@ -102,8 +122,8 @@ def _gru_backward_steps(grad_outputs: Tensor, dn_dh: Tensor, dz_dh: Tensor, dr_d
         dh = grad_outputs[t] + carry
         torch.mul(dh, dn_dh[t], out=grad_n[t])
         torch.mul(grad_n[t], dr_dn[t], out=grad_gh[t, :, :hidden])
-        torch.mul(dh, dz_dh[t], out=grad_gh[t, :, hidden:2 * hidden])
-        torch.mul(grad_n[t], r[t], out=grad_gh[t, :, 2 * hidden:])
+        torch.mul(dh, dz_dh[t], out=grad_gh[t, :, hidden : 2 * hidden])
+        torch.mul(grad_n[t], r[t], out=grad_gh[t, :, 2 * hidden :])
         carry = torch.mm(grad_gh[t].to(weight.dtype), weight).float().addcmul_(dh, z_masked[t])
         carry.mul_(keep[t, :, None])
     return carry
@@ -138,8 +158,9 @@ class _GRUSequence(torch.autograd.Function):
         rz = gates_in.new_empty(steps, rows, 2 * hidden)  # reset and update gates
         n = torch.empty_like(previous)  # candidate state
         gh_n = torch.empty_like(previous)  # W_hn h_prev + b_hn, which the reset gate multiplies
-        _scripted(_gru_forward_steps)(gates_in, h0.float(), weight_hh.t().to(dtype), bias_hh, keep, out_mask,
-                                      previous, outputs, rz, n, gh_n)
+        _scripted(_gru_forward_steps)(
+            gates_in, h0.float(), weight_hh.t().to(dtype), bias_hh, keep, out_mask, previous, outputs, rz, n, gh_n
+        )
         ctx.save_for_backward(weight_hh, keep, out_mask, previous, rz, n, gh_n)
         return outputs
 
@@ -155,11 +176,12 @@ class _GRUSequence(torch.autograd.Function):
         dr_dn = gh_n * r * (1 - r)
         grad_gh = previous.new_empty(steps, rows, 3 * hidden)  # gradient at W_hh h_prev + b_hh
         grad_n = torch.empty_like(previous)  # gradient at the candidate's input pre-activation
-        carry = _scripted(_gru_backward_steps)(grad_outputs.contiguous(), dn_dh, dz_dh, dr_dn, r, z * mask, keep,
-                                               weight_hh.to(ctx.dtype), grad_gh, grad_n)
+        carry = _scripted(_gru_backward_steps)(
+            grad_outputs.contiguous(), dn_dh, dz_dh, dr_dn, r, z * mask, keep, weight_hh.to(ctx.dtype), grad_gh, grad_n
+        )
         flat = grad_gh.reshape(steps * rows, 3 * hidden)
         grad_weight = torch.mm(flat.t().to(ctx.dtype), previous.reshape(steps * rows, hidden).to(ctx.dtype))
-        grad_gates_in = torch.cat([grad_gh[..., :2 * hidden], grad_n], dim=-1)
+        grad_gates_in = torch.cat([grad_gh[..., : 2 * hidden], grad_n], dim=-1)
         return grad_gates_in.to(ctx.input_dtype), carry, grad_weight.float(), flat.sum(0), None, None, None
 
 
@@ -203,8 +225,14 @@ class DSRNN(nn.Module):
         edge, node = self.temporal_gru.hidden_size, self.node_gru.hidden_size
         return [torch.zeros(batch, edge), torch.zeros(batch, self.max_humans, edge), torch.zeros(batch, node)]
 
-    def step(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
-             hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:
+    def step(
+        self,
+        robot_node: Tensor,
+        temporal_edges: Tensor,
+        spatial_edges: Tensor,
+        human_mask: Tensor,
+        hidden: list[Tensor],
+    ) -> tuple[Tensor, list[Tensor]]:
         """One time step for B robots with humans padded to max_humans: the (B, mlp_hidden) features and the
         new hidden states. ``human_mask`` (B, n) is 1 for a present human, 0 for padding."""
         b, n = human_mask.shape
@@ -225,8 +253,15 @@ class DSRNN(nn.Module):
         return self.output_linear(node_h), [temporal_h, spatial_h, node_h]
 
     @torch.jit.unused  # training only; a TorchScript agent file holds the acting step
-    def forward(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
-                episode_start: Tensor, hidden: list[Tensor]) -> tuple[Tensor, Tensor, list[Tensor]]:
+    def forward(
+        self,
+        robot_node: Tensor,
+        temporal_edges: Tensor,
+        spatial_edges: Tensor,
+        human_mask: Tensor,
+        episode_start: Tensor,
+        hidden: list[Tensor],
+    ) -> tuple[Tensor, Tensor, list[Tensor]]:
         """A (T, B, ...) sequence; hidden states are zeroed where ``episode_start`` (T, B) is 1.
         Returns action means (T, B, 2), values (T, B) and the final hidden states.
 
@@ -240,11 +275,15 @@ class DSRNN(nn.Module):
             hidden = [h * keep[0].reshape((-1,) + (1,) * (h.dim() - 1)) for h in hidden]
             x, hidden = self.step(robot_node[0], temporal_edges[0], spatial_edges[0], human_mask[0], hidden)
             return self._heads(x[None]) + (hidden,)
-        temporal_h = gru_sequence(self.temporal_gru, torch.relu(self.temporal_embed(temporal_edges)), hidden[0],
-                                  keep)
+        temporal_h = gru_sequence(self.temporal_gru, torch.relu(self.temporal_embed(temporal_edges)), hidden[0], keep)
         spatial_in = torch.relu(self.spatial_embed(spatial_edges)).reshape(t, b * n, -1)
-        spatial_h = gru_sequence(self.spatial_gru, spatial_in, hidden[1].reshape(b * n, -1),
-                                 keep.repeat_interleave(n, dim=1), human_mask.reshape(t, b * n)).reshape(t, b, n, -1)
+        spatial_h = gru_sequence(
+            self.spatial_gru,
+            spatial_in,
+            hidden[1].reshape(b * n, -1),
+            keep.repeat_interleave(n, dim=1),
+            human_mask.reshape(t, b * n),
+        ).reshape(t, b, n, -1)
 
         query = self.attention_temporal(temporal_h).unsqueeze(2)  # (T, B, 1, A)
         keys = self.attention_spatial(spatial_h)  # (T, B, n, A)
@@ -261,8 +300,14 @@ class DSRNN(nn.Module):
         """Action means and values from node features, in float32 whatever the products' precision."""
         return self.action_mean(self.actor(x)).float(), self.critic_linear(self.critic(x)).squeeze(-1).float()
 
-    def act_mean(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
-                 hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:
+    def act_mean(
+        self,
+        robot_node: Tensor,
+        temporal_edges: Tensor,
+        spatial_edges: Tensor,
+        human_mask: Tensor,
+        hidden: list[Tensor],
+    ) -> tuple[Tensor, list[Tensor]]:
         """The deterministic action (B, 2) and new hidden states: what evaluation and search use."""
         x, hidden = self.step(robot_node, temporal_edges, spatial_edges, human_mask, hidden)
         return self.action_mean(self.actor(x)), hidden
@@ -280,8 +325,14 @@ class _TorchScriptEntry(nn.Module):
     def initial_state(self, batch: int) -> list[Tensor]:
         return self.net.initial_state(batch)
 
-    def forward(self, robot_node: Tensor, temporal_edges: Tensor, spatial_edges: Tensor, human_mask: Tensor,
-                hidden: list[Tensor]) -> tuple[Tensor, list[Tensor]]:
+    def forward(
+        self,
+        robot_node: Tensor,
+        temporal_edges: Tensor,
+        spatial_edges: Tensor,
+        human_mask: Tensor,
+        hidden: list[Tensor],
+    ) -> tuple[Tensor, list[Tensor]]:
         return self.net.act_mean(robot_node, temporal_edges, spatial_edges, human_mask, hidden)
 
 
@@ -296,9 +347,12 @@ def observation_tensors(observation: Observation, max_humans: int | None) -> tup
     if n < max_humans:
         spatial = np.concatenate([spatial, np.zeros((b, max_humans - n, 2), np.float32)], axis=1)
         mask = np.concatenate([mask, np.zeros((b, max_humans - n), np.float32)], axis=1)
-    return (torch.from_numpy(np.asarray(observation.robot_node, np.float32)),
-            torch.from_numpy(np.asarray(observation.temporal_edges, np.float32)),
-            torch.from_numpy(np.ascontiguousarray(spatial)), torch.from_numpy(np.ascontiguousarray(mask)))
+    return (
+        torch.from_numpy(np.asarray(observation.robot_node, np.float32)),
+        torch.from_numpy(np.asarray(observation.temporal_edges, np.float32)),
+        torch.from_numpy(np.ascontiguousarray(spatial)),
+        torch.from_numpy(np.ascontiguousarray(mask)),
+    )
 
 
 class TorchPolicy:
@@ -338,8 +392,16 @@ def save_checkpoint(path: str | Path, net: DSRNN, **extra) -> None:
     """Write a checkpoint that ``load_dsrnn`` reads; ``extra`` holds training state (steps, optimiser, ...)."""
     path = Path(path)
     partial = path.with_name(path.name + ".partial")  # a run killed while saving keeps its last good checkpoint
-    torch.save({"format": CHECKPOINT_FORMAT, "network": asdict(net.config), "observation": OBSERVATION_LAYOUT,
-                "model": net.state_dict(), **extra}, partial)
+    torch.save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "network": asdict(net.config),
+            "observation": OBSERVATION_LAYOUT,
+            "model": net.state_dict(),
+            **extra,
+        },
+        partial,
+    )
     partial.replace(path)
 
 
@@ -358,9 +420,11 @@ def read_checkpoint(path: str | Path, data=None) -> dict:
     data = _torch_file(path) if data is None else data
     if isinstance(data, dict) and data and all(isinstance(v, torch.Tensor) for v in data.values()):
         names = ", ".join(list(data)[:3])
-        raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (format {CHECKPOINT_FORMAT!r}) nor CrowdNav_DSRNN's "
-                         f"DS-RNN policy (parameters base.humanNodeRNN..., dist.fc_mean...): it is the state_dict of "
-                         f"another network (parameters {names}, ...)")
+        raise ValueError(
+            f"{path} is not a Foil DS-RNN checkpoint (format {CHECKPOINT_FORMAT!r}) nor CrowdNav_DSRNN's "
+            f"DS-RNN policy (parameters base.humanNodeRNN..., dist.fc_mean...): it is the state_dict of "
+            f"another network (parameters {names}, ...)"
+        )
     if not isinstance(data, dict) or not str(data.get("format", "")).startswith("foil.dsrnn/"):
         raise ValueError(f"{path} is not a Foil DS-RNN checkpoint (expected format {CHECKPOINT_FORMAT!r})")
     if data["format"] != CHECKPOINT_FORMAT or data.get("observation") != OBSERVATION_LAYOUT:
@@ -369,7 +433,8 @@ def read_checkpoint(path: str | Path, data=None) -> dict:
             f"{path} is a {data['format']} checkpoint whose network reads an older observation (robot node "
             f"{' '.join(map(str, fields_read))}); this version of "
             f"Foil observes the goal relative to the robot as well ({' '.join(ROBOT_NODE_FIELDS)}). Retrain it with "
-            "`foil train` (the shipped agents lo, med and hi are already of this version)")
+            "`foil train` (the shipped agents lo, med and hi are already of this version)"
+        )
     return data
 
 

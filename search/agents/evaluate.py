@@ -56,19 +56,22 @@ def evaluate(policy: Policy, episodes: int = 500, seed: int = 0, config: WorldCo
 def format_result(result: dict) -> str:
     low, high = result["reward_ci95"]
     nav = "n/a" if result["nav_time_mean"] is None else f"{result['nav_time_mean']:.2f} s"
-    return "\n".join([
-        f"agent            {result['agent']}",
-        f"episodes         {result['episodes']}  ({result['time_limit']:g} s each at most)",
-        f"success rate     {result['success_rate']:.3f}",
-        f"collision rate   {result['collision_rate']:.3f}",
-        f"timeout rate     {result['timeout_rate']:.3f}",
-        f"mean reward      {result['reward_mean']:.2f}  (95% CI {low:.2f} to {high:.2f})",
-        f"mean nav time    {nav}  (successful episodes)",
-    ])
+    return "\n".join(
+        [
+            f"agent            {result['agent']}",
+            f"episodes         {result['episodes']}  ({result['time_limit']:g} s each at most)",
+            f"success rate     {result['success_rate']:.3f}",
+            f"collision rate   {result['collision_rate']:.3f}",
+            f"timeout rate     {result['timeout_rate']:.3f}",
+            f"mean reward      {result['reward_mean']:.2f}  (95% CI {low:.2f} to {high:.2f})",
+            f"mean nav time    {nav}  (successful episodes)",
+        ]
+    )
 
 
-def run_eval(agent: str, episodes: int, seed: int, as_json: bool, time_limit: float | None = None,
-             world: dict | None = None) -> int:
+def run_eval(
+    agent: str, episodes: int, seed: int, as_json: bool, time_limit: float | None = None, world: dict | None = None
+) -> int:
     """`foil eval`: in the world the agent brings (an imported checkpoint's), under the ``world`` settings given."""
     if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
         raise ValueError(f"--time-limit must be a positive, finite number of seconds, got {time_limit}")

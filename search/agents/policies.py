@@ -50,12 +50,12 @@ class OrcaRobotPolicy(_Stateless):
         far = np.where(observation.human_mask[..., None], humans, 1e6)  # padded humans out of range
         pos = np.concatenate([robot_pos[:, None, :], far], axis=1)
         vel = np.concatenate([observation.temporal_edges[:, None, :], observation.human_velocities], axis=1)
-        pref = np.concatenate([_toward_goal(observation, v_pref[:, None])[:, None, :], np.zeros((b, n, 2))],
-                              axis=1)
+        pref = np.concatenate([_toward_goal(observation, v_pref[:, None])[:, None, :], np.zeros((b, n, 2))], axis=1)
         radii = np.concatenate([observation.robot_node[:, 2:3], observation.human_radii], axis=1) + pad
         speeds = np.concatenate([v_pref[:, None], np.ones((b, n))], axis=1)
-        action = orca_velocities(pos, vel, pref, radii, speeds, max_neighbors=n, time_horizon=self.time_horizon,
-                                 dt=self.dt, n_ego=1)
+        action = orca_velocities(
+            pos, vel, pref, radii, speeds, max_neighbors=n, time_horizon=self.time_horizon, dt=self.dt, n_ego=1
+        )
         return action[:, 0], state
 
 
@@ -72,9 +72,18 @@ class SocialForceRobotPolicy(_Stateless):
         humans = robot_pos + observation.spatial_edges
         far = np.where(observation.human_mask[..., None], humans, 1e6)
         velocity = social_force_velocities(
-            robot_pos, observation.temporal_edges[:, None, :], observation.robot_node[:, None, 3:5],
-            observation.robot_node[:, None, 2], observation.robot_node[:, None, 5], A=self.A, B=self.B,
-            KI=self.KI, dt=self.dt, others_pos=far, others_radius=observation.human_radii)
+            robot_pos,
+            observation.temporal_edges[:, None, :],
+            observation.robot_node[:, None, 3:5],
+            observation.robot_node[:, None, 2],
+            observation.robot_node[:, None, 5],
+            A=self.A,
+            B=self.B,
+            KI=self.KI,
+            dt=self.dt,
+            others_pos=far,
+            others_radius=observation.human_radii,
+        )
         return velocity[:, 0], state
 
 
@@ -107,8 +116,10 @@ def load_policy(spec: str) -> Policy:
         if not (hasattr(policy, "act") and hasattr(policy, "initial_state")):
             raise ValueError(f"{spec!r} is not a policy: it needs act() and initial_state()")
         return policy
-    raise ValueError(f"unknown agent {spec!r}: use one of {sorted(SCRIPTED) + list(SHIPPED_AGENTS)}, a checkpoint "
-                     "file or module:attribute")
+    raise ValueError(
+        f"unknown agent {spec!r}: use one of {sorted(SCRIPTED) + list(SHIPPED_AGENTS)}, a checkpoint "
+        "file or module:attribute"
+    )
 
 
 def trained_world(spec: str) -> dict:
@@ -129,8 +140,10 @@ def comparison_world(agents: list[str], explicit: dict, scenario_world: dict | N
     for agent in agents:
         for key, value in trained_world(agent).items():
             if key in world and world[key][1] != value and key not in explicit:
-                raise ValueError(f"agents {world[key][0]} and {agent} were trained in different worlds ({key} = "
-                                 f"{world[key][1]!r} and {value!r}): choose one, e.g. --world {key}={value}")
+                raise ValueError(
+                    f"agents {world[key][0]} and {agent} were trained in different worlds ({key} = "
+                    f"{world[key][1]!r} and {value!r}): choose one, e.g. --world {key}={value}"
+                )
             world.setdefault(key, (agent, value))
     scenario_world = scenario_world or {}
     return {key: value for key, (_, value) in world.items() if key not in scenario_world} | explicit

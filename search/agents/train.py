@@ -37,8 +37,19 @@ from search.sim.scenarios import sample_training_states
 from search.sim.world import WorldConfig, WorldState
 
 TRAIN_STREAM = 0  # first word of every training seed sequence; evaluation uses another, so seeds never overlap
-PROGRESS_COLUMNS = ("update", "env_steps", "seconds", "steps_per_s", "episodes", "reward_mean", "success_rate",
-                    "policy_loss", "value_loss", "entropy", "approx_kl")
+PROGRESS_COLUMNS = (
+    "update",
+    "env_steps",
+    "seconds",
+    "steps_per_s",
+    "episodes",
+    "reward_mean",
+    "success_rate",
+    "policy_loss",
+    "value_loss",
+    "entropy",
+    "approx_kl",
+)
 
 
 PRECISIONS = ("auto", "float32", "bfloat16")
@@ -79,15 +90,28 @@ class TrainConfig:
     def __post_init__(self):
         if self.num_envs % self.minibatches:
             raise ValueError(f"num_envs ({self.num_envs}) must be a multiple of minibatches ({self.minibatches})")
-        if min(self.total_steps, self.num_envs, self.num_steps, self.epochs, self.minibatches, self.save_every,
-               self.threads) < 1:
-            raise ValueError("total_steps, num_envs, num_steps, epochs, minibatches, save_every and threads "
-                             "must be positive")
+        if (
+            min(
+                self.total_steps,
+                self.num_envs,
+                self.num_steps,
+                self.epochs,
+                self.minibatches,
+                self.save_every,
+                self.threads,
+            )
+            < 1
+        ):
+            raise ValueError(
+                "total_steps, num_envs, num_steps, epochs, minibatches, save_every and threads must be positive"
+            )
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {self.precision!r}")
         if self.network.max_humans < self.world.human_num:
-            raise ValueError(f"network.max_humans ({self.network.max_humans}) is smaller than the world's "
-                             f"human_num ({self.world.human_num})")
+            raise ValueError(
+                f"network.max_humans ({self.network.max_humans}) is smaller than the world's "
+                f"human_num ({self.world.human_num})"
+            )
 
     @property
     def steps_per_update(self) -> int:
@@ -155,22 +179,40 @@ class Rollout(NamedTuple):
     initial_hidden: list[Tensor]
 
 
-def minibatch_gradients(net: DSRNN, params: list[Tensor], config: TrainConfig, rollout: Rollout, samples: int,
-                        part: Tensor, with_entropy: bool) -> tuple[list[Tensor], Tensor]:
+def minibatch_gradients(
+    net: DSRNN,
+    params: list[Tensor],
+    config: TrainConfig,
+    rollout: Rollout,
+    samples: int,
+    part: Tensor,
+    with_entropy: bool,
+) -> tuple[list[Tensor], Tensor]:
     """The PPO loss's gradients from the worlds ``part`` of a minibatch of ``samples`` samples (the parts'
     gradients add up to the minibatch's), and the part's sums of policy loss, value loss and approximate KL."""
     r = rollout
     with config.autocast():
-        mean, value, _ = net(r.robot[:, part], r.temporal[:, part], r.spatial[:, part], r.mask[:, part],
-                             r.start[:, part], [h[part] for h in r.initial_hidden])
+        mean, value, _ = net(
+            r.robot[:, part],
+            r.temporal[:, part],
+            r.spatial[:, part],
+            r.mask[:, part],
+            r.start[:, part],
+            [h[part] for h in r.initial_hidden],
+        )
     log_ratio = gaussian_log_prob(r.actions[:, part], mean, net.action_logstd) - r.logprobs[:, part]
     ratio = log_ratio.exp()
     adv, returns, old_value = r.advantages[:, part], r.returns[:, part], r.values[:, part]
     # the value loss clipped around the rollout's values, as CrowdNav_DSRNN's PPO does
     clipped_value = old_value + (value - old_value).clamp(-config.clip, config.clip)
     value_loss = torch.max((value - returns).pow(2), (clipped_value - returns).pow(2))
-    sums = torch.stack([-torch.min(adv * ratio, adv * ratio.clamp(1 - config.clip, 1 + config.clip)).sum(),
-                        0.5 * value_loss.sum(), ((ratio - 1) - log_ratio).detach().sum()])
+    sums = torch.stack(
+        [
+            -torch.min(adv * ratio, adv * ratio.clamp(1 - config.clip, 1 + config.clip)).sum(),
+            0.5 * value_loss.sum(),
+            ((ratio - 1) - log_ratio).detach().sum(),
+        ]
+    )
     loss = (sums[0] + config.value_coef * sums[1]) / samples
     if with_entropy:
         loss = loss - config.entropy_coef * gaussian_entropy(net.action_logstd)
@@ -193,8 +235,10 @@ class Progress:
             return
         done = update / self.total
         bar = "#" * int(30 * done) + "-" * (30 - int(30 * done))
-        line = (f"[{bar}] {update}/{self.total} updates  {steps:,} steps  {steps_per_s:,.0f} steps/s  "
-                f"reward(last 100) {recent_reward:6.2f}")
+        line = (
+            f"[{bar}] {update}/{self.total} updates  {steps:,} steps  {steps_per_s:,.0f} steps/s  "
+            f"reward(last 100) {recent_reward:6.2f}"
+        )
         print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
         if self.tty and update == self.total:
             print(file=sys.stderr)
@@ -212,8 +256,9 @@ def keep_freed_memory() -> None:
     libc.mallopt(-1, 1 << 30)  # M_TRIM_THRESHOLD: keep up to 1 GiB of freed heap
 
 
-def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
-          stop_after_updates: int | None = None) -> Path:
+def train(
+    config: TrainConfig, out_dir: str | Path, show_progress: bool = True, stop_after_updates: int | None = None
+) -> Path:
     """Run (or resume) PPO into ``out_dir``; returns the last checkpoint. ``stop_after_updates`` ends this
     sitting early (the run stays resumable)."""
     out = Path(out_dir)
@@ -243,8 +288,10 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
     if saved:  # resume: everything that the next update depends on comes back
         data = read_checkpoint(saved[-1])
         if _without_length(data.get("train_config")) != _without_length(config.to_dict()):
-            raise ValueError(f"{out} holds a run with a different config (only total_steps may change, to train "
-                             "a run longer); use a new --out directory")
+            raise ValueError(
+                f"{out} holds a run with a different config (only total_steps may change, to train "
+                "a run longer); use a new --out directory"
+            )
         net.load_state_dict(data["model"])
         optimizer.load_state_dict(data["optimizer"])
         run = data["run"]
@@ -300,8 +347,10 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
                 reward = world.step(state, wc, action.numpy().astype(np.float64)[:, None, :])[:, 0]
                 done = state.done[:, 0].copy()
                 episode_return += reward
-                b_rewards[t], b_dones[t] = torch.from_numpy(reward.astype(np.float32)), torch.from_numpy(
-                    done.astype(np.float32))
+                b_rewards[t], b_dones[t] = (
+                    torch.from_numpy(reward.astype(np.float32)),
+                    torch.from_numpy(done.astype(np.float32)),
+                )
                 finished = np.flatnonzero(done)
                 if finished.size:
                     for i in finished:
@@ -331,13 +380,24 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
         # PPO epochs over recurrent minibatches of whole world sequences; each minibatch is split into one part
         # per thread, whose gradients add up (in a fixed order) to the minibatch's
         per_batch = n_envs // config.minibatches
-        rollout = Rollout(b_robot, b_temporal, b_spatial, b_mask, b_start, b_actions, b_logprobs, b_values, advantages,
-                          returns, initial_hidden)
+        rollout = Rollout(
+            b_robot,
+            b_temporal,
+            b_spatial,
+            b_mask,
+            b_start,
+            b_actions,
+            b_logprobs,
+            b_values,
+            advantages,
+            returns,
+            initial_hidden,
+        )
         stats = []
         for _ in range(config.epochs):
             order = torch.randperm(n_envs)
             for k in range(config.minibatches):
-                parts = order[k * per_batch:(k + 1) * per_batch].tensor_split(min(config.threads, per_batch))
+                parts = order[k * per_batch : (k + 1) * per_batch].tensor_split(min(config.threads, per_batch))
                 gradients = functools.partial(minibatch_gradients, net, params, config, rollout, n_steps * per_batch)
                 results = list(parallel_map(gradients, parts, [i == 0 for i in range(len(parts))]))
                 for param, *grads in zip(params, *(r[0] for r in results), strict=True):
@@ -352,10 +412,25 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
         steps_per_s = config.steps_per_update / (time.perf_counter() - started)
         reward_mean = float(np.mean(recent_returns)) if recent_returns else float("nan")
         policy_loss, value_loss, entropy, approx_kl = np.mean(stats, axis=0)
-        row = dict(zip(PROGRESS_COLUMNS, (
-            update, steps, round(seconds, 2), round(steps_per_s, 1), episodes, round(reward_mean, 4),
-            round(float(np.mean(recent_success)) if recent_success else float("nan"), 4),
-            round(policy_loss, 6), round(value_loss, 6), round(entropy, 6), round(approx_kl, 6)), strict=True))
+        row = dict(
+            zip(
+                PROGRESS_COLUMNS,
+                (
+                    update,
+                    steps,
+                    round(seconds, 2),
+                    round(steps_per_s, 1),
+                    episodes,
+                    round(reward_mean, 4),
+                    round(float(np.mean(recent_success)) if recent_success else float("nan"), 4),
+                    round(policy_loss, 6),
+                    round(value_loss, 6),
+                    round(entropy, 6),
+                    round(approx_kl, 6),
+                ),
+                strict=True,
+            )
+        )
         with progress_path.open("a", newline="") as f:
             csv.DictWriter(f, PROGRESS_COLUMNS).writerow(row)
         if show_progress:
@@ -364,13 +439,27 @@ def train(config: TrainConfig, out_dir: str | Path, show_progress: bool = True,
         stopping = stop_after_updates is not None and update - first_update + 1 >= stop_after_updates
         if update % config.save_every == 0 or update == total_updates or stopping:
             last = out / "checkpoints" / f"{update:06d}.pt"
-            run = {"world_state": state.fields(),
-                   "hidden": hidden, "episode_start": episode_start, "episode_return": episode_return,
-                   "recent_returns": list(recent_returns), "recent_success": list(recent_success),
-                   "episodes": episodes, "seconds": seconds, "numpy_rng": rng.bit_generator.state,
-                   "torch_rng": torch.get_rng_state()}
-            save_checkpoint(last, net, update=update, env_steps=steps, train_config=config.to_dict(),
-                            optimizer=optimizer.state_dict(), run=run)
+            run = {
+                "world_state": state.fields(),
+                "hidden": hidden,
+                "episode_start": episode_start,
+                "episode_return": episode_return,
+                "recent_returns": list(recent_returns),
+                "recent_success": list(recent_success),
+                "episodes": episodes,
+                "seconds": seconds,
+                "numpy_rng": rng.bit_generator.state,
+                "torch_rng": torch.get_rng_state(),
+            }
+            save_checkpoint(
+                last,
+                net,
+                update=update,
+                env_steps=steps,
+                train_config=config.to_dict(),
+                optimizer=optimizer.state_dict(),
+                run=run,
+            )
         if stopping:
             break
     if pool:

@@ -108,8 +108,15 @@ class BuildSpec:
 def _render_options(build: Build, text: str, source: str) -> RenderOptions:
     """`[build.render]` as RenderOptions, refused with its line like the rest of the table."""
     known = {f.name for f in fields(RenderOptions)}
-    refuse(text, source, [(("build", "render", key), f"unknown key; expected some of {sorted(known)}")
-                          for key in build.render if key not in known])
+    refuse(
+        text,
+        source,
+        [
+            (("build", "render", key), f"unknown key; expected some of {sorted(known)}")
+            for key in build.render
+            if key not in known
+        ],
+    )
     try:
         return RenderOptions(**build.render)
     except (TypeError, ValueError) as error:
@@ -136,8 +143,11 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
             problems.append((("build", "schemes", name, "solver"), str(error)))
             solver = None
         world = WorldConfig if crowd else None  # an environment adapter's settings are its own
-        for table, cls, what in (("settings", solver, "solver"), ("reward", RewardConfig, "reward"),
-                                 ("world", world, "world")):
+        for table, cls, what in (
+            ("settings", solver, "solver"),
+            ("reward", RewardConfig, "reward"),
+            ("world", world, "world"),
+        ):
             for key, value in getattr(scheme, table).items():
                 try:
                     if cls is not None:
@@ -156,15 +166,25 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
             found = load_scenario_or_distribution(scenario)
             solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
             if isinstance(found, ScenarioDistribution) != (solvers == {"representative"}):
-                problems.append((("build", "sets", i, "scenarios", j), f"{scenario!r} is a "
-                                 f"{'distribution' if isinstance(found, ScenarioDistribution) else 'fixed scenario'}: "
-                                 f"the representative solver draws from a distribution (such as 'training'), the "
-                                 f"other solvers search from a fixed scenario; give each kind a set of its own"))
+                problems.append(
+                    (
+                        ("build", "sets", i, "scenarios", j),
+                        f"{scenario!r} is a "
+                        f"{'distribution' if isinstance(found, ScenarioDistribution) else 'fixed scenario'}: "
+                        f"the representative solver draws from a distribution (such as 'training'), the "
+                        f"other solvers search from a fixed scenario; give each kind a set of its own",
+                    )
+                )
     distribution = build.representativeness.distribution
     try:
         if not isinstance(load_scenario_or_distribution(distribution), ScenarioDistribution):
-            problems.append((("build", "representativeness", "distribution"), f"{distribution!r} is one fixed "
-                             f"scenario; give a distribution of starting states such as 'training'"))
+            problems.append(
+                (
+                    ("build", "representativeness", "distribution"),
+                    f"{distribution!r} is one fixed "
+                    f"scenario; give a distribution of starting states such as 'training'",
+                )
+            )
     except (ValueError, FileNotFoundError) as error:
         problems.append((("build", "representativeness", "distribution"), str(error)))
     return problems
@@ -176,19 +196,40 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
     try:
         build = parse_build_table(text, source)
         options = _render_options(build, text, source)
-        refuse(text, source, [(("build", "sets", i, "agents"), f"a ranking shows at most {len(ROBOT_STYLES)} robots "
-                               f"(one colour and shape each), got {len(clip_set.agents)}")
-                              for i, clip_set in enumerate(build.sets)
-                              if "ranking" in clip_set.parts and len(clip_set.agents) > len(ROBOT_STYLES)])
+        refuse(
+            text,
+            source,
+            [
+                (
+                    ("build", "sets", i, "agents"),
+                    f"a ranking shows at most {len(ROBOT_STYLES)} robots "
+                    f"(one colour and shape each), got {len(clip_set.agents)}",
+                )
+                for i, clip_set in enumerate(build.sets)
+                if "ranking" in clip_set.parts and len(clip_set.agents) > len(ROBOT_STYLES)
+            ],
+        )
         refuse(text, source, _setting_problems(build))
     except StudyError as error:
         raise BuildError(str(error)) from None
     return BuildSpec(
-        seed=build.seed, eval_episodes=build.eval.episodes, eval_seed=build.eval.seed, render=options,
+        seed=build.seed,
+        eval_episodes=build.eval.episodes,
+        eval_seed=build.eval.seed,
+        render=options,
         schemes={name: Scheme(name=name, **scheme.model_dump()) for name, scheme in build.schemes.items()},
-        sets=tuple(ClipSet(parts=tuple(s.parts), schemes=tuple(s.schemes), scenarios=tuple(s.scenarios),
-                           pairs=s.clip_pairs(), agents=s.all_agents()) for s in build.sets),
-        representativeness=Representativeness(**build.representativeness.model_dump()))
+        sets=tuple(
+            ClipSet(
+                parts=tuple(s.parts),
+                schemes=tuple(s.schemes),
+                scenarios=tuple(s.scenarios),
+                pairs=s.clip_pairs(),
+                agents=s.all_agents(),
+            )
+            for s in build.sets
+        ),
+        representativeness=Representativeness(**build.representativeness.model_dump()),
+    )
 
 
 def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
@@ -239,9 +280,16 @@ def plan(spec: BuildSpec) -> list[ClipJob]:
                     numbers = tuple(shared[a] for a in pair)
                 else:
                     numbers, first = tuple(random.Random(name).sample([first, first + 1], 2)), first + 2
-                jobs.append(ClipJob(id="clip-" + hashlib.sha256(name.encode()).hexdigest()[:10],
-                                    scheme=spec.schemes[scheme], scenario=scenario, pair=pair, numbers=numbers,
-                                    parts=clip_set.parts))
+                jobs.append(
+                    ClipJob(
+                        id="clip-" + hashlib.sha256(name.encode()).hexdigest()[:10],
+                        scheme=spec.schemes[scheme],
+                        scenario=scenario,
+                        pair=pair,
+                        numbers=numbers,
+                        parts=clip_set.parts,
+                    )
+                )
     return jobs
 
 
@@ -268,12 +316,19 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
 
     scheme = job.scheme
     world = under(world, load_scenario_or_distribution(job.scenario).world if world else {})
-    return SearchJob(agents=job.pair, scenario=job.scenario, solver=scheme.solver, budget=scheme.budget,
-                     seed=scheme.seed, top_k=scheme.top_k,
-                     solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
-                     reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
-                     world_settings=world | check_settings(WorldConfig, scheme.world, "world")
-                     if worlds.is_crowd(job.pair, job.scenario) else dict(scheme.world))
+    return SearchJob(
+        agents=job.pair,
+        scenario=job.scenario,
+        solver=scheme.solver,
+        budget=scheme.budget,
+        seed=scheme.seed,
+        top_k=scheme.top_k,
+        solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
+        reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
+        world_settings=world | check_settings(WorldConfig, scheme.world, "world")
+        if worlds.is_crowd(job.pair, job.scenario)
+        else dict(scheme.world),
+    )
 
 
 def study_world(spec: BuildSpec) -> dict:
@@ -304,16 +359,23 @@ def agent_source(agent: str, world: dict) -> dict:
 
     if not worlds.is_crowd([agent]):  # a Gymnasium world's agent (highway driving): its model file
         path = worlds.agent_file(agent) or Path(agent)
-        return {"kind": "gymnasium"} | ({"checkpoint": str(path), "sha256": sha256_file(path)} if path.is_file()
-                                       else {})
+        return {"kind": "gymnasium"} | (
+            {"checkpoint": str(path), "sha256": sha256_file(path)} if path.is_file() else {}
+        )
     source = {"kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"}
     path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
     if agent not in SCRIPTED and path.is_file():
-        source |= {"kind": source["kind"] if agent in SHIPPED_AGENTS else "checkpoint", "checkpoint": str(path),
-                   "sha256": sha256_file(path)}
+        source |= {
+            "kind": source["kind"] if agent in SHIPPED_AGENTS else "checkpoint",
+            "checkpoint": str(path),
+            "sha256": sha256_file(path),
+        }
         if is_crowdnav_file(path):
-            source |= {"kind": "crowdnav_dsrnn", "config": str(config_path(path)),
-                       "trained_world": trained_world(agent)}
+            source |= {
+                "kind": "crowdnav_dsrnn",
+                "config": str(config_path(path)),
+                "trained_world": trained_world(agent),
+            }
     return source | {"world": WorldConfig.from_dict(world).to_dict()}
 
 
@@ -322,12 +384,16 @@ def search_inputs(search: SearchJob) -> dict:
     input."""
     from search.solvers.reward import RewardConfig
 
-    return {"agents": [agent_identity(a) for a in search.agents],
-            "scenario": worlds.scenario_dict(search.agents, search.scenario, search.world_settings),
-            "solver": search.solver, "solver_settings": asdict(solver_config_class(search.solver)(
-                **search.solver_settings)),
-            "reward": RewardConfig(**search.reward_settings).to_dict(),
-            "budget": search.budget, "seed": search.seed, "top_k": search.top_k}
+    return {
+        "agents": [agent_identity(a) for a in search.agents],
+        "scenario": worlds.scenario_dict(search.agents, search.scenario, search.world_settings),
+        "solver": search.solver,
+        "solver_settings": asdict(solver_config_class(search.solver)(**search.solver_settings)),
+        "reward": RewardConfig(**search.reward_settings).to_dict(),
+        "budget": search.budget,
+        "seed": search.seed,
+        "top_k": search.top_k,
+    }
 
 
 class Cache:
@@ -359,14 +425,16 @@ class Cache:
         (self.path(kind, inputs) / "inputs.json").write_text(json.dumps(inputs, sort_keys=True, indent=1))
 
 
-def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, log,
-                    world: dict | None = None) -> dict[str, dict]:
+def evaluate_agents(
+    agents: list[str], episodes: int, seed: int, cache: Cache, log, world: dict | None = None
+) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
     per input."""
     results = {}
     for agent in agents:
         inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed} | (
-            {"world": world} if world else {})
+            {"world": world} if world else {}
+        )
         folder = cache.path("eval", inputs)
         if cache.valid("eval", inputs, "eval.json"):
             log(f"eval {agent}: cached")
@@ -376,8 +444,10 @@ def evaluate_agents(agents: list[str], episodes: int, seed: int, cache: Cache, l
             folder = cache.store("eval", inputs)
             (folder / "eval.json").write_text(json.dumps(result, indent=1))
             cache.seal("eval", inputs)
-            log(f"eval {agent}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} "
-                f"({time.perf_counter() - started:.1f} s)")
+            log(
+                f"eval {agent}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} "
+                f"({time.perf_counter() - started:.1f} s)"
+            )
         results[agent] = json.loads((folder / "eval.json").read_text())
     return results
 
@@ -427,8 +497,10 @@ def run_searches(jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log,
 
     context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
     with ProcessPoolExecutor(min(workers, len(todo)), mp_context=context, initializer=limit_threads) as pool:
-        futures = {pool.submit(_run_search, search, cache.store("search", inputs)): key
-                   for key, (_, search, inputs) in todo.items()}
+        futures = {
+            pool.submit(_run_search, search, cache.store("search", inputs)): key
+            for key, (_, search, inputs) in todo.items()
+        }
         for future in as_completed(futures):
             job, _, inputs = todo[futures[future]]
             finished(job, inputs, future.result())
@@ -444,11 +516,19 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
 
 def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
     """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
-    inputs = {"summary": sha256_file(summary), "numbers": list(job.numbers), "options": asdict(options),
-              "renderer": sha256_file(worlds.renderer_file(summary)), "clip": out.name}
+    inputs = {
+        "summary": sha256_file(summary),
+        "numbers": list(job.numbers),
+        "options": asdict(options),
+        "renderer": sha256_file(worlds.renderer_file(summary)),
+        "clip": out.name,
+    }
     folder = cache.path("render", inputs)
-    if cache.valid("render", inputs, "sha256") and out.is_file() \
-            and (folder / "sha256").read_text() == sha256_file(out):
+    if (
+        cache.valid("render", inputs, "sha256")
+        and out.is_file()
+        and (folder / "sha256").read_text() == sha256_file(out)
+    ):
         log(f"render {job.id}: cached")
         return
     result = worlds.render(summary, out, list(job.numbers), options)
@@ -489,25 +569,46 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         better = better_agent(job.pair, evaluations)
         clip_audit = audit(VisibleClip.of_summary(data, agents, labels), labels[agents.index(better)])
         if clip_audit["shows"] != "better":
-            log(f"warning: clip {job.id} is misleading: it shows the better robot {better} "
+            log(
+                f"warning: clip {job.id} is misleading: it shows the better robot {better} "
                 f"({labels[agents.index(better)]}) as {'no better' if clip_audit['shows'] == 'tie' else 'worse'}: "
-                f"{clip_audit['why']}")
-        clips.append(ManifestClip(
-            id=job.id, file=f"clips/{job.id}.mp4", sha256=sha256_file(clip), scheme=job.scheme.name,
-            scenario=job.scenario, agents=agents, labels=labels, better=better, summary=f"summaries/{job.id}.json",
-            audit=ClipAudit(**clip_audit), poster=f"clips/{job.id}.poster.png", sheet=f"clips/{job.id}.sheet.png",
-            parts=list(job.parts), solver=job.scheme.solver, reward=data.get("reward"),
-            outcomes=[data["outcomes"][k] for k in order]))
+                f"{clip_audit['why']}"
+            )
+        clips.append(
+            ManifestClip(
+                id=job.id,
+                file=f"clips/{job.id}.mp4",
+                sha256=sha256_file(clip),
+                scheme=job.scheme.name,
+                scenario=job.scenario,
+                agents=agents,
+                labels=labels,
+                better=better,
+                summary=f"summaries/{job.id}.json",
+                audit=ClipAudit(**clip_audit),
+                poster=f"clips/{job.id}.poster.png",
+                sheet=f"clips/{job.id}.sheet.png",
+                parts=list(job.parts),
+                solver=job.scheme.solver,
+                reward=data.get("reward"),
+                outcomes=[data["outcomes"][k] for k in order],
+            )
+        )
     (out / "study.toml").write_text(text, encoding="utf-8")
     wanted = {path for c in clips for path in (c.file, c.summary, c.poster, c.sheet)} | {"study.toml"}
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
     write_gallery(out, clips, evaluations, scenario_reports)
-    manifest = Manifest(format=MANIFEST_FORMAT, label_seed=spec.seed, clips=clips, agents=evaluations,
-                        sources={agent: agent_source(agent, world) for agent in spec.agents},
-                        files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
-                        representativeness=scenario_reports)
+    manifest = Manifest(
+        format=MANIFEST_FORMAT,
+        label_seed=spec.seed,
+        clips=clips,
+        agents=evaluations,
+        sources={agent: agent_source(agent, world) for agent in spec.agents},
+        files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
+        representativeness=scenario_reports,
+    )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
     return manifest
@@ -545,30 +646,44 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
     for clip_set in spec.sets:
         if {"pairwise", "ranking"} & set(clip_set.parts):
             for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
-                if worlds.is_crowd(pair, name) and not isinstance(load_scenario_or_distribution(name),
-                                                                   ScenarioDistribution):
+                if worlds.is_crowd(pair, name) and not isinstance(
+                    load_scenario_or_distribution(name), ScenarioDistribution
+                ):
                     scenarios_of.setdefault(pair, []).append(name)
     reports = []
     for pair, names in scenarios_of.items():
         names = list(dict.fromkeys(names))
         fixed = [frozen_scenario(beneath(load_scenario_or_distribution(name), world), {}) for name in names]
-        inputs = {"agents": [agent_identity(a) for a in pair], "scenarios": [s.to_dict() for s in fixed],
-                  "distribution": asdict(distribution), "states": settings.states, "pushes": settings.pushes,
-                  "seed": settings.seed, "reward": RewardConfig().to_dict()}
+        inputs = {
+            "agents": [agent_identity(a) for a in pair],
+            "scenarios": [s.to_dict() for s in fixed],
+            "distribution": asdict(distribution),
+            "states": settings.states,
+            "pushes": settings.pushes,
+            "seed": settings.seed,
+            "reward": RewardConfig().to_dict(),
+        }
         folder = cache.path("representativeness", inputs)
         if not cache.valid("representativeness", inputs, "report.json"):
             started = time.perf_counter()
             rng = np.random.default_rng(settings.seed)
             drawn = [frozen_scenario(s, {}) for s in distribution.sample(rng, settings.states)]
-            found = measure([load_policy(a) for a in pair], fixed, drawn, RewardConfig(),
-                            RepresentativeConfig(states=settings.states, pushes=settings.pushes), rng)
+            found = measure(
+                [load_policy(a) for a in pair],
+                fixed,
+                drawn,
+                RewardConfig(),
+                RepresentativeConfig(states=settings.states, pushes=settings.pushes),
+                rng,
+            )
             folder = cache.store("representativeness", inputs)
             (folder / "report.json").write_text(json.dumps(found, indent=1))
             cache.seal("representativeness", inputs)
             log(f"representativeness {pair[0]}-{pair[1]}: {time.perf_counter() - started:.1f} s")
         for name, found in zip(names, json.loads((folder / "report.json").read_text()), strict=True):
             report = {"agents": list(pair), "scenario": name, "distribution": settings.distribution} | {
-                key: value for key, value in found.items() if key != "scenario"}
+                key: value for key, value in found.items() if key != "scenario"
+            }
             reports.append(report)
             log(describe_representativeness(report))
     return reports
@@ -579,29 +694,40 @@ def describe_representativeness(report: dict) -> str:
     first, second = report["agents"]
     vote = report["distribution_vote"]
     voted = {1: first, -1: second, 0: "neither"}[vote["direction"]]
-    line = (f"{report['scenario']}, {first} vs {second}: {first} looks better in {report['first_looks_better']:.0%} "
-            f"of {report['rollouts']} nominal rollouts, {second} in {report['second_looks_better']:.0%}; "
-            f"{report['distribution']}'s {vote['states']} states vote {voted} ({vote['for_first']} for {first}, "
-            f"{vote['for_second']} for {second})")
+    line = (
+        f"{report['scenario']}, {first} vs {second}: {first} looks better in {report['first_looks_better']:.0%} "
+        f"of {report['rollouts']} nominal rollouts, {second} in {report['second_looks_better']:.0%}; "
+        f"{report['distribution']}'s {vote['states']} states vote {voted} ({vote['for_first']} for {first}, "
+        f"{vote['for_second']} for {second})"
+    )
     if report["percentile"] is not None:
         line += f"; percentile {report['percentile']:.0f} of its states"
     if report["disagrees"] and report["majority"] == 0:
-        return (f"warning: unrepresentative scenario {line}: its clips tend to show no difference where most "
-                f"starting states show one")
+        return (
+            f"warning: unrepresentative scenario {line}: its clips tend to show no difference where most "
+            f"starting states show one"
+        )
     if report["disagrees"]:
-        return (f"warning: unrepresentative scenario {line}: its clips tend to show the other robot as better than "
-                f"most starting states do")
+        return (
+            f"warning: unrepresentative scenario {line}: its clips tend to show the other robot as better than "
+            f"most starting states do"
+        )
     return f"representativeness {line}"
 
 
-def write_gallery(out: Path, clips: list[ManifestClip], evaluations: dict[str, dict],
-                  scenario_reports: list[dict]) -> None:
+def write_gallery(
+    out: Path, clips: list[ManifestClip], evaluations: dict[str, dict], scenario_reports: list[dict]
+) -> None:
     """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-    templates = Environment(loader=FileSystemLoader(Path(__file__).parent), autoescape=True, undefined=StrictUndefined,
-                            keep_trailing_newline=True)
-    page = templates.get_template("gallery.html").render(clips=clips, evaluations=evaluations, zip=zip,
-                                                         scenarios=scenario_reports,
-                                                         describe=describe_representativeness)
+    templates = Environment(
+        loader=FileSystemLoader(Path(__file__).parent),
+        autoescape=True,
+        undefined=StrictUndefined,
+        keep_trailing_newline=True,
+    )
+    page = templates.get_template("gallery.html").render(
+        clips=clips, evaluations=evaluations, zip=zip, scenarios=scenario_reports, describe=describe_representativeness
+    )
     (out / "index.html").write_text(page, encoding="utf-8")

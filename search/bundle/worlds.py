@@ -30,8 +30,9 @@ def evaluate(agent: str, episodes: int, seed: int, world: dict | None = None) ->
         from search.agents.policies import load_policy
         from search.sim.world import WorldConfig
 
-        return evaluate_crowd(load_policy(agent), episodes=episodes, seed=seed,
-                              config=WorldConfig.from_dict(world or {}))
+        return evaluate_crowd(
+            load_policy(agent), episodes=episodes, seed=seed, config=WorldConfig.from_dict(world or {})
+        )
     from search.gym.agents import load_agent
     from search.highway.adapter import HighwayAdapter
     from search.highway.evaluate import evaluate as evaluate_highway

@@ -40,8 +40,10 @@ ROBOT_COLOURS = (
     (204, 121, 167),  # reddish purple
 )
 ROBOT_SHAPES = ("circle", "square", "diamond", "triangle", "triangle-down", "plus")
-ROBOT_STYLES = tuple((ROBOT_COLOURS[i % len(ROBOT_COLOURS)], ROBOT_SHAPES[i % len(ROBOT_SHAPES)])
-                     for i in range(len(ROBOT_COLOURS) * len(ROBOT_SHAPES)))
+ROBOT_STYLES = tuple(
+    (ROBOT_COLOURS[i % len(ROBOT_COLOURS)], ROBOT_SHAPES[i % len(ROBOT_SHAPES)])
+    for i in range(len(ROBOT_COLOURS) * len(ROBOT_SHAPES))
+)
 BACKGROUND = (255, 255, 255)
 ARENA = (247, 247, 245)
 GRID = (228, 228, 224)
@@ -149,8 +151,17 @@ class Layout:
         low, high = scene.extent()
         span = float(max(high - low))
         centre = (low + high) / 2
-        return cls(panels=panels, panel=panel, header=header, legend=legend, width=width, height=_round16(total),
-                   origin=(float(centre[0] - span / 2), float(centre[1] - span / 2)), span=span, text=text)
+        return cls(
+            panels=panels,
+            panel=panel,
+            header=header,
+            legend=legend,
+            width=width,
+            height=_round16(total),
+            origin=(float(centre[0] - span / 2), float(centre[1] - span / 2)),
+            span=span,
+            text=text,
+        )
 
     @property
     def scale(self) -> float:
@@ -192,9 +203,23 @@ def _shape(draw: ImageDraw.ImageDraw, shape: str, c: float, r: float, **style) -
         draw.polygon([(c, c - s), (c + s * 0.87, c + s * 0.5), (c - s * 0.87, c + s * 0.5)], **style)
     else:  # a plus, arms wide enough for two digits
         s, w = r * 1.3, r * 0.6
-        draw.polygon([(c - w, c - s), (c + w, c - s), (c + w, c - w), (c + s, c - w), (c + s, c + w), (c + w, c + w),
-                      (c + w, c + s), (c - w, c + s), (c - w, c + w), (c - s, c + w), (c - s, c - w), (c - w, c - w)],
-                     **style)
+        draw.polygon(
+            [
+                (c - w, c - s),
+                (c + w, c - s),
+                (c + w, c - w),
+                (c + s, c - w),
+                (c + s, c + w),
+                (c + w, c + w),
+                (c + w, c + s),
+                (c - w, c + s),
+                (c - w, c + w),
+                (c - s, c + w),
+                (c - s, c - w),
+                (c - w, c - w),
+            ],
+            **style,
+        )
 
 
 # a number in a triangle sits towards its wide side (by this many radii) and a size smaller
@@ -209,11 +234,13 @@ def _centered_text(draw: ImageDraw.ImageDraw, c: float, text: str, size: int, fi
 def _text_stamp(text: str, size: int, fill, anchor: str, bold: bool) -> tuple[Image.Image, tuple[int, int]]:
     """Text as an RGBA image and the offset of its corner from the anchor point."""
     stroke = 1 if bold else 0
-    x0, y0, x1, y1 = ImageDraw.Draw(Image.new("RGBA", (1, 1))).textbbox((0, 0), text, font=font(size),
-                                                                          anchor=anchor, stroke_width=stroke)
+    x0, y0, x1, y1 = ImageDraw.Draw(Image.new("RGBA", (1, 1))).textbbox(
+        (0, 0), text, font=font(size), anchor=anchor, stroke_width=stroke
+    )
     stamp = Image.new("RGBA", (max(1, x1 - x0), max(1, y1 - y0)), fill + (0,))
-    ImageDraw.Draw(stamp).text((-x0, -y0), text, font=font(size), fill=fill, anchor=anchor, stroke_width=stroke,
-                               stroke_fill=fill)
+    ImageDraw.Draw(stamp).text(
+        (-x0, -y0), text, font=font(size), fill=fill, anchor=anchor, stroke_width=stroke, stroke_fill=fill
+    )
     return stamp, (x0, y0)
 
 
@@ -226,11 +253,15 @@ class Sprites:
         self.robots = {n: self._robot(n, robot, 1.0) for n in numbers}
         self.icons = {n: self._robot(n, robot, legend_text * 0.85 / (robot * 1.5)) for n in numbers}
         self.crash = _sprite(robot * 2.6, 1.0, _paint_burst)
-        self.badges = {"success": _sprite(robot * 0.75, 1.0, _paint_check),
-                       "timeout": _sprite(robot * 0.75, 1.0, _paint_clock)}
+        self.badges = {
+            "success": _sprite(robot * 0.75, 1.0, _paint_check),
+            "timeout": _sprite(robot * 0.75, 1.0, _paint_clock),
+        }
         small = legend_text * 0.5 / (robot * 0.75)
-        self.small_badges = {"success": _sprite(robot * 0.75, small, _paint_check),
-                             "timeout": _sprite(robot * 0.75, small, _paint_clock)}
+        self.small_badges = {
+            "success": _sprite(robot * 0.75, small, _paint_check),
+            "timeout": _sprite(robot * 0.75, small, _paint_clock),
+        }
 
     @staticmethod
     def _human(index: int, radius: float):
@@ -238,6 +269,7 @@ class Sprites:
             r = radius * ppm
             draw.ellipse((c - r, c - r, c + r, c + r), fill=HUMAN_FILL, outline=HUMAN_EDGE, width=max(1, int(r / 8)))
             _centered_text(draw, c, str(index), int(r * (1.5 if index < 10 else 1.1)), INK)
+
         return _sprite(radius * 1.05, 1.0, paint)
 
     @staticmethod
@@ -251,6 +283,7 @@ class Sprites:
             _shape(draw, shape, c, r * 1.15, fill=(255, 255, 255))
             _shape(draw, shape, c, r, fill=colour, outline=INK, width=max(1, int(r / 10)))
             _centered_text(draw, c, str(number), int(r * size), number_ink(colour), r * NUMBER_DROP.get(shape, 0))
+
         return _sprite(radius * 1.75, scale, paint)
 
     def robot(self, number: int):
@@ -268,8 +301,12 @@ def _paint_burst(draw, c, ppm):
 
 def _paint_check(draw, c, ppm):
     draw.ellipse((0, 0, 2 * c, 2 * c), fill=SUCCESS, outline=(255, 255, 255), width=max(2, int(c / 6)))
-    draw.line([(c * 0.5, c * 1.05), (c * 0.85, c * 1.4), (c * 1.5, c * 0.6)], fill=(255, 255, 255),
-              width=max(2, int(c / 4)), joint="curve")
+    draw.line(
+        [(c * 0.5, c * 1.05), (c * 0.85, c * 1.4), (c * 1.5, c * 0.6)],
+        fill=(255, 255, 255),
+        width=max(2, int(c / 4)),
+        joint="curve",
+    )
 
 
 def _paint_clock(draw, c, ppm):
@@ -311,23 +348,31 @@ class ClipRenderer:
         self.scene = scene
         self.options = options or RenderOptions()
         self.numbers = list(numbers) if numbers is not None else list(range(1, scene.n_agents + 1))
-        if len(self.numbers) != scene.n_agents or not all(isinstance(n, int) and n >= 1 for n in self.numbers) \
-                or len({robot_style(n) for n in self.numbers}) != scene.n_agents:
-            raise ValueError(f"give one robot number (1 or more) per agent, each with its own colour and shape "
-                             f"(numbers {len(ROBOT_STYLES)} apart share one); the summary has {scene.n_agents} "
-                             f"agents, got {self.numbers}")
+        if (
+            len(self.numbers) != scene.n_agents
+            or not all(isinstance(n, int) and n >= 1 for n in self.numbers)
+            or len({robot_style(n) for n in self.numbers}) != scene.n_agents
+        ):
+            raise ValueError(
+                f"give one robot number (1 or more) per agent, each with its own colour and shape "
+                f"(numbers {len(ROBOT_STYLES)} apart share one); the summary has {scene.n_agents} "
+                f"agents, got {self.numbers}"
+            )
         self.layout = Layout.make(scene, self.options)
         self.robot_px = self.layout.marker(scene.robot_radius)
-        self.sprites = Sprites(self.numbers, scene.n_humans, self.layout.marker(scene.human_radius), self.robot_px,
-                               self.layout.text)
+        self.sprites = Sprites(
+            self.numbers, scene.n_humans, self.layout.marker(scene.human_radius), self.robot_px, self.layout.text
+        )
         # on-screen order: by robot number; panel p shows the agent self.order[p] when each robot has its own crowd
         self.order = sorted(range(scene.n_agents), key=lambda k: self.numbers[k])
         self.panel_of = [self.order.index(k) if scene.n_panels > 1 else 0 for k in range(scene.n_agents)]
-        self.pixels_robots = np.stack([self.layout.to_pixel(self.panel_of[k], scene.robots[:, k])
-                                       for k in range(scene.n_agents)], axis=1)  # (T, N, 2)
+        self.pixels_robots = np.stack(
+            [self.layout.to_pixel(self.panel_of[k], scene.robots[:, k]) for k in range(scene.n_agents)], axis=1
+        )  # (T, N, 2)
         crowd_of_panel = self.order if scene.n_panels > 1 else [0]
-        self.pixels_humans = np.stack([self.layout.to_pixel(p, scene.humans[:, crowd])
-                                       for p, crowd in enumerate(crowd_of_panel)], axis=1)  # (T, P, n, 2)
+        self.pixels_humans = np.stack(
+            [self.layout.to_pixel(p, scene.humans[:, crowd]) for p, crowd in enumerate(crowd_of_panel)], axis=1
+        )  # (T, P, n, 2)
         self.texts: set[str] = set()  # every string drawn, so tests can check that no real name appears
         self.background = self._background()
         self.frames, self.event_starts = self._schedule()
@@ -361,8 +406,9 @@ class ClipRenderer:
 
     # -- drawing ------------------------------------------------------------------------------------------------
 
-    def _text(self, image: Image.Image, xy, text: str, size: int, fill=INK, anchor: str = "la",
-              bold: bool = False) -> tuple[float, float, float, float]:
+    def _text(
+        self, image: Image.Image, xy, text: str, size: int, fill=INK, anchor: str = "la", bold: bool = False
+    ) -> tuple[float, float, float, float]:
         """Draw text from a cache of stamps (text rendering dominates a frame otherwise); returns its box."""
         self.texts.add(text)
         stamp, (x0, y0) = _text_stamp(text, size, fill, anchor, bold)
@@ -437,7 +483,7 @@ class ClipRenderer:
         start = 0
         for j in range(1, len(points)):
             if j == len(points) - 1 or shades[j] != shades[start]:
-                draw.line(points[start: j + 1], fill=_mix(colour, float(shades[start])), width=width, joint="curve")
+                draw.line(points[start : j + 1], fill=_mix(colour, float(shades[start])), width=width, joint="curve")
                 start = j
 
     def _draw_human_tails(self, draw: ImageDraw.ImageDraw, i: int, humans) -> None:
@@ -445,7 +491,7 @@ class ClipRenderer:
         first = max(0, i - round(2.0 / self.scene.dt))
         for p in range(self.scene.n_panels):
             for h in range(self.scene.n_humans):
-                run = [tuple(q) for q in self.pixels_humans[first: i + 1, p, h]] + [tuple(humans[p, h])]
+                run = [tuple(q) for q in self.pixels_humans[first : i + 1, p, h]] + [tuple(humans[p, h])]
                 draw.line(run, fill=HUMAN_TAIL, width=max(2, int(self.scene.human_radius * self.layout.scale * 0.4)))
 
     def _event(self, k: int, t: float):
@@ -481,8 +527,11 @@ class ClipRenderer:
         slice of each, so none is hidden."""
         near = self.robot_px * 0.5
         for k in self.order[::-1]:
-            together = [j for j in self.order if self.panel_of[j] == self.panel_of[k]
-                        and np.hypot(*(robots[j] - robots[k])) < near]
+            together = [
+                j
+                for j in self.order
+                if self.panel_of[j] == self.panel_of[k] and np.hypot(*(robots[j] - robots[k])) < near
+            ]
             sprite, half = self.sprites.robot(self.numbers[k])
             if len(together) == 1:
                 _paste(image, (sprite, half), robots[k])
@@ -575,8 +624,20 @@ def side_paths(clip: str | os.PathLike) -> tuple[Path, Path]:
 
 def encoder_args(options: RenderOptions) -> list[str]:
     """ffmpeg output flags every mainstream browser (iOS Safari included) plays, with the moov atom first."""
-    return ["-crf", str(options.crf), "-preset", options.preset, "-profile:v", "high", "-level", "4.1",
-            "-movflags", "+faststart", "-map_metadata", "-1"]
+    return [
+        "-crf",
+        str(options.crf),
+        "-preset",
+        options.preset,
+        "-profile:v",
+        "high",
+        "-level",
+        "4.1",
+        "-movflags",
+        "+faststart",
+        "-map_metadata",
+        "-1",
+    ]
 
 
 def contact_sheet(renderer: ClipRenderer, columns: int = 3) -> Image.Image:
@@ -596,8 +657,9 @@ def contact_sheet(renderer: ClipRenderer, columns: int = 3) -> Image.Image:
     return sheet
 
 
-def render(scene: Scene, out: str | os.PathLike, numbers: list[int] | None = None,
-           options: RenderOptions | None = None) -> RenderResult:
+def render(
+    scene: Scene, out: str | os.PathLike, numbers: list[int] | None = None, options: RenderOptions | None = None
+) -> RenderResult:
     """Draw and encode a clip with its poster and contact sheet; the clip appears only once complete."""
     started = time.perf_counter()
     return encode(ClipRenderer(scene, numbers, options), out, started)
@@ -615,9 +677,17 @@ def encode(renderer, out: str | os.PathLike, started: float) -> RenderResult:
     o, lay = renderer.options, renderer.layout
     frames = renderer.frames
     partial = out.with_name(f".{out.stem}.partial.mp4")
-    writer = imageio_ffmpeg.write_frames(str(partial), (lay.width, lay.height), fps=o.fps, codec="libx264",
-                                         pix_fmt_out="yuv420p", quality=None, macro_block_size=16,
-                                         output_params=encoder_args(o), ffmpeg_log_level="error")
+    writer = imageio_ffmpeg.write_frames(
+        str(partial),
+        (lay.width, lay.height),
+        fps=o.fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        quality=None,
+        macro_block_size=16,
+        output_params=encoder_args(o),
+        ffmpeg_log_level="error",
+    )
     writer.send(None)
     poster = None
     try:
@@ -635,11 +705,22 @@ def encode(renderer, out: str | os.PathLike, started: float) -> RenderResult:
     poster_path, sheet_path = side_paths(out)
     poster.save(poster_path, optimize=True)
     contact_sheet(renderer).save(sheet_path, optimize=True)
-    return RenderResult(clip=out, poster=poster_path, sheet=sheet_path, frames=len(frames),
-                        seconds=len(frames) / o.fps, width=lay.width, height=lay.height,
-                        render_s=time.perf_counter() - started)
+    return RenderResult(
+        clip=out,
+        poster=poster_path,
+        sheet=sheet_path,
+        frames=len(frames),
+        seconds=len(frames) / o.fps,
+        width=lay.width,
+        height=lay.height,
+        render_s=time.perf_counter() - started,
+    )
 
 
-def render_file(summary: str | os.PathLike, out: str | os.PathLike, numbers: list[int] | None = None,
-                options: RenderOptions | None = None) -> RenderResult:
+def render_file(
+    summary: str | os.PathLike,
+    out: str | os.PathLike,
+    numbers: list[int] | None = None,
+    options: RenderOptions | None = None,
+) -> RenderResult:
     return render(load_scene(summary), out, numbers, options)

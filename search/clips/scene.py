@@ -70,7 +70,7 @@ def _points(value, shape_tail: tuple[int, ...], where: str) -> np.ndarray:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         raise SummaryError(f"{where} must be a list of [x, y] pairs") from None
-    if array.shape[-len(shape_tail):] != shape_tail or array.ndim < len(shape_tail):
+    if array.shape[-len(shape_tail) :] != shape_tail or array.ndim < len(shape_tail):
         raise SummaryError(f"{where} has shape {array.shape}, expected (..., {', '.join(map(str, shape_tail))})")
     if not np.all(np.isfinite(array)):
         raise SummaryError(f"{where} contains NaN or infinite numbers")
@@ -79,6 +79,7 @@ def _points(value, shape_tail: tuple[int, ...], where: str) -> np.ndarray:
 
 def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
     """The scene of a parsed summary.json, or SummaryError naming what is missing or malformed."""
+
     def fail(message: str):
         raise SummaryError(f"{source}: {message}")
 
@@ -90,8 +91,7 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
     if missing:
         fail(f"missing key(s) {missing}")
     agents = summary["agents"]
-    if not isinstance(agents, list) or len(agents) < 2 or not all(isinstance(a, dict) and "name" in a
-                                                                  for a in agents):
+    if not isinstance(agents, list) or len(agents) < 2 or not all(isinstance(a, dict) and "name" in a for a in agents):
         fail("agents must be a list of at least two {name, source} objects")
     n_agents = len(agents)
     try:
@@ -125,13 +125,17 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
         except SummaryError as error:
             fail(str(error))
         if robot.shape != (n_agents, 2):
-            fail(f"{where}.robots has {robot.shape[0] if robot.ndim == 2 else '?'} positions, expected one per "
-                 f"agent ({n_agents})")
+            fail(
+                f"{where}.robots has {robot.shape[0] if robot.ndim == 2 else '?'} positions, expected one per "
+                f"agent ({n_agents})"
+            )
         if crowd.shape == (n, 2) and panels == 1:
             crowd = crowd[None]
         elif crowd.shape == (n, 2):
-            fail(f"{where}.humans holds one crowd, but the robots are visible (robot_visible = true), so each of the "
-                 f"{panels} agents has its own crowd: the summary must record one crowd per agent")
+            fail(
+                f"{where}.humans holds one crowd, but the robots are visible (robot_visible = true), so each of the "
+                f"{panels} agents has its own crowd: the summary must record one crowd per agent"
+            )
         if crowd.shape != (panels, n, 2):
             per = f"{n} humans" + (f" for each of the {panels} agents' crowds" if panels > 1 else "")
             fail(f"{where}.humans has shape {crowd.shape}, expected {per}")

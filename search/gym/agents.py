@@ -48,8 +48,9 @@ def load_sb3(path: str | Path):
         raise ValueError(f"{path}: not a Stable-Baselines3 model file ({error})") from None
     family = module.split(".")[1] if module.startswith("stable_baselines3.") else ""
     if family not in SB3_ALGORITHMS:
-        raise ValueError(f"{path}: a policy of {module!r}; Foil loads Stable-Baselines3's "
-                         f"{sorted(SB3_ALGORITHMS.values())}")
+        raise ValueError(
+            f"{path}: a policy of {module!r}; Foil loads Stable-Baselines3's {sorted(SB3_ALGORITHMS.values())}"
+        )
     import stable_baselines3
 
     return getattr(stable_baselines3, SB3_ALGORITHMS[family]).load(path, device="cpu")
@@ -68,5 +69,7 @@ def load_agent(spec: str, adapter) -> GymAgent:
             return GymAgent(spec, spec, getattr(import_module(module_name), attribute))
         except (ImportError, AttributeError) as error:
             raise ValueError(f"cannot load agent {spec!r}: {error}") from None
-    raise ValueError(f"unknown agent {spec!r}: give a shipped name ({', '.join(adapter.agent_names()) or 'none'}), "
-                     "a Stable-Baselines3 .zip file or module:attribute")
+    raise ValueError(
+        f"unknown agent {spec!r}: give a shipped name ({', '.join(adapter.agent_names()) or 'none'}), "
+        "a Stable-Baselines3 .zip file or module:attribute"
+    )

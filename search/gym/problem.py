@@ -45,14 +45,25 @@ class GymScenario:
     description: str = ""
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "domain": "gym", "adapter": self.adapter, "seed": self.seed,
-                "settings": dict(self.settings), "description": self.description}
+        return {
+            "name": self.name,
+            "domain": "gym",
+            "adapter": self.adapter,
+            "seed": self.seed,
+            "settings": dict(self.settings),
+            "description": self.description,
+        }
 
     @classmethod
     def from_dict(cls, data: dict) -> GymScenario:
         try:
-            return cls(name=str(data["name"]), adapter=str(data["adapter"]), seed=int(data["seed"]),
-                       settings=dict(data.get("settings", {})), description=str(data.get("description", "")))
+            return cls(
+                name=str(data["name"]),
+                adapter=str(data["adapter"]),
+                seed=int(data["seed"]),
+                settings=dict(data.get("settings", {})),
+                description=str(data.get("description", "")),
+            )
         except KeyError as error:
             raise ValueError(f"a Gymnasium scenario needs name, adapter and seed; {error} is missing") from None
 
@@ -90,8 +101,11 @@ class Divergence:
         self.squared, self.minimum = config.norm == "squared", config.combine == "min"
         self.discrete = isinstance(action_space, gymnasium.spaces.Discrete)
         if not self.discrete:
-            if not isinstance(action_space, gymnasium.spaces.Box) or not np.all(np.isfinite(action_space.low)) \
-                    or not np.all(np.isfinite(action_space.high)):
+            if (
+                not isinstance(action_space, gymnasium.spaces.Box)
+                or not np.all(np.isfinite(action_space.low))
+                or not np.all(np.isfinite(action_space.high))
+            ):
                 raise ValueError(f"agents' actions must be Discrete or a bounded Box, not {action_space}")
             self.low = np.asarray(action_space.low, dtype=np.float64).reshape(-1)
             self.high = np.asarray(action_space.high, dtype=np.float64).reshape(-1)
@@ -134,16 +148,23 @@ def _pairs(values: list):
 class GymCoupledProblem:
     """The agents under comparison, one environment instance each, under one environment action (a `Problem`)."""
 
-    def __init__(self, agents: list[GymAgent], scenario: GymScenario, reward: RewardConfig | None = None,
-                 adapter: Adapter | None = None, render: bool = False):
+    def __init__(
+        self,
+        agents: list[GymAgent],
+        scenario: GymScenario,
+        reward: RewardConfig | None = None,
+        adapter: Adapter | None = None,
+        render: bool = False,
+    ):
         if len(agents) < 2:
             raise ValueError("a comparison needs at least two agents")
         self.agents, self.scenario = agents, scenario
         self.adapter = adapter or scenario.load_adapter()
         self.reward_config = reward or RewardConfig()
         if self.reward_config.heuristic != "state_divergence":
-            raise ValueError("in a Gymnasium domain the horizon heuristic is the state divergence: leave "
-                             "heuristic unset")
+            raise ValueError(
+                "in a Gymnasium domain the horizon heuristic is the state divergence: leave heuristic unset"
+            )
         self.action_shape = tuple(self.adapter.env_action_shape)
         self.horizon = self.reward_config.horizon
         self.prior = ActionPrior(self.action_shape, 1.0, self.reward_config.prior, self.reward_config.prior_sigma)
@@ -164,13 +185,17 @@ class GymCoupledProblem:
 
     def _save(self, row: list[Instance]) -> list[Instance]:
         """A row as saved instances (``env`` holds the adapter's snapshot of the environment)."""
-        return [Instance(self.adapter.snapshot_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
-                for i in row]
+        return [
+            Instance(self.adapter.snapshot_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
+            for i in row
+        ]
 
     def _load(self, row: list[Instance]) -> list[Instance]:
         """Live instances from a saved row, which stays usable."""
-        return [Instance(self.adapter.restore_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
-                for i in row]
+        return [
+            Instance(self.adapter.restore_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
+            for i in row
+        ]
 
     def reset(self, batch: int) -> None:
         self.rows = [self._load(self._initial) for _ in range(batch)]

@@ -45,15 +45,27 @@ def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -
         goal, end = problem.last_events
         plausibility = c.plausibility * float(problem.prior.log_prob(action)) if c.plausibility else 0.0
         divergence = float(reward[0]) - plausibility if c.plausibility else float(reward[0])
-        for name, value in zip(TERMS, (0.0 if goal[0] or end[0] else divergence, divergence if goal[0] else 0.0,
-                                       divergence if end[0] else 0.0, plausibility), strict=True):
+        for name, value in zip(
+            TERMS,
+            (
+                0.0 if goal[0] or end[0] else divergence,
+                divergence if goal[0] else 0.0,
+                divergence if end[0] else 0.0,
+                plausibility,
+            ),
+            strict=True,
+        ):
             terms[name].append(value)
         rewards.append(float(reward[0]))
         row = problem.rows[0]
-        steps.append({"t": float((i + 1) * problem.adapter.dt),
-                      "humans": [_floats(problem.adapter.others(instance.env)) for instance in row],
-                      "robots": [_floats(problem.adapter.position(instance.env)) for instance in row],
-                      "robot_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]]})
+        steps.append(
+            {
+                "t": float((i + 1) * problem.adapter.dt),
+                "humans": [_floats(problem.adapter.others(instance.env)) for instance in row],
+                "robots": [_floats(problem.adapter.position(instance.env)) for instance in row],
+                "robot_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]],
+            }
+        )
         if on_state is not None:
             on_state(problem)
         if terminal[0]:
@@ -62,12 +74,16 @@ def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -
     if terminal_at is None or terminal_at != len(env_actions) - 1:
         where = "never ends" if terminal_at is None else f"ends at step {terminal_at + 1} of {len(env_actions)}"
         raise ValueError(f"the trajectory {where}: a summary holds exactly one complete trajectory")
-    return {"steps": steps, "reward": sequential_sum(rewards),
-            "reward_terms": {name: sequential_sum(values) for name, values in terms.items()}}
+    return {
+        "steps": steps,
+        "reward": sequential_sum(rewards),
+        "reward_terms": {name: sequential_sum(values) for name, values in terms.items()},
+    }
 
 
-def build_gym_summary(agents: list[GymAgent], scenario: GymScenario, reward_config: RewardConfig,
-                      env_actions: np.ndarray, solver: dict) -> dict:
+def build_gym_summary(
+    agents: list[GymAgent], scenario: GymScenario, reward_config: RewardConfig, env_actions: np.ndarray, solver: dict
+) -> dict:
     problem = GymCoupledProblem(agents, scenario, reward_config)
     record = replay(problem, env_actions)
     dt = problem.adapter.dt
@@ -79,10 +95,15 @@ def build_gym_summary(agents: list[GymAgent], scenario: GymScenario, reward_conf
         "reward_parameters": reward_config.to_dict(),
         "env_actions": [_floats(np.asarray(a).reshape(-1)) for a in env_actions],
         "steps": record["steps"],
-        "outcomes": [{"event": OUTCOME_NAMES[instance.outcome],
-                      "time": float(instance.event_step * dt) if instance.event_step else None,
-                      "path_length": instance.path_length, "min_human_distance": None}
-                     for instance in problem.rows[0]],
+        "outcomes": [
+            {
+                "event": OUTCOME_NAMES[instance.outcome],
+                "time": float(instance.event_step * dt) if instance.event_step else None,
+                "path_length": instance.path_length,
+                "min_human_distance": None,
+            }
+            for instance in problem.rows[0]
+        ],
         "reward": record["reward"],
         "reward_terms": record["reward_terms"],
     }
@@ -91,20 +112,31 @@ def build_gym_summary(agents: list[GymAgent], scenario: GymScenario, reward_conf
 def run_gym_search(job: SearchJob, scenario: GymScenario, progress: bool = False) -> dict[str, str]:
     """``foil search`` in a Gymnasium domain: the same solvers, top-K and files as in the crowd world."""
     if job.solver == "representative":
-        raise ValueError("the representative solver draws starting states from a crowd distribution (such as "
-                         "'training'); in a Gymnasium world use mcts, nfirst, random or cem")
+        raise ValueError(
+            "the representative solver draws starting states from a crowd distribution (such as "
+            "'training'); in a Gymnasium world use mcts, nfirst, random or cem"
+        )
     started = time.perf_counter()
     if job.world_settings:
-        scenario = GymScenario(scenario.name, scenario.adapter, scenario.seed,
-                               scenario.settings | job.world_settings, scenario.description)
+        scenario = GymScenario(
+            scenario.name, scenario.adapter, scenario.seed, scenario.settings | job.world_settings, scenario.description
+        )
     adapter = scenario.load_adapter()
     agents = [load_agent(spec, adapter) for spec in job.agents]
     reward_config = RewardConfig.from_dict(job.reward_settings)
     problem = GymCoupledProblem(agents, scenario, reward_config, adapter)
     shape = problem.action_shape
-    return search_files(job, problem, scenario.name, reward_config, started, progress,
-                        lambda actions, solver: build_gym_summary(agents, scenario, reward_config,
-                                                                  np.asarray(actions).reshape(-1, *shape), solver))
+    return search_files(
+        job,
+        problem,
+        scenario.name,
+        reward_config,
+        started,
+        progress,
+        lambda actions, solver: build_gym_summary(
+            agents, scenario, reward_config, np.asarray(actions).reshape(-1, *shape), solver
+        ),
+    )
 
 
 def rebuild(data: dict) -> dict:
@@ -112,8 +144,9 @@ def rebuild(data: dict) -> dict:
     adapter = scenario.load_adapter()
     agents = [load_agent(entry["name"], adapter) for entry in data["agents"]]
     env_actions = np.array(data["env_actions"], dtype=np.float64).reshape(-1, *adapter.env_action_shape)
-    return build_gym_summary(agents, scenario, RewardConfig.from_dict(data["reward_parameters"]), env_actions,
-                             data["solver"])
+    return build_gym_summary(
+        agents, scenario, RewardConfig.from_dict(data["reward_parameters"]), env_actions, data["solver"]
+    )
 
 
 def verify_gym(path: str | Path) -> list[str]:

@@ -64,8 +64,7 @@ class HighwayAdapter(Adapter):
 
     def others(self, env) -> list:
         ego = env.unwrapped.vehicle
-        return [np.asarray(v.position, dtype=np.float64).tolist() for v in env.unwrapped.road.vehicles
-                if v is not ego]
+        return [np.asarray(v.position, dtype=np.float64).tolist() for v in env.unwrapped.road.vehicles if v is not ego]
 
     def outcome(self, terminated: bool, truncated: bool, info: dict) -> str:
         """A crash, or leaving the road, is a collision; lasting the whole drive is a success (there is no goal
@@ -84,4 +83,3 @@ class HighwayAdapter(Adapter):
         if not path.is_file():
             raise ValueError(f"unknown highway agent {name!r}: the shipped ones are {self.agent_names()}")
         return path
-

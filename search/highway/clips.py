@@ -76,8 +76,9 @@ class HighwayLayout:
 class HighwayScene:
     """What a highway clip shows: per agent its captured views, its outcome, and the clip's length."""
 
-    def __init__(self, views: list[list[np.ndarray]], outcomes: list[tuple[str, float]], end_time: float,
-                 frames_per_s: float):
+    def __init__(
+        self, views: list[list[np.ndarray]], outcomes: list[tuple[str, float]], end_time: float, frames_per_s: float
+    ):
         self.views, self.outcomes, self.end_time, self.frames_per_s = views, outcomes, end_time, frames_per_s
         self.n_agents = len(views)
 
@@ -104,12 +105,17 @@ class _Capture:
 def load_highway_scene(summary: dict, numbers: list[int], layout: HighwayLayout) -> HighwayScene:
     """Replay a highway summary with rendering environments and capture every simulation step of each agent."""
     scenario = GymScenario.from_dict(summary["scenario"])
-    screen = {"screen_width": layout.panel, "screen_height": layout.view_height, "centering_position": list(EGO_AT),
-              "scaling": 9.0 * layout.panel / 480}  # px per metre: about 53 m of road in view
+    screen = {
+        "screen_width": layout.panel,
+        "screen_height": layout.view_height,
+        "centering_position": list(EGO_AT),
+        "scaling": 9.0 * layout.panel / 480,
+    }  # px per metre: about 53 m of road in view
     adapter = HighwayAdapter(scenario.settings | screen)
     agents = [load_agent(entry["name"], adapter) for entry in summary["agents"]]
-    problem = GymCoupledProblem(agents, scenario, RewardConfig.from_dict(summary["reward_parameters"]), adapter,
-                                render=True)
+    problem = GymCoupledProblem(
+        agents, scenario, RewardConfig.from_dict(summary["reward_parameters"]), adapter, render=True
+    )
     views: list[list[np.ndarray]] = [[] for _ in agents]
 
     def capture(p: GymCoupledProblem) -> None:
@@ -176,8 +182,12 @@ class HighwayClipRenderer(ClipRenderer):
             self._text(image, xy, text, lay.text, INK if event else MUTED, "lm")
 
 
-def render_highway(summary_path: str | os.PathLike, out: str | os.PathLike, numbers: list[int] | None = None,
-                   options: RenderOptions | None = None) -> RenderResult:
+def render_highway(
+    summary_path: str | os.PathLike,
+    out: str | os.PathLike,
+    numbers: list[int] | None = None,
+    options: RenderOptions | None = None,
+) -> RenderResult:
     """`foil render` for a highway summary: the clip, its poster and its contact sheet."""
     started = time.perf_counter()
     return encode(HighwayClipRenderer(load_summary(summary_path), numbers, options), Path(out), started)

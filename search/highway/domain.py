@@ -49,9 +49,11 @@ def infer_domain(agents: list[str], scenario: str | None = None) -> str:
         kinds = {HIGHWAY}
     if len(kinds) > 1:
         listing = ", ".join(f"{name} ({kind or 'any'})" for name, kind in found.items())
-        raise ValueError(f"cannot mix worlds: {listing}. Compare crowd agents (lo, med, hi, checkpoints) on crowd "
-                         "scenarios, and highway agents (highway-lo, highway-med, highway-hi, .zip files) on highway "
-                         f"scenarios ({', '.join(sorted(SCENARIOS))})")
+        raise ValueError(
+            f"cannot mix worlds: {listing}. Compare crowd agents (lo, med, hi, checkpoints) on crowd "
+            "scenarios, and highway agents (highway-lo, highway-med, highway-hi, .zip files) on highway "
+            f"scenarios ({', '.join(sorted(SCENARIOS))})"
+        )
     return kinds.pop() if kinds else CROWD
 
 

@@ -42,12 +42,19 @@ def evaluate(agent: GymAgent, episodes: int, seed: int = 0, adapter: HighwayAdap
         lengths.append(steps)
     rewards = np.asarray(rewards)
     half = 1.96 * rewards.std(ddof=1) / math.sqrt(episodes)
-    return {"agent": agent.name, "domain": "highway", "episodes": episodes, "seed": seed,
-            "collision_rate": collisions / episodes, "collision_ci95": list(wilson(collisions, episodes)),
-            "timeout_rate": 0.0,  # an episode ends in a crash or lasts the whole drive
-            "success_rate": 1 - collisions / episodes, "reward_mean": float(rewards.mean()),
-            "reward_ci95": [float(rewards.mean() - half), float(rewards.mean() + half)],
-            "length_mean": float(np.mean(lengths))}
+    return {
+        "agent": agent.name,
+        "domain": "highway",
+        "episodes": episodes,
+        "seed": seed,
+        "collision_rate": collisions / episodes,
+        "collision_ci95": list(wilson(collisions, episodes)),
+        "timeout_rate": 0.0,  # an episode ends in a crash or lasts the whole drive
+        "success_rate": 1 - collisions / episodes,
+        "reward_mean": float(rewards.mean()),
+        "reward_ci95": [float(rewards.mean() - half), float(rewards.mean() + half)],
+        "length_mean": float(np.mean(lengths)),
+    }
 
 
 def run_eval(spec: str, episodes: int, seed: int, as_json: bool) -> int:
@@ -59,7 +66,9 @@ def run_eval(spec: str, episodes: int, seed: int, as_json: bool) -> int:
     else:
         low, high = result["collision_ci95"]
         r_low, r_high = result["reward_ci95"]
-        print(f"{spec}: {episodes} episodes (seed {seed}), collision rate {result['collision_rate']:.3f} "
-              f"({low:.3f} to {high:.3f}), mean reward {result['reward_mean']:.2f} ({r_low:.2f} to {r_high:.2f}), "
-              f"mean length {result['length_mean']:.1f} s")
+        print(
+            f"{spec}: {episodes} episodes (seed {seed}), collision rate {result['collision_rate']:.3f} "
+            f"({low:.3f} to {high:.3f}), mean reward {result['reward_mean']:.2f} ({r_low:.2f} to {r_high:.2f}), "
+            f"mean length {result['length_mean']:.1f} s"
+        )
     return 0

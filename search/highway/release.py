@@ -24,10 +24,21 @@ from search.highway.evaluate import evaluate
 
 VALIDATION_EPISODES = 30
 VALIDATION_SEED, TEST_SEED = 1, 0
-COLUMNS = ("checkpoint", "env_steps", "episodes", "reward_mean", "reward_low", "reward_high", "collision_rate",
-           "collision_low", "collision_high")
-REPRODUCE = ("foil train --config search/highway/train.toml --out runs/highway\n"
-             "foil release runs/highway --out search/highway/agents --every 1 --jobs 3")
+COLUMNS = (
+    "checkpoint",
+    "env_steps",
+    "episodes",
+    "reward_mean",
+    "reward_low",
+    "reward_high",
+    "collision_rate",
+    "collision_low",
+    "collision_high",
+)
+REPRODUCE = (
+    "foil train --config search/highway/train.toml --out runs/highway\n"
+    "foil release runs/highway --out search/highway/agents --every 1 --jobs 3"
+)
 
 
 def is_highway_run(run_dir: Path) -> bool:
@@ -37,17 +48,26 @@ def is_highway_run(run_dir: Path) -> bool:
 
 def checkpoints(run_dir: Path) -> list[Path]:
     """The run's checkpoints, by environment steps."""
-    found = [(int(m.group(1)), p) for p in (run_dir / "checkpoints").glob("model_*_steps.zip")
-             if (m := re.fullmatch(r"model_(\d+)_steps", p.stem))]
+    found = [
+        (int(m.group(1)), p)
+        for p in (run_dir / "checkpoints").glob("model_*_steps.zip")
+        if (m := re.fullmatch(r"model_(\d+)_steps", p.stem))
+    ]
     return [p for _, p in sorted(found)]
 
 
 def _row(path: Path, result: dict) -> dict:
-    return {"checkpoint": path.name, "env_steps": int(path.stem.split("_")[1]), "episodes": result["episodes"],
-            "reward_mean": round(result["reward_mean"], 4), "reward_low": round(result["reward_ci95"][0], 4),
-            "reward_high": round(result["reward_ci95"][1], 4), "collision_rate": round(result["collision_rate"], 4),
-            "collision_low": round(result["collision_ci95"][0], 4),
-            "collision_high": round(result["collision_ci95"][1], 4)}
+    return {
+        "checkpoint": path.name,
+        "env_steps": int(path.stem.split("_")[1]),
+        "episodes": result["episodes"],
+        "reward_mean": round(result["reward_mean"], 4),
+        "reward_low": round(result["reward_ci95"][0], 4),
+        "reward_high": round(result["reward_ci95"][1], 4),
+        "collision_rate": round(result["collision_rate"], 4),
+        "collision_low": round(result["collision_ci95"][0], 4),
+        "collision_high": round(result["collision_ci95"][1], 4),
+    }
 
 
 def validate_run(run_dir: Path, every: int, log=print) -> list[dict]:
@@ -64,8 +84,9 @@ def validate_run(run_dir: Path, every: int, log=print) -> list[dict]:
     adapter, rows = HighwayAdapter(), []
     for path in chosen:
         if path.name not in done:
-            result = evaluate(GymAgent(path.stem, str(path), load_sb3(path)), VALIDATION_EPISODES, VALIDATION_SEED,
-                              adapter)
+            result = evaluate(
+                GymAgent(path.stem, str(path), load_sb3(path)), VALIDATION_EPISODES, VALIDATION_SEED, adapter
+            )
             done[path.name] = _row(path, result)
             log(f"{path.name}: reward {result['reward_mean']:6.2f}  collisions {result['collision_rate']:.3f}")
         rows.append(done[path.name])
@@ -75,6 +96,7 @@ def validate_run(run_dir: Path, every: int, log=print) -> list[dict]:
 
 def apart(a: dict, b: dict) -> bool:
     """Whether two rows' collision-rate and reward 95% intervals are disjoint."""
+
     def disjoint(low: str, high: str) -> bool:
         return float(a[high]) < float(b[low]) or float(b[high]) < float(a[low])
 
@@ -87,11 +109,16 @@ def choose(rows: list[dict]) -> dict[str, dict]:
     if lo is None:
         raise ReleaseError("no validated snapshot is clearly worse than the best; validate more (--every 1)")
     middle = (float(lo["reward_mean"]) + float(hi["reward_mean"])) / 2
-    between = [r for r in rows if int(lo["env_steps"]) < int(r["env_steps"]) < int(hi["env_steps"])
-               and apart(r, lo) and apart(r, hi)]
+    between = [
+        r
+        for r in rows
+        if int(lo["env_steps"]) < int(r["env_steps"]) < int(hi["env_steps"]) and apart(r, lo) and apart(r, hi)
+    ]
     if not between:
-        raise ReleaseError(f"no snapshot between {lo['checkpoint']} and {hi['checkpoint']} is clearly apart from "
-                           "both; validate every checkpoint (--every 1) or save checkpoints more often")
+        raise ReleaseError(
+            f"no snapshot between {lo['checkpoint']} and {hi['checkpoint']} is clearly apart from "
+            "both; validate every checkpoint (--every 1) or save checkpoints more often"
+        )
     med = min(between, key=lambda r: abs(float(r["reward_mean"]) - middle))
     return {"lo": lo, "med": med, "hi": hi}
 
@@ -103,34 +130,36 @@ def _minutes(run_dir: Path, steps: int) -> float:
 
 
 def model_card(name: str, row: dict, test: dict, config: dict, minutes: float) -> str:
-    why = {"hi": "the validated snapshot with the best mean reward",
-           "lo": "the earliest validated snapshot clearly worse than hi",
-           "med": "the snapshot between lo and hi whose validation reward is closest to the middle of theirs, "
-                  "clearly apart from both"}[name]
+    why = {
+        "hi": "the validated snapshot with the best mean reward",
+        "lo": "the earliest validated snapshot clearly worse than hi",
+        "med": "the snapshot between lo and hi whose validation reward is closest to the middle of theirs, "
+        "clearly apart from both",
+    }[name]
     low, high = test["collision_ci95"]
     r_low, r_high = test["reward_ci95"]
     return f"""# Agent `highway-{name}`
 
 A highway driving policy (Stable-Baselines3 PPO, MLP 64x64) for highway-env's `highway-fast-v0` with continuous \
 acceleration and steering (Foil's world: search/highway/env.py): the snapshot of one training run after \
-**{int(row['env_steps']):,} environment steps** ({minutes:.0f} minutes of training on a shared 2-core CPU). It is \
-{why}. Validation: {row['episodes']} episodes of evaluation seed {VALIDATION_SEED}; reward \
-{float(row['reward_mean']):.2f}, collision rate {float(row['collision_rate']):.3f}.
+**{int(row["env_steps"]):,} environment steps** ({minutes:.0f} minutes of training on a shared 2-core CPU). It is \
+{why}. Validation: {row["episodes"]} episodes of evaluation seed {VALIDATION_SEED}; reward \
+{float(row["reward_mean"]):.2f}, collision rate {float(row["collision_rate"]):.3f}.
 
-Training: PPO with {config['num_envs']} environments x {config['num_steps']} steps per update, batch \
-{config['batch_size']}, {config['epochs']} epochs, learning rate {config['learning_rate']}, gamma {config['gamma']}, \
-initial log standard deviation {config['log_std_init']}, seed {config['seed']}; highway-env's own reward \
+Training: PPO with {config["num_envs"]} environments x {config["num_steps"]} steps per update, batch \
+{config["batch_size"]}, {config["epochs"]} epochs, learning rate {config["learning_rate"]}, gamma {config["gamma"]}, \
+initial log standard deviation {config["log_std_init"]}, seed {config["seed"]}; highway-env's own reward \
 (speed, right lane, no collision; 0 to 1 per second).
 
 ## Test evaluation
 
-`foil eval highway-{name} --episodes {test['episodes']} --seed {TEST_SEED}`: episodes disjoint from training and \
+`foil eval highway-{name} --episodes {test["episodes"]} --seed {TEST_SEED}`: episodes disjoint from training and \
 validation; deterministic action; an episode ends with a crash, leaving the road, or after 30 s.
 
 | episodes | collision rate (95% CI) | mean reward (95% CI) | mean length |
 |---:|---|---|---:|
-| {test['episodes']} | {test['collision_rate']:.3f} ({low:.3f} to {high:.3f}) | {test['reward_mean']:.2f} \
-({r_low:.2f} to {r_high:.2f}) | {test['length_mean']:.1f} s |
+| {test["episodes"]} | {test["collision_rate"]:.3f} ({low:.3f} to {high:.3f}) | {test["reward_mean"]:.2f} \
+({r_low:.2f} to {r_high:.2f}) | {test["length_mean"]:.1f} s |
 
 ## Reproduce
 
@@ -160,13 +189,17 @@ def release(run_dir: Path, out: Path | None, episodes: int, every: int, log=prin
     else:
         tests = {name: _test(name, path, episodes) for name, path in paths.items()}
     for name, test in tests.items():
-        log(f"highway-{name} = {chosen[name]['checkpoint']}: test reward {test['reward_mean']:.2f}, collisions "
-            f"{test['collision_rate']:.3f}")
+        log(
+            f"highway-{name} = {chosen[name]['checkpoint']}: test reward {test['reward_mean']:.2f}, collisions "
+            f"{test['collision_rate']:.3f}"
+        )
     rows = {name: _row(Path(chosen[name]["checkpoint"]), tests[name]) for name in chosen}
     clashes = [f"{a}/{b}" for a, b in (("lo", "med"), ("med", "hi"), ("lo", "hi")) if not apart(rows[a], rows[b])]
     if clashes:
-        raise ReleaseError(f"on {episodes} test episodes the intervals of {clashes} overlap; validate every "
-                           "checkpoint (--every 1) or train longer")
+        raise ReleaseError(
+            f"on {episodes} test episodes the intervals of {clashes} overlap; validate every "
+            "checkpoint (--every 1) or train longer"
+        )
     config = json.loads((run_dir / "config.json").read_text())
     out.mkdir(parents=True, exist_ok=True)
     for name, row in chosen.items():

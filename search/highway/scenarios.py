@@ -7,12 +7,27 @@ from search.gym.problem import GymScenario
 
 ADAPTER = "search.highway.adapter:HighwayAdapter"
 SCENARIOS = {
-    "highway-dense": GymScenario("highway-dense", ADAPTER, 11, {"vehicles_density": 1.5},
-                                 "Three lanes of dense traffic: gaps are short, cut-ins come close."),
-    "highway-light": GymScenario("highway-light", ADAPTER, 12, {"vehicles_density": 0.8},
-                                 "Three lanes of light traffic: room to overtake, speed matters."),
-    "highway-four-lanes": GymScenario("highway-four-lanes", ADAPTER, 13, {"lanes_count": 4},
-                                      "Four lanes of ordinary traffic: more lane changes around the ego."),
+    "highway-dense": GymScenario(
+        "highway-dense",
+        ADAPTER,
+        11,
+        {"vehicles_density": 1.5},
+        "Three lanes of dense traffic: gaps are short, cut-ins come close.",
+    ),
+    "highway-light": GymScenario(
+        "highway-light",
+        ADAPTER,
+        12,
+        {"vehicles_density": 0.8},
+        "Three lanes of light traffic: room to overtake, speed matters.",
+    ),
+    "highway-four-lanes": GymScenario(
+        "highway-four-lanes",
+        ADAPTER,
+        13,
+        {"lanes_count": 4},
+        "Four lanes of ordinary traffic: more lane changes around the ego.",
+    ),
 }
 
 

@@ -70,9 +70,19 @@ def train(config: TrainConfig, out: str | Path) -> Path:
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps({"domain": "highway", **asdict(config)}, indent=1) + "\n")
     envs = make_vec_env(lambda: make_env(), n_envs=config.num_envs, seed=config.seed)
-    model = PPO("MlpPolicy", envs, learning_rate=config.learning_rate, n_steps=config.num_steps,
-                batch_size=config.batch_size, n_epochs=config.epochs, gamma=config.gamma, seed=config.seed,
-                policy_kwargs={"log_std_init": config.log_std_init}, device="cpu", verbose=0)
+    model = PPO(
+        "MlpPolicy",
+        envs,
+        learning_rate=config.learning_rate,
+        n_steps=config.num_steps,
+        batch_size=config.batch_size,
+        n_epochs=config.epochs,
+        gamma=config.gamma,
+        seed=config.seed,
+        policy_kwargs={"log_std_init": config.log_std_init},
+        device="cpu",
+        verbose=0,
+    )
     model.set_logger(configure(str(out), ["csv"]))
     model.save(out / "checkpoints" / "model_0_steps")
     every = max(1, config.save_every // config.num_envs)

@@ -50,8 +50,7 @@ class CoupledStep:
 
 
 class CoupledSimulator:
-    def __init__(self, policies: list[Policy], scenario: Scenario, config: WorldConfig | None = None,
-                 batch: int = 1):
+    def __init__(self, policies: list[Policy], scenario: Scenario, config: WorldConfig | None = None, batch: int = 1):
         if len(policies) < 2:
             raise ValueError("a coupled simulator compares at least two policies")
         if batch < 1:
@@ -123,8 +122,11 @@ class CoupledSimulator:
         env_action = world.check_env_action(env_action, self.batch, self.config)
         world_action = env_action if self.shared_crowd else np.tile(env_action, (self.n_agents, 1, 1))
         crowd_action = None if self.config.env_action_mode == "observation" else world_action
-        humans = _crowd_worker().submit(world.human_velocities, self.state, self.config, crowd_action) \
-            if _crowd_worker() else None
+        humans = (
+            _crowd_worker().submit(world.human_velocities, self.state, self.config, crowd_action)
+            if _crowd_worker()
+            else None
+        )
         observations = self.observations(env_action)
         actions = np.zeros((self.batch, self.n_agents, 2))
         for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
@@ -171,8 +173,11 @@ class CoupledSimulator:
         rows = index if isinstance(index, list) else np.asarray(index, dtype=np.int64).reshape(-1).tolist()
         if len(rows) != snapshot.batch:
             raise ValueError(f"{len(rows)} rows to overwrite, but the snapshot holds {snapshot.batch}")
-        pairs = [(state[key], value) for state, new in zip(self.policy_states, snapshot.policy_states, strict=True)
-                 for key, value in new.items()]
+        pairs = [
+            (state[key], value)
+            for state, new in zip(self.policy_states, snapshot.policy_states, strict=True)
+            for key, value in new.items()
+        ]
         if self.shared_crowd:  # rows are worlds: one pass over every array
             world.assign_rows(self.state.row_pairs(snapshot.state) + pairs, rows)
         else:
@@ -212,8 +217,14 @@ def _crowd_worker() -> ThreadPoolExecutor | None:
 os.register_at_fork(after_in_child=_crowd_worker.cache_clear)  # a forked child does not inherit the thread
 
 
-def replay(policies: list[Policy], scenario: Scenario, env_actions, config: WorldConfig | None = None,
-           stop_when_done: bool = True, coda_to: int = 0) -> Trajectory:
+def replay(
+    policies: list[Policy],
+    scenario: Scenario,
+    env_actions,
+    config: WorldConfig | None = None,
+    stop_when_done: bool = True,
+    coda_to: int = 0,
+) -> Trajectory:
     """Run one coupled scenario from its initial state under a sequence of environment actions.
 
     With ``coda_to`` the run goes on after the last action without pushes (zero environment actions) until every

@@ -20,18 +20,19 @@ from search.sim.world import OUTCOME_NAMES, WorldConfig
 class CrowdNavEnv(gym.Env):
     metadata = {"render_modes": []}
 
-    def __init__(self, config: WorldConfig | None = None, scenario: Scenario | None = None,
-                 env_action_fn=None):
+    def __init__(self, config: WorldConfig | None = None, scenario: Scenario | None = None, env_action_fn=None):
         self.scenario = scenario
         self.config = scenario.config(config) if scenario else (config or WorldConfig())
         self.env_action_fn = env_action_fn
         n = self.config.human_num
         bound = 1e3  # metres and m/s: far beyond any reachable position or speed
-        self.observation_space = spaces.Dict({
-            "robot_node": spaces.Box(-bound, bound, (ROBOT_NODE_SIZE,), np.float32),
-            "temporal_edges": spaces.Box(-bound, bound, (2,), np.float32),
-            "spatial_edges": spaces.Box(-bound, bound, (n, 2), np.float32),
-        })
+        self.observation_space = spaces.Dict(
+            {
+                "robot_node": spaces.Box(-bound, bound, (ROBOT_NODE_SIZE,), np.float32),
+                "temporal_edges": spaces.Box(-bound, bound, (2,), np.float32),
+                "spatial_edges": spaces.Box(-bound, bound, (n, 2), np.float32),
+            }
+        )
         if self.config.kinematics == "holonomic":
             v = self.config.robot_v_pref
             self.action_space = spaces.Box(-v, v, (2,), np.float32)
@@ -42,9 +43,11 @@ class CrowdNavEnv(gym.Env):
 
     def _observation(self) -> dict:
         obs = observe(self.state, self.config, robot=0)
-        return {"robot_node": obs.robot_node[0].astype(np.float32),
-                "temporal_edges": obs.temporal_edges[0].astype(np.float32),
-                "spatial_edges": obs.spatial_edges[0].astype(np.float32)}
+        return {
+            "robot_node": obs.robot_node[0].astype(np.float32),
+            "temporal_edges": obs.temporal_edges[0].astype(np.float32),
+            "spatial_edges": obs.spatial_edges[0].astype(np.float32),
+        }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

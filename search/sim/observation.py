@@ -19,8 +19,20 @@ PolicyState = dict[str, np.ndarray]
 # The robot node's fields, in order. The first seven are CrowdNav_DSRNN's (absolute position and goal); the goal
 # relative to the robot follows, as a deliberate departure: through the absolute coordinates alone a goal offset
 # that is small next to the world's +-12 m reads like a low-gain controller, and trained robots circled their goal.
-ROBOT_NODE_FIELDS = ("px", "py", "radius", "gx", "gy", "v_pref", "theta",
-                     "goal_dx", "goal_dy", "goal_distance", "goal_ux", "goal_uy")
+ROBOT_NODE_FIELDS = (
+    "px",
+    "py",
+    "radius",
+    "gx",
+    "gy",
+    "v_pref",
+    "theta",
+    "goal_dx",
+    "goal_dy",
+    "goal_distance",
+    "goal_ux",
+    "goal_uy",
+)
 ROBOT_NODE_SIZE = len(ROBOT_NODE_FIELDS)
 
 
@@ -41,8 +53,13 @@ class Observation:
         return self.robot_node.shape[0]
 
 
-def observe(state: WorldState, config: WorldConfig, robot: int, worlds: slice = slice(None),
-            position_noise: np.ndarray | None = None) -> Observation:
+def observe(
+    state: WorldState,
+    config: WorldConfig,
+    robot: int,
+    worlds: slice = slice(None),
+    position_noise: np.ndarray | None = None,
+) -> Observation:
     """Robot ``robot``'s observation in the worlds ``worlds`` (a slice); ``position_noise`` (B, n, 2) shifts the
     humans it sees (the observation mode of the environment action)."""
     start, stop, step = worlds.indices(state.n_worlds)
@@ -51,8 +68,13 @@ def observe(state: WorldState, config: WorldConfig, robot: int, worlds: slice = 
     return observe_agents(state, config, [(start, robot)], stop - start, position_noise)[0]
 
 
-def observe_agents(state: WorldState, config: WorldConfig, agents: list[tuple[int, int]], batch: int,
-                   position_noise: np.ndarray | None = None) -> list[Observation]:
+def observe_agents(
+    state: WorldState,
+    config: WorldConfig,
+    agents: list[tuple[int, int]],
+    batch: int,
+    position_noise: np.ndarray | None = None,
+) -> list[Observation]:
     """Several robots' observations in one pass (a coupled step observes every agent): agent ``(first, robot)``
     is robot ``robot`` in worlds ``first`` to ``first + batch``."""
     k, n = len(agents), state.human_pos.shape[1]
@@ -61,21 +83,68 @@ def observe_agents(state: WorldState, config: WorldConfig, agents: list[tuple[in
     human_radii, done = np.empty((k, batch, n)), np.empty((k, batch), dtype=bool)
     human_mask = np.ones((k, batch, n), dtype=bool)
     where = np.array(agents, dtype=np.int64).reshape(k, 2)
-    _observe(state.robot_pos, state.robot_goal, state.robot_theta, state.robot_vel, state.done, state.human_pos,
-             state.human_vel, state.human_radius, where, position_noise, float(config.robot_radius),
-             float(config.robot_v_pref), robot_node, temporal_edges, spatial_edges, human_velocities, human_radii,
-             done)
+    _observe(
+        state.robot_pos,
+        state.robot_goal,
+        state.robot_theta,
+        state.robot_vel,
+        state.done,
+        state.human_pos,
+        state.human_vel,
+        state.human_radius,
+        where,
+        position_noise,
+        float(config.robot_radius),
+        float(config.robot_v_pref),
+        robot_node,
+        temporal_edges,
+        spatial_edges,
+        human_velocities,
+        human_radii,
+        done,
+    )
     if config.robot_fov < 360:  # CrowdNav's robot faces its velocity (holonomic) or its heading (unicycle)
-        heading = robot_node[..., 6] if config.kinematics == "unicycle" else \
-            np.arctan2(temporal_edges[..., 1], temporal_edges[..., 0])
+        heading = (
+            robot_node[..., 6]
+            if config.kinematics == "unicycle"
+            else np.arctan2(temporal_edges[..., 1], temporal_edges[..., 0])
+        )
         human_mask = in_view(heading, spatial_edges, config.robot_fov)
-    return [Observation(robot_node[i], temporal_edges[i], spatial_edges[i], human_velocities[i], human_radii[i],
-                        human_mask[i], done[i]) for i in range(k)]
+    return [
+        Observation(
+            robot_node[i],
+            temporal_edges[i],
+            spatial_edges[i],
+            human_velocities[i],
+            human_radii[i],
+            human_mask[i],
+            done[i],
+        )
+        for i in range(k)
+    ]
 
 
 @numba.njit(cache=True)
-def _observe(robot_pos, robot_goal, robot_theta, robot_vel, robot_done, human_pos, human_vel, human_radius, where,
-             noise, radius, v_pref, robot_node, temporal_edges, spatial_edges, human_velocities, human_radii, done):
+def _observe(
+    robot_pos,
+    robot_goal,
+    robot_theta,
+    robot_vel,
+    robot_done,
+    human_pos,
+    human_vel,
+    human_radius,
+    where,
+    noise,
+    radius,
+    v_pref,
+    robot_node,
+    temporal_edges,
+    spatial_edges,
+    human_velocities,
+    human_radii,
+    done,
+):
     """Fill every agent's observation arrays in one pass (numpy took a dozen calls per agent)."""
     for k in range(where.shape[0]):
         first, robot = where[k, 0], where[k, 1]

@@ -121,8 +121,27 @@ def _lp3(lp, ld_x, ld_y, n_lines, begin_line, radius, result, proj_p, proj_dx, p
 
 
 @_jit
-def _agent_velocity(pos, vel, pref, radii, max_speeds, a, neighbor_dist, max_neighbors, inv_horizon, dt, out,
-                    nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy):
+def _agent_velocity(
+    pos,
+    vel,
+    pref,
+    radii,
+    max_speeds,
+    a,
+    neighbor_dist,
+    max_neighbors,
+    inv_horizon,
+    dt,
+    out,
+    nb_idx,
+    nb_dist,
+    lp,
+    ld_x,
+    ld_y,
+    proj_p,
+    proj_dx,
+    proj_dy,
+):
     """New velocity of agent ``a`` of one world, written to ``out``."""
     n = pos.shape[0]
     # Nearest neighbours, ascending distance, as RVO2's kd-tree insertion keeps them.
@@ -218,13 +237,33 @@ def _solve_world(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_ne
     proj_dx = np.empty(n, np.float32)
     proj_dy = np.empty(n, np.float32)
     for a in range(n_ego):
-        _agent_velocity(pos, vel, pref, radii, max_speeds, a, neighbor_dist, max_neighbors, inv_horizon, dt,
-                        out[a], nb_idx, nb_dist, lp, ld_x, ld_y, proj_p, proj_dx, proj_dy)
+        _agent_velocity(
+            pos,
+            vel,
+            pref,
+            radii,
+            max_speeds,
+            a,
+            neighbor_dist,
+            max_neighbors,
+            inv_horizon,
+            dt,
+            out[a],
+            nb_idx,
+            nb_dist,
+            lp,
+            ld_x,
+            ld_y,
+            proj_p,
+            proj_dx,
+            proj_dy,
+        )
 
 
 @_jit
-def _crowd_world(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors,
-                 time_horizon, dt, out):
+def _crowd_world(
+    pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors, time_horizon, dt, out
+):
     """One crowd as CrowdNav drives RVO2: the preferred velocity is the vector to the goal, normalised only
     when longer than 1 m, plus ``pref_offset``; radii padded by ``padding``; speed limit v_pref."""
     n = pos.shape[0]
@@ -254,25 +293,62 @@ def _crowd_world(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_d
 @_jit
 def _orca_worlds(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_neighbors, time_horizon, dt, out):
     for w in range(pos.shape[0]):
-        _solve_world(pos[w], vel[w], pref[w], radii[w], max_speeds[w], n_ego, neighbor_dist, max_neighbors,
-                     time_horizon, dt, out[w])
+        _solve_world(
+            pos[w],
+            vel[w],
+            pref[w],
+            radii[w],
+            max_speeds[w],
+            n_ego,
+            neighbor_dist,
+            max_neighbors,
+            time_horizon,
+            dt,
+            out[w],
+        )
 
 
 @_jit
-def _crowd_worlds(pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors,
-                  time_horizon, dt, out):
+def _crowd_worlds(
+    pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors, time_horizon, dt, out
+):
     for w in range(pos.shape[0]):
-        _crowd_world(pos[w], vel[w], goal[w], radii[w], v_pref[w], pref_offset[w], padding, neighbor_dist,
-                     max_neighbors, time_horizon, dt, out[w])
+        _crowd_world(
+            pos[w],
+            vel[w],
+            goal[w],
+            radii[w],
+            v_pref[w],
+            pref_offset[w],
+            padding,
+            neighbor_dist,
+            max_neighbors,
+            time_horizon,
+            dt,
+            out[w],
+        )
 
 
-def crowd_velocities(pos, vel, goal, radii, v_pref, pref_offset, *, padding, neighbor_dist, max_neighbors,
-                     time_horizon, dt) -> np.ndarray:
+def crowd_velocities(
+    pos, vel, goal, radii, v_pref, pref_offset, *, padding, neighbor_dist, max_neighbors, time_horizon, dt
+) -> np.ndarray:
     """New velocities (W, n, 2) of crowds that see only each other; float64 state in, float32 solve."""
     f32 = np.float32
     out = np.empty(pos.shape, np.float32)
-    _crowd_worlds(pos, vel, goal, radii, v_pref, pref_offset, f32(padding), f32(neighbor_dist), int(max_neighbors),
-           f32(time_horizon), f32(dt), out)
+    _crowd_worlds(
+        pos,
+        vel,
+        goal,
+        radii,
+        v_pref,
+        pref_offset,
+        f32(padding),
+        f32(neighbor_dist),
+        int(max_neighbors),
+        f32(time_horizon),
+        f32(dt),
+        out,
+    )
     return out.astype(np.float64)
 
 
@@ -288,8 +364,19 @@ def _as_batch(name: str, array, shape_tail: tuple[int, ...], n_worlds: int | Non
     return out
 
 
-def orca_velocities(positions, velocities, preferred_velocities, radii, max_speeds, *, neighbor_dist=10.0,
-                    max_neighbors=10, time_horizon=5.0, dt=0.25, n_ego=None) -> np.ndarray:
+def orca_velocities(
+    positions,
+    velocities,
+    preferred_velocities,
+    radii,
+    max_speeds,
+    *,
+    neighbor_dist=10.0,
+    max_neighbors=10,
+    time_horizon=5.0,
+    dt=0.25,
+    n_ego=None,
+) -> np.ndarray:
     """New velocities of the first ``n_ego`` agents of each world (all agents by default), shape (B, n_ego, 2).
 
     Agents beyond ``n_ego`` act only as neighbours: a robot steering by ORCA through a crowd needs its own
@@ -308,18 +395,37 @@ def orca_velocities(positions, velocities, preferred_velocities, radii, max_spee
     n_ego = n if n_ego is None else int(n_ego)
     out = np.zeros((n_worlds, n_ego, 2), np.float32)
     f32 = np.float32
-    _orca_worlds(pos, vel, pref, rad, speed, n_ego, f32(neighbor_dist), int(max_neighbors), f32(time_horizon),
-                 f32(dt), out)
+    _orca_worlds(
+        pos, vel, pref, rad, speed, n_ego, f32(neighbor_dist), int(max_neighbors), f32(time_horizon), f32(dt), out
+    )
     return out.astype(np.float64)
 
 
-def orca_step(positions, velocities, preferred_velocities, radii, max_speeds, *, neighbor_dist=10.0,
-              max_neighbors=10, time_horizon=5.0, dt=0.25) -> np.ndarray:
+def orca_step(
+    positions,
+    velocities,
+    preferred_velocities,
+    radii,
+    max_speeds,
+    *,
+    neighbor_dist=10.0,
+    max_neighbors=10,
+    time_horizon=5.0,
+    dt=0.25,
+) -> np.ndarray:
     """Every agent's new velocity (B, n, 2), as one RVO2 ``doStep`` computes it (no obstacles).
 
     Inputs are (B, n, 2) positions, velocities and preferred velocities, and (B, n) radii and maximum speeds;
     radii are used as given (callers add CrowdNav's padding themselves).
     """
-    return orca_velocities(positions, velocities, preferred_velocities, radii, max_speeds,
-                           neighbor_dist=neighbor_dist, max_neighbors=max_neighbors,
-                           time_horizon=time_horizon, dt=dt)
+    return orca_velocities(
+        positions,
+        velocities,
+        preferred_velocities,
+        radii,
+        max_speeds,
+        neighbor_dist=neighbor_dist,
+        max_neighbors=max_neighbors,
+        time_horizon=time_horizon,
+        dt=dt,
+    )

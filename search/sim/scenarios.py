@@ -57,19 +57,24 @@ class Scenario:
         goals = np.array(self.human_goals, dtype=np.float64).reshape(-1, 2)
         tile_h = (n_worlds, 1, 1)
         tile_r = (n_worlds, n_robots, 1)
-        return new_state(np.tile(humans, tile_h), np.tile(goals, tile_h),
-                         np.tile(np.array(self.robot_start, dtype=np.float64), tile_r),
-                         np.tile(np.array(self.robot_goal, dtype=np.float64), tile_r),
-                         self.robot_heading, config)
+        return new_state(
+            np.tile(humans, tile_h),
+            np.tile(goals, tile_h),
+            np.tile(np.array(self.robot_start, dtype=np.float64), tile_r),
+            np.tile(np.array(self.robot_goal, dtype=np.float64), tile_r),
+            self.robot_heading,
+            config,
+        )
 
     def to_dict(self) -> dict:
         return {
             "name": self.name,
             "description": self.description,
-            "robot": {"start": list(self.robot_start), "goal": list(self.robot_goal),
-                      "heading": self.robot_heading},
-            "humans": [{"position": list(p), "goal": list(g)}
-                       for p, g in zip(self.human_positions, self.human_goals, strict=True)],
+            "robot": {"start": list(self.robot_start), "goal": list(self.robot_goal), "heading": self.robot_heading},
+            "humans": [
+                {"position": list(p), "goal": list(g)}
+                for p, g in zip(self.human_positions, self.human_goals, strict=True)
+            ],
             "world": dict(self.world),
         }
 
@@ -79,8 +84,11 @@ class Scenario:
             raise ValueError(f"{source}: {message}")
 
         def point(value, where: str) -> tuple[float, float]:
-            if (not isinstance(value, list | tuple) or len(value) != 2
-                    or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
+            if (
+                not isinstance(value, list | tuple)
+                or len(value) != 2
+                or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+            ):
                 fail(f"{where} must be a pair of numbers [x, y], got {value!r}")
             if not all(math.isfinite(v) for v in value):
                 fail(f"{where} must be finite, got {value!r}")
@@ -117,10 +125,16 @@ class Scenario:
         world = data.get("world", {})
         if not isinstance(world, dict):
             fail("[world] must be a table of world settings")
-        scenario = cls(name=str(data.get("name", source)), description=str(data.get("description", "")),
-                       robot_start=point(robot["start"], "[robot] start"),
-                       robot_goal=point(robot["goal"], "[robot] goal"), robot_heading=float(heading),
-                       human_positions=tuple(positions), human_goals=tuple(goals), world=dict(world))
+        scenario = cls(
+            name=str(data.get("name", source)),
+            description=str(data.get("description", "")),
+            robot_start=point(robot["start"], "[robot] start"),
+            robot_goal=point(robot["goal"], "[robot] goal"),
+            robot_heading=float(heading),
+            human_positions=tuple(positions),
+            human_goals=tuple(goals),
+            world=dict(world),
+        )
         try:
             scenario.config()
         except (ValueError, TypeError) as error:
@@ -158,20 +172,27 @@ class ScenarioDistribution:
     def sample(self, rng: np.random.Generator, count: int) -> list[Scenario]:
         """``count`` starting states, each a fixed scenario named after its draw (``training#3``)."""
         state = sample_training_states(self.config(), rng, count)
-        return [Scenario(name=f"{self.name}#{i}", description=f"starting state {i} drawn from {self.name}",
-                         robot_start=tuple(state.robot_pos[i, 0].tolist()),
-                         robot_goal=tuple(state.robot_goal[i, 0].tolist()),
-                         human_positions=tuple(map(tuple, state.human_pos[i].tolist())),
-                         human_goals=tuple(map(tuple, state.human_goal[i].tolist())),
-                         robot_heading=float(state.robot_theta[i, 0]), world=dict(self.world))
-                for i in range(count)]
+        return [
+            Scenario(
+                name=f"{self.name}#{i}",
+                description=f"starting state {i} drawn from {self.name}",
+                robot_start=tuple(state.robot_pos[i, 0].tolist()),
+                robot_goal=tuple(state.robot_goal[i, 0].tolist()),
+                human_positions=tuple(map(tuple, state.human_pos[i].tolist())),
+                human_goals=tuple(map(tuple, state.human_goal[i].tolist())),
+                robot_heading=float(state.robot_theta[i, 0]),
+                world=dict(self.world),
+            )
+            for i in range(count)
+        ]
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "scenario distribution") -> ScenarioDistribution:
         unknown = sorted(set(data) - {"name", "description", "distribution", "world"})
         if unknown:
-            raise ValueError(f"{source}: unknown key(s) {unknown}; a distribution has name, description, "
-                             f"[distribution] and [world]")
+            raise ValueError(
+                f"{source}: unknown key(s) {unknown}; a distribution has name, description, [distribution] and [world]"
+            )
         table = data["distribution"]
         kind = table.get("kind") if isinstance(table, dict) else None
         if kind not in DISTRIBUTION_KINDS or set(table) != {"kind"}:
@@ -179,8 +200,12 @@ class ScenarioDistribution:
         world = data.get("world", {})
         if not isinstance(world, dict):
             raise ValueError(f"{source}: [world] must be a table of world settings")
-        distribution = cls(name=str(data.get("name", source)), kind=kind, description=str(data.get("description", "")),
-                           world=dict(world))
+        distribution = cls(
+            name=str(data.get("name", source)),
+            kind=kind,
+            description=str(data.get("description", "")),
+            world=dict(world),
+        )
         try:
             distribution.config()
         except (ValueError, TypeError) as error:
@@ -196,9 +221,11 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     """A fixed scenario: shipped by name (``paper-bl-tr``, ``paper-tl-br``, ``paper-code``) or a TOML file."""
     scenario = load_scenario_or_distribution(name_or_path)
     if isinstance(scenario, ScenarioDistribution):
-        raise ValueError(f"{str(name_or_path)!r} is a distribution of starting states, not one scenario: the "
-                         f"representative solver draws from it (--solver representative); other solvers search "
-                         f"from a fixed scenario such as paper-bl-tr")
+        raise ValueError(
+            f"{str(name_or_path)!r} is a distribution of starting states, not one scenario: the "
+            f"representative solver draws from it (--solver representative); other solvers search "
+            f"from a fixed scenario such as paper-bl-tr"
+        )
     return scenario
 
 
@@ -209,8 +236,9 @@ def load_scenario_or_distribution(name_or_path: str | Path) -> Scenario | Scenar
     if not path.suffix and (SHIPPED_DIR / f"{name_or_path}.toml").exists():
         path = SHIPPED_DIR / f"{name_or_path}.toml"
     if not path.exists():
-        raise FileNotFoundError(f"no scenario {str(name_or_path)!r}: give a TOML file or one of the shipped "
-                                f"scenarios {shipped_scenarios()}")
+        raise FileNotFoundError(
+            f"no scenario {str(name_or_path)!r}: give a TOML file or one of the shipped scenarios {shipped_scenarios()}"
+        )
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as error:
@@ -264,5 +292,6 @@ def sample_training_states(config: WorldConfig, rng: np.random.Generator, n_worl
                     break
             humans[w, i] = p
     streams = rng.integers(0, 2**63, n_worlds).astype(np.uint64) if config.random_crowd else None
-    return new_state(humans, -humans, robots, goals, headings[:, None], config, human_radius=radii,
-                     human_v_pref=v_prefs, rng=streams)
+    return new_state(
+        humans, -humans, robots, goals, headings[:, None], config, human_radius=radii, human_v_pref=v_prefs, rng=streams
+    )

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def social_force_velocities(positions, velocities, goals, radii, v_prefs, *, A=2.0, B=1.0, KI=1.0, dt=0.25,
-                            others_pos=None, others_radius=None):
+def social_force_velocities(
+    positions, velocities, goals, radii, v_prefs, *, A=2.0, B=1.0, KI=1.0, dt=0.25, others_pos=None, others_radius=None
+):
     """New velocities (W, n, 2): relax towards the goal at v_pref, pushed away by every other agent.
 
     ``others_pos`` (W, m, 2) and ``others_radius`` (W, m) add agents that push but are not moved (a visible

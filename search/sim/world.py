@@ -109,13 +109,19 @@ class WorldConfig(Settings):
             (self.dt > 0 and self.time_limit > 0, "dt and time_limit must be positive"),
             (self.env_action_bound >= 0, "env_action_bound must be >= 0"),
             (self.human_radius > 0 and self.robot_radius > 0, "radii must be positive"),
-            (0 <= self.goal_change_chance <= 1 and 0 <= self.end_goal_change_chance <= 1,
-             "goal_change_chance and end_goal_change_chance must be between 0 and 1"),
+            (
+                0 <= self.goal_change_chance <= 1 and 0 <= self.end_goal_change_chance <= 1,
+                "goal_change_chance and end_goal_change_chance must be between 0 and 1",
+            ),
             (self.goal_change_interval > 0, "goal_change_interval must be positive"),
-            (0 < self.robot_fov <= 360 and 0 < self.human_fov <= 360,
-             "robot_fov and human_fov must be in degrees, above 0 and at most 360"),
-            (self.human_fov == 360 or (self.human_policy == "orca" and not self.robot_visible),
-             "human_fov below 360 needs ORCA humans and an invisible robot"),
+            (
+                0 < self.robot_fov <= 360 and 0 < self.human_fov <= 360,
+                "robot_fov and human_fov must be in degrees, above 0 and at most 360",
+            ),
+            (
+                self.human_fov == 360 or (self.human_policy == "orca" and not self.robot_visible),
+                "human_fov below 360 needs ORCA humans and an invisible robot",
+            ),
             (self.unicycle_motion in UNICYCLE_MOTIONS, f"unicycle_motion must be one of {UNICYCLE_MOTIONS}"),
             (self.robot_start in ROBOT_STARTS, f"robot_start must be one of {ROBOT_STARTS}"),
             (0 <= self.crowd_seed < 2**63, "crowd_seed must be between 0 and 2**63 - 1"),
@@ -123,7 +129,6 @@ class WorldConfig(Settings):
         for ok, message in checks:
             if not ok:
                 raise ValueError(f"invalid world config: {message}")
-
 
     def with_(self, **changes) -> WorldConfig:
         return replace(self, **changes)
@@ -134,9 +139,25 @@ class WorldConfig(Settings):
         return self.goal_change_chance > 0 or self.end_goal_change_chance > 0
 
 
-STATE_FIELDS = ("human_pos", "human_vel", "human_goal", "human_radius", "human_v_pref", "robot_pos", "robot_vel",
-                "robot_theta", "robot_speed", "robot_goal", "time", "done", "outcome", "event_time", "path_length",
-                "min_clearance", "rng")
+STATE_FIELDS = (
+    "human_pos",
+    "human_vel",
+    "human_goal",
+    "human_radius",
+    "human_v_pref",
+    "robot_pos",
+    "robot_vel",
+    "robot_theta",
+    "robot_speed",
+    "robot_goal",
+    "time",
+    "done",
+    "outcome",
+    "event_time",
+    "path_length",
+    "min_clearance",
+    "rng",
+)
 
 
 class WorldState:
@@ -163,8 +184,10 @@ class WorldState:
         left out: zero, as states saved before it existed had)."""
         values.setdefault("rng", np.zeros(np.shape(values.get("time", ())), np.uint64))
         if values.keys() != set(STATE_FIELDS):
-            raise TypeError(f"WorldState takes every field by name: missing {sorted(set(STATE_FIELDS) - values.keys())}"
-                            f", unknown {sorted(values.keys() - set(STATE_FIELDS))}")
+            raise TypeError(
+                f"WorldState takes every field by name: missing {sorted(set(STATE_FIELDS) - values.keys())}"
+                f", unknown {sorted(values.keys() - set(STATE_FIELDS))}"
+            )
         human_pos, robot_pos = np.asarray(values["human_pos"]), np.asarray(values["robot_pos"])
         layout = _layout(human_pos.shape[1], robot_pos.shape[1])
         object.__setattr__(self, "layout", layout)
@@ -186,14 +209,19 @@ class WorldState:
             raise AttributeError(name)
         rows, worlds = self.rows, self.rows.shape[0]
         for field, (offset, dtype, shape, strides) in self.layout.fields.items():
-            view = np.ndarray((worlds, *shape), dtype, rows, offset, (rows.strides[0], *strides)) if worlds \
-                else np.empty((0, *shape), dtype)  # no worlds: nothing to share
+            view = (
+                np.ndarray((worlds, *shape), dtype, rows, offset, (rows.strides[0], *strides))
+                if worlds
+                else np.empty((0, *shape), dtype)
+            )  # no worlds: nothing to share
             object.__setattr__(self, field, view)
         return object.__getattribute__(self, name)
 
     def __setattr__(self, name: str, value) -> None:
-        raise AttributeError(f"WorldState fields are views into its rows: write into them in place "
-                             f"(state.{name}[...] = value) instead of rebinding them")
+        raise AttributeError(
+            f"WorldState fields are views into its rows: write into them in place "
+            f"(state.{name}[...] = value) instead of rebinding them"
+        )
 
     def __reduce__(self):
         return _state_of_rows, (self.rows, self.layout.humans, self.layout.robots)
@@ -223,16 +251,17 @@ class WorldState:
     def row_pairs(self, other: WorldState) -> list[tuple[np.ndarray, np.ndarray]]:
         """(this state's world rows, ``other``'s), as ``assign_rows`` takes them."""
         if other.layout is not self.layout:
-            raise ValueError(f"worlds of {self.layout.humans} humans and {self.layout.robots} robot(s) cannot be "
-                             f"overwritten by worlds of {other.layout.humans} humans and {other.layout.robots}")
+            raise ValueError(
+                f"worlds of {self.layout.humans} humans and {self.layout.robots} robot(s) cannot be "
+                f"overwritten by worlds of {other.layout.humans} humans and {other.layout.robots}"
+            )
         return [(self.rows, other.rows)]
 
     def fields(self) -> dict[str, np.ndarray]:
         return {name: getattr(self, name) for name in STATE_FIELDS}
 
     def equals(self, other: WorldState) -> bool:
-        return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True)
-                   for name in STATE_FIELDS)
+        return all(np.array_equal(getattr(self, name), getattr(other, name), equal_nan=True) for name in STATE_FIELDS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -253,11 +282,25 @@ def _state_of_rows(rows: np.ndarray, humans: int, robots: int) -> WorldState:
 
 @cache
 def _layout(humans: int, robots: int) -> _Layout:
-    shapes = {"human_pos": (humans, 2), "human_vel": (humans, 2), "human_goal": (humans, 2),
-              "human_radius": (humans,), "human_v_pref": (humans,), "robot_pos": (robots, 2),
-              "robot_vel": (robots, 2), "robot_theta": (robots,), "robot_speed": (robots,),
-              "robot_goal": (robots, 2), "time": (), "done": (robots,), "outcome": (robots,),
-              "event_time": (robots,), "path_length": (robots,), "min_clearance": (robots,), "rng": ()}
+    shapes = {
+        "human_pos": (humans, 2),
+        "human_vel": (humans, 2),
+        "human_goal": (humans, 2),
+        "human_radius": (humans,),
+        "human_v_pref": (humans,),
+        "robot_pos": (robots, 2),
+        "robot_vel": (robots, 2),
+        "robot_theta": (robots,),
+        "robot_speed": (robots,),
+        "robot_goal": (robots, 2),
+        "time": (),
+        "done": (robots,),
+        "outcome": (robots,),
+        "event_time": (robots,),
+        "path_length": (robots,),
+        "min_clearance": (robots,),
+        "rng": (),
+    }
     dtypes = {"done": np.dtype(np.bool_), "outcome": np.dtype(np.int8), "rng": np.dtype(np.uint64)}
     fields, offset = {}, 0
     for name in sorted(STATE_FIELDS, key=lambda name: -dtypes.get(name, np.dtype(np.float64)).itemsize):
@@ -283,8 +326,17 @@ def assign_rows(pairs: list[tuple[np.ndarray, np.ndarray]], rows: list[int]) -> 
             target[rows] = values
 
 
-def new_state(human_pos, human_goal, robot_pos, robot_goal, robot_theta, config: WorldConfig,
-              human_radius=None, human_v_pref=None, rng=None) -> WorldState:
+def new_state(
+    human_pos,
+    human_goal,
+    robot_pos,
+    robot_goal,
+    robot_theta,
+    config: WorldConfig,
+    human_radius=None,
+    human_v_pref=None,
+    rng=None,
+) -> WorldState:
     """A state at time 0 with resting agents, from (W, n, 2) humans and (W, R, 2) robots.
 
     Human radii and preferred speeds are the config's unless given (W, n). ``rng`` (W,) seeds each world's random
@@ -359,8 +411,10 @@ def check_env_action(env_action, n_worlds: int, config: WorldConfig) -> np.ndarr
     if action.shape in ((n_worlds, n * 2), (n_worlds, n, 2)):
         action = action.reshape(n_worlds, n, 2)
     else:
-        raise ValueError(f"environment action must have shape ({n_worlds}, {n * 2}) or ({n_worlds}, {n}, 2) "
-                         f"(an (x, y) per human per world), got {action.shape}")
+        raise ValueError(
+            f"environment action must have shape ({n_worlds}, {n * 2}) or ({n_worlds}, {n}, 2) "
+            f"(an (x, y) per human per world), got {action.shape}"
+        )
     bound = config.env_action_bound
     if np.abs(action).max(initial=0.0) <= bound:  # the usual case, in two array operations
         return action
@@ -369,8 +423,10 @@ def check_env_action(env_action, n_worlds: int, config: WorldConfig) -> np.ndarr
     if np.any(np.abs(action) > bound):
         if not config.clip_env_actions:
             worst = float(np.max(np.abs(action)))
-            raise ValueError(f"environment action {worst:.4g} is outside the bound ±{bound}; pass actions inside "
-                             "the bound, or set clip_env_actions = true to clip them")
+            raise ValueError(
+                f"environment action {worst:.4g} is outside the bound ±{bound}; pass actions inside "
+                "the bound, or set clip_env_actions = true to clip them"
+            )
         action = np.clip(action, -bound, bound)
     return action
 
@@ -392,10 +448,19 @@ def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndar
     if config.human_fov < 360:
         velocity = _crowd_velocities_in_view(state, config, offset, padding)
     elif config.human_policy == "orca" and not config.robot_visible:
-        velocity = crowd_velocities(state.human_pos, state.human_vel, state.human_goal, state.human_radius,
-                                    state.human_v_pref, offset, padding=padding,
-                                    neighbor_dist=config.neighbor_dist, max_neighbors=config.max_neighbors,
-                                    time_horizon=config.time_horizon, dt=config.dt)
+        velocity = crowd_velocities(
+            state.human_pos,
+            state.human_vel,
+            state.human_goal,
+            state.human_radius,
+            state.human_v_pref,
+            offset,
+            padding=padding,
+            neighbor_dist=config.neighbor_dist,
+            max_neighbors=config.max_neighbors,
+            time_horizon=config.time_horizon,
+            dt=config.dt,
+        )
     elif config.human_policy == "orca":
         # The visible robot is one more agent in the humans' ORCA (its own velocity as its preference).
         pref = preferred_velocities(state) + offset
@@ -404,18 +469,40 @@ def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndar
         pref = np.concatenate([pref, state.robot_vel], axis=1)
         rad = np.concatenate([state.human_radius, np.full((state.n_worlds, 1), config.robot_radius)], axis=1)
         speed = np.concatenate([state.human_v_pref, np.full((state.n_worlds, 1), config.robot_v_pref)], axis=1)
-        velocity = orca_velocities(pos, vel, pref, rad + padding, speed, neighbor_dist=config.neighbor_dist,
-                                   max_neighbors=config.max_neighbors, time_horizon=config.time_horizon,
-                                   dt=config.dt, n_ego=config.human_num)
+        velocity = orca_velocities(
+            pos,
+            vel,
+            pref,
+            rad + padding,
+            speed,
+            neighbor_dist=config.neighbor_dist,
+            max_neighbors=config.max_neighbors,
+            time_horizon=config.time_horizon,
+            dt=config.dt,
+            n_ego=config.human_num,
+        )
     else:
         goals = state.human_goal
         if env_action is not None and mode == "preferred":
             goals = state.human_pos + preferred_velocities(state) + env_action
-        others = (state.robot_pos, np.full(state.robot_pos.shape[:2], config.robot_radius)) \
-            if config.robot_visible else (None, None)
-        velocity = social_force_velocities(state.human_pos, state.human_vel, goals, state.human_radius,
-                                           state.human_v_pref, A=config.sf_a, B=config.sf_b, KI=config.sf_ki,
-                                           dt=config.dt, others_pos=others[0], others_radius=others[1])
+        others = (
+            (state.robot_pos, np.full(state.robot_pos.shape[:2], config.robot_radius))
+            if config.robot_visible
+            else (None, None)
+        )
+        velocity = social_force_velocities(
+            state.human_pos,
+            state.human_vel,
+            goals,
+            state.human_radius,
+            state.human_v_pref,
+            A=config.sf_a,
+            B=config.sf_b,
+            KI=config.sf_ki,
+            dt=config.dt,
+            others_pos=others[0],
+            others_radius=others[1],
+        )
     if env_action is not None and mode == "velocity":
         velocity = velocity + env_action
     return velocity
@@ -434,8 +521,7 @@ def in_view(heading: np.ndarray, offsets: np.ndarray, fov_degrees: float) -> np.
         return np.arccos(np.clip(cosine, -1.0, 1.0)) <= np.radians(fov_degrees) / 2
 
 
-def _crowd_velocities_in_view(state: WorldState, config: WorldConfig, offset: np.ndarray,
-                              padding: float) -> np.ndarray:
+def _crowd_velocities_in_view(state: WorldState, config: WorldConfig, offset: np.ndarray, padding: float) -> np.ndarray:
     """ORCA humans that see only the humans within ``human_fov`` of their walking direction: as CrowdNav, each
     human solves its own program in which a human it does not see stands still at DUMMY_HUMAN_POSITION."""
     w, n = state.human_pos.shape[:2]
@@ -450,9 +536,14 @@ def _crowd_velocities_in_view(state: WorldState, config: WorldConfig, offset: np
     radii = np.where(seen, state.human_radius[:, order], config.human_radius) + padding
     pref = (preferred_velocities(state) + offset)[:, order]
     speed = state.human_v_pref[:, order]
-    velocity = orca_velocities(*(a.reshape(w * n, *a.shape[2:]) for a in (pos, vel, pref, radii, speed)),
-                               neighbor_dist=config.neighbor_dist, max_neighbors=config.max_neighbors,
-                               time_horizon=config.time_horizon, dt=config.dt, n_ego=1)
+    velocity = orca_velocities(
+        *(a.reshape(w * n, *a.shape[2:]) for a in (pos, vel, pref, radii, speed)),
+        neighbor_dist=config.neighbor_dist,
+        max_neighbors=config.max_neighbors,
+        time_horizon=config.time_horizon,
+        dt=config.dt,
+        n_ego=1,
+    )
     return velocity.reshape(w, n, 2)
 
 
@@ -486,19 +577,26 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
     return np.where(active[..., None], velocity, 0.0)
 
 
-def arc_velocities(state: WorldState, config: WorldConfig, robot_action: np.ndarray, heading_before: np.ndarray,
-                   velocity: np.ndarray) -> np.ndarray:
+def arc_velocities(
+    state: WorldState, config: WorldConfig, robot_action: np.ndarray, heading_before: np.ndarray, velocity: np.ndarray
+) -> np.ndarray:
     """The unicycle's move over one step on an arc, as a velocity (W, R, 2): CrowdNav_DSRNN's differential drive
     turns at the constant rate dtheta / dt while moving at the new speed, so the robot moves along the chord
     v / dtheta * (sin(theta + dtheta) - sin(theta), cos(theta) - cos(theta + dtheta)). A turn under 1e-4 rad
     moves straight (CrowdNav does not move the robot at all then; a policy trained there rarely turns that
     little). ``velocity`` is ``robot_velocities``' result, ``heading_before`` the heading before it."""
-    dtheta = np.clip(np.asarray(robot_action, np.float64)[..., 1], -config.unicycle_max_dtheta,
-                     config.unicycle_max_dtheta)
+    dtheta = np.clip(
+        np.asarray(robot_action, np.float64)[..., 1], -config.unicycle_max_dtheta, config.unicycle_max_dtheta
+    )
     turning = np.abs(dtheta) >= 1e-4
     rate = state.robot_speed / np.where(turning, dtheta, 1.0)
-    chord = np.stack([np.sin(heading_before + dtheta) - np.sin(heading_before),
-                      np.cos(heading_before) - np.cos(heading_before + dtheta)], axis=-1)
+    chord = np.stack(
+        [
+            np.sin(heading_before + dtheta) - np.sin(heading_before),
+            np.cos(heading_before) - np.cos(heading_before + dtheta),
+        ],
+        axis=-1,
+    )
     moved = np.where(turning[..., None], rate[..., None] * chord, velocity)
     return np.where(state.done[..., None], 0.0, moved)
 
@@ -540,24 +638,66 @@ def advance(state: WorldState, config: WorldConfig, robot_action, new_human_vel:
     new_robot_vel = robot_velocities(state, config, robot_action)
     moved = arc_velocities(state, config, robot_action, heading_before, new_robot_vel) if arc else new_robot_vel
     reward = np.empty(state.done.shape)
-    _move_and_judge(state.robot_pos, state.robot_goal, state.human_pos, state.human_radius, moved,
-                    new_human_vel, state.time, state.done, state.outcome, state.event_time, state.path_length,
-                    state.min_clearance, float(config.dt), float(config.robot_radius), float(config.time_limit),
-                    float(config.discomfort_dist), float(config.discomfort_factor), float(config.progress_factor),
-                    float(config.success_reward), float(config.collision_penalty), reward)
+    _move_and_judge(
+        state.robot_pos,
+        state.robot_goal,
+        state.human_pos,
+        state.human_radius,
+        moved,
+        new_human_vel,
+        state.time,
+        state.done,
+        state.outcome,
+        state.event_time,
+        state.path_length,
+        state.min_clearance,
+        float(config.dt),
+        float(config.robot_radius),
+        float(config.time_limit),
+        float(config.discomfort_dist),
+        float(config.discomfort_factor),
+        float(config.progress_factor),
+        float(config.success_reward),
+        float(config.collision_penalty),
+        reward,
+    )
     state.robot_vel[...] = new_robot_vel
     state.human_vel[...] = new_human_vel
     if config.random_crowd:
-        _change_goals(state.human_pos, state.human_goal, state.human_radius, state.human_v_pref, state.robot_goal,
-                      state.time, state.rng, float(config.goal_change_chance), float(config.goal_change_interval),
-                      float(config.end_goal_change_chance), float(config.circle_radius), float(config.robot_radius),
-                      float(config.discomfort_dist))
+        _change_goals(
+            state.human_pos,
+            state.human_goal,
+            state.human_radius,
+            state.human_v_pref,
+            state.robot_goal,
+            state.time,
+            state.rng,
+            float(config.goal_change_chance),
+            float(config.goal_change_interval),
+            float(config.end_goal_change_chance),
+            float(config.circle_radius),
+            float(config.robot_radius),
+            float(config.discomfort_dist),
+        )
     return reward
 
 
 @numba.njit(cache=True, nogil=True)
-def _change_goals(human_pos, human_goal, human_radius, human_v_pref, robot_goal, time, rng, chance, interval,
-                  end_chance, circle_radius, robot_radius, discomfort_dist):
+def _change_goals(
+    human_pos,
+    human_goal,
+    human_radius,
+    human_v_pref,
+    robot_goal,
+    time,
+    rng,
+    chance,
+    interval,
+    end_chance,
+    circle_radius,
+    robot_radius,
+    discomfort_dist,
+):
     """CrowdNav_DSRNN's goal changes, after a move: every ``interval`` seconds each walking human takes a new
     goal with ``chance``; then each human within its radius of its goal takes one with ``end_chance``. A new goal
     lies on the circle (plus noise scaled by the human's v_pref), clear of the other humans' positions and goals
@@ -568,20 +708,56 @@ def _change_goals(human_pos, human_goal, human_radius, human_v_pref, robot_goal,
         if chance > 0 and abs(periods - np.round(periods)) < 1e-9:
             for h in range(human_pos.shape[1]):
                 if human_v_pref[w, h] != 0 and _next_random(rng, w) <= chance:
-                    _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng, w, h,
-                              circle_radius, robot_radius, discomfort_dist)
+                    _new_goal(
+                        human_pos,
+                        human_goal,
+                        human_radius,
+                        human_v_pref,
+                        robot_goal,
+                        rng,
+                        w,
+                        h,
+                        circle_radius,
+                        robot_radius,
+                        discomfort_dist,
+                    )
         if end_chance > 0:
             for h in range(human_pos.shape[1]):
                 dx, dy = human_goal[w, h, 0] - human_pos[w, h, 0], human_goal[w, h, 1] - human_pos[w, h, 1]
-                if (human_v_pref[w, h] != 0 and np.sqrt(dx * dx + dy * dy) < human_radius[w, h]
-                        and _next_random(rng, w) <= end_chance):
-                    _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng, w, h,
-                              circle_radius, robot_radius, discomfort_dist)
+                if (
+                    human_v_pref[w, h] != 0
+                    and np.sqrt(dx * dx + dy * dy) < human_radius[w, h]
+                    and _next_random(rng, w) <= end_chance
+                ):
+                    _new_goal(
+                        human_pos,
+                        human_goal,
+                        human_radius,
+                        human_v_pref,
+                        robot_goal,
+                        rng,
+                        w,
+                        h,
+                        circle_radius,
+                        robot_radius,
+                        discomfort_dist,
+                    )
 
 
 @numba.njit(cache=True, nogil=True)
-def _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng, w, h, circle_radius,
-              robot_radius, discomfort_dist):
+def _new_goal(
+    human_pos,
+    human_goal,
+    human_radius,
+    human_v_pref,
+    robot_goal,
+    rng,
+    w,
+    h,
+    circle_radius,
+    robot_radius,
+    discomfort_dist,
+):
     """Draw human ``h``'s new goal as CrowdNav does, retrying while it is too close to another agent (at most
     1000 tries; the last one stands)."""
     for _ in range(1000):
@@ -596,8 +772,10 @@ def _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng
         for other in range(human_pos.shape[1]):
             if other != h:
                 min_dist = human_radius[w, h] + human_radius[w, other] + discomfort_dist
-                if (np.hypot(gx - human_pos[w, other, 0], gy - human_pos[w, other, 1]) < min_dist
-                        or np.hypot(gx - human_goal[w, other, 0], gy - human_goal[w, other, 1]) < min_dist):
+                if (
+                    np.hypot(gx - human_pos[w, other, 0], gy - human_pos[w, other, 1]) < min_dist
+                    or np.hypot(gx - human_goal[w, other, 0], gy - human_goal[w, other, 1]) < min_dist
+                ):
                     clear = False
         if clear:
             break
@@ -605,9 +783,29 @@ def _new_goal(human_pos, human_goal, human_radius, human_v_pref, robot_goal, rng
 
 
 @numba.njit(cache=True, nogil=True)
-def _move_and_judge(robot_pos, robot_goal, human_pos, human_radius, robot_vel, human_vel, time, done, outcome,
-                    event_time, path_length, min_clearance, dt, robot_radius, time_limit, discomfort_dist,
-                    discomfort_factor, progress_factor, success_reward, collision_penalty, reward):
+def _move_and_judge(
+    robot_pos,
+    robot_goal,
+    human_pos,
+    human_radius,
+    robot_vel,
+    human_vel,
+    time,
+    done,
+    outcome,
+    event_time,
+    path_length,
+    min_clearance,
+    dt,
+    robot_radius,
+    time_limit,
+    discomfort_dist,
+    discomfort_factor,
+    progress_factor,
+    success_reward,
+    collision_penalty,
+    reward,
+):
     """Robots move, then humans, time advances; each robot's move is judged (collision, success, timeout) and
     rewarded; the state's arrays are updated in place. The float operations are those of the formulas written
     with numpy arrays in the tests, in the same order, so the results are bit-identical to them: closest approach
@@ -668,5 +866,3 @@ def _move_and_judge(robot_pos, robot_goal, human_pos, human_radius, robot_vel, h
                 outcome[w, r] = 2 if collision else 1 if success else 3
                 event_time[w, r] = now
                 done[w, r] = True
-
-

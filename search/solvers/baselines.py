@@ -37,8 +37,10 @@ class CEMConfig:
     def __post_init__(self):
         checks = [
             (self.population >= 2, "population must be >= 2"),
-            (0 < self.elite_fraction <= 1 and self.population * self.elite_fraction >= 1,
-             "elite_fraction must leave at least one elite in the population"),
+            (
+                0 < self.elite_fraction <= 1 and self.population * self.elite_fraction >= 1,
+                "elite_fraction must leave at least one elite in the population",
+            ),
             (0 < self.smoothing <= 1, "smoothing must be in (0, 1]"),
             (self.initial_std > 0 and self.min_std >= 0, "initial_std must be > 0 and min_std >= 0"),
         ]
@@ -47,24 +49,23 @@ class CEMConfig:
                 raise ValueError(f"invalid CEM setting: {message}")
 
 
-def _sample_batches(problem: Problem, tracker: Tracker, rng: np.random.Generator, batch: int,
-                    stop_after: int | None = None) -> None:
+def _sample_batches(
+    problem: Problem, tracker: Tracker, rng: np.random.Generator, batch: int, stop_after: int | None = None
+) -> None:
     """Prior-sampled trajectories, ``batch`` at a time, until the budget (or ``stop_after`` trajectories) runs out."""
     started = 0
     while not tracker.exhausted and (stop_after is None or started < stop_after):
         count = tracker.affordable(batch if stop_after is None else min(batch, stop_after - started))
         started += count
         actions, lengths, returns = fresh(problem, count)
-        rollout(problem, tracker, actions, lengths, returns,
-                lambda rows, depth: problem.prior.sample(rng, rows.size))
+        rollout(problem, tracker, actions, lengths, returns, lambda rows, depth: problem.prior.sample(rng, rows.size))
 
 
 def n_first(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: SamplingConfig | None = None):
     _sample_batches(problem, tracker, rng, (config or SamplingConfig()).batch, stop_after=tracker.queue.k)
 
 
-def random_search(problem: Problem, tracker: Tracker, rng: np.random.Generator,
-                  config: SamplingConfig | None = None):
+def random_search(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: SamplingConfig | None = None):
     _sample_batches(problem, tracker, rng, (config or SamplingConfig()).batch)
 
 

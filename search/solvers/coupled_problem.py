@@ -15,15 +15,21 @@ from search.solvers.reward import DivergenceReward, RewardConfig
 class CoupledProblem:
     """The agents under comparison in one coupled simulator, scored by the divergence reward."""
 
-    def __init__(self, policies: list[Policy], scenario: Scenario, world: WorldConfig | None = None,
-                 reward: RewardConfig | None = None):
+    def __init__(
+        self,
+        policies: list[Policy],
+        scenario: Scenario,
+        world: WorldConfig | None = None,
+        reward: RewardConfig | None = None,
+    ):
         self.sim = CoupledSimulator(policies, scenario, world, batch=1)
         self.reward_config = reward or RewardConfig()
         config = self.sim.config
         self.action_shape = (config.human_num, 2)
         self.horizon = self.reward_config.horizon
-        self.prior = ActionPrior(self.action_shape, config.env_action_bound, self.reward_config.prior,
-                                 self.reward_config.prior_sigma)
+        self.prior = ActionPrior(
+            self.action_shape, config.env_action_bound, self.reward_config.prior, self.reward_config.prior_sigma
+        )
         self.reward = DivergenceReward(self.reward_config, self.prior)
 
     @property
@@ -39,8 +45,9 @@ class CoupledProblem:
         state, batch = sim.state, sim.batch
         t = np.rint(state.time[:batch] / sim.config.dt).astype(np.int64)
         goal, end = self.reward.events(newly_done, sim.gather(state.outcome), sim.gather(state.done).all(axis=1), t)
-        reward = self.reward.step(robot_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal,
-                                  end)
+        reward = self.reward.step(
+            robot_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal, end
+        )
         return reward, goal | end
 
     def snapshot(self, index=None) -> Snapshot:
@@ -72,8 +79,8 @@ def concat_snapshots(snapshots: list[Snapshot]) -> Snapshot:
 
     batches = [s.batch for s in snapshots]
     state = WorldState.of_rows(join([s.state.rows for s in snapshots], batches), snapshots[0].state.layout)
-    policy_states = [{key: np.concatenate([s.policy_states[k][key] for s in snapshots])
-                      for key in snapshots[0].policy_states[k]}
-                     for k in range(len(snapshots[0].policy_states))]
+    policy_states = [
+        {key: np.concatenate([s.policy_states[k][key] for s in snapshots]) for key in snapshots[0].policy_states[k]}
+        for k in range(len(snapshots[0].policy_states))
+    ]
     return Snapshot(state, policy_states, sum(batches))
-

@@ -383,15 +383,30 @@ class Rollouts:
         search.tracker.count(n)
         search.batch_rows += n
         search.batch_steps += 1
-        expanded, ended = _record_step(self.held, reward, terminal, self.actions, self.lengths, self.returns,
-                                       self.taken, countdown, config.repeat, config.rollout_depth)
+        expanded, ended = _record_step(
+            self.held,
+            reward,
+            terminal,
+            self.actions,
+            self.lengths,
+            self.returns,
+            self.taken,
+            countdown,
+            config.repeat,
+            config.rollout_depth,
+        )
         tree = search.tree
         for i in np.flatnonzero(expanded).tolist():
             action = self.edges[i]
             if tree.links[action, CHILD] < 0:  # another row may have expanded it first
                 keep = config.branch == "snapshot" and not terminal[i]
-                tree.expand(action, int(self.lengths[i]), float(self.returns[i]), bool(terminal[i]),
-                            problem.snapshot([i]) if keep else None)
+                tree.expand(
+                    action,
+                    int(self.lengths[i]),
+                    float(self.returns[i]),
+                    bool(terminal[i]),
+                    problem.snapshot([i]) if keep else None,
+                )
         return terminal, ended
 
     def _fill(self, ended: np.ndarray) -> None:
@@ -430,8 +445,7 @@ class Rollouts:
                 problem.assign([i], snapshot)
         elif reused:  # a problem without assign: rebuild the batch row by row
             new_rows = dict(zip(places[:reused], snapshots, strict=False))
-            problem.restore(problem.concat([new_rows[i] if i in new_rows else problem.snapshot([i])
-                                            for i in range(n)]))
+            problem.restore(problem.concat([new_rows[i] if i in new_rows else problem.snapshot([i]) for i in range(n)]))
         if len(snapshots) > reused:  # more rows than before: the new ones go after the others
             grown = snapshots[reused:]
             problem.restore(problem.concat(([problem.snapshot()] if n else []) + grown))
@@ -445,8 +459,17 @@ class Rollouts:
     def _compact(self, keep: np.ndarray) -> None:
         """Keep rows ``keep`` (in order) as rows 0, 1, ..."""
         count = keep.size
-        for array in (self.actions, self.lengths, self.returns, self.taken, self.countdown, self.held, self.paths,
-                      self.path_lengths, self.edges):
+        for array in (
+            self.actions,
+            self.lengths,
+            self.returns,
+            self.taken,
+            self.countdown,
+            self.held,
+            self.paths,
+            self.path_lengths,
+            self.edges,
+        ):
             array[:count] = array[keep]
         self.n = count
 

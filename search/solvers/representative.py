@@ -75,11 +75,17 @@ class Vote:
     def record(self, rollouts: Rollouts) -> dict:
         """What run.json says of the vote."""
         signs = np.sign(rollouts.contrast)
-        return {"states": len(self.state_votes), "rollouts": len(signs),
-                "for_first": int((self.state_votes > 0).sum()), "for_second": int((self.state_votes < 0).sum()),
-                "no_majority": int((self.state_votes == 0).sum()), "direction": self.direction,
-                "margin": self.margin, "tied": self.direction == 0,
-                "agreeing_share": float((signs == self.direction).mean()) if self.direction else None}
+        return {
+            "states": len(self.state_votes),
+            "rollouts": len(signs),
+            "for_first": int((self.state_votes > 0).sum()),
+            "for_second": int((self.state_votes < 0).sum()),
+            "no_majority": int((self.state_votes == 0).sum()),
+            "direction": self.direction,
+            "margin": self.margin,
+            "tied": self.direction == 0,
+            "agreeing_share": float((signs == self.direction).mean()) if self.direction else None,
+        }
 
 
 def vote(rollouts: Rollouts, states: int) -> Vote:
@@ -101,8 +107,9 @@ def candidates(rollouts: Rollouts, result: Vote) -> list[int]:
     return index[np.argsort(-np.abs(rollouts.contrast[index]), kind="stable")].tolist()
 
 
-def choose(order: list[int], direction: int, replayed_contrast: Callable[[int], tuple[float, object]],
-           top_k: int) -> list[tuple[int, object]]:
+def choose(
+    order: list[int], direction: int, replayed_contrast: Callable[[int], tuple[float, object]], top_k: int
+) -> list[tuple[int, object]]:
     """The first ``top_k`` candidates whose exact replay is a non-tie in ``direction`` (any direction when it is
     0), as (rollout, replay). ``replayed_contrast(i)`` gives the replay's contrast and the replay itself."""
     kept = []
@@ -122,8 +129,14 @@ def visible_contrast(clip: VisibleClip) -> float:
     return difference if abs(difference) >= OBSERVER.tie_margin else 0.0
 
 
-def roll_out(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig, pushes: int,
-             rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+def roll_out(
+    policies: list[Policy],
+    scenarios: list[Scenario],
+    reward_config: RewardConfig,
+    pushes: int,
+    rng: np.random.Generator,
+    tracker: Tracker,
+) -> Rollouts:
     """One rollout without pushes and ``pushes`` under uniform pushes from each scenario, all in one batch, each
     followed by its coda; scored by their visible contrast."""
     copies = pushes + 1
@@ -154,43 +167,69 @@ def roll_out(policies: list[Policy], scenarios: list[Scenario], reward_config: R
             event_time, clearance = sim.gather(state.event_time), sim.gather(state.min_clearance)
             robot_pos = sim.gather(state.robot_pos)
             for k in np.flatnonzero(over):
-                final[int(rows[k])] = (outcome[k].copy(), event_time[k].copy(), clearance[k].copy(),
-                                       robot_pos[k].copy(), float(state.time[k]))
+                final[int(rows[k])] = (
+                    outcome[k].copy(),
+                    event_time[k].copy(),
+                    clearance[k].copy(),
+                    robot_pos[k].copy(),
+                    float(state.time[k]),
+                )
         keep = np.flatnonzero(~over)
         if not keep.size:
             break
         sim.restore(sim.snapshot(keep))
         rows = rows[keep]
     contrast = np.array([visible_contrast(_clip(scenarios[row // copies], *final[row])) for row in range(rows_total)])
-    return Rollouts(state=np.arange(rows_total) // copies,
-                    actions=[env[row, : searched[row]] for row in range(rows_total)], contrast=contrast)
+    return Rollouts(
+        state=np.arange(rows_total) // copies,
+        actions=[env[row, : searched[row]] for row in range(rows_total)],
+        contrast=contrast,
+    )
 
 
-def roll_out_states(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig,
-                    config: RepresentativeConfig, rng: np.random.Generator, tracker: Tracker) -> tuple[Rollouts, int]:
+def roll_out_states(
+    policies: list[Policy],
+    scenarios: list[Scenario],
+    reward_config: RewardConfig,
+    config: RepresentativeConfig,
+    rng: np.random.Generator,
+    tracker: Tracker,
+) -> tuple[Rollouts, int]:
     """``roll_out`` over the scenarios in order, a batch of states at a time, while the budget lasts: a batch is cut
     to the states that fit in what is left at the steps a state has cost so far (the first batch always runs);
     the rollouts and how many states they cover."""
     parts, done_states = [], 0
     while done_states < len(scenarios):
         per_state = tracker.steps / done_states if done_states else None
-        count = config.batch_states if per_state is None else min(config.batch_states,
-                                                                   math.floor(tracker.remaining / per_state))
+        count = (
+            config.batch_states
+            if per_state is None
+            else min(config.batch_states, math.floor(tracker.remaining / per_state))
+        )
         count = min(count, len(scenarios) - done_states)
         if count < 1:
             break
-        part = roll_out(policies, scenarios[done_states: done_states + count], reward_config, config.pushes, rng,
-                        tracker)
+        part = roll_out(
+            policies, scenarios[done_states : done_states + count], reward_config, config.pushes, rng, tracker
+        )
         part.state += done_states
         parts.append(part)
         done_states += count
-    return Rollouts(state=np.concatenate([p.state for p in parts]), actions=[a for p in parts for a in p.actions],
-                    contrast=np.concatenate([p.contrast for p in parts])), done_states
+    return Rollouts(
+        state=np.concatenate([p.state for p in parts]),
+        actions=[a for p in parts for a in p.actions],
+        contrast=np.concatenate([p.contrast for p in parts]),
+    ), done_states
 
 
-def representativeness(policies: list[Policy], fixed: list[Scenario], drawn: list[Scenario],
-                       reward_config: RewardConfig, config: RepresentativeConfig,
-                       rng: np.random.Generator) -> list[dict]:
+def representativeness(
+    policies: list[Policy],
+    fixed: list[Scenario],
+    drawn: list[Scenario],
+    reward_config: RewardConfig,
+    config: RepresentativeConfig,
+    rng: np.random.Generator,
+) -> list[dict]:
     """How representative each fixed scenario is of the distribution ``drawn`` was drawn from, for two agents:
     how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
     pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
@@ -204,37 +243,58 @@ def representativeness(policies: list[Policy], fixed: list[Scenario], drawn: lis
     for scenario in fixed:
         own = np.sign(roll_out(policies, [scenario], reward_config, config.pushes, rng, tracker).contrast)
         share = float((own == result.direction).mean()) if result.direction else None
-        reports.append({
-            "scenario": scenario.name, "rollouts": len(own), "first_looks_better": float((own > 0).mean()),
-            "second_looks_better": float((own < 0).mean()), "no_difference": float((own == 0).mean()),
-            "majority": int(np.sign(own.sum())), "distribution_vote": result.record(rollouts),
-            "percentile": None if share is None else float(100 * (agreement < share).mean()),
-            "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction)})
+        reports.append(
+            {
+                "scenario": scenario.name,
+                "rollouts": len(own),
+                "first_looks_better": float((own > 0).mean()),
+                "second_looks_better": float((own < 0).mean()),
+                "no_difference": float((own == 0).mean()),
+                "majority": int(np.sign(own.sum())),
+                "distribution_vote": result.record(rollouts),
+                "percentile": None if share is None else float(100 * (agreement < share).mean()),
+                "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction),
+            }
+        )
     return reports
 
 
 def largest_contrast(summaries: list[dict]) -> int:
     """Which of a search's summaries (two agents, best reward first) shows the largest non-tie visible contrast,
     in either direction: outcome-contrast selection. The first where none shows a visible difference."""
-    contrasts = [abs(visible_contrast(VisibleClip.of_summary(s, [a["name"] for a in s["agents"]], ["1", "2"])))
-                 for s in summaries]
+    contrasts = [
+        abs(visible_contrast(VisibleClip.of_summary(s, [a["name"] for a in s["agents"]], ["1", "2"])))
+        for s in summaries
+    ]
     best = max(range(len(contrasts)), key=contrasts.__getitem__)  # the first of equals
     return best if contrasts[best] > 0 else 0
 
 
 def _clip(scenario: Scenario, outcome, event_time, min_clearance, robot_pos, end_s: float) -> VisibleClip:
     """What a rollout's clip shows, as `VisibleClip.of_summary` reads it from a summary."""
-    outcomes = tuple({"event": OUTCOME_NAMES[int(o)], "time": float(e) if math.isfinite(e) else None,
-                      "min_human_distance": float(c) if math.isfinite(c) else None}
-                     for o, e, c in zip(outcome, event_time, min_clearance, strict=True))
+    outcomes = tuple(
+        {
+            "event": OUTCOME_NAMES[int(o)],
+            "time": float(e) if math.isfinite(e) else None,
+            "min_human_distance": float(c) if math.isfinite(c) else None,
+        }
+        for o, e, c in zip(outcome, event_time, min_clearance, strict=True)
+    )
     progress = tuple(progress_towards(scenario.robot_start, scenario.robot_goal, end) for end in robot_pos.tolist())
-    return VisibleClip(labels=tuple(str(k) for k in range(len(outcomes))), outcomes=outcomes, progress=progress,
-                       end_s=max(end_s, 1e-6))
+    return VisibleClip(
+        labels=tuple(str(k) for k in range(len(outcomes))), outcomes=outcomes, progress=progress, end_s=max(end_s, 1e-6)
+    )
 
 
-def representative(policies: list[Policy], scenarios: list[Scenario], reward_config: RewardConfig,
-                   tracker: Tracker, rng: np.random.Generator, config: RepresentativeConfig,
-                   replay: Callable[[Scenario, np.ndarray], tuple[float, object]]) -> tuple[list, dict]:
+def representative(
+    policies: list[Policy],
+    scenarios: list[Scenario],
+    reward_config: RewardConfig,
+    tracker: Tracker,
+    rng: np.random.Generator,
+    config: RepresentativeConfig,
+    replay: Callable[[Scenario, np.ndarray], tuple[float, object]],
+) -> tuple[list, dict]:
     """Roll out the drawn ``scenarios`` a batch of states at a time while the budget lasts, vote, and choose the
     top-K clips. ``replay(scenario, actions)`` gives an exact replay's contrast and the replay (a summary).
     Returns the chosen replays in order and the record of the vote for run.json."""
@@ -243,18 +303,28 @@ def representative(policies: list[Policy], scenarios: list[Scenario], reward_con
     rollouts, done_states = roll_out_states(policies, scenarios, reward_config, config, rng, tracker)
     result = vote(rollouts, done_states)
     order, how = candidates(rollouts, result), "voted direction"
-    chosen = choose(order, result.direction,
-                    lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]), tracker.queue.k)
+    chosen = choose(
+        order, result.direction, lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]), tracker.queue.k
+    )
     if not chosen:  # a tied vote, or no candidate of the vote survived its replay: the largest contrast
-        how = "largest contrast (tied vote)" if not result.direction else "largest contrast (no candidate of the " \
-                                                                          "vote survived its replay)"
+        how = (
+            "largest contrast (tied vote)"
+            if not result.direction
+            else "largest contrast (no candidate of the vote survived its replay)"
+        )
         everything = candidates(rollouts, Vote(result.state_votes, 0))
-        chosen = choose(everything, 0, lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]),
-                        tracker.queue.k)
+        chosen = choose(
+            everything, 0, lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]), tracker.queue.k
+        )
     if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
         how = "no visible contrast anywhere: the first state without pushes"
         chosen = [(0, replay(scenarios[0], rollouts.actions[0])[1])]
-    record = result.record(rollouts) | {"drawn": len(scenarios), "candidates": len(order), "selection": how,
-                                        "chosen": [{"state": int(rollouts.state[i]), "rollout": i,
-                                                    "contrast": float(rollouts.contrast[i])} for i, _ in chosen]}
+    record = result.record(rollouts) | {
+        "drawn": len(scenarios),
+        "candidates": len(order),
+        "selection": how,
+        "chosen": [
+            {"state": int(rollouts.state[i]), "rollout": i, "contrast": float(rollouts.contrast[i])} for i, _ in chosen
+        ],
+    }
     return [summary for _, summary in chosen], record

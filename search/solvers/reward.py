@@ -65,15 +65,17 @@ class RewardConfig(Settings):
             (isinstance(self.horizon, int) and self.horizon >= 1, "horizon must be a whole number of steps >= 1"),
             (self.norm in ("plain", "squared"), "norm must be 'plain' or 'squared'"),
             (self.combine in ("mean", "min"), "combine must be 'mean' or 'min'"),
-            (self.finish in ("all", "first"), "finish must be 'all' (a finished robot stands still until every "
-                                              "robot has finished) or 'first' (the first finish ends it)"),
+            (
+                self.finish in ("all", "first"),
+                "finish must be 'all' (a finished robot stands still until every "
+                "robot has finished) or 'first' (the first finish ends it)",
+            ),
             (self.prior in PRIOR_KINDS, f"prior must be one of {PRIOR_KINDS}"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(f"invalid reward config: {message}")
         heuristic_function(self.heuristic)
-
 
 
 def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarray:
@@ -131,8 +133,20 @@ class DivergenceReward:
         if self.heuristic is not state_divergence and end.any():
             heuristic = np.asarray(self.heuristic(robot_pos, human_pos, c), dtype=np.float64)
         reward = np.empty(len(goal))
-        _step(robot_actions, robot_pos, goal, end, heuristic, c.norm == "squared", c.combine == "min", c.goal_bonus,
-              c.alpha, c.horizon_offset, c.beta, reward)
+        _step(
+            robot_actions,
+            robot_pos,
+            goal,
+            end,
+            heuristic,
+            c.norm == "squared",
+            c.combine == "min",
+            c.goal_bonus,
+            c.alpha,
+            c.horizon_offset,
+            c.beta,
+            reward,
+        )
         return reward
 
     def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:
@@ -144,7 +158,8 @@ class DivergenceReward:
             "action_divergence": np.where(~goal & ~end, divergence, 0.0),
             "goal": np.where(goal, divergence, 0.0),
             "horizon": np.where(end, divergence, 0.0),
-            "plausibility": c.plausibility * self.prior.log_prob(env_action) if c.plausibility
+            "plausibility": c.plausibility * self.prior.log_prob(env_action)
+            if c.plausibility
             else np.zeros(goal.shape),
         }
 
@@ -167,8 +182,9 @@ class DivergenceReward:
         outcome = np.where(event_step[None, :] <= t[:, None], trajectory.outcome[None, :], 0)
         all_done = np.all(event_step[None, :] <= t[:, None], axis=1)
         goal, end = self.events(newly_done, outcome, all_done, t)
-        terms = self.step_terms(trajectory.robot_actions, trajectory.robot_pos, trajectory.human_pos,
-                                trajectory.env_actions, goal, end)
+        terms = self.step_terms(
+            trajectory.robot_actions, trajectory.robot_pos, trajectory.human_pos, trajectory.env_actions, goal, end
+        )
         per_step = terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
         return sequential_sum(per_step), {k: sequential_sum(v) for k, v in terms.items()}, goal | end
 
@@ -180,8 +196,10 @@ def _rows(values) -> np.ndarray:
     """Agent vectors (..., N, 2) as rows (B, N, 2) of float64, as the kernels take them (no copy if they are)."""
     values = np.asarray(values, dtype=np.float64)
     if values.ndim < 2 or values.shape[-2] < 2 or values.shape[-1] != 2:
-        raise ValueError(f"a divergence compares vectors in the plane of two or more agents (..., N >= 2, 2), "
-                         f"not an array of shape {values.shape}")
+        raise ValueError(
+            f"a divergence compares vectors in the plane of two or more agents (..., N >= 2, 2), "
+            f"not an array of shape {values.shape}"
+        )
     return values.reshape(-1, *values.shape[-2:])
 
 
@@ -210,8 +228,9 @@ def _divergences(values, squared, minimum, out):
 
 
 @numba.njit(cache=True)
-def _step(robot_actions, robot_pos, goal, end, heuristic, squared, minimum, goal_bonus, alpha, horizon_offset,
-          beta, reward):
+def _step(
+    robot_actions, robot_pos, goal, end, heuristic, squared, minimum, goal_bonus, alpha, horizon_offset, beta, reward
+):
     """Each row's divergence term into ``reward`` (B,): ``goal_bonus + alpha * d_s`` on a goal step,
     ``horizon_offset + beta * h`` on an end step (h: ``heuristic[b]``, or d_s where ``heuristic`` is empty), the
     action divergence d_a otherwise."""

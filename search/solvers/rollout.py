@@ -70,13 +70,19 @@ class Tracker:
 def fresh(problem: Problem, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``count`` new trajectories at the initial state: action buffer, lengths and returns for ``rollout``."""
     problem.reset(count)
-    return (np.zeros((count, problem.horizon, *problem.action_shape)), np.zeros(count, dtype=np.int64),
-            np.zeros(count))
+    return (np.zeros((count, problem.horizon, *problem.action_shape)), np.zeros(count, dtype=np.int64), np.zeros(count))
 
 
-def rollout(problem: Problem, tracker: Tracker, actions: np.ndarray, lengths: np.ndarray, returns: np.ndarray,
-            choose: Callable[[np.ndarray, np.ndarray], np.ndarray], max_steps: int | None = None,
-            on_step: Callable[[int, np.ndarray, np.ndarray], None] | None = None) -> np.ndarray:
+def rollout(
+    problem: Problem,
+    tracker: Tracker,
+    actions: np.ndarray,
+    lengths: np.ndarray,
+    returns: np.ndarray,
+    choose: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    max_steps: int | None = None,
+    on_step: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
+) -> np.ndarray:
     """Step the problem's current rows until each trajectory ends, batched, dropping rows as they end.
 
     ``actions`` (B, H, *shape) holds each row's environment actions from the initial state (``lengths`` (B,) of

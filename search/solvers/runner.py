@@ -128,18 +128,41 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     reward_config = RewardConfig.from_dict(job.reward_settings)
     if job.solver == "representative":
         distribution = replace(loaded, world=loaded.world | job.world_settings)
-        return search_files(job, None, job.scenario, reward_config, started, progress, None,
-                            vote=lambda tracker, rng, config, solver: _representative(
-                                job, policies, distribution, reward_config, tracker, rng, config, solver))
+        return search_files(
+            job,
+            None,
+            job.scenario,
+            reward_config,
+            started,
+            progress,
+            None,
+            vote=lambda tracker, rng, config, solver: _representative(
+                job, policies, distribution, reward_config, tracker, rng, config, solver
+            ),
+        )
     scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
     problem = CoupledProblem(policies, scenario, reward=reward_config)
-    return search_files(job, problem, scenario.name, reward_config, started, progress,
-                        lambda actions, solver: build_summary(list(job.agents), policies, scenario, reward_config,
-                                                              actions, solver))
+    return search_files(
+        job,
+        problem,
+        scenario.name,
+        reward_config,
+        started,
+        progress,
+        lambda actions, solver: build_summary(list(job.agents), policies, scenario, reward_config, actions, solver),
+    )
 
 
-def search_files(job: SearchJob, problem, scenario_name: str, reward_config: RewardConfig, started: float,
-                 progress: bool, summarize, vote=None) -> dict[str, str]:
+def search_files(
+    job: SearchJob,
+    problem,
+    scenario_name: str,
+    reward_config: RewardConfig,
+    started: float,
+    progress: bool,
+    summarize,
+    vote=None,
+) -> dict[str, str]:
     """Search ``problem`` with the job's solver and write its files; ``summarize(env_actions, solver)`` builds the
     summary of a kept trajectory (any domain's). ``vote(tracker, rng, solver_config, solver)`` (the representative
     solver) replaces both: it gives the summaries in its own order and the record of its vote."""
@@ -159,9 +182,10 @@ def search_files(job: SearchJob, problem, scenario_name: str, reward_config: Rew
     search_time = time.perf_counter() - started
     solver["budget_used"] = tracker.steps
     if voted is None:
-        summaries = [summarize(found.actions, solver | {"search_reward": found.reward,
-                                                        "found_at_step": found.sim_steps})
-                     for found in tracker.queue.ranked()]
+        summaries = [
+            summarize(found.actions, solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
+            for found in tracker.queue.ranked()
+        ]
         summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
     files = {}
     for rank, summary in enumerate(summaries, start=1):
@@ -181,8 +205,10 @@ def search_files(job: SearchJob, problem, scenario_name: str, reward_config: Rew
         "steps_per_s": tracker.steps / max(search_time, 1e-9),
         "best_reward": summaries[0]["reward"] if summaries else None,
         "curve": [[steps, reward] for steps, reward in tracker.curve],
-        "summaries": [{"file": name, "reward": s["reward"], "search_reward": s["solver"].get("search_reward")}
-                      for name, s in zip(files, summaries, strict=True)],
+        "summaries": [
+            {"file": name, "reward": s["reward"], "search_reward": s["solver"].get("search_reward")}
+            for name, s in zip(files, summaries, strict=True)
+        ],
     }
     if voted is not None:
         record["vote"] = voted
@@ -190,16 +216,26 @@ def search_files(job: SearchJob, problem, scenario_name: str, reward_config: Rew
     return files
 
 
-def _representative(job: SearchJob, policies: list, distribution, reward_config: RewardConfig, tracker: Tracker,
-                    rng: np.random.Generator, config: RepresentativeConfig, solver: dict) -> tuple[list, dict]:
+def _representative(
+    job: SearchJob,
+    policies: list,
+    distribution,
+    reward_config: RewardConfig,
+    tracker: Tracker,
+    rng: np.random.Generator,
+    config: RepresentativeConfig,
+    solver: dict,
+) -> tuple[list, dict]:
     """The representative solver's summaries (in its order: the chosen clip first) and the record of its vote.
     Each summary's scenario is the starting state it was drawn as; its solver entry says which state and what
     contrast the search saw."""
     from search.sim.scenarios import ScenarioDistribution
 
     if not isinstance(distribution, ScenarioDistribution):
-        raise ValueError(f"the representative solver draws starting states from a distribution (such as "
-                         f"'training'); {job.scenario!r} is one fixed scenario")
+        raise ValueError(
+            f"the representative solver draws starting states from a distribution (such as "
+            f"'training'); {job.scenario!r} is one fixed scenario"
+        )
     drawn = distribution.sample(rng, config.states)
     scenarios = [frozen_scenario(s, s.world | job.world_settings) for s in drawn]
     agents = list(job.agents)
@@ -210,8 +246,11 @@ def _representative(job: SearchJob, policies: list, distribution, reward_config:
 
     summaries, vote = representative(policies, scenarios, reward_config, tracker, rng, config, replay)
     for summary, chosen in zip(summaries, vote["chosen"], strict=True):
-        summary["solver"] = summary["solver"] | {"budget_used": tracker.steps, "state": chosen["state"],
-                                                 "search_contrast": chosen["contrast"]}
+        summary["solver"] = summary["solver"] | {
+            "budget_used": tracker.steps,
+            "state": chosen["state"],
+            "search_contrast": chosen["contrast"],
+        }
     return summaries, vote
 
 
@@ -226,12 +265,17 @@ def write_outputs(out: str | Path, files: dict[str, str]) -> Path:
     return out
 
 
-def study_jobs(agents: list[str], scenarios: list[str], solvers: list[str], joint: bool = False,
-               **common) -> list[SearchJob]:
+def study_jobs(
+    agents: list[str], scenarios: list[str], solvers: list[str], joint: bool = False, **common
+) -> list[SearchJob]:
     """Every pair of agents (or, with ``joint``, all agents together) on every scenario with every solver."""
     groups = [tuple(agents)] if joint else list(itertools.combinations(agents, 2))
-    return [SearchJob(agents=group, scenario=scenario, solver=solver, **common)
-            for solver in solvers for group in groups for scenario in scenarios]
+    return [
+        SearchJob(agents=group, scenario=scenario, solver=solver, **common)
+        for solver in solvers
+        for group in groups
+        for scenario in scenarios
+    ]
 
 
 def limit_threads() -> None:
@@ -245,8 +289,15 @@ def _job_in_worker(job: SearchJob, search=None) -> dict[str, str]:
     return (search or run_search)(job)
 
 
-def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, backend: str = "process",
-            ray_address: str | None = None, progress: bool = True, search=None) -> dict:
+def run_all(
+    jobs: list[SearchJob],
+    out: str | Path,
+    workers: int | None = None,
+    backend: str = "process",
+    ray_address: str | None = None,
+    progress: bool = True,
+    search=None,
+) -> dict:
     """Run jobs in parallel and write each one's files to ``out/<solver>/<agents>/<scenario>/``; also writes
     ``out/study.json`` with every job's record. Returns that record. ``search`` runs one job (default
     ``run_search``, the crowd world's; another world passes its own top-level function)."""
@@ -283,11 +334,24 @@ def run_all(jobs: list[SearchJob], out: str | Path, workers: int | None = None, 
     for index, job in enumerate(jobs):
         where = write_outputs(Path(out) / job.solver / job.label, results[index])
         record = json.loads(results[index]["run.json"])
-        records.append({"dir": str(where.relative_to(out)), "agents": list(job.agents), "scenario": job.scenario,
-                        "solver": job.solver, "best_reward": record["best_reward"], "wall_s": record["wall_s"],
-                        "sim_steps": record["sim_steps"]})
-    study = {"format": "foil.study-search/1", "backend": backend, "workers": workers,
-             "wall_s": time.perf_counter() - started, "jobs": records}
+        records.append(
+            {
+                "dir": str(where.relative_to(out)),
+                "agents": list(job.agents),
+                "scenario": job.scenario,
+                "solver": job.solver,
+                "best_reward": record["best_reward"],
+                "wall_s": record["wall_s"],
+                "sim_steps": record["sim_steps"],
+            }
+        )
+    study = {
+        "format": "foil.study-search/1",
+        "backend": backend,
+        "workers": workers,
+        "wall_s": time.perf_counter() - started,
+        "jobs": records,
+    }
     (Path(out) / "study.json").write_text(json.dumps(study, indent=1) + "\n")
     return study
 

@@ -54,8 +54,14 @@ def _humans(crowds: np.ndarray) -> list:
     return _pairs(crowds[0]) if len(crowds) == 1 else _pairs(crowds)
 
 
-def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_config: RewardConfig,
-                  env_actions: np.ndarray, solver: dict) -> dict:
+def build_summary(
+    agents: list[str],
+    policies: list,
+    scenario: Scenario,
+    reward_config: RewardConfig,
+    env_actions: np.ndarray,
+    solver: dict,
+) -> dict:
     """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs.
 
     The reward is the search's, over the searched steps. What the clip shows goes on after them: where the
@@ -77,16 +83,27 @@ def build_summary(agents: list[str], policies: list, scenario: Scenario, reward_
         "scenario": scenario.to_dict(),
         "solver": solver,
         "reward_parameters": reward_config.to_dict(),
-        "env_actions": [np.asarray(a, dtype=np.float64).reshape(-1).tolist()
-                        for a in trajectory.env_actions[:searched]],
-        "steps": [{"t": float(trajectory.time[i]), "humans": _humans(trajectory.crowds[i]),
-                   "robots": _pairs(trajectory.robot_pos[i]), "robot_actions": _pairs(trajectory.robot_actions[i])}
-                  for i in range(len(trajectory.time))],
-        "outcomes": [{"event": OUTCOME_NAMES[int(trajectory.outcome[k])],
-                      "time": _number(trajectory.event_time[k]),
-                      "path_length": float(trajectory.path_length[k]),
-                      "min_human_distance": _number(trajectory.min_clearance[k])}
-                     for k in range(len(agents))],
+        "env_actions": [
+            np.asarray(a, dtype=np.float64).reshape(-1).tolist() for a in trajectory.env_actions[:searched]
+        ],
+        "steps": [
+            {
+                "t": float(trajectory.time[i]),
+                "humans": _humans(trajectory.crowds[i]),
+                "robots": _pairs(trajectory.robot_pos[i]),
+                "robot_actions": _pairs(trajectory.robot_actions[i]),
+            }
+            for i in range(len(trajectory.time))
+        ],
+        "outcomes": [
+            {
+                "event": OUTCOME_NAMES[int(trajectory.outcome[k])],
+                "time": _number(trajectory.event_time[k]),
+                "path_length": float(trajectory.path_length[k]),
+                "min_human_distance": _number(trajectory.min_clearance[k]),
+            }
+            for k in range(len(agents))
+        ],
         "reward": total,
         "reward_terms": terms,
     }
@@ -98,8 +115,7 @@ def rebuild(data: dict) -> dict:
     scenario = Scenario.from_dict(data["scenario"], source="summary scenario")
     reward_config = RewardConfig.from_dict(data["reward_parameters"])
     env_actions = np.array(data["env_actions"], dtype=np.float64)
-    return build_summary(agents, [load_policy(a) for a in agents], scenario, reward_config, env_actions,
-                         data["solver"])
+    return build_summary(agents, [load_policy(a) for a in agents], scenario, reward_config, env_actions, data["solver"])
 
 
 def differences(expected, found, where: str = "", limit: int = 10) -> list[str]:

@@ -38,7 +38,8 @@ def test_module_attribute_loads_your_own_policy(tmp_path, monkeypatch):
         "    def act(self, observation, state):\n"
         "        action, state = super().act(observation, state)\n"
         "        return 0.5 * action, state\n"
-        "robot = Cautious()\n")
+        "robot = Cautious()\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     for spec in ("my_robot:Cautious", "my_robot:robot"):
         assert load_policy(spec).name == "cautious"

@@ -28,8 +28,8 @@ def _gru(p: dict, prefix: str, x: np.ndarray, h: np.ndarray) -> np.ndarray:
     gh = h @ p[prefix + "weight_hh_l0"].T + p[prefix + "bias_hh_l0"]
     size = h.shape[-1]
     r = _sigmoid(gi[..., :size] + gh[..., :size])
-    z = _sigmoid(gi[..., size:2 * size] + gh[..., size:2 * size])
-    n = np.tanh(gi[..., 2 * size:] + r * gh[..., 2 * size:])
+    z = _sigmoid(gi[..., size : 2 * size] + gh[..., size : 2 * size])
+    n = np.tanh(gi[..., 2 * size :] + r * gh[..., 2 * size :])
     return (1 - z) * n + z * h
 
 
@@ -44,10 +44,18 @@ def reference_step(p: dict, robot_node, temporal, spatial, edge_h, node_h):
     [ReLU(encoder(robot_linear(node))), ReLU(edge_attention_embed([h_temporal, attended]))], output linear,
     actor MLP, fc_mean."""
     relu = lambda x: np.maximum(x, 0)  # noqa: E731
-    ht = _gru(p, "base.humanhumanEdgeRNN_temporal.gru.",
-              relu(_linear(p, "base.humanhumanEdgeRNN_temporal.encoder_linear.", temporal)), edge_h[:, 0])
-    hs = _gru(p, "base.humanhumanEdgeRNN_spatial.gru.",
-              relu(_linear(p, "base.humanhumanEdgeRNN_spatial.encoder_linear.", spatial)), edge_h[:, 1:])
+    ht = _gru(
+        p,
+        "base.humanhumanEdgeRNN_temporal.gru.",
+        relu(_linear(p, "base.humanhumanEdgeRNN_temporal.encoder_linear.", temporal)),
+        edge_h[:, 0],
+    )
+    hs = _gru(
+        p,
+        "base.humanhumanEdgeRNN_spatial.gru.",
+        relu(_linear(p, "base.humanhumanEdgeRNN_spatial.encoder_linear.", spatial)),
+        edge_h[:, 1:],
+    )
     query = _linear(p, "base.attn.temporal_edge_layer.0.", ht)
     keys = _linear(p, "base.attn.spatial_edge_layer.0.", hs)
     scores = np.einsum("ba,bna->bn", query, keys) * spatial.shape[1] / np.sqrt(SIZES["attention_size"])
@@ -63,12 +71,26 @@ def reference_step(p: dict, robot_node, temporal, spatial, edge_h, node_h):
 
 
 def observation(rng, batch: int, seen: np.ndarray) -> Observation:
-    node = np.concatenate([rng.uniform(-5, 5, (batch, 2)), np.full((batch, 1), 0.3), rng.uniform(-5, 5, (batch, 2)),
-                           np.ones((batch, 1)), rng.uniform(0, 6, (batch, 1)), np.zeros((batch, 5))], axis=1)
-    return Observation(robot_node=node, temporal_edges=rng.uniform(-1, 1, (batch, 2)),
-                       spatial_edges=rng.uniform(-4, 4, (batch, HUMANS, 2)),
-                       human_velocities=rng.uniform(-1, 1, (batch, HUMANS, 2)),
-                       human_radii=np.full((batch, HUMANS), 0.3), human_mask=seen, done=np.zeros(batch, bool))
+    node = np.concatenate(
+        [
+            rng.uniform(-5, 5, (batch, 2)),
+            np.full((batch, 1), 0.3),
+            rng.uniform(-5, 5, (batch, 2)),
+            np.ones((batch, 1)),
+            rng.uniform(0, 6, (batch, 1)),
+            np.zeros((batch, 5)),
+        ],
+        axis=1,
+    )
+    return Observation(
+        robot_node=node,
+        temporal_edges=rng.uniform(-1, 1, (batch, 2)),
+        spatial_edges=rng.uniform(-4, 4, (batch, HUMANS, 2)),
+        human_velocities=rng.uniform(-1, 1, (batch, HUMANS, 2)),
+        human_radii=np.full((batch, HUMANS), 0.3),
+        human_mask=seen,
+        done=np.zeros(batch, bool),
+    )
 
 
 @pytest.mark.parametrize("legacy", [True, False], ids=["legacy-serialisation", "zip-serialisation"])
@@ -80,8 +102,10 @@ def test_forward_pass_equals_the_reference_on_a_checkpoint_in_the_original_forma
     rng = np.random.default_rng(0)
     batch, dt = 4, CONFIG["env"]["time_step"]
     state = policy.initial_state(batch)
-    edge_h, node_h = np.zeros((batch, 1 + HUMANS, SIZES["human_human_edge_rnn_size"])), \
-        np.zeros((batch, SIZES["human_node_rnn_size"]))
+    edge_h, node_h = (
+        np.zeros((batch, 1 + HUMANS, SIZES["human_human_edge_rnn_size"])),
+        np.zeros((batch, SIZES["human_node_rnn_size"])),
+    )
     believed = None
     for step in range(4):
         seen = rng.random((batch, HUMANS)) < 0.6
@@ -97,8 +121,9 @@ def test_forward_pass_equals_the_reference_on_a_checkpoint_in_the_original_forma
         believed = np.where(seen[..., None], humans, unseen)
         node = obs.robot_node[:, :7].copy()
         node[:, 6] = math.pi / 2  # a holonomic CrowdNav robot never updates theta
-        expected, edge_h, node_h = reference_step(p, node, obs.temporal_edges, believed[..., :2] - robot[:, None],
-                                                  edge_h, node_h)
+        expected, edge_h, node_h = reference_step(
+            p, node, obs.temporal_edges, believed[..., :2] - robot[:, None], edge_h, node_h
+        )
         action, state = policy.act(obs, state)
         np.testing.assert_allclose(action, expected, atol=2e-5, err_msg=f"step {step}")
     assert action.shape == (batch, 2) and np.abs(action).max() > 0.05  # outputs that depend on the inputs
@@ -122,19 +147,44 @@ def test_config_parser_reads_every_key_and_maps_the_world(tmp_path):
     text_lines = path.read_text().splitlines()
     assert all(f"{s}.{k} =" in text_lines[line - 1] for (s, k), (_, line) in config.values.items())
     assert config.world == {
-        "dt": 0.25, "randomize_attributes": True, "success_reward": 10.0, "collision_penalty": -20.0,
-        "discomfort_dist": 0.25, "discomfort_factor": 10.0, "circle_radius": 6.0, "human_num": HUMANS,
-        "human_policy": "orca", "human_radius": 0.3, "human_v_pref": 1.0, "robot_visible": False,
-        "robot_radius": 0.3, "robot_v_pref": 1.0, "kinematics": "holonomic", "neighbor_dist": 10.0,
-        "safety_space": 0.15, "time_horizon": 5.0, "sf_a": 2.0, "sf_b": 1.0, "sf_ki": 1.0, "time_limit": 49.0,
-        "human_fov": 360.0, "robot_fov": 360.0, "goal_change_chance": 0.25, "end_goal_change_chance": 1.0}
+        "dt": 0.25,
+        "randomize_attributes": True,
+        "success_reward": 10.0,
+        "collision_penalty": -20.0,
+        "discomfort_dist": 0.25,
+        "discomfort_factor": 10.0,
+        "circle_radius": 6.0,
+        "human_num": HUMANS,
+        "human_policy": "orca",
+        "human_radius": 0.3,
+        "human_v_pref": 1.0,
+        "robot_visible": False,
+        "robot_radius": 0.3,
+        "robot_v_pref": 1.0,
+        "kinematics": "holonomic",
+        "neighbor_dist": 10.0,
+        "safety_space": 0.15,
+        "time_horizon": 5.0,
+        "sf_a": 2.0,
+        "sf_b": 1.0,
+        "sf_ki": 1.0,
+        "time_limit": 49.0,
+        "human_fov": 360.0,
+        "robot_fov": 360.0,
+        "goal_change_chance": 0.25,
+        "end_goal_change_chance": 1.0,
+    }
     assert config.sizes == SIZES
     WorldConfig.from_dict(config.world)
 
 
 def test_config_with_switches_off_and_a_unicycle(tmp_path):
-    changed = {**CONFIG, "humans": {**CONFIG["humans"], "random_goal_changing": False, "FOV": 1.0},
-               "robot": {**CONFIG["robot"], "FOV": 0.5}, "action_space": {"kinematics": "unicycle"}}
+    changed = {
+        **CONFIG,
+        "humans": {**CONFIG["humans"], "random_goal_changing": False, "FOV": 1.0},
+        "robot": {**CONFIG["robot"], "FOV": 0.5},
+        "action_space": {"kinematics": "unicycle"},
+    }
     path = tmp_path / "config.py"
     path.write_text(config_text(changed))
     world = read_config(path).world
@@ -143,20 +193,23 @@ def test_config_with_switches_off_and_a_unicycle(tmp_path):
     assert (world["kinematics"], world["unicycle_motion"], world["robot_start"]) == ("unicycle", "arc", "circle")
 
 
-@pytest.mark.parametrize(("section", "key", "value", "says"), [
-    ("sim", "group_human", True, "Foil reproduces only False"),
-    ("noise", "add_noise", True, "Foil reproduces only False"),
-    ("humans", "random_unobservability", True, "Foil reproduces only False"),
-    ("env", "env_name", "CrowdSimPred-v0", "Foil reproduces only 'CrowdSimDict-v0'"),
-    ("humans", "policy", "srnn", "human_policy must be 'orca' or 'social_force'"),
-    ("reward", "discomfort_dist_front", 0.5, "one discomfort distance"),
-    ("robot", "FOV", 3, "multiples of pi"),
-    ("sim", "lidar_range", 5, "does not know this setting"),
-    ("sim", "human_num", 2.5, "expected a whole number"),
-    ("action_space", "kinematics", "diff_drive", "kinematics must be 'holonomic' or 'unicycle'"),
-    ("env", "time_limit", 1, "more than 1 s"),
-    ("SRNN", "human_node_lstm_size", 16, "does not know this setting"),
-])
+@pytest.mark.parametrize(
+    ("section", "key", "value", "says"),
+    [
+        ("sim", "group_human", True, "Foil reproduces only False"),
+        ("noise", "add_noise", True, "Foil reproduces only False"),
+        ("humans", "random_unobservability", True, "Foil reproduces only False"),
+        ("env", "env_name", "CrowdSimPred-v0", "Foil reproduces only 'CrowdSimDict-v0'"),
+        ("humans", "policy", "srnn", "human_policy must be 'orca' or 'social_force'"),
+        ("reward", "discomfort_dist_front", 0.5, "one discomfort distance"),
+        ("robot", "FOV", 3, "multiples of pi"),
+        ("sim", "lidar_range", 5, "does not know this setting"),
+        ("sim", "human_num", 2.5, "expected a whole number"),
+        ("action_space", "kinematics", "diff_drive", "kinematics must be 'holonomic' or 'unicycle'"),
+        ("env", "time_limit", 1, "more than 1 s"),
+        ("SRNN", "human_node_lstm_size", 16, "does not know this setting"),
+    ],
+)
 def test_config_parser_refuses_what_foil_cannot_reproduce_naming_its_line(tmp_path, section, key, value, says):
     config = {s: dict(values) for s, values in CONFIG.items()}
     config[section][key] = value
@@ -194,8 +247,11 @@ def test_clear_errors_for_another_network_and_a_missing_config(tmp_path):
 
 def test_config_sizes_must_be_the_checkpoints(tmp_path):
     config = {**CONFIG, "SRNN": {**SIZES, "attention_size": 64}}
-    with pytest.raises(ValueError, match=r"config.py:\d+: SRNN.attention_size = 64, but the checkpoint's weights "
-                       "have 5"):
+    with pytest.raises(
+        ValueError,
+        match=r"config.py:\d+: SRNN.attention_size = 64, but the checkpoint's weights "
+        "have 5",
+    ):
         load_policy(str(write_model(tmp_path / "model", config=config)))
 
 
@@ -251,8 +307,11 @@ def test_a_unicycle_agent_observes_its_heading_and_turns_in_an_arc_world(tmp_pat
 
 
 def test_a_visible_robot_among_social_force_humans(tmp_path, capsys):
-    changed = {**CONFIG, "robot": {**CONFIG["robot"], "visible": True},
-               "humans": {**CONFIG["humans"], "policy": "social_force"}}
+    changed = {
+        **CONFIG,
+        "robot": {**CONFIG["robot"], "visible": True},
+        "humans": {**CONFIG["humans"], "policy": "social_force"},
+    }
     checkpoint = str(write_model(tmp_path / "model", config=changed))
     assert trained_world(checkpoint)["robot_visible"] and trained_world(checkpoint)["human_policy"] == "social_force"
     assert main(["eval", checkpoint, "--episodes", "2", "--json"]) == 0

@@ -38,17 +38,21 @@ def test_absent_humans_do_not_change_the_action(net):
     small = random_observation(4, 3)
     padded = random_observation(4, 6, seed=1)
     padded = dataclasses.replace(
-        padded, robot_node=small.robot_node, temporal_edges=small.temporal_edges,
+        padded,
+        robot_node=small.robot_node,
+        temporal_edges=small.temporal_edges,
         spatial_edges=np.concatenate([small.spatial_edges, padded.spatial_edges[:, 3:]], axis=1),
-        human_mask=np.array([[True] * 3 + [False] * 3] * 4))
+        human_mask=np.array([[True] * 3 + [False] * 3] * 4),
+    )
     state_a, state_b = policy.initial_state(4), policy.initial_state(4)
     for _ in range(3):
         action_a, state_a = policy.act(small, state_a)
         action_b, state_b = policy.act(padded, state_b)
         np.testing.assert_allclose(action_a, action_b, atol=1e-6)
     full = dataclasses.replace(padded, human_mask=np.ones((4, 6), dtype=bool))
-    assert not np.allclose(policy.act(full, policy.initial_state(4))[0],
-                           policy.act(small, policy.initial_state(4))[0], atol=1e-4)
+    assert not np.allclose(
+        policy.act(full, policy.initial_state(4))[0], policy.act(small, policy.initial_state(4))[0], atol=1e-4
+    )
 
 
 def test_same_observation_and_state_give_the_same_action(net):
@@ -121,8 +125,9 @@ def test_sequence_gradients_match_stepping(net):
         loss = loss + (net.action_mean(net.actor(features)) * weights[i]).sum()
         loss = loss + net.critic_linear(net.critic(features)).square().sum()
     step_grads = torch.autograd.grad(loss, params)
-    for name, a, b in zip([n for n, _ in net.named_parameters() if n != "action_logstd"], sequence_grads,
-                          step_grads, strict=True):
+    for name, a, b in zip(
+        [n for n, _ in net.named_parameters() if n != "action_logstd"], sequence_grads, step_grads, strict=True
+    ):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5, msg=name)
 
 
@@ -138,9 +143,13 @@ def test_bfloat16_products_keep_float32_state_and_outputs(net):
 
 
 def test_snapshot_and_restore_in_the_coupled_simulator():
-    scenario = Scenario(name="six", robot_start=(-5.0, 4.0), robot_goal=(7.0, -2.0),
-                        human_positions=((0, 0), (1, 1), (-1, 2), (2, -1), (3, 3), (-2, -2)),
-                        human_goals=((0, 1), (-1, -1), (1, -2), (-2, 1), (-3, -3), (2, 2)))
+    scenario = Scenario(
+        name="six",
+        robot_start=(-5.0, 4.0),
+        robot_goal=(7.0, -2.0),
+        human_positions=((0, 0), (1, 1), (-1, 2), (2, -1), (3, 3), (-2, -2)),
+        human_goals=((0, 1), (-1, -1), (1, -2), (-2, 1), (-3, -3), (2, 2)),
+    )
     policies = [DSRNNPolicy(make_net(0), "a"), DSRNNPolicy(make_net(1), "b")]
     sim = CoupledSimulator(policies, scenario, batch=2)
     zero = np.zeros((2, 6, 2))

@@ -13,8 +13,17 @@ from search.cli import main
 from search.sim.scenarios import sample_training_states
 from search.sim.world import WorldConfig
 
-KEYS = ["agent", "episodes", "success_rate", "collision_rate", "timeout_rate", "reward_mean", "reward_ci95",
-        "nav_time_mean", "time_limit"]
+KEYS = [
+    "agent",
+    "episodes",
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "reward_mean",
+    "reward_ci95",
+    "nav_time_mean",
+    "time_limit",
+]
 
 
 def test_eval_json_has_exactly_the_contract_keys(capsys):

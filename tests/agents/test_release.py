@@ -8,14 +8,31 @@ from search.agents.release import ReleaseError, choose, separated
 
 
 def row(i: int, success: float, reward: float, timeout: float = 0.0, half_width: float = 0.8) -> dict:
-    return {"checkpoint": f"{i:06d}.pt", "env_steps": i * 1000, "episodes": 500, "reward_mean": reward,
-            "reward_low": reward - half_width, "reward_high": reward + half_width, "success_rate": success,
-            "collision_rate": 1 - success - timeout, "timeout_rate": timeout}
+    return {
+        "checkpoint": f"{i:06d}.pt",
+        "env_steps": i * 1000,
+        "episodes": 500,
+        "reward_mean": reward,
+        "reward_low": reward - half_width,
+        "reward_high": reward + half_width,
+        "success_rate": success,
+        "collision_rate": 1 - success - timeout,
+        "timeout_rate": timeout,
+    }
 
 
-CURVE = [row(0, 0.0, -5), row(1, 0.30, 8.0, 0.30), row(2, 0.45, 11.0), row(3, 0.55, 13.0), row(4, 0.70, 17.5),
-         row(5, 0.85, 19.0), row(6, 0.93, 21.0, 0.01), row(7, 0.96, 22.0, 0.02), row(8, 0.97, 21.5, 0.05),
-         row(9, 0.955, 21.8, 0.01)]
+CURVE = [
+    row(0, 0.0, -5),
+    row(1, 0.30, 8.0, 0.30),
+    row(2, 0.45, 11.0),
+    row(3, 0.55, 13.0),
+    row(4, 0.70, 17.5),
+    row(5, 0.85, 19.0),
+    row(6, 0.93, 21.0, 0.01),
+    row(7, 0.96, 22.0, 0.02),
+    row(8, 0.97, 21.5, 0.05),
+    row(9, 0.955, 21.8, 0.01),
+]
 
 
 def test_hi_is_the_best_snapshot_that_meets_the_bar_and_the_others_are_clearly_worse_and_earlier():

@@ -15,11 +15,18 @@ from search.sim.world import WorldConfig
 pytestmark = pytest.mark.slow  # PPO updates
 
 TINY_WORLD = WorldConfig(human_num=0, circle_radius=2.0, min_start_goal_distance=1.5, time_limit=5.0)
-TINY = TrainConfig.from_dict({
-    "seed": 0, "total_steps": 16 * 20 * 14, "num_envs": 16, "num_steps": 20, "learning_rate": 3e-3,
-    "save_every": 5, "network": {"max_humans": 1, "edge_hidden": 8, "node_hidden": 16, "embed": 8, "attention": 8,
-                                 "mlp_hidden": 32},
-    "world": TINY_WORLD.to_dict()})
+TINY = TrainConfig.from_dict(
+    {
+        "seed": 0,
+        "total_steps": 16 * 20 * 14,
+        "num_envs": 16,
+        "num_steps": 20,
+        "learning_rate": 3e-3,
+        "save_every": 5,
+        "network": {"max_humans": 1, "edge_hidden": 8, "node_hidden": 16, "embed": 8, "attention": 8, "mlp_hidden": 32},
+        "world": TINY_WORLD.to_dict(),
+    }
+)
 
 
 def rows(out) -> list[dict]:
@@ -37,8 +44,7 @@ def test_a_few_updates_improve_the_deterministic_return(tmp_path, precision):
     progress = rows(tmp_path)
     assert list(progress[0]) == list(PROGRESS_COLUMNS) and len(progress) == 14
     assert read_checkpoint(last)["env_steps"] == 14 * 16 * 20
-    assert sorted(p.name for p in (tmp_path / "checkpoints").glob("*.pt")) == ["000005.pt", "000010.pt",
-                                                                                "000014.pt"]
+    assert sorted(p.name for p in (tmp_path / "checkpoints").glob("*.pt")) == ["000005.pt", "000010.pt", "000014.pt"]
 
 
 def test_a_resumed_run_matches_an_uninterrupted_one(tmp_path):
@@ -49,8 +55,9 @@ def test_a_resumed_run_matches_an_uninterrupted_one(tmp_path):
     a, b = read_checkpoint(whole)["model"], read_checkpoint(parts)["model"]
     assert all(torch.equal(a[k], b[k]) for k in a)
     drop = ("seconds", "steps_per_s")
-    assert [{k: v for k, v in r.items() if k not in drop} for r in rows(tmp_path / "whole")] == \
-           [{k: v for k, v in r.items() if k not in drop} for r in rows(tmp_path / "parts")]
+    assert [{k: v for k, v in r.items() if k not in drop} for r in rows(tmp_path / "whole")] == [
+        {k: v for k, v in r.items() if k not in drop} for r in rows(tmp_path / "parts")
+    ]
 
 
 def test_minibatches_split_across_threads_give_the_same_run_up_to_rounding(tmp_path):
@@ -70,8 +77,9 @@ def test_a_run_can_go_longer_but_not_change_its_config(tmp_path):
     train(config, tmp_path, show_progress=False)
     with pytest.raises(ValueError, match="different config"):
         train(TrainConfig.from_dict(config.to_dict() | {"learning_rate": 1e-4}), tmp_path, show_progress=False)
-    longer = train(TrainConfig.from_dict(config.to_dict() | {"total_steps": 16 * 20 * 2}), tmp_path,
-                   show_progress=False)
+    longer = train(
+        TrainConfig.from_dict(config.to_dict() | {"total_steps": 16 * 20 * 2}), tmp_path, show_progress=False
+    )
     assert read_checkpoint(longer)["update"] == 2 and len(rows(tmp_path)) == 2
 
 
@@ -81,9 +89,14 @@ def test_config_files_are_checked(tmp_path):
     config = load_train_config(path)
     assert (config.num_envs, config.network.edge_hidden, config.world.human_num) == (8, 32, 5)
     assert config.network.node_hidden == 128 and config.epochs == 5  # the rest keeps the paper's defaults
-    for text, message in [("lr = 1\n", "unknown training setting"), ("[network]\nwidth = 3\n", "unknown network"),
-                          ("num_envs = 3\n", "multiple of minibatches"), ("[world]\nhuman_num = 11\n", "max_humans"),
-                          ("num_envs = \n", "not valid TOML"), ("precision = 'half'\n", "precision must be")]:
+    for text, message in [
+        ("lr = 1\n", "unknown training setting"),
+        ("[network]\nwidth = 3\n", "unknown network"),
+        ("num_envs = 3\n", "multiple of minibatches"),
+        ("[world]\nhuman_num = 11\n", "max_humans"),
+        ("num_envs = \n", "not valid TOML"),
+        ("precision = 'half'\n", "precision must be"),
+    ]:
         path.write_text(text)
         with pytest.raises(ValueError, match=message):
             load_train_config(path)
@@ -95,9 +108,11 @@ def test_foil_train_command_writes_a_run(tmp_path, capsys):
     from search.cli import main
 
     config = tmp_path / "train.toml"
-    config.write_text("total_steps = 64\nnum_envs = 4\nnum_steps = 16\n"
-                      "[network]\nmax_humans = 2\nedge_hidden = 8\nnode_hidden = 8\nembed = 4\nattention = 4\n"
-                      "mlp_hidden = 8\n[world]\nhuman_num = 2\n")
+    config.write_text(
+        "total_steps = 64\nnum_envs = 4\nnum_steps = 16\n"
+        "[network]\nmax_humans = 2\nedge_hidden = 8\nnode_hidden = 8\nembed = 4\nattention = 4\n"
+        "mlp_hidden = 8\n[world]\nhuman_num = 2\n"
+    )
     assert main(["train", "--config", str(config), "--out", str(tmp_path / "run")]) == 0
     assert "000001.pt" in capsys.readouterr().out
     assert len(rows(tmp_path / "run")) == 1

@@ -9,10 +9,12 @@ from app.visible import VisibleClip, audit
 
 def summary(*outcomes: dict, ends: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.0)), t: float = 25.0):
     """A hand-made summary of agents lo and hi going from (-5, -5) to (5, 5), ending at ``ends``."""
-    return {"agents": [{"name": "lo"}, {"name": "hi"}],
-            "scenario": {"robot": {"start": [-5.0, -5.0], "goal": [5.0, 5.0]}},
-            "steps": [{"t": t, "robots": [list(end) for end in ends]}],
-            "outcomes": list(outcomes)}
+    return {
+        "agents": [{"name": "lo"}, {"name": "hi"}],
+        "scenario": {"robot": {"start": [-5.0, -5.0], "goal": [5.0, 5.0]}},
+        "steps": [{"t": t, "robots": [list(end) for end in ends]}],
+        "outcomes": list(outcomes),
+    }
 
 
 SUCCESS = {"event": "success", "time": 14.0, "min_human_distance": 0.9}
@@ -21,14 +23,17 @@ CRASH = {"event": "collision", "time": 3.5, "min_human_distance": -0.05}
 RUNNING = {"event": "running", "time": None, "min_human_distance": 0.8}
 
 
-@pytest.mark.parametrize("lo, hi, ends, shows", [
-    (CRASH, SUCCESS, ((-3, -3), (5, 5)), "better"),  # the worse robot crashes, the better one arrives
-    (SUCCESS, CRASH, ((5, 5), (-3, -3)), "worse"),  # the better robot crashes early: the paper's failure
-    (RUNNING, LATE, ((0, 0), (5, 5)), "better"),
-    (LATE, RUNNING, ((5, 5), (0, 0)), "worse"),  # the worse robot arrives while the better is on its way
-    (RUNNING, RUNNING, ((0.1, 0.1), (0.3, 0.3)), "tie"),  # both on their way, about as far
-    (SUCCESS, SUCCESS, ((5, 5), (5, 5)), "tie"),
-])
+@pytest.mark.parametrize(
+    "lo, hi, ends, shows",
+    [
+        (CRASH, SUCCESS, ((-3, -3), (5, 5)), "better"),  # the worse robot crashes, the better one arrives
+        (SUCCESS, CRASH, ((5, 5), (-3, -3)), "worse"),  # the better robot crashes early: the paper's failure
+        (RUNNING, LATE, ((0, 0), (5, 5)), "better"),
+        (LATE, RUNNING, ((5, 5), (0, 0)), "worse"),  # the worse robot arrives while the better is on its way
+        (RUNNING, RUNNING, ((0.1, 0.1), (0.3, 0.3)), "tie"),  # both on their way, about as far
+        (SUCCESS, SUCCESS, ((5, 5), (5, 5)), "tie"),
+    ],
+)
 def test_audit_judges_what_the_clip_shows_against_the_ground_truth(lo, hi, ends, shows):
     for agents, labels in ((["lo", "hi"], ["Robot 1", "Robot 2"]), (["hi", "lo"], ["Robot 1", "Robot 2"])):
         clip = VisibleClip.of_summary(summary(lo, hi, ends=ends), agents, labels)
@@ -38,10 +43,10 @@ def test_audit_judges_what_the_clip_shows_against_the_ground_truth(lo, hi, ends,
 
 
 def test_audit_names_what_happened():
-    clip = VisibleClip.of_summary(summary(CRASH, SUCCESS, ends=((-3, -3), (5, 5))), ["lo", "hi"],
-                                  ["Robot 1", "Robot 2"])
-    assert audit(clip, "Robot 2")["why"] == ("Robot 2 reached the goal after 14 seconds. "
-                                             "Robot 1 bumped into a person.")
+    clip = VisibleClip.of_summary(
+        summary(CRASH, SUCCESS, ends=((-3, -3), (5, 5))), ["lo", "hi"], ["Robot 1", "Robot 2"]
+    )
+    assert audit(clip, "Robot 2")["why"] == ("Robot 2 reached the goal after 14 seconds. Robot 1 bumped into a person.")
     with pytest.raises(ValueError, match="compares two robots"):
         audit(clip, "Robot 3")
 

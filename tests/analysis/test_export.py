@@ -15,8 +15,18 @@ from tests.support.analysis import add_participant
 from tests.support.survey import ADMIN_PASSWORD, ATTENTION, FormReader, answer_for, start, study_text
 
 # Texts a spreadsheet would run, a reader would take for missing, or that test the escape itself.
-TRICKY = ["=HYPERLINK(\"http://x\",\"y\")", "+1+2", "-3", "@SUM(A1)", "\tTab first", "\rCarriage", "'quoted",
-          "NA", "line one\nline two, with a comma and \"quotes\"", "plain words"]
+TRICKY = [
+    '=HYPERLINK("http://x","y")',
+    "+1+2",
+    "-3",
+    "@SUM(A1)",
+    "\tTab first",
+    "\rCarriage",
+    "'quoted",
+    "NA",
+    'line one\nline two, with a comma and "quotes"',
+    "plain words",
+]
 
 
 def restore(cell: str) -> str:
@@ -54,15 +64,21 @@ def answered(make_client, tmp_path):
     clients[2].post("/study", data=answer_for(page))  # the instructions only
     admin = clients[0]
     login = admin.get("/admin/login")
-    admin.post("/admin/login", data={"csrf_token": FormReader(login.text).hidden["csrf_token"],
-                                     "password": ADMIN_PASSWORD})
+    admin.post(
+        "/admin/login", data={"csrf_token": FormReader(login.text).hidden["csrf_token"], "password": ADMIN_PASSWORD}
+    )
     db = admin.app.state.context.db
     with db.reading() as session:
         first = session.query(Participant).order_by(Participant.id).first()
     overview = admin.get(f"/admin/participants/{first.code}")
-    admin.post(f"/admin/participants/{first.code}/exclusion",
-               data={"csrf_token": FormReader(overview.text).hidden["csrf_token"], "excluded": "1",
-                     "note": "=cmd|' /C calc'!A0"})
+    admin.post(
+        f"/admin/participants/{first.code}/exclusion",
+        data={
+            "csrf_token": FormReader(overview.text).hidden["csrf_token"],
+            "excluded": "1",
+            "note": "=cmd|' /C calc'!A0",
+        },
+    )
     study = parse_study(path.read_text())
     result = export_study(db, study, tmp_path / "export")
     with db.reading() as session:
@@ -141,8 +157,12 @@ def test_wide_and_participants_files(answered):
                 key = f"p1_{scheme}_{pair[0]}_{pair[1]}_{answer.question}"
             else:
                 key = f"p2_{scheme}_{answer.question}"
-            wanted = {"choose": answer.answer_agent, "rank": answer.answer_agent, "scale": answer.value,
-                      "text": answer.answer}[answer.question_type]
+            wanted = {
+                "choose": answer.answer_agent,
+                "rank": answer.answer_agent,
+                "scale": answer.value,
+                "text": answer.answer,
+            }[answer.question_type]
             assert getattr(row, key) == wanted, key
     # the header is fixed by the study: every scheme, pair and question, answered or not
     assert "p1_schemeadaptivesecret_agentlowsecret_agentmedsecret_difficulty" in wide.columns
@@ -186,8 +206,9 @@ def test_export_of_a_hand_built_database_is_stable(survey_db, paper_study, bundl
     empty = export_study(survey_db, study, tmp_path / "empty")
     assert empty.participants == 0 and pd.read_csv(empty.out / "long.csv").empty
     for condition in range(4):
-        add_participant(survey_db, study, bundle_dir, condition=condition,
-                        answer=lambda screen: answer_of(screen), seed=condition)
+        add_participant(
+            survey_db, study, bundle_dir, condition=condition, answer=lambda screen: answer_of(screen), seed=condition
+        )
     one = export_study(survey_db, study, tmp_path / "one", batch=3)
     two = export_study(survey_db, study, tmp_path / "two", batch=500)
     for name in ("long.csv", "wide.csv", "participants.csv", "codebook.json", "codebook.md"):
@@ -200,8 +221,12 @@ def answer_of(screen: dict) -> dict:
     labels = [robot["label"] for robot in screen.get("robots", [])]
     answers = {}
     for name in screen.get("questions", []):
-        answers[name] = {"better": labels[0] if labels else None, "ranking": labels,
-                         "justification": "it was faster", "explanation": "ranked by speed"}.get(name, 3)
+        answers[name] = {
+            "better": labels[0] if labels else None,
+            "ranking": labels,
+            "justification": "it was faster",
+            "explanation": "ranked by speed",
+        }.get(name, 3)
     return answers
 
 
@@ -244,15 +269,24 @@ def test_study_stored_in_the_database(survey_db, paper_study):
 def test_comprehension_answers_are_in_long_and_leave_wide_as_it_is(survey_db, bundle_dir, tmp_path):
     """The instructions' comprehension answers (always the expected one: a wrong one is refused) are long.csv rows
     of the instructions screen; wide.csv has no column for them and is written as without them."""
-    study = parse_study(study_text(platform='"none"', assignment='"balanced"') + """
+    study = parse_study(
+        study_text(platform='"none"', assignment='"balanced"')
+        + """
 [[comprehension]]
 text = "Which robot is better?"
 options = ["The first", "The one that reaches its goal without touching anyone"]
 expected = "The one that reaches its goal without touching anyone"
-""")
+"""
+    )
     understood = {"understand1": study.comprehension[0].expected}
-    add_participant(survey_db, study, bundle_dir, condition=0, seed=5,
-                    answer=lambda screen: understood if screen["kind"] == "instructions" else answer_of(screen))
+    add_participant(
+        survey_db,
+        study,
+        bundle_dir,
+        condition=0,
+        seed=5,
+        answer=lambda screen: understood if screen["kind"] == "instructions" else answer_of(screen),
+    )
     result = export_study(survey_db, study, tmp_path / "out")
     long = pd.read_csv(result.out / "long.csv")
     (row,) = long[long.step == 0].itertuples()

@@ -21,19 +21,29 @@ LO = SECRET_NAMES["lo"]
 def known_answers(wrong: bool = False):
     """Adaptive: always right, difficulty 1, agreement 5. N-first: right only on the clips with the worst robot
     (2 of 3 pairs), ranking reversed, difficulty 5, agreement 2. `wrong`: every answer wrong."""
+
     def answer(screen: dict) -> dict:
         if screen["kind"] == "pairwise":
             good = not wrong and (screen["scheme"] == ADAPTIVE or LO in {r["agent"] for r in screen["robots"]})
             agents = [r["agent"] for r in screen["robots"]]
             pick = screen["better"] if good else next(a for a in agents if a != screen["better"])
-            return {"better": label_of(screen, pick), "justification": "seen",
-                    "difficulty": 1 if screen["scheme"] == ADAPTIVE else 5}
+            return {
+                "better": label_of(screen, pick),
+                "justification": "seen",
+                "difficulty": 1 if screen["scheme"] == ADAPTIVE else 5,
+            }
         if screen["kind"] == "ranking":
             order = screen["true_order"] if screen["scheme"] == ADAPTIVE and not wrong else screen["true_order"][::-1]
             agree = 5 if screen["scheme"] == ADAPTIVE else 2
-            return {"ranking": [label_of(screen, a) for a in order], "explanation": "seen", "difference": 7,
-                    "easy_worst_middle": agree, "easy_middle_best": agree}
+            return {
+                "ranking": [label_of(screen, a) for a in order],
+                "explanation": "seen",
+                "difference": 7,
+                "easy_worst_middle": agree,
+                "easy_middle_best": agree,
+            }
         return {}
+
     return answer
 
 
@@ -55,10 +65,17 @@ def test_table1_counts_and_tests(known_db):
     e = data.exclusions
     assert (e.before, e.after) == (7, 4)
     assert e.per_reason == {"flagged_by_admin": 1, "incomplete": 1, "too_fast": 1}
-    overall = {(task, scheme): (data.tally(task, ALL, scheme).correct, data.tally(task, ALL, scheme).incorrect)
-               for task in ("pairwise", "ranking") for scheme in SCHEMES}
-    assert overall == {("pairwise", ADAPTIVE): (12, 0), ("pairwise", NFIRST): (8, 4),
-                       ("ranking", ADAPTIVE): (4, 0), ("ranking", NFIRST): (0, 4)}
+    overall = {
+        (task, scheme): (data.tally(task, ALL, scheme).correct, data.tally(task, ALL, scheme).incorrect)
+        for task in ("pairwise", "ranking")
+        for scheme in SCHEMES
+    }
+    assert overall == {
+        ("pairwise", ADAPTIVE): (12, 0),
+        ("pairwise", NFIRST): (8, 4),
+        ("ranking", ADAPTIVE): (4, 0),
+        ("ranking", NFIRST): (0, 4),
+    }
     # conditions alternate the scenario rotation, so each scenario fed part one for two participants
     for scenario in SCENARIOS:
         nfirst = data.tally("pairwise", scenario, NFIRST)
@@ -77,17 +94,30 @@ def test_report_files(known_db, tmp_path):
     db, study = known_db
     html = render_report(tally_study(db, study), tmp_path / "report")
     out = tmp_path / "report"
-    for name in ("report.html", "table1.csv", "accuracy_tests.csv", "ratings.csv", "rating_tests.csv",
-                 "exclusions.csv", "likert.png", "likert.svg", "distribution-difficulty.png",
-                 "distribution-difference.svg"):
+    for name in (
+        "report.html",
+        "table1.csv",
+        "accuracy_tests.csv",
+        "ratings.csv",
+        "rating_tests.csv",
+        "exclusions.csv",
+        "likert.png",
+        "likert.svg",
+        "distribution-difficulty.png",
+        "distribution-difference.svg",
+    ):
         assert (out / name).stat().st_size > 0, name
     assert "<script" not in html and "<img" not in html and html.count("<svg") == 3  # self-contained
     assert "Fisher&#39;s exact test, two-sided" in html and "100.00%" in html and "66.67%" in html
     with (out / "table1.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     first = rows[0]
-    assert (first["scope"], first["scheme"], first["pairwise_correct"], first["ranking_n"]) == (ALL, ADAPTIVE, "12",
-                                                                                                "4")
+    assert (first["scope"], first["scheme"], first["pairwise_correct"], first["ranking_n"]) == (
+        ALL,
+        ADAPTIVE,
+        "12",
+        "4",
+    )
     assert float(rows[1]["pairwise_accuracy"]) == pytest.approx(8 / 12, abs=1e-4)
     assert float(rows[1]["pairwise_ci95_low"]) == pytest.approx(0.3906, abs=1e-4)  # Wilson, 8 of 12
     with (out / "exclusions.csv").open() as handle:
@@ -157,8 +187,9 @@ def test_figure_text_and_legends_are_at_least_12_px_where_the_report_shows_them(
         assert smallest_text_px(buffer.getvalue()) >= 12
 
 
-def test_foil_report_finds_the_served_bundle_for_the_audit_column(known_db, paper_study, bundle_dir, tmp_path,
-                                                                  monkeypatch, capsys):
+def test_foil_report_finds_the_served_bundle_for_the_audit_column(
+    known_db, paper_study, bundle_dir, tmp_path, monkeypatch, capsys
+):
     """The server records the bundle it serves; `foil report` with only the database fills the per-clip audit
     column from it, and says so when that bundle is gone."""
     import json

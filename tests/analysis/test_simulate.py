@@ -92,8 +92,11 @@ def test_bots_take_the_study_and_the_report_counts_their_answers(live_server, bu
                     misleading_answers.append(agent)
             elif question == "ranking":
                 clip = manifest[answer["clips"][0]]
-                agent_of = {label: agent for c in answer["clips"] for label, agent in
-                            zip(manifest[c]["labels"], manifest[c]["agents"], strict=True)}
+                agent_of = {
+                    label: agent
+                    for c in answer["clips"]
+                    for label, agent in zip(manifest[c]["labels"], manifest[c]["agents"], strict=True)
+                }
                 order = [agent_of[label] for label in answer["value"]]
                 expected[("ranking", clip["scheme"], order == AGENT_RANK[::-1])] += 1
             elif question in ("difficulty", "easy_middle_best"):
@@ -113,8 +116,11 @@ def test_bots_take_the_study_and_the_report_counts_their_answers(live_server, bu
             assert (tally.correct, tally.incorrect) == (expected[(task, scheme, True)], expected[(task, scheme, False)])
     assert data.tally("pairwise", ALL, SCHEMES[0]).n == 3 * analysed
     assert sum(sum(c.values()) for c in data.ratings["difficulty"].values()) == ratings["difficulty"]
-    assert sum(sum(c.values()) for c in data.ratings["easy_middle_best"].values()) == ratings["easy_middle_best"] \
-        == 2 * analysed  # one ranking per scheme
+    assert (
+        sum(sum(c.values()) for c in data.ratings["easy_middle_best"].values())
+        == ratings["easy_middle_best"]
+        == 2 * analysed
+    )  # one ranking per scheme
     # The misleading clip shows the worst robot doing well; bots judge what they see, not the ground truth.
     assert misleading_answers and set(misleading_answers) == {SECRET_NAMES["lo"]}
     render_report(data, tmp_path / "report")
@@ -138,37 +144,93 @@ def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
     assert "2 participants" in out and (tmp_path / "report" / "report.html").exists()
     assert (tmp_path / "export" / "wide.csv").read_text().count("\n") == 3
     # the bots are left out of the analysis unless asked for
-    assert json.loads((tmp_path / "export" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] \
-        == ["real"]
-    assert main(["export", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "with-bots"),
-                 "--include", "bot"]) == 0
-    assert json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] \
-        == ["real", "bot"]
+    assert json.loads((tmp_path / "export" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] == [
+        "real"
+    ]
+    assert (
+        main(
+            [
+                "export",
+                "--db",
+                db_url,
+                "--study",
+                str(study_file),
+                "--out",
+                str(tmp_path / "with-bots"),
+                "--include",
+                "bot",
+            ]
+        )
+        == 0
+    )
+    assert json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] == [
+        "real",
+        "bot",
+    ]
     # with the bundle, each clip's accuracy stands beside its audit; a folder without a manifest is refused
     audited = tmp_path / "audited-bundle"
     shutil.copytree(bundle_dir, audited)
     manifest = json.loads((audited / "manifest.json").read_text())
     manifest["clips"][0]["audit"] = {"shows": "worse", "why": "Robot 9 bumped into a person early."}
     (audited / "manifest.json").write_text(json.dumps(manifest))
-    assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "audited"),
-                 "--include", "bot", "--bundle", str(audited)]) == 0
+    assert (
+        main(
+            [
+                "report",
+                "--db",
+                db_url,
+                "--study",
+                str(study_file),
+                "--out",
+                str(tmp_path / "audited"),
+                "--include",
+                "bot",
+                "--bundle",
+                str(audited),
+            ]
+        )
+        == 0
+    )
     assert "Robot 9 bumped into a person early." in (tmp_path / "audited" / "report.html").read_text()
-    for bad in (["--include", "robots"], ["--bundle", str(tmp_path / "nowhere")], ["--min-seconds", "nan"],
-                ["--min-seconds", "inf"], ["--min-seconds", "-1"]):
+    for bad in (
+        ["--include", "robots"],
+        ["--bundle", str(tmp_path / "nowhere")],
+        ["--min-seconds", "nan"],
+        ["--min-seconds", "inf"],
+        ["--min-seconds", "-1"],
+    ):
         assert main(["report", "--db", db_url, "--study", str(study_file), "--out", str(tmp_path / "x"), *bad]) == 2
     # errors are named, not raised
-    assert main(["report", "--db", f"sqlite:///{tmp_path / 'nope.sqlite3'}", "--study", str(study_file),
-                 "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(
+            [
+                "report",
+                "--db",
+                f"sqlite:///{tmp_path / 'nope.sqlite3'}",
+                "--study",
+                str(study_file),
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 2
+    )
     assert main(["simulate", "--url", url, "--participants", "1"]) == 2
     assert "--bundle DIR" in capsys.readouterr().err
 
 
 def test_observer_judges_visible_outcomes():
     observer = Observer(noise=0.0)
-    clip = VisibleClip(labels=("Robot 1", "Robot 2", "Robot 3"), end_s=20.0, progress=(0.0, 0.0, 0.5),
-                       outcomes=({"event": "success", "time": 10.0, "min_human_distance": 1.0},
-                                 {"event": "collision", "time": 3.0},
-                                 {"event": "timeout", "time": 20.0, "min_human_distance": 0.3}))
+    clip = VisibleClip(
+        labels=("Robot 1", "Robot 2", "Robot 3"),
+        end_s=20.0,
+        progress=(0.0, 0.0, 0.5),
+        outcomes=(
+            {"event": "success", "time": 10.0, "min_human_distance": 1.0},
+            {"event": "collision", "time": 3.0},
+            {"event": "timeout", "time": 20.0, "min_human_distance": 0.3},
+        ),
+    )
     scores = clip.scores(observer)
     assert scores == {"Robot 1": 2.5, "Robot 2": -1.0, "Robot 3": pytest.approx(0.5 - 2 * 0.2)}
     assert clip.describe("Robot 2") == "Robot 2 bumped into a person."

@@ -15,7 +15,7 @@ def test_wilson_interval_textbook_values():
     assert wilson_interval(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
     assert wilson_interval(10, 10) == pytest.approx((0.7225, 1.0), abs=1e-4)
     assert wilson_interval(5, 10) == pytest.approx((0.2366, 0.7634), abs=1e-4)
-    z2 = 1.959963984540054 ** 2
+    z2 = 1.959963984540054**2
     assert wilson_interval(0, 120)[1] == pytest.approx(z2 / (120 + z2))
     assert wilson_interval(0, 0) is None
     with pytest.raises(ValueError):

@@ -56,7 +56,7 @@ def finished_and_halfway(client) -> tuple[TestClient, str]:
 def test_progress_median_participant_view_exclusion_and_csv(make_client):
     client = make_client(BALANCED)
     halfway, page = finished_and_halfway(client)
-    evil = "<script>alert(1)</script>=HYPERLINK(\"http://x\")"
+    evil = '<script>alert(1)</script>=HYPERLINK("http://x")'
     halfway.post("/study", data={**answer_for(page), "justification": evil})
 
     log_in(client)
@@ -73,15 +73,24 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in detail and "<script>alert(1)" not in detail
     assert "half2" in detail
     token = FormReader(detail).hidden["csrf_token"]
-    assert client.post(f"/admin/participants/{started.code}/exclusion",
-                       data={"excluded": "1", "note": "too fast"}).status_code == 403
-    saved = client.post(f"/admin/participants/{started.code}/exclusion",
-                        data={"csrf_token": token, "excluded": "1", "note": "too fast"})
+    assert (
+        client.post(
+            f"/admin/participants/{started.code}/exclusion", data={"excluded": "1", "note": "too fast"}
+        ).status_code
+        == 403
+    )
+    saved = client.post(
+        f"/admin/participants/{started.code}/exclusion", data={"csrf_token": token, "excluded": "1", "note": "too fast"}
+    )
     assert saved.status_code == 200
     person = stored(client, Participant)[1]
     assert person.excluded and person.exclusion_note == "too fast"
-    assert client.post(f"/admin/participants/{started.code}/exclusion",
-                       data={"csrf_token": token, "excluded": "maybe"}).status_code == 400
+    assert (
+        client.post(
+            f"/admin/participants/{started.code}/exclusion", data={"csrf_token": token, "excluded": "maybe"}
+        ).status_code
+        == 400
+    )
     assert client.get("/admin/participants/nobody").status_code == 404
 
     export = client.get("/admin/export.csv")
@@ -106,7 +115,9 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
         people = list(csv.DictReader(io.StringIO(zipped.read("paper-export/participants.csv").decode())))
     assert names == ["codebook.json", "codebook.md", "long.csv", "participants.csv", "wide.csv"]
     assert [(p["participant"].removeprefix("'"), p["flagged_by_admin"], p["excluded"]) for p in people] == [
-        (finished.code, "0", "0"), (started.code, "1", "1")]
+        (finished.code, "0", "0"),
+        (started.code, "1", "1"),
+    ]
 
     report = client.get("/admin/report")
     assert report.status_code == 200 and "Table 1" in report.text and "<script" not in report.text
@@ -131,8 +142,11 @@ def test_participant_page_names_screens_as_the_participant_saw_them(make_client)
     log_in(client)
 
     detail = client.get(f"/admin/participants/{finished.code}").text
-    cells = [cell.split("</td>")[0] for cell in detail.split("<tbody>")[1].split("<tr>")[1:] for cell in
-             [cell.split("<td>", 1)[1]]]
+    cells = [
+        cell.split("</td>")[0]
+        for cell in detail.split("<tbody>")[1].split("<tr>")[1:]
+        for cell in [cell.split("<td>", 1)[1]]
+    ]
     assert cells[0] == "Instructions"
     assert "Part 1 of 2, clip 1 of 6" in cells and "Part 1 of 2, clip 6 of 6" in cells
     assert "Part 2 of 2, round 1 of 2, clip 3 of 3" in cells and "Part 2 of 2, round 2 of 2, ranking" in cells

@@ -51,8 +51,14 @@ def test_a_changed_password_invalidates_earlier_admin_cookies(make_client, tmp_p
     assert log_in(client).status_code == 200
     captured = client.cookies["foil_session"]
     settings = client.app.state.context.settings
-    restarted = create_app(Settings(bundle_dir=bundle_dir, study_file=settings.study_file, database_url=database_url,
-                                    admin_password="a different admin password"))
+    restarted = create_app(
+        Settings(
+            bundle_dir=bundle_dir,
+            study_file=settings.study_file,
+            database_url=database_url,
+            admin_password="a different admin password",
+        )
+    )
     try:
         after = TestClient(restarted, follow_redirects=False)
         after.cookies.set("foil_session", captured)  # the same cookie key (kept in the database)
@@ -60,6 +66,7 @@ def test_a_changed_password_invalidates_earlier_admin_cookies(make_client, tmp_p
         assert log_in(TestClient(restarted), "a different admin password").status_code == 200
     finally:
         restarted.state.context.db.dispose()
+
 
 @pytest.mark.slow  # waits out the delays
 def test_password_guessing_is_slowed_per_client_with_growing_delays(make_client, caplog):

@@ -33,20 +33,23 @@ def assert_rejected(client, data: dict, message: str) -> None:
     assert len(stored(client, Response)) == before and stored(client, Participant)[0].step == step
 
 
-@pytest.mark.parametrize("field, value, message", [
-    ("better", None, "Choose one of the robots."),
-    ("better", "Robot 9", "That robot is not in this clip."),
-    ("justification", None, "Please write an answer."),
-    ("justification", "   \n ", "Please write an answer."),
-    ("justification", "x" * 2001, "Please keep this under 2000 characters"),
-    ("difficulty", None, "Choose one point on the scale."),
-    ("difficulty", "0", "whole number from 1 to 9"),
-    ("difficulty", "10", "whole number from 1 to 9"),
-    ("difficulty", "4.5", "whole number from 1 to 9"),
-    ("video_events", "[]", "Please watch the clip to the end"),
-    ("video_events", '[{"type": "ended"}]', "malformed record"),
-    ("video_events", "not json", "malformed record"),
-])
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("better", None, "Choose one of the robots."),
+        ("better", "Robot 9", "That robot is not in this clip."),
+        ("justification", None, "Please write an answer."),
+        ("justification", "   \n ", "Please write an answer."),
+        ("justification", "x" * 2001, "Please keep this under 2000 characters"),
+        ("difficulty", None, "Choose one point on the scale."),
+        ("difficulty", "0", "whole number from 1 to 9"),
+        ("difficulty", "10", "whole number from 1 to 9"),
+        ("difficulty", "4.5", "whole number from 1 to 9"),
+        ("video_events", "[]", "Please watch the clip to the end"),
+        ("video_events", '[{"type": "ended"}]', "malformed record"),
+        ("video_events", "not json", "malformed record"),
+    ],
+)
 def test_every_invalid_pairwise_answer_is_rejected_and_nothing_saved(make_client, field, value, message):
     client = make_client(BALANCED)
     good = answer_for(at_first_clip(client))
@@ -56,11 +59,14 @@ def test_every_invalid_pairwise_answer_is_rejected_and_nothing_saved(make_client
     assert len(stored(client, Response)) == 2
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"ranking-2": None}, "Put a robot in every place"),
-    ({"ranking-2": "same-as-1"}, "has a robot twice"),
-    ({"ranking-3": "Robot 7"}, "not in this study"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"ranking-2": None}, "Put a robot in every place"),
+        ({"ranking-2": "same-as-1"}, "has a robot twice"),
+        ({"ranking-3": "Robot 7"}, "not in this study"),
+    ],
+)
 def test_invalid_rankings_are_rejected(make_client, change, message):
     client = make_client(BALANCED)
     good = answer_for(at_first_ranking(client))
@@ -163,8 +169,11 @@ def test_oversized_requests_are_refused(make_client):
     good = answer_for(at_first_clip(client))
     response = client.post("/study", data={**good, "justification": "x" * 70_000})
     assert response.status_code == 413 and "at most" in response.text
-    chunked = client.post("/study", content=iter([b"a=" + b"x" * 40_000, b"x" * 40_000]),
-                          headers={"content-type": "application/x-www-form-urlencoded"})
+    chunked = client.post(
+        "/study",
+        content=iter([b"a=" + b"x" * 40_000, b"x" * 40_000]),
+        headers={"content-type": "application/x-www-form-urlencoded"},
+    )
     assert chunked.status_code == 413
     assert len(stored(client, Response)) == 1
 

@@ -30,8 +30,10 @@ def test_paper_conditions_are_scheme_order_times_scenario_order():
     study = load_study(PAPER_STUDY)
     found = conditions(study)
     assert [(c.schemes, c.rotation) for c in found] == [
-        (("adaptive", "nfirst"), 0), (("adaptive", "nfirst"), 1),
-        (("nfirst", "adaptive"), 0), (("nfirst", "adaptive"), 1),
+        (("adaptive", "nfirst"), 0),
+        (("adaptive", "nfirst"), 1),
+        (("nfirst", "adaptive"), 0),
+        (("nfirst", "adaptive"), 1),
     ]
     assert found[1].describe(study) == "adaptive then nfirst; part 1: paper-tl-br, part 2: paper-bl-tr"
 

@@ -60,10 +60,17 @@ def test_manifest_entry_with_bad_ground_truth(bundle_copy):
 
 
 def test_a_clip_the_study_needs_is_missing(bundle_copy):
-    edit_manifest(bundle_copy, lambda m: m.update(clips=[c for c in m["clips"] if c["scheme"] != "schemenfirstsecret"
-                                                         or c["scenario"] != "scenariotwosecret"]))
-    with pytest.raises(BundleError, match="needs a clip of scheme 'schemenfirstsecret', scenario "
-                                          "'scenariotwosecret', agents 'agentlowsecret' and 'agentmedsecret'"):
+    edit_manifest(
+        bundle_copy,
+        lambda m: m.update(
+            clips=[c for c in m["clips"] if c["scheme"] != "schemenfirstsecret" or c["scenario"] != "scenariotwosecret"]
+        ),
+    )
+    with pytest.raises(
+        BundleError,
+        match="needs a clip of scheme 'schemenfirstsecret', scenario "
+        "'scenariotwosecret', agents 'agentlowsecret' and 'agentmedsecret'",
+    ):
         check_study_against_bundle(parse_study(study_text()), load_bundle(bundle_copy))
 
 
@@ -83,9 +90,12 @@ def test_a_video_attention_checks_clip_must_be_in_the_bundle(bundle_dir):
     present = parse_study(study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret")))
     check_study_against_bundle(present, bundle)
     missing = parse_study(study_text(contact=VIDEO_CHECK.format(scheme="schemeadaptivesecret")))
-    with pytest.raises(BundleError, match=r"attention_checks\[0\] \(a video attention check's clip\) needs a clip of "
-                                          "scheme 'schemeadaptivesecret', scenario 'scenarioexamplesecret', agents "
-                                          "'agentlowsecret' and 'agenthighsecret'; the manifest has none"):
+    with pytest.raises(
+        BundleError,
+        match=r"attention_checks\[0\] \(a video attention check's clip\) needs a clip of "
+        "scheme 'schemeadaptivesecret', scenario 'scenarioexamplesecret', agents "
+        "'agentlowsecret' and 'agenthighsecret'; the manifest has none",
+    ):
         check_study_against_bundle(missing, bundle)
 
 

@@ -16,8 +16,7 @@ from tests.support.survey import ADMIN_PASSWORD, CLOSING, PAPER_STUDY, FormReade
 
 
 def closing_client(make_client, required: str = "[]") -> TestClient:
-    return make_client({"platform": '"none"', "assignment": '"balanced"',
-                        "contact": CLOSING.format(required=required)})
+    return make_client({"platform": '"none"', "assignment": '"balanced"', "contact": CLOSING.format(required=required)})
 
 
 def to_closing(client: TestClient) -> str:
@@ -72,45 +71,62 @@ def test_closing_answers_are_checked_stored_and_exported(make_client, tmp_path):
     with open(tmp_path / "out" / "long.csv", encoding="utf-8", newline="") as handle:
         rows = [r for r in csv.DictReader(handle) if r["screen"] == "closing"]
     assert {r["question"]: (r["question_type"], restore(r["answer"]), r["value"]) for r in rows} == {
-        "age_range": ("choice", "30-49", ""), "confidence": ("scale", "4", "4"), "feedback": ("text", typed, "")}
+        "age_range": ("choice", "30-49", ""),
+        "confidence": ("scale", "4", "4"),
+        "feedback": ("text", typed, ""),
+    }
     assert all(r["part"] == "" and r["correct"] == "" for r in rows)
     with open(tmp_path / "out" / "wide.csv", encoding="utf-8", newline="") as handle:
         (wide,) = list(csv.DictReader(handle))
     assert (wide["closing_age_range"], wide["closing_robot_experience"], wide["closing_confidence"]) == (
-        "30-49", "", "4")
+        "30-49",
+        "",
+        "4",
+    )
     assert restore(wide["closing_feedback"]) == typed
     book = json.loads((tmp_path / "out" / "codebook.json").read_text())
     assert book["questions"]["age_range"] == {
-        "type": "choice", "text": "Your age", "options": ["18-29", "30-49", "50 or older", "Prefer not to say"],
-        "asked": "closing", "required": True}
+        "type": "choice",
+        "text": "Your age",
+        "options": ["18-29", "30-49", "50 or older", "Prefer not to say"],
+        "asked": "closing",
+        "required": True,
+    }
     assert book["questions"]["feedback"]["text"] == "Anything you want to tell the researchers?"
     assert book["questions"]["robot_experience"]["required"] is False
     assert "closing_feedback" in [c["name"] for c in book["files"]["wide.csv"]["columns"]]
-    assert "options: 18-29; 30-49; 50 or older; Prefer not to say; closing screen, required" in (
-        tmp_path / "out" / "codebook.md").read_text()
+    assert (
+        "options: 18-29; 30-49; 50 or older; Prefer not to say; closing screen, required"
+        in (tmp_path / "out" / "codebook.md").read_text()
+    )
 
     log = TestClient(client.app)
     login = log.get("/admin/login")
-    log.post("/admin/login", data={"csrf_token": FormReader(login.text).hidden["csrf_token"],
-                                   "password": ADMIN_PASSWORD})
+    log.post(
+        "/admin/login", data={"csrf_token": FormReader(login.text).hidden["csrf_token"], "password": ADMIN_PASSWORD}
+    )
     detail = log.get(f"/admin/participants/{person.code}").text
     assert "Last screen: closing questions" in detail and "30-49" in detail
 
 
-@pytest.mark.parametrize(("closing", "message"), [
-    ('[closing]\nquestions = ["nowhere"]', "closing.questions[0]: no question named 'nowhere'"),
-    ('[closing]\nquestions = ["ranking"]', "a 'rank' question cannot be asked on the closing screen"),
-    ('[closing]\nfeedback = "Tell us"\nrequired = ["age"]', "'age' is not asked on the closing screen"),
-    ("[closing]\ntitle = \"Last\"", "give closing questions, a feedback question, or both"),
-])
+@pytest.mark.parametrize(
+    ("closing", "message"),
+    [
+        ('[closing]\nquestions = ["nowhere"]', "closing.questions[0]: no question named 'nowhere'"),
+        ('[closing]\nquestions = ["ranking"]', "a 'rank' question cannot be asked on the closing screen"),
+        ('[closing]\nfeedback = "Tell us"\nrequired = ["age"]', "'age' is not asked on the closing screen"),
+        ('[closing]\ntitle = "Last"', "give closing questions, a feedback question, or both"),
+    ],
+)
 def test_closing_table_mistakes_are_named(closing, message):
     with pytest.raises(StudyError, match=message.replace("[", r"\[").replace("]", r"\]")):
         parse_study(study_text(contact='""\n' + closing))
 
 
 def test_choice_questions_are_refused_in_parts():
-    text = study_text().replace('[questions.better]\ntype = "choose"', '[questions.better]\ntype = "choice"\n'
-                                'options = ["a", "b"]')
+    text = study_text().replace(
+        '[questions.better]\ntype = "choose"', '[questions.better]\ntype = "choice"\noptions = ["a", "b"]'
+    )
     with pytest.raises(StudyError, match="a 'choice' question cannot be asked in a pairwise part"):
         parse_study(text)
 

@@ -8,8 +8,11 @@ from fastapi.testclient import TestClient
 from app.models import Participant, Response
 from tests.support.survey import SECRET_NAMES, FormReader, answer_for, finish, start, stored
 
-PROLIFIC = {"platform": '"prolific"', "assignment": '"balanced"',
-            "redirect_url": '"https://app.prolific.com/submissions/complete?cc=FOIL-PAPER-7Q2K"'}
+PROLIFIC = {
+    "platform": '"prolific"',
+    "assignment": '"balanced"',
+    "redirect_url": '"https://app.prolific.com/submissions/complete?cc=FOIL-PAPER-7Q2K"',
+}
 PROLIFIC_LINK = "?PROLIFIC_PID=pid{n}&STUDY_ID=study1&SESSION_ID=session{n}"
 
 
@@ -110,8 +113,9 @@ def test_coming_back_resumes_and_a_finished_participant_cannot_retake(make_clien
     third_browser = TestClient(client.app)
     again = third_browser.get("/" + PROLIFIC_LINK.format(n=7))
     assert "FOIL-PAPER-7Q2K" in again.text and "step" not in FormReader(again.text).hidden
-    forced = third_browser.post("/consent", data={"csrf_token": FormReader(again.text).hidden.get("csrf_token", ""),
-                                                  "choice": "agree"})
+    forced = third_browser.post(
+        "/consent", data={"csrf_token": FormReader(again.text).hidden.get("csrf_token", ""), "choice": "agree"}
+    )
     assert forced.status_code in (200, 403) and "step" not in FormReader(forced.text).hidden
     assert len(stored(client, Participant)) == 1
 
@@ -143,8 +147,7 @@ def test_platform_link_without_id_is_refused_clearly(make_client):
 def test_decline_ends_politely(make_client):
     client = make_client(PROLIFIC)
     page = client.get("/" + PROLIFIC_LINK.format(n=2))
-    done = client.post("/consent", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
-                                         "choice": "decline"})
+    done = client.post("/consent", data={"csrf_token": FormReader(page.text).hidden["csrf_token"], "choice": "decline"})
     assert "You chose not to take part" in done.text
     (person,) = stored(client, Participant)
     assert person.status == "declined" and person.slot is None and person.plan is None
@@ -170,13 +173,19 @@ def test_desktop_only_study_turns_phones_away(make_client):
 
 
 def test_attention_check_is_placed_and_scored(make_client, tmp_path):
-    client = make_client({"platform": '"none"', "assignment": '"balanced"', "contact": '''""
+    client = make_client(
+        {
+            "platform": '"none"',
+            "assignment": '"balanced"',
+            "contact": '''""
 [[attention_checks]]
 part = 1
 after = 2
 text = "Please choose Agree."
 options = ["Disagree", "Agree"]
-expected = "Agree"'''})
+expected = "Agree"''',
+        }
+    )
     page = start(client)
     seen = walk(client, page)
     (person,) = stored(client, Participant)

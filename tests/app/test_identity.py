@@ -15,10 +15,16 @@ from app.models import Participant, Response
 from tests.support.survey import FormReader, answer_for, start, stored
 
 PLATFORMS = {
-    "prolific": ({"platform": '"prolific"', "assignment": '"balanced"'},
-                 "?PROLIFIC_PID={id}&STUDY_ID={study}&SESSION_ID={session}", "?PROLIFIC_PID={id}"),
-    "mturk": ({"platform": '"mturk"', "assignment": '"balanced"'},
-              "?workerId={id}&hitId={study}&assignmentId={session}", "?workerId={id}"),
+    "prolific": (
+        {"platform": '"prolific"', "assignment": '"balanced"'},
+        "?PROLIFIC_PID={id}&STUDY_ID={study}&SESSION_ID={session}",
+        "?PROLIFIC_PID={id}",
+    ),
+    "mturk": (
+        {"platform": '"mturk"', "assignment": '"balanced"'},
+        "?workerId={id}&hitId={study}&assignmentId={session}",
+        "?workerId={id}",
+    ),
 }
 
 

@@ -36,15 +36,27 @@ def test_an_installed_wheel_serves_pages_and_static_files(tmp_path, bundle_dir):
         kwargs = {"ignore": shutil.ignore_patterns("__pycache__")} if (REPO / name).is_dir() else {}
         copy(REPO / name, source / name, **kwargs)
     env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH" and not key.startswith("FOIL_")}
-    run(sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--wheel-dir", tmp_path / "dist",
-        ".", cwd=source, env=env)
+    run(
+        sys.executable,
+        "-m",
+        "pip",
+        "wheel",
+        "--no-deps",
+        "--no-build-isolation",
+        "--wheel-dir",
+        tmp_path / "dist",
+        ".",
+        cwd=source,
+        env=env,
+    )
     (wheel,) = (tmp_path / "dist").glob("foil-*.whl")
 
     venv = tmp_path / "venv"
     run(sys.executable, "-m", "venv", "--without-pip", venv, cwd=tmp_path, env=env)
     python = venv / "bin" / "python"
-    site = Path(run(python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])", cwd=tmp_path,
-                    env=env).strip())
+    site = Path(
+        run(python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])", cwd=tmp_path, env=env).strip()
+    )
     (site / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")  # after the venv's own
     run(python, "-m", "pip", "install", "--no-deps", "--no-index", wheel, cwd=tmp_path, env=env)
     shutil.rmtree(source)
@@ -55,9 +67,24 @@ def test_an_installed_wheel_serves_pages_and_static_files(tmp_path, bundle_dir):
     study.write_text(study_text(platform='"none"'))
     port = free_port()
     with (tmp_path / "server.log").open("w") as log:
-        server = subprocess.Popen([venv / "bin" / "foil", "serve", "--bundle", bundle_dir, "--study", study,
-                                   "--db", f"sqlite:///{tmp_path / 'survey.sqlite3'}", "--port", str(port)],
-                                  cwd=tmp_path, env=env, stdout=log, stderr=subprocess.STDOUT)
+        server = subprocess.Popen(
+            [
+                venv / "bin" / "foil",
+                "serve",
+                "--bundle",
+                bundle_dir,
+                "--study",
+                study,
+                "--db",
+                f"sqlite:///{tmp_path / 'survey.sqlite3'}",
+                "--port",
+                str(port),
+            ],
+            cwd=tmp_path,
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
     try:
         url = f"http://127.0.0.1:{port}"
         deadline = time.monotonic() + 60

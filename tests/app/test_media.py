@@ -40,10 +40,14 @@ def test_range_requests_get_206(client_and_clip):
 def test_ranges_are_the_same_from_memory_and_from_the_file(client_and_clip, kept_bytes):
     client, url, data = client_and_clip
     client.app.state.context.kept_clips.limit = kept_bytes
-    for asked, first, last in [("0-1023", 0, 1023), ("0-", 0, len(data) - 1), ("100-199", 100, 199),
-                               (f"10-{len(data) + 50}", 10, len(data) - 1)]:
+    for asked, first, last in [
+        ("0-1023", 0, 1023),
+        ("0-", 0, len(data) - 1),
+        ("100-199", 100, 199),
+        (f"10-{len(data) + 50}", 10, len(data) - 1),
+    ]:
         part = client.get(url, headers={"range": f"bytes={asked}"})
-        assert part.status_code == 206 and part.content == data[first:last + 1]
+        assert part.status_code == 206 and part.content == data[first : last + 1]
         assert part.headers["content-range"] == f"bytes {first}-{last}/{len(data)}"
     assert client.get(url, headers={"range": f"bytes={len(data)}-"}).status_code == 416
     assert bool(client.app.state.context.kept_clips.clips) == bool(kept_bytes)
@@ -56,11 +60,19 @@ def test_clips_carry_no_session(client_and_clip):
     assert "set-cookie" not in response.headers and "cookie" not in response.headers.get("vary", "").lower()
 
 
-@pytest.mark.parametrize("path", [
-    "/clips/../manifest.json", "/clips/..%2Fmanifest.json", "/clips/%2e%2e%2fmanifest.json",
-    "/clips/" + "0" * 64 + ".mp4", "/clips/manifest.json", "/clips/000.mp4", "/static/../app/settings.py",
-    "/static/%2e%2e/app/settings.py",
-])
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/clips/../manifest.json",
+        "/clips/..%2Fmanifest.json",
+        "/clips/%2e%2e%2fmanifest.json",
+        "/clips/" + "0" * 64 + ".mp4",
+        "/clips/manifest.json",
+        "/clips/000.mp4",
+        "/static/../app/settings.py",
+        "/static/%2e%2e/app/settings.py",
+    ],
+)
 def test_nothing_outside_the_listed_clips_is_served(client_and_clip, path):
     client, _, _ = client_and_clip
     response = client.get(path)

@@ -33,24 +33,34 @@ def test_upgrade_from_the_first_revision_keeps_data(database_url):
     migrate(database_url, "0001")
     engine = create_engine(database_url)
     with engine.begin() as connection:
-        connection.execute(text(
-            "INSERT INTO participant (id, code, study, platform, external_id, status, step, step_started_at, "
-            "user_agent, created_at, \"plan\") VALUES (1, 'abc', 'paper', 'prolific', 'P1', 'started', 0, "
-            "'2024-01-01 00:00:00', '', '2024-01-01 00:00:00', '[{\"kind\": \"instructions\"}]')"))
-        connection.execute(text(  # declined: no plan
-            "INSERT INTO participant (id, code, study, platform, external_id, status, step, step_started_at, "
-            "user_agent, created_at) VALUES (2, 'def', 'paper', 'prolific', 'P2', 'declined', 0, "
-            "'2024-01-01 00:00:00', '', '2024-01-01 00:00:00')"))
-        connection.execute(text(
-            "INSERT INTO response (participant_id, step, kind, answers, video_events, plays, server_ms, "
-            "submitted_at) VALUES (1, 0, 'instructions', '{}', '[]', 0, 10, '2024-01-01 00:00:05')"))
+        connection.execute(
+            text(
+                "INSERT INTO participant (id, code, study, platform, external_id, status, step, step_started_at, "
+                "user_agent, created_at, \"plan\") VALUES (1, 'abc', 'paper', 'prolific', 'P1', 'started', 0, "
+                "'2024-01-01 00:00:00', '', '2024-01-01 00:00:00', '[{\"kind\": \"instructions\"}]')"
+            )
+        )
+        connection.execute(
+            text(  # declined: no plan
+                "INSERT INTO participant (id, code, study, platform, external_id, status, step, step_started_at, "
+                "user_agent, created_at) VALUES (2, 'def', 'paper', 'prolific', 'P2', 'declined', 0, "
+                "'2024-01-01 00:00:00', '', '2024-01-01 00:00:00')"
+            )
+        )
+        connection.execute(
+            text(
+                "INSERT INTO response (participant_id, step, kind, answers, video_events, plays, server_ms, "
+                "submitted_at) VALUES (1, 0, 'instructions', '{}', '[]', 0, 10, '2024-01-01 00:00:05')"
+            )
+        )
     with pytest.raises(DatabaseError, match="revision 0001"):
         check_migrated(engine)
     migrate(database_url)
     check_migrated(engine)
     with engine.connect() as connection:
-        rows = connection.execute(text(
-            "SELECT code, excluded, exclusion_note, attention_failures FROM participant ORDER BY id")).all()
+        rows = connection.execute(
+            text("SELECT code, excluded, exclusion_note, attention_failures FROM participant ORDER BY id")
+        ).all()
         assert [tuple(row) for row in rows] == [("abc", False, "", 0), ("def", False, "", 0)]
         assert connection.execute(text("SELECT count(*) FROM response")).scalar() == 1
     with Session(engine) as session:
@@ -61,7 +71,9 @@ def test_upgrade_from_the_first_revision_keeps_data(database_url):
         plans = connection.execute(text('SELECT "plan" FROM participant ORDER BY id')).scalars().all()
         # SQLite hands back the JSON text, psycopg the decoded value
         assert [json.loads(plan) if isinstance(plan, str) else plan for plan in plans] == [
-            [{"kind": "instructions"}], None]
+            [{"kind": "instructions"}],
+            None,
+        ]
     engine.dispose()
 
 

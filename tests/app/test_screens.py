@@ -61,8 +61,11 @@ def test_stored_plans_read_and_write_back_byte_for_byte():
 
 
 def test_a_new_plan_is_stored_with_the_keys_of_a_stored_one_in_the_same_order(bundle_dir):
-    text = study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret")) + ATTENTION + CLOSING.format(
-        required="[]").removeprefix('""')
+    text = (
+        study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret"))
+        + ATTENTION
+        + CLOSING.format(required="[]").removeprefix('""')
+    )
     study = parse_study(text)
     plan = build_plan(study, load_bundle(bundle_dir), conditions(study)[0], random.Random(4))
     assert {type(screen) for screen in plan} >= {Pairwise, Watch, Ranking, Attention}
@@ -73,11 +76,14 @@ def test_a_new_plan_is_stored_with_the_keys_of_a_stored_one_in_the_same_order(bu
         assert list(screen) == stored[variant(screen)]
 
 
-@pytest.mark.parametrize(("plan", "message"), [
-    ([{"kind": "video"}], "tag 'video' found using 'kind' does not match"),
-    ([{"kind": "pairwise", "part": 1}], r"0\.pairwise\.clip\n  Field required"),
-    ([{"kind": "instructions", "colour": "red"}], r"0\.instructions\.colour\n  Extra inputs are not permitted"),
-])
+@pytest.mark.parametrize(
+    ("plan", "message"),
+    [
+        ([{"kind": "video"}], "tag 'video' found using 'kind' does not match"),
+        ([{"kind": "pairwise", "part": 1}], r"0\.pairwise\.clip\n  Field required"),
+        ([{"kind": "instructions", "colour": "red"}], r"0\.instructions\.colour\n  Extra inputs are not permitted"),
+    ],
+)
 def test_a_stored_plan_that_is_not_one_is_refused_with_the_field_named(plan, message):
     with pytest.raises(ValidationError, match=message):
         parse_plan(plan)

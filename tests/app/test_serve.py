@@ -22,8 +22,17 @@ def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):
     study = tmp_path / "study.toml"
     study.write_text(study_text(platform='"none"'))
     port = free_port()
-    server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", str(port),
-                  cwd=tmp_path, env_extra={"FOIL_ADMIN_PASSWORD": "a long enough password"})
+    server = foil(
+        "serve",
+        "--bundle",
+        str(bundle_dir),
+        "--study",
+        str(study),
+        "--port",
+        str(port),
+        cwd=tmp_path,
+        env_extra={"FOIL_ADMIN_PASSWORD": "a long enough password"},
+    )
     try:
         deadline = time.monotonic() + 30
         while True:
@@ -59,12 +68,24 @@ def test_a_port_in_use_is_one_line_with_the_port_hint_and_changes_no_database(tm
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", str(port),
-                      "--db", f"sqlite:///{tmp_path / 'survey.sqlite3'}", cwd=tmp_path)
+        server = foil(
+            "serve",
+            "--bundle",
+            str(bundle_dir),
+            "--study",
+            str(study),
+            "--port",
+            str(port),
+            "--db",
+            f"sqlite:///{tmp_path / 'survey.sqlite3'}",
+            cwd=tmp_path,
+        )
         output, _ = server.communicate(timeout=60)
     assert server.returncode == 2
-    assert output.strip().splitlines() == [f"foil serve: error: port {port} on 127.0.0.1 is already in use (another "
-                                           "foil serve?): stop that server or choose another port with --port"]
+    assert output.strip().splitlines() == [
+        f"foil serve: error: port {port} on 127.0.0.1 is already in use (another "
+        "foil serve?): stop that server or choose another port with --port"
+    ]
     assert not (tmp_path / "survey.sqlite3").exists()  # nothing migrated
 
 
@@ -75,8 +96,14 @@ def test_make_demo_prints_a_generated_admin_password_and_serves_with_it(tmp_path
     env = {key: value for key, value in os.environ.items() if key != "FOIL_ADMIN_PASSWORD"}
 
     def make(*args: str, **extra: str) -> str:
-        return subprocess.run(["make", "-s", *args, f"DEMO_BUNDLE={demo}"], cwd=REPO, env={**env, **extra},
-                              capture_output=True, text=True, check=True).stdout
+        return subprocess.run(
+            ["make", "-s", *args, f"DEMO_BUNDLE={demo}"],
+            cwd=REPO,
+            env={**env, **extra},
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
 
     first = make("demo-password")
     saved = Path(f"{demo}.admin-password")
@@ -91,9 +118,11 @@ def test_make_demo_prints_a_generated_admin_password_and_serves_with_it(tmp_path
 
 
 def test_the_server_never_imports_search_torch_or_the_highway_packages():
-    code = ("import sys, app.main, app.serve; "
-            "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch', 'highway_env', 'pygame', "
-            "'stable_baselines3', 'gymnasium')]; print(bad); "
-            "sys.exit(1 if bad else 0)")
+    code = (
+        "import sys, app.main, app.serve; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch', 'highway_env', 'pygame', "
+        "'stable_baselines3', 'gymnasium')]; print(bad); "
+        "sys.exit(1 if bad else 0)"
+    )
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr

@@ -36,8 +36,10 @@ def test_build_table_is_checked_and_a_second_set_is_found_at_its_line():
     with pytest.raises(StudyError) as error:
         parse_study(text, "paper.toml")
     line = line_of(text, "[[build.sets]]               # the instructions page")
-    assert str(error.value) == (f"paper.toml, line {line}, build.sets[1]: give either agents = [...] (every pair of "
-                                "them) or pairs = [[a, b], ...]")
+    assert str(error.value) == (
+        f"paper.toml, line {line}, build.sets[1]: give either agents = [...] (every pair of "
+        "them) or pairs = [[a, b], ...]"
+    )
 
 
 def test_unknown_top_level_key_is_rejected_with_its_line():
@@ -55,14 +57,16 @@ def test_misspelt_field_in_a_part_names_line_and_field():
 
 
 def test_bad_scale_points_and_labels_name_the_question():
-    text = PAPER.replace("points = 9\nanchors = [\"Very Easy\"", "points = 1\nanchors = [\"Very Easy\"")
+    text = PAPER.replace('points = 9\nanchors = ["Very Easy"', 'points = 1\nanchors = ["Very Easy"')
     with pytest.raises(StudyError) as error:
         parse_study(text)
     message = str(error.value)
     assert "questions.difficulty.points" in message and f"line {line_of(text, 'points = 1')}" in message
-    text = PAPER.replace('labels = ["Strongly disagree", "Disagree", "Neither agree nor disagree", "Agree", '
-                         '"Strongly agree"]\n\n[questions.easy_middle_best]',
-                         'labels = ["No", "Yes"]\n\n[questions.easy_middle_best]')
+    text = PAPER.replace(
+        'labels = ["Strongly disagree", "Disagree", "Neither agree nor disagree", "Agree", '
+        '"Strongly agree"]\n\n[questions.easy_middle_best]',
+        'labels = ["No", "Yes"]\n\n[questions.easy_middle_best]',
+    )
     with pytest.raises(StudyError, match=r"questions\.easy_worst_middle: labels has 2 entries but points = 5"):
         parse_study(text)
 
@@ -114,10 +118,16 @@ def test_a_scheme_with_scenarios_of_its_own_takes_them_part_by_part():
     assert [demo.part_scenario(p, 1, "adaptive") for p in (0, 1)] == ["paper-tl-br", "paper-bl-tr"]
     text = (paper.parent / "demo.toml").read_text()
     right = 'representative = ["training", "training"]'
-    for wrong, message in (('representativ = ["training", "training"]', "scheme_scenarios names 'representativ', "
-                                                                         "which is not one of schemes"),
-                           ('representative = ["training"]', "scheme_scenarios.representative gives 1 scenarios; "
-                                                             "the design has 2, one for each")):
+    for wrong, message in (
+        (
+            'representativ = ["training", "training"]',
+            "scheme_scenarios names 'representativ', which is not one of schemes",
+        ),
+        (
+            'representative = ["training"]',
+            "scheme_scenarios.representative gives 1 scenarios; the design has 2, one for each",
+        ),
+    ):
         bad = text.replace(right, wrong)
         with pytest.raises(StudyError) as error:
             parse_study(bad, "demo.toml")

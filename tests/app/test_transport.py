@@ -16,8 +16,15 @@ from tests.support.survey import FormReader, answer_for, log_in, study_text
 
 PILOT = {"platform": '"none"'}
 ONE_DATABASE = pytest.mark.parametrize("database_url", ["sqlite"], indirect=True)  # nothing here is per database
-SECURITY_HEADERS = ("content-security-policy", "x-content-type-options", "referrer-policy", "cache-control",
-                    "permissions-policy", "cross-origin-opener-policy", "x-frame-options")
+SECURITY_HEADERS = (
+    "content-security-policy",
+    "x-content-type-options",
+    "referrer-policy",
+    "cache-control",
+    "permissions-policy",
+    "cross-origin-opener-policy",
+    "x-frame-options",
+)
 
 
 def has_security_headers(headers) -> bool:
@@ -27,8 +34,9 @@ def has_security_headers(headers) -> bool:
 @ONE_DATABASE
 def test_413_and_500_replies_carry_the_security_headers(make_client):
     client = make_client(PILOT)
-    too_large = client.post("/consent", content=b"x" * (65 * 1024),
-                            headers={"content-type": "application/x-www-form-urlencoded"})
+    too_large = client.post(
+        "/consent", content=b"x" * (65 * 1024), headers={"content-type": "application/x-www-form-urlencoded"}
+    )
     assert too_large.status_code == 413 and has_security_headers(too_large.headers)
 
     def broken():
@@ -51,9 +59,19 @@ def test_no_reply_takes_the_host_header(make_client):
 
 
 @ONE_DATABASE
-@pytest.mark.parametrize("query", ["min_seconds=nan", "min_seconds=inf", "min_seconds=-1", "min_seconds=1e400",
-                                   "median_fraction=nan", "median_fraction=-inf", "median_fraction=1.5",
-                                   "min_seconds=ten"])
+@pytest.mark.parametrize(
+    "query",
+    [
+        "min_seconds=nan",
+        "min_seconds=inf",
+        "min_seconds=-1",
+        "min_seconds=1e400",
+        "median_fraction=nan",
+        "median_fraction=-inf",
+        "median_fraction=1.5",
+        "min_seconds=ten",
+    ],
+)
 def test_numbers_in_query_strings_are_finite_and_in_range(make_client, query):
     client = make_client(PILOT)
     log_in(client)
@@ -67,8 +85,13 @@ def test_numbers_in_query_strings_are_finite_and_in_range(make_client, query):
 def server(tmp_path, bundle_dir):
     study = tmp_path / "study.toml"
     study.write_text(study_text(platform='"none"'))
-    live = LiveServer(bundle=bundle_dir, study=study, database_url=f"sqlite:///{tmp_path / 'survey.sqlite3'}",
-                      workdir=tmp_path, env={"FOIL_REQUEST_TIMEOUT_S": "1", "FOIL_ACCESS_LOG": "0"})
+    live = LiveServer(
+        bundle=bundle_dir,
+        study=study,
+        database_url=f"sqlite:///{tmp_path / 'survey.sqlite3'}",
+        workdir=tmp_path,
+        env={"FOIL_REQUEST_TIMEOUT_S": "1", "FOIL_ACCESS_LOG": "0"},
+    )
     with live:
         yield live
 
@@ -112,8 +135,9 @@ def test_slow_and_silent_clients_are_cut_off(server):
             received = b""
             while chunk := sock.recv(65536):
                 received += chunk
-            assert received == b"" or (received.startswith(b"HTTP/1.1 408 ")
-                                        and has_security_headers(head_of(received)))
+            assert received == b"" or (
+                received.startswith(b"HTTP/1.1 408 ") and has_security_headers(head_of(received))
+            )
     finally:
         for sock in sockets:
             sock.close()
@@ -124,8 +148,10 @@ def test_slow_and_silent_clients_are_cut_off(server):
 def test_a_client_that_leaves_mid_request_is_one_line_in_the_log(server):
     landing = httpx.get(server.url + "/")
     cookie = landing.headers["set-cookie"].split(";")[0]
-    head = (b"POST /consent HTTP/1.1\r\nHost: x\r\nContent-Type: application/x-www-form-urlencoded\r\n"
-            b"Content-Length: 1000\r\nCookie: " + cookie.encode() + b"\r\n\r\ncsrf_token=abc")
+    head = (
+        b"POST /consent HTTP/1.1\r\nHost: x\r\nContent-Type: application/x-www-form-urlencoded\r\n"
+        b"Content-Length: 1000\r\nCookie: " + cookie.encode() + b"\r\n\r\ncsrf_token=abc"
+    )
     for _ in range(3):
         raw(server, head)  # the body never comes: the server gives up after its timeout
     deadline = time.monotonic() + 30
@@ -138,8 +164,11 @@ def test_a_client_that_leaves_mid_request_is_one_line_in_the_log(server):
 
 @pytest.mark.slow  # a live server
 def test_requests_the_http_parser_refuses_get_the_security_headers(server):
-    for request in (b"NOT HTTP AT ALL\r\n\r\n", b"GET / HTTP/1.1\r\nHost: x\r\nContent-Length: -5\r\n\r\n",
-                    b"GET /\x00 HTTP/1.1\r\nHost: x\r\n\r\n"):
+    for request in (
+        b"NOT HTTP AT ALL\r\n\r\n",
+        b"GET / HTTP/1.1\r\nHost: x\r\nContent-Length: -5\r\n\r\n",
+        b"GET /\x00 HTTP/1.1\r\nHost: x\r\n\r\n",
+    ):
         reply = raw(server, request)
         assert reply.startswith(b"HTTP/1.1 400 ") and has_security_headers(head_of(reply)), reply[:300]
 
@@ -148,10 +177,12 @@ def test_requests_the_http_parser_refuses_get_the_security_headers(server):
 def test_a_deeply_nested_viewing_record_neither_fails_nor_drops_the_connection(server):
     participant = httpx.Client(base_url=server.url, follow_redirects=True)
     page = participant.get("/").text
-    page = participant.post("/consent", data={"csrf_token": FormReader(page).hidden["csrf_token"],
-                                              "choice": "agree"}).text
-    page = participant.post("/condition", data={"csrf_token": FormReader(page).hidden["csrf_token"],
-                                                "number": "1"}).text
+    page = participant.post(
+        "/consent", data={"csrf_token": FormReader(page).hidden["csrf_token"], "choice": "agree"}
+    ).text
+    page = participant.post(
+        "/condition", data={"csrf_token": FormReader(page).hidden["csrf_token"], "number": "1"}
+    ).text
     page = participant.post("/study", data=answer_for(page)).text  # the instructions: now at the first clip
     for depth in (3_000, 15_000):
         reply = participant.post("/study", data={**answer_for(page), "video_events": "[" * depth})

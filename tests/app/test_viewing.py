@@ -35,6 +35,7 @@ def to_first_clip(client, query: str = "") -> str:
     assert response.status_code == 200
     return response.text
 
+
 @pytest.mark.slow  # waits out a clip's length
 def test_a_clip_answered_sooner_than_it_plays_is_refused_and_nothing_saved(make_client):
     client = make_client(ANONYMOUS)
@@ -77,6 +78,7 @@ def test_pilot_and_bot_links_are_recorded_and_only_the_token_skips_the_wait(make
     assert kinds == ["bot", "bot", "pilot"]
     versions = {p.consent_version for p in stored(client, Participant)}
     assert len(versions) == 1 and next(iter(versions)).startswith("sha256:")
+
 
 @pytest.mark.slow  # waits out a clip's length
 def test_the_report_and_export_leave_pilots_and_bots_out_by_default(make_client, tmp_path):
@@ -151,10 +153,18 @@ def test_events_of_the_new_kinds_are_kept_with_their_values(make_client):
     client = make_client(ANONYMOUS)
     token = pilot_token(client.app.state.context.db, "paper")
     page = to_first_clip(client, f"?pilot={token}")
-    events = [{"type": "loaded", "t": 5}, {"type": "play", "t": 10}, {"type": "seek_blocked", "t": 50, "v": 2.9},
-              {"type": "ratechange", "t": 60, "v": 2}, {"type": "hidden", "t": 100}, {"type": "visible", "t": 600},
-              {"type": "ended", "t": 3100}, {"type": "reload", "t": 0}, {"type": "play", "t": 40},
-              {"type": "ended", "t": 3040}]
+    events = [
+        {"type": "loaded", "t": 5},
+        {"type": "play", "t": 10},
+        {"type": "seek_blocked", "t": 50, "v": 2.9},
+        {"type": "ratechange", "t": 60, "v": 2},
+        {"type": "hidden", "t": 100},
+        {"type": "visible", "t": 600},
+        {"type": "ended", "t": 3100},
+        {"type": "reload", "t": 0},
+        {"type": "play", "t": 40},
+        {"type": "ended", "t": 3040},
+    ]
     data = answer_for(page) | {"video_events": json.dumps(events), "viewport": "360x800"}
     assert client.post("/study", data=data).status_code == 200
     with client.app.state.context.db.reading() as session:
@@ -192,13 +202,21 @@ def test_a_concurrent_resubmit_with_other_answers_gets_the_kept_notice_on_postgr
         with engine.connect() as holder, engine.connect() as watcher:
             holder.execute(text("BEGIN"))
             holder.execute(text("LOCK TABLE response IN EXCLUSIVE MODE"))  # reads go on, inserts wait
-            threads = [threading.Thread(target=lambda n=n, tab=tab: replies.__setitem__(
-                n, tab.post("/study", data=answers[n]))) for n, tab in enumerate((client, other_tab))]
+            threads = [
+                threading.Thread(
+                    target=lambda n=n, tab=tab: replies.__setitem__(n, tab.post("/study", data=answers[n]))
+                )
+                for n, tab in enumerate((client, other_tab))
+            ]
             for thread in threads:
                 thread.start()
             deadline = time.monotonic() + 30
-            while watcher.scalar(text("SELECT count(*) FROM pg_locks WHERE NOT granted AND relation = "
-                                      "'response'::regclass")) < 2:
+            while (
+                watcher.scalar(
+                    text("SELECT count(*) FROM pg_locks WHERE NOT granted AND relation = 'response'::regclass")
+                )
+                < 2
+            ):
                 assert time.monotonic() < deadline, "the two submissions did not both reach their insert"
                 time.sleep(0.05)
                 watcher.rollback()

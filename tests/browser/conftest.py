@@ -19,8 +19,13 @@ def server(tmp_path_factory, bundle_dir):
     work = tmp_path_factory.mktemp("browser-server")
     study = work / "study.toml"
     study.write_text(study_text())
-    with LiveServer(bundle=bundle_dir, study=study, database_url=f"sqlite:///{work / 'survey.sqlite3'}",
-                    workdir=work, admin_password=ADMIN_PASSWORD) as live:
+    with LiveServer(
+        bundle=bundle_dir,
+        study=study,
+        database_url=f"sqlite:///{work / 'survey.sqlite3'}",
+        workdir=work,
+        admin_password=ADMIN_PASSWORD,
+    ) as live:
         yield live
 
 

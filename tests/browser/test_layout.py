@@ -34,8 +34,13 @@ def server(tmp_path_factory):
     (bundle / "summaries").mkdir()
     for clip in json.loads((bundle / "manifest.json").read_text())["clips"]:
         (bundle / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], misleading=False)))
-    with LiveServer(bundle=bundle, study=study, database_url=f"sqlite:///{work / 'survey.sqlite3'}", workdir=work,
-                    admin_password=ADMIN_PASSWORD) as live:
+    with LiveServer(
+        bundle=bundle,
+        study=study,
+        database_url=f"sqlite:///{work / 'survey.sqlite3'}",
+        workdir=work,
+        admin_password=ADMIN_PASSWORD,
+    ) as live:
         yield live
 
 
@@ -57,8 +62,10 @@ def to_first_clip(page, server) -> None:
     with page.expect_navigation():
         page.click("button[value=agree]")
     with page.expect_navigation():  # a pilot is not held to the example's playing time
-        page.evaluate("() => { document.querySelector('fieldset[data-answers]').disabled = false; "
-                      "document.querySelector('form[data-step-form]').requestSubmit(); }")
+        page.evaluate(
+            "() => { document.querySelector('fieldset[data-answers]').disabled = false; "
+            "document.querySelector('form[data-step-form]').requestSubmit(); }"
+        )
     assert page.locator("input[name=step]").get_attribute("value") == "1"
     page.wait_for_function("() => document.querySelector('video').readyState >= 2")
 
@@ -127,8 +134,11 @@ def test_watch_only_screens_ranking_clips_and_places(server, new_context):
     page = new_context(DESKTOPS[0]).new_page()
     to_first_clip(page, server)
     for _ in range(20):  # through part one to the first clip that is only watched
-        if page.locator("video").count() and not page.locator("input[name=better]").count() and \
-                not page.locator("input[name=attention]").count():
+        if (
+            page.locator("video").count()
+            and not page.locator("input[name=better]").count()
+            and not page.locator("input[name=attention]").count()
+        ):
             break
         answer_unwatched(page)
     status = page.locator("[data-status]")
@@ -145,18 +155,20 @@ def test_watch_only_screens_ranking_clips_and_places(server, new_context):
         if page.locator("select[name^=ranking]").count():
             break
         answer_unwatched(page)
-    page.wait_for_function("() => [...document.querySelectorAll('.round-clips video')].every("
-                           "v => v.readyState >= 2 && v.currentTime > v.duration - 0.2)")
+    page.wait_for_function(
+        "() => [...document.querySelectorAll('.round-clips video')].every("
+        "v => v.readyState >= 2 && v.currentTime > v.duration - 0.2)"
+    )
     shoot(page, "ranking")
     videos = page.locator(".round-clips video")
     assert videos.count() == 3
     for k in range(3):  # large enough to read the labels drawn in the clip: well over the 220 px of before
         assert videos.nth(k).bounding_box()["width"] >= 360
-    ended = page.evaluate("() => [...document.querySelectorAll('.round-clips video')].map("
-                          "v => [v.paused, v.duration - v.currentTime])")
+    ended = page.evaluate(
+        "() => [...document.querySelectorAll('.round-clips video')].map(v => [v.paused, v.duration - v.currentTime])"
+    )
     assert all(paused and left < 0.2 for paused, left in ended)  # each shows its last frame: how it ended
-    outcomes = [page.locator(".round-clips figure").nth(k).locator(".outcomes li").all_inner_texts()
-                for k in range(3)]
+    outcomes = [page.locator(".round-clips figure").nth(k).locator(".outcomes li").all_inner_texts() for k in range(3)]
     assert all(len(texts) == 2 for texts in outcomes)
     assert all(text.startswith("Robot ") and text.endswith(".") for texts in outcomes for text in texts)
     assert any("bumped into a person" in text for texts in outcomes for text in texts)  # the worst robot
@@ -196,8 +208,10 @@ def test_the_admin_answers_table_uses_the_page_width_and_the_site_has_an_icon(se
         return broken;
     }""")
     assert broken == []
-    wrap = page.evaluate("() => { const w = document.querySelector('table.answers').parentElement;"
-                         " return [w.scrollWidth, w.clientWidth, w.getBoundingClientRect().width]; }")
+    wrap = page.evaluate(
+        "() => { const w = document.querySelector('table.answers').parentElement;"
+        " return [w.scrollWidth, w.clientWidth, w.getBoundingClientRect().width]; }"
+    )
     assert wrap[0] <= wrap[1] and wrap[2] > 1000  # the page's width, no sideways scrolling
     icon = page.evaluate("document.querySelector('link[rel=icon]').href")
     reply = httpx.get(icon)

@@ -23,6 +23,8 @@ from tests.support.survey import ADMIN_PASSWORD, finish, start
 pytestmark = pytest.mark.browser
 
 FREE_TEXT = "Robot 1 kept its distance — 距离 <script>alert('x')</script> & \"quotes\""
+
+
 def link(worker: str) -> str:
     return f"/?workerId={worker}&assignmentId=A-{worker}&hitId=HIT1"
 
@@ -73,9 +75,16 @@ class Walker:
         if not self.axe:
             return
         found = self.page.evaluate("async () => (await axe.run(document, {resultTypes: ['violations']})).violations")
-        serious = [{"id": v["id"], "impact": v["impact"], "help": v["help"],
-                    "nodes": [node["html"][:200] for node in v["nodes"]]}
-                   for v in found if v["impact"] in SERIOUS]
+        serious = [
+            {
+                "id": v["id"],
+                "impact": v["impact"],
+                "help": v["help"],
+                "nodes": [node["html"][:200] for node in v["nodes"]],
+            }
+            for v in found
+            if v["impact"] in SERIOUS
+        ]
         if serious:
             self.violations[label] = serious
 
@@ -95,8 +104,9 @@ class Walker:
         self.page.click("[data-play]")
         self.page.wait_for_function("() => document.querySelector('video').ended", timeout=20_000)
         assert next_button.is_enabled()
-        played = self.page.evaluate("(() => { const v = document.querySelector('video');"
-                                    " return [v.currentTime, v.duration]; })()")
+        played = self.page.evaluate(
+            "(() => { const v = document.querySelector('video'); return [v.currentTime, v.duration]; })()"
+        )
         assert played[1] > 0.5 and played[0] >= played[1] - 0.05, played
 
     def answer_clip(self, choice: int) -> dict:
@@ -118,8 +128,10 @@ class Walker:
         given = {"ranking": order, "explanation": FREE_TEXT}
         self.page.keyboard.press("Tab")
         for _ in range(80):
-            focused = self.page.evaluate("(() => { const e = document.activeElement;"
-                                         " return [e.tagName, e.name || '', e.type || '', e.checked || false]; })()")
+            focused = self.page.evaluate(
+                "(() => { const e = document.activeElement;"
+                " return [e.tagName, e.name || '', e.type || '', e.checked || false]; })()"
+            )
             tag, name, kind, checked = focused
             if tag == "SELECT" and name.startswith("ranking-"):
                 self.page.keyboard.type(order[int(name.split("-")[1]) - 1])
@@ -172,8 +184,11 @@ def stored(server, worker: str) -> tuple[list[Participant], list[Response]]:
     try:
         with db.reading() as session:
             people = list(session.scalars(select(Participant).where(Participant.external_id == worker)))
-            responses = list(session.scalars(select(Response).where(
-                Response.participant_id.in_([p.id for p in people])).order_by(Response.step)))
+            responses = list(
+                session.scalars(
+                    select(Response).where(Response.participant_id.in_([p.id for p in people])).order_by(Response.step)
+                )
+            )
     finally:
         db.dispose()
     return people, responses
@@ -300,7 +315,8 @@ def test_other_participant_pages_are_accessible(server, new_context):
     decliner.submit("button[value=decline]")
     assert decliner.kind() == "other"
     assert walker.violations == {} and decliner.violations == {}, json.dumps(
-        walker.violations | decliner.violations, indent=1)
+        walker.violations | decliner.violations, indent=1
+    )
 
 
 def test_the_accessibility_check_finds_violations(server, new_context):

@@ -30,8 +30,13 @@ def long_server(tmp_path_factory):
     study = work / "study.toml"
     study.write_text(study_text(platform='"none"', assignment='"balanced"'))
     long_bundle_dir = write_long_bundle(work / "clips", work / "bundle")
-    with LiveServer(bundle=long_bundle_dir, study=study, database_url=f"sqlite:///{work / 'survey.sqlite3'}",
-                    workdir=work, admin_password=ADMIN_PASSWORD) as live:
+    with LiveServer(
+        bundle=long_bundle_dir,
+        study=study,
+        database_url=f"sqlite:///{work / 'survey.sqlite3'}",
+        workdir=work,
+        admin_password=ADMIN_PASSWORD,
+    ) as live:
         yield live
 
 

@@ -22,8 +22,9 @@ class Corridor(gymnasium.Env):
 
     def __init__(self, discrete: bool = False):
         self.discrete = discrete
-        self.action_space = gymnasium.spaces.Discrete(5) if discrete else \
-            gymnasium.spaces.Box(-1.0, 1.0, (2,), dtype=np.float64)
+        self.action_space = (
+            gymnasium.spaces.Discrete(5) if discrete else gymnasium.spaces.Box(-1.0, 1.0, (2,), dtype=np.float64)
+        )
         self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (4,), dtype=np.float64)
         self.obstacle_velocity = 0.0
 
@@ -45,8 +46,13 @@ class Corridor(gymnasium.Env):
         crashed = bool(np.linalg.norm(self.walker - self.obstacle) < self.radius)
         arrived = bool(np.linalg.norm(self.walker - GOAL) < 0.3)
         info = {"crashed": crashed, "is_success": arrived}
-        return self._observation(), float(arrived) - float(crashed), crashed or arrived, \
-            self.steps >= self.max_steps, info
+        return (
+            self._observation(),
+            float(arrived) - float(crashed),
+            crashed or arrived,
+            self.steps >= self.max_steps,
+            info,
+        )
 
 
 class CorridorAdapter(Adapter):
@@ -75,8 +81,9 @@ def straight(observations):
 
 def dodging(observations):
     """Walks at the goal, stepping aside when the obstacle is near ahead."""
-    near = (np.abs(observations[:, 2] - observations[:, 0]) < 1.5) & (np.abs(observations[:, 3] - observations[:, 1])
-                                                                     < 1.0)
+    near = (np.abs(observations[:, 2] - observations[:, 0]) < 1.5) & (
+        np.abs(observations[:, 3] - observations[:, 1]) < 1.0
+    )
     side = np.where(observations[:, 3] > observations[:, 1], -1.0, 1.0)
     return np.stack([np.where(near, 0.3, 1.0), np.where(near, side, -0.5 * observations[:, 1])], axis=1)
 
@@ -96,8 +103,14 @@ class FastCorridorAdapter(CorridorAdapter):
 
     def snapshot_env(self, env):
         e = env.unwrapped
-        return (e.discrete, e.walker.copy(), e.obstacle.copy(), e.steps, e.obstacle_velocity,
-                e.np_random.bit_generator.state)
+        return (
+            e.discrete,
+            e.walker.copy(),
+            e.obstacle.copy(),
+            e.steps,
+            e.obstacle_velocity,
+            e.np_random.bit_generator.state,
+        )
 
     def restore_env(self, saved):
         discrete, walker, obstacle, steps, velocity, rng_state = saved

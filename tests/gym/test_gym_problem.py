@@ -27,8 +27,9 @@ def scenario(discrete: bool = False, seed: int = 3, adapter: str = ADAPTER) -> G
 def problem(discrete: bool = False, adapter: str = ADAPTER, **reward) -> GymCoupledProblem:
     chosen = scenario(discrete, adapter=adapter)
     adapter = chosen.load_adapter()
-    return GymCoupledProblem([load_agent(spec, adapter) for spec in (DISCRETE if discrete else BOX)], chosen,
-                             RewardConfig(**reward))
+    return GymCoupledProblem(
+        [load_agent(spec, adapter) for spec in (DISCRETE if discrete else BOX)], chosen, RewardConfig(**reward)
+    )
 
 
 def walkers(p: GymCoupledProblem) -> np.ndarray:

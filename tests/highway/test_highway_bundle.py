@@ -26,10 +26,19 @@ def test_the_highway_study_plans_highway_searches_the_server_accepts():
     inputs = [search_inputs(search_job(job)) for job in jobs]
     assert {i["scenario"]["domain"] for i in inputs} == {"gym"}
     assert all(len(agent["sha256"]) == 64 for i in inputs for agent in i["agents"])  # the shipped files' checksums
-    clips = {job.id: ManifestClip(id=job.id, file=f"clips/{job.id}.mp4", sha256=f"{n:064x}", scheme=job.scheme.name,
-                                  scenario=job.scenario, agents=list(job.pair),
-                                  labels=[robot_label(number) for number in job.numbers], better=job.pair[0])
-             for n, job in enumerate(jobs)}
+    clips = {
+        job.id: ManifestClip(
+            id=job.id,
+            file=f"clips/{job.id}.mp4",
+            sha256=f"{n:064x}",
+            scheme=job.scheme.name,
+            scenario=job.scenario,
+            agents=list(job.pair),
+            labels=[robot_label(number) for number in job.numbers],
+            better=job.pair[0],
+        )
+        for n, job in enumerate(jobs)
+    }
     check_study_against_bundle(load_study(STUDY), Bundle(root=ROOT, clips=clips, paths={}))
 
 
@@ -49,8 +58,10 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     from app.settings import Settings
 
     text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
-    text = text.replace("[build.eval]", "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\n"
-                        "event_hold = 0.2\nwidth = 480\n\n[build.eval]")
+    text = text.replace(
+        "[build.eval]",
+        "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\nevent_hold = 0.2\nwidth = 480\n\n[build.eval]",
+    )
     study = tmp_path / "highway.toml"
     study.write_text(text)
     log = []
@@ -63,8 +74,11 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     assert "highway-hi" in (out / "index.html").read_text()
     database = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     migrate(database)
-    app = create_app(Settings(bundle_dir=out, study_file=out / "study.toml", database_url=database,
-                              admin_password="a-long-admin-password"))
+    app = create_app(
+        Settings(
+            bundle_dir=out, study_file=out / "study.toml", database_url=database, admin_password="a-long-admin-password"
+        )
+    )
     try:
         page = TestClient(app, follow_redirects=True).get("/")
         assert page.status_code == 200 and "Which self-driving car handles the highway better?" in page.text

@@ -28,9 +28,31 @@ def test_the_world_is_inferred_and_mixing_is_refused(tmp_path, capsys):
 
 def test_foil_search_and_verify_on_a_highway_scenario(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["search", "--agents", DRIVERS, "--scenario", "highway-light", "--out", str(out), "--budget", "20",
-                 "--top-k", "1", "--solver", "random", "--set", "batch=1", "--world", "vehicles_density=1.2",
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "search",
+                "--agents",
+                DRIVERS,
+                "--scenario",
+                "highway-light",
+                "--out",
+                str(out),
+                "--budget",
+                "20",
+                "--top-k",
+                "1",
+                "--solver",
+                "random",
+                "--set",
+                "batch=1",
+                "--world",
+                "vehicles_density=1.2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     summary = out / "summary-001.json"
     data = json.loads(summary.read_text())
     assert data["scenario"]["settings"]["vehicles_density"] == 1.2
@@ -53,14 +75,28 @@ def test_foil_eval_reads_any_stable_baselines3_file(tmp_path, capsys):
 
 
 def _row(name, steps, reward, collision, width=0.5):
-    return {"checkpoint": name, "env_steps": steps, "episodes": 30, "reward_mean": reward,
-            "reward_low": reward - width, "reward_high": reward + width, "collision_rate": collision,
-            "collision_low": max(0.0, collision - 0.1), "collision_high": min(1.0, collision + 0.1)}
+    return {
+        "checkpoint": name,
+        "env_steps": steps,
+        "episodes": 30,
+        "reward_mean": reward,
+        "reward_low": reward - width,
+        "reward_high": reward + width,
+        "collision_rate": collision,
+        "collision_low": max(0.0, collision - 0.1),
+        "collision_high": min(1.0, collision + 0.1),
+    }
 
 
 def test_release_picks_three_clearly_separated_snapshots():
-    rows = [_row("a", 0, 5.0, 1.0), _row("b", 10, 12.0, 0.6), _row("c", 20, 14.5, 0.45), _row("d", 30, 20.0, 0.1),
-            _row("e", 40, 21.0, 0.0), _row("f", 50, 20.8, 0.0)]
+    rows = [
+        _row("a", 0, 5.0, 1.0),
+        _row("b", 10, 12.0, 0.6),
+        _row("c", 20, 14.5, 0.45),
+        _row("d", 30, 20.0, 0.1),
+        _row("e", 40, 21.0, 0.0),
+        _row("f", 50, 20.8, 0.0),
+    ]
     chosen = choose(rows)
     assert [chosen[k]["checkpoint"] for k in ("lo", "med", "hi")] == ["a", "b", "e"]  # b: nearest the middle 13
     assert apart(chosen["lo"], chosen["med"]) and apart(chosen["med"], chosen["hi"])
@@ -71,8 +107,10 @@ def test_release_picks_three_clearly_separated_snapshots():
 
 def test_foil_train_writes_a_highway_run_that_release_recognises(tmp_path, capsys):
     config = tmp_path / "tiny.toml"
-    config.write_text('domain = "highway"\ntotal_steps = 64\nnum_envs = 2\nnum_steps = 32\nbatch_size = 32\n'
-                      'epochs = 1\nsave_every = 64\n')
+    config.write_text(
+        'domain = "highway"\ntotal_steps = 64\nnum_envs = 2\nnum_steps = 32\nbatch_size = 32\n'
+        "epochs = 1\nsave_every = 64\n"
+    )
     run = tmp_path / "run"
     assert main(["train", "--config", str(config), "--out", str(run)]) == 0
     assert is_highway_run(run) and [p.name for p in checkpoints(run)][0] == "model_0_steps.zip"
@@ -84,8 +122,29 @@ def test_foil_train_writes_a_highway_run_that_release_recognises(tmp_path, capsy
 
 def test_the_shipped_highway_agents_search_verify_and_evaluate(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["search", "--agents", "highway-lo,highway-hi", "--scenario", "highway-dense", "--out", str(out),
-                 "--budget", "12", "--top-k", "1", "--solver", "mcts", "--set", "batch=2", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "search",
+                "--agents",
+                "highway-lo,highway-hi",
+                "--scenario",
+                "highway-dense",
+                "--out",
+                str(out),
+                "--budget",
+                "12",
+                "--top-k",
+                "1",
+                "--solver",
+                "mcts",
+                "--set",
+                "batch=2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     summary = json.loads((out / "summary-001.json").read_text())
     assert [a["name"] for a in summary["agents"]] == ["highway-lo", "highway-hi"]
     assert summary["agents"][1]["source"].endswith("search/highway/agents/hi.zip")
@@ -97,9 +156,31 @@ def test_the_shipped_highway_agents_search_verify_and_evaluate(tmp_path, capsys)
 
 def test_foil_search_all_runs_highway_pairs(tmp_path):
     out = tmp_path / "all"
-    assert main(["search-all", "--agents", DRIVERS, "--scenarios", "highway-light", "--solvers", "random",
-                 "--budget", "6", "--top-k", "1", "--set", "batch=1", "--jobs", "1", "--quiet", "--out",
-                 str(out)]) == 0
+    assert (
+        main(
+            [
+                "search-all",
+                "--agents",
+                DRIVERS,
+                "--scenarios",
+                "highway-light",
+                "--solvers",
+                "random",
+                "--budget",
+                "6",
+                "--top-k",
+                "1",
+                "--set",
+                "batch=1",
+                "--jobs",
+                "1",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     study = json.loads((out / "study.json").read_text())
     assert len(study["jobs"]) == 1
     assert main(["verify", str(out / study["jobs"][0]["dir"] / "summary-001.json")]) == 0

@@ -22,8 +22,9 @@ DRIVERS = ("tests.highway.drivers:cruise", "tests.highway.drivers:cautious")
 
 @pytest.fixture(scope="module")
 def summary_file(tmp_path_factory):
-    job = SearchJob(agents=DRIVERS, scenario="highway-dense", solver="random", budget=20, top_k=1,
-                    solver_settings={"batch": 1})
+    job = SearchJob(
+        agents=DRIVERS, scenario="highway-dense", solver="random", budget=20, top_k=1, solver_settings={"batch": 1}
+    )
     out = write_outputs(tmp_path_factory.mktemp("search"), run_gym_search(job, SCENARIOS["highway-dense"]))
     return out / "summary-001.json"
 
@@ -52,11 +53,13 @@ def test_each_view_is_highway_envs_drawing_with_the_ego_in_its_robots_colour(sum
     assert isinstance(lay, HighwayLayout) and lay.panels == 2
     image = np.asarray(renderer.draw(renderer.frames[0]))
     for slot, k in enumerate(renderer.order):
-        view = image[lay.header: lay.header + lay.view_height, slot * lay.panel: (slot + 1) * lay.panel]
+        view = image[lay.header : lay.header + lay.view_height, slot * lay.panel : (slot + 1) * lay.panel]
         assert view.std() > 10  # a drawn road, not a blank surface
         colour = np.array(robot_style(renderer.numbers[k])[0])
-        near_ego = view[int(EGO_AT[1] * lay.view_height) - 12: int(EGO_AT[1] * lay.view_height) + 12,
-                        int(EGO_AT[0] * lay.panel) - 30: int(EGO_AT[0] * lay.panel) + 30]
+        near_ego = view[
+            int(EGO_AT[1] * lay.view_height) - 12 : int(EGO_AT[1] * lay.view_height) + 12,
+            int(EGO_AT[0] * lay.panel) - 30 : int(EGO_AT[0] * lay.panel) + 30,
+        ]
         assert (np.abs(near_ego.astype(int) - colour).sum(axis=2) < 30).sum() > 20
     assert {"Robot 1", "Robot 2"} <= renderer.texts and any(t.startswith("Time") for t in renderer.texts)
     end = np.asarray(renderer.draw(renderer.frames[-1]))

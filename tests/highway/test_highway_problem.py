@@ -25,8 +25,7 @@ def problem(scenario: GymScenario, agents=DRIVERS) -> GymCoupledProblem:
 
 def world(p: GymCoupledProblem) -> list:
     """Every vehicle's position, speed and heading in every instance."""
-    return [[[(*v.position, v.speed, v.heading) for v in i.env.unwrapped.road.vehicles] for i in row]
-            for row in p.rows]
+    return [[[(*v.position, v.speed, v.heading) for v in i.env.unwrapped.road.vehicles] for i in row] for row in p.rows]
 
 
 def test_restore_continues_exactly_as_the_original_did():
@@ -80,15 +79,18 @@ def test_environment_action_moves_other_drivers_within_bounds_and_never_the_ego(
     assert (tuple(ego.position), ego.speed, ego.heading, dict(ego.action)) == ego_state
 
 
-@pytest.mark.parametrize("agents,discrete", [(DRIVERS, False),
-                                             (("tests.highway.drivers:idle", "tests.highway.drivers:faster"), True)])
+@pytest.mark.parametrize(
+    "agents,discrete", [(DRIVERS, False), (("tests.highway.drivers:idle", "tests.highway.drivers:faster"), True)]
+)
 def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, discrete):
     scenario = SCENARIOS["highway-light"]
     if discrete:
-        scenario = GymScenario("highway-light-meta", scenario.adapter, scenario.seed,
-                               scenario.settings | {"discrete": True})
-    job = SearchJob(agents=agents, scenario=scenario.name, solver="random", budget=40, top_k=2,
-                    solver_settings={"batch": 2})
+        scenario = GymScenario(
+            "highway-light-meta", scenario.adapter, scenario.seed, scenario.settings | {"discrete": True}
+        )
+    job = SearchJob(
+        agents=agents, scenario=scenario.name, solver="random", budget=40, top_k=2, solver_settings={"batch": 2}
+    )
     files = run_gym_search(job, scenario)
     again = run_gym_search(job, scenario)
     assert {k: v for k, v in files.items() if k != "run.json"} == {k: v for k, v in again.items() if k != "run.json"}

@@ -12,8 +12,9 @@ from tests.support.summaries import summary_from_simulation
 
 @pytest.fixture(scope="session")
 def shared_summary() -> dict:
-    return summary_from_simulation(["goal", "orca"], load_scenario("paper-bl-tr"),
-                                   names=["SECRET-ALPHA", "SECRET-BETA"])
+    return summary_from_simulation(
+        ["goal", "orca"], load_scenario("paper-bl-tr"), names=["SECRET-ALPHA", "SECRET-BETA"]
+    )
 
 
 @pytest.fixture

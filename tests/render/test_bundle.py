@@ -75,7 +75,8 @@ def test_a_ranking_set_gives_each_agent_one_number_per_scheme_and_scenario():
 def test_no_robot_number_names_two_agents_anywhere_in_a_bundle():
     text = BUILD.replace('scenarios = ["paper-bl-tr"]', 'scenarios = ["paper-bl-tr", "paper-tl-br"]') + (
         '\n[[build.sets]]\nparts = ["pairwise"]\nschemes = ["adaptive"]\nscenarios = ["paper-code"]\n'
-        'agents = ["goal", "orca", "social_force"]\n')
+        'agents = ["goal", "orca", "social_force"]\n'
+    )
     jobs = plan(parse_build(text))
     agent_of = {}
     for job in jobs:
@@ -98,38 +99,81 @@ def test_robot_numbers_are_seeded_and_vary_with_the_seed():
     assert sorted(example.numbers) == [7, 8]
 
 
-@pytest.mark.parametrize(("old", "new", "message"), [
-    ("seed = 7\n", "", r"line 1, build\.seed: Field required"),
-    ("[build.schemes.adaptive]", "[build.scheme.adaptive]",
-     r"line 8, build\.scheme: unknown key \(check the spelling; see docs/clips\.md"),
-    ("budget = 300\nseed = 1\n\n[build.schemes.nfirst]", "budget = 0\nseed = 1\n\n[build.schemes.nfirst]",
-     r"line 10, build\.schemes\.adaptive\.budget: Input should be greater than or equal to 1"),
-    ("budget = 300\nseed = 1\n\n[build.schemes.nfirst]", 'budget = "300"\nseed = 1\n\n[build.schemes.nfirst]',
-     r"line 10, build\.schemes\.adaptive\.budget: Input should be a valid integer"),
-    ('solver = "nfirst"', 'sovler = "nfirst"', r"line 13, build\.schemes\.nfirst\.solver: Field required\n"
-                                               r".*line 14, build\.schemes\.nfirst\.sovler: unknown key"),
-    ("episodes = 4", "episodes = 1", r"build\.eval\.episodes: Input should be greater than or equal to 2"),
-    ('schemes = ["adaptive", "nfirst"]', 'schemes = ["adaptive", "mcts"]',
-     r"line 20, build\.sets\[0\]\.schemes\[1\]: no scheme 'mcts'; defined: \['adaptive', 'nfirst'\]"),
-    ('parts = ["example"]', 'parts = ["warmup"]',
-     r"build\.sets\[1\]\.parts\[0\]: Input should be 'pairwise', 'ranking' or 'example'"),
-    ('parts = ["example"]', 'parts = ["ranking"]',
-     r"line 24, build\.sets\[1\]: a set that feeds a ranking part lists its agents"),
-    ('scenarios = ["paper-code"]', 'scenarios = ["paper-bl-tr", "paper-bl-tr"]',
-     r"build\.sets\[1\]\.scenarios: names must not repeat"),
-    ('pairs = [["goal", "orca"]]', 'pairs = [["goal", "goal"]]',
-     r"build\.sets\[1\]\.pairs\[0\]: a pair needs two different agents"),
-    ('agents = ["goal", "orca", "social_force"]', 'agents = ["goal"]',
-     r"line 22, build\.sets\[0\]\.agents: Value should have at least 2 items"),
-    ('schemes = ["nfirst"]\nscenarios = ["paper-code"]', 'schemes = ["adaptive"]\nscenarios = ["paper-bl-tr"]',
-     r"line 24, build\.sets\[1\]: the clip of adaptive, paper-bl-tr, goal and orca is already in sets\[0\]"),
-    ('agents = ["goal", "orca", "social_force"]', "", r"line 18, build\.sets\[0\]: give either agents"),
-    ("[build.eval]", "[build.render]\nfps = 5\n[build.eval]", r"line 4, build\.render: .*fps must be at least 20"),
-    ("[build.eval]", "[build.render]\nfsp = 24\n[build.eval]",
-     r"line 5, build\.render\.fsp: unknown key; expected some of \[.*'fps'"),
-    ('agents = ["goal", "orca", "social_force"]', f"agents = {[f'a{i}' for i in range(43)]}",
-     r"line 22, build\.sets\[0\]\.agents: a ranking shows at most 42 robots"),
-])
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("seed = 7\n", "", r"line 1, build\.seed: Field required"),
+        (
+            "[build.schemes.adaptive]",
+            "[build.scheme.adaptive]",
+            r"line 8, build\.scheme: unknown key \(check the spelling; see docs/clips\.md",
+        ),
+        (
+            "budget = 300\nseed = 1\n\n[build.schemes.nfirst]",
+            "budget = 0\nseed = 1\n\n[build.schemes.nfirst]",
+            r"line 10, build\.schemes\.adaptive\.budget: Input should be greater than or equal to 1",
+        ),
+        (
+            "budget = 300\nseed = 1\n\n[build.schemes.nfirst]",
+            'budget = "300"\nseed = 1\n\n[build.schemes.nfirst]',
+            r"line 10, build\.schemes\.adaptive\.budget: Input should be a valid integer",
+        ),
+        (
+            'solver = "nfirst"',
+            'sovler = "nfirst"',
+            r"line 13, build\.schemes\.nfirst\.solver: Field required\n"
+            r".*line 14, build\.schemes\.nfirst\.sovler: unknown key",
+        ),
+        ("episodes = 4", "episodes = 1", r"build\.eval\.episodes: Input should be greater than or equal to 2"),
+        (
+            'schemes = ["adaptive", "nfirst"]',
+            'schemes = ["adaptive", "mcts"]',
+            r"line 20, build\.sets\[0\]\.schemes\[1\]: no scheme 'mcts'; defined: \['adaptive', 'nfirst'\]",
+        ),
+        (
+            'parts = ["example"]',
+            'parts = ["warmup"]',
+            r"build\.sets\[1\]\.parts\[0\]: Input should be 'pairwise', 'ranking' or 'example'",
+        ),
+        (
+            'parts = ["example"]',
+            'parts = ["ranking"]',
+            r"line 24, build\.sets\[1\]: a set that feeds a ranking part lists its agents",
+        ),
+        (
+            'scenarios = ["paper-code"]',
+            'scenarios = ["paper-bl-tr", "paper-bl-tr"]',
+            r"build\.sets\[1\]\.scenarios: names must not repeat",
+        ),
+        (
+            'pairs = [["goal", "orca"]]',
+            'pairs = [["goal", "goal"]]',
+            r"build\.sets\[1\]\.pairs\[0\]: a pair needs two different agents",
+        ),
+        (
+            'agents = ["goal", "orca", "social_force"]',
+            'agents = ["goal"]',
+            r"line 22, build\.sets\[0\]\.agents: Value should have at least 2 items",
+        ),
+        (
+            'schemes = ["nfirst"]\nscenarios = ["paper-code"]',
+            'schemes = ["adaptive"]\nscenarios = ["paper-bl-tr"]',
+            r"line 24, build\.sets\[1\]: the clip of adaptive, paper-bl-tr, goal and orca is already in sets\[0\]",
+        ),
+        ('agents = ["goal", "orca", "social_force"]', "", r"line 18, build\.sets\[0\]: give either agents"),
+        ("[build.eval]", "[build.render]\nfps = 5\n[build.eval]", r"line 4, build\.render: .*fps must be at least 20"),
+        (
+            "[build.eval]",
+            "[build.render]\nfsp = 24\n[build.eval]",
+            r"line 5, build\.render\.fsp: unknown key; expected some of \[.*'fps'",
+        ),
+        (
+            'agents = ["goal", "orca", "social_force"]',
+            f"agents = {[f'a{i}' for i in range(43)]}",
+            r"line 22, build\.sets\[0\]\.agents: a ranking shows at most 42 robots",
+        ),
+    ],
+)
 def test_bad_build_tables_give_clear_errors_with_their_line(old, new, message):
     assert old in BUILD
     with pytest.raises(BuildError, match=f"^study.toml, (.|\n)*{message}"):
@@ -148,26 +192,35 @@ def test_the_server_and_the_bundle_builder_report_a_bad_build_line_alike(tmp_pat
         load_build(study)
     assert str(served.value) == str(bundled.value)
     line = line_of(study.read_text(), "budget = -5")
-    assert str(bundled.value) == (f"{study}, line {line}, build.schemes.adaptive.budget: Input should be greater "
-                                  "than or equal to 1")
+    assert str(bundled.value) == (
+        f"{study}, line {line}, build.schemes.adaptive.budget: Input should be greater than or equal to 1"
+    )
 
 
 def test_scheme_settings_reach_the_search_as_the_fields_types():
     """A whole number in the study file is a float where the setting is one, as `foil search --set
     exploration=100` gives it, so both make the same search."""
-    text = BUILD + ('[build.schemes.adaptive.settings]\nexploration = 100\nmode = "receding"\n'
-                    "[build.schemes.adaptive.reward]\nalpha = 2\n[build.schemes.adaptive.world]\n")
+    text = BUILD + (
+        '[build.schemes.adaptive.settings]\nexploration = 100\nmode = "receding"\n'
+        "[build.schemes.adaptive.reward]\nalpha = 2\n[build.schemes.adaptive.world]\n"
+    )
     job = next(job for job in plan(parse_build(text + "robot_visible = true\n")) if job.scheme.name == "adaptive")
     search = search_job(job)
     assert search.solver_settings == {"exploration": 100.0, "mode": "receding"}
     assert type(search.solver_settings["exploration"]) is float and type(search.reward_settings["alpha"]) is float
     assert search.reward_settings == {"alpha": 2.0} and search.world_settings == {"robot_visible": True}
     assert (search.agents, search.scenario, search.budget, search.seed) == (job.pair, job.scenario, 300, 1)
-    with pytest.raises(BuildError, match=r"build\.schemes\.adaptive\.world\.robot_visible: bad world setting "
-                                         "robot_visible = 'yes': robot_visible takes a bool"):
+    with pytest.raises(
+        BuildError,
+        match=r"build\.schemes\.adaptive\.world\.robot_visible: bad world setting "
+        "robot_visible = 'yes': robot_visible takes a bool",
+    ):
         parse_build(text + 'robot_visible = "yes"\n')
-    with pytest.raises(BuildError, match=r"build\.schemes\.adaptive\.settings: must be a table of key = value "
-                                         "settings"):
+    with pytest.raises(
+        BuildError,
+        match=r"build\.schemes\.adaptive\.settings: must be a table of key = value "
+        "settings",
+    ):
         parse_build(text.replace("exploration = 100", "nested = {x = 1}") + "robot_visible = true\n")
 
 
@@ -175,25 +228,33 @@ def test_bad_search_settings_are_refused_before_any_work(tmp_path):
     """Settings the solver, reward or world do not have, and scenarios that do not exist, are refused at their lines
     before anything runs."""
     study = tmp_path / "study.toml"
-    study.write_text('[build]\nseed = 1\n[build.schemes.a]\nsolver = "mcts"\nbudget = 10\nseed = 0\n'
-                     '[build.schemes.a.settings]\nexplorashun = 3\n[build.schemes.a.world]\nrobot_visible = "yes"\n'
-                     '[[build.sets]]\nparts = ["pairwise"]\nschemes = ["a"]\nscenarios = ["paper-bl-tr", "nowhere"]\n'
-                     'pairs = [["goal", "orca"]]\n')
+    study.write_text(
+        '[build]\nseed = 1\n[build.schemes.a]\nsolver = "mcts"\nbudget = 10\nseed = 0\n'
+        '[build.schemes.a.settings]\nexplorashun = 3\n[build.schemes.a.world]\nrobot_visible = "yes"\n'
+        '[[build.sets]]\nparts = ["pairwise"]\nschemes = ["a"]\nscenarios = ["paper-bl-tr", "nowhere"]\n'
+        'pairs = [["goal", "orca"]]\n'
+    )
     with pytest.raises(BuildError) as refused:
         build_bundle(study, tmp_path / "out", log=lambda line: None)
     lines = str(refused.value).splitlines()
-    assert lines[0].startswith(f"{study}, line 8, build.schemes.a.settings.explorashun: bad solver setting "
-                               "'explorashun': use a key among")
-    assert lines[1].startswith(f"{study}, line 10, build.schemes.a.world.robot_visible: bad world setting "
-                               "robot_visible = 'yes': robot_visible takes a bool")
+    assert lines[0].startswith(
+        f"{study}, line 8, build.schemes.a.settings.explorashun: bad solver setting 'explorashun': use a key among"
+    )
+    assert lines[1].startswith(
+        f"{study}, line 10, build.schemes.a.world.robot_visible: bad world setting "
+        "robot_visible = 'yes': robot_visible takes a bool"
+    )
     assert lines[2].startswith(f"{study}, line 14, build.sets[0].scenarios[1]: ") and "nowhere" in lines[2]
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("old, new, field", [
-    ('seed = 1\nrequire_full_view', 'sead = 1\nrequire_full_view', r"study\.sead: unknown key"),
-    ('[[comprehension]]', '[[comprehensionn]]', r"comprehensionn: unknown key"),
-])
+@pytest.mark.parametrize(
+    "old, new, field",
+    [
+        ("seed = 1\nrequire_full_view", "sead = 1\nrequire_full_view", r"study\.sead: unknown key"),
+        ("[[comprehension]]", "[[comprehensionn]]", r"comprehensionn: unknown key"),
+    ],
+)
 def test_foil_bundle_checks_every_table_before_any_search(tmp_path, capsys, old, new, field):
     """A misspelt key anywhere in the study file stops `foil bundle` at once with its line, as `foil serve` would
     after the whole build; nothing is searched or written."""
@@ -230,10 +291,19 @@ def test_shipped_study_files_build_and_serve(name):
     spec, _ = load_build(ROOT / "studies" / name)
     jobs = plan(spec)
     assert all(search_inputs(search_job(job)) for job in jobs)
-    clips = {job.id: ManifestClip(id=job.id, file=f"clips/{job.id}.mp4", sha256=f"{n:064x}", scheme=job.scheme.name,
-                                  scenario=job.scenario, agents=list(job.pair),
-                                  labels=[robot_label(number) for number in job.numbers], better=job.pair[0])
-             for n, job in enumerate(jobs)}
+    clips = {
+        job.id: ManifestClip(
+            id=job.id,
+            file=f"clips/{job.id}.mp4",
+            sha256=f"{n:064x}",
+            scheme=job.scheme.name,
+            scenario=job.scenario,
+            agents=list(job.pair),
+            labels=[robot_label(number) for number in job.numbers],
+            better=job.pair[0],
+        )
+        for n, job in enumerate(jobs)
+    }
     study = load_study(ROOT / "studies" / name)  # the server reads the same file
     check_study_against_bundle(study, Bundle(root=ROOT, clips=clips, paths={}))
     without_one = dict(list(clips.items())[1:])
@@ -252,29 +322,58 @@ def test_paper_build_reproduces_the_papers_clip_set():
             assert pairs == {frozenset(p) for p in (("lo", "med"), ("med", "hi"), ("lo", "hi"))}
     # the paper's reward as its code sets it, ending at the first robot's end (docs/search.md)
     adaptive = next(search_inputs(search_job(job)) for job in main if job.scheme.name == "adaptive")
-    assert {k: adaptive["reward"][k] for k in ("finish", "goal_bonus", "alpha", "beta", "horizon_offset",
-                                                 "collision_is_goal")} == {
-        "finish": "first", "goal_bonus": 100.0, "alpha": 1.0, "beta": 1e4, "horizon_offset": -1e5,
-        "collision_is_goal": False}
-    assert all(search_inputs(search_job(job))["reward"]["finish"] == "first"
-               for job in main if job.scheme.name == "nfirst")
+    assert {
+        k: adaptive["reward"][k]
+        for k in ("finish", "goal_bonus", "alpha", "beta", "horizon_offset", "collision_is_goal")
+    } == {
+        "finish": "first",
+        "goal_bonus": 100.0,
+        "alpha": 1.0,
+        "beta": 1e4,
+        "horizon_offset": -1e5,
+        "collision_is_goal": False,
+    }
+    assert all(
+        search_inputs(search_job(job))["reward"]["finish"] == "first" for job in main if job.scheme.name == "nfirst"
+    )
 
 
-@pytest.mark.parametrize("majority, disagrees, start, end", [
-    (1, False, "representativeness paper-bl-tr, lo vs hi:", "percentile 40 of its states"),
-    (-1, True, "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
-     "its clips tend to show the other robot as better than most starting states do"),
-    (0, True, "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
-     "its clips tend to show no difference where most starting states show one"),
-])
+@pytest.mark.parametrize(
+    "majority, disagrees, start, end",
+    [
+        (1, False, "representativeness paper-bl-tr, lo vs hi:", "percentile 40 of its states"),
+        (
+            -1,
+            True,
+            "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
+            "its clips tend to show the other robot as better than most starting states do",
+        ),
+        (
+            0,
+            True,
+            "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
+            "its clips tend to show no difference where most starting states show one",
+        ),
+    ],
+)
 def test_the_representativeness_line_warns_when_the_scenario_disagrees_with_the_distribution(
-        majority, disagrees, start, end):
+    majority, disagrees, start, end
+):
     from search.bundle.build import describe_representativeness
 
-    report = {"agents": ["lo", "hi"], "scenario": "paper-bl-tr", "distribution": "training", "rollouts": 33,
-              "first_looks_better": 0.1, "second_looks_better": 0.7, "no_difference": 0.2, "majority": majority,
-              "percentile": 40.0, "disagrees": disagrees,
-              "distribution_vote": {"direction": 1, "states": 64, "for_first": 50, "for_second": 4}}
+    report = {
+        "agents": ["lo", "hi"],
+        "scenario": "paper-bl-tr",
+        "distribution": "training",
+        "rollouts": 33,
+        "first_looks_better": 0.1,
+        "second_looks_better": 0.7,
+        "no_difference": 0.2,
+        "majority": majority,
+        "percentile": 40.0,
+        "disagrees": disagrees,
+        "distribution_vote": {"direction": 1, "states": 64, "for_first": 50, "for_second": 4},
+    }
     line = describe_representativeness(report)
     assert line.startswith(start) and line.endswith(end)
     assert "lo looks better in 10% of 33 nominal rollouts, hi in 70%" in line

@@ -12,7 +12,9 @@ from tests.support.survey import survey_tables
 
 pytestmark = pytest.mark.slow
 
-SMALL_STUDY = survey_tables() + """
+SMALL_STUDY = (
+    survey_tables()
+    + """
 [build]
 seed = 7
 
@@ -66,6 +68,7 @@ schemes = ["nfirst"]
 scenarios = ["paper-code"]
 pairs = [["goal", "orca"]]
 """
+)
 
 
 @pytest.fixture(scope="module")
@@ -188,9 +191,12 @@ def test_outcome_selection_shows_the_top_k_summary_with_the_largest_visible_cont
     out, manifest, _, _ = built
     clip = next(c for c in manifest["clips"] if c["scheme"] == "adaptive")
     shown = json.loads((out / clip["summary"]).read_text())
-    [folder] = [folder for folder in (out / "cache" / "search").iterdir()
-                if json.loads((folder / "inputs.json").read_text())["solver"] == "mcts"
-                and json.loads((folder / "inputs.json").read_text())["budget"] == 300]
+    [folder] = [
+        folder
+        for folder in (out / "cache" / "search").iterdir()
+        if json.loads((folder / "inputs.json").read_text())["solver"] == "mcts"
+        and json.loads((folder / "inputs.json").read_text())["budget"] == 300
+    ]
     searched = [json.loads(p.read_text()) for p in sorted(folder.glob("summary-*.json"))]
     assert len(searched) == 5
 

@@ -16,7 +16,9 @@ from tests.support.survey import survey_tables
 
 pytestmark = pytest.mark.slow
 
-STUDY = survey_tables() + """
+STUDY = (
+    survey_tables()
+    + """
 [build]
 seed = 3
 
@@ -38,6 +40,7 @@ schemes = ["nfirst"]
 scenarios = ["{scenario}"]
 pairs = [["{checkpoint}", "goal"]]
 """
+)
 
 
 def test_a_bundle_records_the_checkpoint_and_the_world_each_agent_was_compared_in(tmp_path):

@@ -81,7 +81,7 @@ def served(tmp_path_factory):
     from app.study import load_study
 
     text = (ROOT / "studies" / "demo.toml").read_text()
-    text = text[:text.index("\n[build]\n")]
+    text = text[: text.index("\n[build]\n")]
     for shipped, scripted in (('"lo"', '"goal"'), ('"med"', '"orca"'), ('"hi"', '"social_force"')):
         text = text.replace(shipped, scripted)
     root = tmp_path_factory.mktemp("labels")
@@ -112,7 +112,8 @@ def test_a_label_never_names_two_agents_in_a_participants_study(served):
         for screen in plan:
             if isinstance(screen, Round):
                 rounds.setdefault((screen.part, screen.block), set()).update(
-                    (robot.label, robot.agent) for robot in screen.robots)
+                    (robot.label, robot.agent) for robot in screen.robots
+                )
         assert len(rounds) == len(condition.schemes)
         for labelled in rounds.values():
             assert len(labelled) == len({label for label, _ in labelled}) == len({a for _, a in labelled}) == 3
@@ -124,8 +125,9 @@ def test_each_clip_draws_its_labels_in_their_colours(served):
     """The label the plan records is the robot the clip shows: its colour is drawn in the clip's poster."""
     _, bundle = served
     for clip in bundle.clips.values():
-        poster = np.asarray(Image.open(bundle.root / clip.file.replace(".mp4", ".poster.png")).convert("RGB"),
-                            dtype=np.int16)
+        poster = np.asarray(
+            Image.open(bundle.root / clip.file.replace(".mp4", ".poster.png")).convert("RGB"), dtype=np.int16
+        )
         for label in clip.labels:
             colour = robot_style(int(label.split()[-1]))[0]
             assert (np.abs(poster - np.array(colour)).max(axis=-1) <= 3).sum() > 30, (clip.id, label)

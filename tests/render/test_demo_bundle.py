@@ -30,8 +30,11 @@ def test_every_representative_clip_of_the_demo_shows_the_better_robot(tmp_path):
     study = tmp_path / "demo.toml"
     study.write_text(representative_part(DEMO.read_text()))
     demo_spec, _ = load_build(DEMO)
-    demo_searches = {json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in plan(demo_spec)
-                     if job.scheme.name == "representative"}
+    demo_searches = {
+        json.dumps(search_inputs(search_job(job)), sort_keys=True)
+        for job in plan(demo_spec)
+        if job.scheme.name == "representative"
+    }
     spec, _ = load_build(study)
     assert {json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in plan(spec)} == demo_searches
     manifest = build_bundle(study, tmp_path / "out", log=lambda line: None)

@@ -179,7 +179,7 @@ def test_every_robot_style_is_distinct():
     for i, a in enumerate(ROBOT_COLOURS):
         assert contrast(number_ink(a), a) >= 4.0
         assert np.linalg.norm(lab(a) - lab(CRASH)) > 20  # never the collision's yellow
-        for b in ROBOT_COLOURS[i + 1:]:
+        for b in ROBOT_COLOURS[i + 1 :]:
             assert np.linalg.norm(lab(a) - lab(b)) > 20, (a, b)  # CIE76 distance: clearly different colours
     # silhouettes: each shape's marker (with its white rim) overlaps any other by at most 5/6 of their union
     numbers = list(range(1, len(ROBOT_SHAPES) + 1))
@@ -195,9 +195,12 @@ def number_height(sprite, ink, within: float) -> int:
     """Rows spanned by the number's pixels (ink colour, within ``within`` half sizes of the centre)."""
     image, half = sprite
     pixels = np.asarray(image, dtype=np.int16)
-    rows, cols = np.mgrid[:pixels.shape[0], :pixels.shape[1]]
-    mask = (np.hypot(cols - half, rows - half) <= within * half) & (pixels[..., 3] > 200) \
+    rows, cols = np.mgrid[: pixels.shape[0], : pixels.shape[1]]
+    mask = (
+        (np.hypot(cols - half, rows - half) <= within * half)
+        & (pixels[..., 3] > 200)
         & (np.abs(pixels[..., :3] - np.array(ink)).max(axis=-1) < 60)
+    )
     found = np.nonzero(mask.any(axis=1))[0]
     return found.max() - found.min() + 1
 
@@ -208,8 +211,9 @@ def test_people_and_robots_stay_readable_on_a_360_px_phone(robot_visible, width)
     """Shown 360 px wide, a person's number is at least 10 px tall and a robot's one-digit number 9 px, also when
     the view is wide or split in two arenas (markers are then drawn larger than to scale)."""
     scenario = load_scenario("paper-bl-tr")
-    scene = scene_from_summary(summary_from_simulation(["goal", "orca"],
-                                                       visible(scenario) if robot_visible else scenario))
+    scene = scene_from_summary(
+        summary_from_simulation(["goal", "orca"], visible(scenario) if robot_visible else scenario)
+    )
     renderer = ClipRenderer(scene, numbers=[7, 12], options=RenderOptions(width=width))
     phone = 360 / renderer.layout.width
     assert renderer.layout.marker(scene.human_radius) >= scene.human_radius * renderer.layout.scale
@@ -235,8 +239,10 @@ def test_collision_is_marked_where_and_when_it_happens(shared_summary):
     assert blob_centre(before, robots[k], near) is None
     assert blob_centre(after, robots[k], near) is not None
     assert blob_centre(later, robots[k], near) is not None  # the burst stays where it happened
-    window = (slice(max(0, int(robots[k][1] - near)), int(robots[k][1] + near)),
-              slice(max(0, int(robots[k][0] - near)), int(robots[k][0] + near)))
+    window = (
+        slice(max(0, int(robots[k][1] - near)), int(robots[k][1] + near)),
+        slice(max(0, int(robots[k][0] - near)), int(robots[k][0] + near)),
+    )
     assert after[window].sum() > later[window].sum()  # the CRASH tag goes after a while, not to hide people
     assert f"CRASHED · {when:.1f} s" in renderer.texts and "CRASH" in renderer.texts
 
@@ -282,8 +288,9 @@ def test_each_robot_has_its_own_panel_when_robots_are_visible():
 
 
 def probe(path) -> str:
-    run = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True,
-                         text=True)
+    run = subprocess.run(
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True, text=True
+    )
     return run.stderr
 
 
@@ -291,10 +298,10 @@ def top_level_boxes(path) -> list[str]:
     data = path.read_bytes()
     boxes, offset = [], 0
     while offset + 8 <= len(data):
-        size = int.from_bytes(data[offset: offset + 4], "big")
-        boxes.append(data[offset + 4: offset + 8].decode("latin-1"))
+        size = int.from_bytes(data[offset : offset + 4], "big")
+        boxes.append(data[offset + 4 : offset + 8].decode("latin-1"))
         if size == 1:
-            size = int.from_bytes(data[offset + 8: offset + 16], "big")
+            size = int.from_bytes(data[offset + 8 : offset + 16], "big")
         if size < 8:
             break
         offset += size
@@ -347,8 +354,11 @@ BAD = [
     (lambda s: s["outcomes"].pop(), "one entry per agent"),
     (lambda s: s["scenario"].pop("robot"), "scenario is not a valid initial state"),
     (lambda s: s.update(agents=[{"name": "only"}]), "at least two"),
-    (lambda s: s["scenario"]["world"].update(robot_visible=True), r"steps\[0\].humans holds one crowd, but the robots "
-                                                                   "are visible"),
+    (
+        lambda s: s["scenario"]["world"].update(robot_visible=True),
+        r"steps\[0\].humans holds one crowd, but the robots "
+        "are visible",
+    ),
 ]
 
 
@@ -381,15 +391,23 @@ def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
 
     root = Path(__file__).resolve().parents[2]
     css = (root / "app" / "static" / "survey.css").read_text()
-    colours = {int(k): tuple(map(int, rgb.split(","))) for k, rgb in
-               re.findall(r"\.robot-colour-(\d+) \{ background: rgb\(([\d, ]+)\); \}", css)}
+    colours = {
+        int(k): tuple(map(int, rgb.split(",")))
+        for k, rgb in re.findall(r"\.robot-colour-(\d+) \{ background: rgb\(([\d, ]+)\); \}", css)
+    }
     shapes = set(re.findall(r"\.robot-([a-z-]+) \{", css)) - {"x", "key"}
-    macros = Environment(loader=FileSystemLoader(root / "app" / "templates"), autoescape=True) \
-        .get_template("_macros.html").module
+    macros = (
+        Environment(loader=FileSystemLoader(root / "app" / "templates"), autoescape=True)
+        .get_template("_macros.html")
+        .module
+    )
     for number in range(1, 2 * len(ROBOT_STYLES) + 1):
         marker = str(macros.robot_marker(f"Robot {number}"))
-        colour, shape = re.fullmatch(r'<span class="marker robot-colour-(\d+) robot-([a-z-]+)" aria-hidden="true">'
-                                     r'</span>', marker.strip()).groups()
+        colour, shape = re.fullmatch(
+            r'<span class="marker robot-colour-(\d+) robot-([a-z-]+)" aria-hidden="true">'
+            r"</span>",
+            marker.strip(),
+        ).groups()
         assert (colours[int(colour)], shape) == robot_style(number)
         assert shape in shapes
     assert "robot-x" in str(macros.robot_marker("Robot A"))

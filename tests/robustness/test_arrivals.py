@@ -25,11 +25,22 @@ ARRIVALS = 500
 
 def participant_row(code: str, slot: int) -> dict:
     """A participant's row with every column the table needs: its scalar defaults and the given values."""
-    row = {column.name: column.default.arg for column in Participant.__table__.c
-           if column.default is not None and column.default.is_scalar}
+    row = {
+        column.name: column.default.arg
+        for column in Participant.__table__.c
+        if column.default is not None and column.default.is_scalar
+    }
     now = datetime.now(UTC)
-    return {**row, "code": code, "study": "paper", "platform": "none", "slot": slot, "step_started_at": now,
-            "created_at": now, "user_agent": ""}
+    return {
+        **row,
+        "code": code,
+        "study": "paper",
+        "platform": "none",
+        "slot": slot,
+        "step_started_at": now,
+        "created_at": now,
+        "user_agent": "",
+    }
 
 
 @pytest.mark.slow
@@ -55,8 +66,13 @@ def test_500_arrivals_at_once_all_get_a_plan_and_balance_is_exact(tmp_path, bund
         finally:
             client.close()
 
-    with LiveServer(bundle=bundle_dir, study=study_file, database_url=database_url, workdir=tmp_path,
-                    env={"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS}) as server:
+    with LiveServer(
+        bundle=bundle_dir,
+        study=study_file,
+        database_url=database_url,
+        workdir=tmp_path,
+        env={"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS},
+    ) as server:
         threads = [threading.Thread(target=arrive, args=(n, server.url)) for n in range(ARRIVALS)]
         for thread in threads:
             thread.start()
@@ -78,10 +94,10 @@ def test_500_arrivals_at_once_all_get_a_plan_and_balance_is_exact(tmp_path, bund
     assert len(people) == ARRIVALS and all(plans)
     assert sorted(person.slot for person in people) == list(range(ARRIVALS))
     for person in people:
-        assert person.condition == condition_for_slot(seed=study.study.seed, n_conditions=n_conditions,
-                                                      slot=person.slot)
-    assert Counter(person.condition for person in people) == {c: ARRIVALS // n_conditions
-                                                              for c in range(n_conditions)}
+        assert person.condition == condition_for_slot(
+            seed=study.study.seed, n_conditions=n_conditions, slot=person.slot
+        )
+    assert Counter(person.condition for person in people) == {c: ARRIVALS // n_conditions for c in range(n_conditions)}
 
 
 def test_a_second_arrival_waits_for_the_first_and_takes_the_next_slot(make_client):

@@ -28,8 +28,9 @@ def test_sigkill_mid_study_loses_no_acknowledged_answer(tmp_path, bundle_dir):
     study_file.write_text(study_text(assignment='"balanced"'))
     study = parse_study(study_file.read_text())
     url = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
-    server = LiveServer(bundle=bundle_dir, study=study_file, database_url=url, workdir=tmp_path,
-                        env=CROWD_FROM_ONE_ADDRESS)
+    server = LiveServer(
+        bundle=bundle_dir, study=study_file, database_url=url, workdir=tmp_path, env=CROWD_FROM_ONE_ADDRESS
+    )
     with server:
         crowd = Crowd(server.url, str(bundle_dir), BOTS, pause_s=0.2, ramp_s=1.0, outage_s=60)
         runner = threading.Thread(target=crowd.run)

@@ -42,8 +42,9 @@ def missing_manifest(bundle):
     return "no manifest.json in bundle"
 
 
-@pytest.mark.parametrize("breaking", [broken_checksum, missing_clip, manifest_for_another_study, unreadable_manifest,
-                                      missing_manifest])
+@pytest.mark.parametrize(
+    "breaking", [broken_checksum, missing_clip, manifest_for_another_study, unreadable_manifest, missing_manifest]
+)
 def test_foil_serve_refuses_a_broken_bundle_naming_the_problem(tmp_path, bundle_dir, breaking):
     bundle = shutil.copytree(bundle_dir, tmp_path / "bundle")
     expected = breaking(bundle)

@@ -12,8 +12,23 @@ SMALL = ["--budget", "600", "--top-k", "3", "--reward", "horizon=30", "--quiet"]
 
 
 def search(out, *extra, agents="goal,orca", solver="mcts", seed="0"):
-    return main(["search", "--agents", agents, "--scenario", "paper-bl-tr", "--solver", solver, "--seed", seed,
-                 "--out", str(out), *SMALL, *extra])
+    return main(
+        [
+            "search",
+            "--agents",
+            agents,
+            "--scenario",
+            "paper-bl-tr",
+            "--solver",
+            solver,
+            "--seed",
+            seed,
+            "--out",
+            str(out),
+            *SMALL,
+            *extra,
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -83,16 +98,19 @@ def test_joint_search_of_three_agents(tmp_path):
     assert main(["verify", str(tmp_path / "summary-001.json")]) == 0
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--solver", "annealing"], "unknown solver 'annealing'"),
-    (["--set", "exploraton=3"], "bad solver setting 'exploraton=3'"),
-    (["--set", "batch=many"], "batch takes a int"),
-    (["--reward", "norm=cubed"], "norm must be 'plain' or 'squared'"),
-    (["--world", "env_action_mode=shove"], "env_action_mode must be one of"),
-    (["--agents", "goal"], "at least two agents"),
-    (["--agents", "goal,nobody"], "unknown agent 'nobody'"),
-    (["--scenario", "nowhere"], "no scenario 'nowhere'"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--solver", "annealing"], "unknown solver 'annealing'"),
+        (["--set", "exploraton=3"], "bad solver setting 'exploraton=3'"),
+        (["--set", "batch=many"], "batch takes a int"),
+        (["--reward", "norm=cubed"], "norm must be 'plain' or 'squared'"),
+        (["--world", "env_action_mode=shove"], "env_action_mode must be one of"),
+        (["--agents", "goal"], "at least two agents"),
+        (["--agents", "goal,nobody"], "unknown agent 'nobody'"),
+        (["--scenario", "nowhere"], "no scenario 'nowhere'"),
+    ],
+)
 def test_bad_input_is_a_clear_error(tmp_path, capsys, extra, message):
     flag, value = extra
     options = {"--agents": "goal,orca", "--scenario": "paper-bl-tr", "--solver": "mcts"}
@@ -112,8 +130,10 @@ def test_verify_rejects_a_file_that_is_not_a_summary(tmp_path, capsys):
 
 
 def test_parse_settings_converts_types():
-    assert parse_settings(CEMConfig, ["population=16", "smoothing=0.5"], "solver") == {"population": 16,
-                                                                                        "smoothing": 0.5}
+    assert parse_settings(CEMConfig, ["population=16", "smoothing=0.5"], "solver") == {
+        "population": 16,
+        "smoothing": 0.5,
+    }
 
 
 def test_study_jobs_cover_every_pair_and_scenario():
@@ -152,8 +172,9 @@ def test_first_finish_ends_every_trajectory_at_the_first_robots_end(tmp_path):
     """With --reward finish=first a summary's searched steps end on the step the first robot collides or arrives,
     a collision earns no goal term; the clip plays on without pushes (its coda) until the other robot's episode
     ends too or the horizon is reached, and replay reproduces every summary, coda included, exactly."""
-    assert search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "3000",
-                  "--top-k", "5") == 0
+    assert (
+        search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "3000", "--top-k", "5") == 0
+    )
     ends, codas = set(), 0
     for path in sorted(tmp_path.glob("summary-*.json")):
         summary = json.loads(path.read_text())

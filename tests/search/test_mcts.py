@@ -15,8 +15,9 @@ SEEDS = range(5)
 
 
 def coupled(horizon: int = 40) -> CoupledProblem:
-    return CoupledProblem([load_policy("goal"), load_policy("orca")], load_scenario("paper-bl-tr"),
-                          reward=RewardConfig(horizon=horizon))
+    return CoupledProblem(
+        [load_policy("goal"), load_policy("orca")], load_scenario("paper-bl-tr"), reward=RewardConfig(horizon=horizon)
+    )
 
 
 def nodes(tree: Tree, root: int = 0):
@@ -47,7 +48,7 @@ def test_widening_rule(problem, budget):
     tree, checked = search.tree, 0
     for state in nodes(tree, search.root):
         visits, children = tree.states[state, VISITS], tree.children(state)
-        limit = config.k * visits ** config.alpha
+        limit = config.k * visits**config.alpha
         terminal = sum(tree.links[a, CHILD] >= 0 and tree.states[tree.links[a, CHILD], TERMINAL] for a in children)
         assert limit <= len(children), "a node visited n times holds at least k * n**alpha actions"
         # beyond the limit only when every action so far ended the trajectory (then it must widen to go on)
@@ -102,8 +103,9 @@ def test_repeat_holds_each_action_for_its_steps():
 
 def test_receding_horizon_commits_step_by_step_and_drops_other_branches():
     tracker = Tracker(2000, 5)
-    search = mcts(coupled(horizon=20), tracker, np.random.default_rng(0),
-                  MCTSConfig(mode="receding", batch=8, repeat=2))
+    search = mcts(
+        coupled(horizon=20), tracker, np.random.default_rng(0), MCTSConfig(mode="receding", batch=8, repeat=2)
+    )
     tree = search.tree
     assert tree.states[search.root, DEPTH] >= 4
     state = search.root
@@ -148,7 +150,7 @@ def test_rows_whose_iteration_ended_take_the_next_iteration(problem):
     full = np.flatnonzero(sizes == 16)
     # full until the budget is nearly spent; then the rows in flight finish without successors
     assert full.size > 0.8 * sizes.size and np.all(sizes[: full[-1]] == 16)
-    assert np.all(np.diff(sizes[full[-1]:]) <= 0)
+    assert np.all(np.diff(sizes[full[-1] :]) <= 0)
     assert tracker.steps >= tracker.budget and sizes.sum() == tracker.steps
 
 

@@ -13,8 +13,9 @@ from search.solvers.representative import Rollouts, Vote, candidates, choose, vo
 def rollouts(contrast_by_state: list[list[float]]) -> Rollouts:
     contrast = [c for row in contrast_by_state for c in row]
     state = [s for s, row in enumerate(contrast_by_state) for _ in row]
-    return Rollouts(state=np.array(state), actions=[np.zeros((1, 1, 2))] * len(contrast),
-                    contrast=np.array(contrast, dtype=float))
+    return Rollouts(
+        state=np.array(state), actions=[np.zeros((1, 1, 2))] * len(contrast), contrast=np.array(contrast, dtype=float)
+    )
 
 
 def test_states_vote_by_their_majority_and_candidates_agree_with_the_direction():
@@ -52,9 +53,34 @@ def test_no_agreeing_candidate_leaves_an_empty_list_for_the_fallback():
 
 
 def representative_search(out, seed="0", budget="4000"):
-    return main(["search", "--agents", "goal,orca", "--scenario", "training", "--solver", "representative",
-                 "--seed", seed, "--budget", budget, "--top-k", "2", "--set", "states=6", "--set", "pushes=5",
-                 "--set", "batch_states=3", "--reward", "horizon=60", "--out", str(out), "--quiet"])
+    return main(
+        [
+            "search",
+            "--agents",
+            "goal,orca",
+            "--scenario",
+            "training",
+            "--solver",
+            "representative",
+            "--seed",
+            seed,
+            "--budget",
+            budget,
+            "--top-k",
+            "2",
+            "--set",
+            "states=6",
+            "--set",
+            "pushes=5",
+            "--set",
+            "batch_states=3",
+            "--reward",
+            "horizon=60",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -98,12 +124,57 @@ def test_representative_summaries_verify_and_the_same_seed_gives_the_same_clip(s
 
 
 def test_the_representative_solver_and_a_distribution_are_refused_where_they_do_not_fit(tmp_path, capsys):
-    assert main(["search", "--agents", "goal,orca", "--scenario", "training", "--solver", "mcts", "--out",
-                 str(tmp_path), "--quiet"]) != 0
+    assert (
+        main(
+            [
+                "search",
+                "--agents",
+                "goal,orca",
+                "--scenario",
+                "training",
+                "--solver",
+                "mcts",
+                "--out",
+                str(tmp_path),
+                "--quiet",
+            ]
+        )
+        != 0
+    )
     assert "distribution of starting states" in capsys.readouterr().err
-    assert main(["search", "--agents", "goal,orca", "--scenario", "paper-bl-tr", "--solver", "representative",
-                 "--out", str(tmp_path), "--quiet"]) != 0
+    assert (
+        main(
+            [
+                "search",
+                "--agents",
+                "goal,orca",
+                "--scenario",
+                "paper-bl-tr",
+                "--solver",
+                "representative",
+                "--out",
+                str(tmp_path),
+                "--quiet",
+            ]
+        )
+        != 0
+    )
     assert "draws starting states from a distribution" in capsys.readouterr().err
-    assert main(["search", "--agents", "goal,orca,social_force", "--scenario", "training", "--solver",
-                 "representative", "--out", str(tmp_path), "--quiet"]) != 0
+    assert (
+        main(
+            [
+                "search",
+                "--agents",
+                "goal,orca,social_force",
+                "--scenario",
+                "training",
+                "--solver",
+                "representative",
+                "--out",
+                str(tmp_path),
+                "--quiet",
+            ]
+        )
+        != 0
+    )
     assert "two agents" in capsys.readouterr().err

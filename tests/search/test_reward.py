@@ -84,14 +84,18 @@ def test_step_terms_by_hand():
 
 def test_plausibility_is_the_prior_log_likelihood():
     action = np.array([[[0.1, -0.2]]])
-    uniform = reward(plausibility=0.5).step_terms(np.zeros((1, 2, 2)), np.zeros((1, 2, 2)), np.zeros((1, 1, 2)),
-                                                  action, np.array([False]), np.array([False]))
+    uniform = reward(plausibility=0.5).step_terms(
+        np.zeros((1, 2, 2)), np.zeros((1, 2, 2)), np.zeros((1, 1, 2)), action, np.array([False]), np.array([False])
+    )
     assert uniform["plausibility"][0] == pytest.approx(0.5 * -2 * math.log(0.5))
     sigma, bound = 0.1, 0.25
-    gaussian = DivergenceReward(RewardConfig(plausibility=1.0, prior="gaussian", prior_sigma=sigma),
-                                ActionPrior((1, 2), bound, "gaussian", sigma))
-    terms = gaussian.step_terms(np.zeros((1, 2, 2)), np.zeros((1, 2, 2)), np.zeros((1, 1, 2)), action,
-                                np.array([False]), np.array([False]))
+    gaussian = DivergenceReward(
+        RewardConfig(plausibility=1.0, prior="gaussian", prior_sigma=sigma),
+        ActionPrior((1, 2), bound, "gaussian", sigma),
+    )
+    terms = gaussian.step_terms(
+        np.zeros((1, 2, 2)), np.zeros((1, 2, 2)), np.zeros((1, 1, 2)), action, np.array([False]), np.array([False])
+    )
     mass = math.erf(bound / (sigma * math.sqrt(2)))
     expected = sum(-0.5 * (x / sigma) ** 2 - math.log(sigma * math.sqrt(2 * math.pi) * mass) for x in (0.1, -0.2))
     assert terms["plausibility"][0] == pytest.approx(expected)
@@ -104,11 +108,17 @@ def test_gaussian_prior_samples_stay_in_bound():
     assert np.abs(samples).max() <= 0.25
 
 
-@pytest.mark.parametrize("settings, message", [
-    ({"norm": "cubed"}, "norm"), ({"combine": "max"}, "combine"), ({"horizon": 0}, "horizon"),
-    ({"finish": "last"}, "finish must be 'all'"),
-    ({"heuristic": "nope"}, "unknown heuristic"), ({"prior": "beta"}, "prior"),
-])
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"norm": "cubed"}, "norm"),
+        ({"combine": "max"}, "combine"),
+        ({"horizon": 0}, "horizon"),
+        ({"finish": "last"}, "finish must be 'all'"),
+        ({"heuristic": "nope"}, "unknown heuristic"),
+        ({"prior": "beta"}, "prior"),
+    ],
+)
 def test_bad_reward_settings_say_what_is_wrong(settings, message):
     with pytest.raises(ValueError, match=message):
         RewardConfig(**settings)
@@ -149,10 +159,14 @@ def numpy_step_terms(config, heuristic, prior, robot_actions, robot_pos, human_p
 
 
 @pytest.mark.parametrize("agents", [2, 3, 5])
-@pytest.mark.parametrize("settings", [
-    {}, {"norm": "squared", "combine": "min", "goal_bonus": 100.0, "beta": 1e4, "horizon_offset": -1e5},
-    {"plausibility": 0.3, "prior": "gaussian", "heuristic": "tests.search.test_reward:far_humans"},
-])
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {},
+        {"norm": "squared", "combine": "min", "goal_bonus": 100.0, "beta": 1e4, "horizon_offset": -1e5},
+        {"plausibility": 0.3, "prior": "gaussian", "heuristic": "tests.search.test_reward:far_humans"},
+    ],
+)
 def test_the_compiled_reward_equals_the_numpy_formulas_bit_for_bit(agents, settings):
     """Searches and replays score steps with one compiled kernel; it must give the numpy formulas' numbers to the
     last bit (a summary is checked exactly), and a step's reward must be the sum of its terms."""
@@ -176,8 +190,9 @@ def test_the_compiled_reward_equals_the_numpy_formulas_bit_for_bit(agents, setti
         total = terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
         assert np.array_equal(r.step(actions, positions, humans, env, g, e), total)
     for combine in ("mean", "min"):
-        assert np.array_equal(pairwise_divergence(positions, config.norm, combine),
-                              numpy_divergence(positions, config.norm, combine))
+        assert np.array_equal(
+            pairwise_divergence(positions, config.norm, combine), numpy_divergence(positions, config.norm, combine)
+        )
 
 
 @pytest.mark.parametrize("shape", [(5, 1, 2), (5, 2, 3), (2,)])

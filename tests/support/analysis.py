@@ -38,14 +38,30 @@ def summary_for(agents: list[str], misleading: bool) -> dict:
     """A small foil.summary/1 of two robots (in `agents` order) walking from (-4, -4) to (4, 4)."""
     outcomes = [dict(SHOWN[agent]) for agent in agents]
     if misleading:
-        outcomes = [{"event": "timeout", "time": 20.0, "min_human_distance": 0.5}
-                    if agent == SECRET_NAMES["hi"] else {"event": "success", "time": 8.0, "min_human_distance": 0.9}
-                    for agent in agents]
-    steps = [{"t": round(0.25 * (k + 1), 2), "humans": [[0.0, 1.0]], "robots": [[-4 + 0.3 * k, -4 + 0.3 * k]] * 2,
-              "robot_actions": [[0.3, 0.3]] * 2} for k in range(80)]
-    return {"format": "foil.summary/1", "agents": [{"name": a, "source": a} for a in agents],
-            "scenario": {"robot": {"start": [-4.0, -4.0], "goal": [4.0, 4.0]}}, "steps": steps,
-            "outcomes": outcomes, "reward": 1.0, "reward_terms": {}}
+        outcomes = [
+            {"event": "timeout", "time": 20.0, "min_human_distance": 0.5}
+            if agent == SECRET_NAMES["hi"]
+            else {"event": "success", "time": 8.0, "min_human_distance": 0.9}
+            for agent in agents
+        ]
+    steps = [
+        {
+            "t": round(0.25 * (k + 1), 2),
+            "humans": [[0.0, 1.0]],
+            "robots": [[-4 + 0.3 * k, -4 + 0.3 * k]] * 2,
+            "robot_actions": [[0.3, 0.3]] * 2,
+        }
+        for k in range(80)
+    ]
+    return {
+        "format": "foil.summary/1",
+        "agents": [{"name": a, "source": a} for a in agents],
+        "scenario": {"robot": {"start": [-4.0, -4.0], "goal": [4.0, 4.0]}},
+        "steps": steps,
+        "outcomes": outcomes,
+        "reward": 1.0,
+        "reward_terms": {},
+    }
 
 
 def write_bot_bundle(folder: Path, root: Path) -> Path:
@@ -57,8 +73,22 @@ def write_bot_bundle(folder: Path, root: Path) -> Path:
     files = []
     for n in range(n_clips):
         files.append(folder / f"{n:03d}.mp4")
-        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(base), "-c", "copy",
-                        "-metadata", f"comment=clip {n}", str(files[-1])], check=True)
+        subprocess.run(
+            [
+                imageio_ffmpeg.get_ffmpeg_exe(),
+                "-v",
+                "error",
+                "-y",
+                "-i",
+                str(base),
+                "-c",
+                "copy",
+                "-metadata",
+                f"comment=clip {n}",
+                str(files[-1]),
+            ],
+            check=True,
+        )
     root = write_bundle(root, files, schemes=SCHEMES, scenarios=SCENARIOS, agents=AGENT_RANK, example=EXAMPLE)
     manifest = json.loads((root / "manifest.json").read_text())
     (root / "summaries").mkdir()
@@ -67,8 +97,18 @@ def write_bot_bundle(folder: Path, root: Path) -> Path:
     return root
 
 
-def add_participant(db: Database, study, bundle_root: Path, *, condition: int, answer, status: str = "completed",
-                    seed: int = 0, minutes: float = 10.0, excluded: bool = False) -> Participant:
+def add_participant(
+    db: Database,
+    study,
+    bundle_root: Path,
+    *,
+    condition: int,
+    answer,
+    status: str = "completed",
+    seed: int = 0,
+    minutes: float = 10.0,
+    excluded: bool = False,
+) -> Participant:
     """A participant with a real plan (app.plan) and `answer(screen) -> answers dict` for every screen."""
     from datetime import UTC, datetime, timedelta
 
@@ -76,9 +116,16 @@ def add_participant(db: Database, study, bundle_root: Path, *, condition: int, a
     with db.writing() as session:
         number = session.query(Participant).count()
         start = datetime(2024, 5, 1, 12, 0, tzinfo=UTC) + timedelta(hours=number)
-        participant = Participant(code=f"hand{number:03d}", study=study.study.id, platform="none", status=status,
-                                  condition=condition, created_at=start, excluded=excluded,
-                                  completed_at=start + timedelta(minutes=minutes) if status == "completed" else None)
+        participant = Participant(
+            code=f"hand{number:03d}",
+            study=study.study.id,
+            platform="none",
+            status=status,
+            condition=condition,
+            created_at=start,
+            excluded=excluded,
+            completed_at=start + timedelta(minutes=minutes) if status == "completed" else None,
+        )
         session.add(participant)
         session.flush()
         participant.plan = dump_plan(build_plan(study, bundle, conditions(study)[condition], random.Random(seed)))
@@ -86,9 +133,19 @@ def add_participant(db: Database, study, bundle_root: Path, *, condition: int, a
             answers = answer(screen)
             if screen["kind"] == "attention" and answers["attention"] != screen["expected"]:
                 participant.attention_failures += 1
-            session.add(Response(participant_id=participant.id, step=step, kind=screen["kind"], answers=answers,
-                                 video_events=[], plays=1 if "media" in screen else 0, client_ms=1000 + step,
-                                 server_ms=900 + step, submitted_at=start + timedelta(seconds=10 * step)))
+            session.add(
+                Response(
+                    participant_id=participant.id,
+                    step=step,
+                    kind=screen["kind"],
+                    answers=answers,
+                    video_events=[],
+                    plays=1 if "media" in screen else 0,
+                    client_ms=1000 + step,
+                    server_ms=900 + step,
+                    submitted_at=start + timedelta(seconds=10 * step),
+                )
+            )
         participant.step = len(participant.plan)
     return participant
 

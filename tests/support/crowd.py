@@ -26,8 +26,13 @@ from app.bots import Bot, ClipIndex, Observer
 CONNECTION_ERRORS = (OSError, http.client.HTTPException)
 
 
-PAGE_TYPES = {("GET", "/"): "landing", ("POST", "/consent"): "consent", ("GET", "/study"): "study page",
-              ("POST", "/study"): "answer", ("POST", "/condition"): "condition"}
+PAGE_TYPES = {
+    ("GET", "/"): "landing",
+    ("POST", "/consent"): "consent",
+    ("GET", "/study"): "study page",
+    ("POST", "/study"): "answer",
+    ("POST", "/condition"): "condition",
+}
 
 
 def page_type(method: str, path: str) -> str:
@@ -74,8 +79,13 @@ class LoopbackClient:
     def post(self, path: str, data: dict) -> Reply:
         if self.pause_s:
             time.sleep(self.pause_s)  # reading the page and answering it
-        return self._follow("POST", path, urlencode(data), {"Content-Type": "application/x-www-form-urlencoded"},
-                            sent={name: str(value) for name, value in data.items()})
+        return self._follow(
+            "POST",
+            path,
+            urlencode(data),
+            {"Content-Type": "application/x-www-form-urlencoded"},
+            sent={name: str(value) for name, value in data.items()},
+        )
 
     def close(self) -> None:
         if self.connection is not None:
@@ -145,7 +155,7 @@ class LoopbackClient:
         if "chunked" in names.get("transfer-encoding", ""):
             raise http.client.HTTPException("a chunked reply: the survey server sends a Content-Length")
         length = 0 if method == "HEAD" or status in (204, 304) else int(names.get("content-length", 0))
-        body = received[end + 4:]
+        body = received[end + 4 :]
         while len(body) < length:
             body += self._receive(length - len(body))
         return status, fields, bytes(body[:length])
@@ -193,8 +203,14 @@ class Crowd:
         clips, observer = self.clips or ClipIndex(self.bundle_dir), Observer()
         for k in range(self.participants):
             client = LoopbackClient(self.url, pause_s=self.pause_s, log=self.log)
-            bot = Bot(client, clips, observer, random.Random(f"{self.seed}:{k}"), number=k,
-                      external_id=f"load-{self.seed}-{k}")
+            bot = Bot(
+                client,
+                clips,
+                observer,
+                random.Random(f"{self.seed}:{k}"),
+                number=k,
+                external_id=f"load-{self.seed}-{k}",
+            )
             self.people.append(Participant(bot, client))
 
     def _server_back(self) -> bool:
@@ -230,8 +246,10 @@ class Crowd:
     def run(self) -> float:
         """Run the crowd; returns the wall time it took."""
         started = time.monotonic()
-        threads = [threading.Thread(target=self._take, args=(person, self.ramp_s * k / max(1, self.participants)),
-                                    daemon=True) for k, person in enumerate(self.people)]
+        threads = [
+            threading.Thread(target=self._take, args=(person, self.ramp_s * k / max(1, self.participants)), daemon=True)
+            for k, person in enumerate(self.people)
+        ]
         for thread in threads:
             thread.start()
         for thread in threads:
@@ -291,8 +309,12 @@ def audit(database_url: str, crowd: Crowd, *, seed: int, n_conditions: int) -> A
     try:
         with db.reading() as session:
             records = list(session.scalars(select(Record)))
-            stored = {(p.external_id, r.step): r.answers for p, r in session.execute(
-                select(Record, Response).join(Response, Response.participant_id == Record.id))}
+            stored = {
+                (p.external_id, r.step): r.answers
+                for p, r in session.execute(
+                    select(Record, Response).join(Response, Response.participant_id == Record.id)
+                )
+            }
     finally:
         db.dispose()
     missing, acknowledged = [], 0
@@ -309,13 +331,22 @@ def audit(database_url: str, crowd: Crowd, *, seed: int, n_conditions: int) -> A
     balance = []
     if slots != list(range(len(slots))):
         balance.append(f"arrival slots are not 0..{len(slots) - 1} without gaps: {slots}")
-    wrong = [p.external_id for p in records if p.slot is not None and p.condition != condition_for_slot(
-        seed=seed, n_conditions=n_conditions, slot=p.slot)]
+    wrong = [
+        p.external_id
+        for p in records
+        if p.slot is not None and p.condition != condition_for_slot(seed=seed, n_conditions=n_conditions, slot=p.slot)
+    ]
     if wrong:
         balance.append(f"participants whose condition is not their slot's: {wrong}")
     counts = Counter(p.condition for p in records)
     if max(counts.values(), default=0) - min((counts[c] for c in range(n_conditions)), default=0) > 1:
         balance.append(f"conditions' counts differ by more than one: {dict(counts)}")
-    return Audit(participants=len(records), responses=len(stored), acknowledged=acknowledged, missing=missing,
-                 duplicated=[i for i, n in ids.items() if n > 1], conditions=dict(sorted(counts.items())),
-                 balance_problems=balance)
+    return Audit(
+        participants=len(records),
+        responses=len(stored),
+        acknowledged=acknowledged,
+        missing=missing,
+        duplicated=[i for i, n in ids.items() if n > 1],
+        conditions=dict(sorted(counts.items())),
+        balance_problems=balance,
+    )

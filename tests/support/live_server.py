@@ -32,8 +32,15 @@ def foil(*args: str, cwd, env_extra: dict | None = None, stdout=subprocess.PIPE,
     """`foil ARGS...` as a child process with no FOIL_* variables from the outside, output to `stdout`."""
     env = {key: value for key, value in os.environ.items() if not key.startswith("FOIL_")}
     env |= {"PYTHONPATH": str(REPO), **(env_extra or {})}
-    return subprocess.Popen([sys.executable, "-c", FOIL, *args], cwd=cwd, env=env, stdout=stdout,
-                            stderr=subprocess.STDOUT, text=True, **kwargs)
+    return subprocess.Popen(
+        [sys.executable, "-c", FOIL, *args],
+        cwd=cwd,
+        env=env,
+        stdout=stdout,
+        stderr=subprocess.STDOUT,
+        text=True,
+        **kwargs,
+    )
 
 
 class LiveServer:
@@ -42,8 +49,16 @@ class LiveServer:
     `start` waits until it answers HTTP; `kill` is SIGKILL (a crash: no shutdown, nothing flushed); `stop` asks it
     to shut down. As a context manager it is sure to stop."""
 
-    def __init__(self, *, bundle: Path, study: Path, database_url: str, workdir: Path, admin_password: str = "",
-                 env: dict[str, str] | None = None):
+    def __init__(
+        self,
+        *,
+        bundle: Path,
+        study: Path,
+        database_url: str,
+        workdir: Path,
+        admin_password: str = "",
+        env: dict[str, str] | None = None,
+    ):
         self.bundle, self.study, self.database_url, self.workdir = bundle, study, database_url, Path(workdir)
         self.admin_password = admin_password
         self.env = env or {}  # FOIL_* settings
@@ -56,9 +71,22 @@ class LiveServer:
         env = {"FOIL_ADMIN_PASSWORD": self.admin_password} if self.admin_password else {}
         env |= self.env
         with self.log.open("a") as log:
-            self.process = foil("serve", "--bundle", str(self.bundle), "--study", str(self.study), "--db",
-                                self.database_url, "--host", "127.0.0.1", "--port", str(self.port),
-                                cwd=self.workdir, env_extra=env, stdout=log)
+            self.process = foil(
+                "serve",
+                "--bundle",
+                str(self.bundle),
+                "--study",
+                str(self.study),
+                "--db",
+                self.database_url,
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(self.port),
+                cwd=self.workdir,
+                env_extra=env,
+                stdout=log,
+            )
         deadline = time.monotonic() + timeout_s
         while True:
             try:
@@ -66,12 +94,14 @@ class LiveServer:
                 return self
             except httpx.TransportError:
                 if self.process.poll() is not None:
-                    raise RuntimeError(f"the server exited with {self.process.returncode}:\n"
-                                       f"{self.log.read_text()}") from None
+                    raise RuntimeError(
+                        f"the server exited with {self.process.returncode}:\n{self.log.read_text()}"
+                    ) from None
                 if time.monotonic() > deadline:
                     self.kill()
-                    raise RuntimeError(f"the server did not answer within {timeout_s} s:\n"
-                                       f"{self.log.read_text()}") from None
+                    raise RuntimeError(
+                        f"the server did not answer within {timeout_s} s:\n{self.log.read_text()}"
+                    ) from None
                 time.sleep(0.1)
 
     def kill(self) -> None:

@@ -49,8 +49,9 @@ class ThrowawayServer:
             try:
                 pwd.getpwnam("postgres")
             except KeyError:
-                raise RuntimeError("PostgreSQL cannot run as root and there is no `postgres` user to run it as") \
-                    from None
+                raise RuntimeError(
+                    "PostgreSQL cannot run as root and there is no `postgres` user to run it as"
+                ) from None
             self.user = "postgres"
             shutil.chown(self.folder, "postgres")
         self.url = f"postgresql+psycopg://foil@127.0.0.1:{self.port}/foil"
@@ -67,12 +68,25 @@ class ThrowawayServer:
     def start(self, *, durable: bool = False) -> ThrowawayServer:
         """`durable`: commits reach the disk as on a deployed server (for benchmarks). Without it, as in the tests,
         where durability is not under test: no fsync makes creating and dropping tables fast."""
-        self._run("initdb", "-D", str(self.data), "-U", "foil", "--auth=trust", "-E", "UTF8", "--locale=C.UTF-8",
-                  "--no-sync")
-        options = (f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.folder} -c max_connections=200"
-                   + ("" if durable else " -c fsync=off -c synchronous_commit=off -c full_page_writes=off"))
-        self._run("pg_ctl", "-D", str(self.data), "-o", options, "-l", str(self.folder / "server.log"), "-w",
-                  "-t", "60", "start")
+        self._run(
+            "initdb", "-D", str(self.data), "-U", "foil", "--auth=trust", "-E", "UTF8", "--locale=C.UTF-8", "--no-sync"
+        )
+        options = f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.folder} -c max_connections=200" + (
+            "" if durable else " -c fsync=off -c synchronous_commit=off -c full_page_writes=off"
+        )
+        self._run(
+            "pg_ctl",
+            "-D",
+            str(self.data),
+            "-o",
+            options,
+            "-l",
+            str(self.folder / "server.log"),
+            "-w",
+            "-t",
+            "60",
+            "start",
+        )
         deadline = time.monotonic() + 30
         while True:
             try:
@@ -115,7 +129,8 @@ def reset(url: str) -> None:
     engine = create_engine(url)
     with engine.begin() as connection:
         connection.execute(text("SET LOCAL lock_timeout = '20s'"))  # a leaked transaction fails the test, not hangs
-        connection.execute(text("""
+        connection.execute(
+            text("""
             DO $$ DECLARE r record; BEGIN
               FOR r IN SELECT tablename FROM pg_tables WHERE schemaname = current_schema() LOOP
                 EXECUTE 'DROP TABLE IF EXISTS ' || quote_ident(r.tablename) || ' CASCADE';
@@ -124,5 +139,6 @@ def reset(url: str) -> None:
                        WHERE sequence_schema = current_schema() LOOP
                 EXECUTE 'DROP SEQUENCE IF EXISTS ' || quote_ident(r.sequence_name) || ' CASCADE';
               END LOOP;
-            END $$"""))
+            END $$""")
+        )
     engine.dispose()

@@ -20,9 +20,14 @@ REPO = Path(__file__).resolve().parents[2]
 PAPER_STUDY = REPO / "studies" / "paper.toml"
 # The paper's names, renamed so that a test can assert they never appear in a participant's page.
 SECRET_NAMES = {
-    "lo": "agentlowsecret", "med": "agentmedsecret", "hi": "agenthighsecret",
-    "adaptive": "schemeadaptivesecret", "nfirst": "schemenfirstsecret",
-    "paper-bl-tr": "scenarioonesecret", "paper-tl-br": "scenariotwosecret", "paper-code": "scenarioexamplesecret",
+    "lo": "agentlowsecret",
+    "med": "agentmedsecret",
+    "hi": "agenthighsecret",
+    "adaptive": "schemeadaptivesecret",
+    "nfirst": "schemenfirstsecret",
+    "paper-bl-tr": "scenarioonesecret",
+    "paper-tl-br": "scenariotwosecret",
+    "paper-code": "scenarioexamplesecret",
 }
 AGENT_RANK = ["agentlowsecret", "agentmedsecret", "agenthighsecret"]  # worst to best: the ground truth
 ADMIN_PASSWORD = "correct horse battery"
@@ -31,9 +36,23 @@ WATCHED = json.dumps([{"type": "loaded", "t": 5}, {"type": "play", "t": 100}, {"
 
 def make_clip(path: Path, source: str) -> None:
     subprocess.run(
-        [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi",
-         "-i", f"{source}=size=64x64:rate=10:duration=1",
-         "-c:v", "libx264", "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)],
+        [
+            imageio_ffmpeg.get_ffmpeg_exe(),
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "lavfi",
+            "-i",
+            f"{source}=size=64x64:rate=10:duration=1",
+            "-c:v",
+            "libx264",
+            "-pix_fmt",
+            "yuv420p",
+            "-movflags",
+            "+faststart",
+            str(path),
+        ],
         check=True,
     )
 
@@ -51,13 +70,24 @@ def write_bundle(root: Path, clip_files: list[Path], *, schemes, scenarios, agen
         name = f"clips/{n:03d}.mp4"
         shutil.copyfile(source, root / name)
         shown = list(pair) if n % 2 else list(reversed(pair))  # both on-screen orders occur
-        entries.append(ManifestClip(
-            id=f"{scheme}-{scenario}-{pair[0]}-{pair[1]}", file=name, sha256=sha256_file(root / name),
-            scheme=scheme, scenario=scenario, agents=shown, labels=[label[a] for a in shown],
-            better=max(pair, key=AGENT_RANK.index) if pair[0] in AGENT_RANK else pair[1],
-            summary=f"summaries/{n:03d}.json"))
-    manifest = Manifest(format=MANIFEST_FORMAT, clips=entries,
-                        agents={agent: {"agent": agent, "episodes": 10, "success_rate": 0.5} for agent in agents})
+        entries.append(
+            ManifestClip(
+                id=f"{scheme}-{scenario}-{pair[0]}-{pair[1]}",
+                file=name,
+                sha256=sha256_file(root / name),
+                scheme=scheme,
+                scenario=scenario,
+                agents=shown,
+                labels=[label[a] for a in shown],
+                better=max(pair, key=AGENT_RANK.index) if pair[0] in AGENT_RANK else pair[1],
+                summary=f"summaries/{n:03d}.json",
+            )
+        )
+    manifest = Manifest(
+        format=MANIFEST_FORMAT,
+        clips=entries,
+        agents={agent: {"agent": agent, "episodes": 10, "success_rate": 0.5} for agent in agents},
+    )
     (root / "manifest.json").write_text(manifest_json(manifest))
     return root
 
@@ -66,7 +96,7 @@ def survey_tables() -> str:
     """The paper study's survey tables without its [build] table: what a study file for a test bundle starts with,
     since `foil bundle` checks the whole file before any search."""
     text_ = PAPER_STUDY.read_text()
-    return text_[:text_.index("\n[build]\n")] + "\n"
+    return text_[: text_.index("\n[build]\n")] + "\n"
 
 
 def study_text(**changes: str) -> str:
@@ -80,17 +110,16 @@ def study_text(**changes: str) -> str:
     return text_
 
 
-
-VIDEO_CHECK = '''""
+VIDEO_CHECK = """""
 [[attention_checks]]
 part = 1
 after = 1
 text = "Did one of the robots touch a person?"
 options = ["Yes", "No"]
 expected = "Yes"
-clip = {{scheme = "{scheme}", scenario = "scenarioexamplesecret", agents = ["agentlowsecret", "agenthighsecret"]}}'''
+clip = {{scheme = "{scheme}", scenario = "scenarioexamplesecret", agents = ["agentlowsecret", "agenthighsecret"]}}"""
 
-CLOSING = '''""
+CLOSING = """""
 [closing]
 questions = ["age_range", "robot_experience", "confidence"]
 feedback = "Anything you want to tell the researchers?"
@@ -110,7 +139,7 @@ options = ["Never", "A little", "A lot"]
 type = "scale"
 text = "How sure were you of your answers?"
 points = 5
-anchors = ["Not at all", "Completely"]'''
+anchors = ["Not at all", "Completely"]"""
 
 ATTENTION = """
 [[attention_checks]]
@@ -174,8 +203,9 @@ def start(client: TestClient, query: str = "") -> str:
     """Open the study link and consent; returns the first page after consent."""
     page = client.get(f"/{query}")
     assert page.status_code == 200, page.text
-    response = client.post("/consent", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
-                                             "choice": "agree"})
+    response = client.post(
+        "/consent", data={"csrf_token": FormReader(page.text).hidden["csrf_token"], "choice": "agree"}
+    )
     assert response.status_code == 200, response.text
     return response.text
 
@@ -186,8 +216,13 @@ def finish(client: TestClient, page: str, choice: int = 0, limit: int = 60) -> s
         form = FormReader(page)
         if "step" not in form.hidden:
             if "number" in form.radios:  # the paper's self-selected condition
-                page = client.post("/condition", data={"csrf_token": form.hidden["csrf_token"],
-                                                       "number": str(choice % len(form.radios["number"]) + 1)}).text
+                page = client.post(
+                    "/condition",
+                    data={
+                        "csrf_token": form.hidden["csrf_token"],
+                        "number": str(choice % len(form.radios["number"]) + 1),
+                    },
+                ).text
                 continue
             return page
         response = client.post("/study", data=answer_for(page, choice))
@@ -206,8 +241,9 @@ def stored(client: TestClient, model) -> list:
 
 def log_in(client: TestClient, password: str = ADMIN_PASSWORD):
     page = client.get("/admin/login")
-    return client.post("/admin/login", data={"csrf_token": FormReader(page.text).hidden["csrf_token"],
-                                             "password": password})
+    return client.post(
+        "/admin/login", data={"csrf_token": FormReader(page.text).hidden["csrf_token"], "password": password}
+    )
 
 
 CLIP_S = 3.0  # the long clips' playing time: longer than the server's 1-second viewing tolerance
@@ -219,10 +255,32 @@ def write_long_bundle(clips: Path, root: Path) -> Path:
     files = []
     for name, source in (("a", "testsrc"), ("b", "testsrc2")):
         files.append(clips / f"{name}.mp4")
-        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i",
-                        f"{source}=size=72x88:rate=10:duration={CLIP_S}", "-c:v", "libx264", "-pix_fmt", "yuv420p",
-                        "-movflags", "+faststart", str(files[-1])], check=True)
+        subprocess.run(
+            [
+                imageio_ffmpeg.get_ffmpeg_exe(),
+                "-v",
+                "error",
+                "-y",
+                "-f",
+                "lavfi",
+                "-i",
+                f"{source}=size=72x88:rate=10:duration={CLIP_S}",
+                "-c:v",
+                "libx264",
+                "-pix_fmt",
+                "yuv420p",
+                "-movflags",
+                "+faststart",
+                str(files[-1]),
+            ],
+            check=True,
+        )
     names = SECRET_NAMES
-    return write_bundle(root, files, schemes=[names["adaptive"], names["nfirst"]],
-                        scenarios=[names["paper-bl-tr"], names["paper-tl-br"]], agents=AGENT_RANK,
-                        example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])))
+    return write_bundle(
+        root,
+        files,
+        schemes=[names["adaptive"], names["nfirst"]],
+        scenarios=[names["paper-bl-tr"], names["paper-tl-br"]],
+        agents=AGENT_RANK,
+        example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])),
+    )

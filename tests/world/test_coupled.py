@@ -138,7 +138,6 @@ def test_crowds_are_shared_or_one_per_agent():
     assert not np.allclose(step.crowds[:, 0], step.crowds[:, 1])
 
 
-
 @pytest.mark.parametrize("visible", [False, True])
 @pytest.mark.parametrize("rows", [[2], [4, 1], [0, 1, 3, 4, 5]])
 def test_assign_overwrites_some_rows_with_a_snapshot_and_leaves_the_others(visible, rows):
@@ -169,8 +168,11 @@ def test_assign_overwrites_some_rows_with_a_snapshot_and_leaves_the_others(visib
         target.assign([0, 1], source.snapshot([0]))
 
 
-@pytest.mark.parametrize("config", [None, WorldConfig(robot_visible=True), WorldConfig(env_action_mode="preferred")],
-                         ids=["shared crowd", "visible robots", "preferred mode"])
+@pytest.mark.parametrize(
+    "config",
+    [None, WorldConfig(robot_visible=True), WorldConfig(env_action_mode="preferred")],
+    ids=["shared crowd", "visible robots", "preferred mode"],
+)
 def test_the_crowd_helper_thread_changes_nothing(monkeypatch, config):
     """Crowds computed on the helper thread while the policies act equal crowds computed in line, bit for bit."""
     from search.sim import coupled
@@ -215,8 +217,12 @@ def test_a_forked_child_gets_its_own_crowd_helper():
 def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
     from search.sim.observation import observe
 
-    sim = CoupledSimulator([load_policy("goal"), load_policy("orca")], load_scenario("paper-bl-tr"),
-                           WorldConfig(robot_visible=visible), batch=3)
+    sim = CoupledSimulator(
+        [load_policy("goal"), load_policy("orca")],
+        load_scenario("paper-bl-tr"),
+        WorldConfig(robot_visible=visible),
+        batch=3,
+    )
     rng = np.random.default_rng(4)
     for _ in range(6):
         sim.step(rng.uniform(-0.25, 0.25, (3, 10, 2)))
@@ -231,10 +237,21 @@ def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
             np.testing.assert_array_equal(seen.spatial_edges, humans - pos[:, None, :])
             offset = state.robot_goal[worlds, robot] - pos
             distance = np.sqrt(offset[:, 0] * offset[:, 0] + offset[:, 1] * offset[:, 1])
-            np.testing.assert_array_equal(seen.robot_node, np.column_stack([
-                pos, np.full(3, sim.config.robot_radius), state.robot_goal[worlds, robot],
-                np.full(3, sim.config.robot_v_pref), state.robot_theta[worlds, robot],
-                offset, distance, offset / distance[:, None]]))
+            np.testing.assert_array_equal(
+                seen.robot_node,
+                np.column_stack(
+                    [
+                        pos,
+                        np.full(3, sim.config.robot_radius),
+                        state.robot_goal[worlds, robot],
+                        np.full(3, sim.config.robot_v_pref),
+                        state.robot_theta[worlds, robot],
+                        offset,
+                        distance,
+                        offset / distance[:, None],
+                    ]
+                ),
+            )
             np.testing.assert_array_equal(seen.temporal_edges, state.robot_vel[worlds, robot])
             np.testing.assert_array_equal(seen.human_velocities, state.human_vel[worlds])
             np.testing.assert_array_equal(seen.human_radii, state.human_radius[worlds])

@@ -15,8 +15,16 @@ from search.sim.orca import orca_velocities
 from search.sim.scenarios import Scenario, sample_training_states
 from search.sim.world import WorldConfig, new_state
 
-CROWDNAV = WorldConfig(human_num=5, human_v_pref=1.0, randomize_attributes=True, goal_change_chance=0.25,
-                       end_goal_change_chance=1.0, robot_fov=180.0, human_fov=270.0, time_limit=49.0)
+CROWDNAV = WorldConfig(
+    human_num=5,
+    human_v_pref=1.0,
+    randomize_attributes=True,
+    goal_change_chance=0.25,
+    end_goal_change_chance=1.0,
+    robot_fov=180.0,
+    human_fov=270.0,
+    time_limit=49.0,
+)
 
 
 def test_randomised_humans_are_uniform_over_crowdnavs_ranges():
@@ -85,8 +93,15 @@ def test_goals_change_with_their_chance_every_interval_only():
 def test_humans_at_their_goal_take_a_new_one_with_the_end_chance(chance):
     config = WorldConfig(human_num=1, human_v_pref=1.0, end_goal_change_chance=chance)
     worlds = 400
-    state = new_state(np.zeros((worlds, 1, 2)), np.full((worlds, 1, 2), 0.1), np.full((worlds, 1, 2), -20.0),
-                      np.full((worlds, 1, 2), -25.0), 0.0, config, rng=np.arange(worlds, dtype=np.uint64))
+    state = new_state(
+        np.zeros((worlds, 1, 2)),
+        np.full((worlds, 1, 2), 0.1),
+        np.full((worlds, 1, 2), -20.0),
+        np.full((worlds, 1, 2), -25.0),
+        0.0,
+        config,
+        rng=np.arange(worlds, dtype=np.uint64),
+    )
     world.step(state, config, np.zeros((worlds, 1, 2)))  # every human arrives within its radius of (0.1, 0.1)
     changed = np.linalg.norm(state.human_goal[:, 0] - 0.1, axis=-1) > 1e-12
     assert abs(changed.mean() - chance) < 3 * math.sqrt(0.25 / worlds)
@@ -94,8 +109,14 @@ def test_humans_at_their_goal_take_a_new_one_with_the_end_chance(chance):
 
 
 def _robot_among(humans, config, velocity=(1.0, 0.0), theta=0.0):
-    state = new_state(np.array([humans], float), np.array([humans], float), np.zeros((1, 1, 2)),
-                      np.array([[[9.0, 0.0]]]), theta, config)
+    state = new_state(
+        np.array([humans], float),
+        np.array([humans], float),
+        np.zeros((1, 1, 2)),
+        np.array([[[9.0, 0.0]]]),
+        theta,
+        config,
+    )
     state.robot_vel[0, 0] = velocity
     return state
 
@@ -129,8 +150,13 @@ def test_humans_avoid_only_the_humans_in_their_view():
     # by hand: human 0 sees human 2 (ahead), and human 1 in its place stands still at (7, 7)
     pad = 0.01 + config.safety_space
     expected = orca_velocities(
-        np.array([[[0.0, 0.0], [7.0, 7.0], [1.0, 0.8]]]), np.array([[[0.5, 0.0], [0.0, 0.0], [0.0, 0.0]]]),
-        np.array([[[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]]]), np.full((1, 3), 0.3 + pad), np.ones((1, 3)), n_ego=1)
+        np.array([[[0.0, 0.0], [7.0, 7.0], [1.0, 0.8]]]),
+        np.array([[[0.5, 0.0], [0.0, 0.0], [0.0, 0.0]]]),
+        np.array([[[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]]]),
+        np.full((1, 3), 0.3 + pad),
+        np.ones((1, 3)),
+        n_ego=1,
+    )
     np.testing.assert_array_equal(velocity[0, 0], expected[0, 0])
     everyone = world.human_velocities(state, config.with_(human_fov=360.0), None)
     assert not np.allclose(everyone[0, 0], velocity[0, 0])  # with full view, human 1 behind it matters
@@ -138,20 +164,24 @@ def test_humans_avoid_only_the_humans_in_their_view():
 
 def test_the_arc_unicycle_turns_while_it_moves():
     config = WorldConfig(human_num=0, kinematics="unicycle", unicycle_motion="arc")
-    state = new_state(np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 1, 2)), np.array([[[9.0, 9.0]]]),
-                      0.3, config)
+    state = new_state(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 1, 2)), np.array([[[9.0, 9.0]]]), 0.3, config
+    )
     state.robot_speed[:] = 0.8
     world.step(state, config, np.array([[[0.05, 0.1]]]))
     v, theta, turn, dt = 0.85, 0.3, 0.1, config.dt
     radius = v * dt / turn  # CrowdNav's differential drive: w = dtheta / dt, R = v / w
-    expected = [radius * (math.sin(theta + turn) - math.sin(theta)),
-                radius * (math.cos(theta) - math.cos(theta + turn))]
+    expected = [
+        radius * (math.sin(theta + turn) - math.sin(theta)),
+        radius * (math.cos(theta) - math.cos(theta + turn)),
+    ]
     np.testing.assert_allclose(state.robot_pos[0, 0], expected, rtol=1e-12)
     assert state.robot_theta[0, 0] == pytest.approx(0.4)
     np.testing.assert_allclose(state.robot_vel[0, 0], [v * math.cos(0.4), v * math.sin(0.4)])
     straight = config.with_(unicycle_motion="straight")
-    other = new_state(np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 1, 2)), np.array([[[9.0, 9.0]]]),
-                      0.3, straight)
+    other = new_state(
+        np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), np.zeros((1, 1, 2)), np.array([[[9.0, 9.0]]]), 0.3, straight
+    )
     other.robot_speed[:] = 0.8
     world.step(other, straight, np.array([[[0.05, 0.1]]]))
     np.testing.assert_allclose(other.robot_pos[0, 0], [dt * v * math.cos(0.4), dt * v * math.sin(0.4)])
@@ -191,8 +221,11 @@ def test_replays_with_every_setting_on_are_bit_identical_and_snapshots_carry_the
 
 
 def test_invalid_settings_are_explained():
-    for changes, message in [({"goal_change_chance": 1.5}, "between 0 and 1"), ({"robot_fov": 0.0}, "degrees"),
-                             ({"human_fov": 90.0, "robot_visible": True}, "invisible robot"),
-                             ({"unicycle_motion": "skid"}, "unicycle_motion")]:
+    for changes, message in [
+        ({"goal_change_chance": 1.5}, "between 0 and 1"),
+        ({"robot_fov": 0.0}, "degrees"),
+        ({"human_fov": 90.0, "robot_visible": True}, "invisible robot"),
+        ({"unicycle_motion": "skid"}, "unicycle_motion"),
+    ]:
         with pytest.raises(ValueError, match=message):
             WorldConfig(**changes)

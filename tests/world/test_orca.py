@@ -11,8 +11,16 @@ def rvo2_velocities(pos, vel, pref, radii, speeds, neighbor_dist=10.0, max_neigh
     """One RVO2 doStep over one world, as CrowdNav drives the library."""
     sim = pyrvo.RVOSimulator(dt, neighbor_dist, max_neighbors, horizon, horizon, 0.3, 1.0)
     for i in range(len(pos)):
-        sim.add_agent(tuple(pos[i]), neighbor_dist, max_neighbors, horizon, horizon, float(radii[i]),
-                      float(speeds[i]), tuple(vel[i]))
+        sim.add_agent(
+            tuple(pos[i]),
+            neighbor_dist,
+            max_neighbors,
+            horizon,
+            horizon,
+            float(radii[i]),
+            float(speeds[i]),
+            tuple(vel[i]),
+        )
         sim.set_agent_pref_velocity(i, tuple(pref[i]))
     sim.do_step()
     return np.array([[sim.get_agent_velocity(i).x, sim.get_agent_velocity(i).y] for i in range(len(pos))])
@@ -28,8 +36,9 @@ def test_agrees_with_rvo2_on_random_scenes(spread, n, max_neighbors):
     radii = rng.uniform(0.2, 0.5, (b, n))
     speeds = rng.uniform(0.1, 1.5, (b, n))
     ours = orca_step(pos, vel, pref, radii, speeds, max_neighbors=max_neighbors)
-    reference = np.stack([rvo2_velocities(pos[w], vel[w], pref[w], radii[w], speeds[w],
-                                          max_neighbors=max_neighbors) for w in range(b)])
+    reference = np.stack(
+        [rvo2_velocities(pos[w], vel[w], pref[w], radii[w], speeds[w], max_neighbors=max_neighbors) for w in range(b)]
+    )
     assert np.abs(ours - reference).max() < 1e-4
 
 
@@ -96,15 +105,23 @@ def test_n_ego_computes_only_the_leading_agents():
     np.testing.assert_array_equal(first[:, 0], full[:, 0])
 
 
-@pytest.mark.parametrize("bad, message", [
-    (dict(positions=np.zeros((2, 3))), "positions must have shape"),
-    (dict(radii=np.zeros((1, 4))), "radii has shape"),
-    (dict(velocities=np.full((1, 3, 2), np.nan)), "velocities contains NaN"),
-    (dict(max_speeds=-np.ones((1, 3))), "non-negative"),
-])
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (dict(positions=np.zeros((2, 3))), "positions must have shape"),
+        (dict(radii=np.zeros((1, 4))), "radii has shape"),
+        (dict(velocities=np.full((1, 3, 2), np.nan)), "velocities contains NaN"),
+        (dict(max_speeds=-np.ones((1, 3))), "non-negative"),
+    ],
+)
 def test_bad_inputs_are_named(bad, message):
-    args = dict(positions=np.zeros((1, 3, 2)), velocities=np.zeros((1, 3, 2)),
-                preferred_velocities=np.zeros((1, 3, 2)), radii=np.ones((1, 3)), max_speeds=np.ones((1, 3)))
+    args = dict(
+        positions=np.zeros((1, 3, 2)),
+        velocities=np.zeros((1, 3, 2)),
+        preferred_velocities=np.zeros((1, 3, 2)),
+        radii=np.ones((1, 3)),
+        max_speeds=np.ones((1, 3)),
+    )
     args.update(bad)
     with pytest.raises(ValueError, match=message):
         orca_step(**args)

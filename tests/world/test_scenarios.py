@@ -37,17 +37,20 @@ def test_scenario_round_trips_through_its_dict():
     assert Scenario.from_dict(scenario.to_dict()) == scenario
 
 
-@pytest.mark.parametrize("text, message", [
-    ('name = "x"\n', "missing \\[robot\\]"),
-    ('[robot]\nstart = [0, 0]\n', "needs 'goal'"),
-    ('[robot]\nstart = [0, "a"]\ngoal = [1, 1]\n', "start must be a pair of numbers"),
-    ('[robot]\nstart = [0, 0]\ngoal = [1, 1]\n[[humans]]\ngoal = [1, 1]\n', "human 0 needs 'position'"),
-    ('[robot]\nstart = [0, 0]\ngoal = [1, 1]\n[world]\nspeed = 2\n', "unknown world setting"),
-    ('[robot]\nstart = [0, 0]\ngoal = [1, 1]\ncolour = 3\n', "unknown key\\(s\\) \\['colour'\\]"),
-    ('robots = 2\n[robot]\nstart = [0, 0]\ngoal = [1, 1]\n', "unknown key"),
-    ('[robot\nstart = [0, 0]\n', "not valid TOML"),
-    ('[robot]\nstart = [0, nan]\ngoal = [1, 1]\n', "must be finite"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('name = "x"\n', "missing \\[robot\\]"),
+        ("[robot]\nstart = [0, 0]\n", "needs 'goal'"),
+        ('[robot]\nstart = [0, "a"]\ngoal = [1, 1]\n', "start must be a pair of numbers"),
+        ("[robot]\nstart = [0, 0]\ngoal = [1, 1]\n[[humans]]\ngoal = [1, 1]\n", "human 0 needs 'position'"),
+        ("[robot]\nstart = [0, 0]\ngoal = [1, 1]\n[world]\nspeed = 2\n", "unknown world setting"),
+        ("[robot]\nstart = [0, 0]\ngoal = [1, 1]\ncolour = 3\n", "unknown key\\(s\\) \\['colour'\\]"),
+        ("robots = 2\n[robot]\nstart = [0, 0]\ngoal = [1, 1]\n", "unknown key"),
+        ("[robot\nstart = [0, 0]\n", "not valid TOML"),
+        ("[robot]\nstart = [0, nan]\ngoal = [1, 1]\n", "must be finite"),
+    ],
+)
 def test_bad_scenario_files_are_explained(tmp_path, text, message):
     path = tmp_path / "bad.toml"
     path.write_text(text)
@@ -72,8 +75,10 @@ def test_training_distribution_is_seeded_and_follows_crowdnav():
     np.testing.assert_array_equal(a.human_goal, -a.human_pos)
 
 
-@pytest.mark.parametrize("config", [WorldConfig(), WorldConfig(kinematics="unicycle"),
-                                    WorldConfig(human_policy="social_force", robot_visible=True)])
+@pytest.mark.parametrize(
+    "config",
+    [WorldConfig(), WorldConfig(kinematics="unicycle"), WorldConfig(human_policy="social_force", robot_visible=True)],
+)
 def test_gymnasium_wrapper_passes_the_env_checker(config):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the checker's note that the env has no registered spec
@@ -124,5 +129,6 @@ def test_a_distribution_is_refused_where_one_scenario_is_needed_and_bad_files_ar
         load_scenario_or_distribution(bad)
     dense = tmp_path / "dense.toml"
     dense.write_text('name = "dense"\n[distribution]\nkind = "circle-crossing"\n[world]\nhuman_num = 4\n')
-    assert [len(s.human_positions) for s in load_scenario_or_distribution(dense).sample(
-        np.random.default_rng(0), 2)] == [4, 4]
+    assert [
+        len(s.human_positions) for s in load_scenario_or_distribution(dense).sample(np.random.default_rng(0), 2)
+    ] == [4, 4]

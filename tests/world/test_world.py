@@ -105,11 +105,14 @@ def test_observation_mode_leaves_the_crowd_alone():
     np.testing.assert_array_equal(first.human_pos, second.human_pos)
 
 
-@pytest.mark.parametrize("action, message", [
-    (np.full((1, 10, 2), 0.3), "outside the bound"),
-    (np.full((1, 10, 2), np.nan), "NaN or infinite"),
-    (np.zeros((1, 9, 2)), "must have shape"),
-])
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (np.full((1, 10, 2), 0.3), "outside the bound"),
+        (np.full((1, 10, 2), np.nan), "NaN or infinite"),
+        (np.zeros((1, 9, 2)), "must have shape"),
+    ],
+)
 def test_bad_environment_actions_are_refused_and_change_nothing(action, message):
     config = WorldConfig()
     state = sample_training_states(config, np.random.default_rng(0), 1)
@@ -202,8 +205,7 @@ def test_holonomic_velocities_equal_the_numpy_formula_bit_for_bit():
     before = state.copy()
     velocity = world.robot_velocities(state, config, action)
     speed = np.sqrt(action[..., 0:1] ** 2 + action[..., 1:2] ** 2)
-    clipped = np.where(speed > config.robot_v_pref, action * (config.robot_v_pref / np.maximum(speed, 1e-300)),
-                       action)
+    clipped = np.where(speed > config.robot_v_pref, action * (config.robot_v_pref / np.maximum(speed, 1e-300)), action)
     active = ~before.done
     theta = np.where(speed[..., 0] > 0, np.arctan2(clipped[..., 1], clipped[..., 0]), before.robot_theta)
     assert np.array_equal(velocity, np.where(active[..., None], clipped, 0.0))
@@ -226,8 +228,14 @@ def test_unicycle_accumulates_clipped_speed_and_turns():
 
 def test_social_force_humans_head_for_their_goals_and_repel():
     config = WorldConfig(human_num=2, human_policy="social_force", human_v_pref=1.0)
-    state = new_state(np.array([[[-3.0, 0.0], [3.0, 0.05]]]), np.array([[[3.0, 0.0], [-3.0, 0.05]]]),
-                      np.array([[[0.0, -20.0]]]), np.array([[[0.0, 20.0]]]), 0.0, config)
+    state = new_state(
+        np.array([[[-3.0, 0.0], [3.0, 0.05]]]),
+        np.array([[[3.0, 0.0], [-3.0, 0.05]]]),
+        np.array([[[0.0, -20.0]]]),
+        np.array([[[0.0, 20.0]]]),
+        0.0,
+        config,
+    )
     for _ in range(60):
         world.step(state, config, np.zeros((1, 1, 2)))
         assert np.linalg.norm(state.human_vel, axis=-1).max() <= 1.0 + 1e-9
@@ -235,8 +243,10 @@ def test_social_force_humans_head_for_their_goals_and_repel():
 
 
 def test_visible_robot_is_avoided_by_humans():
-    invisible, visible = WorldConfig(human_num=1, human_v_pref=1.0), WorldConfig(human_num=1, human_v_pref=1.0,
-                                                                                  robot_visible=True)
+    invisible, visible = (
+        WorldConfig(human_num=1, human_v_pref=1.0),
+        WorldConfig(human_num=1, human_v_pref=1.0, robot_visible=True),
+    )
     runs = []
     for config in (invisible, visible):
         state = one_robot_world(config, [0.0, 0.0], [0.0, 0.0], humans=[[-3.0, 0.0]], human_goals=[[3.0, 0.0]])
@@ -269,29 +279,39 @@ def numpy_move_and_judge(state, config, robot_vel, human_vel):
     rel_end = robot_pos[:, :, None, :] - human_pos[:, None, :, :]
     seg = rel_end - rel_start
     seg_sq = np.sum(seg * seg, axis=-1)
-    t = np.clip(np.divide(-np.sum(rel_start * seg, axis=-1), seg_sq, out=np.zeros_like(seg_sq), where=seg_sq > 0),
-                0.0, 1.0)
-    surface = np.linalg.norm(rel_start + t[..., None] * seg, axis=-1) - state.human_radius[:, None, :] \
-        - config.robot_radius
+    t = np.clip(
+        np.divide(-np.sum(rel_start * seg, axis=-1), seg_sq, out=np.zeros_like(seg_sq), where=seg_sq > 0), 0.0, 1.0
+    )
+    surface = (
+        np.linalg.norm(rel_start + t[..., None] * seg, axis=-1) - state.human_radius[:, None, :] - config.robot_radius
+    )
     clearance = surface.min(axis=-1)
     goal_dist = np.linalg.norm(state.robot_goal - robot_pos, axis=-1)
     collision = active & (clearance < 0)
     success = active & ~collision & (goal_dist < config.robot_radius)
     timeout = active & ~collision & ~success & (time[:, None] >= config.time_limit - 1e-9)
-    reward = np.where(clearance < config.discomfort_dist,
-                      (clearance - config.discomfort_dist) * config.discomfort_factor * config.dt,
-                      config.progress_factor * (prev_goal_dist - goal_dist))
+    reward = np.where(
+        clearance < config.discomfort_dist,
+        (clearance - config.discomfort_dist) * config.discomfort_factor * config.dt,
+        config.progress_factor * (prev_goal_dist - goal_dist),
+    )
     reward = np.where(timeout, 0.0, reward)
     reward = np.where(success, config.success_reward, reward)
     reward = np.where(collision, config.collision_penalty, reward)
     reward = np.where(active, reward, 0.0)
     finished = collision | success | timeout
     return {
-        "reward": reward, "robot_pos": robot_pos, "human_pos": human_pos, "time": time, "path_length": path_length,
+        "reward": reward,
+        "robot_pos": robot_pos,
+        "human_pos": human_pos,
+        "time": time,
+        "path_length": path_length,
         "min_clearance": np.where(active, np.minimum(state.min_clearance, clearance), state.min_clearance),
-        "outcome": np.where(collision, COLLISION, np.where(success, SUCCESS, np.where(timeout, TIMEOUT,
-                                                                                       state.outcome))),
-        "event_time": np.where(finished, time[:, None], state.event_time), "done": state.done | finished,
+        "outcome": np.where(
+            collision, COLLISION, np.where(success, SUCCESS, np.where(timeout, TIMEOUT, state.outcome))
+        ),
+        "event_time": np.where(finished, time[:, None], state.event_time),
+        "done": state.done | finished,
     }
 
 
