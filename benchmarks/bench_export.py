@@ -1,7 +1,7 @@
 """Export and report of a large synthetic study: time and peak memory for 1,000 and 10,000 participants.
 
 The database is the real schema (migrated SQLite file) filled with participants of the shipped paper study: real
-plans (app.plan.build_plan over a bundle of manifest entries), random valid answers to every screen. Each export
+plans (app.survey.plan.build_plan over a bundle of manifest entries), random valid answers to every screen. Each export
 runs in a fresh child process so its peak resident memory (ru_maxrss) is its own.
 
     .venv/bin/python benchmarks/bench_export.py [--participants 1000,10000]
@@ -26,14 +26,14 @@ sys.path.insert(0, str(REPO))
 
 from sqlalchemy import insert  # noqa: E402
 
-from app.assignment import conditions  # noqa: E402
-from app.bundle import Bundle  # noqa: E402
-from app.database import Database, migrate  # noqa: E402
 from app.formats import ManifestClip  # noqa: E402
-from app.models import Participant, ParticipantPlan, Response  # noqa: E402
-from app.plan import build_plan  # noqa: E402
-from app.screens import dump_plan  # noqa: E402
-from app.study import load_study  # noqa: E402
+from app.store.database import Database, migrate  # noqa: E402
+from app.store.models import Participant, ParticipantPlan, Response  # noqa: E402
+from app.survey.assignment import conditions  # noqa: E402
+from app.survey.bundle import Bundle  # noqa: E402
+from app.survey.plan import build_plan  # noqa: E402
+from app.survey.screens import dump_plan  # noqa: E402
+from app.survey.study import load_study  # noqa: E402
 
 STUDY = REPO / "studies" / "paper.toml"
 RANK = ["lo", "med", "hi"]
@@ -132,8 +132,8 @@ def fill(url: str, n: int, seed: int = 0, chunk: int = 500) -> None:
 
 def child(url: str, out: str, what: str) -> None:
     """Run one export or report and print its time and this process's peak resident memory."""
-    from app.export_csv import export_study
-    from app.report import render_report, tally_study
+    from app.analysis.export_csv import export_study
+    from app.analysis.report import render_report, tally_study
 
     db = Database(url)
     study = load_study(STUDY)

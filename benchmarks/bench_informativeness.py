@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from app.statistics import wilson_interval
+from app.analysis.statistics import wilson_interval
 from app.visible import VisibleClip, audit
 from search.agents.evaluate import evaluate
 from search.agents.policies import load_policy

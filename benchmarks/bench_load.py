@@ -1,6 +1,6 @@
-"""Survey server under load: `foil simulate`'s bots (app.bots.Bot, threads, through the lean keep-alive client of
-tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback, clips included, on the
-same machine as the server.
+"""Survey server under load: `foil simulate`'s bots (app.analysis.bots.Bot, threads, through the lean keep-alive
+client of tests/robustness/crowd.py) take the paper study at once against `foil serve` on loopback, clips included,
+on the same machine as the server.
 
 Six runs, each bounded in time and count (--runs picks some):
   ceiling  a minimal FastAPI endpoint returning a constant, served the way `foil serve` serves here (uvicorn, one
@@ -46,9 +46,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from app.assignment import conditions  # noqa: E402
-from app.bots import Bot, ClipIndex, Observer  # noqa: E402
-from app.study import parse_study  # noqa: E402
+from app.analysis.bots import Bot, ClipIndex, Observer  # noqa: E402
+from app.survey.assignment import conditions  # noqa: E402
+from app.survey.study import parse_study  # noqa: E402
 from tests.support import postgres  # noqa: E402
 from tests.support.analysis import write_bot_bundle  # noqa: E402
 from tests.support.crowd import Crowd, LoopbackClient, audit, page_type  # noqa: E402

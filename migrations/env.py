@@ -1,9 +1,9 @@
-"""Alembic environment: run by `foil serve` (app.database.migrate) or by `alembic` with alembic.ini."""
+"""Alembic environment: run by `foil serve` (app.store.database.migrate) or by `alembic` with alembic.ini."""
 
 from alembic import context
 from sqlalchemy import create_engine
 
-from app.models import Base
+from app.store.models import Base
 
 config = context.config
 target_metadata = Base.metadata

@@ -66,13 +66,13 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from app.serve import serve
+    from app.web.serve import serve
 
     return serve(bundle=args.bundle, study=args.study, database_url=args.db, host=args.host, port=args.port)
 
 
 def _exclusion_rules(args: argparse.Namespace):
-    from app.exclusions import ExclusionRules
+    from app.analysis.exclusions import ExclusionRules
 
     return ExclusionRules(
         min_seconds=args.min_seconds, median_fraction=args.median_fraction, include_kinds=tuple(_names(args.include))
@@ -80,13 +80,13 @@ def _exclusion_rules(args: argparse.Namespace):
 
 
 def _export(args: argparse.Namespace) -> int:
-    from app.export_csv import run_export
+    from app.analysis.export_csv import run_export
 
     return run_export(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
 
 
 def _report(args: argparse.Namespace) -> int:
-    from app.report import run_report
+    from app.analysis.report import run_report
 
     return run_report(
         database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args), bundle=args.bundle
@@ -94,7 +94,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from app.bots import run_simulate
+    from app.analysis.bots import run_simulate
 
     return run_simulate(
         url=args.url,

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from app.database import migrate
-from app.main import create_app
-from app.settings import Settings
+from app.store.database import migrate
+from app.web.main import create_app
+from app.web.settings import Settings
 from tests.support import postgres
 from tests.support.survey import ADMIN_PASSWORD, AGENT_RANK, SECRET_NAMES, make_clip, study_text, write_bundle
 

@@ -30,8 +30,8 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
-from app.study import Build, StudyError, parse_study, refuse
-from app.study import parse_build as parse_build_table
+from app.survey.study import Build, StudyError, parse_study, refuse
+from app.survey.study import parse_build as parse_build_table
 from app.visible import VisibleClip, audit
 from search.bundle import worlds
 from search.clips.render import ROBOT_STYLES, RenderOptions, robot_label
@@ -192,7 +192,7 @@ def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
 
 def parse_build(text: str, source: str = "study file") -> BuildSpec:
     """The `[build]` table of a study file's text as a BuildSpec, or BuildError naming the file, line and field as
-    the server does (`app.study`); the survey tables are left to the server."""
+    the server does (`app.survey.study`); the survey tables are left to the server."""
     try:
         build = parse_build_table(text, source)
         options = _render_options(build, text, source)

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from app.database import Database, migrate
-from app.study import parse_study
+from app.store.database import Database, migrate
+from app.survey.study import parse_study
 from tests.support.analysis import write_bot_bundle
 from tests.support.survey import study_text
 

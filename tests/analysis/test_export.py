@@ -8,9 +8,9 @@ import json
 import pandas as pd
 import pytest
 
-from app.export_csv import export_study, neutralise
-from app.models import Participant, Response
-from app.study import parse_study
+from app.analysis.export_csv import export_study, neutralise
+from app.store.models import Participant, Response
+from app.survey.study import parse_study
 from tests.support.analysis import add_participant
 from tests.support.survey import ADMIN_PASSWORD, ATTENTION, FormReader, answer_for, start, study_text
 
@@ -231,7 +231,7 @@ def answer_of(screen: dict) -> dict:
 
 
 def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
-    from app.analysis_source import analysis_database, analysis_study
+    from app.analysis.source import analysis_database, analysis_study
 
     with pytest.raises(ValueError, match="no database file"):
         analysis_database(f"sqlite:///{tmp_path / 'missing.sqlite3'}")
@@ -244,14 +244,14 @@ def test_bad_database_and_study_are_named(tmp_path, survey_db, paper_study):
 
 
 def test_the_server_stores_its_study_file(make_client):
-    from app.analysis_source import analysis_study
+    from app.analysis.source import analysis_study
 
     context = make_client({"platform": '"none"'}).app.state.context
     assert analysis_study(context.db, None) == context.study
 
 
 def test_study_stored_in_the_database(survey_db, paper_study):
-    from app.analysis_source import analysis_study, remember_study
+    from app.analysis.source import analysis_study, remember_study
 
     path, study = paper_study
     remember_study(survey_db, path.read_text(), study)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from app.database import Database, migrate
-from app.export_csv import export_study
+from app.analysis.export_csv import export_study
+from app.store.database import Database, migrate
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_export.py"
 

@@ -8,9 +8,9 @@ import re
 
 import pytest
 
-from app.exclusions import ExclusionRules
-from app.report import ALL, render_report, tally_study
-from app.study import parse_study
+from app.analysis.exclusions import ExclusionRules
+from app.analysis.report import ALL, render_report, tally_study
+from app.survey.study import parse_study
 from tests.support.analysis import SCENARIOS, SCHEMES, add_participant, fisher_two_sided, label_of
 from tests.support.survey import SECRET_NAMES, study_text
 
@@ -169,7 +169,7 @@ def test_figure_text_and_legends_are_at_least_12_px_where_the_report_shows_them(
     report.html (also on the admin report page), however many labelled scale questions the study has."""
     import matplotlib.pyplot as plt
 
-    from app.report import likert_figure
+    from app.analysis.report import likert_figure
 
     db, study = known_db
     data = tally_study(db, study)
@@ -195,8 +195,8 @@ def test_foil_report_finds_the_served_bundle_for_the_audit_column(
     import json
     import shutil
 
-    from app.main import create_app
-    from app.settings import Settings
+    from app.web.main import create_app
+    from app.web.settings import Settings
     from search.cli import main
 
     db, study = known_db

@@ -12,14 +12,14 @@ from collections import Counter
 import pytest
 import uvicorn
 
-from app.analysis_source import analysis_database
-from app.bots import Observer, VisibleClip, simulate
-from app.database import migrate
-from app.exclusions import ExclusionRules
-from app.main import create_app
-from app.report import ALL, render_report, tally_study
-from app.settings import Settings
-from app.study import parse_study
+from app.analysis.bots import Observer, VisibleClip, simulate
+from app.analysis.exclusions import ExclusionRules
+from app.analysis.report import ALL, render_report, tally_study
+from app.analysis.source import analysis_database
+from app.store.database import migrate
+from app.survey.study import parse_study
+from app.web.main import create_app
+from app.web.settings import Settings
 from search.cli import main
 from tests.support.analysis import MISLEADING, SCHEMES
 from tests.support.survey import AGENT_RANK, ATTENTION, SECRET_NAMES, study_text

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from app.statistics import accuracy_difference, ordinal_difference, wilson_interval
+from app.analysis.statistics import accuracy_difference, ordinal_difference, wilson_interval
 from tests.support.analysis import fisher_two_sided
 
 

@@ -9,8 +9,8 @@ import zipfile
 import pytest
 from fastapi.testclient import TestClient
 
-from app.models import Participant
-from app.settings import Settings
+from app.store.models import Participant
+from app.web.settings import Settings
 from tests.support.survey import FormReader, answer_for, finish, log_in, start, stored
 
 BALANCED = {"platform": '"prolific"', "assignment": '"balanced"'}

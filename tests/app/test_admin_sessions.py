@@ -9,8 +9,8 @@ import logging
 import pytest
 from fastapi.testclient import TestClient
 
-from app.main import create_app
-from app.settings import Settings
+from app.web.main import create_app
+from app.web.settings import Settings
 from tests.support.survey import ADMIN_PASSWORD, FormReader, log_in
 
 PILOT = {"platform": '"none"'}

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from app.models import Participant, Response
+from app.store.models import Participant, Response
 from tests.support.survey import FormReader, answer_for, start, stored
 
 BALANCED = {"platform": '"none"', "assignment": '"balanced"'}

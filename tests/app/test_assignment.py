@@ -8,11 +8,11 @@ from collections import Counter
 
 from fastapi.testclient import TestClient
 
-from app.assignment import condition_for_slot, conditions
-from app.models import Participant
-from app.plan import build_plan
-from app.screens import Pairwise, Ranking
-from app.study import load_study
+from app.store.models import Participant
+from app.survey.assignment import condition_for_slot, conditions
+from app.survey.plan import build_plan
+from app.survey.screens import Pairwise, Ranking
+from app.survey.study import load_study
 from tests.support.survey import PAPER_STUDY, FormReader, start, stored
 
 
@@ -81,7 +81,7 @@ def test_one_person_opening_the_link_twice_at_once_gets_one_record(make_client):
 
 
 def test_plan_is_seeded_and_randomises_order_and_answer_options(bundle_dir, tmp_path):
-    from app.bundle import load_bundle
+    from app.survey.bundle import load_bundle
     from tests.support.survey import study_text
 
     path = tmp_path / "study.toml"

@@ -7,8 +7,8 @@ import shutil
 
 import pytest
 
-from app.bundle import BundleError, check_study_against_bundle, load_bundle
-from app.study import parse_study
+from app.survey.bundle import BundleError, check_study_against_bundle, load_bundle
+from app.survey.study import parse_study
 from tests.support.survey import VIDEO_CHECK, study_text
 
 
@@ -100,8 +100,8 @@ def test_a_video_attention_checks_clip_must_be_in_the_bundle(bundle_dir):
 
 
 def test_the_server_does_not_start_without_the_video_attention_checks_clip(tmp_path, bundle_dir):
-    from app.main import create_app
-    from app.settings import Settings
+    from app.web.main import create_app
+    from app.web.settings import Settings
 
     study = tmp_path / "study.toml"
     study.write_text(study_text(contact=VIDEO_CHECK.format(scheme="schemeadaptivesecret")))

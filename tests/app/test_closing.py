@@ -9,9 +9,9 @@ import json
 import pytest
 from fastapi.testclient import TestClient
 
-from app.export_csv import export_study, restore
-from app.models import Participant, Response
-from app.study import StudyError, load_study, parse_study
+from app.analysis.export_csv import export_study, restore
+from app.store.models import Participant, Response
+from app.survey.study import StudyError, load_study, parse_study
 from tests.support.survey import ADMIN_PASSWORD, CLOSING, PAPER_STUDY, FormReader, answer_for, start, stored, study_text
 
 

@@ -1,6 +1,6 @@
 """Exports that are safe in any spreadsheet: no piece of a cell that a spreadsheet could read as a formula, after
 splitting the cell on a comma, semicolon, tab or line break and trimming whitespace (fullwidth signs included);
-no NUL; and the documented reverse (`app.export_csv.restore`, the codebook's rule) gives back exactly what was
+no NUL; and the documented reverse (`app.analysis.export_csv.restore`, the codebook's rule) gives back exactly what was
 typed. End to end through the real app and `foil export`, on SQLite and PostgreSQL."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.export_csv import export_study, neutralise, restore
+from app.analysis.export_csv import export_study, neutralise, restore
 from tests.support.survey import answer_for, start
 
 # What Excel, LibreOffice or Google Sheets may take for the start of a formula, fullwidth and small forms included.

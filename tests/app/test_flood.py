@@ -8,8 +8,8 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import event
 
-from app.kinds import pilot_token
-from app.models import Participant
+from app.store.models import Participant
+from app.survey.kinds import pilot_token
 from tests.support.survey import FormReader, log_in, stored
 
 ANONYMOUS = {"platform": '"none"', "assignment": '"balanced"'}

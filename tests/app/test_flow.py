@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from fastapi.testclient import TestClient
 
-from app.models import Participant, Response
+from app.store.models import Participant, Response
 from tests.support.survey import SECRET_NAMES, FormReader, answer_for, finish, start, stored
 
 PROLIFIC = {

@@ -11,7 +11,7 @@ import re
 import pytest
 from fastapi.testclient import TestClient
 
-from app.models import Participant, Response
+from app.store.models import Participant, Response
 from tests.support.survey import FormReader, answer_for, start, stored
 
 PLATFORMS = {

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import sysconfig
 import time
+import tomllib
 from pathlib import Path
 
 import httpx
@@ -98,7 +99,20 @@ def test_an_installed_wheel_serves_pages_and_static_files(tmp_path, bundle_dir):
         assert page.status_code == 200 and 'name="csrf_token"' in page.text and "consent" in page.text.lower()
         style = httpx.get(f"{url}/static/survey.css", timeout=5)
         assert style.status_code == 200 and style.headers["content-type"].startswith("text/css")
-        assert style.content == (REPO / "app" / "static" / "survey.css").read_bytes()
+        assert style.content == (REPO / "static" / "survey.css").read_bytes()
     finally:
         server.terminate()
         server.wait(timeout=30)
+
+
+def test_the_wheel_lists_every_package():
+    """pyproject.toml names the packages one by one (to map templates/ and static/ into app/): a new package left
+    out of the list would be missing from the wheel."""
+    listed = set(tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"])
+    packages = {
+        ".".join(init.parent.relative_to(REPO).parts)
+        for top in ("app", "search", "migrations")
+        for init in (REPO / top).rglob("__init__.py")
+    }
+    assert packages - listed == set()
+    assert listed - packages == {"app.templates", "app.static"}

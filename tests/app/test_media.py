@@ -69,8 +69,8 @@ def test_clips_carry_no_session(client_and_clip):
         "/clips/" + "0" * 64 + ".mp4",
         "/clips/manifest.json",
         "/clips/000.mp4",
-        "/static/../app/settings.py",
-        "/static/%2e%2e/app/settings.py",
+        "/static/../app/web/settings.py",
+        "/static/%2e%2e/app/web/settings.py",
     ],
 )
 def test_nothing_outside_the_listed_clips_is_served(client_and_clip, path):

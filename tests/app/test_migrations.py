@@ -15,8 +15,8 @@ from alembic.script import ScriptDirectory
 from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session
 
-from app.database import MIGRATIONS_DIR, DatabaseError, alembic_config, check_migrated, migrate
-from app.models import Base, Participant
+from app.store.database import MIGRATIONS_DIR, DatabaseError, alembic_config, check_migrated, migrate
+from app.store.models import Base, Participant
 from tests.support.live_server import REPO
 
 
@@ -86,7 +86,7 @@ def test_an_empty_database_is_refused_with_a_message(tmp_path):
 
 def test_migrations_run_from_any_working_directory(tmp_path):
     url = f"sqlite:///{tmp_path / 'elsewhere.sqlite3'}"
-    code = f"from app.database import migrate; migrate({url!r})"
+    code = f"from app.store.database import migrate; migrate({url!r})"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, check=True, capture_output=True)
     engine = create_engine(url)

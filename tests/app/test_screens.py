@@ -9,11 +9,11 @@ import random
 import pytest
 from pydantic import ValidationError
 
-from app.assignment import conditions
-from app.bundle import load_bundle
-from app.plan import build_plan
-from app.screens import Attention, Pairwise, Ranking, Watch, dump_plan, parse_plan
-from app.study import parse_study
+from app.survey.assignment import conditions
+from app.survey.bundle import load_bundle
+from app.survey.plan import build_plan
+from app.survey.screens import Attention, Pairwise, Ranking, Watch, dump_plan, parse_plan
+from app.survey.study import parse_study
 from tests.support.survey import ATTENTION, CLOSING, VIDEO_CHECK, study_text
 
 # One screen of each kind as the server stored them (a video attention check and a plain one), byte for byte.

@@ -8,7 +8,7 @@ from datetime import UTC, datetime, timedelta
 from fastapi.testclient import TestClient
 from sqlalchemy import update
 
-from app.models import Participant, Response
+from app.store.models import Participant, Response
 from tests.support.survey import FormReader, answer_for, log_in, start, stored
 
 PILOT = {"platform": '"none"', "assignment": '"balanced"'}

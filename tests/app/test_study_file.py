@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.study import StudyError, load_study, parse_study
+from app.survey.study import StudyError, load_study, parse_study
 from tests.support.survey import PAPER_STUDY
 
 PAPER = PAPER_STUDY.read_text()

@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 from sqlalchemy import select
 
-from app.exclusions import ExclusionRules
-from app.export_csv import export_study
-from app.kinds import pilot_token
-from app.models import Participant, Response
-from app.report import tally_study
-from app.screens import parse_plan
+from app.analysis.exclusions import ExclusionRules
+from app.analysis.export_csv import export_study
+from app.analysis.report import tally_study
+from app.store.models import Participant, Response
+from app.survey.kinds import pilot_token
+from app.survey.screens import parse_plan
 from tests.support.survey import CLIP_S, FormReader, answer_for, finish, start, stored, write_long_bundle
 
 
@@ -171,7 +171,7 @@ def test_events_of_the_new_kinds_are_kept_with_their_values(make_client):
         response = session.scalar(select(Response).where(Response.step == 1))
     assert response.plays == 2 and response.details == {"viewport": "360x800"}
     assert response.video_events[2] == {"type": "seek_blocked", "t": 50, "v": 2.9}
-    from app.exclusions import viewing_problems
+    from app.analysis.exclusions import viewing_problems
 
     plan = parse_plan(stored(client, Participant)[0].plan)
     viewing = viewing_problems(response, plan[1])

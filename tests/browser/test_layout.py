@@ -11,8 +11,8 @@ import json
 import httpx
 import pytest
 
-from app.database import Database
-from app.kinds import pilot_token
+from app.store.database import Database
+from app.survey.kinds import pilot_token
 from tests.support.analysis import summary_for
 from tests.support.browser import ARTIFACTS
 from tests.support.live_server import LiveServer

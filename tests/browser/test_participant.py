@@ -15,8 +15,8 @@ import httpx
 import pytest
 from sqlalchemy import select
 
-from app.database import Database
-from app.models import Participant, Response
+from app.store.database import Database
+from app.store.models import Participant, Response
 from tests.support.browser import ARTIFACTS, DESKTOP, PHONE, SERIOUS
 from tests.support.survey import ADMIN_PASSWORD, finish, start
 

@@ -10,9 +10,9 @@ import json
 import pytest
 from sqlalchemy import select
 
-from app.database import Database
-from app.kinds import pilot_token
-from app.models import Participant, Response
+from app.store.database import Database
+from app.store.models import Participant, Response
+from app.survey.kinds import pilot_token
 from tests.support.browser import ARTIFACTS, SERIOUS
 from tests.support.live_server import LiveServer
 from tests.support.survey import ADMIN_PASSWORD, study_text, write_long_bundle

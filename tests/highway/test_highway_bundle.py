@@ -16,9 +16,9 @@ STUDY = ROOT / "studies" / "highway.toml"
 
 
 def test_the_highway_study_plans_highway_searches_the_server_accepts():
-    from app.bundle import Bundle, check_study_against_bundle
     from app.formats import ManifestClip
-    from app.study import load_study
+    from app.survey.bundle import Bundle, check_study_against_bundle
+    from app.survey.study import load_study
     from search.clips.render import robot_label
 
     spec, _ = load_build(STUDY)
@@ -53,9 +53,9 @@ def test_a_highway_study_mixing_worlds_is_refused_at_its_line(tmp_path):
 
 @pytest.mark.slow
 def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
-    from app.database import migrate
-    from app.main import create_app
-    from app.settings import Settings
+    from app.store.database import migrate
+    from app.web.main import create_app
+    from app.web.settings import Settings
 
     text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
     text = text.replace(

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from app.bundle import BundleError
+from app.survey.bundle import BundleError
 from search.bundle.build import BuildError, build_bundle, load_build, parse_build, plan, search_inputs, search_job
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -182,7 +182,7 @@ def test_bad_build_tables_give_clear_errors_with_their_line(old, new, message):
 
 def test_the_server_and_the_bundle_builder_report_a_bad_build_line_alike(tmp_path):
     """The server and `foil bundle` validate the study file with the same models and report alike."""
-    from app.study import StudyError, load_study
+    from app.survey.study import StudyError, load_study
 
     study = tmp_path / "study.toml"
     study.write_text((ROOT / "studies" / "demo.toml").read_text().replace("budget = 5_000   ", "budget = -5   "))
@@ -283,9 +283,9 @@ def test_a_study_file_without_a_build_table_is_refused(tmp_path):
 def test_shipped_study_files_build_and_serve(name):
     """Every search of the shipped study files is valid (settings, scenarios), and the clips they plan are what
     the server asks for: a manifest of them passes the server's start-up check, one label per robot in a round."""
-    from app.bundle import Bundle, check_study_against_bundle
     from app.formats import ManifestClip
-    from app.study import load_study
+    from app.survey.bundle import Bundle, check_study_against_bundle
+    from app.survey.study import load_study
     from search.clips.render import robot_label
 
     spec, _ = load_build(ROOT / "studies" / name)

@@ -140,7 +140,7 @@ def test_searches_in_parallel_give_the_same_bundle(built, tmp_path):
 
 
 def test_the_survey_server_accepts_the_bundle(built):
-    from app.bundle import load_bundle
+    from app.survey.bundle import load_bundle
 
     out, manifest, _, _ = built
     bundle = load_bundle(out)

@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from app.bundle import load_bundle
 from app.formats import sha256_file
+from app.survey.bundle import load_bundle
 from search.bundle.build import build_bundle
 from search.cli import main
 from tests.support.crowdnav import HUMANS, SCENARIO, write_model

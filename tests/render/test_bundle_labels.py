@@ -77,8 +77,8 @@ def served(tmp_path_factory):
     """The demo study (three schemes within, two scenarios counterbalanced, the representative scheme's from the
     training distribution, a pairwise and a ranking part and an example clip) with scripted agents, its bundle
     built, loaded as the server loads them."""
-    from app.bundle import check_study_against_bundle, load_bundle
-    from app.study import load_study
+    from app.survey.bundle import check_study_against_bundle, load_bundle
+    from app.survey.study import load_study
 
     text = (ROOT / "studies" / "demo.toml").read_text()
     text = text[: text.index("\n[build]\n")]
@@ -96,9 +96,9 @@ def served(tmp_path_factory):
 def test_a_label_never_names_two_agents_in_a_participants_study(served):
     """Over every condition's plan (example clip included), a label stands for one agent only; in a ranking round
     each agent has one label in all the round's clips and its ranking, and every round has labels of its own."""
-    from app.assignment import conditions
-    from app.plan import build_plan
-    from app.screens import Round
+    from app.survey.assignment import conditions
+    from app.survey.plan import build_plan
+    from app.survey.screens import Round
 
     study, bundle = served
     example = bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]

@@ -385,19 +385,19 @@ def test_render_options_are_checked():
 
 
 def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
-    """The survey pages' key beside a clip (app/templates/_macros.html, app/static/survey.css) draws Robot N in the
+    """The survey pages' key beside a clip (templates/_macros.html, static/survey.css) draws Robot N in the
     colour and shape the clip gives it."""
     from jinja2 import Environment, FileSystemLoader
 
     root = Path(__file__).resolve().parents[2]
-    css = (root / "app" / "static" / "survey.css").read_text()
+    css = (root / "static" / "survey.css").read_text()
     colours = {
         int(k): tuple(map(int, rgb.split(",")))
         for k, rgb in re.findall(r"\.robot-colour-(\d+) \{ background: rgb\(([\d, ]+)\); \}", css)
     }
     shapes = set(re.findall(r"\.robot-([a-z-]+) \{", css)) - {"x", "key"}
     macros = (
-        Environment(loader=FileSystemLoader(root / "app" / "templates"), autoescape=True)
+        Environment(loader=FileSystemLoader(root / "templates"), autoescape=True)
         .get_template("_macros.html")
         .module
     )

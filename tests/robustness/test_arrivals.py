@@ -12,10 +12,10 @@ from datetime import UTC, datetime
 import pytest
 from sqlalchemy import insert, select
 
-from app.assignment import condition_for_slot, conditions, next_slot
-from app.database import Database
-from app.models import Participant
-from app.study import parse_study
+from app.store.database import Database
+from app.store.models import Participant
+from app.survey.assignment import condition_for_slot, conditions, next_slot
+from app.survey.study import parse_study
 from tests.support.crowd import LoopbackClient
 from tests.support.live_server import CROWD_FROM_ONE_ADDRESS, LiveServer
 from tests.support.survey import FormReader, study_text

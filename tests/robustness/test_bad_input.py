@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from app.models import Participant, Response
+from app.store.models import Participant, Response
 from tests.support.survey import ADMIN_PASSWORD, WATCHED, FormReader, answer_for, start, stored
 
 BALANCED = {"platform": '"none"', "assignment": '"balanced"'}

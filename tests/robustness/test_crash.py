@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from app.assignment import conditions
-from app.study import parse_study
+from app.survey.assignment import conditions
+from app.survey.study import parse_study
 from tests.support.crowd import Crowd, audit
 from tests.support.live_server import CROWD_FROM_ONE_ADDRESS, LiveServer
 from tests.support.survey import study_text

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import imageio_ffmpeg
 
-from app.assignment import conditions
-from app.bundle import load_bundle
-from app.database import Database
-from app.models import Participant, Response
-from app.plan import build_plan
-from app.screens import dump_plan
+from app.store.database import Database
+from app.store.models import Participant, Response
+from app.survey.assignment import conditions
+from app.survey.bundle import load_bundle
+from app.survey.plan import build_plan
+from app.survey.screens import dump_plan
 from tests.support.survey import AGENT_RANK, SECRET_NAMES, make_clip, write_bundle
 
 SCHEMES = [SECRET_NAMES["adaptive"], SECRET_NAMES["nfirst"]]
@@ -109,7 +109,7 @@ def add_participant(
     minutes: float = 10.0,
     excluded: bool = False,
 ) -> Participant:
-    """A participant with a real plan (app.plan) and `answer(screen) -> answers dict` for every screen."""
+    """A participant with a real plan (app.survey.plan) and `answer(screen) -> answers dict` for every screen."""
     from datetime import UTC, datetime, timedelta
 
     bundle = load_bundle(bundle_root)

@@ -1,4 +1,4 @@
-"""A crowd of `foil simulate` bots (app.bots.Bot) taking a study at once against a real server, each in its own
+"""A crowd of `foil simulate` bots (app.analysis.bots.Bot) taking a study at once against a real server, each in its own
 thread, for the crash test and the load benchmark.
 
 Each bot talks through a `LoopbackClient`: a lean keep-alive HTTP/1.1 client on a plain socket (httpx costs about
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from types import SimpleNamespace
 from urllib.parse import urlencode, urlsplit
 
-from app.bots import Bot, ClipIndex, Observer
+from app.analysis.bots import Bot, ClipIndex, Observer
 
 # Errors of a connection that the server dropped or refused (it crashed, or is restarting).
 CONNECTION_ERRORS = (OSError, http.client.HTTPException)
@@ -51,7 +51,7 @@ class Exchange:
 
 
 class Reply:
-    """The parts of a response that app.bots.Bot reads."""
+    """The parts of a response that app.analysis.bots.Bot reads."""
 
     def __init__(self, method: str, path: str, status: int, text: str):
         self.status_code, self.text = status, text
@@ -300,10 +300,10 @@ def audit(database_url: str, crowd: Crowd, *, seed: int, n_conditions: int) -> A
 
     from sqlalchemy import select
 
-    from app.assignment import condition_for_slot
-    from app.database import Database
-    from app.models import Participant as Record
-    from app.models import Response
+    from app.store.database import Database
+    from app.store.models import Participant as Record
+    from app.store.models import Response
+    from app.survey.assignment import condition_for_slot
 
     db = Database(database_url)
     try:

@@ -17,8 +17,8 @@ REPO = Path(__file__).resolve().parents[2]
 FOIL = "import sys; from search.cli import main; sys.exit(main())"
 
 
-# A crowd of bots on one machine all arrive from 127.0.0.1: the per-address arrival limit (app.security.ArrivalLimit)
-# is for people, so a server for a crowd lifts it.
+# A crowd of bots on one machine all arrive from 127.0.0.1: the per-address arrival limit
+# (app.web.security.ArrivalLimit) is for people, so a server for a crowd lifts it.
 CROWD_FROM_ONE_ADDRESS = {"FOIL_ARRIVALS_BURST": "1000000"}
 
 

@@ -1,6 +1,6 @@
 """The screens of a participant's plan, one model per kind, told apart by `kind`.
 
-A plan is stored as JSON (app.models.ParticipantPlan): `parse_plan` reads it through the union, `dump_plan` writes
+A plan is stored as JSON (app.store.models.ParticipantPlan): `parse_plan` reads it through the union, `dump_plan` writes
 it. Only the fields that were set are written, in the order declared here, so a plan reads and writes as the same
 JSON, and plans stored before a field existed (`position`, `round_start`, a ranking's clips) still read. The fields
 a screen sets last, its `progress` line and its `position` in the plan, come last in every kind.

@@ -10,11 +10,11 @@ from __future__ import annotations
 import itertools
 import random
 
-from app.assignment import Condition
-from app.bundle import Bundle
-from app.clip_length import clip_shape
 from app.formats import ManifestClip
-from app.screens import (
+from app.survey.assignment import Condition
+from app.survey.bundle import Bundle
+from app.survey.clip_length import clip_shape
+from app.survey.screens import (
     Attention,
     Closing,
     Instructions,
@@ -27,7 +27,7 @@ from app.screens import (
     Watch,
     WithRobots,
 )
-from app.study import RankingPart, Study
+from app.survey.study import RankingPart, Study
 
 
 def _pick(

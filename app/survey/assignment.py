@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from sqlalchemy import Connection, bindparam, func, select
 from sqlalchemy.orm import Session
 
-from app.models import Participant
-from app.study import Study
+from app.store.models import Participant
+from app.survey.study import Study
 
 
 @dataclass(frozen=True)

@@ -8,12 +8,10 @@ from typing import Literal
 from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-PACKAGE_DIR = Path(__file__).resolve().parent  # templates/ and static/ ship inside the package
-
 
 class TransportLimits(BaseSettings):
-    """What the HTTP server accepts (app.transport), from the same FOIL_* variables; `foil serve` applies them,
-    and so does uvicorn's command line with `--http app.transport:SurveyHttpProtocol`."""
+    """What the HTTP server accepts (app.web.transport), from the same FOIL_* variables; `foil serve` applies them,
+    and so does uvicorn's command line with `--http app.web.transport:SurveyHttpProtocol`."""
 
     model_config = SettingsConfigDict(env_prefix="FOIL_", extra="ignore")
 
@@ -61,8 +59,6 @@ class Settings(BaseSettings):
     # Host names the server answers to (Starlette's TrustedHostMiddleware; other Host headers get 400), as a JSON
     # list: FOIL_ALLOWED_HOSTS='["survey.example.org"]'. No reply is built from the Host header in any case.
     allowed_hosts: list[str] = ["*"]
-    templates_dir: Path = PACKAGE_DIR / "templates"
-    static_dir: Path = PACKAGE_DIR / "static"
 
     @model_validator(mode="after")
     def _sane(self) -> Settings:

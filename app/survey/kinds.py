@@ -15,8 +15,8 @@ import secrets
 
 from sqlalchemy.exc import IntegrityError
 
-from app.database import Database
-from app.models import ServerSetting
+from app.store.database import Database
+from app.store.models import ServerSetting
 
 KINDS = ("real", "pilot", "bot")
 TOKEN_KEY = "pilot-token:"

@@ -1,4 +1,4 @@
-"""What every request needs, built once per process by app.main.create_app."""
+"""What every request needs, built once per process by app.web.main.create_app."""
 
 from __future__ import annotations
 
@@ -11,13 +11,13 @@ from fastapi import Depends, Request
 from fastapi.responses import HTMLResponse
 from jinja2 import Environment
 
-from app.assignment import Condition
-from app.bundle import Bundle
-from app.database import Database
-from app.media import KeptClips
-from app.security import csrf_token
-from app.settings import Settings
-from app.study import Study
+from app.store.database import Database
+from app.survey.assignment import Condition
+from app.survey.bundle import Bundle
+from app.survey.study import Study
+from app.web.media import KeptClips
+from app.web.security import csrf_token
+from app.web.settings import Settings
 
 MAX_PAGES = 4096  # about 4 KB each; the paper study with 300 participants showed 544 distinct pages
 
@@ -36,7 +36,9 @@ class Context:
     kept_clips: KeptClips = field(default_factory=KeptClips, compare=False)
 
     def render(self, request: Request, name: str, status_code: int = 200, **context) -> HTMLResponse:
-        html = self.templates.get_template(name).render(request=request, study=self.study, **context)
+        html = self.templates.get_template(name).render(
+            request=request, study=self.study, csrf_token=csrf_token, **context
+        )
         return HTMLResponse(html, status_code=status_code)
 
     def render_form(self, request: Request, key: tuple, name: str, context: Callable[[], dict]) -> HTMLResponse:

@@ -17,7 +17,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, sha256_file
-from app.study import ClipRef, Study
+from app.survey.study import ClipRef, Study
 
 
 class BundleError(ValueError):

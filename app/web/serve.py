@@ -10,15 +10,15 @@ from pathlib import Path
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 
-from app.database import migrate
-from app.settings import Settings, TransportLimits
-from app.transport import survey_protocol
+from app.store.database import migrate
+from app.web.settings import Settings, TransportLimits
+from app.web.transport import survey_protocol
 
 
 def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: str, port: int) -> int:
     import uvicorn
 
-    from app.main import create_app
+    from app.web.main import create_app
 
     given = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
     settings = Settings(**{key: value for key, value in given.items() if value is not None})

@@ -9,29 +9,28 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import PlainTextResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
-from jinja2 import Environment, FileSystemLoader
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
 from starlette.middleware.sessions import SessionMiddleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import ClientDisconnect
 
-from app import admin_pages, analysis_pages, media, participant_pages
-from app.analysis_source import remember_study
-from app.assignment import conditions
-from app.bundle import check_study_against_bundle, load_bundle
-from app.context import Context
-from app.database import Database, check_migrated
-from app.security import (
+from app.analysis.source import remember_study
+from app.page_templates import STATIC_DIR, page_templates
+from app.store.database import Database, check_migrated
+from app.survey.assignment import conditions
+from app.survey.bundle import check_study_against_bundle, load_bundle
+from app.survey.study import load_study
+from app.web import admin_pages, analysis_pages, media, participant_pages
+from app.web.context import Context
+from app.web.security import (
     ArrivalLimit,
     BodyLimitMiddleware,
     LoginThrottle,
     SecurityHeadersMiddleware,
-    csrf_token,
     stored_secret,
 )
-from app.settings import Settings
-from app.study import load_study
+from app.web.settings import Settings
 
 log = logging.getLogger("foil.server")
 
@@ -47,10 +46,6 @@ def _cookie_secret(settings: Settings, db: Database) -> str:
             return stored_secret(session)
 
 
-def _paragraphs(text: str) -> list[str]:
-    return [" ".join(block.split()) for block in text.strip().split("\n\n") if block.strip()]
-
-
 def create_app(settings: Settings) -> FastAPI:
     """Build the app for an already migrated database (`foil serve` migrates first)."""
     study = load_study(settings.study_path())
@@ -60,12 +55,8 @@ def create_app(settings: Settings) -> FastAPI:
     check_migrated(db.engine)
     remember_study(db, settings.study_path().read_text(encoding="utf-8"), study, bundle.root)  # for foil report
 
-    # Templates are compiled once per process: no check for changed files on every page.
-    templates = Environment(loader=FileSystemLoader(settings.templates_dir), autoescape=True, auto_reload=False)
-    templates.globals["csrf_token"] = csrf_token
-    templates.filters["paragraphs"] = _paragraphs
     context = Context(
-        settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db, templates=templates
+        settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db, templates=page_templates()
     )
 
     app = FastAPI(title="Foil survey", docs_url=None, redoc_url=None, openapi_url=None)
@@ -79,7 +70,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.arrivals = ArrivalLimit(burst=settings.arrivals_burst, per_minute=settings.arrivals_per_minute)
     app.include_router(participant_pages.router)
     app.include_router(media.router)
-    app.mount("/static", StaticFiles(directory=str(settings.static_dir)), name="static")
+    app.mount("/static", StaticFiles(directory=str(STATIC_DIR)), name="static")
     if settings.admin_password is None:
         log.warning(
             "FOIL_ADMIN_PASSWORD is not set: the admin pages are off (set it, 8 characters or more, and "
@@ -159,5 +150,5 @@ def create_app(settings: Settings) -> FastAPI:
 
 
 def app_from_env() -> FastAPI:
-    """For `uvicorn --factory app.main:app_from_env --workers N` with FOIL_* variables (run migrations first)."""
+    """For `uvicorn --factory app.web.main:app_from_env --workers N` with FOIL_* variables (run migrations first)."""
     return create_app(Settings())

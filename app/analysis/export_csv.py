@@ -17,8 +17,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TextIO
 
-from app.analysis_source import analysis_database, analysis_study
-from app.answer_table import (
+from app.analysis.answer_table import (
     LONG_COLUMNS,
     PARTICIPANT_COLUMNS,
     Column,
@@ -27,10 +26,11 @@ from app.answer_table import (
     participant_records,
     participant_row,
 )
-from app.assignment import conditions
-from app.database import Database
-from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.study import FEEDBACK, ChoiceQuestion, ScaleQuestion, Study
+from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
+from app.analysis.source import analysis_database, analysis_study
+from app.store.database import Database
+from app.survey.assignment import conditions
+from app.survey.study import FEEDBACK, ChoiceQuestion, ScaleQuestion, Study
 
 # Whole cells that pandas (by default) or R read as a missing value, though a participant may type them.
 MISSING_TOKENS = {
@@ -214,7 +214,7 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
         "apostrophe at the start of the cell and right after each comma, semicolon, tab or "
         'line break (pandas: series.str.replace(r"(^|[,;\\t\\n\\r])\'", r"\\1", '
         "regex=True)), then replace U+2400 0 by NUL and U+2400 U+2400 by U+2400 "
-        "(app.export_csv.restore does both)",
+        "(app.analysis.export_csv.restore does both)",
     }
 
 

@@ -13,11 +13,11 @@ from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import FileResponse, HTMLResponse, StreamingResponse
 from starlette.background import BackgroundTask
 
-from app.admin_pages import Admin
-from app.context import ContextDep
-from app.exclusions import ExclusionRules
-from app.export_csv import export_study, long_csv_chunks
-from app.report import render_report, tally_study
+from app.analysis.exclusions import ExclusionRules
+from app.analysis.export_csv import export_study, long_csv_chunks
+from app.analysis.report import render_report, tally_study
+from app.web.admin_pages import Admin
+from app.web.context import ContextDep
 
 router = APIRouter(prefix="/admin", dependencies=[Admin])
 # The report inlines its styles and SVG figures and has no scripts: allow exactly that, on this page only.

@@ -1,5 +1,5 @@
 """Admin pages: progress per condition and status, median duration, one participant's answers and the exclusion
-flag (the report and downloads are in app.analysis_pages). They exist only when FOIL_ADMIN_PASSWORD is set;
+flag (the report and downloads are in app.web.analysis_pages). They exist only when FOIL_ADMIN_PASSWORD is set;
 `disabled_router` says so otherwise."""
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import RedirectResponse
 from sqlalchemy import func, select
 
-from app.answer_table import ParticipantRecord, long_rows
-from app.context import Context, ContextDep
-from app.database import as_utc
-from app.models import Participant
-from app.screens import Closing, Instructions, Screen
-from app.security import FormDep, LoginThrottle, admin_mark, is_admin, unstorable
+from app.analysis.answer_table import ParticipantRecord, long_rows
+from app.store.database import as_utc
+from app.store.models import Participant
+from app.survey.screens import Closing, Instructions, Screen
+from app.web.context import Context, ContextDep
+from app.web.security import FormDep, LoginThrottle, admin_mark, is_admin, unstorable
 
 router = APIRouter(prefix="/admin")
 disabled_router = APIRouter()
@@ -29,7 +29,7 @@ log = logging.getLogger("foil.admin")
 
 
 class LoginRequired(Exception):
-    """Raised by `admin_only`; app.main turns it into a redirect to the login page."""
+    """Raised by `admin_only`; app.web.main turns it into a redirect to the login page."""
 
 
 def admin_only(request: Request) -> None:
@@ -138,7 +138,7 @@ PAGE_SIZE = 50
 @router.get("", dependencies=[Admin])
 def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1):
     """The progress table and one page of the participants list, newest first (`status`: a status or a kind)."""
-    from app.kinds import pilot_token
+    from app.survey.kinds import pilot_token
 
     shown = Participant.study == ctx.study.study.id
     if status:

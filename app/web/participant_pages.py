@@ -22,15 +22,14 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
 
-from app.answers import Checked, check_screen, digits
-from app.assignment import condition_for_slot, next_slot
-from app.clip_length import clip_shape
-from app.context import Context, ContextDep
-from app.database import as_utc
-from app.kinds import kind_from_link, pilot_token
-from app.models import Participant, ParticipantPlan, Response
-from app.plan import build_plan
-from app.screens import (
+from app.store.database import as_utc
+from app.store.models import Participant, ParticipantPlan, Response
+from app.survey.answers import Checked, check_screen, digits
+from app.survey.assignment import condition_for_slot, next_slot
+from app.survey.clip_length import clip_shape
+from app.survey.kinds import kind_from_link, pilot_token
+from app.survey.plan import build_plan
+from app.survey.screens import (
     Asking,
     Attention,
     Closing,
@@ -47,9 +46,10 @@ from app.screens import (
     parse_plan,
     shows_clip,
 )
-from app.security import FormDep
-from app.study import FEEDBACK, TextQuestion
+from app.survey.study import FEEDBACK, TextQuestion
 from app.visible import VisibleClip
+from app.web.context import Context, ContextDep
+from app.web.security import FormDep
 
 # Every request of a participant runs these Core statements in a Session: loading ORM objects and flushing them
 # cost several times what the statements do. The INSERTs name every column.

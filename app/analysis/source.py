@@ -10,9 +10,9 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError, OperationalError
 
-from app.database import Database, DatabaseError, check_migrated
-from app.models import ServerSetting
-from app.study import Study, load_study, parse_study
+from app.store.database import Database, DatabaseError, check_migrated
+from app.store.models import ServerSetting
+from app.survey.study import Study, load_study, parse_study
 
 
 def analysis_database(url: str) -> Database:

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 from sqlalchemy import Row, select
 
-from app.database import Database, as_utc
-from app.models import Participant
-from app.screens import Attention, Pairwise, Screen, Watch, shows_clip
+from app.store.database import Database, as_utc
+from app.store.models import Participant
+from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip
 
 REASONS = {
     "pilot_or_bot": "a pilot (preview link) or a bot (`foil simulate`), not a real participant",
@@ -21,7 +21,7 @@ REASONS = {
     "flagged_by_admin": "flagged for exclusion on the admin pages",
     "skipped_viewing": "answered a clip sooner than it plays, or sped it up before it first ended",
 }
-VIEW_TOLERANCE_MS = 1000  # as the server's own check (app.participant_pages)
+VIEW_TOLERANCE_MS = 1000  # as the server's own check (app.web.participant_pages)
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
 """Request size limits, security headers, CSRF tokens for every form (the session they live in is Starlette's
-signed cookie, app.main), admin login throttling and admin session versions."""
+signed cookie, app.web.main), admin login throttling and admin session versions."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from fastapi import Depends, HTTPException, Request
 from starlette.datastructures import FormData
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.models import ServerSetting
+from app.store.models import ServerSetting
 
 
 class BodyLimitMiddleware:
@@ -77,7 +77,7 @@ async def _too_large(send: Send, limit: int) -> None:
 
 
 def security_headers(frame_ancestors: str = "'none'") -> list[tuple[bytes, bytes]]:
-    """What every reply carries, the app's (SecurityHeadersMiddleware) and the HTTP server's own (app.transport):
+    """What every reply carries, the app's (SecurityHeadersMiddleware) and the HTTP server's own (app.web.transport):
     no sniffing, no framing (unless allowed), only our own scripts and media. HSTS is the reverse proxy's, which
     terminates HTTPS (docs/survey.md)."""
     policy = (

@@ -15,15 +15,13 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from jinja2 import Environment, FileSystemLoader, select_autoescape
-
-from app.analysis_source import analysis_database, analysis_study, served_bundle
-from app.answer_table import long_rows, participant_records
-from app.database import Database
-from app.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.settings import PACKAGE_DIR
-from app.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
-from app.study import ScaleQuestion, Study
+from app.analysis.answer_table import long_rows, participant_records
+from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
+from app.analysis.source import analysis_database, analysis_study, served_bundle
+from app.analysis.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
+from app.page_templates import page_templates
+from app.store.database import Database
+from app.survey.study import ScaleQuestion, Study
 
 ALL = "all scenarios"
 TASKS = {
@@ -396,14 +394,6 @@ def _save(figure, out: Path, stem: str) -> str:
 # The report --------------------------------------------------------------------------------------------------
 
 
-def _template_env() -> Environment:
-    env = Environment(loader=FileSystemLoader(str(PACKAGE_DIR / "templates")), autoescape=select_autoescape())
-    env.filters["percent"] = lambda value: "–" if value is None else f"{100 * value:.2f}%"
-    env.filters["p"] = lambda value: "–" if value is None else ("< 0.001" if value < 1e-3 else f"{value:.3g}")
-    env.filters["num"] = lambda value: "–" if value is None else f"{value:.3g}"
-    return env
-
-
 def render_report(data: ReportData, out: Path | None = None) -> str:
     """report.html as text; with `out`, also write it there with the figures (PNG, SVG) and tables (CSV)."""
     import tempfile
@@ -443,7 +433,7 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
             for name, rows in tables.items():
                 _write_csv(folder / name, rows)
         html = (
-            _template_env()
+            page_templates()
             .get_template("report.html")
             .render(
                 data=data,

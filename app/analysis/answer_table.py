@@ -16,11 +16,11 @@ from datetime import UTC, datetime
 
 from sqlalchemy import Row, select
 
-from app.assignment import Condition
-from app.database import Database, as_utc
-from app.exclusions import duration_s, viewing_problems
-from app.models import Participant, ParticipantPlan, Response
-from app.screens import (
+from app.analysis.exclusions import duration_s, viewing_problems
+from app.store.database import Database, as_utc
+from app.store.models import Participant, ParticipantPlan, Response
+from app.survey.assignment import Condition
+from app.survey.screens import (
     Attention,
     Closing,
     InPart,
@@ -34,7 +34,7 @@ from app.screens import (
     parse_plan,
     shows_clip,
 )
-from app.study import FEEDBACK, PairwisePart, Study
+from app.survey.study import FEEDBACK, PairwisePart, Study
 
 LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
 ORDER_SEPARATOR = ">"  # between the places of a ranking, best first

@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 
 from starlette.datastructures import FormData
 
-from app.screens import Asking, Attention, Closing, Instructions, Screen, WithRobots, shows_clip
-from app.study import FEEDBACK, ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
+from app.survey.screens import Asking, Attention, Closing, Instructions, Screen, WithRobots, shows_clip
+from app.survey.study import FEEDBACK, ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
 
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
 # seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being

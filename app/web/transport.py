@@ -4,7 +4,7 @@ client that sends too slowly, or opens a connection and sends nothing, is cut of
 connection for as long as it likes). Keep-alive between requests is uvicorn's own `timeout_keep_alive`.
 
 `foil serve` runs uvicorn with `survey_protocol(limits)`; with uvicorn's command line (several workers) pass
-`--http app.transport:SurveyHttpProtocol`, which reads the same FOIL_* variables (see `TransportLimits`)."""
+`--http app.web.transport:SurveyHttpProtocol`, which reads the same FOIL_* variables (see `TransportLimits`)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import logging
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
-from app.security import security_headers
-from app.settings import TransportLimits
+from app.web.security import security_headers
+from app.web.settings import TransportLimits
 
 log = logging.getLogger("foil.server")
 # What every reply written here carries: the app's security headers.
@@ -136,5 +136,5 @@ def survey_protocol(limits: TransportLimits) -> type[LimitedHttpToolsProtocol]:
     return type("SurveyHttpProtocol", (LimitedHttpToolsProtocol,), {"limits": limits})
 
 
-# For `uvicorn --http app.transport:SurveyHttpProtocol`: the limits from the FOIL_* variables.
+# For `uvicorn --http app.web.transport:SurveyHttpProtocol`: the limits from the FOIL_* variables.
 SurveyHttpProtocol = LimitedHttpToolsProtocol

@@ -18,8 +18,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app.clip_length import clip_shape
 from app.formats import Manifest, load_summary
+from app.survey.clip_length import clip_shape
 from app.visible import Observer, VisibleClip, contrast
 
 

@@ -1,0 +1,1 @@
+"""Reading a study's answers back: the answer table, exclusions, statistics, export, report and the bots."""

@@ -1,0 +1,1 @@
+"""The survey's storage: the database (engine, sessions, migrations) and its tables."""
