@@ -2,30 +2,23 @@
 
 The file says what participants see (texts, parts, questions), how they are assigned (design), where they come from
 (platform) and where they go at the end (completion). A top-level `[build]` table says which clips `foil bundle`
-searches for and renders; it is checked here too, so the server and the bundle builder report a bad line alike.
+searches for and renders: the bundle builder owns it (`search.bundle.spec`), so it is any table here. Errors are
+located in the file by `app.toml_errors`, as the bundle builder's are.
 """
 
 from __future__ import annotations
 
-import itertools
+import hashlib
 import re
-import tomllib
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import (
-    AfterValidator,
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    ValidationError,
-    field_validator,
-    model_validator,
-)
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from app.toml_errors import Loc, Problem, TomlFileError, load_toml, validated
 
 
-class StudyError(ValueError):
+class StudyError(TomlFileError):
     """A study file that cannot be used; the message names the file, line and field."""
 
 
@@ -36,7 +29,7 @@ class Strict(BaseModel):
 Text = Annotated[str, Field(min_length=1)]
 
 
-def _distinct(values: list) -> list:
+def _distinct(values: list[str]) -> list[str]:
     if len(set(values)) != len(values):
         raise ValueError("names must not repeat")
     return values
@@ -174,6 +167,7 @@ class ScaleQuestion(Strict):
         """Text for every point: the given labels, or the anchors at the ends and the number in between."""
         if self.labels is not None:
             return list(self.labels)
+        assert self.anchors is not None  # _labelled: labels or anchors
         low, high = self.anchors
         return [low if i == 1 else high if i == self.points else str(i) for i in range(1, self.points + 1)]
 
@@ -187,7 +181,7 @@ class RankQuestion(Strict):
 
 
 class ChoiceQuestion(Strict):
-    """One of the researcher's options, such as an age range (a closing question, see `Closing`)."""
+    """One of the researcher's options, such as an age range (a closing question, see `ClosingQuestions`)."""
 
     type: Literal["choice"]
     text: Text
@@ -209,7 +203,7 @@ Question = Annotated[
 FEEDBACK = "feedback"  # the name of the closing screen's feedback box in the data
 
 
-class Closing(Strict):
+class ClosingQuestions(Strict):
     """An optional last screen after the parts, before the completion page: closing questions (demographics,
     experience with robots) and a free-text feedback box, every answer optional unless named in `required`."""
 
@@ -282,117 +276,6 @@ class ComprehensionCheck(Strict):
         return self
 
 
-def _settings(value):
-    """A table of key = value settings as `foil search --set` takes them: scalars, no nested tables."""
-    if not isinstance(value, dict) or not all(isinstance(v, bool | int | float | str) for v in value.values()):
-        raise ValueError("must be a table of key = value settings (numbers, strings, true/false; no nested tables)")
-    return value
-
-
-Settings = Annotated[dict[str, bool | int | float | str], BeforeValidator(_settings)]
-
-
-def _whole(minimum: int):
-    """A whole number >= minimum; strict, so a string or true/false is refused rather than converted."""
-    return Annotated[int, Field(ge=minimum, strict=True)]
-
-
-class BuildEval(Strict):
-    """The ground truth: each agent's `foil eval` on these test episodes."""
-
-    episodes: _whole(2) = 500
-    seed: _whole(0) = 0
-
-
-class BuildScheme(Strict):
-    """How one scheme's clips are found: a solver of `foil search` with its simulator-step budget, seed and top-K,
-    and its solver, reward and world settings (checked against their fields by the bundle builder)."""
-
-    solver: Text  # mcts, nfirst, random, cem, representative
-    budget: _whole(1)
-    seed: _whole(0)
-    top_k: _whole(1) = 1
-    select: Literal["reward", "contrast"] = "reward"  # which of the top-K becomes the clip (docs/clips.md)
-    settings: Settings = {}
-    reward: Settings = {}
-    world: Settings = {}
-
-
-class BuildSet(Strict):
-    """Every pair under every scheme on every scenario, feeding the survey parts named."""
-
-    parts: Annotated[list[Literal["pairwise", "ranking", "example"]], Field(min_length=1), AfterValidator(_distinct)]
-    schemes: Names
-    scenarios: Names
-    agents: Annotated[Names, Field(min_length=2)] | None = None  # every pair of these ...
-    pairs: Annotated[list[Pair], Field(min_length=1)] | None = None  # ... or these pairs
-
-    @model_validator(mode="after")
-    def _agents_or_pairs(self) -> BuildSet:
-        if (self.agents is None) == (self.pairs is None):
-            raise ValueError("give either agents = [...] (every pair of them) or pairs = [[a, b], ...]")
-        if self.agents is None and "ranking" in self.parts:
-            raise ValueError(
-                "a set that feeds a ranking part lists its agents (agents = [...]), so each agent "
-                "keeps one robot number in all its clips"
-            )
-        return self
-
-    def clip_pairs(self) -> tuple[tuple[str, str], ...]:
-        if self.agents is not None:
-            return tuple(itertools.combinations(self.agents, 2))
-        return tuple(self.pairs)
-
-    def all_agents(self) -> tuple[str, ...]:
-        """Every agent of the set's clips, in the order given."""
-        return tuple(dict.fromkeys(a for pair in self.clip_pairs() for a in pair))
-
-
-class BuildRepresentativeness(Strict):
-    """How `foil bundle` measures the study's fixed scenarios against the task's distribution of starting states."""
-
-    distribution: Text = "training"
-    states: _whole(1) = 64  # starting states drawn from the distribution
-    pushes: _whole(1) = 32  # rollouts per state (and per fixed scenario) under uniform pushes
-    seed: _whole(0) = 0
-
-
-class Build(Strict):
-    """The `[build]` table: which clips `foil bundle` searches for and renders (docs/clips.md)."""
-
-    seed: _whole(0)  # seeds which robot number each agent gets in each clip
-    eval: BuildEval = BuildEval()
-    representativeness: BuildRepresentativeness = BuildRepresentativeness()
-    render: Settings = {}  # RenderOptions fields, checked by the renderer
-    schemes: Annotated[dict[str, BuildScheme], Field(min_length=1)]
-    sets: Annotated[list[BuildSet], Field(min_length=1)]
-
-
-def _build_problems(build: Build) -> list[tuple[tuple, str]]:
-    """Checks across the [build] tables: every scheme a set names is defined, and every clip is listed once."""
-    problems = []
-    seen: dict[tuple, int] = {}
-    for i, clip_set in enumerate(build.sets):
-        for j, name in enumerate(clip_set.schemes):
-            if name not in build.schemes:
-                problems.append(
-                    (("build", "sets", i, "schemes", j), f"no scheme {name!r}; defined: {sorted(build.schemes)}")
-                )
-        for scheme, scenario, pair in itertools.product(clip_set.schemes, clip_set.scenarios, clip_set.clip_pairs()):
-            key = (scheme, scenario, frozenset(pair))
-            if key in seen:
-                problems.append(
-                    (
-                        ("build", "sets", i),
-                        f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} "
-                        f"is already in sets[{seen[key]}]; list each clip once, with every part it feeds",
-                    )
-                )
-                break
-            seen[key] = i
-    return problems
-
-
 class Study(Strict):
     study: StudyInfo
     design: Design
@@ -403,14 +286,12 @@ class Study(Strict):
     questions: dict[str, Question]
     attention_checks: list[AttentionCheck] = []
     comprehension: list[ComprehensionCheck] = []
-    closing: Closing | None = None
-    build: Build | None = None  # checked here, used by `foil bundle` alone
+    closing: ClosingQuestions | None = None
+    build: dict[str, Any] | None = None  # the bundle builder's table (search.bundle.spec), left alone here
 
     def consent_version(self) -> str:
         """The version of the consent text each participant is recorded with: `[study] consent_version`, or
         `sha256:` and the first 12 hex digits of the consent text's hash (any edit gives a new version)."""
-        import hashlib
-
         if self.study.consent_version:
             return self.study.consent_version
         return "sha256:" + hashlib.sha256(self.texts.consent.encode()).hexdigest()[:12]
@@ -427,13 +308,13 @@ class Study(Strict):
     def part_scenario(self, part_index: int, rotation: int, scheme: str | None = None) -> str:
         """The scenario feeding a part: parts take the design's scenarios in turn, rotated per condition; a scheme
         with scenarios of its own takes its scenario at the same place."""
-        names = self.design.scheme_scenarios.get(scheme, self.design.scenarios)
+        names = self.design.scheme_scenarios.get(scheme or "", self.design.scenarios)
         return names[(part_index + rotation) % len(names)]
 
 
-def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
+def _reference_problems(study: Study) -> list[Problem]:
     """Checks across tables that pydantic's per-field validation cannot see, as (location, message)."""
-    problems = []
+    problems: list[Problem] = []
     for name in study.questions:
         if not re.fullmatch(r"[a-z][a-z0-9_]{0,39}", name):
             problems.append((("questions", name), "question names are lower_snake_case, at most 40 characters"))
@@ -478,117 +359,29 @@ def _reference_problems(study: Study) -> list[tuple[tuple, str]]:
     for c, check in enumerate(study.attention_checks):
         if check.part > len(study.parts):
             problems.append((("attention_checks", c, "part"), f"there are only {len(study.parts)} parts"))
-    if study.build is not None:
-        problems += _build_problems(study.build)
     return problems
 
 
-def _table_path(header: str, arrays: dict[tuple, int], new_element: bool = False) -> tuple:
-    """Resolve a dotted header to a path with the current index of every array-of-tables along it; a `[[...]]`
-    header (`new_element`) starts the next element of the array it names, so that one gets no index here."""
-    names = [name.strip().strip('"') for name in header.split(".")]
-    path: tuple = ()
-    for i, name in enumerate(names):
-        path += (name,)
-        if path in arrays and not (new_element and i == len(names) - 1):
-            path += (arrays[path],)
-    return path
-
-
-def locate(text: str, loc: tuple) -> int | None:
-    """The line of `text` that best matches a pydantic error location (the deepest key or table defining it)."""
-    want = tuple(str(x) for x in loc)
-    arrays: dict[tuple, int] = {}
-    table: tuple = ()
-    best, best_depth = None, -1
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if line.startswith("[["):
-            names = _table_path(line[2 : line.find("]]")], arrays, new_element=True)
-            arrays[names] = arrays.get(names, -1) + 1
-            table = names + (arrays[names],)
-            path = table
-        elif line.startswith("["):
-            table = _table_path(line[1 : line.find("]")], arrays)
-            path = table
-        elif "=" in line and not line.startswith("#"):
-            key = line.split("=", 1)[0].strip()
-            path = table + tuple(k.strip().strip('"') for k in key.split("."))
-        else:
-            continue
-        path = tuple(str(x) for x in path)
-        depth = len(path) if want[: len(path)] == path else len(want) if path[: len(want)] == want else -1
-        if depth > best_depth:  # a table only made by its subtables is found at the first of them
-            best, best_depth = number, depth
-    return best
-
-
-def _field(loc: tuple) -> str:
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(top level)"
-
-
-def _loc_without_union_tags(loc: tuple) -> tuple:
+def _loc_without_union_tags(loc: Loc) -> Loc:
     """Pydantic puts the chosen union member (`questions.NAME.scale...`) in the location; the file does not."""
     tags = {"parts": {"pairwise", "ranking"}, "questions": {"choose", "text", "scale", "rank", "choice"}}
-    if len(loc) >= 3 and loc[0] in tags and loc[2] in tags[loc[0]]:
+    if len(loc) >= 3 and loc[0] in tags and loc[2] in tags[str(loc[0])]:
         return loc[:2] + loc[3:]
     return loc
 
 
-def _toml(text: str, source: str) -> dict:
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise StudyError(f"{source}: not valid TOML: {error}") from None
-
-
-def refuse(text: str, source: str, problems: list[tuple[tuple, str]]) -> None:
-    """Raise StudyError listing every (location, message) problem with the file, the line and the field."""
-    if problems:
-        lines = []
-        for loc, message in problems:
-            line = locate(text, loc)
-            lines.append(f"{source}, {f'line {line}' if line else 'no line'}, {_field(loc)}: {message}")
-        raise StudyError("\n".join(lines))
-
-
-def _validated(model: type[Strict], data: dict, text: str, source: str, at: tuple, checks):
-    """`data` (the table at location `at` of the file) as `model`, then `checks(value)`'s problems; every problem
-    of either refused with its line and field."""
-    problems: list[tuple[tuple, str]] = []
-    try:
-        value = model.model_validate(data)
-    except ValidationError as error:
-        for item in error.errors():
-            loc = _loc_without_union_tags(at + item["loc"])
-            message = item["msg"].removeprefix("Value error, ")
-            if item["type"] == "extra_forbidden":
-                docs = "docs/clips.md" if loc[0] == "build" else "docs/survey.md"
-                message = f"unknown key (check the spelling; see {docs} for the keys a study file takes)"
-            problems.append((loc, message))
-    else:
-        problems = checks(value)
-    refuse(text, source, problems)
-    return value
-
-
 def parse_study(text: str, source: str = "study file") -> Study:
     """Parse and validate study TOML; raise StudyError listing every problem with its line and field."""
-    return _validated(Study, _toml(text, source), text, source, (), _reference_problems)
-
-
-def parse_build(text: str, source: str = "study file") -> Build:
-    """The `[build]` table of study TOML alone, with the same errors as `parse_study`: `foil bundle` may build a
-    study whose survey tables are not final yet."""
-    data = _toml(text, source)
-    if "build" not in data:
-        raise StudyError(
-            f"{source}: no [build] table: it says which clips to search for and render (see docs/clips.md)"
-        )
-    return _validated(Build, data["build"], text, source, ("build",), _build_problems)
+    return validated(
+        Study,
+        load_toml(text, source, StudyError),
+        text,
+        source,
+        checks=_reference_problems,
+        error=StudyError,
+        unknown_key="unknown key (check the spelling; see docs/survey.md for the keys a study file takes)",
+        tidy=_loc_without_union_tags,
+    )
 
 
 def load_study(path: str | Path) -> Study:

@@ -31,14 +31,14 @@ import torch
 from torch import Tensor, nn
 
 from search.sim.observation import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
-from search.sim.settings import Settings
+from search.sim.settings import ConfigTable
 
 CHECKPOINT_FORMAT = "foil.dsrnn/2"
 OBSERVATION_LAYOUT = {"robot_node": list(ROBOT_NODE_FIELDS)}
 
 
 @dataclass(frozen=True)
-class NetworkConfig(Settings):
+class NetworkConfig(ConfigTable):
     """Layer sizes. Defaults: the paper's full-size DS-RNN."""
 
     what = "network"

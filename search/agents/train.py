@@ -19,7 +19,6 @@ import functools
 import math
 import sys
 import time
-import tomllib
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, fields
@@ -30,10 +29,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from app.toml_errors import load_toml
 from search.agents.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
 from search.sim import world
 from search.sim.observation import ROBOT_NODE_SIZE, observe
 from search.sim.scenarios import sample_training_states
+from search.sim.settings import check_keys
 from search.sim.world import WorldConfig, WorldState
 
 TRAIN_STREAM = 0  # first word of every training seed sequence; evaluation uses another, so seeds never overlap
@@ -125,10 +126,7 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, values: dict) -> TrainConfig:
         values = dict(values)
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown training setting(s) {unknown}; known settings: {sorted(known)}")
+        check_keys(values, (f.name for f in fields(cls)), "training setting")
         network = NetworkConfig.from_dict(values.pop("network", {}))
         world_config = WorldConfig.from_dict(values.pop("world", {}))
         try:
@@ -144,10 +142,7 @@ def load_train_config(path: str | Path) -> TrainConfig:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no training config at {str(path)!r}")
-    try:
-        return TrainConfig.from_dict(tomllib.loads(path.read_text()))
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML: {error}") from None
+    return TrainConfig.from_dict(load_toml(path.read_text(), str(path)))
 
 
 def _without_length(config: dict | None) -> dict | None:

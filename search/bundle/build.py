@@ -26,226 +26,15 @@ import os
 import random
 import shutil
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
-from app.survey.study import Build, StudyError, parse_study, refuse
-from app.survey.study import parse_build as parse_build_table
 from app.visible import VisibleClip, audit
 from search.bundle import worlds
-from search.clips.render import ROBOT_STYLES, RenderOptions, robot_label
-from search.solvers.runner import (
-    SearchJob,
-    check_settings,
-    limit_threads,
-    solver_config_class,
-    write_outputs,
-)
-
-
-class BuildError(ValueError):
-    """A `[build]` table that cannot be built; the message names the file, the line and the field."""
-
-
-@dataclass(frozen=True)
-class Scheme:
-    """How one scheme's clips are found: a solver with its simulator-step budget, seed and settings, and the
-    reward and world settings, as a study file's `[build.schemes.NAME]` table gives them."""
-
-    name: str
-    solver: str
-    budget: int
-    seed: int
-    top_k: int
-    select: str = "reward"  # the clip is the search's best summary by "reward", or its largest visible "contrast"
-    settings: dict = field(default_factory=dict)  # the solver's
-    reward: dict = field(default_factory=dict)
-    world: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class ClipSet:
-    """Every pair under every scheme on every scenario; a set that feeds a ranking labels each agent once per
-    scheme and scenario (a round)."""
-
-    parts: tuple[str, ...]
-    schemes: tuple[str, ...]
-    scenarios: tuple[str, ...]
-    pairs: tuple[tuple[str, str], ...]
-    agents: tuple[str, ...]  # every agent of the pairs, in the order given
-
-    @property
-    def ranking(self) -> bool:
-        return "ranking" in self.parts
-
-
-@dataclass(frozen=True)
-class Representativeness:
-    """How the study's fixed scenarios are measured against the task's distribution (`[build.representativeness]`)."""
-
-    distribution: str = "training"
-    states: int = 64
-    pushes: int = 32
-    seed: int = 0
-
-
-@dataclass(frozen=True)
-class BuildSpec:
-    seed: int  # seeds the agent-to-robot-number mapping of every clip
-    eval_episodes: int
-    eval_seed: int
-    render: RenderOptions
-    schemes: dict[str, Scheme]
-    sets: tuple[ClipSet, ...]
-    representativeness: Representativeness = Representativeness()
-
-    @property
-    def agents(self) -> list[str]:
-        return list(dict.fromkeys(a for s in self.sets for a in s.agents))
-
-
-def _render_options(build: Build, text: str, source: str) -> RenderOptions:
-    """`[build.render]` as RenderOptions, refused with its line like the rest of the table."""
-    known = {f.name for f in fields(RenderOptions)}
-    refuse(
-        text,
-        source,
-        [
-            (("build", "render", key), f"unknown key; expected some of {sorted(known)}")
-            for key in build.render
-            if key not in known
-        ],
-    )
-    try:
-        return RenderOptions(**build.render)
-    except (TypeError, ValueError) as error:
-        refuse(text, source, [(("build", "render"), str(error))])
-
-
-def _setting_problems(build: Build) -> list[tuple[tuple, str]]:
-    """Each scheme's solver, reward and world settings checked against those settings' fields, and each set's
-    scenarios found, so that a bad one is refused at its line before any work."""
-    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
-    from search.sim.world import WorldConfig
-    from search.solvers.reward import RewardConfig
-
-    problems = []
-    try:
-        crowd = worlds.is_crowd([a for clip_set in build.sets for a in clip_set.all_agents()])
-    except ValueError as error:
-        problems.append((("build", "sets"), str(error)))
-        crowd = True
-    for name, scheme in build.schemes.items():
-        try:
-            solver = solver_config_class(scheme.solver)
-        except ValueError as error:
-            problems.append((("build", "schemes", name, "solver"), str(error)))
-            solver = None
-        world = WorldConfig if crowd else None  # an environment adapter's settings are its own
-        for table, cls, what in (
-            ("settings", solver, "solver"),
-            ("reward", RewardConfig, "reward"),
-            ("world", world, "world"),
-        ):
-            for key, value in getattr(scheme, table).items():
-                try:
-                    if cls is not None:
-                        check_settings(cls, {key: value}, what)
-                except ValueError as error:
-                    problems.append((("build", "schemes", name, table, key), str(error)))
-    for i, clip_set in enumerate(build.sets):
-        for j, scenario in enumerate(clip_set.scenarios):
-            try:
-                worlds.scenario_dict(clip_set.all_agents(), scenario, {})
-            except (ValueError, FileNotFoundError) as error:
-                problems.append((("build", "sets", i, "scenarios", j), str(error)))
-                continue
-            if not worlds.is_crowd(clip_set.all_agents(), scenario):
-                continue
-            found = load_scenario_or_distribution(scenario)
-            solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
-            if isinstance(found, ScenarioDistribution) != (solvers == {"representative"}):
-                problems.append(
-                    (
-                        ("build", "sets", i, "scenarios", j),
-                        f"{scenario!r} is a "
-                        f"{'distribution' if isinstance(found, ScenarioDistribution) else 'fixed scenario'}: "
-                        f"the representative solver draws from a distribution (such as 'training'), the "
-                        f"other solvers search from a fixed scenario; give each kind a set of its own",
-                    )
-                )
-    distribution = build.representativeness.distribution
-    try:
-        if not isinstance(load_scenario_or_distribution(distribution), ScenarioDistribution):
-            problems.append(
-                (
-                    ("build", "representativeness", "distribution"),
-                    f"{distribution!r} is one fixed "
-                    f"scenario; give a distribution of starting states such as 'training'",
-                )
-            )
-    except (ValueError, FileNotFoundError) as error:
-        problems.append((("build", "representativeness", "distribution"), str(error)))
-    return problems
-
-
-def parse_build(text: str, source: str = "study file") -> BuildSpec:
-    """The `[build]` table of a study file's text as a BuildSpec, or BuildError naming the file, line and field as
-    the server does (`app.survey.study`); the survey tables are left to the server."""
-    try:
-        build = parse_build_table(text, source)
-        options = _render_options(build, text, source)
-        refuse(
-            text,
-            source,
-            [
-                (
-                    ("build", "sets", i, "agents"),
-                    f"a ranking shows at most {len(ROBOT_STYLES)} robots "
-                    f"(one colour and shape each), got {len(clip_set.agents)}",
-                )
-                for i, clip_set in enumerate(build.sets)
-                if "ranking" in clip_set.parts and len(clip_set.agents) > len(ROBOT_STYLES)
-            ],
-        )
-        refuse(text, source, _setting_problems(build))
-    except StudyError as error:
-        raise BuildError(str(error)) from None
-    return BuildSpec(
-        seed=build.seed,
-        eval_episodes=build.eval.episodes,
-        eval_seed=build.eval.seed,
-        render=options,
-        schemes={name: Scheme(name=name, **scheme.model_dump()) for name, scheme in build.schemes.items()},
-        sets=tuple(
-            ClipSet(
-                parts=tuple(s.parts),
-                schemes=tuple(s.schemes),
-                scenarios=tuple(s.scenarios),
-                pairs=s.clip_pairs(),
-                agents=s.all_agents(),
-            )
-            for s in build.sets
-        ),
-        representativeness=Representativeness(**build.representativeness.model_dump()),
-    )
-
-
-def load_build(path: str | os.PathLike) -> tuple[BuildSpec, str]:
-    """The build spec of a study file, and the file's text (copied into the bundle for the server). The whole file
-    is checked, every table, as `foil serve` will check it: a misspelt key fails now, not after the searches."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileNotFoundError(f"no study file {path}") from None
-    spec = parse_build(text, source=str(path))
-    try:
-        parse_study(text, source=str(path))
-    except StudyError as error:
-        raise BuildError(str(error)) from None
-    return spec, text
+from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
+from search.clips.render import RenderOptions, robot_label
+from search.solvers.runner import SearchJob, limit_threads, solver_config_class, write_outputs
 
 
 @dataclass(frozen=True)
@@ -260,7 +49,7 @@ class ClipJob:
     parts: tuple[str, ...]
 
 
-def plan(spec: BuildSpec) -> list[ClipJob]:
+def plan_clips(spec: BuildSpec) -> list[ClipJob]:
     """Every clip of the study with its robot numbers. Numbers are handed out in blocks and never twice: a block
     of two per clip, or, in a set that feeds a ranking, one per scheme and scenario (a round) with one number per
     agent across its clips. So a participant never sees one name (colour, shape) stand for two agents, whichever
@@ -308,11 +97,9 @@ def agent_identity(agent: str) -> dict:
 
 
 def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
-    """The search behind a clip, its settings checked against the solver's, reward's and world's fields; ``world``
-    is the study's comparison world (``study_world``), under the scenario file's and the scheme's world settings."""
+    """The search behind a clip, with its scheme's settings; ``world`` is the study's comparison world
+    (``study_world``), under the scenario file's and the scheme's world settings."""
     from search.sim.scenarios import load_scenario_or_distribution
-    from search.sim.world import WorldConfig
-    from search.solvers.reward import RewardConfig
 
     scheme = job.scheme
     world = under(world, load_scenario_or_distribution(job.scenario).world if world else {})
@@ -323,11 +110,9 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
         budget=scheme.budget,
         seed=scheme.seed,
         top_k=scheme.top_k,
-        solver_settings=check_settings(solver_config_class(scheme.solver), scheme.settings, "solver"),
-        reward_settings=check_settings(RewardConfig, scheme.reward, "reward"),
-        world_settings=world | check_settings(WorldConfig, scheme.world, "world")
-        if worlds.is_crowd(job.pair, job.scenario)
-        else dict(scheme.world),
+        solver_settings=asdict(scheme.solver_config),
+        reward_settings=scheme.reward.to_dict(),
+        world_settings=world | scheme.world if worlds.is_crowd(job.pair, job.scenario) else dict(scheme.world),
     )
 
 
@@ -542,7 +327,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     """Build (or bring up to date) the bundle of a study file in ``out``, running up to ``workers`` searches at
     once; returns the manifest."""
     spec, text = load_build(study)
-    jobs = plan(spec)
+    jobs = plan_clips(spec)
     try:  # bad settings or scenarios fail here, before any work
         world = study_world(spec)
         searches = [search_job(job, world) for job in jobs]

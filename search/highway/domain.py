@@ -3,9 +3,9 @@ another Gymnasium environment (a scenario file naming an adapter). Mixing them i
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
+from app.toml_errors import load_toml
 from search.gym.problem import GymScenario
 from search.highway.adapter import AGENT_PREFIX
 from search.highway.scenarios import SCENARIOS, load_highway_scenario
@@ -29,7 +29,7 @@ def _gym_file(name: str) -> dict | None:
     path = Path(name)
     if path.suffix != ".toml" or not path.is_file():
         return None
-    data = tomllib.loads(path.read_text())
+    data = load_toml(path.read_text(), name)
     return data if "adapter" in data else None
 
 

@@ -16,6 +16,9 @@ import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from app.toml_errors import load_toml
+from search.sim.settings import check_keys
+
 
 @dataclass(frozen=True)
 class TrainConfig:
@@ -46,12 +49,12 @@ def is_highway_config(path: str | Path) -> bool:
 
 
 def load_config(path: str | Path) -> TrainConfig:
-    data = tomllib.loads(Path(path).read_text())
+    data = load_toml(Path(path).read_text(), str(path))
     data.pop("domain", None)
-    known = {f.name for f in fields(TrainConfig)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"{path}: unknown highway training settings {unknown}; use some of {sorted(known)}")
+    try:
+        check_keys(data, (f.name for f in fields(TrainConfig)), "highway training setting")
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
     return TrainConfig(**data)
 
 

@@ -23,12 +23,12 @@ The number of humans in the file sets ``human_num``.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from app.toml_errors import load_toml
 from search.sim.world import HUMAN_RADIUS_RANGE, HUMAN_V_PREF_RANGE, WorldConfig, WorldState, new_state
 
 SHIPPED_DIR = Path(__file__).parent / "scenarios"
@@ -239,10 +239,7 @@ def load_scenario_or_distribution(name_or_path: str | Path) -> Scenario | Scenar
         raise FileNotFoundError(
             f"no scenario {str(name_or_path)!r}: give a TOML file or one of the shipped scenarios {shipped_scenarios()}"
         )
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML: {error}") from None
+    data = load_toml(path.read_text(), str(path))
     if "distribution" in data:
         return ScenarioDistribution.from_dict(data, source=str(path))
     return Scenario.from_dict(data, source=str(path))

@@ -25,7 +25,7 @@ import numba
 import numpy as np
 
 from search.sim.orca import crowd_velocities, orca_velocities
-from search.sim.settings import Settings
+from search.sim.settings import ConfigTable
 from search.sim.social_force import social_force_velocities
 
 RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
@@ -49,7 +49,7 @@ ENV_ACTION_MODES = ("preferred", "velocity", "observation")
 
 
 @dataclass(frozen=True)
-class WorldConfig(Settings):
+class WorldConfig(ConfigTable):
     """Everything that defines a world apart from its initial state. Defaults: the paper's setting."""
 
     what = "world"

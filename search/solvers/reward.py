@@ -32,7 +32,7 @@ from importlib import import_module
 import numba
 import numpy as np
 
-from search.sim.settings import Settings
+from search.sim.settings import ConfigTable
 from search.sim.world import COLLISION, SUCCESS
 from search.solvers.prior import PRIOR_KINDS, ActionPrior
 
@@ -40,7 +40,7 @@ TERMS = ("action_divergence", "goal", "horizon", "plausibility")
 
 
 @dataclass(frozen=True)
-class RewardConfig(Settings):
+class RewardConfig(ConfigTable):
     """Everything that defines the search objective. Defaults: the paper's formula with plain norms and T = 100."""
 
     what = "reward"

@@ -13,13 +13,14 @@ import json
 import os
 import re
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from app.formats import summary_json
 from app.visible import VisibleClip
+from search.sim.settings import check_keys, field_types
 from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
 from search.solvers.coupled_problem import CoupledProblem
 from search.solvers.mcts import MCTSConfig, mcts
@@ -77,13 +78,17 @@ def _slug(name: str) -> str:
 
 def parse_settings(cls, items: list[str], what: str) -> dict:
     """``key=value`` strings as a dict for dataclass ``cls``, each value converted to its field's type."""
-    types = {f.name: type(f.default) for f in fields(cls)}
+    types = field_types(cls)
     settings = {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip()
-        if not sep or key not in types:
+        if not sep:
             raise ValueError(f"bad {what} setting {item!r}: use key=value with a key among {sorted(types)}")
+        try:
+            check_keys([key], types, f"{what} setting")
+        except ValueError as error:
+            raise ValueError(f"bad {what} setting {item!r}: {error}") from None
         kind = types[key]
         try:
             if kind is bool:
@@ -94,23 +99,6 @@ def parse_settings(cls, items: list[str], what: str) -> dict:
                 settings[key] = kind(text)
         except ValueError:
             raise ValueError(f"bad {what} setting {item!r}: {key} takes a {kind.__name__}") from None
-    return settings
-
-
-def check_settings(cls, values: dict, what: str) -> dict:
-    """Settings for dataclass ``cls`` given as typed values (a study file's table), each checked against its
-    field's type; a whole number is taken where a float is expected, as ``parse_settings`` takes "10"."""
-    types = {f.name: type(f.default) for f in fields(cls)}
-    settings = {}
-    for key, value in values.items():
-        if key not in types:
-            raise ValueError(f"bad {what} setting {key!r}: use a key among {sorted(types)}")
-        kind = types[key]
-        if kind is float and type(value) is int:
-            value = float(value)
-        if type(value) is not kind:
-            raise ValueError(f"bad {what} setting {key} = {value!r}: {key} takes a {kind.__name__}")
-        settings[key] = value
     return settings
 
 

@@ -29,17 +29,13 @@ def test_paper_study_is_the_papers_survey():
     assert study.study.assignment == "self-select"
 
 
-def test_build_table_is_checked_and_a_second_set_is_found_at_its_line():
-    build = parse_study(PAPER).build
-    assert build.schemes["adaptive"].budget == 1_000_000 and build.sets[1].pairs == [("lo", "hi")]
+def test_the_build_table_is_the_bundle_builders_and_left_alone_here():
+    """`[build]` belongs to `foil bundle` (search/bundle/spec.py): the server takes any table there as it is."""
+    assert parse_study(PAPER).build["schemes"]["adaptive"]["budget"] == 1_000_000
     text = PAPER.replace('scenarios = ["paper-code"]', 'scenarios = ["paper-code"]\nagents = ["lo", "hi"]')
-    with pytest.raises(StudyError) as error:
-        parse_study(text, "paper.toml")
-    line = line_of(text, "[[build.sets]]               # the instructions page")
-    assert str(error.value) == (
-        f"paper.toml, line {line}, build.sets[1]: give either agents = [...] (every pair of "
-        "them) or pairs = [[a, b], ...]"
-    )
+    assert parse_study(text).build["sets"][1]["agents"] == ["lo", "hi"]
+    with pytest.raises(StudyError, match=r"line 1, build: Input should be a valid dictionary"):
+        parse_study("build = 3\n" + PAPER[: PAPER.index("\n[build]")])
 
 
 def test_unknown_top_level_key_is_rejected_with_its_line():

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from search.bundle.build import build_bundle, load_build, plan, search_inputs, search_job
+from search.bundle.build import build_bundle, plan_clips, search_inputs, search_job
+from search.bundle.spec import load_build
 
 ROOT = Path(__file__).resolve().parents[2]
 STUDY = ROOT / "studies" / "highway.toml"
@@ -22,7 +23,7 @@ def test_the_highway_study_plans_highway_searches_the_server_accepts():
     from search.clips.render import robot_label
 
     spec, _ = load_build(STUDY)
-    jobs = plan(spec)
+    jobs = plan_clips(spec)
     inputs = [search_inputs(search_job(job)) for job in jobs]
     assert {i["scenario"]["domain"] for i in inputs} == {"gym"}
     assert all(len(agent["sha256"]) == 64 for i in inputs for agent in i["agents"])  # the shipped files' checksums
@@ -43,7 +44,7 @@ def test_the_highway_study_plans_highway_searches_the_server_accepts():
 
 
 def test_a_highway_study_mixing_worlds_is_refused_at_its_line(tmp_path):
-    from search.bundle.build import BuildError
+    from search.bundle.spec import BuildError
 
     study = tmp_path / "study.toml"
     study.write_text(STUDY.read_text().replace('pairs = [["highway-lo", "highway-hi"]]', 'pairs = [["lo", "hi"]]'))

@@ -117,7 +117,7 @@ def test_foil_train_writes_a_highway_run_that_release_recognises(tmp_path, capsy
     assert checkpoints(run)[-1].name == "model_64_steps.zip"
     config.write_text('domain = "highway"\nlearning_rat = 1\n')
     assert main(["train", "--config", str(config), "--out", str(run)]) == 2
-    assert "unknown highway training settings ['learning_rat']" in capsys.readouterr().err
+    assert "unknown highway training setting(s) ['learning_rat']" in capsys.readouterr().err
 
 
 def test_the_shipped_highway_agents_search_verify_and_evaluate(tmp_path, capsys):

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import re
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
 
 from app.survey.bundle import BundleError
-from search.bundle.build import BuildError, build_bundle, load_build, parse_build, plan, search_inputs, search_job
+from search.bundle.build import build_bundle, plan_clips, search_inputs, search_job
+from search.bundle.spec import BuildError, load_build, parse_build
+from search.solvers.mcts import MCTSConfig
+from search.solvers.reward import RewardConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -49,7 +53,7 @@ def line_of(text: str, needle: str) -> int:
 
 
 def test_plan_covers_every_pair_scheme_and_scenario():
-    jobs = plan(parse_build(BUILD))
+    jobs = plan_clips(parse_build(BUILD))
     assert len(jobs) == 2 * 3 + 1
     assert len({job.id for job in jobs}) == len(jobs)
     keys = {(job.scheme.name, job.scenario, frozenset(job.pair)) for job in jobs}
@@ -60,7 +64,7 @@ def test_plan_covers_every_pair_scheme_and_scenario():
 
 
 def test_a_ranking_set_gives_each_agent_one_number_per_scheme_and_scenario():
-    jobs = [job for job in plan(parse_build(BUILD)) if "ranking" in job.parts]
+    jobs = [job for job in plan_clips(parse_build(BUILD)) if "ranking" in job.parts]
     blocks = []
     for scheme in ("adaptive", "nfirst"):
         numbers = {}
@@ -77,7 +81,7 @@ def test_no_robot_number_names_two_agents_anywhere_in_a_bundle():
         '\n[[build.sets]]\nparts = ["pairwise"]\nschemes = ["adaptive"]\nscenarios = ["paper-code"]\n'
         'agents = ["goal", "orca", "social_force"]\n'
     )
-    jobs = plan(parse_build(text))
+    jobs = plan_clips(parse_build(text))
     agent_of = {}
     for job in jobs:
         for agent, number in zip(job.pair, job.numbers, strict=True):
@@ -88,14 +92,14 @@ def test_no_robot_number_names_two_agents_anywhere_in_a_bundle():
 
 
 def test_robot_numbers_are_seeded_and_vary_with_the_seed():
-    first = [job.numbers for job in plan(parse_build(BUILD))]
-    assert first == [job.numbers for job in plan(parse_build(BUILD))]
+    first = [job.numbers for job in plan_clips(parse_build(BUILD))]
+    assert first == [job.numbers for job in plan_clips(parse_build(BUILD))]
     mappings = set()
     for seed in range(12):
         text = BUILD.replace("seed = 7", f"seed = {seed}")
-        mappings.add(tuple(job.numbers for job in plan(parse_build(text))))
+        mappings.add(tuple(job.numbers for job in plan_clips(parse_build(text))))
     assert len(mappings) > 3
-    example = [job for job in plan(parse_build(BUILD)) if job.parts == ("example",)][0]
+    example = [job for job in plan_clips(parse_build(BUILD)) if job.parts == ("example",)][0]
     assert sorted(example.numbers) == [7, 8]
 
 
@@ -165,7 +169,7 @@ def test_robot_numbers_are_seeded_and_vary_with_the_seed():
         (
             "[build.eval]",
             "[build.render]\nfsp = 24\n[build.eval]",
-            r"line 5, build\.render\.fsp: unknown key; expected some of \[.*'fps'",
+            r"line 5, build\.render\.fsp: unknown render setting\(s\) \['fsp'\]; known render settings: \[.*'fps'",
         ),
         (
             'agents = ["goal", "orca", "social_force"]',
@@ -180,20 +184,42 @@ def test_bad_build_tables_give_clear_errors_with_their_line(old, new, message):
         parse_build(BUILD.replace(old, new), source="study.toml")
 
 
-def test_the_server_and_the_bundle_builder_report_a_bad_build_line_alike(tmp_path):
-    """The server and `foil bundle` validate the study file with the same models and report alike."""
+def test_the_paper_build_table_is_parsed_and_a_second_set_is_found_at_its_line():
+    paper = (ROOT / "studies" / "paper.toml").read_text()
+    spec = parse_build(paper)
+    assert spec.schemes["adaptive"].budget == 1_000_000 and spec.sets[1].pairs == (("lo", "hi"),)
+    text = paper.replace('scenarios = ["paper-code"]', 'scenarios = ["paper-code"]\nagents = ["lo", "hi"]')
+    with pytest.raises(BuildError) as error:
+        parse_build(text, "paper.toml")
+    line = line_of(text, "[[build.sets]]               # the instructions page")
+    assert str(error.value) == (
+        f"paper.toml, line {line}, build.sets[1]: give either agents = [...] (every pair of "
+        "them) or pairs = [[a, b], ...]"
+    )
+
+
+def test_the_bundle_builder_owns_the_build_table_and_reports_like_the_server(tmp_path):
+    """The server leaves `[build]` alone; `foil bundle` refuses a bad line of it in the server's form (file, line,
+    field), and lists the survey tables' problems, found by the server's own check, with it."""
     from app.survey.study import StudyError, load_study
 
     study = tmp_path / "study.toml"
-    study.write_text((ROOT / "studies" / "demo.toml").read_text().replace("budget = 5_000   ", "budget = -5   "))
+    text = (ROOT / "studies" / "demo.toml").read_text().replace("budget = 5_000   ", "budget = -5   ")
+    study.write_text(text)
+    assert load_study(study).build["schemes"]["adaptive"]["budget"] == -5
+    with pytest.raises(BuildError) as bundled:
+        load_build(study)
+    line = line_of(study.read_text(), "budget = -5")
+    assert str(bundled.value) == (
+        f"{study}, line {line}, build.schemes.adaptive.budget: Input should be greater than or equal to 1"
+    )
+    study.write_text(text.replace("seed = 1\nrequire_full_view", "sead = 1\nrequire_full_view"))
     with pytest.raises(StudyError) as served:
         load_study(study)
     with pytest.raises(BuildError) as bundled:
         load_build(study)
-    assert str(served.value) == str(bundled.value)
-    line = line_of(study.read_text(), "budget = -5")
-    assert str(bundled.value) == (
-        f"{study}, line {line}, build.schemes.adaptive.budget: Input should be greater than or equal to 1"
+    assert str(bundled.value) == f"{served.value}\n{study}, line {line}, build.schemes.adaptive.budget: " + (
+        "Input should be greater than or equal to 1"
     )
 
 
@@ -204,11 +230,14 @@ def test_scheme_settings_reach_the_search_as_the_fields_types():
         '[build.schemes.adaptive.settings]\nexploration = 100\nmode = "receding"\n'
         "[build.schemes.adaptive.reward]\nalpha = 2\n[build.schemes.adaptive.world]\n"
     )
-    job = next(job for job in plan(parse_build(text + "robot_visible = true\n")) if job.scheme.name == "adaptive")
+    job = next(job for job in plan_clips(parse_build(text + "robot_visible = true\n")) if job.scheme.name == "adaptive")
+    assert job.scheme.solver_config == MCTSConfig(exploration=100.0, mode="receding")
+    assert job.scheme.reward == RewardConfig(alpha=2.0)
     search = search_job(job)
-    assert search.solver_settings == {"exploration": 100.0, "mode": "receding"}
+    assert search.solver_settings == asdict(MCTSConfig(exploration=100.0, mode="receding"))
     assert type(search.solver_settings["exploration"]) is float and type(search.reward_settings["alpha"]) is float
-    assert search.reward_settings == {"alpha": 2.0} and search.world_settings == {"robot_visible": True}
+    assert search.reward_settings == RewardConfig(alpha=2.0).to_dict()
+    assert search.world_settings == {"robot_visible": True}
     assert (search.agents, search.scenario, search.budget, search.seed) == (job.pair, job.scenario, 300, 1)
     with pytest.raises(
         BuildError,
@@ -236,9 +265,10 @@ def test_bad_search_settings_are_refused_before_any_work(tmp_path):
     )
     with pytest.raises(BuildError) as refused:
         build_bundle(study, tmp_path / "out", log=lambda line: None)
-    lines = str(refused.value).splitlines()
+    lines = [line for line in str(refused.value).splitlines() if ", build." in line]  # after the survey tables'
     assert lines[0].startswith(
-        f"{study}, line 8, build.schemes.a.settings.explorashun: bad solver setting 'explorashun': use a key among"
+        f"{study}, line 8, build.schemes.a.settings.explorashun: unknown solver setting(s) ['explorashun']; known "
+        "solver settings: ["
     )
     assert lines[1].startswith(
         f"{study}, line 10, build.schemes.a.world.robot_visible: bad world setting "
@@ -289,7 +319,7 @@ def test_shipped_study_files_build_and_serve(name):
     from search.clips.render import robot_label
 
     spec, _ = load_build(ROOT / "studies" / name)
-    jobs = plan(spec)
+    jobs = plan_clips(spec)
     assert all(search_inputs(search_job(job)) for job in jobs)
     clips = {
         job.id: ManifestClip(
@@ -313,7 +343,7 @@ def test_shipped_study_files_build_and_serve(name):
 
 def test_paper_build_reproduces_the_papers_clip_set():
     spec, _ = load_build(ROOT / "studies" / "paper.toml")
-    jobs = plan(spec)
+    jobs = plan_clips(spec)
     main = [job for job in jobs if "example" not in job.parts]
     assert {job.scheme.solver for job in main} == {"mcts", "nfirst"}
     for scheme in ("adaptive", "nfirst"):

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from search.bundle.build import build_bundle, load_build, plan, search_inputs, search_job
+from search.bundle.build import build_bundle, plan_clips, search_inputs, search_job
+from search.bundle.spec import load_build
 
 pytestmark = pytest.mark.slow
 
@@ -32,11 +33,11 @@ def test_every_representative_clip_of_the_demo_shows_the_better_robot(tmp_path):
     demo_spec, _ = load_build(DEMO)
     demo_searches = {
         json.dumps(search_inputs(search_job(job)), sort_keys=True)
-        for job in plan(demo_spec)
+        for job in plan_clips(demo_spec)
         if job.scheme.name == "representative"
     }
     spec, _ = load_build(study)
-    assert {json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in plan(spec)} == demo_searches
+    assert {json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in plan_clips(spec)} == demo_searches
     manifest = build_bundle(study, tmp_path / "out", log=lambda line: None)
     clips = [clip for clip in manifest.clips if clip.scheme == "representative"]
     assert len(clips) == 3

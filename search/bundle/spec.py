@@ -1,0 +1,398 @@
+"""The study file's `[build]` table, owned by the bundle builder: its models, and its parsing, once, into a BuildSpec
+holding what the searches and renders take: each scheme's solver config and RewardConfig, its world settings checked
+against WorldConfig, and the RenderOptions. Every problem is refused before any work with its line and field, as
+the server refuses the survey tables (`app.toml_errors`); the server leaves `[build]` alone.
+
+The table as the researcher writes it (docs/clips.md)::
+
+    [build]                            seed of the agent-to-robot-number mapping
+    [build.eval]                       episodes and seed of each agent's `foil eval` (the ground truth)
+    [build.representativeness]         the distribution the fixed scenarios are measured against
+    [build.render]                     RenderOptions fields
+    [build.schemes.NAME]               solver, budget, seed, top_k, select; [.settings], [.reward], [.world]
+    [[build.sets]]                     parts, schemes, scenarios; agents (every pair) or pairs
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import AfterValidator, BeforeValidator, Field, model_validator
+
+from app.survey.study import Names, Pair, Strict, StudyError, Text, parse_study
+from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
+from search.bundle import worlds
+from search.clips.render import ROBOT_STYLES, RenderOptions
+from search.sim.settings import check_keys, check_values
+from search.sim.world import WorldConfig
+from search.solvers.baselines import CEMConfig, SamplingConfig
+from search.solvers.mcts import MCTSConfig
+from search.solvers.representative import RepresentativeConfig
+from search.solvers.reward import RewardConfig
+from search.solvers.runner import solver_config_class
+
+DOCS = "docs/clips.md"
+
+
+class BuildError(TomlFileError):
+    """A `[build]` table that cannot be built; the message names the file, the line and the field."""
+
+
+Scalar = bool | int | float | str
+SolverConfig = MCTSConfig | SamplingConfig | CEMConfig | RepresentativeConfig
+
+
+def _scalars(value: object) -> object:
+    """A table of key = value settings as `foil search --set` takes them: scalars, no nested tables."""
+    if not isinstance(value, dict) or not all(isinstance(v, Scalar) for v in value.values()):
+        raise ValueError("must be a table of key = value settings (numbers, strings, true/false; no nested tables)")
+    return value
+
+
+ScalarTable = Annotated[dict[str, Scalar], BeforeValidator(_scalars)]
+Whole = Annotated[int, Field(ge=0, strict=True)]  # strict: a string or true/false is refused, not converted
+Positive = Annotated[int, Field(ge=1, strict=True)]
+
+
+def _distinct_parts(values: list[str]) -> list[str]:
+    if len(set(values)) != len(values):
+        raise ValueError("names must not repeat")
+    return values
+
+
+class EvalTable(Strict):
+    """The ground truth: each agent's `foil eval` on these test episodes."""
+
+    episodes: Annotated[int, Field(ge=2, strict=True)] = 500
+    seed: Whole = 0
+
+
+class SchemeTable(Strict):
+    """How one scheme's clips are found: a solver of `foil search` with its simulator-step budget, seed and top-K,
+    and its solver, reward and world settings (checked against their fields when parsed)."""
+
+    solver: Text  # mcts, nfirst, random, cem, representative
+    budget: Positive
+    seed: Whole
+    top_k: Positive = 1
+    select: Literal["reward", "contrast"] = "reward"  # which of the top-K becomes the clip (docs/clips.md)
+    settings: ScalarTable = {}
+    reward: ScalarTable = {}
+    world: ScalarTable = {}
+
+
+class SetTable(Strict):
+    """Every pair under every scheme on every scenario, feeding the survey parts named."""
+
+    parts: Annotated[
+        list[Literal["pairwise", "ranking", "example"]], Field(min_length=1), AfterValidator(_distinct_parts)
+    ]
+    schemes: Names
+    scenarios: Names
+    agents: Annotated[Names, Field(min_length=2)] | None = None  # every pair of these ...
+    pairs: Annotated[list[Pair], Field(min_length=1)] | None = None  # ... or these pairs
+
+    @model_validator(mode="after")
+    def _agents_or_pairs(self) -> SetTable:
+        if (self.agents is None) == (self.pairs is None):
+            raise ValueError("give either agents = [...] (every pair of them) or pairs = [[a, b], ...]")
+        if self.agents is None and "ranking" in self.parts:
+            raise ValueError(
+                "a set that feeds a ranking part lists its agents (agents = [...]), so each agent "
+                "keeps one robot number in all its clips"
+            )
+        return self
+
+    def clip_pairs(self) -> tuple[tuple[str, str], ...]:
+        if self.agents is not None:
+            return tuple(itertools.combinations(self.agents, 2))
+        assert self.pairs is not None  # _agents_or_pairs
+        return tuple(self.pairs)
+
+    def all_agents(self) -> tuple[str, ...]:
+        """Every agent of the set's clips, in the order given."""
+        return tuple(dict.fromkeys(a for pair in self.clip_pairs() for a in pair))
+
+
+class Representativeness(Strict):
+    """How `foil bundle` measures the study's fixed scenarios against the task's distribution of starting states
+    (`[build.representativeness]`)."""
+
+    distribution: Text = "training"
+    states: Positive = 64  # starting states drawn from the distribution
+    pushes: Positive = 32  # rollouts per state (and per fixed scenario) under uniform pushes
+    seed: Whole = 0
+
+
+class BuildTable(Strict):
+    """The `[build]` table as written: which clips `foil bundle` searches for and renders (docs/clips.md)."""
+
+    seed: Whole  # seeds which robot number each agent gets in each clip
+    eval: EvalTable = EvalTable()
+    representativeness: Representativeness = Representativeness()
+    render: ScalarTable = {}  # RenderOptions fields
+    schemes: Annotated[dict[str, SchemeTable], Field(min_length=1)]
+    sets: Annotated[list[SetTable], Field(min_length=1)]
+
+
+@dataclass(frozen=True)
+class Scheme:
+    """How one scheme's clips are found, as the search takes it: a solver with its config, simulator-step budget,
+    seed and top-K, the reward, and the world settings the scheme sets (in the crowd world checked against
+    WorldConfig; they go over the scenario's and the study's own, so only those given are kept)."""
+
+    name: str
+    solver: str
+    budget: int
+    seed: int
+    top_k: int
+    select: str  # the clip is the search's best summary by "reward", or its largest visible "contrast"
+    solver_config: SolverConfig
+    reward: RewardConfig
+    world: dict[str, Scalar]
+
+
+@dataclass(frozen=True)
+class ClipSet:
+    """Every pair under every scheme on every scenario; a set that feeds a ranking labels each agent once per
+    scheme and scenario (a round)."""
+
+    parts: tuple[str, ...]
+    schemes: tuple[str, ...]
+    scenarios: tuple[str, ...]
+    pairs: tuple[tuple[str, str], ...]
+    agents: tuple[str, ...]  # every agent of the pairs, in the order given
+
+    @property
+    def ranking(self) -> bool:
+        return "ranking" in self.parts
+
+
+@dataclass(frozen=True)
+class BuildSpec:
+    seed: int  # seeds the agent-to-robot-number mapping of every clip
+    eval_episodes: int
+    eval_seed: int
+    render: RenderOptions
+    schemes: dict[str, Scheme]
+    sets: tuple[ClipSet, ...]
+    representativeness: Representativeness = Representativeness()
+
+    @property
+    def agents(self) -> list[str]:
+        return list(dict.fromkeys(a for s in self.sets for a in s.agents))
+
+
+def _set_problems(build: BuildTable) -> list[Problem]:
+    """Checks across the tables: every scheme a set names is defined, every clip is listed once, and a ranking
+    shows no more robots than there are colours and shapes."""
+    problems: list[Problem] = []
+    seen: dict[tuple[str, str, frozenset[str]], int] = {}
+    for i, clip_set in enumerate(build.sets):
+        for j, name in enumerate(clip_set.schemes):
+            if name not in build.schemes:
+                problems.append(
+                    (("build", "sets", i, "schemes", j), f"no scheme {name!r}; defined: {sorted(build.schemes)}")
+                )
+        for scheme, scenario, pair in itertools.product(clip_set.schemes, clip_set.scenarios, clip_set.clip_pairs()):
+            key = (scheme, scenario, frozenset(pair))
+            if key in seen:
+                problems.append(
+                    (
+                        ("build", "sets", i),
+                        f"the clip of {scheme}, {scenario}, {pair[0]} and {pair[1]} "
+                        f"is already in sets[{seen[key]}]; list each clip once, with every part it feeds",
+                    )
+                )
+                break
+            seen[key] = i
+    return problems
+
+
+def _rankings_problems(build: BuildTable) -> list[Problem]:
+    return [
+        (
+            ("build", "sets", i, "agents"),
+            f"a ranking shows at most {len(ROBOT_STYLES)} robots (one colour and shape each), got "
+            f"{len(clip_set.all_agents())}",
+        )
+        for i, clip_set in enumerate(build.sets)
+        if "ranking" in clip_set.parts and len(clip_set.all_agents()) > len(ROBOT_STYLES)
+    ]
+
+
+def _scenario_problems(build: BuildTable) -> list[Problem]:
+    """Each set's scenarios found and of the kind its solvers search (a distribution for the representative
+    solver, a fixed scenario for the others), and the representativeness distribution a distribution."""
+    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
+
+    problems: list[Problem] = []
+    for i, clip_set in enumerate(build.sets):
+        for j, scenario in enumerate(clip_set.scenarios):
+            try:
+                worlds.scenario_dict(clip_set.all_agents(), scenario, {})
+            except (ValueError, FileNotFoundError) as error:
+                problems.append((("build", "sets", i, "scenarios", j), str(error)))
+                continue
+            if not worlds.is_crowd(clip_set.all_agents(), scenario):
+                continue
+            found = load_scenario_or_distribution(scenario)
+            solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
+            if isinstance(found, ScenarioDistribution) != (solvers == {"representative"}):
+                problems.append(
+                    (
+                        ("build", "sets", i, "scenarios", j),
+                        f"{scenario!r} is a "
+                        f"{'distribution' if isinstance(found, ScenarioDistribution) else 'fixed scenario'}: "
+                        f"the representative solver draws from a distribution (such as 'training'), the "
+                        f"other solvers search from a fixed scenario; give each kind a set of its own",
+                    )
+                )
+    distribution = build.representativeness.distribution
+    at = ("build", "representativeness", "distribution")
+    try:
+        if not isinstance(load_scenario_or_distribution(distribution), ScenarioDistribution):
+            problems.append(
+                (
+                    at,
+                    f"{distribution!r} is one fixed scenario; give a distribution of starting states such as "
+                    "'training'",
+                )
+            )
+    except (ValueError, FileNotFoundError) as error:
+        problems.append((at, str(error)))
+    return problems
+
+
+def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
+    """Each scheme with its solver, reward and world settings checked against their fields, one problem per bad
+    key (or per bad table, where the values together are refused)."""
+    try:
+        crowd = worlds.is_crowd([a for clip_set in build.sets for a in clip_set.all_agents()])
+    except ValueError as error:
+        problems.append((("build", "sets"), str(error)))
+        crowd = True
+    schemes = {}
+    for name, table in build.schemes.items():
+        at = ("build", "schemes", name)
+        found = len(problems)
+        try:
+            solver: type | None = solver_config_class(table.solver)
+        except ValueError as error:
+            problems.append(((*at, "solver"), str(error)))
+            solver = None
+        checked: dict[str, dict[str, Scalar]] = {}
+        for key, cls, what in (
+            ("settings", solver, "solver"),
+            ("reward", RewardConfig, "reward"),
+            ("world", WorldConfig if crowd else None, "world"),  # an environment adapter's settings are its own
+        ):
+            checked[key] = {}
+            for setting, value in getattr(table, key).items():
+                try:
+                    checked[key] |= check_values(cls, {setting: value}, what) if cls else {setting: value}
+                except ValueError as error:
+                    problems.append(((*at, key, setting), str(error)))
+        if len(problems) > found or solver is None:
+            continue
+        try:
+            solver_config, reward = solver(**checked["settings"]), RewardConfig.from_dict(checked["reward"])
+        except (TypeError, ValueError) as error:
+            problems.append((at, str(error)))
+            continue
+        schemes[name] = Scheme(
+            name=name,
+            solver=table.solver,
+            budget=table.budget,
+            seed=table.seed,
+            top_k=table.top_k,
+            select=table.select,
+            solver_config=solver_config,
+            reward=reward,
+            world=checked["world"],
+        )
+    return schemes
+
+
+def _render_options(build: BuildTable, problems: list[Problem]) -> RenderOptions:
+    """`[build.render]` as RenderOptions; a bad key or value is a problem at its line like the rest of the table."""
+    known = RenderOptions.__dataclass_fields__
+    for key in build.render:
+        try:
+            check_keys([key], known, "render setting")
+        except ValueError as error:
+            problems.append((("build", "render", key), str(error)))
+    try:
+        return RenderOptions(**{key: value for key, value in build.render.items() if key in known})  # type: ignore[arg-type]
+    except (TypeError, ValueError) as error:
+        problems.append((("build", "render"), str(error)))
+        return RenderOptions()
+
+
+def parse_build(text: str, source: str = "study file") -> BuildSpec:
+    """The `[build]` table of a study file's text as a BuildSpec, or BuildError listing every problem with its file,
+    line and field, as the server lists the survey tables' (the survey tables are left to the server)."""
+    data = load_toml(text, source, BuildError)
+    if "build" not in data:
+        raise BuildError(f"{source}: no [build] table: it says which clips to search for and render (see {DOCS})")
+    build = validated(
+        BuildTable,
+        data["build"],
+        text,
+        source,
+        at=("build",),
+        checks=_set_problems,
+        error=BuildError,
+        unknown_key=f"unknown key (check the spelling; see {DOCS} for the keys a study file takes)",
+    )
+    problems: list[Problem] = []
+    render = _render_options(build, problems)
+    problems += _rankings_problems(build)
+    schemes = _schemes(build, problems)
+    problems += _scenario_problems(build)
+    refuse(text, source, problems, BuildError)
+    return BuildSpec(
+        seed=build.seed,
+        eval_episodes=build.eval.episodes,
+        eval_seed=build.eval.seed,
+        render=render,
+        schemes=schemes,
+        sets=tuple(
+            ClipSet(
+                parts=tuple(s.parts),
+                schemes=tuple(s.schemes),
+                scenarios=tuple(s.scenarios),
+                pairs=s.clip_pairs(),
+                agents=s.all_agents(),
+            )
+            for s in build.sets
+        ),
+        representativeness=build.representativeness,
+    )
+
+
+def load_build(path: str | os.PathLike[str]) -> tuple[BuildSpec, str]:
+    """The build spec of a study file, and the file's text (copied into the bundle for the server). The whole file
+    is checked first, every survey table, as `foil serve` will check it, then the `[build]` table: a misspelt key
+    anywhere fails now, not after the searches; the problems of both are listed together."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no study file {path}") from None
+    problems = []
+    try:
+        parse_study(text, source=str(path))
+    except StudyError as error:
+        problems.append(str(error))
+    try:
+        spec = parse_build(text, source=str(path))
+    except BuildError as error:
+        problems.append(str(error))
+    if problems:  # a file that is not TOML at all is refused alike by both: once is enough
+        raise BuildError("\n".join(dict.fromkeys(problems)))
+    return spec, text
