@@ -29,7 +29,8 @@ class Strict(BaseModel):
 Text = Annotated[str, Field(min_length=1)]
 
 
-def _distinct(values: list[str]) -> list[str]:
+def distinct(values: list[str]) -> list[str]:
+    """Names given once each (a validator)."""
     if len(set(values)) != len(values):
         raise ValueError("names must not repeat")
     return values
@@ -41,7 +42,7 @@ def _two_different(pair: tuple[str, str]) -> tuple[str, str]:
     return pair
 
 
-Names = Annotated[list[Text], Field(min_length=1), AfterValidator(_distinct)]
+Names = Annotated[list[Text], Field(min_length=1), AfterValidator(distinct)]
 Pair = Annotated[tuple[Text, Text], AfterValidator(_two_different)]
 
 

@@ -23,7 +23,7 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
-from app.survey.study import Names, Pair, Strict, StudyError, Text, parse_study
+from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, parse_study
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
 from search.bundle import worlds
 from search.clips.render import ROBOT_STYLES, RenderOptions
@@ -58,12 +58,6 @@ Whole = Annotated[int, Field(ge=0, strict=True)]  # strict: a string or true/fal
 Positive = Annotated[int, Field(ge=1, strict=True)]
 
 
-def _distinct_parts(values: list[str]) -> list[str]:
-    if len(set(values)) != len(values):
-        raise ValueError("names must not repeat")
-    return values
-
-
 class EvalTable(Strict):
     """The ground truth: each agent's `foil eval` on these test episodes."""
 
@@ -88,9 +82,7 @@ class SchemeTable(Strict):
 class SetTable(Strict):
     """Every pair under every scheme on every scenario, feeding the survey parts named."""
 
-    parts: Annotated[
-        list[Literal["pairwise", "ranking", "example"]], Field(min_length=1), AfterValidator(_distinct_parts)
-    ]
+    parts: Annotated[list[Literal["pairwise", "ranking", "example"]], Field(min_length=1), AfterValidator(distinct)]
     schemes: Names
     scenarios: Names
     agents: Annotated[Names, Field(min_length=2)] | None = None  # every pair of these ...
@@ -210,19 +202,13 @@ def _set_problems(build: BuildTable) -> list[Problem]:
                 )
                 break
             seen[key] = i
+        if "ranking" in clip_set.parts and len(clip_set.all_agents()) > len(ROBOT_STYLES):
+            message = (
+                f"a ranking shows at most {len(ROBOT_STYLES)} robots (one colour and shape each), got "
+                f"{len(clip_set.all_agents())}"
+            )
+            problems.append((("build", "sets", i, "agents"), message))
     return problems
-
-
-def _rankings_problems(build: BuildTable) -> list[Problem]:
-    return [
-        (
-            ("build", "sets", i, "agents"),
-            f"a ranking shows at most {len(ROBOT_STYLES)} robots (one colour and shape each), got "
-            f"{len(clip_set.all_agents())}",
-        )
-        for i, clip_set in enumerate(build.sets)
-        if "ranking" in clip_set.parts and len(clip_set.all_agents()) > len(ROBOT_STYLES)
-    ]
 
 
 def _scenario_problems(build: BuildTable) -> list[Problem]:
@@ -351,7 +337,6 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
     )
     problems: list[Problem] = []
     render = _render_options(build, problems)
-    problems += _rankings_problems(build)
     schemes = _schemes(build, problems)
     problems += _scenario_problems(build)
     refuse(text, source, problems, BuildError)

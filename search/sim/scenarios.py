@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from app.toml_errors import load_toml
+from search.sim.settings import check_keys
 from search.sim.world import HUMAN_RADIUS_RANGE, HUMAN_V_PREF_RANGE, WorldConfig, WorldState, new_state
 
 SHIPPED_DIR = Path(__file__).parent / "scenarios"
@@ -94,18 +95,20 @@ class Scenario:
                 fail(f"{where} must be finite, got {value!r}")
             return float(value[0]), float(value[1])
 
-        unknown = sorted(set(data) - {"name", "description", "robot", "humans", "world"})
-        if unknown:
-            fail(f"unknown key(s) {unknown}; expected name, description, [robot], [[humans]], [world]")
+        def keys(table: dict, known: set[str], where: str = "") -> None:
+            try:
+                check_keys(table, known, "key")
+            except ValueError as error:
+                fail(f"{where}{error}")
+
+        keys(data, {"name", "description", "robot", "humans", "world"})
         robot = data.get("robot")
         if not isinstance(robot, dict):
             fail("missing [robot] table with start and goal")
         for key in ("start", "goal"):
             if key not in robot:
                 fail(f"[robot] needs '{key}' = [x, y]")
-        extra = sorted(set(robot) - {"start", "goal", "heading"})
-        if extra:
-            fail(f"[robot] has unknown key(s) {extra}; expected start, goal and heading")
+        keys(robot, {"start", "goal", "heading"}, "[robot]: ")
         heading = robot.get("heading", math.pi / 2)
         if not isinstance(heading, int | float) or not math.isfinite(heading):
             fail(f"[robot] heading must be a number of radians, got {heading!r}")
@@ -116,9 +119,7 @@ class Scenario:
         for i, human in enumerate(humans):
             if not isinstance(human, dict) or "position" not in human:
                 fail(f"human {i} needs 'position' = [x, y]")
-            extra = sorted(set(human) - {"position", "goal"})
-            if extra:
-                fail(f"human {i} has unknown key(s) {extra}; expected position and goal")
+            keys(human, {"position", "goal"}, f"human {i}: ")
             p = point(human["position"], f"human {i} position")
             positions.append(p)
             goals.append(point(human["goal"], f"human {i} goal") if "goal" in human else (-p[0], -p[1]))
@@ -188,11 +189,10 @@ class ScenarioDistribution:
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "scenario distribution") -> ScenarioDistribution:
-        unknown = sorted(set(data) - {"name", "description", "distribution", "world"})
-        if unknown:
-            raise ValueError(
-                f"{source}: unknown key(s) {unknown}; a distribution has name, description, [distribution] and [world]"
-            )
+        try:
+            check_keys(data, {"name", "description", "distribution", "world"}, "key")
+        except ValueError as error:
+            raise ValueError(f"{source}: {error}") from None
         table = data["distribution"]
         kind = table.get("kind") if isinstance(table, dict) else None
         if kind not in DISTRIBUTION_KINDS or set(table) != {"kind"}:
