@@ -1,7 +1,8 @@
 # The two set-up commands: `make demo` (main job) and `make test` (whole test suite).
-# Both create .venv and install everything. PyTorch is pinned first so that a machine with a local CPU wheel
-# (or a GPU machine, which gets the regular build) satisfies the package's `torch` requirement without pulling
-# a second build.
+# Both create .venv and install everything: the survey server (the base install), the offline side (the `search`
+# extra), the report's figures, highway driving and the test tools. PyTorch is pinned first so that a machine with
+# a local CPU wheel (or a GPU machine, which gets the regular build) satisfies the `search` extra's `torch`
+# requirement without pulling a second build.
 PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
@@ -28,7 +29,7 @@ $(VENV)/.installed: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
-	$(BIN)/python -m pip install --quiet -e ".[dev,highway]"
+	$(BIN)/python -m pip install --quiet -e ".[search,figures,highway,dev]"
 	touch $@
 
 $(AXE):

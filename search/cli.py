@@ -1,12 +1,22 @@
-"""The `foil` command line. Each subcommand imports its machinery only when it runs."""
+"""The `foil` command line: the offline side's commands here, the survey server's from app/cli.py. Each subcommand
+imports its machinery only when it runs, so a server-only install (without the `search` extra) runs the server's
+commands and refuses the offline ones with the extra to install."""
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
+from importlib.util import find_spec
 from pathlib import Path
+
+from app.cli import COMMANDS as SERVER_COMMANDS
+from app.cli import add_commands as add_server_commands
+from app.cli import comma_separated
+
+# What the `search` extra adds to a server-only install (pyproject.toml), by import name: every offline command
+# needs it.
+OFFLINE_MODULES = ("numpy", "numba", "torch", "gymnasium", "tqdm", "imageio_ffmpeg", "PIL")
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -65,48 +75,6 @@ def _eval(args: argparse.Namespace) -> int:
     )
 
 
-def _serve(args: argparse.Namespace) -> int:
-    from app.web.serve import serve
-
-    return serve(bundle=args.bundle, study=args.study, database_url=args.db, host=args.host, port=args.port)
-
-
-def _exclusion_rules(args: argparse.Namespace):
-    from app.analysis.exclusions import ExclusionRules
-
-    return ExclusionRules(
-        min_seconds=args.min_seconds, median_fraction=args.median_fraction, include_kinds=tuple(_names(args.include))
-    )
-
-
-def _export(args: argparse.Namespace) -> int:
-    from app.analysis.export_csv import run_export
-
-    return run_export(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
-
-
-def _report(args: argparse.Namespace) -> int:
-    from app.analysis.report import run_report
-
-    return run_report(
-        database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args), bundle=args.bundle
-    )
-
-
-def _simulate(args: argparse.Namespace) -> int:
-    from app.analysis.bots import run_simulate
-
-    return run_simulate(
-        url=args.url,
-        bundle=args.bundle,
-        participants=args.participants,
-        noise=args.noise,
-        seed=args.seed,
-        inattentive=args.inattentive,
-        first=args.first,
-    )
-
-
 def _render(args: argparse.Namespace) -> int:
     from search.clips.render import RenderOptions, render_file
 
@@ -151,13 +119,13 @@ def _search(args: argparse.Namespace) -> int:
     from search.highway.domain import CROWD, infer_domain, load_gym_scenario
     from search.solvers.runner import SearchJob, run_search, write_outputs
 
-    if infer_domain(_names(args.agents), args.scenario) != CROWD:
+    if infer_domain(comma_separated(args.agents), args.scenario) != CROWD:
         from search.gym.summary import run_gym_search
 
         scenario = load_gym_scenario(args.scenario)
         settings = _search_job_settings(argparse.Namespace(**{**vars(args), "world": []}))
         job = SearchJob(
-            agents=tuple(_names(args.agents)),
+            agents=tuple(comma_separated(args.agents)),
             scenario=args.scenario,
             solver=args.solver,
             **settings | {"world_settings": _json_settings(args.world)},
@@ -165,7 +133,10 @@ def _search(args: argparse.Namespace) -> int:
         files = run_gym_search(job, scenario, progress=not args.quiet)
     else:
         job = SearchJob(
-            agents=tuple(_names(args.agents)), scenario=args.scenario, solver=args.solver, **_search_job_settings(args)
+            agents=tuple(comma_separated(args.agents)),
+            scenario=args.scenario,
+            solver=args.solver,
+            **_search_job_settings(args),
         )
         files = run_search(job, progress=not args.quiet)
     out = write_outputs(args.out, files)
@@ -177,8 +148,10 @@ def _search_all(args: argparse.Namespace) -> int:
     from search.highway.domain import infer_domain
     from search.solvers.runner import run_all, study_jobs
 
-    solvers = _names(args.solvers)
-    crowd = all(infer_domain(_names(args.agents), scenario) == "crowd" for scenario in _names(args.scenarios))
+    solvers = comma_separated(args.solvers)
+    crowd = all(
+        infer_domain(comma_separated(args.agents), scenario) == "crowd" for scenario in comma_separated(args.scenarios)
+    )
     settings = _search_job_settings(
         argparse.Namespace(**{**vars(args), "solver": solvers[0], "world": args.world if crowd else []})
     )
@@ -186,7 +159,9 @@ def _search_all(args: argparse.Namespace) -> int:
         settings["world_settings"] = _json_settings(args.world)
     if len(solvers) > 1 and args.set:
         raise ValueError("--set applies to one solver: give a single --solvers with it")
-    jobs = study_jobs(_names(args.agents), _names(args.scenarios), solvers, joint=args.joint, **settings)
+    jobs = study_jobs(
+        comma_separated(args.agents), comma_separated(args.scenarios), solvers, joint=args.joint, **settings
+    )
     search = None
     if not crowd:
         from search.bundle.worlds import search_files as search
@@ -228,10 +203,6 @@ def _json_settings(items: list[str]) -> dict:
         except json.JSONDecodeError:
             settings[key.strip()] = text
     return settings
-
-
-def _names(text: str) -> list[str]:
-    return [name.strip() for name in text.split(",") if name.strip()]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -297,74 +268,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)
 
-    serve = sub.add_parser("serve", help="run the survey server for a study bundle (applies database migrations)")
-    serve.add_argument("--bundle", required=True, type=Path, help="bundle directory holding manifest.json")
-    serve.add_argument("--study", type=Path, help="study TOML file (default: study.toml in the bundle)")
-    serve.add_argument("--db", help="database URL (default: FOIL_DATABASE_URL or sqlite:///foil.sqlite3)")
-    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
-    serve.set_defaults(handler=_serve)
-
-    for name, handler, what in (
-        ("export", _export, "long.csv, wide.csv, participants.csv and the codebook"),
-        ("report", _report, "report.html with Table 1, the rating figures and tests"),
-    ):
-        command = sub.add_parser(name, help=f"the survey's answers as {what}")
-        command.add_argument("--db", required=True, help="the survey's database URL, e.g. sqlite:///foil.sqlite3")
-        command.add_argument(
-            "--study",
-            help="the study file the survey was served with, or the id of a study "
-            "whose file the server stored in the database (default: the only one stored)",
-        )
-        command.add_argument("--out", required=True, help="output directory")
-        command.add_argument(
-            "--min-seconds",
-            type=float,
-            help="exclude completions faster than this (default: a "
-            "fraction of the median, see --median-fraction; 0: no time rule)",
-        )
-        command.add_argument(
-            "--median-fraction",
-            type=float,
-            default=1 / 3,
-            help="exclude completions faster than this fraction of the median (default 1/3)",
-        )
-        if name == "report":
-            command.add_argument(
-                "--bundle",
-                default=os.environ.get("FOIL_BUNDLE_DIR"),
-                help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
-                "the server recorded in the database): each clip's accuracy is shown beside its audit",
-            )
-        command.add_argument(
-            "--include",
-            default="",
-            metavar="KINDS",
-            help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
-            "(default: none; pilots and bots are left out)",
-        )
-        command.set_defaults(handler=handler)
-
-    simulate = sub.add_parser("simulate", help="bot participants take the study through a running server")
-    simulate.add_argument("--url", required=True, help="the server's address, e.g. http://127.0.0.1:8000")
-    simulate.add_argument("--participants", type=int, required=True, help="how many bots")
-    simulate.add_argument(
-        "--bundle",
-        help="the bundle the server serves (default FOIL_BUNDLE_DIR): the bots read "
-        "what each clip shows from its summary.json",
-    )
-    simulate.add_argument(
-        "--noise", type=float, default=0.5, help="perception noise (default 0.5; see docs/analysis.md)"
-    )
-    simulate.add_argument(
-        "--inattentive",
-        type=float,
-        default=0.0,
-        help="share of bots that answer attention checks at random (default 0)",
-    )
-    simulate.add_argument("--seed", type=int, default=0, help="seed of the bots (default 0); bot k is bot-SEED-k")
-    simulate.add_argument("--first", type=int, default=0, help="number of the first bot (default 0)")
-    simulate.set_defaults(handler=_simulate)
+    add_server_commands(sub)
 
     render = sub.add_parser("render", help="render a summary.json as an H.264 clip with a poster and contact sheet")
     render.add_argument("summary", metavar="SUMMARY.json", help="a summary written by foil search")
@@ -464,12 +368,23 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def missing_offline_modules() -> list[str]:
+    return [name for name in OFFLINE_MODULES if find_spec(name) is None]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "handler", None):
         parser.print_help()
         return 0
+    if args.command not in SERVER_COMMANDS and (missing := missing_offline_modules()):
+        print(
+            f"foil {args.command}: error: this install has the survey server only (no {', '.join(missing)}): "
+            "install the offline side with pip install 'foil[search]'",
+            file=sys.stderr,
+        )
+        return 2
     try:
         return int(args.handler(args) or 0)
     except (ValueError, FileNotFoundError) as error:

@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 
 from app.store.database import migrate
 from app.web.main import create_app
-from app.web.settings import Settings
+from app.web.settings import ServerSettings
 from tests.support import postgres
 from tests.support.survey import ADMIN_PASSWORD, AGENT_RANK, SECRET_NAMES, make_clip, study_text, write_bundle
 
@@ -69,7 +69,7 @@ def make_client(tmp_path, bundle_dir, database_url):
             "admin_password": ADMIN_PASSWORD,
             **settings,
         }
-        app = create_app(Settings(**config))
+        app = create_app(ServerSettings(**config))
         apps.append(app)
         return TestClient(app, follow_redirects=True)
 

@@ -2,7 +2,8 @@
 
 One streaming pass over the database tallies what the analysis needs (counts, not rows), so the report of a large
 study costs no more memory than that of a small one. The outputs are report.html (self-contained: figures
-inlined as SVG, styles inline), each figure as PNG and SVG, and every table as CSV.
+inlined as SVG, styles inline), each figure as PNG and SVG, and every table as CSV. matplotlib draws the figures
+and comes with the `figures` extra: without it the report has every table and test and says how to get them.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import sys
 import textwrap
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field, replace
+from importlib.util import find_spec
 from pathlib import Path
 
 from app.analysis.answer_table import long_rows, participant_records
@@ -28,6 +30,7 @@ TASKS = {
     "pairwise": "part one: pairwise (which robot is better)",
     "ranking": "part two: global ranking (all robots in the right order)",
 }
+FIGURES_EXTRA = "pip install 'foil[figures]'"
 # The paper's Figure 4: orange for disagreement, blue for agreement, grey for the middle.
 DISAGREE, NEUTRAL, AGREE = ("#e66101", "#fdb863"), "#d9d9d9", ("#92c5de", "#0571b0")
 
@@ -277,6 +280,11 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
 # Figures -----------------------------------------------------------------------------------------------------
 
 
+def figures_installed() -> bool:
+    """Whether matplotlib (the `figures` extra) is there to draw the report's figures."""
+    return find_spec("matplotlib") is not None
+
+
 def _pyplot():
     import matplotlib
 
@@ -403,6 +411,7 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
         folder.mkdir(parents=True, exist_ok=True)
         scales = data.scale_questions()
         labelled = [(name, q) for name, q in scales if q.labels is not None]
+        drawn = figures_installed()
         figures = [
             (
                 f"distribution-{name}",
@@ -411,9 +420,9 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
                 _save(distribution_figure(data, name, q), folder, f"distribution-{name}"),
             )
             for name, q in scales
-            if q.labels is None
+            if q.labels is None and drawn
         ]
-        if labelled:
+        if labelled and drawn:
             figures.append(
                 (
                     "likert",
@@ -445,6 +454,8 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
                 tables=list(tables) if out is not None else [],
                 files=out is not None,
                 likert=bool(labelled),
+                figures_left_out=bool(scales) and not drawn,
+                figures_extra=FIGURES_EXTRA,
             )
         )
         if out is not None:
@@ -474,6 +485,8 @@ def run_report(
             file=sys.stderr,
         )
     render_report(data, Path(out))
+    if data.scale_questions() and not figures_installed():
+        print(f"warning: the report has no figures: they need matplotlib: {FIGURES_EXTRA}", file=sys.stderr)
     e = data.exclusions
     print(f"{e.before} participants, {e.after} analysed after exclusions")
     for row in table1_rows(data):

@@ -17,14 +17,14 @@ from app.survey.bundle import Bundle
 from app.survey.study import Study
 from app.web.media import KeptClips
 from app.web.security import csrf_token
-from app.web.settings import Settings
+from app.web.settings import ServerSettings
 
 MAX_PAGES = 4096  # about 4 KB each; the paper study with 300 participants showed 544 distinct pages
 
 
 @dataclass(frozen=True)
 class Context:
-    settings: Settings
+    settings: ServerSettings
     study: Study
     bundle: Bundle
     conditions: list[Condition]

@@ -30,12 +30,12 @@ from app.web.security import (
     SecurityHeadersMiddleware,
     stored_secret,
 )
-from app.web.settings import Settings
+from app.web.settings import ServerSettings
 
 log = logging.getLogger("foil.server")
 
 
-def _cookie_secret(settings: Settings, db: Database) -> str:
+def _cookie_secret(settings: ServerSettings, db: Database) -> str:
     if settings.secret_key is not None:
         return settings.secret_key.get_secret_value()
     try:
@@ -46,7 +46,7 @@ def _cookie_secret(settings: Settings, db: Database) -> str:
             return stored_secret(session)
 
 
-def create_app(settings: Settings) -> FastAPI:
+def create_app(settings: ServerSettings) -> FastAPI:
     """Build the app for an already migrated database (`foil serve` migrates first)."""
     study = load_study(settings.study_path())
     bundle = load_bundle(settings.bundle_dir)
@@ -151,4 +151,4 @@ def create_app(settings: Settings) -> FastAPI:
 
 def app_from_env() -> FastAPI:
     """For `uvicorn --factory app.web.main:app_from_env --workers N` with FOIL_* variables (run migrations first)."""
-    return create_app(Settings())
+    return create_app(ServerSettings())

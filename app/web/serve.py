@@ -6,12 +6,13 @@ import errno
 import logging
 import socket
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 
 from app.store.database import migrate
-from app.web.settings import Settings, TransportLimits
+from app.web.settings import ServerSettings, TransportLimits
 from app.web.transport import survey_protocol
 
 
@@ -20,8 +21,9 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
 
     from app.web.main import create_app
 
-    given = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
-    settings = Settings(**{key: value for key, value in given.items() if value is not None})
+    # Options not given are left to the FOIL_* variables and the defaults.
+    given: dict[str, Any] = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
+    settings = ServerSettings(**{key: value for key, value in given.items() if value is not None})
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
     listening = _bind(host, port)  # before anything is changed: a port in use touches no database
     try:

@@ -26,7 +26,10 @@ class TransportLimits(BaseSettings):
     keep_alive_s: int = Field(default=5, ge=1, le=300)
 
 
-class Settings(BaseSettings):
+class ServerSettings(BaseSettings):
+    """What one survey server runs with: its bundle, study and database, the admin password and the limits of
+    sessions, logins and arrivals (docs/survey.md lists them as FOIL_* variables)."""
+
     model_config = SettingsConfigDict(env_prefix="FOIL_", extra="ignore")
 
     bundle_dir: Path
@@ -61,7 +64,7 @@ class Settings(BaseSettings):
     allowed_hosts: list[str] = ["*"]
 
     @model_validator(mode="after")
-    def _sane(self) -> Settings:
+    def _sane(self) -> ServerSettings:
         if self.admin_password is not None and len(self.admin_password.get_secret_value()) < 8:
             raise ValueError("FOIL_ADMIN_PASSWORD must be at least 8 characters long")
         if self.cookie_samesite == "none" and not self.cookie_secure:

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 import re
+import sys
 
 import pytest
 
@@ -196,7 +198,7 @@ def test_foil_report_finds_the_served_bundle_for_the_audit_column(
     import shutil
 
     from app.web.main import create_app
-    from app.web.settings import Settings
+    from app.web.settings import ServerSettings
     from search.cli import main
 
     db, study = known_db
@@ -207,7 +209,7 @@ def test_foil_report_finds_the_served_bundle_for_the_audit_column(
         clip["audit"] = {"shows": "better", "why": f"what {clip['id']} shows"}
     (served / "manifest.json").write_text(json.dumps(manifest))
     path, _ = paper_study
-    create_app(Settings(bundle_dir=served, study_file=path, database_url=db.url)).state.context.db.dispose()
+    create_app(ServerSettings(bundle_dir=served, study_file=path, database_url=db.url)).state.context.db.dispose()
     monkeypatch.delenv("FOIL_BUNDLE_DIR", raising=False)
     assert main(["report", "--db", db.url, "--out", str(tmp_path / "report")]) == 0
     html = (tmp_path / "report" / "report.html").read_text()
@@ -218,3 +220,31 @@ def test_foil_report_finds_the_served_bundle_for_the_audit_column(
     shutil.rmtree(served)
     assert main(["report", "--db", db.url, "--out", str(tmp_path / "again")]) == 0
     assert f"the bundle the study was served from is gone: {served}" in capsys.readouterr().err
+
+
+def test_without_matplotlib_the_report_has_every_table_and_says_how_to_get_the_figures(
+    known_db, paper_study, tmp_path, monkeypatch, capsys
+):
+    """On an install without the `figures` extra `foil report` (and the admin page, the same HTML) has all but
+    the figures, and says which extra draws them; what it prints is the same."""
+    from search.cli import main
+
+    db, _ = known_db
+    path, _ = paper_study
+    monkeypatch.delenv("FOIL_BUNDLE_DIR", raising=False)
+    command = ["report", "--db", db.url, "--study", str(path), "--out"]
+    assert main([*command, str(tmp_path / "drawn")]) == 0
+    drawn = capsys.readouterr()
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    assert main([*command, str(tmp_path / "plain")]) == 0
+    plain = capsys.readouterr()
+    assert plain.out.replace("plain", "drawn") == drawn.out
+    assert (
+        plain.err
+        == drawn.err + "warning: the report has no figures: they need matplotlib: pip install 'foil[figures]'\n"
+    )
+    files = sorted(file.name for file in (tmp_path / "plain").iterdir())
+    assert files == sorted(name for name in os.listdir(tmp_path / "drawn") if not name.endswith((".png", ".svg")))
+    html = (tmp_path / "plain" / "report.html").read_text()
+    assert "<svg" not in html and "<code>pip install &#39;foil[figures]&#39;</code> adds it" in html
+    assert html.split("<h2")[:-1] == (tmp_path / "drawn" / "report.html").read_text().split("<h2")[:-1]

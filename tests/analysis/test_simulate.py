@@ -19,7 +19,7 @@ from app.analysis.source import analysis_database
 from app.store.database import migrate
 from app.survey.study import parse_study
 from app.web.main import create_app
-from app.web.settings import Settings
+from app.web.settings import ServerSettings
 from search.cli import main
 from tests.support.analysis import MISLEADING, SCHEMES
 from tests.support.survey import AGENT_RANK, ATTENTION, SECRET_NAMES, study_text
@@ -53,7 +53,7 @@ def serve(tmp_path, bundle_dir, text: str):
     study_file.write_text(text)
     url = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     migrate(url)
-    app = create_app(Settings(bundle_dir=bundle_dir, study_file=study_file, database_url=url))
+    app = create_app(ServerSettings(bundle_dir=bundle_dir, study_file=study_file, database_url=url))
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()

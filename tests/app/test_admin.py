@@ -10,7 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.store.models import Participant
-from app.web.settings import Settings
+from app.web.settings import ServerSettings
 from tests.support.survey import FormReader, answer_for, finish, log_in, start, stored
 
 BALANCED = {"platform": '"prolific"', "assignment": '"balanced"'}
@@ -25,7 +25,7 @@ def test_admin_is_off_without_a_password(make_client):
 
 def test_short_admin_password_refuses_to_start(bundle_dir):
     with pytest.raises(ValueError, match="at least 8 characters"):
-        Settings(bundle_dir=bundle_dir, admin_password="short")
+        ServerSettings(bundle_dir=bundle_dir, admin_password="short")
 
 
 def test_admin_pages_need_the_password(make_client):

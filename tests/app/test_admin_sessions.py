@@ -10,7 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.web.main import create_app
-from app.web.settings import Settings
+from app.web.settings import ServerSettings
 from tests.support.survey import ADMIN_PASSWORD, FormReader, log_in
 
 PILOT = {"platform": '"none"'}
@@ -52,7 +52,7 @@ def test_a_changed_password_invalidates_earlier_admin_cookies(make_client, tmp_p
     captured = client.cookies["foil_session"]
     settings = client.app.state.context.settings
     restarted = create_app(
-        Settings(
+        ServerSettings(
             bundle_dir=bundle_dir,
             study_file=settings.study_file,
             database_url=database_url,

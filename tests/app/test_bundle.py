@@ -101,10 +101,12 @@ def test_a_video_attention_checks_clip_must_be_in_the_bundle(bundle_dir):
 
 def test_the_server_does_not_start_without_the_video_attention_checks_clip(tmp_path, bundle_dir):
     from app.web.main import create_app
-    from app.web.settings import Settings
+    from app.web.settings import ServerSettings
 
     study = tmp_path / "study.toml"
     study.write_text(study_text(contact=VIDEO_CHECK.format(scheme="schemeadaptivesecret")))
-    settings = Settings(bundle_dir=bundle_dir, study_file=study, database_url=f"sqlite:///{tmp_path / 'db.sqlite3'}")
+    settings = ServerSettings(
+        bundle_dir=bundle_dir, study_file=study, database_url=f"sqlite:///{tmp_path / 'db.sqlite3'}"
+    )
     with pytest.raises(BundleError, match=r"attention_checks\[0\] \(a video attention check's clip\)"):
         create_app(settings)

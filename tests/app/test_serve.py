@@ -118,9 +118,11 @@ def test_make_demo_prints_a_generated_admin_password_and_serves_with_it(tmp_path
 
 
 def test_the_server_never_imports_search_torch_or_the_highway_packages():
+    """Neither the server nor its commands (app/cli.py, with every command's module)."""
     code = (
-        "import sys, app.web.main, app.web.serve; "
-        "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch', 'highway_env', 'pygame', "
+        "import sys, app.cli, app.web.main, app.web.serve, app.analysis.export_csv, app.analysis.report, "
+        "app.analysis.bots; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('search', 'torch', 'numba', 'highway_env', 'pygame', "
         "'stable_baselines3', 'gymnasium')]; print(bad); "
         "sys.exit(1 if bad else 0)"
     )

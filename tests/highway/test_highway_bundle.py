@@ -56,7 +56,7 @@ def test_a_highway_study_mixing_worlds_is_refused_at_its_line(tmp_path):
 def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     from app.store.database import migrate
     from app.web.main import create_app
-    from app.web.settings import Settings
+    from app.web.settings import ServerSettings
 
     text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
     text = text.replace(
@@ -76,7 +76,7 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     database = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     migrate(database)
     app = create_app(
-        Settings(
+        ServerSettings(
             bundle_dir=out, study_file=out / "study.toml", database_url=database, admin_password="a-long-admin-password"
         )
     )

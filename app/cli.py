@@ -1,0 +1,136 @@
+"""The survey server's commands: `foil serve`, `export`, `report` and `simulate`, their arguments and what runs
+them. The `foil` command (search/cli.py) lists them beside the offline side's commands. Each imports its machinery
+only when it runs, so `foil --help` loads neither side."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from app.analysis.exclusions import ExclusionRules
+
+COMMANDS = ("serve", "export", "report", "simulate")
+
+
+def comma_separated(text: str) -> list[str]:
+    """The names in a comma-separated option (`--include pilot,bot`), blanks left out."""
+    return [name.strip() for name in text.split(",") if name.strip()]
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from app.web.serve import serve
+
+    return serve(bundle=args.bundle, study=args.study, database_url=args.db, host=args.host, port=args.port)
+
+
+def _exclusion_rules(args: argparse.Namespace) -> ExclusionRules:
+    from app.analysis.exclusions import ExclusionRules
+
+    return ExclusionRules(
+        min_seconds=args.min_seconds,
+        median_fraction=args.median_fraction,
+        include_kinds=tuple(comma_separated(args.include)),
+    )
+
+
+def _export(args: argparse.Namespace) -> int:
+    from app.analysis.export_csv import run_export
+
+    return run_export(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
+
+
+def _report(args: argparse.Namespace) -> int:
+    from app.analysis.report import run_report
+
+    return run_report(
+        database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args), bundle=args.bundle
+    )
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from app.analysis.bots import run_simulate
+
+    return run_simulate(
+        url=args.url,
+        bundle=args.bundle,
+        participants=args.participants,
+        noise=args.noise,
+        seed=args.seed,
+        inattentive=args.inattentive,
+        first=args.first,
+    )
+
+
+def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Adds `serve`, `export`, `report` and `simulate` to the `foil` command's subcommands."""
+    serve = commands.add_parser("serve", help="run the survey server for a study bundle (applies database migrations)")
+    serve.add_argument("--bundle", required=True, type=Path, help="bundle directory holding manifest.json")
+    serve.add_argument("--study", type=Path, help="study TOML file (default: study.toml in the bundle)")
+    serve.add_argument("--db", help="database URL (default: FOIL_DATABASE_URL or sqlite:///foil.sqlite3)")
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    serve.set_defaults(handler=_serve)
+
+    for name, handler, what in (
+        ("export", _export, "long.csv, wide.csv, participants.csv and the codebook"),
+        ("report", _report, "report.html with Table 1, the rating figures and tests"),
+    ):
+        command = commands.add_parser(name, help=f"the survey's answers as {what}")
+        command.add_argument("--db", required=True, help="the survey's database URL, e.g. sqlite:///foil.sqlite3")
+        command.add_argument(
+            "--study",
+            help="the study file the survey was served with, or the id of a study "
+            "whose file the server stored in the database (default: the only one stored)",
+        )
+        command.add_argument("--out", required=True, help="output directory")
+        command.add_argument(
+            "--min-seconds",
+            type=float,
+            help="exclude completions faster than this (default: a "
+            "fraction of the median, see --median-fraction; 0: no time rule)",
+        )
+        command.add_argument(
+            "--median-fraction",
+            type=float,
+            default=1 / 3,
+            help="exclude completions faster than this fraction of the median (default 1/3)",
+        )
+        if name == "report":
+            command.add_argument(
+                "--bundle",
+                default=os.environ.get("FOIL_BUNDLE_DIR"),
+                help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
+                "the server recorded in the database): each clip's accuracy is shown beside its audit",
+            )
+        command.add_argument(
+            "--include",
+            default="",
+            metavar="KINDS",
+            help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
+            "(default: none; pilots and bots are left out)",
+        )
+        command.set_defaults(handler=handler)
+
+    simulate = commands.add_parser("simulate", help="bot participants take the study through a running server")
+    simulate.add_argument("--url", required=True, help="the server's address, e.g. http://127.0.0.1:8000")
+    simulate.add_argument("--participants", type=int, required=True, help="how many bots")
+    simulate.add_argument(
+        "--bundle",
+        help="the bundle the server serves (default FOIL_BUNDLE_DIR): the bots read "
+        "what each clip shows from its summary.json",
+    )
+    simulate.add_argument(
+        "--noise", type=float, default=0.5, help="perception noise (default 0.5; see docs/analysis.md)"
+    )
+    simulate.add_argument(
+        "--inattentive",
+        type=float,
+        default=0.0,
+        help="share of bots that answer attention checks at random (default 0)",
+    )
+    simulate.add_argument("--seed", type=int, default=0, help="seed of the bots (default 0); bot k is bot-SEED-k")
+    simulate.add_argument("--first", type=int, default=0, help="number of the first bot (default 0)")
+    simulate.set_defaults(handler=_simulate)
