@@ -8,17 +8,18 @@ import hmac
 import logging
 import secrets
 import statistics
-from collections import Counter
 from math import ceil
+from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import RedirectResponse
-from sqlalchemy import func, select
+from sqlalchemy.orm import Session
 
 from app.analysis.answer_table import ParticipantRecord, long_rows
+from app.store import queries
 from app.store.database import as_utc
 from app.store.models import Participant
-from app.survey.screens import Closing, Instructions, Screen
+from app.survey.screens import Screen
 from app.web.context import Context, ContextDep
 from app.web.security import FormDep, LoginThrottle, admin_mark, is_admin, unstorable
 
@@ -99,30 +100,18 @@ def logout(request: Request, ctx: ContextDep, form: FormDep):
     return RedirectResponse("/admin/login", status_code=303)
 
 
-def _overview(ctx: Context, session) -> dict:
+def _overview(ctx: Context, session: Session) -> dict[str, Any]:
     """Counts per condition and status, and the median duration, computed without loading the participants."""
-    study = Participant.study == ctx.study.study.id
-    counts = Counter(
-        {
-            (condition, status): n
-            for condition, status, n in session.execute(
-                select(Participant.condition, Participant.status, func.count())
-                .where(study)
-                .group_by(Participant.condition, Participant.status)
-            )
-        }
-    )
-    rows = [(c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions]
+    counts = queries.counts_by_condition_and_status(session, ctx.study.study.id)
+    rows: list[tuple[int | str, str, list[int]]] = [
+        (c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions
+    ]
     unassigned = [counts[(None, s)] for s in STATUSES]
     if any(unassigned):
         rows.append(("-", "not assigned yet", unassigned))
     durations = [
         (as_utc(completed) - as_utc(created)).total_seconds()
-        for created, completed in session.execute(
-            select(Participant.created_at, Participant.completed_at).where(
-                study, Participant.status == "completed", Participant.completed_at.is_not(None)
-            )
-        )
+        for created, completed in queries.completion_times(session, ctx.study.study.id)
     ]
     return {
         "rows": rows,
@@ -140,22 +129,12 @@ def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1)
     """The progress table and one page of the participants list, newest first (`status`: a status or a kind)."""
     from app.survey.kinds import pilot_token
 
-    shown = Participant.study == ctx.study.study.id
-    if status:
-        shown = shown & ((Participant.status == status) | (Participant.kind == status))
+    study = ctx.study.study.id
     with ctx.db.reading() as session:
-        n_shown = session.scalar(select(func.count()).select_from(Participant).where(shown))
+        n_shown = queries.count_listed(session, study, status)
         pages = max(1, -(-n_shown // PAGE_SIZE))
         page = min(max(1, page), pages)
-        listed = list(
-            session.scalars(
-                select(Participant)
-                .where(shown)
-                .order_by(Participant.id.desc())
-                .limit(PAGE_SIZE)
-                .offset((page - 1) * PAGE_SIZE)
-            )
-        )
+        listed = queries.listed_participants(session, study, status, PAGE_SIZE, (page - 1) * PAGE_SIZE)
         summary = _overview(ctx, session)
     pilot = f"{str(request.base_url).rstrip('/')}/?pilot={pilot_token(ctx.db, ctx.study.study.id)}"
     return ctx.render(
@@ -172,10 +151,8 @@ def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1)
     )
 
 
-def _participant(session, ctx: Context, code: str) -> Participant:
-    participant = session.scalar(
-        select(Participant).where(Participant.study == ctx.study.study.id, Participant.code == code)
-    )
+def _participant(session: Session, ctx: Context, code: str) -> Participant:
+    participant = queries.find_participant(session, ctx.study.study.id, code)
     if participant is None:
         raise HTTPException(404, "No participant with that code.")
     return participant
@@ -187,15 +164,7 @@ def shown_as(plan: list[Screen], step: int) -> str:
     if step >= len(plan):
         return "finished"
     screen = plan[step]
-    if screen.progress:
-        return screen.progress
-    match screen:
-        case Instructions():
-            return "Instructions"
-        case Closing():
-            return "Closing questions"
-        case _:
-            return f"Part {screen.part}, {screen.kind}"
+    return screen.progress or screen.admin_name()
 
 
 @router.get("/participants/{code}", dependencies=[Admin])
