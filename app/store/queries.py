@@ -14,9 +14,12 @@ from typing import Any
 from sqlalchemy import Row, bindparam, func, insert, select, update
 from sqlalchemy.orm import Session
 
-from app.store.models import Participant, ParticipantPlan, Response
+from app.store.models import Base, Participant, ParticipantPlan, Response
 
-PARTICIPANT, RESPONSE, PLANS = Participant.__table__, Response.__table__, ParticipantPlan.__table__
+TABLES = Base.metadata.tables
+PARTICIPANT, RESPONSE = TABLES[Participant.__tablename__], TABLES[Response.__tablename__]
+PLANS = TABLES[ParticipantPlan.__tablename__]
+Record = Row[*tuple[Any, ...]]  # a row of columns read by name, as attributes
 IDENTITY = ("external_id", "platform_study_id", "platform_session_id")  # the ids a platform's link carries
 _COLUMNS = PARTICIPANT.c["id", "code", "status", "condition", "step", "step_started_at", "kind", "external_id"]
 _SHOWN = select(*_COLUMNS).where(PARTICIPANT.c.study == bindparam("study"))
@@ -58,19 +61,17 @@ _SAVE_DETAILS = (
 )
 
 
-def participant_by_code(session: Session, study: str, code: str) -> Row[Any] | None:
+def participant_by_code(session: Session, study: str, code: str) -> Record | None:
     """The participant of `study` with this code (their session cookie's), without their plan."""
     return session.execute(_BY_CODE, {"study": study, "code": code}).first()
 
 
-def participant_with_plan(session: Session, study: str, code: str) -> Row[Any] | None:
+def participant_with_plan(session: Session, study: str, code: str) -> Record | None:
     """The participant of `study` with this code and their stored plan (`plan` None before assignment)."""
     return session.execute(_WITH_PLAN, {"study": study, "code": code}).first()
 
 
-def participant_by_identity(
-    session: Session, study: str, platform: str, identity: Mapping[str, str]
-) -> Row[Any] | None:
+def participant_by_identity(session: Session, study: str, platform: str, identity: Mapping[str, str]) -> Record | None:
     """The participant who started from a link with these three platform ids (`IDENTITY`)."""
     return session.execute(_BY_IDENTITY, {"study": study, "platform": platform, **identity}).first()
 
@@ -161,6 +162,21 @@ def listed_participants(session: Session, study: str, status: str, limit: int, o
             .offset(offset)
         )
     )
+
+
+def participant_and_responses(session: Session, study: str, code: str) -> tuple[Record, list[Record]] | None:
+    """The participant of `study` with this code, with their plan, and their responses in step order."""
+    participant = session.execute(
+        select(PARTICIPANT, PLANS.c.plan)
+        .outerjoin(PLANS, PLANS.c.participant_id == PARTICIPANT.c.id)
+        .where(PARTICIPANT.c.study == study, PARTICIPANT.c.code == code)
+    ).first()
+    if participant is None:
+        return None
+    responses = session.execute(
+        select(RESPONSE).where(RESPONSE.c.participant_id == participant.id).order_by(RESPONSE.c.step)
+    )
+    return participant, list(responses)
 
 
 def find_participant(session: Session, study: str, code: str) -> Participant | None:

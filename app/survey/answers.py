@@ -13,7 +13,6 @@ from datetime import UTC, datetime
 from enum import Enum
 from typing import Any
 
-from sqlalchemy import Row
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
@@ -214,7 +213,9 @@ class Refused:
     checked: Checked
 
 
-def current_with_plan(session: Session, study: Study, code: object) -> tuple[Row[Any] | None, list[Screen] | None]:
+def current_with_plan(
+    session: Session, study: Study, code: object
+) -> tuple[queries.Record | None, list[Screen] | None]:
     """The participant with this session code and their screens (None before a condition is assigned)."""
     participant = queries.participant_with_plan(session, study.study.id, code) if isinstance(code, str) else None
     if participant is None or participant.plan is None:

@@ -18,7 +18,6 @@ from typing import Any, TypeVar
 
 from fastapi import APIRouter, HTTPException, Request, Response
 from fastapi.responses import HTMLResponse, RedirectResponse
-from sqlalchemy import Row
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
@@ -52,7 +51,7 @@ LOST = (
 
 def _current_screens(
     session: Session, ctx: Context, request: Request, kept: object
-) -> tuple[Row[Any], list[Screen] | None, str]:
+) -> tuple[queries.Record, list[Screen] | None, str]:
     """The participant, their screens while they take part, and the notice for screen `kept` (a step whose first
     answers were kept when it was sent again; "" for none)."""
     participant, plan = current_with_plan(session, ctx.study, request.session.get("participant"))
@@ -85,20 +84,20 @@ def _platform_identity(platform: str, params: Mapping[str, str]) -> dict[str, st
     return dict(zip(queries.IDENTITY, values, strict=True))
 
 
-def _by_code(session: Session, ctx: Context, code: object) -> Row[Any] | None:
+def _by_code(session: Session, ctx: Context, code: object) -> queries.Record | None:
     if not isinstance(code, str):
         return None
     return queries.participant_by_code(session, ctx.study.study.id, code)
 
 
-def _by_identity(session: Session, ctx: Context, identity: Mapping[str, str]) -> Row[Any] | None:
+def _by_identity(session: Session, ctx: Context, identity: Mapping[str, str]) -> queries.Record | None:
     """The participant who started from a link with these three platform ids (see docs/survey.md, Recruiting: a
     platform id alone binds nothing)."""
     info = ctx.study.study
     return queries.participant_by_identity(session, info.id, info.platform, identity)
 
 
-def _current(session: Session, ctx: Context, request: Request) -> Row[Any]:
+def _current(session: Session, ctx: Context, request: Request) -> queries.Record:
     participant = _by_code(session, ctx, request.session.get("participant"))
     if participant is None:
         raise HTTPException(400, LOST)
@@ -117,11 +116,12 @@ def landing(request: Request, ctx: ContextDep) -> Response:
     if info.platform == "mturk" and request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return ctx.render_form(request, ("consent.html", True), "consent.html", lambda: {"preview": True})
     if info.device == "desktop" and MOBILE.search(request.headers.get("user-agent", "")):
-        return ctx.message(
+        desktop_only: Response = ctx.message(
             request,
             "Please use a computer",
             "This study needs a laptop or desktop computer. Please open the link there.",
         )
+        return desktop_only
     kind, fast = "real", False
     if "pilot" in request.query_params or "bot" in request.query_params:
         kind, fast = kind_from_link(request.query_params, pilot_token(ctx.db, info.id))
@@ -161,10 +161,11 @@ def _enter(ctx: Context, identity: dict[str, str], agreed: bool, user_agent: str
         try:
             with ctx.db.writing() as session:
                 if identity and (known := _by_identity(session, ctx, identity)) is not None:
-                    return known.code
+                    return str(known.code)
                 now = datetime.now(UTC)
+                code = secrets.token_hex(16)
                 values: dict[str, Any] = {
-                    "code": secrets.token_hex(16),
+                    "code": code,
                     "study": info.id,
                     "platform": info.platform,
                     "external_id": None,
@@ -194,7 +195,7 @@ def _enter(ctx: Context, identity: dict[str, str], agreed: bool, user_agent: str
                 participant_id = queries.enter_participant(session, values)
                 if values["condition"] is not None:
                     queries.save_plan(session, participant_id, _new_plan(ctx, participant_id, values["condition"]))
-                return values["code"]
+                return code
         except IntegrityError:
             continue
     raise HTTPException(503, "The study is very busy at this moment. Please wait a few seconds and try again.")
@@ -219,10 +220,13 @@ def consent(request: Request, ctx: ContextDep, form: FormDep) -> RedirectRespons
         raise HTTPException(400, "Please choose whether you agree to take part.")
     identity: dict[str, str] = {}
     if ctx.study.study.platform != "none":
-        identity = request.session.get("identity")
-        if not isinstance(identity, dict) or not identity.get("external_id"):
+        linked = request.session.get("identity")
+        if not isinstance(linked, dict) or not linked.get("external_id"):
             raise HTTPException(400, "Please open the study from the link you were given.")
-    kind = request.session.get("kind") if request.session.get("kind") in ("pilot", "bot") else "real"
+        identity = linked
+    kind = "real"
+    if (linked_kind := request.session.get("kind")) in ("pilot", "bot"):
+        kind = str(linked_kind)
     researchers = kind != "real" and request.session.get("fast") is True  # the pilot link, with its token
     if (
         not researchers
@@ -288,18 +292,20 @@ def _render_screen(
     )
 
 
-def _status_page(request: Request, ctx: Context, participant: Row[Any]) -> HTMLResponse:
-    texts = ctx.study.texts
+def _status_page(request: Request, ctx: Context, participant: queries.Record) -> HTMLResponse:
+    page: HTMLResponse
     if participant.status == "declined":
-        return ctx.message(request, "Thank you", texts.declined)
-    if participant.status == "returned":
-        return ctx.message(
+        page = ctx.message(request, "Thank you", ctx.study.texts.declined)
+    elif participant.status == "returned":
+        page = ctx.message(
             request,
             "You have left the study",
             "You chose to stop taking part, so the study cannot be taken again from this link. "
             "If you came from Prolific, please return your submission there.",
         )
-    return ctx.render(request, "complete.html", completion=ctx.study.completion)
+    else:
+        page = ctx.render(request, "complete.html", completion=ctx.study.completion)
+    return page
 
 
 @router.get("/study")
