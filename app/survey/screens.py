@@ -107,6 +107,10 @@ class _Screen(_Stored):
         """The clip that must be watched before the screen is answered; None when it shows none."""
         return None
 
+    def clip_names(self) -> list[str]:
+        """The ids of the clips the screen is about (a ranking's: its round's clips), as the bundle names them."""
+        return []
+
     def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
         """The page's entries that only this kind has (`page_view` writes the ones every kind has)."""
         return {}
@@ -182,6 +186,9 @@ class _ClipScreen(_InPart):
     def question_names(self) -> list[str]:
         return self.questions
 
+    def clip_names(self) -> list[str]:
+        return [self.clip]
+
     def clip_to_watch(self) -> Clip:
         return Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))
 
@@ -232,6 +239,9 @@ class Ranking(_InPart):
     def question_names(self) -> list[str]:
         return self.questions
 
+    def clip_names(self) -> list[str]:
+        return self.clips
+
     def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
         view = super().page(study, bundle) | {"block": self.block}
         if self.media_list:
@@ -260,6 +270,9 @@ class Attention(_InPart):
 
     def asks(self, study: Study) -> list[Asked]:
         return [Asked("attention", OneOf(self.options))]  # any option is saved; a wrong one is a failed check
+
+    def clip_names(self) -> list[str]:
+        return [] if self.clip is None else [self.clip]
 
     def clip_to_watch(self) -> Clip | None:
         if self.media is None:
