@@ -75,7 +75,7 @@ def clip_view(clip: Clip) -> dict[str, Any]:
 
 
 def _showing(clip: Clip) -> dict[str, Any]:
-    """The page's entries for a clip to watch before answering."""
+    """The page's entries for the clip it shows above the questions."""
     view = clip_view(clip)
     return {"clip": view, "clip_url": view["url"]}
 

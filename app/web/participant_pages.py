@@ -244,11 +244,6 @@ def consent(request: Request, ctx: ContextDep, form: FormDep) -> RedirectRespons
     return _see_current()
 
 
-def screen_view(ctx: Context, screen: Screen) -> dict[str, Any]:
-    """What a page may know about a screen (app.survey.screens.page_view)."""
-    return page_view(screen, ctx.study, ctx.bundle)
-
-
 def _render_screen(
     request: Request,
     ctx: Context,
@@ -269,7 +264,7 @@ def _render_screen(
             (name, step, screen.text),
             name,
             lambda: {
-                "screen": screen_view(ctx, screen),
+                "screen": page_view(screen, ctx.study, ctx.bundle),
                 "step": step,
                 "errors": {},
                 "values": {},
@@ -282,7 +277,7 @@ def _render_screen(
         request,
         name,
         status_code=status_code,
-        screen=screen_view(ctx, screen),
+        screen=page_view(screen, ctx.study, ctx.bundle),
         step=step,
         errors=errors or {},
         values=values or {},
