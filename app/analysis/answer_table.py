@@ -165,7 +165,7 @@ LONG_COLUMNS = [
 
 
 def _robots(screen: Screen | None) -> list[Robot]:
-    return screen.robots if isinstance(screen, WithRobots) else []
+    return [] if screen is None else screen.offered()
 
 
 def _scored(question_type: str, value, screen: Screen | None) -> dict:
@@ -198,12 +198,7 @@ def _scored(question_type: str, value, screen: Screen | None) -> dict:
 
 def _clips(screen: Screen | None) -> str | None:
     """The screen's clip id; a ranking's, the clips of its round."""
-    match screen:
-        case Ranking():
-            return LIST_SEPARATOR.join(screen.clips) or None
-        case Pairwise() | Watch() | Attention():
-            return screen.clip or None
-    return None
+    return None if screen is None else LIST_SEPARATOR.join(screen.clip_names()) or None
 
 
 def _trials(plan: list[Screen]) -> list[int | None]:

@@ -11,6 +11,7 @@ from sqlalchemy import Row, select
 
 from app.store.database import Database, as_utc
 from app.store.models import Participant
+from app.survey.answers import VIEW_TOLERANCE_MS  # the server's own check, applied again to what was saved
 from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip
 
 REASONS = {
@@ -21,7 +22,6 @@ REASONS = {
     "flagged_by_admin": "flagged for exclusion on the admin pages",
     "skipped_viewing": "answered a clip sooner than it plays, or sped it up before it first ended",
 }
-VIEW_TOLERANCE_MS = 1000  # as the server's own check (app.web.participant_pages)
 
 
 @dataclass(frozen=True)

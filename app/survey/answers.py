@@ -1,14 +1,26 @@
-"""Server-side validation of a submitted screen. Nothing is saved unless every field is valid."""
+"""A submitted screen: its form checked on the server, then saved with the participant's next step, all in one
+transaction. Nothing is saved unless every field is valid, and every answer is committed before the server replies.
+
+`save_answer` returns what came of it (`Outcome`, or `Refused` with the errors); the page turns that into its reply.
+"""
 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from enum import Enum
+from typing import Any
 
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
 from starlette.datastructures import FormData
 
-from app.survey.screens import Asking, Attention, Closing, Instructions, Screen, WithRobots, shows_clip
-from app.survey.study import FEEDBACK, ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
+from app.store import queries
+from app.store.database import Database, as_utc
+from app.survey.screens import Asked, OneOf, Robot, Screen, parse_plan
+from app.survey.study import ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
 
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
 # seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being
@@ -33,12 +45,19 @@ VIDEO_EVENT_TYPES = {
 MAX_VIDEO_EVENTS = 500
 
 
+VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
+# How much sooner than the clip's playing time (since the screen became current, by the server's clock) its
+# answers are still accepted: clock granularity and the browser's own rounding, not a way to skip.
+VIEW_TOLERANCE_MS = 1000
+
+
 @dataclass
 class Checked:
-    answers: dict = field(default_factory=dict)
+    answers: dict[str, Any] = field(default_factory=dict)
     errors: dict[str, str] = field(default_factory=dict)  # form field -> message shown next to it
-    video_events: list[dict] = field(default_factory=list)
+    video_events: list[dict[str, Any]] = field(default_factory=list)
     client_ms: int | None = None
+    viewport: str | None = None  # the browser window's size, WIDTHxHEIGHT, when it sent one that reads as such
 
     @property
     def plays(self) -> int:
@@ -62,12 +81,16 @@ def _unanswered(form: FormData, name: str) -> bool:
     return not values or (len(values) == 1 and isinstance(values[0], str) and not values[0].strip())
 
 
-def _check_question(name: str, question, screen: Screen, form: FormData, out: Checked) -> None:
-    labels = [robot.label for robot in screen.robots] if isinstance(screen, WithRobots) else []
-    if isinstance(question, ChoiceQuestion):
+def _check_field(asked: Asked, robots: list[Robot], form: FormData, out: Checked) -> None:
+    """One form field checked against its question: its answer into `out.answers`, or why not into `out.errors`."""
+    name, question = asked.name, asked.question
+    labels = [robot.label for robot in robots]
+    if isinstance(question, OneOf | ChoiceQuestion):
         value = _one(form, name)
         if value not in question.options:
             out.errors[name] = "Choose one of the answers."
+        elif isinstance(question, OneOf) and question.expected is not None and value != question.expected:
+            out.errors[name] = "That is not right. Read the instructions above again, then choose another answer."
         else:
             out.answers[name] = value
     elif isinstance(question, ChooseQuestion):
@@ -108,7 +131,7 @@ def _check_question(name: str, question, screen: Screen, form: FormData, out: Ch
             out.answers[name] = ranking
 
 
-def _video_events(raw: str | None) -> list[dict] | None:
+def _video_events(raw: str | None) -> list[dict[str, Any]] | None:
     """The browser's log of clip events, as [{"type": "play", "t": ms}, ...]; None when malformed."""
     if not raw:
         return []
@@ -118,14 +141,14 @@ def _video_events(raw: str | None) -> list[dict] | None:
         return None
     if not isinstance(events, list) or len(events) > MAX_VIDEO_EVENTS:
         return None
-    clean = []
+    clean: list[dict[str, Any]] = []
     for event in events:
         if not isinstance(event, dict) or event.get("type") not in VIDEO_EVENT_TYPES:
             return None
         t = event.get("t")
         if not isinstance(t, int | float) or isinstance(t, bool) or not 0 <= t < 1e9:
             return None
-        item = {"type": event["type"], "t": int(t)}
+        item: dict[str, Any] = {"type": event["type"], "t": int(t)}
         v = event.get("v")
         if isinstance(v, int | float) and not isinstance(v, bool) and -1e6 < v < 1e6:
             item["v"] = round(float(v), 3)
@@ -134,41 +157,130 @@ def _video_events(raw: str | None) -> list[dict] | None:
 
 
 def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
+    """The submitted form of `screen`: its answers, or the errors to show next to its fields."""
     out = Checked()
-    required = study.closing.required if isinstance(screen, Closing) and study.closing else None
-    for name in screen.questions if isinstance(screen, Asking) else []:
-        if required is not None and name not in required and _unanswered(form, name):
-            continue  # a closing question left unanswered: allowed unless the study requires it
-        _check_question(name, study.questions[name], screen, form, out)
-    if (
-        isinstance(screen, Closing)
-        and screen.feedback
-        and not (FEEDBACK not in (required or []) and _unanswered(form, FEEDBACK))
-    ):
-        _check_question(FEEDBACK, TextQuestion(type="text", text="feedback"), screen, form, out)
-    if isinstance(screen, Instructions):
-        for number, check in enumerate(study.comprehension, start=1):
-            value = _one(form, f"understand{number}")
-            if value not in check.options:
-                out.errors[f"understand{number}"] = "Choose one of the answers."
-            elif value != check.expected:
-                out.errors[f"understand{number}"] = (
-                    "That is not right. Read the instructions above again, then choose another answer."
-                )
-            else:
-                out.answers[f"understand{number}"] = value
-    if isinstance(screen, Attention):
-        value = _one(form, "attention")
-        if value not in screen.options:
-            out.errors["attention"] = "Choose one of the answers."
-        else:
-            out.answers["attention"] = value
+    robots = screen.offered()
+    for asked in screen.asks(study):
+        if not asked.required and _unanswered(form, asked.name):
+            continue  # an optional answer left empty: nothing is stored for it
+        _check_field(asked, robots, form, out)
     events = _video_events(_one(form, "video_events"))
     if events is None:
         out.errors["video"] = "The page sent a malformed record of the clip's playback; reload the page."
-    elif shows_clip(screen) and study.study.require_full_view and not any(e["type"] == "ended" for e in events):
+    elif (
+        screen.clip_to_watch() is not None
+        and study.study.require_full_view
+        and not any(e["type"] == "ended" for e in events)
+    ):
         out.errors["video"] = "Please watch the clip to the end before going on."
     out.video_events = events or []
     client_ms = _one(form, "time_on_page_ms") or ""
     out.client_ms = int(client_ms) if digits(client_ms) and len(client_ms) < 10 else None
+    viewport = form.get("viewport")
+    out.viewport = viewport if isinstance(viewport, str) and VIEWPORT.match(viewport) else None
     return out
+
+
+def viewing_problem(clip_ms: int | None, started_at: datetime, now: datetime) -> str | None:
+    """Why the server cannot accept a clip's answers yet: the screen has not been open as long as the clip plays
+    (by the server's own clock, since the screen became current), so the clip cannot have been watched."""
+    if not clip_ms:
+        return None
+    open_ms = (now - as_utc(started_at)).total_seconds() * 1000
+    if open_ms + VIEW_TOLERANCE_MS >= clip_ms:
+        return None
+    return (
+        f"The clip plays for {clip_ms / 1000:.0f} seconds, but this page has been open for only "
+        f"{open_ms / 1000:.0f} seconds, so it cannot have been watched to the end at normal speed. Nothing was "
+        "saved. Please play the clip from the start to the end, then answer again."
+    )
+
+
+class Outcome(Enum):
+    """What came of a submission that was not refused."""
+
+    SAVED = "saved"  # saved; or nothing was left to save (the participant finished, left, or resent the same)
+    KEPT = "kept"  # the screen had been answered before with other answers: the first are kept
+    NOT_OPEN = "not open"  # a screen after the participant's current one
+    UNKNOWN = "unknown"  # no participant with the session's code
+
+
+@dataclass(frozen=True)
+class Refused:
+    """Nothing was saved: the screen is shown again with why (`checked.errors`)."""
+
+    screen: Screen
+    checked: Checked
+
+
+def current_with_plan(
+    session: Session, study: Study, code: object
+) -> tuple[queries.Record | None, list[Screen] | None]:
+    """The participant with this session code and their screens (None before a condition is assigned)."""
+    participant = queries.participant_with_plan(session, study.study.id, code) if isinstance(code, str) else None
+    if participant is None or participant.plan is None:
+        return participant, None
+    return participant, parse_plan(participant.plan)
+
+
+def save_answer(
+    db: Database, study: Study, code: object, step: int, form: FormData, *, fast_link: bool
+) -> Outcome | Refused:
+    """Save the answers to screen `step` of the participant with session code `code`, and make the next screen
+    current. `fast_link`: the session came from the researchers' pilot link, which may skip the viewing rule."""
+    try:
+        return _save_once(db, study, code, step, form, fast_link)
+    except IntegrityError:
+        # A concurrent submission saved this screen first (PostgreSQL; SQLite's writers take turns): this one is
+        # now a resubmit, answered as one.
+        return _save_once(db, study, code, step, form, fast_link)
+
+
+def _save_once(
+    db: Database, study: Study, code: object, step: int, form: FormData, fast_link: bool
+) -> Outcome | Refused:
+    with db.writing() as session:
+        participant, plan = current_with_plan(session, study, code)
+        if participant is None:
+            return Outcome.UNKNOWN
+        if participant.status != "started" or plan is None:
+            return Outcome.SAVED
+        if step < participant.step:  # already answered: a double click or the back button; keep the first
+            saved = queries.saved_answers(session, participant.id, step)
+            sent = check_screen(study, plan[step], form)
+            return Outcome.KEPT if saved is not None and not sent.errors and sent.answers != saved else Outcome.SAVED
+        if step > participant.step:
+            return Outcome.NOT_OPEN
+        screen = plan[step]
+        checked = check_screen(study, screen, form)
+        now = datetime.now(UTC)
+        fast = fast_link and participant.kind in ("pilot", "bot")
+        clip = screen.clip_to_watch()
+        if clip is not None and study.study.require_full_view and not fast and "video" not in checked.errors:
+            problem = viewing_problem(clip.shape.clip_ms, participant.step_started_at, now)
+            if problem:
+                checked.errors["video"] = problem
+        if checked.errors:
+            if any(name.startswith("understand") for name in checked.errors):
+                queries.count_comprehension_attempt(session, participant.id)
+            return Refused(screen, checked)
+        if screen.counts_comprehension(study):
+            queries.count_comprehension_attempt(session, participant.id)
+        queries.save_response(
+            session,
+            {
+                "participant_id": participant.id,
+                "step": step,
+                "kind": screen.kind,
+                "answers": checked.answers,
+                "video_events": checked.video_events,
+                "plays": checked.plays,
+                "client_ms": checked.client_ms,
+                "server_ms": int((now - as_utc(participant.step_started_at)).total_seconds() * 1000),
+                "submitted_at": now,
+                "details": {"viewport": checked.viewport} if checked.viewport else None,
+            },
+        )
+        failed = screen.failed_check(checked.answers)
+        queries.next_step(session, participant.id, step + 1, now, failed=failed, done=step + 1 == len(plan))
+    return Outcome.SAVED

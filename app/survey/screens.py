@@ -1,4 +1,5 @@
-"""The screens of a participant's plan, one model per kind, told apart by `kind`.
+"""The screens of a participant's plan, one model per kind, told apart by `kind`; each kind's behaviour is on its
+model: the answers its form asks for, the clip to watch first, what its page shows and how the admin pages name it.
 
 A plan is stored as JSON (app.store.models.ParticipantPlan): `parse_plan` reads it through the union, `dump_plan` writes
 it. Only the fields that were set are written, in the order declared here, so a plan reads and writes as the same
@@ -8,21 +9,37 @@ a screen sets last, its `progress` line and its `position` in the plan, come las
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
 from functools import cached_property
-from typing import Annotated, Literal, TypeGuard
+from typing import Annotated, Any, ClassVar, Literal, NamedTuple, TypeGuard
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+
+from app.survey.bundle import Bundle
+from app.survey.clip_length import clip_shape
+from app.survey.study import FEEDBACK, Question, Study, TextQuestion
+from app.visible import VisibleClip
+
+
+@dataclass(frozen=True)
+class OneOf:
+    """A form field answered with one of `options`; with `expected`, only that one is right (and saved)."""
+
+    options: list[str]
+    expected: str | None = None
+
+
+class Asked(NamedTuple):
+    """A form field a screen asks for: its name, the question it answers, and whether it may be left empty."""
+
+    name: str
+    question: Question | OneOf
+    required: bool = True
 
 
 class _Stored(BaseModel):
     model_config = ConfigDict(extra="forbid")
-
-
-class _Screen(_Stored):
-    @cached_property
-    def text(self) -> str:
-        """The screen as text, made once: the page cache's key (a screen read from a stored plan never changes)."""
-        return repr(self)
 
 
 class Robot(_Stored):
@@ -40,17 +57,118 @@ class Shape(_Stored):
     height: int | None = None
 
 
+class Clip(NamedTuple):
+    """A clip a screen shows: its file's sha256 (its address) and its shape."""
+
+    media: str
+    shape: Shape
+
+
+def clip_view(clip: Clip) -> dict[str, Any]:
+    """A clip's address and box as a page shows it."""
+    return {
+        "url": f"/clips/{clip.media}.mp4",
+        "width": clip.shape.width or 720,
+        "height": clip.shape.height or 880,
+        "seconds": round((clip.shape.clip_ms or 0) / 1000, 1),
+    }
+
+
+def _showing(clip: Clip) -> dict[str, Any]:
+    """The page's entries for the clip it shows above the questions."""
+    view = clip_view(clip)
+    return {"clip": view, "clip_url": view["url"]}
+
+
+class _Screen(_Stored):
+    """What every kind of screen does, unless its model says otherwise."""
+
+    kind: str  # each kind narrows it to its own name, the union's discriminator
+    template: ClassVar[str] = "screen.html"  # the page's template
+
+    @cached_property
+    def text(self) -> str:
+        """The screen as text, made once: the page cache's key (a screen read from a stored plan never changes)."""
+        return repr(self)
+
+    def offered(self) -> list[Robot]:
+        """The robots the screen offers as answers, in order."""
+        return []
+
+    def question_names(self) -> list[str]:
+        """The study file's questions on the screen, by name."""
+        return []
+
+    def asks(self, study: Study) -> list[Asked]:
+        """The form fields a submission must hold, in the order they are checked and saved."""
+        return [Asked(name, study.questions[name]) for name in self.question_names()]
+
+    def clip_to_watch(self) -> Clip | None:
+        """The clip that must be watched before the screen is answered; None when it shows none."""
+        return None
+
+    def clip_names(self) -> list[str]:
+        """The ids of the clips the screen is about (a ranking's: its round's clips), as the bundle names them."""
+        return []
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        """The page's entries that only this kind has (`page_view` writes the ones every kind has)."""
+        return {}
+
+    def failed_check(self, answers: dict[str, Any]) -> bool:
+        """Whether these saved answers fail an attention check."""
+        return False
+
+    def counts_comprehension(self, study: Study) -> bool:
+        """Whether a valid submission is an attempt at the comprehension questions (counted per participant)."""
+        return False
+
+
 class Instructions(_Screen):
     """The instructions and comprehension questions, always the first screen."""
 
     kind: Literal["instructions"]
     progress: str = ""
     position: tuple[int, int] | None = None  # (index in the plan, number of screens)
+    template: ClassVar[str] = "instructions.html"
+
+    def asks(self, study: Study) -> list[Asked]:
+        return [
+            Asked(f"understand{number}", OneOf(check.options, check.expected))
+            for number, check in enumerate(study.comprehension, start=1)
+        ]
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        if study.example is None:
+            return {}
+        example = bundle.matching(study.example.scheme, study.example.scenario, study.example.agents)[0]
+        sha = example.sha256.lower()
+        shape = clip_shape(bundle.paths[sha])
+        return _showing(Clip(sha, Shape(clip_ms=shape.ms, width=shape.width, height=shape.height)))
+
+    def counts_comprehension(self, study: Study) -> bool:
+        return bool(study.comprehension)
+
+    def admin_name(self) -> str:
+        return "Instructions"
 
 
-class _ClipScreen(_Screen):
-    kind: Literal["pairwise", "watch"]
+class _InPart(_Screen):
+    """A screen of one of the study's parts."""
+
     part: int
+
+    def admin_name(self) -> str:
+        """The screen's name on the admin pages when it has no `progress` line (plans stored before it existed)."""
+        return f"Part {self.part}, {self.kind}"
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        part = study.parts[self.part - 1]
+        return {"part_title": part.title, "part_intro": part.intro, "part_kind": part.kind}
+
+
+class _ClipScreen(_InPart):
+    kind: Literal["pairwise", "watch"]
     clip: str
     media: str  # the clip file's sha256: its address
     scheme: str
@@ -61,6 +179,21 @@ class _ClipScreen(_Screen):
     clip_ms: int | None = None
     width: int | None = None
     height: int | None = None
+
+    def offered(self) -> list[Robot]:
+        return self.robots
+
+    def question_names(self) -> list[str]:
+        return self.questions
+
+    def clip_names(self) -> list[str]:
+        return [self.clip]
+
+    def clip_to_watch(self) -> Clip:
+        return Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        return super().page(study, bundle) | _showing(self.clip_to_watch())
 
 
 class Pairwise(_ClipScreen):
@@ -80,12 +213,14 @@ class Watch(_ClipScreen):
     progress: str = ""
     position: tuple[int, int] | None = None
 
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        return super().page(study, bundle) | {"block": self.block, "round_start": self.round_start}
 
-class Ranking(_Screen):
+
+class Ranking(_InPart):
     """The ranking of a round's robots, after its clips (`clips`, `media_list`, `shapes`, in the order shown)."""
 
     kind: Literal["ranking"]
-    part: int
     block: int
     scheme: str
     scenario: str
@@ -98,12 +233,30 @@ class Ranking(_Screen):
     progress: str = ""
     position: tuple[int, int] | None = None
 
+    def offered(self) -> list[Robot]:
+        return self.robots
 
-class Attention(_Screen):
+    def question_names(self) -> list[str]:
+        return self.questions
+
+    def clip_names(self) -> list[str]:
+        return self.clips
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        view = super().page(study, bundle) | {"block": self.block}
+        if self.media_list:
+            shapes = self.shapes or [Shape()] * len(self.media_list)
+            view["round_clips"] = [
+                clip_view(Clip(sha, shape)) | {"outcomes": _outcomes(bundle, sha)}
+                for sha, shape in zip(self.media_list, shapes, strict=True)
+            ]
+        return view
+
+
+class Attention(_InPart):
     """Attention check number `check` of the study file; with a clip, a video attention check."""
 
     kind: Literal["attention"]
-    part: int
     check: int
     options: list[str]
     expected: str
@@ -115,6 +268,26 @@ class Attention(_Screen):
     progress: str = ""
     position: tuple[int, int] | None = None
 
+    def asks(self, study: Study) -> list[Asked]:
+        return [Asked("attention", OneOf(self.options))]  # any option is saved; a wrong one is a failed check
+
+    def clip_names(self) -> list[str]:
+        return [] if self.clip is None else [self.clip]
+
+    def clip_to_watch(self) -> Clip | None:
+        if self.media is None:
+            return None
+        return Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        view = super().page(study, bundle)
+        if (clip := self.clip_to_watch()) is not None:
+            view |= _showing(clip)
+        return view | {"attention_text": study.attention_checks[self.check].text, "options": self.options}
+
+    def failed_check(self, answers: dict[str, Any]) -> bool:
+        return bool(answers["attention"] != self.expected)
+
 
 class Closing(_Screen):
     """The closing questions and feedback box, after the last part."""
@@ -125,25 +298,83 @@ class Closing(_Screen):
     progress: str = ""
     position: tuple[int, int] | None = None
 
+    def question_names(self) -> list[str]:
+        return self.questions
+
+    def admin_name(self) -> str:
+        return "Closing questions"
+
+    def asks(self, study: Study) -> list[Asked]:
+        """Every closing question may be left empty unless the study file requires it; all are required when the
+        study file no longer has a closing table. The feedback box is optional unless required."""
+        required = study.closing.required if study.closing is not None else None
+        fields = [Asked(name, study.questions[name], required is None or name in required) for name in self.questions]
+        if self.feedback:
+            box = TextQuestion(type="text", text="feedback")
+            fields.append(Asked(FEEDBACK, box, FEEDBACK in (required or [])))
+        return fields
+
+    def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
+        closing = study.closing
+        if closing is None:
+            return {}
+        view: dict[str, Any] = {
+            "part_title": closing.title,
+            "part_intro": closing.intro,
+            "optional": [name for name in closing.asks() if name not in closing.required],
+        }
+        if self.feedback and closing.feedback:
+            view["feedback"] = TextQuestion(type="text", text=closing.feedback, rows=4)
+        return view
+
 
 Screen = Annotated[Instructions | Pairwise | Watch | Ranking | Attention | Closing, Field(discriminator="kind")]
-Asking = Pairwise | Watch | Ranking | Closing  # screens with the study file's questions (a watch screen: none)
 InPart = Pairwise | Watch | Ranking | Attention
 WithRobots = Pairwise | Watch | Ranking
 Round = Watch | Ranking  # screens of a ranking round (`block`)
 PLAN: TypeAdapter[list[Screen]] = TypeAdapter(list[Screen])
 
 
-def shows_clip(screen: Screen) -> TypeGuard[Pairwise | Watch | Attention]:
+def shows_clip(screen: Screen | None) -> TypeGuard[Pairwise | Watch | Attention]:
     """Whether the screen shows a clip that must be watched before it is answered."""
-    return isinstance(screen, Pairwise | Watch) or (isinstance(screen, Attention) and screen.media is not None)
+    return screen is not None and screen.clip_to_watch() is not None
 
 
-def parse_plan(stored: list) -> list[Screen]:
+def page_view(screen: Screen, study: Study, bundle: Bundle) -> dict[str, Any]:
+    """What a page may know about a screen: labels and the clip's address, never agent names or ground truth."""
+    view = {
+        "kind": screen.kind,
+        "progress": screen.progress,
+        "position": screen.position,
+        "labels": [robot.label for robot in screen.offered()],
+        "questions": [(name, study.questions[name]) for name in screen.question_names()],
+        "block": None,
+        "round_start": False,
+        "optional": [],
+    }
+    return view | screen.page(study, bundle)
+
+
+def _outcomes(bundle: Bundle, sha: str) -> list[str]:
+    """How each robot of a clip visibly ends, in words by its label (what the clip itself shows, from its
+    summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
+    clip = next((clip for clip in bundle.clips.values() if clip.sha256.lower() == sha), None)
+    if clip is None or not clip.summary:
+        return []
+    try:
+        summary = json.loads((bundle.root / clip.summary).read_text(encoding="utf-8"))
+        shown = VisibleClip.of_summary(summary, clip.agents, clip.labels)
+    except (OSError, ValueError, KeyError, IndexError, TypeError):
+        return []
+    return [shown.describe(label) for label in clip.labels]
+
+
+def parse_plan(stored: list[Any]) -> list[Screen]:
     """A stored plan as typed screens; a stored plan that is not one is a clear ValidationError."""
     return PLAN.validate_python(stored)
 
 
-def dump_plan(plan: list[Screen]) -> list[dict]:
+def dump_plan(plan: list[Screen]) -> list[dict[str, Any]]:
     """A plan as stored: the fields each screen set, in the order declared."""
-    return PLAN.dump_python(plan, mode="json", exclude_unset=True)
+    stored: list[dict[str, Any]] = PLAN.dump_python(plan, mode="json", exclude_unset=True)
+    return stored

@@ -8,17 +8,18 @@ import hmac
 import logging
 import secrets
 import statistics
-from collections import Counter
 from math import ceil
+from typing import Any
 
-from fastapi import APIRouter, Depends, HTTPException, Request
-from fastapi.responses import RedirectResponse
-from sqlalchemy import func, select
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi.responses import HTMLResponse, RedirectResponse
+from sqlalchemy.orm import Session
 
 from app.analysis.answer_table import ParticipantRecord, long_rows
+from app.store import queries
 from app.store.database import as_utc
 from app.store.models import Participant
-from app.survey.screens import Closing, Instructions, Screen
+from app.survey.screens import Screen
 from app.web.context import Context, ContextDep
 from app.web.security import FormDep, LoginThrottle, admin_mark, is_admin, unstorable
 
@@ -32,6 +33,13 @@ class LoginRequired(Exception):
     """Raised by `admin_only`; app.web.main turns it into a redirect to the login page."""
 
 
+def _password(ctx: Context) -> str:
+    """The admin password; without one no session is an admin's (these pages are not served then)."""
+    if ctx.settings.admin_password is None:
+        raise LoginRequired
+    return ctx.settings.admin_password.get_secret_value()
+
+
 def admin_only(request: Request) -> None:
     """Only for a session logged in since the last logout, with the current password (`security.admin_mark`)."""
     mark = request.session.get("admin")
@@ -39,7 +47,7 @@ def admin_only(request: Request) -> None:
         raise LoginRequired
     ctx: Context = request.app.state.context
     with ctx.db.reading() as session:
-        if not is_admin(session, ctx.settings.admin_password.get_secret_value(), mark):
+        if not is_admin(session, _password(ctx), mark):
             raise LoginRequired
 
 
@@ -47,22 +55,23 @@ Admin = Depends(admin_only)
 
 
 @disabled_router.api_route("/admin{rest:path}", methods=["GET", "POST"])
-def admin_disabled(request: Request, ctx: ContextDep):
-    return ctx.message(
+def admin_disabled(request: Request, ctx: ContextDep) -> HTMLResponse:
+    page: HTMLResponse = ctx.message(
         request,
         "Admin pages are off",
         "Set FOIL_ADMIN_PASSWORD (8 characters or more) and restart the server to use them.",
         status_code=404,
     )
+    return page
 
 
 @router.get("/login")
-def login_page(request: Request, ctx: ContextDep):
+def login_page(request: Request, ctx: ContextDep) -> HTMLResponse:
     return ctx.render(request, "admin/login.html", error="")
 
 
 @router.post("/login")
-def login(request: Request, ctx: ContextDep, form: FormDep):
+def login(request: Request, ctx: ContextDep, form: FormDep) -> Response:
     throttle: LoginThrottle = request.app.state.login_throttle
     client = request.client.host if request.client else "unknown"
     if (wait := throttle.wait_s(client)) > 0:
@@ -78,7 +87,7 @@ def login(request: Request, ctx: ContextDep, form: FormDep):
         refused.headers["retry-after"] = str(ceil(wait))
         return refused
     typed = form.get("password")
-    expected = ctx.settings.admin_password.get_secret_value()
+    expected = _password(ctx)
     if not isinstance(typed, str) or not hmac.compare_digest(typed.encode(), expected.encode()):
         log.warning("admin login from %s: wrong password (%d in a row)", client, throttle.failed(client))
         return ctx.render(request, "admin/login.html", status_code=401, error="Wrong password.")
@@ -91,38 +100,26 @@ def login(request: Request, ctx: ContextDep, form: FormDep):
 
 
 @router.post("/logout", dependencies=[Admin])
-def logout(request: Request, ctx: ContextDep, form: FormDep):
+def logout(request: Request, ctx: ContextDep, form: FormDep) -> RedirectResponse:
     with ctx.db.writing() as session:  # a new version of the admin sessions: every admin cookie so far ends
-        admin_mark(session, ctx.settings.admin_password.get_secret_value(), renew=True)
+        admin_mark(session, _password(ctx), renew=True)
     request.session.pop("admin", None)
     log.info("admin logout from %s: every admin session ended", request.client.host if request.client else "?")
     return RedirectResponse("/admin/login", status_code=303)
 
 
-def _overview(ctx: Context, session) -> dict:
+def _overview(ctx: Context, session: Session) -> dict[str, Any]:
     """Counts per condition and status, and the median duration, computed without loading the participants."""
-    study = Participant.study == ctx.study.study.id
-    counts = Counter(
-        {
-            (condition, status): n
-            for condition, status, n in session.execute(
-                select(Participant.condition, Participant.status, func.count())
-                .where(study)
-                .group_by(Participant.condition, Participant.status)
-            )
-        }
-    )
-    rows = [(c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions]
+    counts = queries.counts_by_condition_and_status(session, ctx.study.study.id)
+    rows: list[tuple[int | str, str, list[int]]] = [
+        (c.index + 1, c.describe(ctx.study), [counts[(c.index, s)] for s in STATUSES]) for c in ctx.conditions
+    ]
     unassigned = [counts[(None, s)] for s in STATUSES]
     if any(unassigned):
         rows.append(("-", "not assigned yet", unassigned))
     durations = [
         (as_utc(completed) - as_utc(created)).total_seconds()
-        for created, completed in session.execute(
-            select(Participant.created_at, Participant.completed_at).where(
-                study, Participant.status == "completed", Participant.completed_at.is_not(None)
-            )
-        )
+        for created, completed in queries.completion_times(session, ctx.study.study.id)
     ]
     return {
         "rows": rows,
@@ -133,29 +130,20 @@ def _overview(ctx: Context, session) -> dict:
 
 
 PAGE_SIZE = 50
+NO_SUCH_PARTICIPANT = "No participant with that code."
 
 
 @router.get("", dependencies=[Admin])
-def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1):
+def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1) -> HTMLResponse:
     """The progress table and one page of the participants list, newest first (`status`: a status or a kind)."""
     from app.survey.kinds import pilot_token
 
-    shown = Participant.study == ctx.study.study.id
-    if status:
-        shown = shown & ((Participant.status == status) | (Participant.kind == status))
+    study = ctx.study.study.id
     with ctx.db.reading() as session:
-        n_shown = session.scalar(select(func.count()).select_from(Participant).where(shown))
+        n_shown = queries.count_listed(session, study, status)
         pages = max(1, -(-n_shown // PAGE_SIZE))
         page = min(max(1, page), pages)
-        listed = list(
-            session.scalars(
-                select(Participant)
-                .where(shown)
-                .order_by(Participant.id.desc())
-                .limit(PAGE_SIZE)
-                .offset((page - 1) * PAGE_SIZE)
-            )
-        )
+        listed = queries.listed_participants(session, study, status, PAGE_SIZE, (page - 1) * PAGE_SIZE)
         summary = _overview(ctx, session)
     pilot = f"{str(request.base_url).rstrip('/')}/?pilot={pilot_token(ctx.db, ctx.study.study.id)}"
     return ctx.render(
@@ -172,12 +160,10 @@ def overview(request: Request, ctx: ContextDep, status: str = "", page: int = 1)
     )
 
 
-def _participant(session, ctx: Context, code: str) -> Participant:
-    participant = session.scalar(
-        select(Participant).where(Participant.study == ctx.study.study.id, Participant.code == code)
-    )
+def _participant(session: Session, ctx: Context, code: str) -> Participant:
+    participant = queries.find_participant(session, ctx.study.study.id, code)
     if participant is None:
-        raise HTTPException(404, "No participant with that code.")
+        raise HTTPException(404, NO_SUCH_PARTICIPANT)
     return participant
 
 
@@ -187,23 +173,18 @@ def shown_as(plan: list[Screen], step: int) -> str:
     if step >= len(plan):
         return "finished"
     screen = plan[step]
-    if screen.progress:
-        return screen.progress
-    match screen:
-        case Instructions():
-            return "Instructions"
-        case Closing():
-            return "Closing questions"
-        case _:
-            return f"Part {screen.part}, {screen.kind}"
+    return screen.progress or screen.admin_name()
 
 
 @router.get("/participants/{code}", dependencies=[Admin])
-def participant_page(code: str, request: Request, ctx: ContextDep):
+def participant_page(code: str, request: Request, ctx: ContextDep) -> HTMLResponse:
     with ctx.db.reading() as session:
-        participant = _participant(session, ctx, code)
-        record = ParticipantRecord(participant, list(participant.responses))
-        rows = list(long_rows(ctx.study, record))
+        found = queries.participant_and_responses(session, ctx.study.study.id, code)
+    if found is None:
+        raise HTTPException(404, NO_SUCH_PARTICIPANT)
+    participant, responses = found
+    record = ParticipantRecord(participant, responses)
+    rows = list(long_rows(ctx.study, record))
     plan = record.plan
     for row in rows:
         row["shown_as"] = shown_as(plan, row["step"])
@@ -220,7 +201,7 @@ def participant_page(code: str, request: Request, ctx: ContextDep):
 
 
 @router.post("/participants/{code}/exclusion", dependencies=[Admin])
-def set_exclusion(code: str, request: Request, ctx: ContextDep, form: FormDep):
+def set_exclusion(code: str, request: Request, ctx: ContextDep, form: FormDep) -> RedirectResponse:
     excluded = form.get("excluded")
     note = form.get("note") or ""
     if excluded not in ("0", "1") or not isinstance(note, str) or len(note) > 2000:

@@ -5,8 +5,10 @@ from __future__ import annotations
 import threading
 
 import pytest
+from starlette.datastructures import FormData
 
 from app.store.models import Participant, Response
+from app.survey.answers import Outcome, Refused, save_answer
 from tests.support.survey import FormReader, answer_for, start, stored
 
 BALANCED = {"platform": '"none"', "assignment": '"balanced"'}
@@ -194,3 +196,30 @@ def test_malformed_requests_get_clear_4xx_pages(make_client):
     unknown = client.get("/no/such/page")
     assert unknown.status_code == 404 and "<h1>Page not found</h1>" in unknown.text
     assert len(stored(client, Response)) == 1
+
+
+def test_saving_an_answer_says_what_came_of_it_and_commits_before_it_returns(make_client):
+    client = make_client(BALANCED)
+    ctx = client.app.state.context
+    first = at_first_clip(client)  # the instructions answered: step 1, the first clip
+    code = stored(client, Participant)[0].code
+
+    def save(step: int, data: dict, who: object = code):
+        return save_answer(ctx.db, ctx.study, who, step, FormData(list(data.items())), fast_link=False)
+
+    answers = answer_for(first)
+    assert save(1, answers, who="someone else") is Outcome.UNKNOWN
+    assert save(2, answers) is Outcome.NOT_OPEN
+    refused = save(1, {**answers, "video_events": "not json"})
+    assert isinstance(refused, Refused) and refused.screen.kind == "pairwise"
+    assert set(refused.checked.errors) == {"video"} and refused.checked.answers["better"] == answers["better"]
+    assert len(stored(client, Response)) == 1  # the instructions' only
+
+    assert save(1, answers) is Outcome.SAVED
+    saved = stored(client, Response)  # read in a transaction of its own: committed
+    assert [r.step for r in saved] == [0, 1] and saved[1].answers["better"] == answers["better"]
+    assert stored(client, Participant)[0].step == 2
+
+    assert save(1, answers) is Outcome.SAVED  # the same answers again: nothing to keep or say
+    assert save(1, answer_for(first, choice=1)) is Outcome.KEPT  # other answers: the first are kept
+    assert stored(client, Response)[1].answers == saved[1].answers and stored(client, Participant)[0].step == 2

@@ -12,7 +12,20 @@ from pydantic import ValidationError
 from app.survey.assignment import conditions
 from app.survey.bundle import load_bundle
 from app.survey.plan import build_plan
-from app.survey.screens import Attention, Pairwise, Ranking, Watch, dump_plan, parse_plan
+from app.survey.screens import (
+    Asked,
+    Attention,
+    Clip,
+    Closing,
+    OneOf,
+    Pairwise,
+    Ranking,
+    Shape,
+    Watch,
+    dump_plan,
+    parse_plan,
+    shows_clip,
+)
 from app.survey.study import parse_study
 from tests.support.survey import ATTENTION, CLOSING, VIDEO_CHECK, study_text
 
@@ -87,3 +100,58 @@ def test_a_new_plan_is_stored_with_the_keys_of_a_stored_one_in_the_same_order(bu
 def test_a_stored_plan_that_is_not_one_is_refused_with_the_field_named(plan, message):
     with pytest.raises(ValidationError, match=message):
         parse_plan(plan)
+
+
+COMPREHENSION = """
+[[comprehension]]
+text = "Which robot is better?"
+options = ["Fast", "Careful"]
+expected = "Careful"
+"""
+
+
+def test_each_kind_of_screen_asks_for_its_own_fields_and_names_its_clip(bundle_dir):
+    text = (
+        study_text(contact=VIDEO_CHECK.format(scheme="schemenfirstsecret"))
+        + ATTENTION
+        + CLOSING.format(required='["age_range"]').removeprefix('""')
+        + COMPREHENSION
+    )
+    study = parse_study(text)
+    plan = build_plan(study, load_bundle(bundle_dir), conditions(study)[0], random.Random(4))
+    by_kind = {}
+    for screen in plan:
+        by_kind.setdefault(type(screen), []).append(screen)
+    pairwise, watch, ranking = by_kind[Pairwise][0], by_kind[Watch][0], by_kind[Ranking][0]
+    video_check, plain_check = sorted(by_kind[Attention], key=lambda screen: screen.media is None)
+    closing, instructions = by_kind[Closing][0], plan[0]
+
+    assert [(a.name, a.question, a.required) for a in pairwise.asks(study)] == [
+        (name, study.questions[name], True) for name in pairwise.questions
+    ]
+    assert watch.asks(study) == [] and [a.name for a in ranking.asks(study)] == ranking.questions
+    assert plain_check.asks(study) == [Asked("attention", OneOf(plain_check.options))]
+    assert instructions.asks(study) == [Asked("understand1", OneOf(["Fast", "Careful"], "Careful"))]
+    asked = [(a.name, a.required) for a in closing.asks(study)]
+    assert asked == [("age_range", True), ("robot_experience", False), ("confidence", False), ("feedback", False)]
+
+    assert pairwise.clip_to_watch() == Clip(pairwise.media, Shape(clip_ms=pairwise.clip_ms, width=64, height=64))
+    assert watch.clip_to_watch() is not None and video_check.clip_to_watch() is not None
+    assert [s.clip_to_watch() for s in (plain_check, ranking, instructions, closing)] == [None] * 4
+    assert pairwise.clip_names() == [pairwise.clip] and ranking.clip_names() == ranking.clips
+    assert video_check.clip_names() == [video_check.clip] and plain_check.clip_names() == closing.clip_names() == []
+    assert [shows_clip(s) for s in (pairwise, video_check, plain_check, ranking, None)] == [1, 1, 0, 0, 0]
+
+    assert [s.template for s in (instructions, pairwise, closing)] == [
+        "instructions.html",
+        "screen.html",
+        "screen.html",
+    ]
+    assert plain_check.failed_check({"attention": "Disagree"}) and not plain_check.failed_check({"attention": "Agree"})
+    assert not pairwise.failed_check({"attention": "Disagree"})
+    assert instructions.counts_comprehension(study) and not pairwise.counts_comprehension(study)
+    assert [s.admin_name() for s in (instructions, ranking, closing)] == [
+        "Instructions",
+        f"Part {ranking.part}, ranking",
+        "Closing questions",
+    ]
