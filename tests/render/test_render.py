@@ -397,9 +397,7 @@ def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
     }
     shapes = set(re.findall(r"\.robot-([a-z-]+) \{", css)) - {"x", "key"}
     macros = (
-        Environment(loader=FileSystemLoader(root / "templates"), autoescape=True)
-        .get_template("_macros.html")
-        .module
+        Environment(loader=FileSystemLoader(root / "templates"), autoescape=True).get_template("_macros.html").module
     )
     for number in range(1, 2 * len(ROBOT_STYLES) + 1):
         marker = str(macros.robot_marker(f"Robot {number}"))
