@@ -26,6 +26,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -43,7 +44,7 @@ class Scenario:
     human_goals: tuple[tuple[float, float], ...]
     robot_heading: float = math.pi / 2
     description: str = ""
-    world: dict = field(default_factory=dict)
+    world: dict[str, Any] = field(default_factory=dict)
 
     def config(self, base: WorldConfig | None = None) -> WorldConfig:
         """The world config for this scenario: ``base`` with the file's settings and its crowd size."""
@@ -66,7 +67,7 @@ class Scenario:
             config,
         )
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,
             "description": self.description,
@@ -79,11 +80,11 @@ class Scenario:
         }
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "scenario") -> Scenario:
-        def fail(message: str):
+    def from_dict(cls, data: dict[str, Any], source: str = "scenario") -> Scenario:
+        def fail(message: str) -> NoReturn:
             raise ValueError(f"{source}: {message}")
 
-        def point(value, where: str) -> tuple[float, float]:
+        def point(value: object, where: str) -> tuple[float, float]:
             if (
                 not isinstance(value, list | tuple)
                 or len(value) != 2
@@ -164,7 +165,7 @@ class ScenarioDistribution:
     name: str
     kind: str = "circle-crossing"
     description: str = ""
-    world: dict = field(default_factory=dict)
+    world: dict[str, Any] = field(default_factory=dict)
 
     def config(self, base: WorldConfig | None = None) -> WorldConfig:
         return WorldConfig.from_dict((base or WorldConfig()).to_dict() | self.world)
@@ -187,7 +188,7 @@ class ScenarioDistribution:
         ]
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "scenario distribution") -> ScenarioDistribution:
+    def from_dict(cls, data: dict[str, Any], source: str = "scenario distribution") -> ScenarioDistribution:
         unknown = sorted(set(data) - {"name", "description", "distribution", "world"})
         if unknown:
             raise ValueError(
