@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Literal, TypedDict
+from typing import Any, Literal, TypedDict, cast
 
 from pydantic import BaseModel, ConfigDict, model_validator
 
@@ -39,7 +39,7 @@ class SummaryAgent(TypedDict):
 
 class SummaryStep(TypedDict):
     t: float  # simulated seconds after the step
-    humans: list  # [[x, y], ...] per human; with visible robots, one such list per agent's crowd
+    humans: list[Any]  # [[x, y], ...] per human; with visible robots, one such list per agent's crowd
     robots: list[list[float]]  # [x, y] per agent
     robot_actions: list[list[float]]  # the velocity each agent chose on this step
 
@@ -54,14 +54,14 @@ class SummaryOutcome(TypedDict):
 class Summary(TypedDict):
     format: str  # SUMMARY_FORMAT
     agents: list[SummaryAgent]
-    scenario: dict  # the scenario with its complete world config
-    solver: dict  # name, parameters, seed, budget, budget_used, search_reward, found_at_step, rank
-    reward_parameters: dict
+    scenario: dict[str, Any]  # the scenario with its complete world config
+    solver: dict[str, Any]  # name, parameters, seed, budget, budget_used, search_reward, found_at_step, rank
+    reward_parameters: dict[str, Any]
     env_actions: list[list[float]]  # per step, the flattened (humans x 2) environment action
     steps: list[SummaryStep]
     outcomes: list[SummaryOutcome]  # one per agent
     reward: float
-    reward_terms: dict
+    reward_terms: dict[str, Any]
 
 
 def summary_json(summary: Summary) -> str:
@@ -81,7 +81,7 @@ def load_summary(path: str | Path) -> Summary:
     if not isinstance(data, dict) or data.get("format") != SUMMARY_FORMAT:
         found = data.get("format") if isinstance(data, dict) else type(data).__name__
         raise ValueError(f"{path}: not a summary (format {found!r}, expected {SUMMARY_FORMAT!r})")
-    return data
+    return cast(Summary, data)  # checked as far as the server needs: a dict of this format
 
 
 class ClipAudit(BaseModel):
@@ -114,7 +114,7 @@ class ManifestClip(BaseModel):
     parts: list[str] = []  # survey parts the clip feeds: pairwise, ranking, example
     solver: str = ""
     reward: float | None = None  # the summary's divergence reward
-    outcomes: list[dict] = []  # each agent's summary outcome, in on-screen order
+    outcomes: list[dict[str, Any]] = []  # each agent's summary outcome, in on-screen order
 
     @model_validator(mode="after")
     def _consistent(self) -> ManifestClip:
@@ -133,13 +133,13 @@ class Manifest(BaseModel):
     format: str  # MANIFEST_FORMAT
     label_seed: int | None = None  # seeds the agent-to-robot-number mapping of the clips
     clips: list[ManifestClip]
-    agents: dict[str, dict] = {}  # each agent's `foil eval --json` object
+    agents: dict[str, dict[str, Any]] = {}  # each agent's `foil eval --json` object
     # each agent's kind, checkpoint (path, sha256; a CrowdNav_DSRNN model's config and trained world) and the
     # full world it was evaluated and searched in (a clip's summary holds its search's exact world)
-    sources: dict[str, dict] = {}
+    sources: dict[str, dict[str, Any]] = {}
     files: dict[str, str] = {}  # every file of the bundle (relative path) -> sha256
     # per pair and fixed scenario: how representative it is of the task's distribution (researchers only)
-    representativeness: list[dict] = []
+    representativeness: list[dict[str, Any]] = []
 
 
 def manifest_json(manifest: Manifest) -> str:

@@ -9,7 +9,10 @@ the survey server's bots and the offline bundle builder share it.
 from __future__ import annotations
 
 import math
+import random
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 SCORE_SUCCESS, SCORE_COLLISION = 2.0, -1.0
 
@@ -26,7 +29,7 @@ class Observer:
     closeness_weight: float = 2.0
     tie_margin: float = 0.25
 
-    def visible_score(self, outcome: dict, end_s: float, progress: float) -> float:
+    def visible_score(self, outcome: Mapping[str, Any], end_s: float, progress: float) -> float:
         event = outcome.get("event")
         if event == "collision":
             return SCORE_COLLISION
@@ -39,7 +42,7 @@ class Observer:
             score -= self.closeness_weight * max(0.0, self.comfort_m - float(closest))
         return score
 
-    def perceive(self, clip: VisibleClip, rng) -> dict[str, float]:
+    def perceive(self, clip: VisibleClip, rng: random.Random) -> dict[str, float]:
         """Each on-screen label's perceived score for one viewing (``rng``: a ``random.Random``)."""
         return {label: score + rng.gauss(0.0, self.noise) for label, score in clip.scores(self).items()}
 
@@ -54,12 +57,12 @@ class VisibleClip:
     """What a clip shows: per on-screen label its outcome and how far it got towards the goal."""
 
     labels: tuple[str, ...]
-    outcomes: tuple[dict, ...]
+    outcomes: tuple[Mapping[str, Any], ...]
     progress: tuple[float, ...]
     end_s: float
 
     @classmethod
-    def of_summary(cls, summary: dict, agents: list[str], labels: list[str]) -> VisibleClip:
+    def of_summary(cls, summary: Mapping[str, Any], agents: list[str], labels: list[str]) -> VisibleClip:
         """The clip of a summary.json whose robots ``agents`` (on-screen order) carry ``labels``."""
         names = [agent["name"] for agent in summary["agents"]]
         order = [names.index(agent) for agent in agents]  # the summary's index of each label's robot
@@ -107,7 +110,7 @@ def audit(clip: VisibleClip, better: str, observer: Observer | None = None) -> d
     return {"shows": shows, "why": f"{clip.describe(better)} {clip.describe(other)}"}
 
 
-def _progress(summary: dict, k: int) -> float:
+def _progress(summary: Mapping[str, Any], k: int) -> float:
     """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
     try:
         start = summary["scenario"]["robot"]["start"]
@@ -118,7 +121,7 @@ def _progress(summary: dict, k: int) -> float:
     return progress_towards(start, goal, end)
 
 
-def progress_towards(start, goal, end) -> float:
+def progress_towards(start: Sequence[float], goal: Sequence[float], end: Sequence[float]) -> float:
     """Share of the start-to-goal distance covered at ``end`` (none when farther from the goal than the start)."""
     total = math.dist(start, goal)
     return max(0.0, 1 - math.dist(end, goal) / total) if total > 0 else 1.0

@@ -13,6 +13,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from typing import Any, cast
 
 from sqlalchemy import Row, select
 
@@ -49,11 +50,11 @@ class Column:
 
 @dataclass
 class ParticipantRecord:
-    participant: Row  # the participant table's columns and the plan, as attributes
-    responses: list[Row]  # the response table's columns, ordered by step
+    participant: Row[Any]  # the participant table's columns and the plan, as attributes
+    responses: list[Row[Any]]  # the response table's columns, ordered by step
     plan: list[Screen] = field(init=False)  # the participant's plan, parsed once
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.plan = parse_plan(self.participant.plan or [])
 
 
@@ -75,7 +76,7 @@ def participant_records(db: Database, study_id: str, batch: int = 500) -> Iterat
             ).all()
             if not participants:
                 return
-            responses: dict[int, list[Row]] = {p.id: [] for p in participants}
+            responses: dict[int, list[Row[Any]]] = {p.id: [] for p in participants}
             query = (
                 select(answers)
                 .where(answers.c.participant_id.in_(list(responses)))
@@ -168,7 +169,7 @@ def _robots(screen: Screen | None) -> list[Robot]:
     return [] if screen is None else screen.offered()
 
 
-def _scored(question_type: str, value, screen: Screen | None) -> dict:
+def _scored(question_type: str, value: Any, screen: Screen | None) -> dict[str, Any]:
     """answer, answer_agent, value, truth and correct of one submitted value."""
     agent_of = {robot.label: robot.agent for robot in _robots(screen)}
     if question_type == "choose":
@@ -185,7 +186,7 @@ def _scored(question_type: str, value, screen: Screen | None) -> dict:
         truth = screen.true_order if isinstance(screen, Ranking) else None
         return {
             "answer": ORDER_SEPARATOR.join(value),
-            "answer_agent": None if None in agents else ORDER_SEPARATOR.join(agents),
+            "answer_agent": None if None in agents else ORDER_SEPARATOR.join(cast(list[str], agents)),
             "truth": None if truth is None else ORDER_SEPARATOR.join(truth),
             "correct": None if truth is None or None in agents else int(agents == truth),
         }
@@ -204,7 +205,7 @@ def _clips(screen: Screen | None) -> str | None:
 def _trials(plan: list[Screen]) -> list[int | None]:
     """Each screen's 1-based position within its part."""
     seen: dict[int, int] = {}
-    out = []
+    out: list[int | None] = []
     for screen in plan:
         if isinstance(screen, InPart):
             seen[screen.part] = seen.get(screen.part, 0) + 1
@@ -214,7 +215,7 @@ def _trials(plan: list[Screen]) -> list[int | None]:
     return out
 
 
-def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
+def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict[str, Any]]:
     """One row per answered question; a screen without questions gives one row with an empty question."""
     participant = record.participant
     plan = record.plan
@@ -247,7 +248,7 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict]:
             "submitted_at": iso_utc(response.submitted_at),
             "viewport": (getattr(response, "details", None) or {}).get("viewport"),
         }
-        if shows_clip(screen):
+        if screen is not None and shows_clip(screen):
             viewing = viewing_problems(response, screen)
             common |= {
                 "clip_ms": viewing["clip_ms"],
@@ -315,7 +316,7 @@ def part_scenarios(plan: list[Screen]) -> list[str]:
     return [by_part[part] for part in sorted(by_part)]
 
 
-def participant_row(record: ParticipantRecord, flags: dict[str, bool], conditions: list[Condition]) -> dict:
+def participant_row(record: ParticipantRecord, flags: dict[str, bool], conditions: list[Condition]) -> dict[str, Any]:
     p = record.participant
     plan = record.plan
     duration = duration_s(p)
@@ -376,10 +377,10 @@ class WideLayout:
     and scheme; attention checks by number. Screen order and labels, which vary per participant, are not in
     the names."""
 
-    def __init__(self, study: Study):
+    def __init__(self, study: Study) -> None:
         self.columns: list[Column] = [c for c in PARTICIPANT_COLUMNS if c.name in WIDE_LEAD]
         self.columns.sort(key=lambda c: WIDE_LEAD.index(c.name))
-        self._pairs: dict[tuple[int, frozenset], str] = {}
+        self._pairs: dict[tuple[int, frozenset[str]], str] = {}
         for p, part in enumerate(study.parts, start=1):
             self.columns.append(Column(f"p{p}_scenario", "string", f"part {p}: its scenario for this participant"))
             for scheme in study.design.schemes:
@@ -412,7 +413,7 @@ class WideLayout:
             raise ValueError(f"scheme, agent or question names give clashing column names {clashes}; rename them")
         self.names = set(names)
 
-    def row(self, record: ParticipantRecord, long: list[dict], flags: dict[str, bool]) -> dict:
+    def row(self, record: ParticipantRecord, long: list[dict[str, Any]], flags: dict[str, bool]) -> dict[str, Any]:
         p = record.participant
         duration = duration_s(p)
         row = {

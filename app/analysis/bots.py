@@ -17,6 +17,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Protocol
 
 from app.formats import Manifest, load_summary
 from app.survey.clip_length import clip_shape
@@ -151,6 +152,27 @@ class BotError(RuntimeError):
     """The server answered a bot with something a participant could not go on from."""
 
 
+class Reply(Protocol):
+    """What a bot reads of a response: httpx.Response's status, text and request (method, url.path)."""
+
+    @property
+    def status_code(self) -> int: ...
+
+    @property
+    def text(self) -> str: ...
+
+    @property
+    def request(self) -> Any: ...
+
+
+class Client(Protocol):
+    """What a bot needs of its HTTP client: httpx.Client's get and post (tests and benchmarks bring their own)."""
+
+    def get(self, url: str, *, params: dict[str, str] = ..., headers: dict[str, str] = ...) -> Reply: ...
+
+    def post(self, url: str, *, data: dict[str, str]) -> Reply: ...
+
+
 @dataclass
 class BotRun:
     """What one bot did: its identity, whether it finished, and every answer with the clip it was about."""
@@ -158,7 +180,7 @@ class BotRun:
     external_id: str
     completed: bool = False
     completion_code: str = ""
-    answers: list[dict] = field(default_factory=list)  # {step, clip (sha256 or None), question, value}
+    answers: list[dict[str, Any]] = field(default_factory=list)  # {step, clip (sha256 or None), question, value}
 
 
 class Bot:
@@ -167,7 +189,7 @@ class Bot:
 
     def __init__(
         self,
-        client,
+        client: Client,
         clips: ClipIndex,
         observer: Observer,
         rng: random.Random,
@@ -175,9 +197,9 @@ class Bot:
         number: int,
         external_id: str,
         attentive: bool = True,
-        link: dict | None = None,
+        link: dict[str, str] | None = None,
         fast: bool = False,
-    ):
+    ) -> None:
         self.client, self.clips, self.observer, self.rng = client, clips, observer, rng
         self.number, self.attentive = number, attentive
         self.link = {"bot": "1", **(link or {})}  # marks the participant as a bot; `pilot=TOKEN` for the fast mode
@@ -186,7 +208,7 @@ class Bot:
         self.block: list[tuple[str, dict[str, float]]] = []  # (clip, perceived scores) since the last ranking
         self.refused: dict[str, set[str]] = {}  # question -> answers the server refused (a wrong comprehension answer)
 
-    def _ok(self, response) -> str:
+    def _ok(self, response: Reply) -> str:
         if response.status_code != 200:
             text = re.sub(r"<[^>]+>", " ", response.text)
             raise BotError(
@@ -247,9 +269,10 @@ class Bot:
             raise BotError(f"clip {form.video}: HTTP {response.status_code}")
         return sha, clip, self.observer.perceive(clip, self.rng), int(clip.end_s * 1000)
 
-    def answer(self, form: PageForm) -> dict:
+    def answer(self, form: PageForm) -> dict[str, str]:
         data = {"csrf_token": form.hidden["csrf_token"], "step": form.hidden["step"]}
         step = int(form.hidden["step"])
+        seen: dict[str, float]
         sha, clip, seen, clip_ms = None, None, {}, 0
         if form.video:
             sha, clip, seen, clip_ms = self._watch(form)
@@ -280,7 +303,7 @@ class Bot:
         data["time_on_page_ms"] = str(clip_ms + 800 + self.rng.randint(3000, 15000))
         return data
 
-    def _choose_again(self, form: PageForm, data: dict) -> bool:
+    def _choose_again(self, form: PageForm, data: dict[str, str]) -> bool:
         """After a refused answer, as a person who reads the error: rule out the choices just refused, and say
         whether every refused choice question still has another option to try."""
         for name in form.radios:
@@ -294,7 +317,7 @@ class Bot:
         wins: dict[str, int] = {}
         scores: dict[str, list[float]] = {}
         for _, seen in self.block:
-            best = max(seen, key=seen.get)
+            best = max(seen, key=seen.__getitem__)
             for label, score in seen.items():
                 wins[label] = wins.get(label, 0) + (label == best)
                 scores.setdefault(label, []).append(score)
@@ -312,7 +335,7 @@ class Bot:
     ) -> str:
         values = [value for value, _ in options]
         if seen and set(values) <= set(seen):  # which robot is better
-            return max(values, key=seen.get)
+            return max(values, key=seen.__getitem__)
         if all(value.isdigit() for value in values):
             return str(self._scale_point(options, legend, seen, ranked))
         quoted = re.findall(r"['\"‘“]([^'\"’”]+)['\"’”]", legend)
@@ -345,7 +368,7 @@ class Bot:
 
     def _explain(self, clip: VisibleClip | None, seen: dict[str, float], ranked: list[str]) -> str:
         if clip is not None and seen:
-            return clip.describe(max(seen, key=seen.get))
+            return clip.describe(max(seen, key=seen.__getitem__))
         if ranked:
             return f"{ranked[0]} did best in the clips and {ranked[-1]} worst."
         return "It looked that way in the clips."

@@ -6,11 +6,12 @@ from __future__ import annotations
 import math
 import statistics
 from dataclasses import dataclass
+from typing import Any
 
 from sqlalchemy import Row, select
 
 from app.store.database import Database, as_utc
-from app.store.models import Participant
+from app.store.models import Participant, Response
 from app.survey.answers import VIEW_TOLERANCE_MS  # the server's own check, applied again to what was saved
 from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip
 
@@ -33,7 +34,7 @@ class ExclusionRules:
     median_fraction: float = 1 / 3
     include_kinds: tuple[str, ...] = ()  # "pilot", "bot": analyse them too (left out by default)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.min_seconds is not None and not 0 <= self.min_seconds < math.inf:
             raise ValueError(
                 f"the minimum duration must be a finite number of seconds, 0 or more, got {self.min_seconds}"
@@ -66,10 +67,11 @@ class ExclusionRules:
         return f"completion under {self.median_fraction:.3g} of the median ({median_s:.1f} s), i.e. {threshold:.1f} s"
 
 
-def duration_s(participant: Participant | Row) -> float | None:
-    if participant.completed_at is None:
+def duration_s(participant: Participant | Row[Any]) -> float | None:
+    completed_at = participant.completed_at
+    if completed_at is None:
         return None
-    return (as_utc(participant.completed_at) - as_utc(participant.created_at)).total_seconds()
+    return (as_utc(completed_at) - as_utc(participant.created_at)).total_seconds()
 
 
 def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("real",)) -> float | None:
@@ -82,11 +84,13 @@ def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("re
         Participant.kind.in_(kinds),
     )
     with db.reading() as session:
-        durations = [(as_utc(done) - as_utc(start)).total_seconds() for start, done in session.execute(query)]
+        durations = [
+            (as_utc(done) - as_utc(start)).total_seconds() for start, done in session.execute(query) if done is not None
+        ]
     return statistics.median(durations) if durations else None
 
 
-def viewing_problems(response, screen: Pairwise | Watch | Attention) -> dict:
+def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | Attention) -> dict[str, Any]:
     """How a clip screen was watched, from its response and the plan's screen: the clip's length, time on screen
     (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden; `skipped` when the screen was
     answered sooner than the clip plays (by the server's clock), or with playback faster than normal before the
@@ -116,9 +120,9 @@ def viewing_problems(response, screen: Pairwise | Watch | Attention) -> dict:
 
 
 def exclusion_flags(
-    participant: Participant | Row,
+    participant: Participant | Row[Any],
     threshold_s: float | None,
-    responses: list | None = None,
+    responses: list[Response] | list[Row[Any]] | None = None,
     rules: ExclusionRules | None = None,
     plan: list[Screen] | None = None,
 ) -> dict[str, bool]:
@@ -128,9 +132,9 @@ def exclusion_flags(
     kinds = (rules or ExclusionRules()).kinds
     plan = plan or []
     skipped = any(
-        viewing_problems(r, plan[r.step])["skipped"]
+        viewing_problems(r, screen)["skipped"]
         for r in responses or []
-        if r.step < len(plan) and shows_clip(plan[r.step])
+        if r.step < len(plan) and shows_clip(screen := plan[r.step])
     )
     flags = {
         "pilot_or_bot": (getattr(participant, "kind", None) or "real") not in kinds,

@@ -15,7 +15,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from app.analysis.answer_table import (
     LONG_COLUMNS,
@@ -96,7 +96,7 @@ def restore(cell: str) -> str:
     return text
 
 
-def _cell(value) -> str | int | float:
+def _cell(value: object) -> str | int | float:
     if value.__class__ is str:  # the common case first: this runs for every cell
         return neutralise(value)
     if value is None:
@@ -109,14 +109,14 @@ def _cell(value) -> str | int | float:
 class _Table:
     """One CSV table being written to a text handle, its header first."""
 
-    def __init__(self, handle: TextIO, columns: list[Column]):
+    def __init__(self, handle: TextIO, columns: list[Column]) -> None:
         self.names = [c.name for c in columns]
         self.handle = handle
         self.writer = csv.writer(self.handle, lineterminator="\r\n")  # RFC 4180; quotes any CR or LF in text
         self.writer.writerow(self.names)
         self.rows = 0
 
-    def write(self, row: dict) -> None:
+    def write(self, row: dict[str, Any]) -> None:
         self.writer.writerow([_cell(row.get(name)) for name in self.names])
         self.rows += 1
 
@@ -146,10 +146,10 @@ class ExportResult:
     seconds: float
 
 
-def _question_codes(study: Study) -> dict:
-    codes = {}
+def _question_codes(study: Study) -> dict[str, dict[str, Any]]:
+    codes: dict[str, dict[str, Any]] = {}
     for name, question in study.questions.items():
-        entry = {"type": question.type, "text": question.text}
+        entry: dict[str, Any] = {"type": question.type, "text": question.text}
         if isinstance(question, ScaleQuestion):
             entry["points"] = question.points
             entry["point_labels"] = question.point_labels()
@@ -165,7 +165,7 @@ def _question_codes(study: Study) -> dict:
     return codes
 
 
-def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None) -> dict:
+def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None) -> dict[str, Any]:
     """Everything an analyst needs to read the files: columns with their types, questions with their scales,
     conditions, exclusion rules, and the arguments that make pandas read each file with exact types."""
     files = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
@@ -218,7 +218,7 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
     }
 
 
-def codebook_markdown(book: dict) -> str:
+def codebook_markdown(book: dict[str, Any]) -> str:
     study = book["study"]
     lines = [
         f"# Codebook: study `{study['id']}`",

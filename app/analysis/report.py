@@ -16,6 +16,8 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field, replace
 from importlib.util import find_spec
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 from app.analysis.answer_table import long_rows, participant_records
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
@@ -24,6 +26,9 @@ from app.analysis.statistics import TestResult, accuracy_difference, ordinal_dif
 from app.page_templates import page_templates
 from app.store.database import Database
 from app.survey.study import ScaleQuestion, Study
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 ALL = "all scenarios"
 TASKS = {
@@ -57,7 +62,7 @@ class Tally:
 class Exclusions:
     before: int = 0
     after: int = 0
-    per_reason: Counter = field(default_factory=Counter)
+    per_reason: Counter[str] = field(default_factory=Counter)
     rule: str = ""
 
 
@@ -69,9 +74,9 @@ class ReportData:
     exclusions: Exclusions
     accuracy: dict[tuple[str, str, str], Tally]  # (task, scope, scheme) -> tally; scope ALL or a scenario
     unscored_rankings: int  # rankings whose clips gave no strict true order
-    ratings: dict[str, dict[str, Counter]]  # scale question -> scheme -> point -> answers
-    per_clip: dict[str, dict] = field(default_factory=dict)  # clip id -> scheme, scenario, agents, Tally
-    audits: dict[str, dict] = field(default_factory=dict)  # clip id -> the manifest's audit, when known
+    ratings: dict[str, dict[str, Counter[int]]]  # scale question -> scheme -> point -> answers
+    per_clip: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> scheme, scenario, agents, Tally
+    audits: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> the manifest's audit, when known
 
     @property
     def schemes(self) -> list[str]:
@@ -107,13 +112,13 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     threshold = rules.threshold_s(median_s)
     exclusions = Exclusions(rule=rules.describe(median_s))
     accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)
-    ratings = {
+    ratings: dict[str, dict[str, Counter[int]]] = {
         name: {scheme: Counter() for scheme in study.design.schemes}
         for name, q in study.questions.items()
         if isinstance(q, ScaleQuestion)
     }
     unscored = 0
-    per_clip: dict[str, dict] = {}
+    per_clip: dict[str, dict[str, Any]] = {}
     for record in participant_records(db, study.study.id):
         flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
         exclusions.before += 1
@@ -157,7 +162,7 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     )
 
 
-def _audits(bundle_dir: str) -> dict[str, dict]:
+def _audits(bundle_dir: str) -> dict[str, dict[str, Any]]:
     """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest."""
     from app.formats import Manifest
 
@@ -177,11 +182,11 @@ def _significant(value: float | None, digits: int = 3) -> str | float:
     return "" if value is None else float(f"{value:.{digits}g}")
 
 
-def table1_rows(data: ReportData) -> list[dict]:
-    rows = []
+def table1_rows(data: ReportData) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     for scope in data.scopes():
         for scheme in data.schemes:
-            row = {"scope": scope, "scheme": scheme}
+            row: dict[str, Any] = {"scope": scope, "scheme": scheme}
             for task in TASKS:
                 tally = data.tally(task, scope, scheme)
                 low, high = tally.interval or (None, None)
@@ -197,8 +202,8 @@ def table1_rows(data: ReportData) -> list[dict]:
     return rows
 
 
-def accuracy_test_rows(data: ReportData) -> list[dict]:
-    rows = []
+def accuracy_test_rows(data: ReportData) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     for scope in data.scopes():
         for task in TASKS:
             result = data.accuracy_test(task, scope)
@@ -215,8 +220,8 @@ def accuracy_test_rows(data: ReportData) -> list[dict]:
     return rows
 
 
-def rating_rows(data: ReportData) -> list[dict]:
-    rows = []
+def rating_rows(data: ReportData) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     for name, question in data.scale_questions():
         labels = question.point_labels()
         for scheme in data.schemes:
@@ -237,8 +242,8 @@ def rating_rows(data: ReportData) -> list[dict]:
     return rows
 
 
-def rating_test_rows(data: ReportData) -> list[dict]:
-    rows = []
+def rating_test_rows(data: ReportData) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     for name, _ in data.scale_questions():
         result = data.rating_test(name)
         counts = {f"n_{scheme}": sum(data.ratings[name][scheme].values()) for scheme in data.schemes}
@@ -255,7 +260,7 @@ def rating_test_rows(data: ReportData) -> list[dict]:
     return rows
 
 
-def exclusion_rows(data: ReportData) -> list[dict]:
+def exclusion_rows(data: ReportData) -> list[dict[str, Any]]:
     e = data.exclusions
     rows = [{"rule": "participants in the database", "participants": e.before}]
     rows += [
@@ -269,7 +274,7 @@ def exclusion_rows(data: ReportData) -> list[dict]:
     return rows
 
 
-def _write_csv(path: Path, rows: list[dict]) -> None:
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     with path.open("w", encoding="utf-8", newline="") as handle:
         if rows:
             writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\r\n")
@@ -285,7 +290,7 @@ def figures_installed() -> bool:
     return find_spec("matplotlib") is not None
 
 
-def _pyplot():
+def _pyplot() -> ModuleType:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -295,9 +300,10 @@ def _pyplot():
     return plt
 
 
-def distribution_figure(data: ReportData, name: str, question: ScaleQuestion):
+def distribution_figure(data: ReportData, name: str, question: ScaleQuestion) -> Figure:
     """The paper's Figure 3 for any scale question: the share of answers at each point, one bar per scheme."""
     plt = _pyplot()
+    figure: Figure
     figure, axes = plt.subplots(figsize=(7.5, 4.2))
     labels = question.point_labels()
     width = 0.8 / max(1, len(data.schemes))
@@ -337,13 +343,14 @@ def _likert_colours(points: int) -> list[str]:
     return low[:half] + ([NEUTRAL] if points % 2 else []) + high[:half]
 
 
-def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
+def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]) -> Figure:
     """The paper's Figure 4: per labelled question, one diverging stacked bar per scheme, centred on the middle
     of the scale (disagreement to the left, agreement to the right)."""
     plt = _pyplot()
     n = max(1, len(questions))
     columns = min(n, LIKERT_COLUMNS)
     rows = -(-n // columns)
+    figure: Figure
     figure, axes_grid = plt.subplots(
         rows, columns, figsize=(6.0 * columns, (2.6 + 0.7 * len(data.schemes)) * rows), squeeze=False
     )
@@ -386,7 +393,7 @@ def likert_figure(data: ReportData, questions: list[tuple[str, ScaleQuestion]]):
     return figure
 
 
-def _save(figure, out: Path, stem: str) -> str:
+def _save(figure: Figure, out: Path, stem: str) -> str:
     """Write PNG and SVG; return the SVG text for inlining in report.html."""
     figure.savefig(out / f"{stem}.png", dpi=150, metadata={"Software": None})
     buffer = io.StringIO()
@@ -412,7 +419,7 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
         scales = data.scale_questions()
         labelled = [(name, q) for name, q in scales if q.labels is not None]
         drawn = figures_installed()
-        figures = [
+        figures: list[tuple[str, str, str | None, str]] = [
             (
                 f"distribution-{name}",
                 f"Answers to “{q.text}” per scheme",

@@ -39,7 +39,7 @@ def accuracy_difference(counts: dict[str, tuple[int, int]]) -> TestResult:
     Pearson's chi-square test of independence on the k x 2 table. Schemes without answers are left out."""
     from scipy import stats
 
-    table = [(c, i) for c, i in counts.values() if c + i > 0]
+    table: list[tuple[float, float]] = [(c, i) for c, i in counts.values() if c + i > 0]
     if len(table) < 2:
         return TestResult("not tested: fewer than two schemes have answers")
     if len(table) == 2:

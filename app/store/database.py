@@ -13,11 +13,13 @@ trades the last commits before an operating-system crash for fewer disk flushes 
 
 from __future__ import annotations
 
+import sqlite3
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import cast
 
 from alembic import command
 from alembic.config import Config
@@ -41,7 +43,7 @@ def make_engine(url: str, *, synchronous: str = "full") -> Engine:
         engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30})
 
         @event.listens_for(engine, "connect")
-        def _sqlite_setup(dbapi_connection, _record):
+        def _sqlite_setup(dbapi_connection: sqlite3.Connection, _record: object) -> None:
             dbapi_connection.isolation_level = None  # Database emits BEGIN itself
             cursor = dbapi_connection.cursor()
             cursor.execute("PRAGMA journal_mode=WAL")
@@ -61,7 +63,7 @@ class Database:
     """Session factories for reading and for writing, over one connection pool. Their work blocks, so endpoints
     that use them are plain functions, which FastAPI runs in its thread pool."""
 
-    def __init__(self, url: str, *, synchronous: str = "full"):
+    def __init__(self, url: str, *, synchronous: str = "full") -> None:
         self.url = url
         self.engine = make_engine(url, synchronous=synchronous)
         self._sessions = sessionmaker(self.engine, expire_on_commit=False)
@@ -91,7 +93,7 @@ class Database:
     def _begin(self, connection: Connection, begin: str) -> None:
         """SQLite: begin the transaction that SQLAlchemy has just opened (the driver is told not to)."""
         if self.sqlite:
-            connection.connection.driver_connection.execute(begin)
+            cast(sqlite3.Connection, connection.connection.driver_connection).execute(begin)
 
     def dispose(self) -> None:
         self.engine.dispose()

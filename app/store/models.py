@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from typing import Any
 
 from sqlalchemy import (
     JSON,
@@ -84,13 +85,13 @@ class Participant(Base):
     attention_failures: Mapped[int] = mapped_column(Integer, default=0)
     kind: Mapped[str] = mapped_column(String(8), default="real", server_default="real")  # real | pilot | bot
     consent_version: Mapped[str] = mapped_column(String(64), default="", server_default="")  # consent text shown
-    details: Mapped[dict | None] = mapped_column(JSON)  # comprehension attempts, viewport, ...
+    details: Mapped[dict[str, Any] | None] = mapped_column(JSON)  # comprehension attempts, viewport, ...
 
     responses: Mapped[list[Response]] = relationship(back_populates="participant", order_by="Response.step")
     plan_row: Mapped[ParticipantPlan | None] = relationship(
         lazy="selectin", cascade="all, delete-orphan", passive_deletes=True
     )
-    plan: AssociationProxy[list | None] = association_proxy(
+    plan: AssociationProxy[list[dict[str, Any]] | None] = association_proxy(
         "plan_row", "plan", creator=lambda plan: ParticipantPlan(plan=plan)
     )
 
@@ -102,7 +103,7 @@ class ParticipantPlan(Base):
     __tablename__ = "participant_plan"
 
     participant_id: Mapped[int] = mapped_column(ForeignKey("participant.id", ondelete="CASCADE"), primary_key=True)
-    plan: Mapped[list] = mapped_column(JSON)
+    plan: Mapped[list[dict[str, Any]]] = mapped_column(JSON)
 
 
 class Response(Base):
@@ -116,13 +117,14 @@ class Response(Base):
     participant_id: Mapped[int] = mapped_column(ForeignKey("participant.id", ondelete="CASCADE"))
     step: Mapped[int] = mapped_column(Integer)
     kind: Mapped[str] = mapped_column(String(16))  # instructions | pairwise | watch | ranking | attention
-    answers: Mapped[dict] = mapped_column(JSON, default=dict)  # question name -> value as submitted
-    video_events: Mapped[list] = mapped_column(JSON, default=list)  # [{"type": "play", "t": ms}, ...]
+    answers: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)  # question name -> value as submitted
+    video_events: Mapped[list[dict[str, Any]]] = mapped_column(JSON, default=list)  # [{"type": "play", "t": ms}, ...]
     plays: Mapped[int] = mapped_column(Integer, default=0)
     # 64-bit: a screen left open for weeks (a participant who comes back through their link) overflows 32 bits
     client_ms: Mapped[int | None] = mapped_column(BigInteger)  # time on page measured by the browser
     server_ms: Mapped[int] = mapped_column(BigInteger)  # from the screen becoming current to this submission
     submitted_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    details: Mapped[dict | None] = mapped_column(JSON)  # what the browser reported besides the answers (viewport)
+    # what the browser reported besides the answers (viewport)
+    details: Mapped[dict[str, Any] | None] = mapped_column(JSON)
 
     participant: Mapped[Participant] = relationship(back_populates="responses")

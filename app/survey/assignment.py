@@ -13,7 +13,7 @@ import itertools
 import random
 from dataclasses import dataclass
 
-from sqlalchemy import Connection, bindparam, func, select
+from sqlalchemy import Connection, Dialect, bindparam, func, select
 from sqlalchemy.orm import Session
 
 from app.store.models import Participant
@@ -34,7 +34,7 @@ class Condition:
 def conditions(study: Study) -> list[Condition]:
     design = study.design
     if design.scheme_factor == "between":
-        scheme_orders = [(scheme,) for scheme in design.schemes]
+        scheme_orders: list[tuple[str, ...]] = [(scheme,) for scheme in design.schemes]
     elif design.counterbalance_scheme_order:
         n = len(design.schemes)
         scheme_orders = [tuple(design.schemes[(i + k) % n] for k in range(n)) for i in range(n)]
@@ -68,5 +68,5 @@ def next_slot(session: Session | Connection, *, study: str) -> int:
     return 0 if highest is None else highest + 1
 
 
-def _dialect(session: Session | Connection):
+def _dialect(session: Session | Connection) -> Dialect:
     return session.get_bind().dialect if isinstance(session, Session) else session.dialect

@@ -35,7 +35,7 @@ class Bundle:
         return list(self._pairs.get((scheme, scenario, frozenset(agents)), ()))
 
     @cached_property
-    def _pairs(self) -> dict[tuple, list[ManifestClip]]:
+    def _pairs(self) -> dict[tuple[str, str, frozenset[str]], list[ManifestClip]]:
         """Two-agent clips by (scheme, scenario, set of agents), each list in id order: a plan looks up a clip
         for every screen it builds."""
         index = defaultdict(list)
@@ -96,7 +96,7 @@ def required_clips(study: Study) -> list[tuple[ClipRef, str]]:
         for scheme in study.design.schemes:
             for scenario in _part_scenarios(study, p, scheme):
                 for pair in pairs:
-                    refs.append((ClipRef(scheme=scheme, scenario=scenario, agents=tuple(pair)), f"parts[{p}]"))
+                    refs.append((ClipRef(scheme=scheme, scenario=scenario, agents=pair), f"parts[{p}]"))
     for c, check in enumerate(study.attention_checks):
         if check.clip is not None:  # a video attention check
             refs.append((check.clip, f"attention_checks[{c}] (a video attention check's clip)"))

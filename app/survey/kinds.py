@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hmac
 import secrets
+from collections.abc import Mapping
 
 from sqlalchemy.exc import IntegrityError
 
@@ -41,12 +42,12 @@ def pilot_token(db: Database, study_id: str) -> str:
         except IntegrityError:
             pass
         with db.reading() as session:
-            token = session.get(ServerSetting, key).value
+            token = session.get_one(ServerSetting, key).value
     _tokens[(db.url, study_id)] = token
     return token
 
 
-def kind_from_link(params, token: str) -> tuple[str, bool]:
+def kind_from_link(params: Mapping[str, str], token: str) -> tuple[str, bool]:
     """(kind, fast) from the study link's parameters: `pilot=TOKEN` makes a pilot (with `bot=1`, a bot), both
     exempt from the server's viewing-time rule (`fast`); `bot=1` alone a bot held to the rules."""
     sent = params.get("pilot") or ""

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import random
+from typing import Any
 
 from app.formats import ManifestClip
 from app.survey.assignment import Condition
@@ -67,7 +68,9 @@ def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[Robot]:
     return robots
 
 
-def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random, bundle: Bundle) -> dict:
+def _clip_fields(
+    part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random, bundle: Bundle
+) -> dict[str, Any]:
     """The fields of a pairwise or watch screen showing `clip`."""
     return {
         "part": part_no,
@@ -154,7 +157,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                         kind="pairwise",
                         **_clip_fields(
                             part_no,
-                            _pick(bundle, scheme, scenario[scheme], tuple(pair), rng, used),
+                            _pick(bundle, scheme, scenario[scheme], pair, rng, used),
                             list(part.questions),
                             rng,
                             bundle,
@@ -174,7 +177,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                 screens += _ranking_screens(part, part_no, scheme, scenario[scheme], bundle, rng, block=b + 1)
         for c, check in reversed(list(enumerate(study.attention_checks))):
             if check.part == part_no:
-                video = {}
+                video: dict[str, Any] = {}
                 if check.clip is not None:  # a video attention check: its clip, watched like any other
                     clip = bundle.matching(check.clip.scheme, check.clip.scenario, check.clip.agents)[0]
                     video = {
@@ -182,7 +185,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                         "media": clip.sha256.lower(),
                         **_shape(bundle, clip).model_dump(exclude_unset=True),
                     }
-                screen = Attention(
+                screen: Screen = Attention(
                     kind="attention",
                     part=part_no,
                     check=c,

@@ -40,19 +40,17 @@ def _rules(min_seconds: float | None, median_fraction: float) -> ExclusionRules:
 
 
 @router.get("/report")
-def report_page(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3):
+def report_page(
+    ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3
+) -> HTMLResponse:
     data = tally_study(ctx.db, ctx.study, _rules(min_seconds, median_fraction))
-    data.audits = {
-        clip.id: clip.audit.model_dump()
-        for clip in ctx.bundle.clips.values()
-        if getattr(clip, "audit", None) is not None
-    }
+    data.audits = {clip.id: clip.audit.model_dump() for clip in ctx.bundle.clips.values() if clip.audit is not None}
     html = render_report(data)
     return HTMLResponse(html, headers={"content-security-policy": REPORT_POLICY})
 
 
 @router.get("/export.csv")
-def long_csv(ctx: ContextDep):
+def long_csv(ctx: ContextDep) -> StreamingResponse:
     filename = f"{ctx.study.study.id}-long.csv"
     return StreamingResponse(
         long_csv_chunks(ctx.db, ctx.study),
@@ -62,7 +60,9 @@ def long_csv(ctx: ContextDep):
 
 
 @router.get("/export.zip")
-def export_zip(ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3):
+def export_zip(
+    ctx: ContextDep, min_seconds: MinSeconds = None, median_fraction: MedianFraction = 1 / 3
+) -> FileResponse:
     """`foil export` into a temporary folder, zipped; both are deleted once the download has been sent."""
     rules = _rules(min_seconds, median_fraction)
     folder = Path(tempfile.mkdtemp(prefix="foil-export-"))

@@ -7,7 +7,7 @@ import logging
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import PlainTextResponse, RedirectResponse, Response
+from fastapi.responses import HTMLResponse, PlainTextResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
@@ -82,7 +82,7 @@ def create_app(settings: ServerSettings) -> FastAPI:
         app.include_router(analysis_pages.router)
 
     @app.exception_handler(HTTPException)
-    async def _http_error(request: Request, error: HTTPException):
+    async def _http_error(request: Request, error: HTTPException) -> HTMLResponse:
         titles = {
             400: "Bad request",
             403: "Not allowed",
@@ -99,18 +99,18 @@ def create_app(settings: ServerSettings) -> FastAPI:
         return page
 
     @app.exception_handler(admin_pages.LoginRequired)
-    async def _login_first(request: Request, error: admin_pages.LoginRequired):
+    async def _login_first(request: Request, error: admin_pages.LoginRequired) -> RedirectResponse:
         return RedirectResponse("/admin/login", status_code=303)
 
     @app.exception_handler(RequestValidationError)
-    async def _bad_request(request: Request, error: RequestValidationError):
+    async def _bad_request(request: Request, error: RequestValidationError) -> HTMLResponse:
         fields = "; ".join(f"{e['loc'][-1]} ({e['msg'].lower()})" for e in error.errors())
         return context.message(
             request, "Bad request", f"The request is missing or has invalid fields: {fields}.", status_code=400
         )
 
     @app.exception_handler(ClientDisconnect)
-    async def _gone(request: Request, error: ClientDisconnect):
+    async def _gone(request: Request, error: ClientDisconnect) -> Response:
         log.info(
             "%s %s from %s: the client left before its request had arrived",
             request.method,
@@ -122,7 +122,7 @@ def create_app(settings: ServerSettings) -> FastAPI:
     security_headers = SecurityHeadersMiddleware(app, frame_ancestors=settings.frame_ancestors)
 
     @app.exception_handler(Exception)
-    async def _server_error(request: Request, error: Exception):
+    async def _server_error(request: Request, error: Exception) -> PlainTextResponse:
         # Starlette's outermost layer sends this (and logs the error): the middlewares below never see it.
         return PlainTextResponse(
             "Something went wrong on the server. What you had already submitted is saved; "
@@ -151,4 +151,4 @@ def create_app(settings: ServerSettings) -> FastAPI:
 
 def app_from_env() -> FastAPI:
     """For `uvicorn --factory app.web.main:app_from_env --workers N` with FOIL_* variables (run migrations first)."""
-    return create_app(ServerSettings())
+    return create_app(ServerSettings())  # type: ignore[call-arg]  # pydantic-settings reads the fields from FOIL_* variables

@@ -27,7 +27,9 @@ KEPT_BYTES = 64 << 20
 class KeptClips:
     """The contents of small clips, read once each while they fit in `limit` bytes in all."""
 
-    def __init__(self, limit: int = KEPT_BYTES):
+    clips: dict[Path, bytes]
+
+    def __init__(self, limit: int = KEPT_BYTES) -> None:
         self.limit, self.size, self.clips = limit, 0, {}
         self.streamed: set[Path] = set()  # too large to keep: asked about once, not on every request
 
@@ -42,7 +44,7 @@ class KeptClips:
         return data
 
 
-def _small_range(data: bytes, request: Request, headers: dict) -> Response | None:
+def _small_range(data: bytes, request: Request, headers: dict[str, str]) -> Response | None:
     """The 206 reply to a simple Range request of a kept clip; None for FileResponse to handle."""
     match = SIMPLE_RANGE.match(request.headers.get("range", ""))
     if match is None or request.method != "GET" or "if-range" in request.headers:
@@ -60,10 +62,10 @@ def _small_range(data: bytes, request: Request, headers: dict) -> Response | Non
 
 
 @router.api_route("/clips/{name}", methods=["GET", "HEAD"])
-async def clip(name: str, request: Request):  # no blocking call on the usual path: no thread pool needed
+async def clip(name: str, request: Request) -> Response:  # no blocking call on the usual path: no thread pool needed
     match = CLIP_NAME.match(name)
     path = request.app.state.context.bundle.paths.get(match.group(1)) if match else None
-    if path is None:
+    if match is None or path is None:
         raise HTTPException(404, "No such clip.")
     headers = {"cache-control": CACHE, "etag": f'"{match.group(1)}"'}
     if request.headers.get("if-none-match") == headers["etag"]:

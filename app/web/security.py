@@ -7,11 +7,13 @@ import hmac
 import secrets
 import threading
 import time
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, cast
 from urllib.parse import parse_qsl
 
 from fastapi import Depends, HTTPException, Request
-from starlette.datastructures import FormData
+from sqlalchemy.orm import Session
+from starlette.datastructures import FormData, UploadFile
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.store.models import ServerSetting
@@ -168,7 +170,7 @@ async def _form(request: Request) -> FormData:
         raise HTTPException(400, f"Too many fields. Maximum number of fields is {MAX_FIELDS}.") from None
     if any(len(name) + len(value) > MAX_FIELD_CHARS for name, value in fields):
         raise HTTPException(400, f"Field exceeded maximum size of {MAX_FIELD_CHARS // 1024}KB.")
-    return FormData(fields)
+    return FormData(cast(list[tuple[str, str | UploadFile]], fields))  # a list of str pairs is such a list
 
 
 MAX_FIELDS, MAX_FIELD_CHARS = 64, 32 * 1024
@@ -194,8 +196,8 @@ class LoginThrottle:
         free_overall: int = 100,
         delay_s: float = 1.0,
         max_delay_s: float = 900.0,
-        clock=time.monotonic,
-    ):
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.free_per_client, self.free_overall = free_per_client, free_overall
         self.delay_s, self.max_delay_s = delay_s, max_delay_s
         self.clock = clock
@@ -242,7 +244,9 @@ class ArrivalLimit:
 
     MAX_CLIENTS = 10_000
 
-    def __init__(self, *, burst: int = 100, per_minute: float = 60.0, clock=time.monotonic):
+    def __init__(
+        self, *, burst: int = 100, per_minute: float = 60.0, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self.burst, self.per_s = burst, per_minute / 60.0
         self.clock = clock
         self.buckets: dict[str, tuple[float, float]] = {}  # address -> (arrivals left, time they were counted)
@@ -266,7 +270,7 @@ class ArrivalLimit:
 ADMIN_SESSIONS = "admin_sessions"
 
 
-def admin_mark(session, password: str, *, renew: bool = False) -> str:
+def admin_mark(session: Session, password: str, *, renew: bool = False) -> str:
     """What an admin's session cookie holds once logged in: an HMAC, keyed by the admin password, of the admin
     sessions' version kept in the database. Logging out draws a new version (`renew`), which ends every admin
     session signed before, in every worker; a new password ends them too."""
@@ -279,7 +283,7 @@ def admin_mark(session, password: str, *, renew: bool = False) -> str:
     return hmac.new(password.encode(), row.value.encode(), "sha256").hexdigest()
 
 
-def is_admin(session, password: str, mark) -> bool:
+def is_admin(session: Session, password: str, mark: object) -> bool:
     """Whether a session cookie's `mark` is the current one (see `admin_mark`)."""
     row = session.get(ServerSetting, ADMIN_SESSIONS)
     if row is None or not isinstance(mark, str):
@@ -299,7 +303,7 @@ def unstorable(text: str) -> str | None:
     return None
 
 
-def stored_secret(session, key: str = "cookie_secret") -> str:
+def stored_secret(session: Session, key: str = "cookie_secret") -> str:
     """A secret generated once and kept in the database, so every worker and every restart share it."""
     row = session.get(ServerSetting, key)
     if row is None:

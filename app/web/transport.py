@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
@@ -33,7 +34,7 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
 
     limits: TransportLimits = TransportLimits()
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._deadline: asyncio.TimerHandle | None = None
         self._head_bytes = self._head_fields = 0
@@ -41,11 +42,11 @@ class LimitedHttpToolsProtocol(HttpToolsProtocol):
         self._refused: str | None = None
 
     # The deadline: armed when a connection opens and when a request begins, disarmed once it has fully arrived.
-    def connection_made(self, transport) -> None:
+    def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]  # as uvicorn narrows it
         super().connection_made(transport)
         self._arm()
 
-    def connection_lost(self, exc) -> None:
+    def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
         super().connection_lost(exc)
 

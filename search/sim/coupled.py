@@ -15,8 +15,10 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import cache
+from typing import cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from search.sim import world
 from search.sim.observation import Observation, Policy, PolicyState, observe_agents
@@ -95,7 +97,7 @@ class CoupledSimulator:
         agents = [(worlds.start or 0, robot) for worlds, robot in map(self._where, range(self.n_agents))]
         return observe_agents(self.state, self.config, agents, self.batch, noise)
 
-    def step(self, env_action) -> CoupledStep:
+    def step(self, env_action: ArrayLike) -> CoupledStep:
         """One step of every coupled scenario under the shared environment action (B, n, 2) or (B, 2n)."""
         actions, reward, newly_done = self.advance(env_action)
         done = self.gather(self.state.done)
@@ -112,7 +114,7 @@ class CoupledSimulator:
             time=self.state.time[: self.batch].copy(),
         )
 
-    def advance(self, env_action) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def advance(self, env_action: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``step`` without its record: the robots' actions (B, N, 2), navigation rewards (W, R) and which robots
         finished on this step (B, N); the new state is ``self.state`` (read robots through ``gather``).
 
@@ -122,11 +124,8 @@ class CoupledSimulator:
         env_action = world.check_env_action(env_action, self.batch, self.config)
         world_action = env_action if self.shared_crowd else np.tile(env_action, (self.n_agents, 1, 1))
         crowd_action = None if self.config.env_action_mode == "observation" else world_action
-        humans = (
-            _crowd_worker().submit(world.human_velocities, self.state, self.config, crowd_action)
-            if _crowd_worker()
-            else None
-        )
+        worker = _crowd_worker()
+        humans = worker.submit(world.human_velocities, self.state, self.config, crowd_action) if worker else None
         observations = self.observations(env_action)
         actions = np.zeros((self.batch, self.n_agents, 2))
         for k, (policy, observation) in enumerate(zip(self.policies, observations, strict=True)):
@@ -149,9 +148,9 @@ class CoupledSimulator:
     @property
     def all_done(self) -> np.ndarray:
         """(B,) every agent has finished."""
-        return self.gather(self.state.done).all(axis=1)
+        return cast(np.ndarray, self.gather(self.state.done).all(axis=1))  # an array: the axis is given
 
-    def snapshot(self, index=None) -> Snapshot:
+    def snapshot(self, index: ArrayLike | None = None) -> Snapshot:
         """A copy of the coupled scenarios ``index`` (all by default; indices may repeat to branch one node
         into several)."""
         index = np.arange(self.batch) if index is None else np.asarray(index, dtype=np.int64).reshape(-1)
@@ -168,7 +167,7 @@ class CoupledSimulator:
         self.state = snapshot.state.copy()
         self.policy_states = [{key: value.copy() for key, value in s.items()} for s in snapshot.policy_states]
 
-    def assign(self, index, snapshot: Snapshot) -> None:
+    def assign(self, index: ArrayLike | list[int], snapshot: Snapshot) -> None:
         """Overwrite the coupled scenarios ``index`` with a snapshot's (as many rows; the batch keeps its size)."""
         rows = index if isinstance(index, list) else np.asarray(index, dtype=np.int64).reshape(-1).tolist()
         if len(rows) != snapshot.batch:
@@ -220,7 +219,7 @@ os.register_at_fork(after_in_child=_crowd_worker.cache_clear)  # a forked child 
 def replay(
     policies: list[Policy],
     scenario: Scenario,
-    env_actions,
+    env_actions: ArrayLike,
     config: WorldConfig | None = None,
     stop_when_done: bool = True,
     coda_to: int = 0,

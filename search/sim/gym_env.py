@@ -7,20 +7,29 @@ or from a fixed scenario when one is given. An optional ``env_action_fn(rng, n_h
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from numpy.typing import ArrayLike
 
 from search.sim import world
 from search.sim.observation import ROBOT_NODE_SIZE, observe
 from search.sim.scenarios import Scenario, sample_training_states
-from search.sim.world import OUTCOME_NAMES, WorldConfig
+from search.sim.world import OUTCOME_NAMES, WorldConfig, WorldState
 
 
 class CrowdNavEnv(gym.Env):
     metadata = {"render_modes": []}
 
-    def __init__(self, config: WorldConfig | None = None, scenario: Scenario | None = None, env_action_fn=None):
+    def __init__(
+        self,
+        config: WorldConfig | None = None,
+        scenario: Scenario | None = None,
+        env_action_fn: Callable[[np.random.Generator, int], ArrayLike] | None = None,
+    ) -> None:
         self.scenario = scenario
         self.config = scenario.config(config) if scenario else (config or WorldConfig())
         self.env_action_fn = env_action_fn
@@ -39,25 +48,27 @@ class CrowdNavEnv(gym.Env):
         else:
             limit = np.array([self.config.unicycle_max_dv, self.config.unicycle_max_dtheta], np.float32)
             self.action_space = spaces.Box(-limit, limit, (2,), np.float32)
-        self.state = None
+        self.state: WorldState | None = None
 
-    def _observation(self) -> dict:
-        obs = observe(self.state, self.config, robot=0)
+    def _observation(self, state: WorldState) -> dict[str, np.ndarray]:
+        obs = observe(state, self.config, robot=0)
         return {
             "robot_node": obs.robot_node[0].astype(np.float32),
             "temporal_edges": obs.temporal_edges[0].astype(np.float32),
             "spatial_edges": obs.spatial_edges[0].astype(np.float32),
         }
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         super().reset(seed=seed)
         if self.scenario is not None:
             self.state = self.scenario.initial_state(self.config)
         else:
             self.state = sample_training_states(self.config, self.np_random, 1)
-        return self._observation(), {}
+        return self._observation(self.state), {}
 
-    def step(self, action):
+    def step(self, action: ArrayLike) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self.state is None:
             raise RuntimeError("call reset() before step()")
         env_action = None
@@ -69,4 +80,4 @@ class CrowdNavEnv(gym.Env):
         terminated = outcome in (world.SUCCESS, world.COLLISION)
         truncated = outcome == world.TIMEOUT
         info = {"outcome": OUTCOME_NAMES[outcome], "time": float(self.state.time[0])}
-        return self._observation(), reward, terminated, truncated, info
+        return self._observation(self.state), reward, terminated, truncated, info

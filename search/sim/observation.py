@@ -50,7 +50,7 @@ class Observation:
 
     @property
     def batch(self) -> int:
-        return self.robot_node.shape[0]
+        return int(self.robot_node.shape[0])
 
 
 def observe(
@@ -126,25 +126,25 @@ def observe_agents(
 
 @numba.njit(cache=True)
 def _observe(
-    robot_pos,
-    robot_goal,
-    robot_theta,
-    robot_vel,
-    robot_done,
-    human_pos,
-    human_vel,
-    human_radius,
-    where,
-    noise,
-    radius,
-    v_pref,
-    robot_node,
-    temporal_edges,
-    spatial_edges,
-    human_velocities,
-    human_radii,
-    done,
-):
+    robot_pos: np.ndarray,
+    robot_goal: np.ndarray,
+    robot_theta: np.ndarray,
+    robot_vel: np.ndarray,
+    robot_done: np.ndarray,
+    human_pos: np.ndarray,
+    human_vel: np.ndarray,
+    human_radius: np.ndarray,
+    where: np.ndarray,
+    noise: np.ndarray | None,
+    radius: float,
+    v_pref: float,
+    robot_node: np.ndarray,
+    temporal_edges: np.ndarray,
+    spatial_edges: np.ndarray,
+    human_velocities: np.ndarray,
+    human_radii: np.ndarray,
+    done: np.ndarray,
+) -> None:
     """Fill every agent's observation arrays in one pass (numpy took a dozen calls per agent)."""
     for k in range(where.shape[0]):
         first, robot = where[k, 0], where[k, 1]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numpy.typing import ArrayLike
 
 # RVO2 computes in single precision, and its 3-D program is ill-conditioned enough that double precision can
 # land on a different vertex; float32 throughout (constants included), and division by a scalar as a multiplication
@@ -25,12 +26,22 @@ _jit = numba.njit(cache=True, nogil=True)
 
 
 @_jit
-def _det(ax, ay, bx, by):
+def _det(ax: float, ay: float, bx: float, by: float) -> float:
     return ax * by - ay * bx
 
 
 @_jit
-def _lp1(lp, ld_x, ld_y, line_no, radius, opt_x, opt_y, direction_opt, result):
+def _lp1(
+    lp: np.ndarray,
+    ld_x: np.ndarray,
+    ld_y: np.ndarray,
+    line_no: int,
+    radius: float,
+    opt_x: float,
+    opt_y: float,
+    direction_opt: bool,
+    result: np.ndarray,
+) -> bool:
     """Optimise on line ``line_no`` subject to lines before it and the speed disc; False when infeasible."""
     px, py = lp[line_no, 0], lp[line_no, 1]
     dx, dy = ld_x[line_no], ld_y[line_no]
@@ -69,7 +80,17 @@ def _lp1(lp, ld_x, ld_y, line_no, radius, opt_x, opt_y, direction_opt, result):
 
 
 @_jit
-def _lp2(lp, ld_x, ld_y, n_lines, radius, opt_x, opt_y, direction_opt, result):
+def _lp2(
+    lp: np.ndarray,
+    ld_x: np.ndarray,
+    ld_y: np.ndarray,
+    n_lines: int,
+    radius: float,
+    opt_x: float,
+    opt_y: float,
+    direction_opt: bool,
+    result: np.ndarray,
+) -> int:
     """Closest point to the optimum inside all half-planes and the disc; returns the first failing line."""
     if direction_opt:
         result[0] = opt_x * radius
@@ -91,7 +112,18 @@ def _lp2(lp, ld_x, ld_y, n_lines, radius, opt_x, opt_y, direction_opt, result):
 
 
 @_jit
-def _lp3(lp, ld_x, ld_y, n_lines, begin_line, radius, result, proj_p, proj_dx, proj_dy):
+def _lp3(
+    lp: np.ndarray,
+    ld_x: np.ndarray,
+    ld_y: np.ndarray,
+    n_lines: int,
+    begin_line: int,
+    radius: float,
+    result: np.ndarray,
+    proj_p: np.ndarray,
+    proj_dx: np.ndarray,
+    proj_dy: np.ndarray,
+) -> None:
     """Minimise the largest violation of the half-planes from ``begin_line`` on (the 3-D fallback)."""
     distance = 0.0
     for i in range(begin_line, n_lines):
@@ -122,26 +154,26 @@ def _lp3(lp, ld_x, ld_y, n_lines, begin_line, radius, result, proj_p, proj_dx, p
 
 @_jit
 def _agent_velocity(
-    pos,
-    vel,
-    pref,
-    radii,
-    max_speeds,
-    a,
-    neighbor_dist,
-    max_neighbors,
-    inv_horizon,
-    dt,
-    out,
-    nb_idx,
-    nb_dist,
-    lp,
-    ld_x,
-    ld_y,
-    proj_p,
-    proj_dx,
-    proj_dy,
-):
+    pos: np.ndarray,
+    vel: np.ndarray,
+    pref: np.ndarray,
+    radii: np.ndarray,
+    max_speeds: np.ndarray,
+    a: int,
+    neighbor_dist: np.float32,
+    max_neighbors: int,
+    inv_horizon: np.float32,
+    dt: np.float32,
+    out: np.ndarray,
+    nb_idx: np.ndarray,
+    nb_dist: np.ndarray,
+    lp: np.ndarray,
+    ld_x: np.ndarray,
+    ld_y: np.ndarray,
+    proj_p: np.ndarray,
+    proj_dx: np.ndarray,
+    proj_dy: np.ndarray,
+) -> None:
     """New velocity of agent ``a`` of one world, written to ``out``."""
     n = pos.shape[0]
     # Nearest neighbours, ascending distance, as RVO2's kd-tree insertion keeps them.
@@ -224,7 +256,19 @@ def _agent_velocity(
 
 
 @_jit
-def _solve_world(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_neighbors, time_horizon, dt, out):
+def _solve_world(
+    pos: np.ndarray,
+    vel: np.ndarray,
+    pref: np.ndarray,
+    radii: np.ndarray,
+    max_speeds: np.ndarray,
+    n_ego: int,
+    neighbor_dist: np.float32,
+    max_neighbors: int,
+    time_horizon: np.float32,
+    dt: np.float32,
+    out: np.ndarray,
+) -> None:
     """New velocities of the first ``n_ego`` agents of one world (float32 arrays) into ``out``."""
     n = pos.shape[0]
     inv_horizon = ONE / time_horizon
@@ -262,8 +306,19 @@ def _solve_world(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_ne
 
 @_jit
 def _crowd_world(
-    pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors, time_horizon, dt, out
-):
+    pos: np.ndarray,
+    vel: np.ndarray,
+    goal: np.ndarray,
+    radii: np.ndarray,
+    v_pref: np.ndarray,
+    pref_offset: np.ndarray,
+    padding: np.float32,
+    neighbor_dist: np.float32,
+    max_neighbors: int,
+    time_horizon: np.float32,
+    dt: np.float32,
+    out: np.ndarray,
+) -> None:
     """One crowd as CrowdNav drives RVO2: the preferred velocity is the vector to the goal, normalised only
     when longer than 1 m, plus ``pref_offset``; radii padded by ``padding``; speed limit v_pref."""
     n = pos.shape[0]
@@ -291,7 +346,19 @@ def _crowd_world(
 # One thread per call: worlds are independent, but on a 2-core machine threads only pay when nothing else runs;
 # searches and training run the policies in the same process and several searches run side by side.
 @_jit
-def _orca_worlds(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_neighbors, time_horizon, dt, out):
+def _orca_worlds(
+    pos: np.ndarray,
+    vel: np.ndarray,
+    pref: np.ndarray,
+    radii: np.ndarray,
+    max_speeds: np.ndarray,
+    n_ego: int,
+    neighbor_dist: np.float32,
+    max_neighbors: int,
+    time_horizon: np.float32,
+    dt: np.float32,
+    out: np.ndarray,
+) -> None:
     for w in range(pos.shape[0]):
         _solve_world(
             pos[w],
@@ -310,8 +377,19 @@ def _orca_worlds(pos, vel, pref, radii, max_speeds, n_ego, neighbor_dist, max_ne
 
 @_jit
 def _crowd_worlds(
-    pos, vel, goal, radii, v_pref, pref_offset, padding, neighbor_dist, max_neighbors, time_horizon, dt, out
-):
+    pos: np.ndarray,
+    vel: np.ndarray,
+    goal: np.ndarray,
+    radii: np.ndarray,
+    v_pref: np.ndarray,
+    pref_offset: np.ndarray,
+    padding: np.float32,
+    neighbor_dist: np.float32,
+    max_neighbors: int,
+    time_horizon: np.float32,
+    dt: np.float32,
+    out: np.ndarray,
+) -> None:
     for w in range(pos.shape[0]):
         _crowd_world(
             pos[w],
@@ -330,7 +408,18 @@ def _crowd_worlds(
 
 
 def crowd_velocities(
-    pos, vel, goal, radii, v_pref, pref_offset, *, padding, neighbor_dist, max_neighbors, time_horizon, dt
+    pos: np.ndarray,
+    vel: np.ndarray,
+    goal: np.ndarray,
+    radii: np.ndarray,
+    v_pref: np.ndarray,
+    pref_offset: np.ndarray,
+    *,
+    padding: float,
+    neighbor_dist: float,
+    max_neighbors: int,
+    time_horizon: float,
+    dt: float,
 ) -> np.ndarray:
     """New velocities (W, n, 2) of crowds that see only each other; float64 state in, float32 solve."""
     f32 = np.float32
@@ -352,7 +441,9 @@ def crowd_velocities(
     return out.astype(np.float64)
 
 
-def _as_batch(name: str, array, shape_tail: tuple[int, ...], n_worlds: int | None, n: int | None) -> np.ndarray:
+def _as_batch(
+    name: str, array: ArrayLike, shape_tail: tuple[int, ...], n_worlds: int | None, n: int | None
+) -> np.ndarray:
     out = np.ascontiguousarray(array, dtype=np.float32)
     expect = "(B, n" + "".join(f", {d}" for d in shape_tail) + ")"
     if out.ndim != 2 + len(shape_tail) or out.shape[2:] != shape_tail:
@@ -365,17 +456,17 @@ def _as_batch(name: str, array, shape_tail: tuple[int, ...], n_worlds: int | Non
 
 
 def orca_velocities(
-    positions,
-    velocities,
-    preferred_velocities,
-    radii,
-    max_speeds,
+    positions: ArrayLike,
+    velocities: ArrayLike,
+    preferred_velocities: ArrayLike,
+    radii: ArrayLike,
+    max_speeds: ArrayLike,
     *,
-    neighbor_dist=10.0,
-    max_neighbors=10,
-    time_horizon=5.0,
-    dt=0.25,
-    n_ego=None,
+    neighbor_dist: float = 10.0,
+    max_neighbors: int = 10,
+    time_horizon: float = 5.0,
+    dt: float = 0.25,
+    n_ego: int | None = None,
 ) -> np.ndarray:
     """New velocities of the first ``n_ego`` agents of each world (all agents by default), shape (B, n_ego, 2).
 
@@ -402,16 +493,16 @@ def orca_velocities(
 
 
 def orca_step(
-    positions,
-    velocities,
-    preferred_velocities,
-    radii,
-    max_speeds,
+    positions: ArrayLike,
+    velocities: ArrayLike,
+    preferred_velocities: ArrayLike,
+    radii: ArrayLike,
+    max_speeds: ArrayLike,
     *,
-    neighbor_dist=10.0,
-    max_neighbors=10,
-    time_horizon=5.0,
-    dt=0.25,
+    neighbor_dist: float = 10.0,
+    max_neighbors: int = 10,
+    time_horizon: float = 5.0,
+    dt: float = 0.25,
 ) -> np.ndarray:
     """Every agent's new velocity (B, n, 2), as one RVO2 ``doStep`` computes it (no obstacles).
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -44,7 +45,7 @@ class Scenario:
     human_goals: tuple[tuple[float, float], ...]
     robot_heading: float = math.pi / 2
     description: str = ""
-    world: dict = field(default_factory=dict)
+    world: dict[str, Any] = field(default_factory=dict)
 
     def config(self, base: WorldConfig | None = None) -> WorldConfig:
         """The world config for this scenario: ``base`` with the file's settings and its crowd size."""
@@ -67,7 +68,7 @@ class Scenario:
             config,
         )
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,
             "description": self.description,
@@ -80,11 +81,11 @@ class Scenario:
         }
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "scenario") -> Scenario:
-        def fail(message: str):
+    def from_dict(cls, data: dict[str, Any], source: str = "scenario") -> Scenario:
+        def fail(message: str) -> NoReturn:
             raise ValueError(f"{source}: {message}")
 
-        def point(value, where: str) -> tuple[float, float]:
+        def point(value: object, where: str) -> tuple[float, float]:
             if (
                 not isinstance(value, list | tuple)
                 or len(value) != 2
@@ -95,7 +96,7 @@ class Scenario:
                 fail(f"{where} must be finite, got {value!r}")
             return float(value[0]), float(value[1])
 
-        def keys(table: dict, known: set[str], where: str = "") -> None:
+        def keys(table: dict[str, Any], known: set[str], where: str = "") -> None:
             try:
                 check_keys(table, known, "key")
             except ValueError as error:
@@ -165,7 +166,7 @@ class ScenarioDistribution:
     name: str
     kind: str = "circle-crossing"
     description: str = ""
-    world: dict = field(default_factory=dict)
+    world: dict[str, Any] = field(default_factory=dict)
 
     def config(self, base: WorldConfig | None = None) -> WorldConfig:
         return WorldConfig.from_dict((base or WorldConfig()).to_dict() | self.world)
@@ -188,7 +189,7 @@ class ScenarioDistribution:
         ]
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "scenario distribution") -> ScenarioDistribution:
+    def from_dict(cls, data: dict[str, Any], source: str = "scenario distribution") -> ScenarioDistribution:
         try:
             check_keys(data, {"name", "description", "distribution", "world"}, "key")
         except ValueError as error:

@@ -6,8 +6,19 @@ import numpy as np
 
 
 def social_force_velocities(
-    positions, velocities, goals, radii, v_prefs, *, A=2.0, B=1.0, KI=1.0, dt=0.25, others_pos=None, others_radius=None
-):
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    goals: np.ndarray,
+    radii: np.ndarray,
+    v_prefs: np.ndarray,
+    *,
+    A: float = 2.0,
+    B: float = 1.0,
+    KI: float = 1.0,
+    dt: float = 0.25,
+    others_pos: np.ndarray | None = None,
+    others_radius: np.ndarray | None = None,
+) -> np.ndarray:
     """New velocities (W, n, 2): relax towards the goal at v_pref, pushed away by every other agent.
 
     ``others_pos`` (W, m, 2) and ``others_radius`` (W, m) add agents that push but are not moved (a visible
@@ -37,4 +48,5 @@ def social_force_velocities(
     speed = np.linalg.norm(new_velocity, axis=-1, keepdims=True)
     cap = v_prefs[..., None]
     scale = np.divide(cap, speed, out=np.ones_like(speed), where=speed > cap)
-    return new_velocity * scale
+    capped: np.ndarray = new_velocity * scale
+    return capped

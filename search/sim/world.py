@@ -18,11 +18,14 @@ A robot that has finished stays where it is; the crowd goes on.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cache
+from typing import Any
 
 import numba
 import numpy as np
+from numpy.typing import ArrayLike
 
 from search.sim.orca import crowd_velocities, orca_velocities
 from search.sim.settings import ConfigTable
@@ -100,7 +103,7 @@ class WorldConfig(ConfigTable):
     unicycle_motion: str = "straight"  # "straight": turn, then move; "arc": CrowdNav's differential drive
     crowd_seed: int = 0  # seeds a fixed scenario's random attributes and goal changes
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (self.human_num >= 0, "human_num must be >= 0"),
             (self.human_policy in ("orca", "social_force"), "human_policy must be 'orca' or 'social_force'"),
@@ -130,7 +133,7 @@ class WorldConfig(ConfigTable):
             if not ok:
                 raise ValueError(f"invalid world config: {message}")
 
-    def with_(self, **changes) -> WorldConfig:
+    def with_(self, **changes: Any) -> WorldConfig:
         return replace(self, **changes)
 
     @property
@@ -178,8 +181,10 @@ class WorldState:
     """
 
     __slots__ = ("rows", "layout", *STATE_FIELDS)
+    rows: np.ndarray
+    layout: _Layout
 
-    def __init__(self, **values: np.ndarray):
+    def __init__(self, **values: ArrayLike) -> None:
         """Worlds from every field of STATE_FIELDS, given by name, each copied into the rows (``rng`` may be
         left out: zero, as states saved before it existed had)."""
         values.setdefault("rng", np.zeros(np.shape(values.get("time", ())), np.uint64))
@@ -203,7 +208,7 @@ class WorldState:
         object.__setattr__(state, "rows", rows)
         return state
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> np.ndarray:
         """The field views, made on first use (a snapshot that is only copied or assigned never needs them)."""
         if name not in STATE_FIELDS:
             raise AttributeError(name)
@@ -215,20 +220,21 @@ class WorldState:
                 else np.empty((0, *shape), dtype)
             )  # no worlds: nothing to share
             object.__setattr__(self, field, view)
-        return object.__getattribute__(self, name)
+        asked: np.ndarray = object.__getattribute__(self, name)
+        return asked
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: object) -> None:
         raise AttributeError(
             f"WorldState fields are views into its rows: write into them in place "
             f"(state.{name}[...] = value) instead of rebinding them"
         )
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[Callable[[np.ndarray, int, int], WorldState], tuple[np.ndarray, int, int]]:
         return _state_of_rows, (self.rows, self.layout.humans, self.layout.robots)
 
     @property
     def n_worlds(self) -> int:
-        return self.rows.shape[0]
+        return int(self.rows.shape[0])
 
     @property
     def n_robots(self) -> int:
@@ -237,11 +243,11 @@ class WorldState:
     def copy(self) -> WorldState:
         return WorldState.of_rows(self.rows.copy(), self.layout)
 
-    def take(self, worlds) -> WorldState:
+    def take(self, worlds: ArrayLike) -> WorldState:
         """A new state made of the given worlds (indices may repeat: one node branched into many)."""
         return WorldState.of_rows(self.rows.take(np.asarray(worlds, dtype=np.int64), axis=0), self.layout)
 
-    def assign(self, worlds, other: WorldState) -> None:
+    def assign(self, worlds: ArrayLike | list[int], other: WorldState) -> None:
         """Overwrite the given worlds (an index array or list) with ``other``'s (e.g. fresh episodes for
         finished worlds)."""
         if not isinstance(worlds, list):
@@ -271,7 +277,7 @@ class _Layout:
 
     humans: int
     robots: int
-    fields: dict
+    fields: dict[str, tuple[int, np.dtype, tuple[int, ...], tuple[int, ...]]]
     row_bytes: int
 
 
@@ -327,15 +333,15 @@ def assign_rows(pairs: list[tuple[np.ndarray, np.ndarray]], rows: list[int]) -> 
 
 
 def new_state(
-    human_pos,
-    human_goal,
-    robot_pos,
-    robot_goal,
-    robot_theta,
+    human_pos: ArrayLike,
+    human_goal: ArrayLike,
+    robot_pos: ArrayLike,
+    robot_goal: ArrayLike,
+    robot_theta: ArrayLike,
     config: WorldConfig,
-    human_radius=None,
-    human_v_pref=None,
-    rng=None,
+    human_radius: ArrayLike | None = None,
+    human_v_pref: ArrayLike | None = None,
+    rng: ArrayLike | None = None,
 ) -> WorldState:
     """A state at time 0 with resting agents, from (W, n, 2) humans and (W, R, 2) robots.
 
@@ -382,7 +388,7 @@ def seed_stream(seed: int) -> np.uint64:
 
 
 @numba.njit(cache=True, nogil=True)
-def _next_random(rng, w):
+def _next_random(rng: np.ndarray, w: int) -> float:
     """The next uniform number in [0, 1) of world ``w``'s splitmix64 stream, advancing ``rng[w]``."""
     state = rng[w] + np.uint64(0x9E3779B97F4A7C15)
     rng[w] = state
@@ -393,7 +399,7 @@ def _next_random(rng, w):
 
 
 @numba.njit(cache=True, nogil=True)
-def _draw_attributes(rng, out):
+def _draw_attributes(rng: np.ndarray, out: np.ndarray) -> None:
     """CrowdNav's randomised humans: (v_pref, radius) per human, uniform over their ranges, from each world's
     stream."""
     for w in range(out.shape[0]):
@@ -404,7 +410,7 @@ def _draw_attributes(rng, out):
             out[w, h, 1] = r_low + (r_high - r_low) * _next_random(rng, w)
 
 
-def check_env_action(env_action, n_worlds: int, config: WorldConfig) -> np.ndarray:
+def check_env_action(env_action: ArrayLike, n_worlds: int, config: WorldConfig) -> np.ndarray:
     """The environment action as (W, n, 2), after the checks that keep bad input out of the world."""
     n = config.human_num
     action = np.asarray(env_action, dtype=np.float64)
@@ -435,7 +441,8 @@ def preferred_velocities(state: WorldState) -> np.ndarray:
     """CrowdNav's ORCA preferred velocity: the vector to the goal, normalised only when longer than 1 m."""
     to_goal = state.human_goal - state.human_pos
     length = np.linalg.norm(to_goal, axis=-1, keepdims=True)
-    return np.where(length > 1.0, to_goal / np.maximum(length, 1e-300), to_goal)
+    preferred: np.ndarray = np.where(length > 1.0, to_goal / np.maximum(length, 1e-300), to_goal)
+    return preferred
 
 
 def human_velocities(state: WorldState, config: WorldConfig, env_action: np.ndarray | None) -> np.ndarray:
@@ -518,7 +525,8 @@ def in_view(heading: np.ndarray, offsets: np.ndarray, fov_degrees: float) -> np.
     length = np.linalg.norm(offsets, axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         cosine = np.sum(direction * offsets, axis=-1) / length
-        return np.arccos(np.clip(cosine, -1.0, 1.0)) <= np.radians(fov_degrees) / 2
+        seen: np.ndarray = np.arccos(np.clip(cosine, -1.0, 1.0)) <= np.radians(fov_degrees) / 2
+        return seen
 
 
 def _crowd_velocities_in_view(state: WorldState, config: WorldConfig, offset: np.ndarray, padding: float) -> np.ndarray:
@@ -547,7 +555,7 @@ def _crowd_velocities_in_view(state: WorldState, config: WorldConfig, offset: np
     return velocity.reshape(w, n, 2)
 
 
-def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.ndarray) -> np.ndarray:
+def robot_velocities(state: WorldState, config: WorldConfig, robot_action: ArrayLike) -> np.ndarray:
     """Apply the robots' kinematics to their actions: the velocities (W, R, 2) they have after this step.
 
     Holonomic: the action is a velocity, rescaled to at most v_pref. Unicycle: the action is (dv, dtheta),
@@ -578,7 +586,7 @@ def robot_velocities(state: WorldState, config: WorldConfig, robot_action: np.nd
 
 
 def arc_velocities(
-    state: WorldState, config: WorldConfig, robot_action: np.ndarray, heading_before: np.ndarray, velocity: np.ndarray
+    state: WorldState, config: WorldConfig, robot_action: ArrayLike, heading_before: np.ndarray, velocity: np.ndarray
 ) -> np.ndarray:
     """The unicycle's move over one step on an arc, as a velocity (W, R, 2): CrowdNav_DSRNN's differential drive
     turns at the constant rate dtheta / dt while moving at the new speed, so the robot moves along the chord
@@ -602,7 +610,7 @@ def arc_velocities(
 
 
 @numba.njit(cache=True, nogil=True)
-def _holonomic(action, v_pref, done, velocity, turns):
+def _holonomic(action: np.ndarray, v_pref: float, done: np.ndarray, velocity: np.ndarray, turns: np.ndarray) -> bool:
     """Each action as a velocity rescaled to at most ``v_pref`` (``action * (v_pref / max(speed, 1e-300))`` where
     the speed is over it, bit for bit as the tests' numpy formula computes it); a robot that has finished stands
     still, and one that moves turns to its velocity. Returns whether every action was finite."""
@@ -621,7 +629,9 @@ def _holonomic(action, v_pref, done, velocity, turns):
     return finite
 
 
-def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) -> np.ndarray:
+def step(
+    state: WorldState, config: WorldConfig, robot_action: ArrayLike, env_action: ArrayLike | None = None
+) -> np.ndarray:
     """Advance every world by one step in place and return each robot's reward (W, R).
 
     ``env_action`` is None (an unperturbed crowd) or (W, n, 2)/(W, 2n) within the configured bound; in
@@ -631,12 +641,14 @@ def step(state: WorldState, config: WorldConfig, robot_action, env_action=None) 
     return advance(state, config, robot_action, human_velocities(state, config, action))
 
 
-def advance(state: WorldState, config: WorldConfig, robot_action, new_human_vel: np.ndarray) -> np.ndarray:
+def advance(state: WorldState, config: WorldConfig, robot_action: ArrayLike, new_human_vel: np.ndarray) -> np.ndarray:
     """``step`` with the humans' new velocities already computed (``human_velocities``)."""
     arc = config.kinematics == "unicycle" and config.unicycle_motion == "arc"
     heading_before = state.robot_theta.copy() if arc else None
     new_robot_vel = robot_velocities(state, config, robot_action)
-    moved = arc_velocities(state, config, robot_action, heading_before, new_robot_vel) if arc else new_robot_vel
+    moved = new_robot_vel
+    if heading_before is not None:
+        moved = arc_velocities(state, config, robot_action, heading_before, new_robot_vel)
     reward = np.empty(state.done.shape)
     _move_and_judge(
         state.robot_pos,
@@ -684,20 +696,20 @@ def advance(state: WorldState, config: WorldConfig, robot_action, new_human_vel:
 
 @numba.njit(cache=True, nogil=True)
 def _change_goals(
-    human_pos,
-    human_goal,
-    human_radius,
-    human_v_pref,
-    robot_goal,
-    time,
-    rng,
-    chance,
-    interval,
-    end_chance,
-    circle_radius,
-    robot_radius,
-    discomfort_dist,
-):
+    human_pos: np.ndarray,
+    human_goal: np.ndarray,
+    human_radius: np.ndarray,
+    human_v_pref: np.ndarray,
+    robot_goal: np.ndarray,
+    time: np.ndarray,
+    rng: np.ndarray,
+    chance: float,
+    interval: float,
+    end_chance: float,
+    circle_radius: float,
+    robot_radius: float,
+    discomfort_dist: float,
+) -> None:
     """CrowdNav_DSRNN's goal changes, after a move: every ``interval`` seconds each walking human takes a new
     goal with ``chance``; then each human within its radius of its goal takes one with ``end_chance``. A new goal
     lies on the circle (plus noise scaled by the human's v_pref), clear of the other humans' positions and goals
@@ -746,18 +758,18 @@ def _change_goals(
 
 @numba.njit(cache=True, nogil=True)
 def _new_goal(
-    human_pos,
-    human_goal,
-    human_radius,
-    human_v_pref,
-    robot_goal,
-    rng,
-    w,
-    h,
-    circle_radius,
-    robot_radius,
-    discomfort_dist,
-):
+    human_pos: np.ndarray,
+    human_goal: np.ndarray,
+    human_radius: np.ndarray,
+    human_v_pref: np.ndarray,
+    robot_goal: np.ndarray,
+    rng: np.ndarray,
+    w: int,
+    h: int,
+    circle_radius: float,
+    robot_radius: float,
+    discomfort_dist: float,
+) -> None:
     """Draw human ``h``'s new goal as CrowdNav does, retrying while it is too close to another agent (at most
     1000 tries; the last one stands)."""
     for _ in range(1000):
@@ -784,28 +796,28 @@ def _new_goal(
 
 @numba.njit(cache=True, nogil=True)
 def _move_and_judge(
-    robot_pos,
-    robot_goal,
-    human_pos,
-    human_radius,
-    robot_vel,
-    human_vel,
-    time,
-    done,
-    outcome,
-    event_time,
-    path_length,
-    min_clearance,
-    dt,
-    robot_radius,
-    time_limit,
-    discomfort_dist,
-    discomfort_factor,
-    progress_factor,
-    success_reward,
-    collision_penalty,
-    reward,
-):
+    robot_pos: np.ndarray,
+    robot_goal: np.ndarray,
+    human_pos: np.ndarray,
+    human_radius: np.ndarray,
+    robot_vel: np.ndarray,
+    human_vel: np.ndarray,
+    time: np.ndarray,
+    done: np.ndarray,
+    outcome: np.ndarray,
+    event_time: np.ndarray,
+    path_length: np.ndarray,
+    min_clearance: np.ndarray,
+    dt: float,
+    robot_radius: float,
+    time_limit: float,
+    discomfort_dist: float,
+    discomfort_factor: float,
+    progress_factor: float,
+    success_reward: float,
+    collision_penalty: float,
+    reward: np.ndarray,
+) -> None:
     """Robots move, then humans, time advances; each robot's move is judged (collision, success, timeout) and
     rewarded; the state's arrays are updated in place. The float operations are those of the formulas written
     with numpy arrays in the tests, in the same order, so the results are bit-identical to them: closest approach
