@@ -11,36 +11,22 @@ from fastapi.testclient import TestClient
 
 from search.bundle.build import build_bundle, plan_clips, search_inputs, search_job
 from search.bundle.spec import load_build
+from tests.support.survey import planned_bundle
 
 ROOT = Path(__file__).resolve().parents[2]
 STUDY = ROOT / "studies" / "highway.toml"
 
 
 def test_the_highway_study_plans_highway_searches_the_server_accepts():
-    from app.formats import ManifestClip
-    from app.survey.bundle import Bundle, check_study_against_bundle
+    from app.survey.bundle import check_study_against_bundle
     from app.survey.study import load_study
-    from search.clips.render import robot_label
 
     spec, _ = load_build(STUDY)
     jobs = plan_clips(spec)
     inputs = [search_inputs(search_job(job)) for job in jobs]
     assert {i["scenario"]["domain"] for i in inputs} == {"gym"}
     assert all(len(agent["sha256"]) == 64 for i in inputs for agent in i["agents"])  # the shipped files' checksums
-    clips = {
-        job.id: ManifestClip(
-            id=job.id,
-            file=f"clips/{job.id}.mp4",
-            sha256=f"{n:064x}",
-            scheme=job.scheme.name,
-            scenario=job.scenario,
-            agents=list(job.pair),
-            labels=[robot_label(number) for number in job.numbers],
-            better=job.pair[0],
-        )
-        for n, job in enumerate(jobs)
-    }
-    check_study_against_bundle(load_study(STUDY), Bundle(root=ROOT, clips=clips, paths={}))
+    check_study_against_bundle(load_study(STUDY), planned_bundle(jobs, ROOT))
 
 
 def test_a_highway_study_mixing_worlds_is_refused_at_its_line(tmp_path):

@@ -13,6 +13,7 @@ from search.bundle.build import build_bundle, plan_clips, search_inputs, search_
 from search.bundle.spec import BuildError, load_build, parse_build
 from search.solvers.mcts import MCTSConfig
 from search.solvers.reward import RewardConfig
+from tests.support.survey import planned_bundle
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -313,30 +314,16 @@ def test_a_study_file_without_a_build_table_is_refused(tmp_path):
 def test_shipped_study_files_build_and_serve(name):
     """Every search of the shipped study files is valid (settings, scenarios), and the clips they plan are what
     the server asks for: a manifest of them passes the server's start-up check, one label per robot in a round."""
-    from app.formats import ManifestClip
     from app.survey.bundle import Bundle, check_study_against_bundle
     from app.survey.study import load_study
-    from search.clips.render import robot_label
 
     spec, _ = load_build(ROOT / "studies" / name)
     jobs = plan_clips(spec)
     assert all(search_inputs(search_job(job)) for job in jobs)
-    clips = {
-        job.id: ManifestClip(
-            id=job.id,
-            file=f"clips/{job.id}.mp4",
-            sha256=f"{n:064x}",
-            scheme=job.scheme.name,
-            scenario=job.scenario,
-            agents=list(job.pair),
-            labels=[robot_label(number) for number in job.numbers],
-            better=job.pair[0],
-        )
-        for n, job in enumerate(jobs)
-    }
+    bundle = planned_bundle(jobs, ROOT)
     study = load_study(ROOT / "studies" / name)  # the server reads the same file
-    check_study_against_bundle(study, Bundle(root=ROOT, clips=clips, paths={}))
-    without_one = dict(list(clips.items())[1:])
+    check_study_against_bundle(study, bundle)
+    without_one = dict(list(bundle.clips.items())[1:])
     with pytest.raises(BundleError, match="needs a clip of"):
         check_study_against_bundle(study, Bundle(root=ROOT, clips=without_one, paths={}))
 

@@ -284,3 +284,25 @@ def write_long_bundle(clips: Path, root: Path) -> Path:
         agents=AGENT_RANK,
         example=(names["nfirst"], names["paper-code"], (names["lo"], names["hi"])),
     )
+
+
+def planned_bundle(jobs: list, root: Path):
+    """A bundle with one manifest entry per clip `foil bundle` plans (`search.bundle.build.plan_clips`), the first
+    agent of each pair the better: what the server's start-up check is given, without searching or rendering."""
+    from app.survey.bundle import Bundle
+    from search.clips.render import robot_label
+
+    clips = {
+        job.id: ManifestClip(
+            id=job.id,
+            file=f"clips/{job.id}.mp4",
+            sha256=f"{n:064x}",
+            scheme=job.scheme.name,
+            scenario=job.scenario,
+            agents=list(job.pair),
+            labels=[robot_label(number) for number in job.numbers],
+            better=job.pair[0],
+        )
+        for n, job in enumerate(jobs)
+    }
+    return Bundle(root=root, clips=clips, paths={})
