@@ -19,8 +19,8 @@ from starlette.datastructures import FormData
 
 from app.store import queries
 from app.store.database import Database, as_utc
-from app.survey.screens import Asked, OneOf, Robot, Screen, parse_plan
-from app.survey.study import ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, Study, TextQuestion
+from app.survey.screens import Asked, Screen, parse_plan
+from app.survey.study import Study, digits
 
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
 # seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being
@@ -64,11 +64,6 @@ class Checked:
         return sum(1 for event in self.video_events if event["type"] == "play")
 
 
-def digits(value: str) -> bool:
-    """Whether `value` is a whole number in ASCII digits: str.isdigit alone also takes '²', which int() refuses."""
-    return value.isascii() and value.isdigit()
-
-
 def _one(form: FormData, name: str) -> str | None:
     """The field's value; None when it is missing, repeated or a file."""
     values = form.getlist(name)
@@ -81,54 +76,13 @@ def _unanswered(form: FormData, name: str) -> bool:
     return not values or (len(values) == 1 and isinstance(values[0], str) and not values[0].strip())
 
 
-def _check_field(asked: Asked, robots: list[Robot], form: FormData, out: Checked) -> None:
+def _check_field(asked: Asked, labels: list[str], form: FormData, out: Checked) -> None:
     """One form field checked against its question: its answer into `out.answers`, or why not into `out.errors`."""
-    name, question = asked.name, asked.question
-    labels = [robot.label for robot in robots]
-    if isinstance(question, OneOf | ChoiceQuestion):
-        value = _one(form, name)
-        if value not in question.options:
-            out.errors[name] = "Choose one of the answers."
-        elif isinstance(question, OneOf) and question.expected is not None and value != question.expected:
-            out.errors[name] = "That is not right. Read the instructions above again, then choose another answer."
-        else:
-            out.answers[name] = value
-    elif isinstance(question, ChooseQuestion):
-        value = _one(form, name)
-        if value not in labels:
-            out.errors[name] = "Choose one of the robots." if not value else "That robot is not in this clip."
-        else:
-            out.answers[name] = value
-    elif isinstance(question, TextQuestion):
-        value = _one(form, name) or ""
-        if len(value.strip()) < question.min_length:
-            out.errors[name] = (
-                "Please write an answer."
-                if question.min_length == 1
-                else (f"Please write at least {question.min_length} characters.")
-            )
-        elif len(value) > question.max_length:
-            out.errors[name] = f"Please keep this under {question.max_length} characters (you wrote {len(value)})."
-        else:
-            out.answers[name] = value
-    elif isinstance(question, ScaleQuestion):
-        value = _one(form, name)
-        if not value:
-            out.errors[name] = "Choose one point on the scale."
-        elif not digits(value) or not 1 <= int(value) <= question.points:
-            out.errors[name] = f"The answer must be a whole number from 1 to {question.points}."
-        else:
-            out.answers[name] = int(value)
-    elif isinstance(question, RankQuestion):
-        ranking = [_one(form, f"{name}-{place}") for place in range(1, len(labels) + 1)]
-        if any(not value for value in ranking):
-            out.errors[name] = "Put a robot in every place of the ranking."
-        elif any(value not in labels for value in ranking):
-            out.errors[name] = "The ranking names a robot that is not in this study."
-        elif len(set(ranking)) != len(ranking):
-            out.errors[name] = "Each robot can take only one place: the ranking has a robot twice."
-        else:
-            out.answers[name] = ranking
+    answer, error = asked.question.check(asked.name, lambda name: _one(form, name), labels)
+    if error is None:
+        out.answers[asked.name] = answer
+    else:
+        out.errors[asked.name] = error
 
 
 def _video_events(raw: str | None) -> list[dict[str, Any]] | None:
@@ -159,11 +113,11 @@ def _video_events(raw: str | None) -> list[dict[str, Any]] | None:
 def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
     """The submitted form of `screen`: its answers, or the errors to show next to its fields."""
     out = Checked()
-    robots = screen.offered()
+    labels = [robot.label for robot in screen.offered()]
     for asked in screen.asks(study):
         if not asked.required and _unanswered(form, asked.name):
             continue  # an optional answer left empty: nothing is stored for it
-        _check_field(asked, robots, form, out)
+        _check_field(asked, labels, form, out)
     events = _video_events(_one(form, "video_events"))
     if events is None:
         out.errors["video"] = "The page sent a malformed record of the clip's playback; reload the page."

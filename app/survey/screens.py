@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 from app.survey.bundle import Bundle
 from app.survey.clip_length import clip_shape
-from app.survey.study import FEEDBACK, Question, Study, TextQuestion
+from app.survey.study import FEEDBACK, CheckedAnswer, FieldReader, Question, Study, TextQuestion, check_option
 from app.visible import VisibleClip
 
 
@@ -28,6 +28,12 @@ class OneOf:
 
     options: list[str]
     expected: str | None = None
+
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        value = read(name)
+        if value in self.options and self.expected is not None and value != self.expected:
+            return None, "That is not right. Read the instructions above again, then choose another answer."
+        return check_option(self.options, value)
 
 
 class Asked(NamedTuple):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -129,12 +130,35 @@ class Completion(Strict):
         return self
 
 
+# Checking a submitted form field: `read(field)` gives the field's one value (None when it is missing or repeated),
+# `labels` the robots on the screen; a check gives (the answer, None) or (None, the message shown next to the field).
+FieldReader = Callable[[str], str | None]
+Answer = str | int | list[str]
+CheckedAnswer = tuple[Answer, None] | tuple[None, str]
+
+
+def digits(value: str) -> bool:
+    """Whether `value` is a whole number in ASCII digits: str.isdigit alone also takes '²', which int() refuses."""
+    return value.isascii() and value.isdigit()
+
+
+def check_option(options: list[str], value: str | None) -> CheckedAnswer:
+    """One of `options`, as a choice question and the instructions' check question take it."""
+    return (value, None) if value in options else (None, "Choose one of the answers.")
+
+
 class ChooseQuestion(Strict):
     """Pick one of the robots shown in the clip."""
 
     type: Literal["choose"]
     text: Text
     help: str = ""  # neutral help text under the question (never an example answer)
+
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        value = read(name)
+        if value not in labels:
+            return None, "Choose one of the robots." if not value else "That robot is not in this clip."
+        return value, None
 
 
 class TextQuestion(Strict):
@@ -144,6 +168,15 @@ class TextQuestion(Strict):
     min_length: Annotated[int, Field(ge=1)] = 1
     max_length: Annotated[int, Field(ge=1, le=10_000)] = 2000
     rows: Annotated[int, Field(ge=1, le=20)] = 3
+
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        value = read(name) or ""
+        if len(value.strip()) < self.min_length:
+            at_least = f"at least {self.min_length} characters" if self.min_length > 1 else "an answer"
+            return None, f"Please write {at_least}."
+        if len(value) > self.max_length:
+            return None, f"Please keep this under {self.max_length} characters (you wrote {len(value)})."
+        return value, None
 
 
 class ScaleQuestion(Strict):
@@ -172,6 +205,14 @@ class ScaleQuestion(Strict):
         low, high = self.anchors
         return [low if i == 1 else high if i == self.points else str(i) for i in range(1, self.points + 1)]
 
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        value = read(name)
+        if not value:
+            return None, "Choose one point on the scale."
+        if not digits(value) or not 1 <= int(value) <= self.points:
+            return None, f"The answer must be a whole number from 1 to {self.points}."
+        return int(value), None
+
 
 class RankQuestion(Strict):
     """Order every robot of a ranking part from best to worst."""
@@ -179,6 +220,17 @@ class RankQuestion(Strict):
     type: Literal["rank"]
     text: Text
     help: str = ""  # neutral help text under the question (never an example answer)
+
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        """The robots best first, from the fields `name-1` (the best place) to `name-N`."""
+        ranking = [read(f"{name}-{place}") for place in range(1, len(labels) + 1)]
+        if any(not value for value in ranking):
+            return None, "Put a robot in every place of the ranking."
+        if any(value not in labels for value in ranking):
+            return None, "The ranking names a robot that is not in this study."
+        if len(set(ranking)) != len(ranking):
+            return None, "Each robot can take only one place: the ranking has a robot twice."
+        return [value for value in ranking if value is not None], None
 
 
 class ChoiceQuestion(Strict):
@@ -195,6 +247,9 @@ class ChoiceQuestion(Strict):
         if len(set(values)) != len(values):
             raise ValueError("options must not repeat")
         return values
+
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        return check_option(self.options, read(name))
 
 
 Question = Annotated[

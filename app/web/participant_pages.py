@@ -24,12 +24,12 @@ from starlette.datastructures import FormData
 
 from app.store import queries
 from app.store.models import Participant
-from app.survey.answers import Checked, Outcome, Refused, current_with_plan, digits, save_answer
+from app.survey.answers import Checked, Outcome, Refused, current_with_plan, save_answer
 from app.survey.assignment import condition_for_slot, next_slot
 from app.survey.kinds import kind_from_link, pilot_token
 from app.survey.plan import build_plan
 from app.survey.screens import Screen, dump_plan, page_view
-from app.survey.study import FEEDBACK
+from app.survey.study import FEEDBACK, digits
 from app.web.context import Context, ContextDep
 from app.web.security import FormDep
 

@@ -223,3 +223,32 @@ def test_saving_an_answer_says_what_came_of_it_and_commits_before_it_returns(mak
     assert save(1, answers) is Outcome.SAVED  # the same answers again: nothing to keep or say
     assert save(1, answer_for(first, choice=1)) is Outcome.KEPT  # other answers: the first are kept
     assert stored(client, Response)[1].answers == saved[1].answers and stored(client, Participant)[0].step == 2
+
+
+def test_each_kind_of_question_checks_its_own_answer():
+    """What each kind of question takes from a submitted form, and the message shown beside its field otherwise."""
+    from app.survey.screens import OneOf
+    from app.survey.study import ChoiceQuestion, ChooseQuestion, RankQuestion, ScaleQuestion, TextQuestion
+
+    form = {"q": "b", "t": "ab", "s": "3", "r-1": "Robot 2", "r-2": "Robot 1"}
+    read, labels = form.get, ["Robot 1", "Robot 2"]
+    not_right = "That is not right. Read the instructions above again, then choose another answer."
+    assert ChoiceQuestion(type="choice", text="?", options=["a", "b"]).check("q", read, labels) == ("b", None)
+    assert ChoiceQuestion(type="choice", text="?", options=["a", "c"]).check("q", read, labels) == (
+        None,
+        "Choose one of the answers.",
+    )
+    assert OneOf(["a", "b"], expected="b").check("q", read, labels) == ("b", None)
+    assert OneOf(["a", "b"], expected="a").check("q", read, labels) == (None, not_right)
+    assert OneOf(["a", "c"], expected="a").check("q", read, labels) == (None, "Choose one of the answers.")
+    assert TextQuestion(type="text", text="?", min_length=3).check("t", read, labels) == (
+        None,
+        "Please write at least 3 characters.",
+    )
+    assert TextQuestion(type="text", text="?", min_length=2).check("t", read, labels) == ("ab", None)
+    assert ScaleQuestion(type="scale", text="?", points=5, anchors=("low", "high")).check("s", read, labels) == (
+        3,
+        None,
+    )
+    assert RankQuestion(type="rank", text="?").check("r", read, labels) == (["Robot 2", "Robot 1"], None)
+    assert ChooseQuestion(type="choose", text="?").check("r-1", read, labels) == ("Robot 2", None)
