@@ -8,24 +8,14 @@ from __future__ import annotations
 
 import pytest
 
-from tests.support.browser import AXE, CHROMIUM, CHROMIUM_ARGS, DESKTOP
-from tests.support.live_server import LiveServer
-from tests.support.survey import ADMIN_PASSWORD, study_text
+from tests.support.browser import AXE, CHROMIUM, CHROMIUM_ARGS, DESKTOP, study_server
+from tests.support.survey import study_text
 
 
 @pytest.fixture(scope="session")
 def server(tmp_path_factory, bundle_dir):
     """One `foil serve` for the browser tests; each test uses its own MTurk worker ids."""
-    work = tmp_path_factory.mktemp("browser-server")
-    study = work / "study.toml"
-    study.write_text(study_text())
-    with LiveServer(
-        bundle=bundle_dir,
-        study=study,
-        database_url=f"sqlite:///{work / 'survey.sqlite3'}",
-        workdir=work,
-        admin_password=ADMIN_PASSWORD,
-    ) as live:
+    with study_server(tmp_path_factory.mktemp("browser-server"), bundle_dir, study_text()) as live:
         yield live
 
 

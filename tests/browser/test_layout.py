@@ -14,9 +14,8 @@ import pytest
 from app.store.database import Database
 from app.survey.kinds import pilot_token
 from tests.support.analysis import summary_for
-from tests.support.browser import ARTIFACTS
-from tests.support.live_server import LiveServer
-from tests.support.survey import ADMIN_PASSWORD, finish, start, study_text, write_long_bundle
+from tests.support.browser import ARTIFACTS, long_clip_server
+from tests.support.survey import ADMIN_PASSWORD, finish, start
 
 pytestmark = pytest.mark.browser
 DESKTOPS = [{"width": 1366, "height": 768}, {"width": 1280, "height": 720}, {"width": 1440, "height": 900}]
@@ -27,20 +26,12 @@ NEXT = "fieldset[data-answers] button[type=submit]"
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    work = tmp_path_factory.mktemp("browser-layout")
-    study = work / "study.toml"
-    study.write_text(study_text(platform='"none"', assignment='"balanced"'))
-    bundle = write_long_bundle(work / "clips", work / "bundle")
-    (bundle / "summaries").mkdir()
-    for clip in json.loads((bundle / "manifest.json").read_text())["clips"]:
-        (bundle / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], misleading=False)))
-    with LiveServer(
-        bundle=bundle,
-        study=study,
-        database_url=f"sqlite:///{work / 'survey.sqlite3'}",
-        workdir=work,
-        admin_password=ADMIN_PASSWORD,
-    ) as live:
+    def with_summaries(bundle):
+        (bundle / "summaries").mkdir()
+        for clip in json.loads((bundle / "manifest.json").read_text())["clips"]:
+            (bundle / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], misleading=False)))
+
+    with long_clip_server(tmp_path_factory.mktemp("browser-layout"), with_summaries) as live:
         yield live
 
 

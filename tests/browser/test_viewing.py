@@ -13,9 +13,7 @@ from sqlalchemy import select
 from app.store.database import Database
 from app.store.models import Participant, Response
 from app.survey.kinds import pilot_token
-from tests.support.browser import ARTIFACTS, SERIOUS
-from tests.support.live_server import LiveServer
-from tests.support.survey import ADMIN_PASSWORD, study_text, write_long_bundle
+from tests.support.browser import ARTIFACTS, SERIOUS, long_clip_server
 
 pytestmark = pytest.mark.browser
 PHONE = {"width": 360, "height": 800}
@@ -26,17 +24,7 @@ NEXT = "fieldset[data-answers] button[type=submit]"
 
 @pytest.fixture(scope="module")
 def long_server(tmp_path_factory):
-    work = tmp_path_factory.mktemp("browser-viewing")
-    study = work / "study.toml"
-    study.write_text(study_text(platform='"none"', assignment='"balanced"'))
-    long_bundle_dir = write_long_bundle(work / "clips", work / "bundle")
-    with LiveServer(
-        bundle=long_bundle_dir,
-        study=study,
-        database_url=f"sqlite:///{work / 'survey.sqlite3'}",
-        workdir=work,
-        admin_password=ADMIN_PASSWORD,
-    ) as live:
+    with long_clip_server(tmp_path_factory.mktemp("browser-viewing")) as live:
         yield live
 
 

@@ -34,7 +34,8 @@ ADMIN_PASSWORD = "correct horse battery"
 WATCHED = json.dumps([{"type": "loaded", "t": 5}, {"type": "play", "t": 100}, {"type": "ended", "t": 1100}])
 
 
-def make_clip(path: Path, source: str) -> None:
+def make_clip(path: Path, source: str, size: str = "64x64", seconds: float = 1) -> None:
+    """A real H.264 clip of ffmpeg's test `source` pattern."""
     subprocess.run(
         [
             imageio_ffmpeg.get_ffmpeg_exe(),
@@ -44,7 +45,7 @@ def make_clip(path: Path, source: str) -> None:
             "-f",
             "lavfi",
             "-i",
-            f"{source}=size=64x64:rate=10:duration=1",
+            f"{source}=size={size}:rate=10:duration={seconds}",
             "-c:v",
             "libx264",
             "-pix_fmt",
@@ -255,26 +256,7 @@ def write_long_bundle(clips: Path, root: Path) -> Path:
     files = []
     for name, source in (("a", "testsrc"), ("b", "testsrc2")):
         files.append(clips / f"{name}.mp4")
-        subprocess.run(
-            [
-                imageio_ffmpeg.get_ffmpeg_exe(),
-                "-v",
-                "error",
-                "-y",
-                "-f",
-                "lavfi",
-                "-i",
-                f"{source}=size=72x88:rate=10:duration={CLIP_S}",
-                "-c:v",
-                "libx264",
-                "-pix_fmt",
-                "yuv420p",
-                "-movflags",
-                "+faststart",
-                str(files[-1]),
-            ],
-            check=True,
-        )
+        make_clip(files[-1], source, size="72x88", seconds=CLIP_S)
     names = SECRET_NAMES
     return write_bundle(
         root,
