@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from importlib.util import find_spec
 from pathlib import Path
@@ -55,37 +56,33 @@ def _release(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from search.agents.evaluate import run_eval
-    from search.highway.domain import CROWD, infer_domain
-    from search.sim.world import WorldConfig
-    from search.solvers.runner import parse_settings
+    from search.solvers.domain import domain_for
 
-    if infer_domain([args.agent]) != CROWD:
-        from search.highway.evaluate import run_eval as run_highway_eval
-
-        return run_highway_eval(args.agent, episodes=args.episodes, seed=args.seed, as_json=args.json)
-
-    return run_eval(
-        args.agent,
-        episodes=args.episodes,
-        seed=args.seed,
-        as_json=args.json,
-        time_limit=args.time_limit,
-        world=parse_settings(WorldConfig, args.world, "world"),
-    )
+    domain = domain_for([args.agent], args.scenario)
+    world = domain.parse_world(args.world)
+    if args.time_limit is not None:
+        if not (math.isfinite(args.time_limit) and args.time_limit > 0):
+            raise ValueError(f"--time-limit must be a positive, finite number of seconds, got {args.time_limit}")
+        if domain.time_limit_setting is None:
+            raise ValueError(
+                f"--time-limit sets the crowd world's episode length; in the {domain.name} world an episode ends "
+                "when its environment says so (give one of its own settings with --world instead)"
+            )
+        world[domain.time_limit_setting] = args.time_limit
+    result = domain.evaluate(args.agent, args.episodes, args.seed, world, args.scenario) | {"agent": args.agent}
+    print(json.dumps(result) if args.json else domain.describe_evaluation(result))
+    return 0
 
 
 def _render(args: argparse.Namespace) -> int:
-    from search.clips.render import RenderOptions, render_file
+    from app.formats import load_summary
+    from search.clips.render import RenderOptions
+    from search.solvers.domain import domain_of_summary
 
     options = RenderOptions(fps=args.fps, speed=args.speed, width=args.width, crf=args.crf)
-    numbers = [int(n) for n in args.numbers.split(",")] if args.numbers else None
-    from app.formats import load_summary
-    from search.gym.summary import is_gym_summary
-
-    if is_gym_summary(load_summary(args.summary)):
-        from search.highway.clips import render_highway as render_file
-    result = render_file(args.summary, args.out, numbers=numbers, options=options)
+    data = load_summary(args.summary)
+    numbers = [int(n) for n in args.numbers.split(",")] if args.numbers else list(range(1, len(data["agents"]) + 1))
+    result = domain_of_summary(data).render(Path(args.summary), Path(args.out), numbers, options)
     print(
         f"{result.clip}: {result.frames} frames, {result.seconds:.1f} s, {result.width}x{result.height}, "
         f"rendered in {result.render_s:.2f} s; poster {result.poster.name}, contact sheet {result.sheet.name}"
@@ -100,8 +97,8 @@ def _bundle(args: argparse.Namespace) -> int:
     return 0
 
 
-def _search_job_settings(args: argparse.Namespace) -> dict:
-    from search.sim.world import WorldConfig
+def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str], scenario: str) -> dict:
+    from search.solvers.domain import domain_for
     from search.solvers.reward import RewardConfig
     from search.solvers.runner import parse_settings, solver_config_class
 
@@ -109,100 +106,51 @@ def _search_job_settings(args: argparse.Namespace) -> dict:
         "budget": args.budget,
         "seed": args.seed,
         "top_k": args.top_k,
-        "solver_settings": parse_settings(solver_config_class(args.solver), args.set, "solver"),
+        "solver_settings": parse_settings(solver_config_class(solver), args.set, "solver"),
         "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
-        "world_settings": parse_settings(WorldConfig, args.world, "world"),
+        "world_settings": domain_for(agents, scenario).parse_world(args.world),
     }
 
 
 def _search(args: argparse.Namespace) -> int:
-    from search.highway.domain import CROWD, infer_domain, load_gym_scenario
     from search.solvers.runner import SearchJob, run_search, write_outputs
 
-    if infer_domain(comma_separated(args.agents), args.scenario) != CROWD:
-        from search.gym.summary import run_gym_search
-
-        scenario = load_gym_scenario(args.scenario)
-        settings = _search_job_settings(argparse.Namespace(**{**vars(args), "world": []}))
-        job = SearchJob(
-            agents=tuple(comma_separated(args.agents)),
-            scenario=args.scenario,
-            solver=args.solver,
-            **settings | {"world_settings": _json_settings(args.world)},
-        )
-        files = run_gym_search(job, scenario, progress=not args.quiet)
-    else:
-        job = SearchJob(
-            agents=tuple(comma_separated(args.agents)),
-            scenario=args.scenario,
-            solver=args.solver,
-            **_search_job_settings(args),
-        )
-        files = run_search(job, progress=not args.quiet)
-    out = write_outputs(args.out, files)
+    agents = comma_separated(args.agents)
+    job = SearchJob(
+        agents=tuple(agents),
+        scenario=args.scenario,
+        solver=args.solver,
+        **_search_job_settings(args, args.solver, agents, args.scenario),
+    )
+    out = write_outputs(args.out, run_search(job, progress=not args.quiet))
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
     return 0
 
 
 def _search_all(args: argparse.Namespace) -> int:
-    from search.highway.domain import infer_domain
     from search.solvers.runner import run_all, study_jobs
 
-    solvers = comma_separated(args.solvers)
-    crowd = all(
-        infer_domain(comma_separated(args.agents), scenario) == "crowd" for scenario in comma_separated(args.scenarios)
-    )
-    settings = _search_job_settings(
-        argparse.Namespace(**{**vars(args), "solver": solvers[0], "world": args.world if crowd else []})
-    )
-    if not crowd:
-        settings["world_settings"] = _json_settings(args.world)
+    solvers, agents, scenarios = (comma_separated(a) for a in (args.solvers, args.agents, args.scenarios))
     if len(solvers) > 1 and args.set:
         raise ValueError("--set applies to one solver: give a single --solvers with it")
-    jobs = study_jobs(
-        comma_separated(args.agents), comma_separated(args.scenarios), solvers, joint=args.joint, **settings
-    )
-    search = None
-    if not crowd:
-        from search.bundle.worlds import search_files as search
+    settings = _search_job_settings(args, solvers[0], agents, scenarios[0])
+    jobs = study_jobs(agents, scenarios, solvers, joint=args.joint, **settings)
     study = run_all(
-        jobs,
-        args.out,
-        workers=args.jobs,
-        backend=args.backend,
-        ray_address=args.ray_address,
-        progress=not args.quiet,
-        search=search,
+        jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address, progress=not args.quiet
     )
     print(f"{args.out}: {len(jobs)} searches in {study['wall_s']:.1f} s; study.json lists them")
     return 0
 
 
 def _verify(args: argparse.Namespace) -> int:
-    from app.formats import load_summary
-    from search.gym.summary import is_gym_summary, verify_gym
     from search.solvers.summary import verify
 
     failed = 0
     for path in args.summaries:
-        problems = verify_gym(path) if is_gym_summary(load_summary(path)) else verify(path)
+        problems = verify(path)
         failed += bool(problems)
         print(f"{path}: " + ("reproduced exactly" if not problems else "DIFFERS\n  " + "\n  ".join(problems)))
     return 1 if failed else 0
-
-
-def _json_settings(items: list[str]) -> dict:
-    """``key=value`` settings of an environment adapter, each value read as JSON where it is (else text)."""
-    settings = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"bad world setting {item!r}: use key=value, e.g. vehicles_density=2")
-        try:
-            settings[key.strip()] = json.loads(text)
-        except json.JSONDecodeError:
-            settings[key.strip()] = text
-    return settings
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -264,6 +212,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="world setting over the agent's (an imported CrowdNav_DSRNN agent brings the world of "
         "its config; others the paper's), e.g. human_num=5",
+    )
+    evaluate.add_argument(
+        "--scenario",
+        metavar="NAME|FILE",
+        help="the world to evaluate in: a scenario or distribution file naming a Gymnasium environment's "
+        "adapter (its settings; episodes are seeded by --seed), or a domain's scenario such as highway-dense "
+        "(default: the agent's own test episodes)",
     )
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)

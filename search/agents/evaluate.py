@@ -9,12 +9,10 @@ horizon their clips show (25 s) as well as at the training time limit (50 s).
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
-from search.agents.policies import comparison_world, load_policy
 from search.sim import world
 from search.sim.observation import Policy, observe
 from search.sim.scenarios import sample_training_states
@@ -67,16 +65,3 @@ def format_result(result: dict) -> str:
             f"mean nav time    {nav}  (successful episodes)",
         ]
     )
-
-
-def run_eval(
-    agent: str, episodes: int, seed: int, as_json: bool, time_limit: float | None = None, world: dict | None = None
-) -> int:
-    """`foil eval`: in the world the agent brings (an imported checkpoint's), under the ``world`` settings given."""
-    if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
-        raise ValueError(f"--time-limit must be a positive, finite number of seconds, got {time_limit}")
-    explicit = (world or {}) | ({} if time_limit is None else {"time_limit": time_limit})
-    config = WorldConfig.from_dict(comparison_world([agent], explicit))
-    result = evaluate(load_policy(agent), episodes=episodes, seed=seed, config=config) | {"agent": agent}
-    print(json.dumps(result) if as_json else format_result(result))
-    return 0

@@ -30,11 +30,12 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
-from app.visible import VisibleClip, audit
-from search.bundle import worlds
+from app.visible import VisibleClip, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.clips.render import RenderOptions, robot_label
-from search.solvers.runner import SearchJob, limit_threads, solver_config_class, write_outputs
+from search.solvers.domain import domain_for, domain_of_summary
+from search.solvers.runner import SearchJob, limit_threads, run_search, solver_config_class, write_outputs
+from search.solvers.summary import verify
 
 
 @dataclass(frozen=True)
@@ -88,21 +89,15 @@ def _key(inputs: dict) -> str:
 
 def agent_identity(agent: str) -> dict:
     """What an agent's results depend on: its name and, for a network, the checksum of its file."""
-    from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
-
-    if agent in SCRIPTED:
-        return {"agent": agent}
-    path = worlds.agent_file(agent) or (AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent))
-    return {"agent": agent, "sha256": sha256_file(path)} if path.is_file() else {"agent": agent}
+    path = domain_for([agent]).agent_file(agent)
+    return {"agent": agent, "sha256": sha256_file(path)} if path is not None and path.is_file() else {"agent": agent}
 
 
 def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
     """The search behind a clip, with its scheme's settings; ``world`` is the study's comparison world
     (``study_world``), under the scenario file's and the scheme's world settings."""
-    from search.sim.scenarios import load_scenario_or_distribution
-
-    scheme = job.scheme
-    world = under(world, load_scenario_or_distribution(job.scenario).world if world else {})
+    scheme, domain = job.scheme, domain_for(job.pair, job.scenario)
+    world = under(world, domain.own_world(job.scenario) if world else {})
     return SearchJob(
         agents=job.pair,
         scenario=job.scenario,
@@ -112,16 +107,14 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
         top_k=scheme.top_k,
         solver_settings=asdict(scheme.solver_config),
         reward_settings=scheme.reward.to_dict(),
-        world_settings=world | scheme.world if worlds.is_crowd(job.pair, job.scenario) else dict(scheme.world),
+        world_settings=world | scheme.world,
     )
 
 
 def study_world(spec: BuildSpec) -> dict:
     """The world settings a study compares its agents in: those its imported checkpoints were trained in (a
     CrowdNav_DSRNN model's config), for every agent, in the evaluation and in every search alike."""
-    from search.agents.policies import comparison_world
-
-    return comparison_world([agent for agent in spec.agents if worlds.is_crowd([agent])], {})
+    return domain_for(spec.agents).study_world(spec.agents)
 
 
 def under(world: dict | None, own: dict) -> dict:
@@ -135,35 +128,6 @@ def beneath(scenario, world: dict | None):
     return replace(scenario, world=world | scenario.world) if world else scenario
 
 
-def agent_source(agent: str, world: dict) -> dict:
-    """Where an agent came from and the world it was compared in, for the manifest: its kind, its checkpoint file
-    and checksum, a CrowdNav_DSRNN model's config and trained world, and the full world of its evaluation."""
-    from search.agents.crowdnav import config_path, is_crowdnav_file
-    from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS, trained_world
-    from search.sim.world import WorldConfig
-
-    if not worlds.is_crowd([agent]):  # a Gymnasium world's agent (highway driving): its model file
-        path = worlds.agent_file(agent) or Path(agent)
-        return {"kind": "gymnasium"} | (
-            {"checkpoint": str(path), "sha256": sha256_file(path)} if path.is_file() else {}
-        )
-    source = {"kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"}
-    path = AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
-    if agent not in SCRIPTED and path.is_file():
-        source |= {
-            "kind": source["kind"] if agent in SHIPPED_AGENTS else "checkpoint",
-            "checkpoint": str(path),
-            "sha256": sha256_file(path),
-        }
-        if is_crowdnav_file(path):
-            source |= {
-                "kind": "crowdnav_dsrnn",
-                "config": str(config_path(path)),
-                "trained_world": trained_world(agent),
-            }
-    return source | {"world": WorldConfig.from_dict(world).to_dict()}
-
-
 def search_inputs(search: SearchJob) -> dict:
     """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
     input."""
@@ -171,7 +135,7 @@ def search_inputs(search: SearchJob) -> dict:
 
     return {
         "agents": [agent_identity(a) for a in search.agents],
-        "scenario": worlds.scenario_dict(search.agents, search.scenario, search.world_settings),
+        "scenario": domain_for(search.agents, search.scenario).scenario_dict(search.scenario, search.world_settings),
         "solver": search.solver,
         "solver_settings": asdict(solver_config_class(search.solver)(**search.solver_settings)),
         "reward": RewardConfig(**search.reward_settings).to_dict(),
@@ -211,21 +175,25 @@ class Cache:
 
 
 def evaluate_agents(
-    agents: list[str], episodes: int, seed: int, cache: Cache, log, world: dict | None = None
+    agents: list[str], episodes: int, seed: int, cache: Cache, log, world: dict | None = None, scenarios=None
 ) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
-    per input."""
+    per input; in a world whose agents act in their scenario's world, in the first of ``scenarios[agent]``."""
     results = {}
     for agent in agents:
+        domain = domain_for([agent])
+        scenario = domain.eval_scenario((scenarios or {}).get(agent, []))
         inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed} | (
             {"world": world} if world else {}
         )
+        if scenario is not None:
+            inputs["scenario"] = domain.scenario_dict(scenario, world or {})
         folder = cache.path("eval", inputs)
         if cache.valid("eval", inputs, "eval.json"):
             log(f"eval {agent}: cached")
         else:
             started = time.perf_counter()
-            result = worlds.evaluate(agent, episodes, seed, world) | {"agent": agent}
+            result = domain.evaluate(agent, episodes, seed, world or {}, scenario) | {"agent": agent}
             folder = cache.store("eval", inputs)
             (folder / "eval.json").write_text(json.dumps(result, indent=1))
             cache.seal("eval", inputs)
@@ -246,7 +214,7 @@ def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
     (`foil verify`), so changes to the simulator or the policies' code are caught too."""
     if not cache.valid("search", inputs, "summary-001.json"):
         return False
-    problems = worlds.verify(cache.path("search", inputs) / "summary-001.json")
+    problems = verify(cache.path("search", inputs) / "summary-001.json")
     if problems:
         log(f"{_describe(job)}: the cached summary no longer re-simulates exactly ({problems[0]}); searching again")
         return False
@@ -257,7 +225,7 @@ def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
 def _run_search(search: SearchJob, folder: Path) -> float:
     """Run one search and write its files into ``folder``; the seconds it took."""
     started = time.perf_counter()
-    write_outputs(folder, worlds.search_files(search))
+    write_outputs(folder, run_search(search))
     return time.perf_counter() - started
 
 
@@ -301,11 +269,14 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
 
 def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
     """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
+    domain = domain_of_summary(json.loads(summary.read_text()))
     inputs = {
         "summary": sha256_file(summary),
         "numbers": list(job.numbers),
         "options": asdict(options),
-        "renderer": sha256_file(worlds.renderer_file(summary)),
+        "renderer": [
+            sha256_file(path) for path in domain_of_summary(json.loads(summary.read_text())).renderer_files(summary)
+        ],
         "clip": out.name,
     }
     folder = cache.path("render", inputs)
@@ -316,7 +287,7 @@ def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, 
     ):
         log(f"render {job.id}: cached")
         return
-    result = worlds.render(summary, out, list(job.numbers), options)
+    result = domain.render(summary, out, list(job.numbers), options)
     folder = cache.store("render", inputs)
     (folder / "sha256").write_text(sha256_file(out))
     cache.seal("render", inputs)
@@ -339,20 +310,26 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         (out / folder).mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
-    evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log, world)
+    domain = domain_for(spec.agents)
+    scenarios = {
+        agent: [name for clip_set in spec.sets if agent in clip_set.all_agents() for name in clip_set.scenarios]
+        for agent in spec.agents
+    }
+    evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log, world, scenarios)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
     scenario_reports = representativeness(spec, cache, log, world)
     clips = []
     for job, search in zip(jobs, inputs, strict=True):
         summary = out / "summaries" / f"{job.id}.json"
-        shutil.copyfile(clip_summary(cache.path("search", search), job.scheme.select), summary)
+        shown = domain.world(job.scenario)
+        shutil.copyfile(clip_summary(cache.path("search", search), job.scheme.select, shown), summary)
         clip = out / "clips" / f"{job.id}.mp4"
         render_clip(job, summary, clip, spec.render, cache, log)
         order = sorted(range(2), key=lambda k: job.numbers[k])
         data = json.loads(summary.read_text())
         agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
         better = better_agent(job.pair, evaluations)
-        clip_audit = audit(VisibleClip.of_summary(data, agents, labels), labels[agents.index(better)])
+        clip_audit = audit(VisibleClip.of_summary(data, agents, labels, shown), labels[agents.index(better)])
         if clip_audit["shows"] != "better":
             log(
                 f"warning: clip {job.id} is misleading: it shows the better robot {better} "
@@ -385,21 +362,23 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
     write_gallery(out, clips, evaluations, scenario_reports)
+    study_shows = domain.world(spec.sets[0].scenarios[0])  # the crowd's words are the default: left out
     manifest = Manifest(
         format=MANIFEST_FORMAT,
         label_seed=spec.seed,
         clips=clips,
         agents=evaluations,
-        sources={agent: agent_source(agent, world) for agent in spec.agents},
+        sources={agent: domain_for([agent]).agent_source(agent, world or {}) for agent in spec.agents},
         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
         representativeness=scenario_reports,
+        world=None if study_shows == World() else study_shows.to_manifest(),
     )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
     return manifest
 
 
-def clip_summary(folder: Path, select: str) -> Path:
+def clip_summary(folder: Path, select: str, world: World) -> Path:
     """The summary of a search that becomes the clip: the best by reward, or with ``select = "contrast"`` the one
     of the search's top-K whose clip shows the largest visible difference (no ground truth is read)."""
     from search.solvers.representative import largest_contrast
@@ -408,56 +387,58 @@ def clip_summary(folder: Path, select: str) -> Path:
     if select == "reward":
         return first
     paths = sorted(folder.glob("summary-[0-9][0-9][0-9].json"))
-    return paths[largest_contrast([json.loads(p.read_text()) for p in paths])]
+    return paths[largest_contrast([json.loads(p.read_text()) for p in paths], world)]
 
 
 def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None) -> list[dict]:
     """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
-    there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`), with
-    a warning line when the scenario's majority disagrees with the distribution's vote. ``world`` is the study's
-    comparison world (``study_world``), beneath each scenario's and the distribution's own settings."""
+    there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`, by
+    default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
+    vote. ``world`` is the study's comparison world (``study_world``), beneath each scenario's and the
+    distribution's own settings."""
     import numpy as np
 
-    from search.agents.policies import load_policy
-    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
     from search.solvers.representative import RepresentativeConfig
     from search.solvers.representative import representativeness as measure
     from search.solvers.reward import RewardConfig
-    from search.solvers.summary import frozen_scenario
 
     settings = spec.representativeness
-    distribution = beneath(load_scenario_or_distribution(settings.distribution), world)
     scenarios_of: dict[tuple[str, str], list[str]] = {}
     for clip_set in spec.sets:
         if {"pairwise", "ranking"} & set(clip_set.parts):
             for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
-                if worlds.is_crowd(pair, name) and not isinstance(
-                    load_scenario_or_distribution(name), ScenarioDistribution
-                ):
+                if not domain_for(pair, name).is_distribution(name):
                     scenarios_of.setdefault(pair, []).append(name)
     reports = []
     for pair, names in scenarios_of.items():
+        domain = domain_for(pair)
+        distribution = settings.distribution or domain.default_distribution
+        if distribution is None:
+            continue  # a world with no distribution of starting states, and none named in the study
         names = list(dict.fromkeys(names))
-        fixed = [frozen_scenario(beneath(load_scenario_or_distribution(name), world), {}) for name in names]
+        fixed = [domain.state(name, under(world, domain.own_world(name))) for name in names]
+        drawn_world = under(world, domain.own_world(distribution))
+        reward = RewardConfig().to_dict()
         inputs = {
             "agents": [agent_identity(a) for a in pair],
             "scenarios": [s.to_dict() for s in fixed],
-            "distribution": asdict(distribution),
+            "distribution": domain.scenario_dict(distribution, drawn_world),
             "states": settings.states,
             "pushes": settings.pushes,
             "seed": settings.seed,
-            "reward": RewardConfig().to_dict(),
+            "reward": reward,
         }
         folder = cache.path("representativeness", inputs)
         if not cache.valid("representativeness", inputs, "report.json"):
             started = time.perf_counter()
             rng = np.random.default_rng(settings.seed)
-            drawn = [frozen_scenario(s, {}) for s in distribution.sample(rng, settings.states)]
+            drawn = domain.draw_states(distribution, drawn_world, rng, settings.states)
             found = measure(
-                [load_policy(a) for a in pair],
+                lambda states, pushes, rng, tracker, pair=pair, domain=domain, reward=reward: domain.roll_out(
+                    pair, states, reward, pushes, rng, tracker
+                ),
                 fixed,
                 drawn,
-                RewardConfig(),
                 RepresentativeConfig(states=settings.states, pushes=settings.pushes),
                 rng,
             )
@@ -466,7 +447,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
             cache.seal("representativeness", inputs)
             log(f"representativeness {pair[0]}-{pair[1]}: {time.perf_counter() - started:.1f} s")
         for name, found in zip(names, json.loads((folder / "report.json").read_text()), strict=True):
-            report = {"agents": list(pair), "scenario": name, "distribution": settings.distribution} | {
+            report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
                 key: value for key, value in found.items() if key != "scenario"
             }
             reports.append(report)

@@ -25,11 +25,10 @@ from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
 from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, parse_study
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
-from search.bundle import worlds
 from search.clips.render import ROBOT_STYLES, RenderOptions
 from search.sim.settings import check_keys, check_values
-from search.sim.world import WorldConfig
 from search.solvers.baselines import CEMConfig, SamplingConfig
+from search.solvers.domain import Domain, domain_for
 from search.solvers.mcts import MCTSConfig
 from search.solvers.representative import RepresentativeConfig
 from search.solvers.reward import RewardConfig
@@ -114,7 +113,7 @@ class Representativeness(Strict):
     """How `foil bundle` measures the study's fixed scenarios against the task's distribution of starting states
     (`[build.representativeness]`)."""
 
-    distribution: Text = "training"
+    distribution: Text | None = None  # default: the world's own (the crowd's "training")
     states: Positive = 64  # starting states drawn from the distribution
     pushes: Positive = 32  # rollouts per state (and per fixed scenario) under uniform pushes
     seed: Whole = 0
@@ -134,8 +133,8 @@ class BuildTable(Strict):
 @dataclass(frozen=True)
 class Scheme:
     """How one scheme's clips are found, as the search takes it: a solver with its config, simulator-step budget,
-    seed and top-K, the reward, and the world settings the scheme sets (in the crowd world checked against
-    WorldConfig; they go over the scenario's and the study's own, so only those given are kept)."""
+    seed and top-K, the reward, and the world settings the scheme sets (checked by the world's domain; they go
+    over the scenario's and the study's own, so only those given are kept)."""
 
     name: str
     solver: str
@@ -214,54 +213,54 @@ def _set_problems(build: BuildTable) -> list[Problem]:
 def _scenario_problems(build: BuildTable) -> list[Problem]:
     """Each set's scenarios found and of the kind its solvers search (a distribution for the representative
     solver, a fixed scenario for the others), and the representativeness distribution a distribution."""
-    from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
-
     problems: list[Problem] = []
+    domain = None
     for i, clip_set in enumerate(build.sets):
         for j, scenario in enumerate(clip_set.scenarios):
             try:
-                worlds.scenario_dict(clip_set.all_agents(), scenario, {})
+                domain = domain_for(clip_set.all_agents(), scenario)
+                domain.scenario_dict(scenario, {})
+                distribution = domain.is_distribution(scenario)
             except (ValueError, FileNotFoundError) as error:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
                 continue
-            if not worlds.is_crowd(clip_set.all_agents(), scenario):
-                continue
-            found = load_scenario_or_distribution(scenario)
             solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
-            if isinstance(found, ScenarioDistribution) != (solvers == {"representative"}):
+            if distribution != (solvers == {"representative"}):
                 problems.append(
                     (
                         ("build", "sets", i, "scenarios", j),
-                        f"{scenario!r} is a "
-                        f"{'distribution' if isinstance(found, ScenarioDistribution) else 'fixed scenario'}: "
-                        f"the representative solver draws from a distribution (such as 'training'), the "
-                        f"other solvers search from a fixed scenario; give each kind a set of its own",
+                        f"{scenario!r} is a {'distribution' if distribution else 'fixed scenario'}: the "
+                        f"representative solver draws from a distribution (such as "
+                        f"{domain.default_distribution or 'a distribution file'!r}), the other solvers search from a "
+                        f"fixed scenario; give each kind a set of its own",
                     )
                 )
-    distribution = build.representativeness.distribution
+    distribution_name = build.representativeness.distribution
     at = ("build", "representativeness", "distribution")
-    try:
-        if not isinstance(load_scenario_or_distribution(distribution), ScenarioDistribution):
-            problems.append(
-                (
-                    at,
-                    f"{distribution!r} is one fixed scenario; give a distribution of starting states such as "
-                    "'training'",
+    if distribution_name is not None and domain is not None:
+        try:
+            if not domain_for([], distribution_name).is_distribution(distribution_name):
+                problems.append(
+                    (
+                        at,
+                        f"{distribution_name!r} is one fixed scenario; give a distribution of starting states such "
+                        f"as {domain.default_distribution or 'a distribution file'!r}",
+                    )
                 )
-            )
-    except (ValueError, FileNotFoundError) as error:
-        problems.append((at, str(error)))
+        except (ValueError, FileNotFoundError) as error:
+            problems.append((at, str(error)))
     return problems
 
 
 def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
     """Each scheme with its solver, reward and world settings checked against their fields, one problem per bad
     key (or per bad table, where the values together are refused)."""
+    domain: Domain | None
     try:
-        crowd = worlds.is_crowd([a for clip_set in build.sets for a in clip_set.all_agents()])
+        domain = domain_for([a for clip_set in build.sets for a in clip_set.all_agents()])
     except ValueError as error:
         problems.append((("build", "sets"), str(error)))
-        crowd = True
+        domain = None
     schemes = {}
     for name, table in build.schemes.items():
         at = ("build", "schemes", name)
@@ -272,15 +271,15 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
             problems.append(((*at, "solver"), str(error)))
             solver = None
         checked: dict[str, dict[str, Scalar]] = {}
-        for key, cls, what in (
-            ("settings", solver, "solver"),
-            ("reward", RewardConfig, "reward"),
-            ("world", WorldConfig if crowd else None, "world"),  # an environment adapter's settings are its own
+        for key, check in (
+            ("settings", lambda values, solver=solver: check_values(solver, values, "solver") if solver else values),
+            ("reward", lambda values: check_values(RewardConfig, values, "reward")),
+            ("world", lambda values: domain.check_world(values, "world") if domain else values),
         ):
             checked[key] = {}
             for setting, value in getattr(table, key).items():
                 try:
-                    checked[key] |= check_values(cls, {setting: value}, what) if cls else {setting: value}
+                    checked[key] |= check({setting: value})
                 except ValueError as error:
                     problems.append(((*at, key, setting), str(error)))
         if len(problems) > found or solver is None:

@@ -35,14 +35,46 @@ from importlib import import_module
 
 import numpy as np
 
+from app.visible import Words, World
+
 EVENTS = ("success", "collision", "timeout")
+GENERIC_WORDS = Words(
+    clip_title="Clip of two agents side by side, each in its own copy of the same world",
+    legend_robots=(
+        "Agents: each view shows one agent, named below the picture, such as Robot 7, with a colour and a shape"
+        " of its own."
+    ),
+    others_marker="",
+    legend_others="Everything else in a view is the world: it starts the same in both views.",
+    legend_trails="",
+    legend_crash=(
+        "A yellow-and-black burst marks the moment an agent fails; the list below the picture then says **failed**."
+    ),
+    legend_status=(
+        "Below the picture each agent's line says **succeeded**, **failed**, **out of time** or **running**,"
+        " with the time."
+    ),
+    success="succeeded after {seconds} seconds",
+    collision="failed after {seconds} seconds",
+    timeout="ran out of time",
+    running="was still going when the clip ended",
+    close_call="",
+)
 
 
 class Adapter(ABC):
-    """Base class of environment adapters; ``settings`` (a JSON-able dict) are the scenario's own settings."""
+    """Base class of environment adapters; ``settings`` (a JSON-able dict) are the scenario's own settings.
+
+    ``rule`` and ``words`` are what a clip visibly shows and how participants read it (`app.visible.World`):
+    "goal" where an agent should reach something (sooner is better), "survival" where it should last (a car
+    that crashes later did better); the words name the agents' outcomes on the survey's pages, in the clip audit
+    and the report."""
 
     env_action_shape: tuple[int, ...] = ()
     dt: float = 1.0
+    domain: str = "gym"
+    rule: str = "goal"
+    words: Words = GENERIC_WORDS
 
     def __init__(self, settings: dict | None = None):
         self.settings = dict(settings or {})
@@ -67,6 +99,9 @@ class Adapter(ABC):
         if terminated:
             return "success" if info.get("is_success") and not info.get("crashed") else "collision"
         return "timeout"
+
+    def world(self) -> World:
+        return World(domain=self.domain, rule=self.rule, words=self.words)
 
     def snapshot_env(self, env):
         """A copy of ``env`` that later steps of ``env`` cannot change."""

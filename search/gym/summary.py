@@ -1,4 +1,4 @@
-"""Searches, summaries and `foil verify` in a Gymnasium domain.
+"""Summaries in a Gymnasium domain, and rebuilding them for `foil verify`.
 
 A summary (``foil.summary/1``, as in the crowd world) is built from a replay of its environment actions at batch
 size 1; its scenario holds the adapter, its settings and the seed, so ``verify`` needs nothing else. Per step it
@@ -9,9 +9,6 @@ has no people to measure against.
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 
 from app.formats import SUMMARY_FORMAT
@@ -19,12 +16,6 @@ from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
 from search.sim.world import OUTCOME_NAMES
 from search.solvers.reward import TERMS, RewardConfig, sequential_sum
-from search.solvers.runner import SearchJob, search_files
-from search.solvers.summary import verify
-
-
-def is_gym_summary(data: dict) -> bool:
-    return isinstance(data.get("scenario"), dict) and data["scenario"].get("domain") == "gym"
 
 
 def _floats(value) -> list:
@@ -109,37 +100,8 @@ def build_gym_summary(
     }
 
 
-def run_gym_search(job: SearchJob, scenario: GymScenario, progress: bool = False) -> dict[str, str]:
-    """``foil search`` in a Gymnasium domain: the same solvers, top-K and files as in the crowd world."""
-    if job.solver == "representative":
-        raise ValueError(
-            "the representative solver draws starting states from a crowd distribution (such as "
-            "'training'); in a Gymnasium world use mcts, nfirst, random or cem"
-        )
-    started = time.perf_counter()
-    if job.world_settings:
-        scenario = GymScenario(
-            scenario.name, scenario.adapter, scenario.seed, scenario.settings | job.world_settings, scenario.description
-        )
-    adapter = scenario.load_adapter()
-    agents = [load_agent(spec, adapter) for spec in job.agents]
-    reward_config = RewardConfig.from_dict(job.reward_settings)
-    problem = GymCoupledProblem(agents, scenario, reward_config, adapter)
-    shape = problem.action_shape
-    return search_files(
-        job,
-        problem,
-        scenario.name,
-        reward_config,
-        started,
-        progress,
-        lambda actions, solver: build_gym_summary(
-            agents, scenario, reward_config, np.asarray(actions).reshape(-1, *shape), solver
-        ),
-    )
-
-
 def rebuild(data: dict) -> dict:
+    """The summary that the file's own inputs produce now."""
     scenario = GymScenario.from_dict(data["scenario"])
     adapter = scenario.load_adapter()
     agents = [load_agent(entry["name"], adapter) for entry in data["agents"]]
@@ -147,8 +109,3 @@ def rebuild(data: dict) -> dict:
     return build_gym_summary(
         agents, scenario, RewardConfig.from_dict(data["reward_parameters"]), env_actions, data["solver"]
     )
-
-
-def verify_gym(path: str | Path) -> list[str]:
-    """Re-simulate a Gymnasium summary; empty when every number is reproduced exactly."""
-    return verify(path, rebuild)

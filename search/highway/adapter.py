@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.visible import Words
 from search.gym.adapter import Adapter
 from search.highway.env import make_env
 
@@ -31,6 +32,32 @@ SPEED_RANGE = 5.0  # m/s either side of a vehicle's own target speed
 LANE_THRESHOLD = 0.8
 AGENTS_DIR = Path(__file__).parent / "agents"
 AGENT_PREFIX = "highway-"
+WORDS = Words(
+    clip_title="Clip of two self-driving cars, each on its own copy of the same highway",
+    legend_robots=(
+        "Self-driving cars: each view follows one, drawn in its robot's colour; its name, such as Robot 7, is"
+        " listed below the picture."
+    ),
+    others_marker="",
+    legend_others=(
+        "Traffic: the other cars, in grey, start alike in both views and get the same wishes for speed and lane;"
+        " they react to the car in front of them."
+    ),
+    legend_trails="",
+    legend_crash=(
+        "A yellow-and-black burst and **CRASH** mark a car crashing or leaving the road; the list below the"
+        " picture then says **CRASHED**."
+    ),
+    legend_status=(
+        "Below the picture each car's line shows its speed and says **drove through** once it has lasted the"
+        " whole drive, or **CRASHED**, with the time."
+    ),
+    success="drove through the traffic without crashing",
+    collision="crashed after {seconds} seconds",
+    timeout="was still driving when the drive ended",
+    running="was still driving when the clip ended",
+    close_call="",
+)
 
 
 class HighwayAdapter(Adapter):
@@ -39,6 +66,7 @@ class HighwayAdapter(Adapter):
 
     env_action_shape = (PERTURBED, 2)
     dt = 1.0  # one decision per simulated second
+    domain, rule, words = "highway", "survival", WORDS  # a car should last the drive: crashing later is better
 
     def make(self, render: bool = False):
         settings = dict(self.settings)

@@ -1,9 +1,10 @@
 """The shipped highway scenarios: initial traffic states from a seed (highway-env places the traffic with the
-environment's generator), in three kinds of traffic."""
+environment's generator), in three kinds of traffic; and the distribution of starting states they come from."""
 
 from __future__ import annotations
 
 from search.gym.problem import GymScenario
+from search.gym.scenarios import GymDistribution
 
 ADAPTER = "search.highway.adapter:HighwayAdapter"
 SCENARIOS = {
@@ -31,7 +32,21 @@ SCENARIOS = {
 }
 
 
-def load_highway_scenario(name: str) -> GymScenario:
-    if name not in SCENARIOS:
-        raise ValueError(f"unknown highway scenario {name!r}: use one of {sorted(SCENARIOS)}")
-    return SCENARIOS[name]
+# The agents' training traffic (highway-env's own placement, default settings), one starting state per seed: the
+# distribution the representative solver draws from and a study's fixed scenarios are checked against.
+DISTRIBUTIONS = {
+    "highway-traffic": GymDistribution(
+        "highway-traffic",
+        ADAPTER,
+        (100_000, 200_000),
+        description="Highway traffic as the shipped agents were trained in it: three lanes, 20 other vehicles.",
+    ),
+}
+
+
+def load_highway_scenario(name: str) -> GymScenario | GymDistribution:
+    """A shipped scenario or distribution by name."""
+    shipped: dict[str, GymScenario | GymDistribution] = {**SCENARIOS, **DISTRIBUTIONS}
+    if name not in shipped:
+        raise ValueError(f"unknown highway scenario {name!r}: use one of {sorted(shipped)}")
+    return shipped[name]

@@ -1,7 +1,7 @@
 """What a solver searches: a batched, branchable, deterministic environment with a reward.
 
 Solvers see only this protocol, so the same MCTS runs on the coupled crowd simulator
-(`search.solvers.coupled_problem`) and on small synthetic problems with a known optimum (the tests use one).
+(`search.crowd.problem`) and on small synthetic problems with a known optimum (the tests use one).
 """
 
 from __future__ import annotations

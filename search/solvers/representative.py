@@ -28,15 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.visible import Observer, VisibleClip, progress_towards
-from search.sim.coupled import CoupledSimulator
-from search.sim.observation import Policy
-from search.sim.scenarios import Scenario
-from search.sim.world import OUTCOME_NAMES
-from search.solvers.coupled_problem import concat_snapshots
-from search.solvers.prior import ActionPrior
-from search.solvers.reward import DivergenceReward, RewardConfig
+from app.visible import Observer, VisibleClip, World
 from search.solvers.rollout import Tracker
+
+# A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
+# the agents and the reward).
+RollOut = Callable[[list, int, np.random.Generator, Tracker], "Rollouts"]
 
 OBSERVER = Observer()
 
@@ -57,8 +54,16 @@ class Rollouts:
     """Every rollout: the state it started from, its searched environment actions and its visible contrast."""
 
     state: np.ndarray  # (K,) index of the starting state
-    actions: list[np.ndarray]  # K arrays (L_k, n, 2): the environment actions up to the search's end
+    actions: list[np.ndarray]  # K arrays (L_k, *action_shape): the environment actions up to the search's end
     contrast: np.ndarray  # (K,) first agent's visible score minus the second's; 0 under the tie margin
+
+    @classmethod
+    def join(cls, parts: list[Rollouts]) -> Rollouts:
+        return cls(
+            state=np.concatenate([p.state for p in parts]),
+            actions=[a for p in parts for a in p.actions],
+            contrast=np.concatenate([p.contrast for p in parts]),
+        )
 
 
 @dataclass(frozen=True)
@@ -122,6 +127,12 @@ def choose(
     return kept
 
 
+def summary_contrast(summary: dict, world: World) -> float:
+    """``visible_contrast`` of a two-agent summary's clip, in its agents' order."""
+    agents = [a["name"] for a in summary["agents"]]
+    return visible_contrast(VisibleClip.of_summary(summary, agents, ["first", "second"], world))
+
+
 def visible_contrast(clip: VisibleClip) -> float:
     """First agent's visible score minus the second's as the viewer sees the clip; 0 under the tie margin."""
     first, second = clip.scores(OBSERVER).values()
@@ -129,68 +140,9 @@ def visible_contrast(clip: VisibleClip) -> float:
     return difference if abs(difference) >= OBSERVER.tie_margin else 0.0
 
 
-def roll_out(
-    policies: list[Policy],
-    scenarios: list[Scenario],
-    reward_config: RewardConfig,
-    pushes: int,
-    rng: np.random.Generator,
-    tracker: Tracker,
-) -> Rollouts:
-    """One rollout without pushes and ``pushes`` under uniform pushes from each scenario, all in one batch, each
-    followed by its coda; scored by their visible contrast."""
-    copies = pushes + 1
-    sims = [CoupledSimulator(policies, scenario, batch=copies) for scenario in scenarios]
-    sim, config = sims[0], sims[0].config
-    sim.restore(concat_snapshots([s.snapshot() for s in sims]))
-    rows_total, horizon, n = len(scenarios) * copies, reward_config.horizon, config.human_num
-    prior = ActionPrior((n, 2), config.env_action_bound, "uniform")
-    env = np.zeros((rows_total, horizon, n, 2))
-    pushed = np.arange(rows_total) % copies != 0
-    env[pushed] = rng.uniform(-config.env_action_bound, config.env_action_bound, (int(pushed.sum()), horizon, n, 2))
-    events = DivergenceReward(reward_config, prior)
-    searched = np.full(rows_total, horizon)  # steps until the search's end rule ended each rollout
-    in_search = np.ones(rows_total, dtype=bool)
-    final = {}  # row -> (outcome, event_time, min_clearance, robot_pos, time) when its clip ended
-    rows = np.arange(rows_total)
-    for t in range(1, horizon + 1):
-        _, _, newly_done = sim.advance(np.where(in_search[rows, None, None], env[rows, t - 1], 0.0))
-        tracker.count(rows.size)
-        state = sim.state
-        outcome, done = sim.gather(state.outcome), sim.gather(state.done)
-        goal, end = events.events(newly_done, outcome, done.all(axis=1), np.full(rows.size, t))
-        ended = in_search[rows] & (goal | end)
-        searched[rows[ended]] = t
-        in_search[rows[ended]] = False
-        over = done.all(axis=1) | (t >= horizon)
-        if over.any():
-            event_time, clearance = sim.gather(state.event_time), sim.gather(state.min_clearance)
-            robot_pos = sim.gather(state.robot_pos)
-            for k in np.flatnonzero(over):
-                final[int(rows[k])] = (
-                    outcome[k].copy(),
-                    event_time[k].copy(),
-                    clearance[k].copy(),
-                    robot_pos[k].copy(),
-                    float(state.time[k]),
-                )
-        keep = np.flatnonzero(~over)
-        if not keep.size:
-            break
-        sim.restore(sim.snapshot(keep))
-        rows = rows[keep]
-    contrast = np.array([visible_contrast(_clip(scenarios[row // copies], *final[row])) for row in range(rows_total)])
-    return Rollouts(
-        state=np.arange(rows_total) // copies,
-        actions=[env[row, : searched[row]] for row in range(rows_total)],
-        contrast=contrast,
-    )
-
-
 def roll_out_states(
-    policies: list[Policy],
-    scenarios: list[Scenario],
-    reward_config: RewardConfig,
+    roll_out: RollOut,
+    scenarios: list,
     config: RepresentativeConfig,
     rng: np.random.Generator,
     tracker: Tracker,
@@ -209,24 +161,17 @@ def roll_out_states(
         count = min(count, len(scenarios) - done_states)
         if count < 1:
             break
-        part = roll_out(
-            policies, scenarios[done_states : done_states + count], reward_config, config.pushes, rng, tracker
-        )
+        part = roll_out(scenarios[done_states : done_states + count], config.pushes, rng, tracker)
         part.state += done_states
         parts.append(part)
         done_states += count
-    return Rollouts(
-        state=np.concatenate([p.state for p in parts]),
-        actions=[a for p in parts for a in p.actions],
-        contrast=np.concatenate([p.contrast for p in parts]),
-    ), done_states
+    return Rollouts.join(parts), done_states
 
 
 def representativeness(
-    policies: list[Policy],
-    fixed: list[Scenario],
-    drawn: list[Scenario],
-    reward_config: RewardConfig,
+    roll_out: RollOut,
+    fixed: list,
+    drawn: list,
     config: RepresentativeConfig,
     rng: np.random.Generator,
 ) -> list[dict]:
@@ -235,13 +180,13 @@ def representativeness(
     pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
     of rollouts that agree with the vote (0: none of the drawn states agrees less)."""
     tracker = Tracker(2**62, 1)
-    rollouts, states = roll_out_states(policies, drawn, reward_config, config, rng, tracker)
+    rollouts, states = roll_out_states(roll_out, drawn, config, rng, tracker)
     result = vote(rollouts, states)
     signs = np.sign(rollouts.contrast)
     agreement = np.array([(signs[rollouts.state == s] == result.direction).mean() for s in range(states)])
     reports = []
     for scenario in fixed:
-        own = np.sign(roll_out(policies, [scenario], reward_config, config.pushes, rng, tracker).contrast)
+        own = np.sign(roll_out([scenario], config.pushes, rng, tracker).contrast)
         share = float((own == result.direction).mean()) if result.direction else None
         reports.append(
             {
@@ -259,48 +204,26 @@ def representativeness(
     return reports
 
 
-def largest_contrast(summaries: list[dict]) -> int:
+def largest_contrast(summaries: list[dict], world: World) -> int:
     """Which of a search's summaries (two agents, best reward first) shows the largest non-tie visible contrast,
     in either direction: outcome-contrast selection. The first where none shows a visible difference."""
-    contrasts = [
-        abs(visible_contrast(VisibleClip.of_summary(s, [a["name"] for a in s["agents"]], ["1", "2"])))
-        for s in summaries
-    ]
+    contrasts = [abs(summary_contrast(s, world)) for s in summaries]
     best = max(range(len(contrasts)), key=contrasts.__getitem__)  # the first of equals
     return best if contrasts[best] > 0 else 0
 
 
-def _clip(scenario: Scenario, outcome, event_time, min_clearance, robot_pos, end_s: float) -> VisibleClip:
-    """What a rollout's clip shows, as `VisibleClip.of_summary` reads it from a summary."""
-    outcomes = tuple(
-        {
-            "event": OUTCOME_NAMES[int(o)],
-            "time": float(e) if math.isfinite(e) else None,
-            "min_human_distance": float(c) if math.isfinite(c) else None,
-        }
-        for o, e, c in zip(outcome, event_time, min_clearance, strict=True)
-    )
-    progress = tuple(progress_towards(scenario.robot_start, scenario.robot_goal, end) for end in robot_pos.tolist())
-    return VisibleClip(
-        labels=tuple(str(k) for k in range(len(outcomes))), outcomes=outcomes, progress=progress, end_s=max(end_s, 1e-6)
-    )
-
-
 def representative(
-    policies: list[Policy],
-    scenarios: list[Scenario],
-    reward_config: RewardConfig,
+    roll_out: RollOut,
+    scenarios: list,
     tracker: Tracker,
     rng: np.random.Generator,
     config: RepresentativeConfig,
-    replay: Callable[[Scenario, np.ndarray], tuple[float, object]],
+    replay: Callable[[object, np.ndarray], tuple[float, object]],
 ) -> tuple[list, dict]:
     """Roll out the drawn ``scenarios`` a batch of states at a time while the budget lasts, vote, and choose the
     top-K clips. ``replay(scenario, actions)`` gives an exact replay's contrast and the replay (a summary).
     Returns the chosen replays in order and the record of the vote for run.json."""
-    if len(policies) != 2:
-        raise ValueError(f"the representative solver votes which of two agents looks better; got {len(policies)}")
-    rollouts, done_states = roll_out_states(policies, scenarios, reward_config, config, rng, tracker)
+    rollouts, done_states = roll_out_states(roll_out, scenarios, config, rng, tracker)
     result = vote(rollouts, done_states)
     order, how = candidates(rollouts, result), "voted direction"
     chosen = choose(
@@ -328,3 +251,33 @@ def representative(
         ],
     }
     return [summary for _, summary in chosen], record
+
+
+def roll_out_problem(
+    coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker, world: World, agents: list[str]
+) -> Rollouts:
+    """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
+    state one without pushes and ``pushes`` under uniform pushes, stepped together until the search's end rule
+    ends each; each scored by its summary's clip (the exact replay with its coda, as the clip will show it)."""
+    parts = []
+    for index, found in enumerate(coupled):
+        problem = found.problem
+        rows, horizon, bound = pushes + 1, problem.horizon, problem.prior.bound
+        env = np.zeros((rows, horizon, *problem.action_shape))
+        env[1:] = rng.uniform(-bound, bound, (rows - 1, horizon, *problem.action_shape))
+        searched = np.full(rows, horizon)
+        running = np.ones(rows, dtype=bool)
+        problem.reset(rows)
+        for t in range(1, horizon + 1):
+            _, terminal = problem.step(env[:, t - 1])
+            tracker.count(int(running.sum()))
+            ended = running & np.asarray(terminal, dtype=bool)
+            searched[ended] = t
+            running &= ~ended
+            if not running.any():
+                break
+        contrast = [summary_contrast(found.summarize(env[row, : searched[row]], {}), world) for row in range(rows)]
+        parts.append(
+            Rollouts(np.full(rows, index), [env[row, : searched[row]] for row in range(rows)], np.array(contrast))
+        )
+    return Rollouts.join(parts)

@@ -19,15 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from app.formats import summary_json
-from app.visible import VisibleClip
 from search.sim.settings import check_keys, field_types
 from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
-from search.solvers.coupled_problem import CoupledProblem
+from search.solvers.domain import Domain, domain_for
 from search.solvers.mcts import MCTSConfig, mcts
-from search.solvers.representative import RepresentativeConfig, representative, visible_contrast
+from search.solvers.representative import RepresentativeConfig, representative, summary_contrast
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-from search.solvers.summary import build_summary, frozen_scenario
 
 SOLVERS = {
     "mcts": (mcts, MCTSConfig),
@@ -103,19 +101,14 @@ def parse_settings(cls, items: list[str], what: str) -> dict:
 
 
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
-    """Run one search and return its output files, name -> text: ``summary-001.json``, ... (best first) and
-    ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that authoritative reward."""
-    from search.agents.policies import comparison_world, load_policy
-    from search.sim.scenarios import load_scenario, load_scenario_or_distribution
-
+    """Run one search in its agents' world and return its output files, name -> text: ``summary-001.json``, ...
+    (best first) and ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that
+    authoritative reward."""
     started = time.perf_counter()
-    policies = [load_policy(spec) for spec in job.agents]
-    # the agents' trained worlds (an imported checkpoint's), under the scenario's own settings and the job's
-    loaded = load_scenario_or_distribution(job.scenario)
-    job = replace(job, world_settings=comparison_world(list(job.agents), job.world_settings, loaded.world))
+    domain = domain_for(job.agents, job.scenario)
+    job = replace(job, world_settings=domain.comparison_world(job.agents, job.world_settings, job.scenario))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     if job.solver == "representative":
-        distribution = replace(loaded, world=loaded.world | job.world_settings)
         return search_files(
             job,
             None,
@@ -124,20 +117,11 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
             started,
             progress,
             None,
-            vote=lambda tracker, rng, config, solver: _representative(
-                job, policies, distribution, reward_config, tracker, rng, config, solver
-            ),
+            vote=lambda tracker, rng, config, solver: _representative(job, domain, tracker, rng, config, solver),
         )
-    scenario = frozen_scenario(load_scenario(job.scenario), job.world_settings)
-    problem = CoupledProblem(policies, scenario, reward=reward_config)
+    coupled = domain.coupled(job.agents, domain.state(job.scenario, job.world_settings), job.reward_settings)
     return search_files(
-        job,
-        problem,
-        scenario.name,
-        reward_config,
-        started,
-        progress,
-        lambda actions, solver: build_summary(list(job.agents), policies, scenario, reward_config, actions, solver),
+        job, coupled.problem, coupled.scenario_name, reward_config, started, progress, coupled.summarize
     )
 
 
@@ -206,9 +190,7 @@ def search_files(
 
 def _representative(
     job: SearchJob,
-    policies: list,
-    distribution,
-    reward_config: RewardConfig,
+    domain: Domain,
     tracker: Tracker,
     rng: np.random.Generator,
     config: RepresentativeConfig,
@@ -217,22 +199,24 @@ def _representative(
     """The representative solver's summaries (in its order: the chosen clip first) and the record of its vote.
     Each summary's scenario is the starting state it was drawn as; its solver entry says which state and what
     contrast the search saw."""
-    from search.sim.scenarios import ScenarioDistribution
-
-    if not isinstance(distribution, ScenarioDistribution):
+    if not domain.is_distribution(job.scenario):
         raise ValueError(
             f"the representative solver draws starting states from a distribution (such as "
             f"'training'); {job.scenario!r} is one fixed scenario"
         )
-    drawn = distribution.sample(rng, config.states)
-    scenarios = [frozen_scenario(s, s.world | job.world_settings) for s in drawn]
-    agents = list(job.agents)
+    if len(job.agents) != 2:
+        raise ValueError(f"the representative solver votes which of two agents looks better; got {len(job.agents)}")
+    scenarios = domain.draw_states(job.scenario, job.world_settings, rng, config.states)
+    agents, world = list(job.agents), domain.world(job.scenario)
+
+    def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
+        return domain.roll_out(agents, states, job.reward_settings, pushes, rng, tracker)
 
     def replay(scenario, actions) -> tuple[float, dict]:
-        summary = build_summary(agents, policies, scenario, reward_config, actions, solver)
-        return visible_contrast(VisibleClip.of_summary(summary, agents, ["first", "second"])), summary
+        summary = domain.coupled(agents, scenario, job.reward_settings).summarize(actions, solver)
+        return summary_contrast(summary, world), summary
 
-    summaries, vote = representative(policies, scenarios, reward_config, tracker, rng, config, replay)
+    summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay)
     for summary, chosen in zip(summaries, vote["chosen"], strict=True):
         summary["solver"] = summary["solver"] | {
             "budget_used": tracker.steps,
@@ -272,9 +256,9 @@ def limit_threads() -> None:
         os.environ.setdefault(name, "1")
 
 
-def _job_in_worker(job: SearchJob, search=None) -> dict[str, str]:
+def _job_in_worker(job: SearchJob) -> dict[str, str]:
     limit_threads()
-    return (search or run_search)(job)
+    return run_search(job)
 
 
 def run_all(
@@ -284,11 +268,9 @@ def run_all(
     backend: str = "process",
     ray_address: str | None = None,
     progress: bool = True,
-    search=None,
 ) -> dict:
     """Run jobs in parallel and write each one's files to ``out/<solver>/<agents>/<scenario>/``; also writes
-    ``out/study.json`` with every job's record. Returns that record. ``search`` runs one job (default
-    ``run_search``, the crowd world's; another world passes its own top-level function)."""
+    ``out/study.json`` with every job's record. Returns that record."""
     from tqdm import tqdm
 
     started = time.perf_counter()
@@ -296,13 +278,13 @@ def run_all(
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)
     results: dict[int, dict[str, str]] = {}
     if backend == "ray":
-        for index, files in _run_ray(jobs, ray_address, workers, search):
+        for index, files in _run_ray(jobs, ray_address, workers):
             results[index] = files
             bar.update()
     elif backend == "process":
         if workers == 1:
             for index, job in enumerate(jobs):
-                results[index] = (search or run_search)(job)
+                results[index] = run_search(job)
                 bar.update()
         else:
             import multiprocessing
@@ -310,7 +292,7 @@ def run_all(
 
             context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
             with ProcessPoolExecutor(workers, mp_context=context, initializer=limit_threads) as pool:
-                futures = {pool.submit(_job_in_worker, job, search): index for index, job in enumerate(jobs)}
+                futures = {pool.submit(_job_in_worker, job): index for index, job in enumerate(jobs)}
                 for future in as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.update()
@@ -344,7 +326,7 @@ def run_all(
     return study
 
 
-def _run_ray(jobs: list[SearchJob], address: str | None, workers: int, search=None):
+def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
     """Yield (index, files) as Ray tasks finish; a local Ray instance when no address is given."""
     try:
         import ray
@@ -358,7 +340,7 @@ def _run_ray(jobs: list[SearchJob], address: str | None, workers: int, search=No
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
         task = ray.remote(num_cpus=1)(_job_in_worker)
-        pending = {task.remote(job, search): index for index, job in enumerate(jobs)}
+        pending = {task.remote(job): index for index, job in enumerate(jobs)}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:

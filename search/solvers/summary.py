@@ -1,121 +1,16 @@
-"""Building and checking summaries (summary.json, defined in `app.formats`): one kept trajectory,
-replayable and checkable.
-
-A summary is built from a replay of its environment actions at batch size 1, never from a search's batched
-numbers (neural policies may differ in the last bits between batch sizes). ``verify`` builds it again from the
-file's own inputs (agents, scenario with its full world config, reward parameters, environment actions) and
-compares every number exactly.
-
-``steps`` holds the state after each step (the initial state is ``scenario``); ``min_human_distance`` is the
-smallest surface-to-surface distance between the robot and any human (negative after a collision).
+"""Checking summaries (summary.json, defined in `app.formats`) in any domain: ``verify`` builds a summary again
+from the file's own inputs (agents, scenario with its full world config, reward parameters, environment actions)
+through its domain and compares every number exactly.
 """
 
 from __future__ import annotations
 
 import json
-import math
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
-from app.formats import SUMMARY_FORMAT, load_summary, summary_json
-from search.agents.policies import SCRIPTED, load_policy
-from search.sim.coupled import replay
-from search.sim.scenarios import Scenario
-from search.sim.world import OUTCOME_NAMES
-from search.solvers.prior import ActionPrior
-from search.solvers.reward import DivergenceReward, RewardConfig
+from app.formats import load_summary, summary_json
 
 REPLAY_KEYS = ("agents", "scenario", "solver", "reward_parameters", "env_actions")  # what verify needs
-
-
-def agent_entry(spec: str, policy) -> dict:
-    return {"name": spec, "source": "scripted" if spec in SCRIPTED else str(getattr(policy, "source", spec))}
-
-
-def frozen_scenario(scenario: Scenario, world: dict) -> Scenario:
-    """The scenario with its complete world config (plus ``world`` overrides) written in, so a summary does not
-    depend on defaults."""
-    return replace(scenario, world=scenario.config().to_dict() | world)
-
-
-def _number(value: float) -> float | None:
-    """JSON has no NaN or infinity: an event that has not happened has no time (null)."""
-    return float(value) if math.isfinite(value) else None
-
-
-def _pairs(array: np.ndarray) -> list[list[float]]:
-    return np.asarray(array, dtype=np.float64).tolist()
-
-
-def _humans(crowds: np.ndarray) -> list:
-    """One crowd as [[x, y], ...]; with visible robots, one such list per agent's crowd."""
-    return _pairs(crowds[0]) if len(crowds) == 1 else _pairs(crowds)
-
-
-def build_summary(
-    agents: list[str],
-    policies: list,
-    scenario: Scenario,
-    reward_config: RewardConfig,
-    env_actions: np.ndarray,
-    solver: dict,
-) -> dict:
-    """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs.
-
-    The reward is the search's, over the searched steps. What the clip shows goes on after them: where the
-    trajectory ended before every robot's episode did (a robot reached its goal first, or ``finish = "first"``),
-    the robots go on without pushes until each has ended or the horizon is reached (the coda: ``steps`` beyond
-    ``env_actions``), and ``outcomes`` are those at the clip's end."""
-    config = scenario.config()
-    searched = len(env_actions)
-    trajectory = replay(policies, scenario, env_actions, stop_when_done=False, coda_to=reward_config.horizon)
-    prior = ActionPrior((config.human_num, 2), config.env_action_bound, reward_config.prior, reward_config.prior_sigma)
-    total, terms, terminal = DivergenceReward(reward_config, prior).trajectory(trajectory.head(searched), config.dt)
-    ends = np.flatnonzero(terminal)
-    if ends.size == 0 or ends[0] != len(terminal) - 1:
-        where = "never ends" if ends.size == 0 else f"ends at step {ends[0] + 1} of {len(terminal)}"
-        raise ValueError(f"the trajectory {where}: a summary holds exactly one complete trajectory")
-    return {
-        "format": SUMMARY_FORMAT,
-        "agents": [agent_entry(spec, policy) for spec, policy in zip(agents, policies, strict=True)],
-        "scenario": scenario.to_dict(),
-        "solver": solver,
-        "reward_parameters": reward_config.to_dict(),
-        "env_actions": [
-            np.asarray(a, dtype=np.float64).reshape(-1).tolist() for a in trajectory.env_actions[:searched]
-        ],
-        "steps": [
-            {
-                "t": float(trajectory.time[i]),
-                "humans": _humans(trajectory.crowds[i]),
-                "robots": _pairs(trajectory.robot_pos[i]),
-                "robot_actions": _pairs(trajectory.robot_actions[i]),
-            }
-            for i in range(len(trajectory.time))
-        ],
-        "outcomes": [
-            {
-                "event": OUTCOME_NAMES[int(trajectory.outcome[k])],
-                "time": _number(trajectory.event_time[k]),
-                "path_length": float(trajectory.path_length[k]),
-                "min_human_distance": _number(trajectory.min_clearance[k]),
-            }
-            for k in range(len(agents))
-        ],
-        "reward": total,
-        "reward_terms": terms,
-    }
-
-
-def rebuild(data: dict) -> dict:
-    """The summary that the file's own inputs produce now."""
-    agents = [entry["name"] for entry in data["agents"]]
-    scenario = Scenario.from_dict(data["scenario"], source="summary scenario")
-    reward_config = RewardConfig.from_dict(data["reward_parameters"])
-    env_actions = np.array(data["env_actions"], dtype=np.float64)
-    return build_summary(agents, [load_policy(a) for a in agents], scenario, reward_config, env_actions, data["solver"])
 
 
 def differences(expected, found, where: str = "", limit: int = 10) -> list[str]:
@@ -143,15 +38,17 @@ def differences(expected, found, where: str = "", limit: int = 10) -> list[str]:
     return out
 
 
-def verify(path: str | Path, rebuild=rebuild) -> list[str]:
-    """Re-simulate a summary; the list of differences is empty when every number is reproduced exactly.
-    ``rebuild`` makes the summary again from the file's inputs (another domain passes its own)."""
+def verify(path: str | Path) -> list[str]:
+    """Re-simulate a summary in its domain; the list of differences is empty when every number is reproduced
+    exactly."""
+    from search.solvers.domain import domain_of_summary
+
     data = load_summary(path)
     missing = [key for key in REPLAY_KEYS if key not in data]
     if missing:
         raise ValueError(f"{path}: summary lacks {missing}; write it again with `foil search`")
     try:
-        expected = json.loads(summary_json(rebuild(data)))
+        expected = json.loads(summary_json(domain_of_summary(data).rebuild(data)))
     except (ValueError, KeyError, TypeError) as error:
         return [f"cannot re-simulate: {error}"]
     return differences(expected, data)

@@ -10,18 +10,26 @@ import pytest
 from search.gym.adapter import load_adapter
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario, GymSnapshot
-from search.gym.summary import run_gym_search, verify_gym
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-from search.solvers.runner import SOLVERS, SearchJob, write_outputs
+from search.solvers.runner import SOLVERS, SearchJob, run_search, write_outputs
+from search.solvers.summary import verify
 
 ADAPTER = "tests.gym.corridor:CorridorAdapter"
+FAST = "tests.gym.corridor:FastCorridorAdapter"
 BOX = ("tests.gym.corridor:straight", "tests.gym.corridor:dodging")
 DISCRETE = ("tests.gym.corridor:straight_moves", "tests.gym.corridor:dodging_moves")
 
 
 def scenario(discrete: bool = False, seed: int = 3, adapter: str = ADAPTER) -> GymScenario:
     return GymScenario("corridor", adapter, seed, {"discrete": discrete})
+
+
+def scenario_file(folder, discrete: bool = False, adapter: str = ADAPTER, seed: int = 3) -> str:
+    """The corridor scenario as a researcher writes it: a TOML file naming the adapter."""
+    path = folder / f"corridor-{adapter.rpartition(':')[2]}-{int(discrete)}.toml"
+    path.write_text(f'adapter = "{adapter}"\nseed = {seed}\n[settings]\ndiscrete = {str(discrete).lower()}\n')
+    return str(path)
 
 
 def problem(discrete: bool = False, adapter: str = ADAPTER, **reward) -> GymCoupledProblem:
@@ -36,7 +44,7 @@ def walkers(p: GymCoupledProblem) -> np.ndarray:
     return np.array([[instance.env.walker for instance in row] for row in p.rows])
 
 
-@pytest.mark.parametrize("adapter", [ADAPTER, "tests.gym.corridor:FastCorridorAdapter"])
+@pytest.mark.parametrize("adapter", [ADAPTER, FAST])
 @pytest.mark.parametrize("discrete", [False, True])
 def test_restore_continues_exactly_as_the_original_did(discrete, adapter):
     p = problem(discrete, adapter)
@@ -128,21 +136,22 @@ def test_every_solver_searches_the_gym_problem(solver):
 @pytest.mark.parametrize("agents", [BOX, DISCRETE])
 def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents):
     discrete = agents == DISCRETE
-    job = SearchJob(agents=agents, scenario="corridor", budget=400, top_k=3, reward_settings={"horizon": 40})
-    files = run_gym_search(job, scenario(discrete))
-    again = run_gym_search(job, scenario(discrete))
+    where = scenario_file(tmp_path, discrete)
+    job = SearchJob(agents=agents, scenario=where, budget=400, top_k=3, reward_settings={"horizon": 40})
+    files = run_search(job)
+    again = run_search(job)
     assert {k: v for k, v in files.items() if k != "run.json"} == {k: v for k, v in again.items() if k != "run.json"}
     out = write_outputs(tmp_path, files)
     summaries = sorted(out.glob("summary-*.json"))
     assert len(summaries) == 3
     for path in summaries:
-        assert verify_gym(path) == []
+        assert verify(path) == []
     data = json.loads(summaries[0].read_text())
     assert data["scenario"]["domain"] == "gym" and len(data["steps"]) == len(data["env_actions"])
     assert {o["event"] for o in data["outcomes"]} <= {"success", "collision", "timeout"}
     data["steps"][-1]["robots"][0][0] += 1e-9
     summaries[0].write_text(json.dumps(data))
-    assert verify_gym(summaries[0])[0].startswith(".steps[")
+    assert verify(summaries[0])[0].startswith(".steps[")
 
 
 def test_bad_adapters_and_agents_are_refused_with_how_to_fix():
@@ -154,15 +163,9 @@ def test_bad_adapters_and_agents_are_refused_with_how_to_fix():
         load_agent("nobody", load_adapter(ADAPTER))
 
 
-def test_a_faster_state_hook_gives_the_same_search_as_deep_copies():
-    job = SearchJob(agents=BOX, scenario="corridor", budget=300, top_k=2, reward_settings={"horizon": 40})
-    deep = run_gym_search(job, scenario())
-    fast = run_gym_search(job, scenario(adapter="tests.gym.corridor:FastCorridorAdapter"))
+def test_a_faster_state_hook_gives_the_same_search_as_deep_copies(tmp_path):
+    common = {"agents": BOX, "budget": 300, "top_k": 2, "reward_settings": {"horizon": 40}}
+    deep = run_search(SearchJob(scenario=scenario_file(tmp_path), **common))
+    fast = run_search(SearchJob(scenario=scenario_file(tmp_path, adapter=FAST), **common))
     strip = lambda files: {k: json.loads(v) | {"scenario": None} for k, v in files.items() if k != "run.json"}  # noqa: E731
     assert strip(deep) == strip(fast)
-
-
-def test_the_representative_solver_is_refused_in_a_gymnasium_world():
-    job = SearchJob(agents=BOX, scenario="corridor", solver="representative", budget=100)
-    with pytest.raises(ValueError, match="representative solver draws starting states from a crowd distribution"):
-        run_gym_search(job, scenario(False))

@@ -7,18 +7,18 @@ import json
 import pytest
 
 from search.cli import main
-from search.highway.domain import CROWD, GYM, HIGHWAY, agent_domain, infer_domain, scenario_domain
 from search.highway.release import apart, checkpoints, choose, is_highway_run
+from search.solvers.domain import domain_for
 
 DRIVERS = "tests.highway.drivers:cruise,tests.highway.drivers:cautious"
 
 
 def test_the_world_is_inferred_and_mixing_is_refused(tmp_path, capsys):
-    assert agent_domain("highway-hi") == HIGHWAY and agent_domain("model.zip") == GYM
-    assert agent_domain("hi") == agent_domain("runs/x.pt") == CROWD and agent_domain("pkg.mod:policy") is None
-    assert scenario_domain("highway-dense") == HIGHWAY and scenario_domain("paper-code") == CROWD
-    assert infer_domain(["highway-lo", "model.zip"], "highway-dense") == HIGHWAY
-    assert infer_domain(["lo", "pkg.mod:policy"], "paper-code") == CROWD
+    assert domain_for(["highway-hi"]).name == "highway" and domain_for(["model.zip"]).name == "gym"
+    assert domain_for(["hi"]).name == domain_for(["runs/x.pt"]).name == domain_for(["pkg.mod:policy"]).name == "crowd"
+    assert domain_for(["pkg.mod:policy"], "highway-dense").name == "highway"
+    assert domain_for(["highway-lo", "model.zip"], "highway-dense").name == "highway"
+    assert domain_for(["lo", "pkg.mod:policy"], "paper-code").name == "crowd"
     code = main(["search", "--agents", "highway-lo,hi", "--scenario", "highway-dense", "--out", str(tmp_path)])
     error = capsys.readouterr().err
     assert code == 2 and "cannot mix worlds" in error and "hi (crowd)" in error and "highway-dense (highway)" in error
@@ -68,7 +68,9 @@ def test_foil_eval_reads_any_stable_baselines3_file(tmp_path, capsys):
     from search.highway.adapter import HighwayAdapter
 
     PPO("MlpPolicy", HighwayAdapter().make(), seed=0, device="cpu").save(tmp_path / "agent.zip")
-    assert main(["eval", str(tmp_path / "agent.zip"), "--episodes", "2", "--json"]) == 0
+    assert main(["eval", str(tmp_path / "agent.zip"), "--episodes", "2", "--json"]) == 2
+    assert "give --scenario FILE" in capsys.readouterr().err  # a Gymnasium agent needs its world
+    assert main(["eval", str(tmp_path / "agent.zip"), "--scenario", "highway-light", "--episodes", "2", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["episodes"] == 2 and 0 <= result["collision_rate"] <= 1
     assert result["reward_ci95"][0] <= result["reward_mean"] <= result["reward_ci95"][1]

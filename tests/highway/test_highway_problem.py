@@ -9,11 +9,11 @@ import pytest
 
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
-from search.gym.summary import run_gym_search, verify_gym
 from search.highway.adapter import LANE_THRESHOLD, PERTURBED, SPEED_RANGE, HighwayAdapter
 from search.highway.scenarios import SCENARIOS, load_highway_scenario
 from search.solvers.reward import RewardConfig
-from search.solvers.runner import SearchJob, write_outputs
+from search.solvers.runner import SearchJob, run_search, write_outputs
+from search.solvers.summary import verify
 
 DRIVERS = ("tests.highway.drivers:cruise", "tests.highway.drivers:cautious")
 
@@ -83,19 +83,20 @@ def test_environment_action_moves_other_drivers_within_bounds_and_never_the_ego(
     "agents,discrete", [(DRIVERS, False), (("tests.highway.drivers:idle", "tests.highway.drivers:faster"), True)]
 )
 def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, discrete):
-    scenario = SCENARIOS["highway-light"]
-    if discrete:
-        scenario = GymScenario(
-            "highway-light-meta", scenario.adapter, scenario.seed, scenario.settings | {"discrete": True}
-        )
     job = SearchJob(
-        agents=agents, scenario=scenario.name, solver="random", budget=40, top_k=2, solver_settings={"batch": 2}
+        agents=agents,
+        scenario="highway-light",
+        solver="random",
+        budget=40,
+        top_k=2,
+        solver_settings={"batch": 2},
+        world_settings={"discrete": True} if discrete else {},
     )
-    files = run_gym_search(job, scenario)
-    again = run_gym_search(job, scenario)
+    files = run_search(job)
+    again = run_search(job)
     assert {k: v for k, v in files.items() if k != "run.json"} == {k: v for k, v in again.items() if k != "run.json"}
     for path in sorted(write_outputs(tmp_path, files).glob("summary-*.json")):
-        assert verify_gym(path) == []
+        assert verify(path) == []
         summary = json.loads(path.read_text())
         for k, outcome in enumerate(summary["outcomes"]):  # the path driven, from the positions it went through
             xs = [step["robots"][k][0] for step in summary["steps"]]

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 from search.agents.policies import load_policy
+from search.crowd.problem import CoupledProblem
 from search.sim.coupled import replay
 from search.sim.scenarios import load_scenario
 from search.solvers.baselines import random_search
-from search.solvers.coupled_problem import CoupledProblem
 from search.solvers.mcts import CHILD, DEPTH, PARENT, STATE, TERMINAL, VISITS, MCTSConfig, Tree, mcts
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker

@@ -7,10 +7,10 @@ import dataclasses
 import numpy as np
 
 from search.agents.policies import load_policy
+from search.crowd.summary import build_summary, frozen_scenario
 from search.sim.coupled import replay
 from search.sim.scenarios import Scenario
 from search.solvers.reward import RewardConfig
-from search.solvers.summary import build_summary, frozen_scenario
 
 
 def summary_from_simulation(

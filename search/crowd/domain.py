@@ -1,0 +1,181 @@
+"""The crowd world as a domain: DS-RNN and scripted robots among ORCA or social-force humans (search/sim,
+search/agents), its scenarios and the ``training`` distribution, its summaries, batched rollouts and clips."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from search.solvers.domain import Coupled, Domain
+
+
+def _policies(agents: Sequence[str]) -> list:
+    from search.agents.policies import load_policy
+
+    return [load_policy(spec) for spec in agents]
+
+
+class CrowdDomain(Domain):
+    name = "crowd"
+    default_distribution = "training"
+    time_limit_setting = "time_limit"
+
+    def claims_agent(self, spec: str) -> bool | None:
+        if spec.endswith(".zip"):
+            return False
+        if ":" in spec and not spec.endswith(".pt"):
+            return None  # module:attribute: a policy object of any world
+        return True
+
+    def claims_scenario(self, name: str) -> bool:
+        from search.sim.scenarios import shipped_scenarios
+
+        return name in shipped_scenarios() or Path(name).suffix == ".toml"
+
+    def claims_summary(self, summary: dict) -> bool:
+        scenario = summary.get("scenario")
+        return isinstance(scenario, dict) and "robot" in scenario
+
+    def describe_agents(self) -> str:
+        return "crowd agents (lo, med, hi, scripted policies, checkpoints) go on crowd scenarios"
+
+    def parse_world(self, items: list[str]) -> dict:
+        from search.sim.world import WorldConfig
+        from search.solvers.runner import parse_settings
+
+        return parse_settings(WorldConfig, items, "world")
+
+    def check_world(self, settings: dict, what: str) -> dict:
+        from search.sim.settings import check_values
+        from search.sim.world import WorldConfig
+
+        return check_values(WorldConfig, settings, what)
+
+    def study_world(self, agents: Sequence[str]) -> dict:
+        from search.agents.policies import comparison_world
+
+        return comparison_world([a for a in agents if self.claims_agent(a)], {})
+
+    def own_world(self, scenario: str) -> dict:
+        from search.sim.scenarios import load_scenario_or_distribution
+
+        return dict(load_scenario_or_distribution(scenario).world)
+
+    def comparison_world(self, agents: Sequence[str], world: dict, scenario: str) -> dict:
+        from search.agents.policies import comparison_world
+
+        return comparison_world(list(agents), world, self.own_world(scenario))
+
+    def is_distribution(self, name: str) -> bool:
+        from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
+
+        return isinstance(load_scenario_or_distribution(name), ScenarioDistribution)
+
+    def scenario_dict(self, name: str, world: dict) -> dict:
+        from dataclasses import asdict
+
+        from search.crowd.summary import frozen_scenario
+        from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
+
+        scenario = load_scenario_or_distribution(name)
+        if isinstance(scenario, ScenarioDistribution):
+            return asdict(replace(scenario, world=scenario.world | world))
+        return frozen_scenario(scenario, world).to_dict()
+
+    def state(self, name: str, world: dict) -> Any:
+        from search.crowd.summary import frozen_scenario
+        from search.sim.scenarios import load_scenario
+
+        return frozen_scenario(load_scenario(name), world)
+
+    def draw_states(self, name: str, world: dict, rng: np.random.Generator, count: int) -> list:
+        from search.crowd.summary import frozen_scenario
+        from search.sim.scenarios import load_scenario_or_distribution
+
+        loaded = load_scenario_or_distribution(name)
+        drawn = replace(loaded, world=loaded.world | world).sample(rng, count)
+        return [frozen_scenario(s, s.world | world) for s in drawn]
+
+    def coupled(self, agents: Sequence[str], state: Any, reward: dict) -> Coupled:
+        from search.crowd.problem import CoupledProblem
+        from search.crowd.summary import build_summary
+        from search.solvers.reward import RewardConfig
+
+        policies, reward_config = _policies(agents), RewardConfig.from_dict(reward)
+        return Coupled(
+            CoupledProblem(policies, state, reward=reward_config),
+            state.name,
+            lambda actions, solver: build_summary(list(agents), policies, state, reward_config, actions, solver),
+        )
+
+    def roll_out(self, agents, states, reward, pushes, rng, tracker):
+        """The crowd's fast path: every state's rollouts in one batched simulator, no replays."""
+        from search.crowd.rollouts import roll_out
+        from search.solvers.reward import RewardConfig
+
+        return roll_out(_policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
+
+    def rebuild(self, summary: dict) -> dict:
+        from search.crowd.summary import rebuild
+
+        return rebuild(summary)
+
+    def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+        """In the world the agent brings (an imported checkpoint's), under the ``world`` settings given."""
+        from search.agents.evaluate import evaluate
+        from search.agents.policies import comparison_world, load_policy
+        from search.sim.world import WorldConfig
+
+        config = WorldConfig.from_dict(comparison_world([agent], world))
+        return evaluate(load_policy(agent), episodes=episodes, seed=seed, config=config)
+
+    def describe_evaluation(self, result: dict) -> str:
+        from search.agents.evaluate import format_result
+
+        return format_result(result)
+
+    def agent_file(self, agent: str) -> Path | None:
+        from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
+
+        if agent in SCRIPTED:
+            return None
+        return AGENTS_DIR / f"{agent}.pt" if agent in SHIPPED_AGENTS else Path(agent)
+
+    def agent_source(self, agent: str, world: dict) -> dict:
+        """Its kind, its checkpoint file and checksum, a CrowdNav_DSRNN model's config and trained world, and the
+        full world of its evaluation."""
+        from app.formats import sha256_file
+        from search.agents.crowdnav import config_path, is_crowdnav_file
+        from search.agents.policies import SCRIPTED, SHIPPED_AGENTS, trained_world
+        from search.sim.world import WorldConfig
+
+        source = {"kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"}
+        path = self.agent_file(agent)
+        if path is not None and path.is_file():
+            source |= {
+                "kind": source["kind"] if agent in SHIPPED_AGENTS else "checkpoint",
+                "checkpoint": str(path),
+                "sha256": sha256_file(path),
+            }
+            if is_crowdnav_file(path):
+                source |= {
+                    "kind": "crowdnav_dsrnn",
+                    "config": str(config_path(path)),
+                    "trained_world": trained_world(agent),
+                }
+        return source | {"world": WorldConfig.from_dict(world).to_dict()}
+
+    def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
+        from search.clips.render import render
+        from search.clips.scene import load_scene
+
+        return render(load_scene(summary), out, numbers, options)
+
+    def renderer_files(self, summary: Path) -> list[Path]:
+        import search.clips.render as renderer
+
+        return [Path(renderer.__file__)]

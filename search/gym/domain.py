@@ -1,0 +1,169 @@
+"""Any Gymnasium environment as a domain: its scenario files name the adapter (docs/gym.md), its agents are
+Stable-Baselines3 files or ``module:attribute`` callables, and what a clip shows and in which words is the
+adapter's."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.visible import World
+from search.gym.adapter import Adapter, load_adapter
+from search.gym.agents import GymAgent, load_agent
+from search.gym.problem import GymCoupledProblem, GymScenario
+from search.gym.scenarios import GymDistribution, gym_file, load_gym_file
+from search.solvers.domain import Coupled, Domain
+
+
+class GymDomain(Domain):
+    name = "gym"
+
+    def __init__(self) -> None:
+        self._agents: dict[tuple[str, str], GymAgent] = {}
+
+    def claims_agent(self, spec: str) -> bool | None:
+        if spec.endswith(".zip"):
+            return True
+        return None if ":" in spec and not spec.endswith(".pt") else False
+
+    def claims_scenario(self, name: str) -> bool:
+        return gym_file(name) is not None
+
+    def claims_summary(self, summary: dict) -> bool:
+        scenario = summary.get("scenario")
+        return isinstance(scenario, dict) and scenario.get("domain") == "gym"
+
+    def describe_agents(self) -> str:
+        return (
+            "Gymnasium agents (Stable-Baselines3 .zip files, module:attribute) go on a scenario file that names "
+            "their environment's adapter"
+        )
+
+    def parse_world(self, items: list[str]) -> dict:
+        """``key=value`` settings of the adapter, each value read as JSON where it is (else text)."""
+        settings = {}
+        for item in items:
+            key, sep, text = item.partition("=")
+            if not sep or not key.strip():
+                raise ValueError(f"bad world setting {item!r}: use key=value, e.g. vehicles_density=2")
+            try:
+                settings[key.strip()] = json.loads(text)
+            except json.JSONDecodeError:
+                settings[key.strip()] = text
+        return settings
+
+    def check_world(self, settings: dict, what: str) -> dict:
+        return dict(settings)  # an adapter's settings are its own
+
+    def load(self, name: str) -> GymScenario | GymDistribution:
+        """A scenario or distribution by name: a file (highway driving adds its shipped names)."""
+        return load_gym_file(name)
+
+    def is_distribution(self, name: str) -> bool:
+        return isinstance(self.load(name), GymDistribution)
+
+    def scenario_dict(self, name: str, world: dict) -> dict:
+        found = self.load(name).to_dict()
+        return found | {"settings": found["settings"] | world}
+
+    def state(self, name: str, world: dict) -> GymScenario:
+        found = self.load(name)
+        if isinstance(found, GymDistribution):
+            raise ValueError(
+                f"{name!r} is a distribution of starting states: only the representative solver draws from one; "
+                "give a scenario file with one seed"
+            )
+        return GymScenario(found.name, found.adapter, found.seed, found.settings | world, found.description)
+
+    def draw_states(self, name: str, world: dict, rng: np.random.Generator, count: int) -> list:
+        found = self.load(name)
+        if not isinstance(found, GymDistribution):
+            raise ValueError(f"{name!r} is one scenario, not a distribution of starting states")
+        return found.with_settings(world).sample(rng, count)
+
+    def agent(self, spec: str, adapter: Adapter) -> GymAgent:
+        """An agent, loaded once per adapter class (a model file is read once per process)."""
+        key = (spec, type(adapter).__qualname__)
+        if key not in self._agents:
+            self._agents[key] = load_agent(spec, adapter)
+        return self._agents[key]
+
+    def coupled(self, agents: Sequence[str], state: Any, reward: dict) -> Coupled:
+        from search.gym.summary import build_gym_summary
+        from search.solvers.reward import RewardConfig
+
+        adapter = state.load_adapter()
+        loaded = [self.agent(spec, adapter) for spec in agents]
+        reward_config = RewardConfig.from_dict(reward)
+        problem = GymCoupledProblem(loaded, state, reward_config, adapter)
+        shape = problem.action_shape
+        return Coupled(
+            problem,
+            state.name,
+            lambda actions, solver: build_gym_summary(
+                loaded, state, reward_config, np.asarray(actions).reshape(-1, *shape), solver
+            ),
+        )
+
+    def rebuild(self, summary: dict) -> dict:
+        from search.gym.summary import rebuild
+
+        return rebuild(summary)
+
+    def adapter(self, scenario: str | None) -> Adapter:
+        """The adapter of a scenario or distribution file, with its settings."""
+        if scenario is None:
+            raise ValueError(
+                "a Gymnasium agent acts in the world its scenario file names: give --scenario FILE (a .toml file "
+                "with adapter = 'module:Class', read relative to the working directory)"
+            )
+        found = self.load(scenario)
+        return load_adapter(found.adapter, found.settings)
+
+    def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+        from search.gym.evaluate import evaluate
+
+        adapter = self.adapter(scenario)
+        adapter = type(adapter)(adapter.settings | world)
+        return evaluate(self.agent(agent, adapter), episodes, seed, adapter)
+
+    def describe_evaluation(self, result: dict) -> str:
+        from search.gym.evaluate import format_result
+
+        return format_result(result)
+
+    def eval_scenario(self, scenarios):
+        """The first scenario the agent is shown in: a Gymnasium agent acts in the world its scenario names."""
+        return scenarios[0] if scenarios else None
+
+    def agent_file(self, agent: str) -> Path | None:
+        return Path(agent) if agent.endswith(".zip") else None
+
+    def agent_source(self, agent: str, world: dict) -> dict:
+        from app.formats import sha256_file
+
+        path = self.agent_file(agent)
+        return {"kind": "gymnasium"} | (
+            {"checkpoint": str(path), "sha256": sha256_file(path)} if path is not None and path.is_file() else {}
+        )
+
+    def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
+        from search.gym.clips import render_gym
+
+        return render_gym(summary, out, numbers, options)
+
+    def renderer_files(self, summary: Path) -> list[Path]:
+        import inspect
+
+        import search.gym.clips as renderer
+        from app.formats import load_summary
+
+        adapter = GymScenario.from_dict(load_summary(summary)["scenario"]).load_adapter()
+        return [Path(renderer.__file__), Path(inspect.getfile(type(adapter)))]
+
+    def world(self, scenario: str | None = None) -> World:
+        return self.adapter(scenario).world()

@@ -1,0 +1,77 @@
+"""How good an agent is in a Gymnasium world: success, collision and timeout rates (the adapter's ``outcome`` of
+each episode's end) and mean episode reward over test episodes, with 95% intervals.
+
+Episode i of evaluation seed s starts from ``reset(seed=EPISODE_BASE * (s + 1) + i)``: far from the seeds
+scenario files use and from training's, so no test episode was seen in training. The world is left as it goes
+without Foil (no environment action is applied); the agent acts deterministically.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from search.gym.adapter import EVENTS, Adapter
+from search.gym.agents import GymAgent
+
+EPISODE_BASE = 1_000_000
+
+
+def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson 95% interval of a rate."""
+    p = successes / n
+    centre, half = p + z * z / (2 * n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return (centre - half) / (1 + z * z / n), (centre + half) / (1 + z * z / n)
+
+
+def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> dict:
+    """The ``foil eval --json`` object: rates with Wilson intervals, mean reward with its 95% interval, mean
+    time to success, mean episode length (seconds) and the time limit the environment allows (null when none)."""
+    if episodes < 2:
+        raise ValueError("evaluate at least 2 episodes (an interval needs them)")
+    env = adapter.make()
+    rewards, lengths, counts = [], [], dict.fromkeys(EVENTS, 0)
+    success_times = []
+    for i in range(episodes):
+        observation, _ = env.reset(seed=EPISODE_BASE * (seed + 1) + i)
+        total, steps, done = 0.0, 0, False
+        while not done:
+            observation, reward, terminated, truncated, info = env.step(agent.act(np.asarray(observation)[None])[0])
+            total, steps, done = total + float(reward), steps + 1, bool(terminated or truncated)
+        event = adapter.outcome(bool(terminated), bool(truncated), info)
+        if event not in EVENTS:
+            raise ValueError(f"adapter outcome {event!r}: use one of {EVENTS}")
+        counts[event] += 1
+        if event == "success":
+            success_times.append(steps * adapter.dt)
+        rewards.append(total)
+        lengths.append(steps * adapter.dt)
+    values = np.asarray(rewards)
+    half = 1.96 * values.std(ddof=1) / math.sqrt(episodes)
+    limit = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None
+    return {
+        "agent": agent.name,
+        "episodes": episodes,
+        "seed": seed,
+        **{f"{event}_rate": counts[event] / episodes for event in EVENTS},
+        **{f"{event}_ci95": list(wilson(counts[event], episodes)) for event in EVENTS},
+        "reward_mean": float(values.mean()),
+        "reward_ci95": [float(values.mean() - half), float(values.mean() + half)],
+        "nav_time_mean": float(np.mean(success_times)) if success_times else None,
+        "length_mean": float(np.mean(lengths)),
+        "time_limit": float(limit * adapter.dt) if limit else None,
+    }
+
+
+def format_result(result: dict) -> str:
+    rates = ", ".join(
+        f"{event} rate {result[f'{event}_rate']:.3f} ({result[f'{event}_ci95'][0]:.3f} to "
+        f"{result[f'{event}_ci95'][1]:.3f})"
+        for event in EVENTS
+    )
+    low, high = result["reward_ci95"]
+    return (
+        f"{result['agent']}: {result['episodes']} episodes (seed {result['seed']}), {rates}, mean reward "
+        f"{result['reward_mean']:.2f} ({low:.2f} to {high:.2f}), mean length {result['length_mean']:.1f} s"
+    )

@@ -1,0 +1,226 @@
+"""The one interface between Foil and a world: everything the command line, the solvers, the bundle builder and
+the clips need from a world goes through a `Domain`, so none of them names a world.
+
+A domain recognises its agents and scenarios, loads scenarios and distributions of starting states, builds the
+coupled problem and its summaries (and re-simulates them for ``foil verify``), evaluates an agent, says where an
+agent came from, renders a clip, and says what a clip visibly shows and in which words (``app.visible.World``).
+
+Foil's own domains are listed in ``BUILTIN``; a package adds one without editing Foil through the entry point
+group ``foil.domains`` (name = "module:Class"). A Gymnasium environment needs no domain of its own: its scenario
+file names an adapter, and the Gymnasium domain takes it from there (docs/gym.md).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import cache
+from importlib import import_module
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from app.visible import World
+
+if TYPE_CHECKING:
+    from search.solvers.representative import Rollouts
+    from search.solvers.rollout import Tracker
+
+ENTRY_POINTS = "foil.domains"
+# Foil's own domains, most specific first: the first that claims an agent or scenario owns it.
+BUILTIN = (
+    "search.highway.domain:HighwayDomain",
+    "search.gym.domain:GymDomain",
+    "search.crowd.domain:CrowdDomain",
+)
+
+
+@dataclass(frozen=True)
+class Coupled:
+    """A search's problem with what turns a kept trajectory into a summary: ``summarize(env_actions, solver)``."""
+
+    problem: Any  # a search.solvers.problem.Problem
+    scenario_name: str
+    summarize: Callable[[np.ndarray, dict], dict]
+
+
+class Domain(ABC):
+    """A world Foil compares agents in. ``name`` goes into the manifest; a state is whatever the domain uses as
+    one concrete starting state (it has a ``name`` and a ``to_dict()``)."""
+
+    name: str = ""
+    default_distribution: str | None = None  # what a study's fixed scenarios are checked against by default
+    time_limit_setting: str | None = None  # the world setting `foil eval --time-limit` sets, where there is one
+
+    # recognising agents, scenarios and summaries
+    @abstractmethod
+    def claims_agent(self, spec: str) -> bool | None:
+        """True for an agent of this world, False for another's, None for one that may act in any world."""
+
+    @abstractmethod
+    def claims_scenario(self, name: str) -> bool: ...
+
+    @abstractmethod
+    def claims_summary(self, summary: dict) -> bool: ...
+
+    @abstractmethod
+    def describe_agents(self) -> str:
+        """What agents and scenarios this world takes, for an error that refuses a mix."""
+
+    # settings and scenarios
+    @abstractmethod
+    def parse_world(self, items: list[str]) -> dict:
+        """``--world key=value`` settings, each converted to its type."""
+
+    @abstractmethod
+    def check_world(self, settings: dict, what: str) -> dict:
+        """A study's world settings checked (a clear error for an unknown key or a bad value)."""
+
+    def study_world(self, agents: Sequence[str]) -> dict:
+        """The world settings the agents bring (a trained world), shared by a whole study. Default: none."""
+        return {}
+
+    def own_world(self, scenario: str) -> dict:
+        """The world settings a scenario file sets itself (they win over a study's). Default: none."""
+        return {}
+
+    def comparison_world(self, agents: Sequence[str], world: dict, scenario: str) -> dict:
+        """The world settings a search runs in, from the agents' trained world, the scenario's and ``world``."""
+        return dict(world)
+
+    @abstractmethod
+    def is_distribution(self, name: str) -> bool:
+        """Whether ``name`` is a distribution of starting states (for the representative solver)."""
+
+    @abstractmethod
+    def scenario_dict(self, name: str, world: dict) -> dict:
+        """The scenario or distribution ``name`` under ``world``, complete (every default written in)."""
+
+    @abstractmethod
+    def state(self, name: str, world: dict) -> Any:
+        """The fixed scenario ``name`` under ``world``, complete."""
+
+    @abstractmethod
+    def draw_states(self, name: str, world: dict, rng: np.random.Generator, count: int) -> list:
+        """``count`` starting states drawn from distribution ``name`` under ``world``, each named ``name#i``."""
+
+    # searching and summaries
+    @abstractmethod
+    def coupled(self, agents: Sequence[str], state: Any, reward: dict) -> Coupled:
+        """The agents in one coupled problem from ``state``, scored by the divergence reward (its settings)."""
+
+    def roll_out(
+        self,
+        agents: Sequence[str],
+        states: list,
+        reward: dict,
+        pushes: int,
+        rng: np.random.Generator,
+        tracker: Tracker,
+    ) -> Rollouts:
+        """The representative solver's rollouts (see `search.solvers.representative`): from each state one
+        without pushes and ``pushes`` under uniform pushes, each scored by what its clip visibly shows. Default:
+        through the coupled problem, each rollout's clip built as its summary (exact, at twice the steps)."""
+        from search.solvers.representative import roll_out_problem
+
+        world = self.world()
+        return roll_out_problem(
+            [self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, world, list(agents)
+        )
+
+    @abstractmethod
+    def rebuild(self, summary: dict) -> dict:
+        """The summary that the file's own inputs produce now (``foil verify`` compares it with the file)."""
+
+    # agents
+    @abstractmethod
+    def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+        """The agent's ``foil eval --json`` object (success, collision, timeout rates, mean reward and its 95%
+        interval), in ``scenario``'s world when given."""
+
+    @abstractmethod
+    def describe_evaluation(self, result: dict) -> str:
+        """``foil eval``'s lines for a person (``--json`` prints the object itself)."""
+
+    def eval_scenario(self, scenarios: Sequence[str]) -> str | None:
+        """Which of a study's scenarios an agent is evaluated in (None: the domain's own test episodes)."""
+        return None
+
+    @abstractmethod
+    def agent_file(self, agent: str) -> Path | None:
+        """The file an agent is loaded from (its checksum identifies it), or None for a scripted one."""
+
+    @abstractmethod
+    def agent_source(self, agent: str, world: dict) -> dict:
+        """Where an agent came from, for the manifest."""
+
+    # clips
+    @abstractmethod
+    def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
+        """``foil render``: the clip, its poster and its contact sheet (a `search.clips.render.RenderResult`)."""
+
+    @abstractmethod
+    def renderer_files(self, summary: Path) -> list[Path]:
+        """The source files a clip of ``summary`` is drawn by (part of a rendered clip's cache key)."""
+
+    def world(self, scenario: str | None = None) -> World:
+        """What a clip visibly shows here and in which words; default the crowd's."""
+        return World()
+
+
+@cache
+def domains() -> tuple[Domain, ...]:
+    """Every installed domain: Foil's own, then those of the ``foil.domains`` entry points."""
+    specs = list(BUILTIN) + [entry.value for entry in entry_points(group=ENTRY_POINTS)]
+    found = []
+    for spec in dict.fromkeys(specs):
+        module, _, name = spec.partition(":")
+        found.append(getattr(import_module(module), name)())
+    return tuple(found)
+
+
+def domain_named(name: str) -> Domain:
+    for domain in domains():
+        if domain.name == name:
+            return domain
+    raise ValueError(f"no domain {name!r}: the installed ones are {[d.name for d in domains()]}")
+
+
+def domain_for(agents: Sequence[str], scenario: str | None = None) -> Domain:
+    """The one world the agents (and the scenario) belong to, or a clear error; agents that may act anywhere
+    (``module:attribute``) go with the others, or with the last domain (the crowd) when alone."""
+    installed = domains()
+    found: dict[str, Domain | None] = {}
+    for spec in agents:
+        claims = [d.claims_agent(spec) for d in installed]
+        found[spec] = next((d for d, c in zip(installed, claims, strict=True) if c), None)
+    if scenario is not None:
+        found[f"scenario {scenario}"] = next((d for d in installed if d.claims_scenario(scenario)), installed[-1])
+    kinds = list(dict.fromkeys(d for d in found.values() if d is not None))
+    if len(kinds) > 1:
+        kinds = _narrowest(kinds, found)
+    if len(kinds) > 1:
+        listing = ", ".join(f"{name} ({d.name if d else 'any'})" for name, d in found.items())
+        worlds = "; ".join(d.describe_agents() for d in kinds)
+        raise ValueError(f"cannot mix worlds: {listing}. {worlds}")
+    return kinds[0] if kinds else installed[-1]
+
+
+def _narrowest(kinds: list[Domain], found: dict[str, Domain | None]) -> list[Domain]:
+    """Where one domain is a kind of another (highway driving is a Gymnasium world), the narrower one takes
+    everything the wider one claimed that the narrower accepts too."""
+    narrow = [d for d in kinds if any(isinstance(d, type(o)) and d is not o for o in kinds)]
+    if len(narrow) != 1:
+        return kinds
+    keep = narrow[0]
+    return [keep] + [d for d in kinds if not isinstance(keep, type(d)) and d is not keep]
+
+
+def domain_of_summary(summary: dict) -> Domain:
+    for domain in domains():
+        if domain.claims_summary(summary):
+            return domain
+    raise ValueError("no installed domain can re-simulate this summary: its scenario names no known world")
