@@ -1,9 +1,12 @@
 """What a clip visibly shows, judged the way a viewer would: the rule the `foil simulate` bots answer by and the
-one `foil bundle` audits every clip with against the ground truth.
+one `foil bundle` audits every clip with against the ground truth, and the words a world's pages use for it.
 
-Only what is on screen counts: which robot bumped into a person, which reached its goal and when, how far a robot
-that is still on its way got, and how close each came to people. Light on purpose (no numpy, no search code), so
-the survey server's bots and the offline bundle builder share it.
+Only what is on screen counts: how each robot ended (in the crowd: which bumped into a person, which reached its
+goal and when, how far one that is still on its way got, how close each came to people). A world (`World`) says
+which rule judges its clips ("goal": reach it, sooner is better; "survival": last, longer is better) and the words
+its participants, audit and report read (`Words`); the bundle's manifest carries it, so the server never needs the
+offline side. Light on purpose (no numpy, no search code), so the survey server's bots and the offline bundle
+builder share it.
 """
 
 from __future__ import annotations
@@ -11,16 +14,94 @@ from __future__ import annotations
 import math
 import random
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 SCORE_SUCCESS, SCORE_COLLISION = 2.0, -1.0
+RULES = ("goal", "survival")
+
+
+@dataclass(frozen=True)
+class Words:
+    """What a world's pages call the things its clips show; the defaults are the crowd's. Legend lines are plain
+    text where ``**text**`` reads in bold (the pages escape everything else); an empty `legend_trails` or
+    `others_marker` leaves that line or marker out. The outcome phrases follow a robot's label ("Robot 2 ...");
+    `success` and `collision` may say ``{seconds}``, the whole seconds the clip shows it took."""
+
+    clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
+    legend_robots: str = (
+        "Robots: each has a colour, a shape (disc, square, diamond, triangle, upside-down triangle or plus) and a"
+        " number of its own, drawn on it; its name, such as Robot 7, is listed below the picture."
+    )
+    others_marker: str = "0"  # the text in the grey disc that marks the others' legend line
+    legend_others: str = "People: grey discs with a number, each with a short tail showing where it walks."
+    legend_trails: str = "Trails: the line behind a robot is the path it has taken."
+    legend_crash: str = (
+        "A yellow-and-black burst and **CRASH** mark a robot bumping into a person; the list below the picture then"
+        " says **CRASHED**."
+    )
+    legend_status: str = (
+        "Below the picture each robot's line says **reached goal**, **out of time** or **on its way** (**still on"
+        " its way** when the clip ends), with the time."
+    )
+    success: str = "reached the goal after {seconds} seconds"
+    collision: str = "bumped into a person"
+    timeout: str = "ran out of time before reaching the goal"
+    running: str = "was still on its way when the clip ended"
+    close_call: str = "came close to people"
+
+
+@dataclass(frozen=True)
+class World:
+    """Which world a bundle's clips show, the rule that judges them (`RULES`) and its words: the manifest's
+    `world` object, absent for the crowd."""
+
+    domain: str = "crowd"
+    rule: str = "goal"
+    words: Words = Words()
+
+    def to_manifest(self) -> dict[str, Any]:
+        return {"domain": self.domain, "rule": self.rule, "words": asdict(self.words)}
+
+    @classmethod
+    def from_manifest(cls, data: Mapping[str, Any] | None) -> World:
+        """The world of a manifest's `world` object (None: the crowd's). Words it leaves out keep the crowd's; a
+        key, rule or word this version does not know is a ValueError that names it."""
+        if data is None:
+            return cls()
+        if not isinstance(data, Mapping):
+            raise ValueError(f"world must be an object with domain, rule and words, not {data!r}")
+        _known("world", data, ("domain", "rule", "words"))
+        domain, rule, words = data.get("domain", "crowd"), data.get("rule", "goal"), data.get("words", {})
+        if not isinstance(domain, str) or not domain:
+            raise ValueError(f"world.domain must be a world's name, not {domain!r}")
+        if rule not in RULES:
+            raise ValueError(f"world.rule must be one of {', '.join(map(repr, RULES))}, not {rule!r}")
+        if not isinstance(words, Mapping):
+            raise ValueError(f"world.words must be an object of texts, not {words!r}")
+        _known("world.words", words, tuple(f.name for f in fields(Words)))
+        for name, text in words.items():
+            if not isinstance(text, str):
+                raise ValueError(f"world.words.{name} must be a text, not {text!r}")
+            try:
+                text.format(seconds=0)
+            except (KeyError, IndexError, ValueError) as error:
+                raise ValueError(f"world.words.{name}: {text!r} may name only {{seconds}} ({error})") from None
+        return cls(domain=domain, rule=rule, words=Words(**words))
+
+
+def _known(where: str, data: Mapping[str, Any], keys: tuple[str, ...]) -> None:
+    unknown = sorted(set(data) - set(keys))
+    if unknown:
+        raise ValueError(f"{where} has unknown key(s) {', '.join(map(repr, unknown))}; it knows {', '.join(keys)}")
 
 
 @dataclass(frozen=True)
 class Observer:
-    """How a viewer judges a robot in a clip: reaching the goal beats timing out beats colliding; sooner is
-    better; coming closer than `comfort_m` to a person counts against it. `noise` is the standard deviation of
+    """How a viewer judges a robot in a clip. By the "goal" rule reaching the goal beats timing out beats
+    colliding, and sooner is better; by the "survival" rule (the task is to last: driving, balancing) lasting
+    the clip beats crashing, and crashing later is better. Coming closer than `comfort_m` to a person counts
+    against a robot that did not collide. `noise` is the standard deviation of
     the perception noise, in the same units (reaching the goal at once versus at the end of the clip is 1).
     Scores closer than `tie_margin` look the same (two robots both still on their way, a few metres apart)."""
 
@@ -29,13 +110,18 @@ class Observer:
     closeness_weight: float = 2.0
     tie_margin: float = 0.25
 
-    def visible_score(self, outcome: Mapping[str, Any], end_s: float, progress: float) -> float:
+    def visible_score(self, outcome: Mapping[str, Any], end_s: float, progress: float, rule: str = "goal") -> float:
+        if rule not in RULES:
+            raise ValueError(f"a clip is judged by one of the rules {', '.join(map(repr, RULES))}, not {rule!r}")
         event = outcome.get("event")
+        lasted = min(1.0, float(outcome.get("time") or end_s) / end_s)  # share of the clip until the event
         if event == "collision":
-            return SCORE_COLLISION
+            return SCORE_COLLISION + (lasted if rule == "survival" else 0.0)
         if event == "success":
-            score = SCORE_SUCCESS + 1 - min(1.0, float(outcome.get("time") or end_s) / end_s)
-        else:  # timeout, or still running when the clip ends: judged by how far it got
+            score = SCORE_SUCCESS + (0.0 if rule == "survival" else 1 - lasted)
+        elif rule == "survival":  # timeout, or still running when the clip ends: it lasted the clip
+            score = 1.0
+        else:  # judged by how far it got
             score = progress
         closest = outcome.get("min_human_distance")
         if closest is not None:
@@ -54,16 +140,20 @@ def contrast(a: float, b: float) -> float:
 
 @dataclass(frozen=True)
 class VisibleClip:
-    """What a clip shows: per on-screen label its outcome and how far it got towards the goal."""
+    """What a clip shows: per on-screen label its outcome and how far it got towards the goal, in its world."""
 
     labels: tuple[str, ...]
     outcomes: tuple[Mapping[str, Any], ...]
     progress: tuple[float, ...]
     end_s: float
+    world: World = World()
 
     @classmethod
-    def of_summary(cls, summary: Mapping[str, Any], agents: list[str], labels: list[str]) -> VisibleClip:
-        """The clip of a summary.json whose robots ``agents`` (on-screen order) carry ``labels``."""
+    def of_summary(
+        cls, summary: Mapping[str, Any], agents: list[str], labels: list[str], world: World | None = None
+    ) -> VisibleClip:
+        """The clip of a summary.json whose robots ``agents`` (on-screen order) carry ``labels``, in ``world``
+        (the crowd's when None)."""
         names = [agent["name"] for agent in summary["agents"]]
         order = [names.index(agent) for agent in agents]  # the summary's index of each label's robot
         steps = summary.get("steps") or [{"t": 1.0}]
@@ -72,28 +162,29 @@ class VisibleClip:
             outcomes=tuple(summary["outcomes"][k] for k in order),
             progress=tuple(_progress(summary, k) for k in order),
             end_s=max(float(steps[-1]["t"]), 1e-6),
+            world=world or World(),
         )
 
     def scores(self, observer: Observer) -> dict[str, float]:
         return {
-            label: observer.visible_score(outcome, self.end_s, progress)
+            label: observer.visible_score(outcome, self.end_s, progress, self.world.rule)
             for label, outcome, progress in zip(self.labels, self.outcomes, self.progress, strict=True)
         }
 
     def describe(self, label: str) -> str:
+        """How the robot labelled ``label`` visibly ended, as one sentence in the world's words."""
         outcome = self.outcomes[self.labels.index(label)]
         event = outcome.get("event")
-        if event == "success":
-            text = f"{label} reached the goal after {float(outcome.get('time') or self.end_s):.0f} seconds"
-        elif event == "collision":
-            text = f"{label} bumped into a person"
-        elif event == "timeout":
-            text = f"{label} ran out of time before reaching the goal"
-        else:  # still moving when the clip ends, as the clip's "still on its way"
-            text = f"{label} was still on its way when the clip ended"
+        words = self.world.words
+        # anything else is still moving when the clip ends, as the clip's "still on its way"
+        phrase = {"success": words.success, "collision": words.collision, "timeout": words.timeout}.get(
+            str(event), words.running
+        )
+        seconds = f"{float(outcome.get('time') or self.end_s):.0f}"
+        text = f"{label} {phrase.format(seconds=seconds)}"
         closest = outcome.get("min_human_distance")
         if closest is not None and event != "collision" and float(closest) < 0.5:
-            text += " and came close to people"
+            text += f" and {words.close_call}"
         return text + "."
 
 
