@@ -25,7 +25,8 @@ from app.visible import Observer, VisibleClip, contrast
 
 
 class ClipIndex:
-    """The bundle's clips by sha256, each as a VisibleClip read from its summary.json."""
+    """The bundle's clips by sha256, each as a VisibleClip read from its summary.json, judged by the rule and
+    described in the words of the bundle's world."""
 
     def __init__(self, bundle_dir: str | Path):
         root = Path(bundle_dir)
@@ -33,13 +34,16 @@ class ClipIndex:
             manifest = Manifest.model_validate_json((root / "manifest.json").read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise ValueError(f"no manifest.json in bundle {root}") from None
+        world = manifest.shown_world()
         self.clips: dict[str, VisibleClip] = {}
         self.lengths_ms: dict[str, int] = {}  # what the server holds each clip's answers for
         for entry in manifest.clips:
             path = root / entry.summary
             if not entry.summary or not path.is_file():
                 raise ValueError(f"clip {entry.id!r}: no summary file {path}; the bots judge clips from it")
-            self.clips[entry.sha256.lower()] = VisibleClip.of_summary(load_summary(path), entry.agents, entry.labels)
+            self.clips[entry.sha256.lower()] = VisibleClip.of_summary(
+                load_summary(path), entry.agents, entry.labels, world
+            )
             clip_file = root / entry.file
             if clip_file.is_file():
                 self.lengths_ms[entry.sha256.lower()] = clip_shape(clip_file).ms
