@@ -24,6 +24,7 @@ CARS = World(
     rule="survival",
     words=Words(
         clip_title="Clip of two self-driving cars on a highway",
+        example_caption="An example: two self-driving cars, each in its own colour, drive the same highway.",
         legend_robots="Robots: each self-driving car wears its robot's colour; its name is listed below the picture.",
         others_marker="",
         legend_others="Traffic: the other cars, in blue, all driving the same way.",
@@ -55,11 +56,12 @@ def with_world(crowd_bundle: Path, root: Path, world: dict) -> Path:
 
 
 def world_parts(page: str) -> str:
-    """What a page says in its world's words: the legend, the videos' accessible names and the outcome lines."""
+    """What a page says in its world's words: the legend, the videos' accessible names and their captions (a
+    ranking round's with its outcome lines)."""
     legend = re.findall(r'<ul class="clip-legend".*?</ul>', page, re.DOTALL)
     titles = re.findall(r'<video [^>]*aria-label="([^"]*)"', page)
-    outcomes = re.findall(r'<ul class="outcomes">.*?</ul>', page, re.DOTALL)
-    return "\n".join(legend + titles + outcomes)
+    captions = re.findall(r"<figcaption>.*?</figcaption>", page, re.DOTALL)
+    return "\n".join(legend + titles + captions)
 
 
 def pages(client) -> str:
@@ -71,7 +73,7 @@ def test_a_highway_bundle_speaks_of_cars_and_never_of_people(make_client, crowd_
     shown = pages(make_client(bundle_dir=bundle))
     assert "Traffic: the other cars, in blue" in shown and 'class="marker person"' not in shown
     assert "<strong>CRASH</strong> mark a car hitting another car" in shown and "Trails:" not in shown
-    assert "Clip of two self-driving cars on a highway" in shown
+    assert "Clip of two self-driving cars on a highway" in shown and CARS.words.example_caption in shown
     assert (
         re.search(r"Robot \d crashed after 6 seconds\.", shown)
         and "drove through and came close to other cars" in shown
@@ -90,7 +92,7 @@ def test_a_crowd_bundle_reads_as_before(make_client, crowd_bundle):
         "<strong>on its way</strong> (<strong>still on its way</strong> when the clip ends), with the time.</li>"
         in shown
     )
-    assert "Clip of two robots in a crowd" in shown
+    assert "Clip of two robots in a crowd" in shown and "walk through a crowd to the same goal." in shown
     assert re.search(r"Robot \d bumped into a person\.", shown)
     assert re.search(r"Robot \d reached the goal after 9 seconds\.", shown)
 
