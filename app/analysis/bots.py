@@ -4,8 +4,9 @@ way a viewer would.
 A bot reads each page's form, fetches the clip the page points to (as a browser would), and answers from what the
 clip visibly shows. It knows a clip by its address (the sha256 in /clips/SHA.mp4), finds it in the bundle and
 reads the clip's summary.json: which robot collided, which reached the goal and when, which timed out, how close
-each came to people. The observer model turns that into a score per robot plus Gaussian perception noise; the
-ground truth (`better` in the manifest, the agents' evaluations) is never read.
+each came to people. The observer model turns that into a score per robot, by the rule of the bundle's world
+(`app.visible.World`), plus Gaussian perception noise; the ground truth (`better` in the manifest, the agents'
+evaluations) is never read.
 """
 
 from __future__ import annotations
