@@ -7,7 +7,8 @@ imports the offline side) and the bundle builder share it. docs/formats.md descr
   exactly and to draw it. Written by ``search.solvers.summary``, read by ``foil verify``, the renderer, the
   bundle's audit and the bots.
 - manifest.json (``foil.bundle/1``): a bundle's clips, each with its agents, on-screen labels, ground truth,
-  audit and checksum. Written by ``foil bundle``, read by the server and the bots.
+  audit and checksum, and the world they show (``app.visible.World``). Written by ``foil bundle``, read by the
+  server and the bots.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ import json
 from pathlib import Path
 from typing import Any, Literal, TypedDict, cast
 
-from pydantic import BaseModel, ConfigDict, model_validator
+from pydantic import BaseModel, ConfigDict, field_validator, model_validator
+
+from app.visible import World
 
 SUMMARY_FORMAT = "foil.summary/1"
 MANIFEST_FORMAT = "foil.bundle/1"
@@ -140,8 +143,22 @@ class Manifest(BaseModel):
     files: dict[str, str] = {}  # every file of the bundle (relative path) -> sha256
     # per pair and fixed scenario: how representative it is of the task's distribution (researchers only)
     representativeness: list[dict[str, Any]] = []
+    world: dict[str, Any] | None = None  # World.to_manifest() of the world the clips show; absent: the crowd
+
+    @field_validator("world")
+    @classmethod
+    def _known_world(cls, world: dict[str, Any] | None) -> dict[str, Any] | None:
+        World.from_manifest(world)  # a world this server cannot speak of is refused at start-up
+        return world
+
+    def shown_world(self) -> World:
+        return World.from_manifest(self.world)
 
 
 def manifest_json(manifest: Manifest) -> str:
-    """A manifest's file text: the one way manifests are written."""
-    return json.dumps(manifest.model_dump(mode="json"), indent=1) + "\n"
+    """A manifest's file text: the one way manifests are written. A crowd manifest leaves `world` out, so it reads
+    byte for byte as it did before worlds had a key."""
+    return (
+        json.dumps(manifest.model_dump(mode="json", exclude={"world"} if manifest.world is None else None), indent=1)
+        + "\n"
+    )

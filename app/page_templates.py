@@ -4,9 +4,11 @@ renders every page the server writes: participant and admin pages and the report
 from __future__ import annotations
 
 from functools import cache
+from html import escape
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader
+from markupsafe import Markup
 
 APP_DIR = Path(__file__).resolve().parent
 
@@ -28,6 +30,13 @@ def _paragraphs(text: str) -> list[str]:
     return [" ".join(block.split()) for block in text.strip().split("\n\n") if block.strip()]
 
 
+def _strong(text: str) -> Markup:
+    """A world's legend line (`app.visible.Words`), escaped for a page's text (quotes need none there), with its
+    ``**words**`` in bold: the manifest carries plain text, never markup."""
+    parts = escape(text, quote=False).split("**")
+    return Markup("".join(f"<strong>{part}</strong>" if k % 2 else part for k, part in enumerate(parts)))
+
+
 def _percent(value: float | None) -> str:
     return "–" if value is None else f"{100 * value:.2f}%"
 
@@ -44,5 +53,5 @@ def _number(value: float | None) -> str:
 def page_templates() -> Environment:
     """Compiled once per process: no check for changed files on every page."""
     env = Environment(loader=FileSystemLoader(TEMPLATES_DIR), autoescape=True, auto_reload=False)
-    env.filters.update(paragraphs=_paragraphs, percent=_percent, p=_p_value, num=_number)
+    env.filters.update(paragraphs=_paragraphs, strong=_strong, percent=_percent, p=_p_value, num=_number)
     return env

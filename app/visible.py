@@ -29,6 +29,9 @@ class Words:
     `success` and `collision` may say ``{seconds}``, the whole seconds the clip shows it took."""
 
     clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
+    example_caption: str = (  # under the instructions' example clip, unless the study file says otherwise
+        "An example: two robots, each with its own colour, shape and name, walk through a crowd to the same goal."
+    )
     legend_robots: str = (
         "Robots: each has a colour, a shape (disc, square, diamond, triangle, upside-down triangle or plus) and a"
         " number of its own, drawn on it; its name, such as Robot 7, is listed below the picture."

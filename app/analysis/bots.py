@@ -4,8 +4,9 @@ way a viewer would.
 A bot reads each page's form, fetches the clip the page points to (as a browser would), and answers from what the
 clip visibly shows. It knows a clip by its address (the sha256 in /clips/SHA.mp4), finds it in the bundle and
 reads the clip's summary.json: which robot collided, which reached the goal and when, which timed out, how close
-each came to people. The observer model turns that into a score per robot plus Gaussian perception noise; the
-ground truth (`better` in the manifest, the agents' evaluations) is never read.
+each came to people. The observer model turns that into a score per robot, by the rule of the bundle's world
+(`app.visible.World`), plus Gaussian perception noise; the ground truth (`better` in the manifest, the agents'
+evaluations) is never read.
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ from app.visible import Observer, VisibleClip, contrast
 
 
 class ClipIndex:
-    """The bundle's clips by sha256, each as a VisibleClip read from its summary.json."""
+    """The bundle's clips by sha256, each as a VisibleClip read from its summary.json, judged by the rule and
+    described in the words of the bundle's world."""
 
     def __init__(self, bundle_dir: str | Path):
         root = Path(bundle_dir)
@@ -33,13 +35,16 @@ class ClipIndex:
             manifest = Manifest.model_validate_json((root / "manifest.json").read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise ValueError(f"no manifest.json in bundle {root}") from None
+        world = manifest.shown_world()
         self.clips: dict[str, VisibleClip] = {}
         self.lengths_ms: dict[str, int] = {}  # what the server holds each clip's answers for
         for entry in manifest.clips:
             path = root / entry.summary
             if not entry.summary or not path.is_file():
                 raise ValueError(f"clip {entry.id!r}: no summary file {path}; the bots judge clips from it")
-            self.clips[entry.sha256.lower()] = VisibleClip.of_summary(load_summary(path), entry.agents, entry.labels)
+            self.clips[entry.sha256.lower()] = VisibleClip.of_summary(
+                load_summary(path), entry.agents, entry.labels, world
+            )
             clip_file = root / entry.file
             if clip_file.is_file():
                 self.lengths_ms[entry.sha256.lower()] = clip_shape(clip_file).ms

@@ -18,6 +18,7 @@ from pydantic import ValidationError
 
 from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, sha256_file
 from app.survey.study import ClipRef, Study
+from app.visible import World
 
 
 class BundleError(ValueError):
@@ -29,6 +30,7 @@ class Bundle:
     root: Path
     clips: dict[str, ManifestClip]  # by id
     paths: dict[str, Path]  # sha256 -> file, what /clips/{sha256}.mp4 serves
+    world: World = World()  # the world the clips show: its rule and the words its pages use
 
     def matching(self, scheme: str, scenario: str, agents: tuple[str, str]) -> list[ManifestClip]:
         """The two-agent clips of a scheme, scenario and pair (in either order), in id order."""
@@ -79,7 +81,7 @@ def load_bundle(root: str | Path) -> Bundle:
             paths[clip.sha256.lower()] = path
     if problems:
         raise BundleError(f"bundle {root}:\n" + "\n".join(problems))
-    return Bundle(root=root, clips=clips, paths=paths)
+    return Bundle(root=root, clips=clips, paths=paths, world=manifest.shown_world())
 
 
 def _part_scenarios(study: Study, part_index: int, scheme: str) -> list[str]:

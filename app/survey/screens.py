@@ -362,14 +362,14 @@ def page_view(screen: Screen, study: Study, bundle: Bundle) -> dict[str, Any]:
 
 
 def _outcomes(bundle: Bundle, sha: str) -> list[str]:
-    """How each robot of a clip visibly ends, in words by its label (what the clip itself shows, from its
-    summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
+    """How each robot of a clip visibly ends, by its label in the words of the bundle's world (what the clip itself
+    shows, from its summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
     clip = next((clip for clip in bundle.clips.values() if clip.sha256.lower() == sha), None)
     if clip is None or not clip.summary:
         return []
     try:
         summary = json.loads((bundle.root / clip.summary).read_text(encoding="utf-8"))
-        shown = VisibleClip.of_summary(summary, clip.agents, clip.labels)
+        shown = VisibleClip.of_summary(summary, clip.agents, clip.labels, bundle.world)
     except (OSError, ValueError, KeyError, IndexError, TypeError):
         return []
     return [shown.describe(label) for label in clip.labels]

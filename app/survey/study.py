@@ -104,9 +104,7 @@ class Texts(Strict):
     preview: Text = "Accept the HIT to start the study."
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
-    example_caption: Text = (
-        "An example: two robots, each with its own colour, shape and name, walk through a crowd to the same goal."
-    )
+    example_caption: str = ""  # under the instructions' example clip; empty: the caption of the bundle's world
     robot_names: Text = (
         "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
         "for two different robots in this study, and in a ranking round each name is one robot in "

@@ -37,7 +37,7 @@ class Context:
 
     def render(self, request: Request, name: str, status_code: int = 200, **context: Any) -> HTMLResponse:
         html = self.templates.get_template(name).render(
-            request=request, study=self.study, csrf_token=csrf_token, **context
+            request=request, study=self.study, words=self.bundle.world.words, csrf_token=csrf_token, **context
         )
         return HTMLResponse(html, status_code=status_code)
 
@@ -50,7 +50,11 @@ class Context:
         pieces = self.pages.get(key)
         if pieces is None:
             html = self.templates.get_template(name).render(
-                request=None, study=self.study, csrf_token=lambda _request: self.csrf_slot, **context()
+                request=None,
+                study=self.study,
+                words=self.bundle.world.words,
+                csrf_token=lambda _request: self.csrf_slot,
+                **context(),
             )
             if len(self.pages) >= MAX_PAGES:
                 self.pages.clear()

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
-from app.visible import VisibleClip, audit
+from app.visible import Observer, VisibleClip, Words, World, audit
 
 
 def summary(*outcomes: dict, ends: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.0)), t: float = 25.0):
@@ -64,3 +66,60 @@ def test_the_audit_says_what_the_clip_says_of_a_robot_still_moving_at_its_end():
     clip = VisibleClip.of_summary(summary(timed_out, LATE, ends=((0, 0), (5, 5))), ["lo", "hi"], ["A", "B"])
     assert "A ran out of time before reaching the goal" in audit(clip, "B")["why"]
     assert status_text("timeout", 50.0).startswith("out of time")
+
+
+HIGHWAY = World(domain="highway", rule="survival", words=Words(collision="crashed after {seconds} seconds"))
+
+
+@pytest.mark.parametrize(
+    "lo, hi, shows",
+    [
+        ({"event": "collision", "time": 4.0}, {"event": "collision", "time": 15.0}, "better"),  # lasted 11 s longer
+        ({"event": "collision", "time": 15.0}, {"event": "collision", "time": 4.0}, "worse"),
+        ({"event": "collision", "time": 20.0}, {"event": "success", "time": 25.0}, "better"),
+        ({"event": "collision", "time": 20.0}, {"event": "timeout", "time": 25.0}, "better"),
+        ({"event": "success", "time": 25.0}, {"event": "success", "time": 25.0}, "tie"),  # both drove through
+        ({"event": "running", "time": None}, {"event": "timeout", "time": 25.0}, "tie"),  # both lasted the clip
+    ],
+)
+def test_the_survival_rule_judges_how_long_a_robot_lasted(lo, hi, shows):
+    """Where the task is to last (driving, balancing) there is no goal: crashing later is better, and two robots
+    that both last the clip look alike, whatever their progress towards a goal the clip never shows."""
+    clip = VisibleClip.of_summary(summary(lo, hi, ends=((5, 5), (-5, -5))), ["lo", "hi"], ["A", "B"], HIGHWAY)
+    assert audit(clip, "B")["shows"] == shows
+
+
+def test_a_world_describes_its_clips_in_its_own_words():
+    crashes = summary({"event": "collision", "time": 4.0}, {"event": "collision", "time": 15.4})
+    clip = VisibleClip.of_summary(crashes, ["lo", "hi"], ["A", "B"], HIGHWAY)
+    assert audit(clip, "B")["why"] == "B crashed after 15 seconds. A crashed after 4 seconds."
+    assert VisibleClip.of_summary(crashes, ["lo", "hi"], ["A", "B"]).describe("A") == "A bumped into a person."
+
+
+def test_a_world_goes_through_the_manifest_unchanged():
+    assert World.from_manifest(None) == World() == World.from_manifest({})
+    assert World.from_manifest(json.loads(json.dumps(HIGHWAY.to_manifest()))) == HIGHWAY
+    assert World.from_manifest({"domain": "cartpole", "rule": "survival"}).words == Words()
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"domain": "highway", "rules": "survival"}, "world has unknown key.*'rules'"),
+        ({"rule": "longest"}, "world.rule must be one of 'goal', 'survival', not 'longest'"),
+        ({"domain": ""}, "world.domain must be a world's name"),
+        ({"words": {"crash": "crashed"}}, "world.words has unknown key.*'crash'"),
+        ({"words": {"collision": "crashed after {time} seconds"}}, "world.words.collision: .* may name only {seconds}"),
+        ({"words": {"success": 3}}, "world.words.success must be a text"),
+        ({"words": ["drove through"]}, "world.words must be an object of texts"),
+        ("highway", "world must be an object"),
+    ],
+)
+def test_a_world_this_version_cannot_read_is_refused_by_name(data, message):
+    with pytest.raises(ValueError, match=message):
+        World.from_manifest(data)
+
+
+def test_a_clip_is_judged_by_a_known_rule():
+    with pytest.raises(ValueError, match="not 'fastest'"):
+        Observer().visible_score({"event": "success", "time": 3.0}, 10.0, 1.0, rule="fastest")

@@ -6,7 +6,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.store.models import Participant, Response
-from tests.support.survey import SECRET_NAMES, FormReader, answer_for, finish, start, stored
+from tests.support.survey import SECRET_NAMES, FormReader, answer_for, finish, start, stored, walk
 
 PROLIFIC = {
     "platform": '"prolific"',
@@ -14,20 +14,6 @@ PROLIFIC = {
     "redirect_url": '"https://app.prolific.com/submissions/complete?cc=FOIL-PAPER-7Q2K"',
 }
 PROLIFIC_LINK = "?PROLIFIC_PID=pid{n}&STUDY_ID=study1&SESSION_ID=session{n}"
-
-
-def walk(client: TestClient, page: str, number: str = "3") -> list[str]:
-    """Answer every screen (choosing `number` if asked), returning every page seen."""
-    seen = [page]
-    while True:
-        form = FormReader(page)
-        if "number" in form.radios:
-            page = client.post("/condition", data={"csrf_token": form.hidden["csrf_token"], "number": number}).text
-        elif "step" in form.hidden:
-            page = client.post("/study", data=answer_for(page)).text
-        else:
-            return seen
-        seen.append(page)
 
 
 def test_paper_study_whole_session_on_mturk(make_client):

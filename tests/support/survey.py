@@ -232,6 +232,20 @@ def finish(client: TestClient, page: str, choice: int = 0, limit: int = 60) -> s
     raise AssertionError("the study did not end")
 
 
+def walk(client: TestClient, page: str, number: str = "3") -> list[str]:
+    """Answer every screen (choosing `number` if asked), returning every page seen."""
+    seen = [page]
+    while True:
+        form = FormReader(page)
+        if "number" in form.radios:
+            page = client.post("/condition", data={"csrf_token": form.hidden["csrf_token"], "number": number}).text
+        elif "step" in form.hidden:
+            page = client.post("/study", data=answer_for(page)).text
+        else:
+            return seen
+        seen.append(page)
+
+
 def stored(client: TestClient, model) -> list:
     """Every row of a table, read straight from the app's database."""
     from sqlalchemy import select
