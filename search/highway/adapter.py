@@ -34,6 +34,7 @@ AGENTS_DIR = Path(__file__).parent / "agents"
 AGENT_PREFIX = "highway-"
 WORDS = Words(
     clip_title="Clip of two self-driving cars, each on its own copy of the same highway",
+    example_caption="An example: two self-driving cars, each on its own copy of the same highway, in the same traffic.",
     legend_robots=(
         "Self-driving cars: each view follows one, drawn in its robot's colour; its name, such as Robot 7, is"
         " listed below the picture."
