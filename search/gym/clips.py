@@ -20,7 +20,7 @@ from importlib import import_module
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
+from PIL import Image, ImageDraw
 
 from app.formats import load_summary
 from search.clips.render import (
@@ -182,6 +182,8 @@ class GymClipRenderer(ClipRenderer):
         for slot, k in enumerate(self.order):
             x0, y0 = lay.origin(slot)
             image.paste(self._view(k, t), (x0, y0))
+            if x0:  # a thin gap, so neighbouring views never read as one
+                ImageDraw.Draw(image).rectangle((x0, y0, x0 + 1, y0 + lay.view_height), fill=BACKGROUND)
             event, when = self.scene.outcomes[k]
             happened = event != "running" and when <= t + 1e-9
             point = self.scene.crash_points[k]
