@@ -6,7 +6,7 @@ from pathlib import Path
 import search
 from tests.support.imports import import_circles, package_modules, upward_imports
 
-LAYERS = ("sim", "agents", "solvers", "gym", "clips", "highway", "bundle", "cli")
+LAYERS = ("sim", "agents", "solvers", "clips", "gym", "highway", "bundle", "cli")
 ROOT = Path(search.__file__).parent
 
 

@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image, ImageDraw
@@ -140,7 +141,7 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
     def capture(p: GymCoupledProblem) -> None:
         nonlocal frames_per_step
         for k, instance in enumerate(p.rows[0]):
-            env = instance.env
+            env: Any = instance.env
             if not views[k]:  # just reset
                 frames_per_step = adapter.record(env, lambda env=env, k=k: views[k].append(np.asarray(env.render())))
             elif instance.event_step not in (0, int(p.t[0])):  # ended earlier: its view stays where it ended
@@ -160,6 +161,10 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
 class GymClipRenderer(ClipRenderer):
     """Foil's timeline, clock and status panel around the environment's views (the crowd renderer's schedule,
     header and tags reused)."""
+
+    # the crowd renderer's timeline and drawing need only what these have in common with its own scene and layout
+    scene: GymScene  # type: ignore[assignment]
+    layout: GymLayout  # type: ignore[assignment]
 
     def __init__(self, summary: dict, numbers: list[int] | None = None, options: RenderOptions | None = None):
         agents = len(summary["agents"])
@@ -202,7 +207,7 @@ class GymClipRenderer(ClipRenderer):
         if cached is None or cached[0] != id(frame):
             image = Image.fromarray(frame)
             size = (self.layout.panel, self.layout.view_height)
-            cached = (id(frame), image if image.size == size else image.resize(size, Image.LANCZOS))
+            cached = (id(frame), image if image.size == size else image.resize(size, Image.Resampling.LANCZOS))
             self._views[k] = cached
         return cached[1]
 
@@ -242,7 +247,7 @@ def render_gym(
     """`foil render` for any Gymnasium summary: the clip, its poster and its contact sheet, by the adapter's own
     renderer where it names one."""
     started = time.perf_counter()
-    summary = load_summary(summary_path)
+    summary: dict[str, Any] = dict(load_summary(Path(summary_path)))
     own = GymScenario.from_dict(summary["scenario"]).load_adapter().renderer
     if own:
         module, _, name = own.partition(":")
