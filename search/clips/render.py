@@ -100,6 +100,22 @@ def robot_style(number: int) -> tuple[tuple[int, int, int], str]:
     return ROBOT_STYLES[(number - 1) % len(ROBOT_STYLES)]
 
 
+def robot_numbers(numbers: list[int] | None, agents: int) -> list[int]:
+    """The robot number shown for each of a summary's agents (default 1, 2, ...), checked: every clip renderer
+    must tell its robots apart by colour and shape."""
+    numbers = list(numbers) if numbers is not None else list(range(1, agents + 1))
+    if (
+        len(numbers) != agents
+        or not all(isinstance(n, int) and n >= 1 for n in numbers)
+        or len({robot_style(n) for n in numbers}) != agents
+    ):
+        raise ValueError(
+            f"give one robot number (1 or more) per agent, each with its own colour and shape "
+            f"(numbers {len(ROBOT_STYLES)} apart share one); the summary has {agents} agents, got {numbers}"
+        )
+    return numbers
+
+
 def _luminance(colour) -> float:
     linear = [v / 255 / 12.92 if v / 255 <= 0.03928 else ((v / 255 + 0.055) / 1.055) ** 2.4 for v in colour]
     return 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
@@ -347,17 +363,7 @@ class ClipRenderer:
     def __init__(self, scene: Scene, numbers: list[int] | None = None, options: RenderOptions | None = None):
         self.scene = scene
         self.options = options or RenderOptions()
-        self.numbers = list(numbers) if numbers is not None else list(range(1, scene.n_agents + 1))
-        if (
-            len(self.numbers) != scene.n_agents
-            or not all(isinstance(n, int) and n >= 1 for n in self.numbers)
-            or len({robot_style(n) for n in self.numbers}) != scene.n_agents
-        ):
-            raise ValueError(
-                f"give one robot number (1 or more) per agent, each with its own colour and shape "
-                f"(numbers {len(ROBOT_STYLES)} apart share one); the summary has {scene.n_agents} "
-                f"agents, got {self.numbers}"
-            )
+        self.numbers = robot_numbers(numbers, scene.n_agents)
         self.layout = Layout.make(scene, self.options)
         self.robot_px = self.layout.marker(scene.robot_radius)
         self.sprites = Sprites(

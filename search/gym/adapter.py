@@ -25,6 +25,10 @@ episode's end reads as Foil's events. Copy this template and fill it in (docs/gy
 ``snapshot_env``/``restore_env`` may be overridden with a faster state get/set where the environment has one; by
 default a snapshot is a deep copy of the environment (wrappers, the unwrapped environment and its random
 generator).
+
+Clips need nothing more: the generic renderer draws the environment's own ``render()`` frames. Optional hooks
+(``view_settings``, ``record``, ``mark_agent``, ``crash_point``, ``caption``, ``status_words``, at the class's end)
+say what it cannot know; ``renderer`` names a renderer of the adapter's own.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from __future__ import annotations
 import copy
 from abc import ABC, abstractmethod
 from importlib import import_module
+from typing import ClassVar
 
 import numpy as np
 
@@ -123,6 +128,42 @@ class Adapter(ABC):
     def others(self, env) -> list:
         """What else a clip or a summary shows of the world, as [[x, y], ...] (default: nothing)."""
         return []
+
+    # Clips (search/gym/clips.py): what the generic renderer cannot know. Every hook has a default, so an adapter
+    # that defines none still renders: the environment's own frames, a label and status under each.
+
+    renderer: str | None = None  # "module:function" with render_gym's signature: the adapter's own renderer
+    status_words: ClassVar[dict[str, str]] = {
+        "success": "succeeded",
+        "collision": "failed",
+        "timeout": "out of time",
+        "running": "running",
+    }  # the status panel's words for each outcome, and for an episode still going at the clip's end
+
+    def view_settings(self, width_px: int) -> dict:
+        """Settings merged over the scenario's for the rendering environment (screen size, zoom), for a view at
+        most ``width_px`` wide; the dynamics must not change. Default none: the environment's frames, scaled."""
+        return {}
+
+    def record(self, env, capture) -> int:
+        """Called once per agent after the reset, before the first frame: arrange for ``capture()`` after each
+        frame the environment simulates inside a step (smoother motion than one frame a step); returns the frames
+        a step shows, the one after it included. Default 1."""
+        return 1
+
+    def mark_agent(self, env, rgb: tuple[int, int, int]) -> None:
+        """Paint the agent in its robot's colour before each frame, and nothing else in a robot colour. Default
+        nothing: the label under the view names it."""
+        return None
+
+    def crash_point(self, env) -> tuple[float, float] | None:
+        """Where a crash marker goes in the view of the episode's end, as fractions of the view's width and height
+        from its top left; None for no marker. Default the view's centre."""
+        return (0.5, 0.5)
+
+    def caption(self, env) -> str:
+        """A short text beside the agent's label, read after each step (a speed, a score). Default none."""
+        return ""
 
 
 def load_adapter(spec: str, settings: dict | None = None) -> Adapter:

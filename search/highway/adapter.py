@@ -15,6 +15,11 @@ left alone: IDM still keeps the gap to the vehicle ahead and aborts a lane chang
 same lane, so a searched scenario stays one that traffic could produce. The bounds keep speeds in the traffic's
 range, and the dead zone makes a commanded lane change a deliberate choice of the search (about one step in ten
 under the uniform prior) rather than constant weaving. The ego vehicle is never touched.
+
+Clips (the generic renderer, search/gym/clips.py, through this adapter's hooks): a view follows the ego along the
+road and keeps the whole road across it, so it is no taller than the road; the ego wears its robot's colour and
+all other traffic one grey that no robot colour is near; the caption is the ego's speed; every simulation step
+(5 per simulated second) is captured through highway-env's video-recording hook.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ import numpy as np
 
 from app.visible import Words
 from search.gym.adapter import Adapter
-from search.highway.env import make_env
+from search.highway.env import CONFIG, make_env
 
 PERTURBED = 8
 SPEED_RANGE = 5.0  # m/s either side of a vehicle's own target speed
@@ -59,6 +64,11 @@ WORDS = Words(
     running="was still driving when the clip ended",
     close_call="",
 )
+VIEW_METRES = 64.0  # of road along a view: about 45 m ahead of the ego and 19 m behind
+EGO_AT = 0.3  # where along the view the ego stays (highway-env's centering_position)
+ROAD_MARGIN = 2.0  # metres of verge above and below the road in a view
+LANE_WIDTH = 4.0  # highway-env's
+TRAFFIC = (200, 200, 200)  # light grey: apart from the road's dark grey, the lane marks' white and every robot
 
 
 class HighwayAdapter(Adapter):
@@ -112,3 +122,65 @@ class HighwayAdapter(Adapter):
         if not path.is_file():
             raise ValueError(f"unknown highway agent {name!r}: the shipped ones are {self.agent_names()}")
         return path
+
+    status_words = {
+        "success": "drove through",
+        "collision": "CRASHED",
+        "timeout": "out of time",
+        "running": "on its way",
+    }
+
+    def view_settings(self, width_px: int) -> dict:
+        lanes = int(self.settings.get("lanes_count", CONFIG["lanes_count"]))
+        scaling = width_px / VIEW_METRES  # px per metre
+        return {
+            "screen_width": width_px,
+            "screen_height": round((lanes * LANE_WIDTH + 2 * ROAD_MARGIN) * scaling),
+            "scaling": scaling,
+            "centering_position": [EGO_AT, 0.5],
+        }
+
+    def record(self, env, capture) -> int:
+        from highway_env.envs.common.graphics import EnvViewer
+
+        road = env.unwrapped
+        road.viewer = EnvViewer(road)
+        road.viewer.observer_vehicle = _RoadCamera(road)
+        road.set_record_video_wrapper(_Capture(capture))
+        return int(road.config["simulation_frequency"] // road.config["policy_frequency"])
+
+    def mark_agent(self, env, rgb: tuple[int, int, int]) -> None:
+        ego = env.unwrapped.vehicle
+        for vehicle in env.unwrapped.road.vehicles:
+            vehicle.color = rgb if vehicle is ego else TRAFFIC  # a set colour also overrides highway-env's crash red
+
+    def crash_point(self, env) -> tuple[float, float]:
+        viewer = env.unwrapped.viewer
+        surface, ego = viewer.sim_surface, env.unwrapped.vehicle
+        _, y = surface.pos2pix(*ego.position)
+        return EGO_AT, y / surface.get_height()
+
+    def caption(self, env) -> str:
+        return f"{3.6 * env.unwrapped.vehicle.speed:.0f} km/h"
+
+
+class _RoadCamera:
+    """What highway-env's viewer follows: the ego along the road, the road's middle across it."""
+
+    def __init__(self, env):
+        self.env = env
+        ys = [lane.position(0.0, 0.0)[1] for lane in env.road.network.lanes_list()]
+        self.middle = (min(ys) + max(ys)) / 2
+
+    @property
+    def position(self) -> np.ndarray:
+        return np.array([self.env.vehicle.position[0], self.middle])
+
+
+class _Capture:
+    """highway-env's video-recording hook: called after each intermediate simulation step."""
+
+    frames_per_sec = 0
+
+    def __init__(self, capture):
+        self._capture_frame = capture

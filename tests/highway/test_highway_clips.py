@@ -1,4 +1,5 @@
-"""Highway clips: highway-env's own offscreen views side by side with Foil's labels, colours, clock and status."""
+"""Highway clips through the generic Gymnasium renderer: highway-env's own offscreen views with Foil's labels,
+colours, clock and status, grey traffic, the ego's speed, and a crash burst that gives way to a small mark."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from search.cli import main
-from search.clips.render import robot_style
+from search.clips.render import ROBOT_COLOURS, RenderOptions, robot_style
+from search.gym.clips import GymClipRenderer, render_gym
 from search.gym.summary import run_gym_search
-from search.highway.clips import EGO_AT, HighwayClipRenderer, HighwayLayout
+from search.highway.adapter import EGO_AT, TRAFFIC
 from search.highway.scenarios import SCENARIOS
 from search.solvers.runner import SearchJob, write_outputs
 from tests.render.test_render import probe, top_level_boxes
@@ -29,42 +30,47 @@ def summary_file(tmp_path_factory):
     return out / "summary-001.json"
 
 
-def test_foil_render_writes_browser_safe_h264_with_poster_and_contact_sheet(tmp_path, summary_file, capsys):
-    clip = tmp_path / "clip.mp4"
-    assert main(["render", str(summary_file), "--out", str(clip), "--numbers", "2,1", "--speed", "4"]) == 0
-    assert "frames" in capsys.readouterr().out
-    info = probe(clip)
+def test_a_highway_clip_is_browser_safe_h264_with_poster_and_contact_sheet(tmp_path, summary_file):
+    result = render_gym(summary_file, tmp_path / "clip.mp4", [2, 1], RenderOptions(speed=4))
+    info = probe(result.clip)
     video = re.search(r"Video: (\w+).*?, (\w+)(?:\(.*?\))?, (\d+)x(\d+)", info)
     assert video and (video.group(1), video.group(2)) == ("h264", "yuv420p"), info
     assert int(video.group(3)) % 16 == 0 and int(video.group(4)) % 16 == 0
-    boxes = top_level_boxes(clip)
+    boxes = top_level_boxes(result.clip)
     assert boxes.index("moov") < boxes.index("mdat")
-    assert imageio_ffmpeg.count_frames_and_secs(str(clip))[0] > 24
-    with Image.open(tmp_path / "clip.poster.png") as poster, Image.open(tmp_path / "clip.sheet.png") as sheet:
+    assert imageio_ffmpeg.count_frames_and_secs(str(result.clip))[0] > 24
+    with Image.open(result.poster) as poster, Image.open(result.sheet) as sheet:
         assert poster.size == (int(video.group(3)), int(video.group(4))) and sheet.width > poster.width
 
 
-def test_each_view_is_highway_envs_drawing_with_the_ego_in_its_robots_colour(summary_file):
+def test_each_view_is_highway_envs_road_with_the_ego_in_its_colour_grey_traffic_and_its_speed(summary_file):
     import json
 
     summary = json.loads(summary_file.read_text())
-    renderer = HighwayClipRenderer(summary, [2, 1])
+    renderer = GymClipRenderer(summary, [6, 1])  # Robot 6's sky blue was highway-env's own traffic blue
     lay = renderer.layout
-    assert isinstance(lay, HighwayLayout) and lay.panels == 2
+    assert lay.columns == 1 and lay.panel == lay.width  # wide road views: one above the other, the clip's width
     image = np.asarray(renderer.draw(renderer.frames[0]))
     for slot, k in enumerate(renderer.order):
-        view = image[lay.header : lay.header + lay.view_height, slot * lay.panel : (slot + 1) * lay.panel]
+        x0, y0 = lay.origin(slot)
+        view = image[y0 : y0 + lay.view_height, x0 : x0 + lay.panel].astype(int)
         assert view.std() > 10  # a drawn road, not a blank surface
-        colour = np.array(robot_style(renderer.numbers[k])[0])
-        near_ego = view[
-            int(EGO_AT[1] * lay.view_height) - 12 : int(EGO_AT[1] * lay.view_height) + 12,
-            int(EGO_AT[0] * lay.panel) - 30 : int(EGO_AT[0] * lay.panel) + 30,
-        ]
-        assert (np.abs(near_ego.astype(int) - colour).sum(axis=2) < 30).sum() > 20
-    assert {"Robot 1", "Robot 2"} <= renderer.texts and any(t.startswith("Time") for t in renderer.texts)
+        own = np.array(robot_style(renderer.numbers[k])[0])
+        ego = near(view, own)
+        rows, columns = np.nonzero(ego)
+        assert ego.sum() > 20 and abs(columns.mean() / lay.panel - EGO_AT) < 0.05
+        assert near(view, TRAFFIC).sum() > 200  # the traffic, in grey
+        assert not any(near(view, colour).any() for colour in ROBOT_COLOURS if tuple(colour) != tuple(own))
+    assert {"Robot 1", "Robot 6"} <= renderer.texts and any(t.startswith("Time") for t in renderer.texts)
+    assert any(re.fullmatch(r"-?\d+ km/h", t) for t in renderer.texts)  # each car's speed
     end = np.asarray(renderer.draw(renderer.frames[-1]))
     events = {o["event"] for o in summary["outcomes"]}
     words = {"success": "drove through", "collision": "CRASHED", "timeout": "out of time"}
     assert all(any(t.startswith(words[e]) for t in renderer.texts) for e in events)
     assert end.shape == image.shape
     assert not any(agent in text for agent in DRIVERS for text in renderer.texts)  # never the real names
+
+
+def near(view: np.ndarray, colour) -> np.ndarray:
+    """Where a view's pixels are (nearly) ``colour``."""
+    return np.abs(view - np.array(colour)).sum(axis=2) < 30

@@ -1,0 +1,255 @@
+"""Clips of any Gymnasium summary: each agent's instance drawn by its environment's own ``render()``, with Foil's
+clock, robot labels, colours and status panel, encoded as the crowd clips are (H.264, poster, contact sheet).
+
+The summary is replayed with rendering environments (the scenario's settings with the adapter's
+``view_settings`` over them: only the screen differs, so the replay is exact). A view is the environment's frame
+scaled to the view's width, never squeezed; the views sit side by side, or one above the other where that shows
+them larger (wide views such as a road's), and each has its robot's label, status and caption beneath it. A view
+whose episode ended stays where it ended. A crash shows a burst for a moment, then a small mark, so the rest of
+that view stays readable. The adapter's hooks (search/gym/adapter.py) say what this renderer cannot know; an
+adapter that names its own ``renderer`` gets that instead.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+from importlib import import_module
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from app.formats import load_summary
+from search.clips.render import (
+    BACKGROUND,
+    INK,
+    MIN_PHONE_TEXT,
+    MUTED,
+    PHONE_WIDTH,
+    ClipRenderer,
+    Frame,
+    RenderOptions,
+    RenderResult,
+    Sprites,
+    _paint_burst,
+    _paste,
+    _round16,
+    _sprite,
+    encode,
+    robot_label,
+    robot_numbers,
+    robot_style,
+)
+from search.gym.adapter import Adapter, load_adapter
+from search.gym.agents import load_agent
+from search.gym.problem import GymCoupledProblem, GymScenario
+from search.gym.summary import replay
+from search.solvers.reward import RewardConfig
+
+SCREEN = (16, 10)  # the screen shape a clip is fitted into when choosing how to arrange its views
+BURST_SECONDS = 1.5  # of video a crash's burst shows before the small mark replaces it
+
+
+@dataclass(frozen=True)
+class GymLayout:
+    """A header with the clock, then per agent its view and a status band below it, in ``columns`` columns."""
+
+    columns: int
+    panel: int  # px width of one view
+    view_height: int
+    header: int
+    band: int
+    width: int
+    height: int
+    text: int
+
+    @classmethod
+    def make(cls, agents: int, view_shape: tuple[int, int], options: RenderOptions) -> GymLayout:
+        """The arrangement that shows each view largest on a SCREEN-shaped display; ties go to more columns."""
+        layouts = [cls._arranged(agents, columns, view_shape, options) for columns in range(1, agents + 1)]
+        return max(layouts, key=lambda lay: (round(lay.shown(), 6), lay.columns))
+
+    @classmethod
+    def _arranged(cls, agents: int, columns: int, view_shape: tuple[int, int], options: RenderOptions) -> GymLayout:
+        width = options.width or 960
+        panel = (width // columns) // 16 * 16
+        width = panel * columns
+        text = math.ceil(MIN_PHONE_TEXT * width / PHONE_WIDTH)
+        view = round(panel * view_shape[0] / view_shape[1])  # the environment's own aspect
+        band = round(text * (1.9 if columns == 1 else 3.9))  # one status line under a full-width view, else two
+        total = round(text * 2.0) + math.ceil(agents / columns) * (view + band)
+        return cls(columns, panel, view, round(text * 2.0), band, width, _round16(total), text)
+
+    def shown(self) -> float:
+        """A view's width, as a fraction of the screen's, when the clip is fitted into a SCREEN-shaped display."""
+        return self.panel * min(SCREEN[0] / self.width, SCREEN[1] / self.height) / SCREEN[0]
+
+    def origin(self, slot: int) -> tuple[int, int]:
+        """Top-left corner of the view in on-screen slot ``slot``."""
+        row, column = divmod(slot, self.columns)
+        return column * self.panel, self.header + row * (self.view_height + self.band)
+
+
+class GymScene:
+    """What a clip shows of each agent: its captured views and captions, its outcome and where a crash mark goes."""
+
+    def __init__(
+        self,
+        views: list[list[np.ndarray]],
+        captions: list[list[str]],
+        outcomes: list[tuple[str, float]],
+        crash_points: list[tuple[float, float] | None],
+        end_time: float,
+        frames_per_step: int,
+        dt: float,
+    ):
+        self.views, self.captions, self.outcomes, self.crash_points = views, captions, outcomes, crash_points
+        self.end_time, self.frames_per_step, self.dt = end_time, frames_per_step, dt
+        self.n_agents = len(views)
+
+    def event_times(self) -> list[float]:
+        return sorted({when for event, when in self.outcomes if event != "running"})
+
+    def _at(self, items: list, t: float, per_step: int):
+        return items[min(int(math.floor(t / self.dt * per_step + 1e-9)), len(items) - 1)]
+
+    def view(self, k: int, t: float) -> np.ndarray:
+        return self._at(self.views[k], t, self.frames_per_step)
+
+    def caption(self, k: int, t: float) -> str:
+        return self._at(self.captions[k], t, 1)
+
+
+def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymScene, Adapter]:
+    """Replay a summary with rendering environments (views at most ``width`` px wide), capturing each agent's
+    frames and captions until its episode ends."""
+    scenario = GymScenario.from_dict(summary["scenario"])
+    adapter = load_adapter(scenario.adapter, scenario.settings | scenario.load_adapter().view_settings(width))
+    agents = [load_agent(entry["name"], adapter) for entry in summary["agents"]]
+    problem = GymCoupledProblem(
+        agents, scenario, RewardConfig.from_dict(summary["reward_parameters"]), adapter, render=True
+    )
+    colours = [robot_style(n)[0] for n in numbers]
+    views: list[list[np.ndarray]] = [[] for _ in agents]
+    captions: list[list[str]] = [[] for _ in agents]
+    frames_per_step = 1
+
+    def capture(p: GymCoupledProblem) -> None:
+        nonlocal frames_per_step
+        for k, instance in enumerate(p.rows[0]):
+            env: Any = instance.env
+            if not views[k]:  # just reset
+                frames_per_step = adapter.record(env, lambda env=env, k=k: views[k].append(np.asarray(env.render())))
+            elif instance.event_step not in (0, int(p.t[0])):  # ended earlier: its view stays where it ended
+                continue
+            adapter.mark_agent(env, colours[k])
+            views[k].append(np.asarray(env.render()))
+            captions[k].append(adapter.caption(env))
+
+    env_actions = np.array(summary["env_actions"], dtype=np.float64).reshape(-1, *adapter.env_action_shape)
+    replay(problem, env_actions, capture)
+    outcomes = [(o["event"], float(o["time"]) if o["time"] is not None else math.inf) for o in summary["outcomes"]]
+    crash_points = [adapter.crash_point(instance.env) for instance in problem.rows[0]]
+    end = float(summary["steps"][-1]["t"])
+    return GymScene(views, captions, outcomes, crash_points, end, frames_per_step, adapter.dt), adapter
+
+
+class GymClipRenderer(ClipRenderer):
+    """Foil's timeline, clock and status panel around the environment's views (the crowd renderer's schedule,
+    header and tags reused)."""
+
+    # the crowd renderer's timeline and drawing need only what these have in common with its own scene and layout
+    scene: GymScene  # type: ignore[assignment]
+    layout: GymLayout  # type: ignore[assignment]
+
+    def __init__(self, summary: dict, numbers: list[int] | None = None, options: RenderOptions | None = None):
+        agents = len(summary["agents"])
+        self.options = options or RenderOptions()
+        self.numbers = robot_numbers(numbers, agents)
+        self.order = sorted(range(agents), key=lambda k: self.numbers[k])
+        self.scene, self.adapter = load_gym_scene(summary, self.numbers, self.options.width or 960)
+        self.layout = GymLayout.make(agents, self.scene.views[0][0].shape[:2], self.options)
+        text = self.layout.text
+        self.sprites = Sprites(self.numbers, 0, 1.0, text * 0.6, text)
+        self.crash_mark = _sprite(text * 0.45, 1.0, _paint_burst)  # what stays of a crash once its burst is over
+        self.digits = 0 if float(self.adapter.dt).is_integer() else 1  # of an event's time
+        self.texts: set[str] = set()
+        self._views: dict[int, tuple[int, Image.Image]] = {}  # per agent, its last scaled view
+        self.frames, self.event_starts = self._schedule()
+
+    def draw(self, frame: Frame) -> Image.Image:
+        lay, t = self.layout, frame.time
+        image = Image.new("RGB", (lay.width, lay.height), BACKGROUND)
+        for slot, k in enumerate(self.order):
+            x0, y0 = lay.origin(slot)
+            image.paste(self._view(k, t), (x0, y0))
+            if x0:  # a thin gap, so neighbouring views never read as one
+                ImageDraw.Draw(image).rectangle((x0, y0, x0 + 1, y0 + lay.view_height), fill=BACKGROUND)
+            event, when = self.scene.outcomes[k]
+            happened = event != "running" and when <= t + 1e-9
+            point = self.scene.crash_points[k]
+            if happened and event == "collision" and point is not None:
+                sprite = self.sprites.crash if self._bursting(when, frame) else self.crash_mark
+                _paste(image, sprite, (x0 + point[0] * lay.panel, y0 + point[1] * lay.view_height))
+            shown = event if happened or t >= self.scene.end_time else ""
+            self._draw_status(image, k, (x0, y0 + lay.view_height), shown, when, t)
+        self._draw_header(image, t)
+        return image
+
+    def _view(self, k: int, t: float) -> Image.Image:
+        """Agent k's view at time t, scaled to the layout (kept per agent: a view changes a few times a second)."""
+        frame = self.scene.view(k, t)
+        cached = self._views.get(k)
+        if cached is None or cached[0] != id(frame):
+            image = Image.fromarray(frame)
+            size = (self.layout.panel, self.layout.view_height)
+            cached = (id(frame), image if image.size == size else image.resize(size, Image.Resampling.LANCZOS))
+            self._views[k] = cached
+        return cached[1]
+
+    def _bursting(self, when: float, frame: Frame) -> bool:
+        """Whether a crash at ``when`` still shows its burst: for BURST_SECONDS of video from its pause (in a still,
+        as long after it in simulated time)."""
+        since = self._since(when, frame)
+        return (since if math.isfinite(since) else frame.time - when) < BURST_SECONDS
+
+    def _draw_status(self, image: Image.Image, k: int, corner: tuple[int, int], event: str, when: float, t: float):
+        """Under a view: the robot's icon and label, its caption at the right, and how it is doing (beside the
+        label under a full-width view, else on a second line)."""
+        lay = self.layout
+        x0, y = corner[0], corner[1] + lay.text * 0.95
+        icon = self.sprites.icons[self.numbers[k]]
+        _paste(image, icon, (x0 + lay.text * 0.6 + icon[1], y))
+        label = self._text(image, (x0 + lay.text * 2.4, y), robot_label(self.numbers[k]), lay.text, INK, "lm", True)
+        caption = self.scene.caption(k, t)
+        if caption:
+            self._text(image, (x0 + lay.panel - lay.text * 0.6, y), caption, lay.text, INK, "rm")
+        status = self.adapter.status_words[event or "running"]
+        if event in ("success", "collision"):
+            status += f" · {when:.{self.digits}f} s"
+        xy = (label[2] + lay.text * 0.8, y) if lay.columns == 1 else (x0 + lay.text * 2.4, y + lay.text * 1.5)
+        if event == "collision":
+            self._tag(image, xy, status, lay.text, "lm")
+        else:
+            self._text(image, xy, status, lay.text, INK if event else MUTED, "lm")
+
+
+def render_gym(
+    summary_path: str | os.PathLike,
+    out: str | os.PathLike,
+    numbers: list[int] | None = None,
+    options: RenderOptions | None = None,
+) -> RenderResult:
+    """`foil render` for any Gymnasium summary: the clip, its poster and its contact sheet, by the adapter's own
+    renderer where it names one."""
+    started = time.perf_counter()
+    summary: dict[str, Any] = dict(load_summary(Path(summary_path)))
+    own = GymScenario.from_dict(summary["scenario"]).load_adapter().renderer
+    if own:
+        module, _, name = own.partition(":")
+        return getattr(import_module(module), name)(summary_path, out, numbers, options)
+    return encode(GymClipRenderer(summary, numbers, options), Path(out), started)

@@ -1,0 +1,163 @@
+"""Clips of any Gymnasium environment: a tiny environment written here, with a 120x80 ``render()`` and an adapter
+that defines none of the clip hooks, renders through the generic renderer; an adapter may name its own."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import gymnasium
+import imageio_ffmpeg
+import numpy as np
+import pytest
+from PIL import Image
+
+from search.clips.render import CRASH, RenderOptions, robot_style
+from search.gym.adapter import Adapter
+from search.gym.clips import GymClipRenderer, render_gym
+from search.gym.problem import GymScenario
+from search.gym.summary import run_gym_search
+from search.solvers.runner import SearchJob, write_outputs
+from tests.render.test_render import probe, top_level_boxes
+
+FAST = dict(speed=4.0, hold_start=0.2, hold_end=0.2, event_hold=0.2, width=480)
+
+
+class Track(gymnasium.Env):
+    """A block runs along a track towards a wall the environment action pushes back and forth; touching it is a
+    crash, six steps without one a timeout. Drawn 120 px wide and 80 px tall."""
+
+    metadata = {"render_modes": ["rgb_array"]}
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+        self.action_space = gymnasium.spaces.Box(0.0, 1.0, (1,), dtype=np.float64)
+        self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (2,), dtype=np.float64)
+        self.push = 0.0
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x, self.wall, self.steps = 0.0, float(self.np_random.uniform(2.5, 3.0)), 0
+        return np.array([self.x, self.wall]), {}
+
+    def step(self, action):
+        self.x += float(action[0])
+        self.wall += 0.2 * self.push
+        self.steps += 1
+        crashed = self.x >= self.wall
+        return np.array([self.x, self.wall]), 0.0, crashed, self.steps >= 6, {"crashed": crashed}
+
+    def render(self):
+        frame = np.full((80, 120, 3), 230, dtype=np.uint8)
+        frame[30:50, 10 + int(20 * self.x) : 20 + int(20 * self.x)] = (40, 40, 40)
+        frame[:, min(119, 10 + int(20 * self.wall))] = (120, 60, 0)
+        return frame
+
+
+class TrackAdapter(Adapter):
+    """The template filled in, and nothing for clips."""
+
+    env_action_shape = (1,)
+    dt = 0.5
+
+    def make(self, render=False):
+        return Track(render_mode="rgb_array" if render else None)
+
+    def apply(self, env, action):
+        env.unwrapped.push = float(action[0])
+
+    def position(self, env):
+        return np.array([env.unwrapped.x])
+
+
+class OwnClipsAdapter(TrackAdapter):
+    renderer = "tests.gym.test_gym_clips:own_renderer"
+
+
+def own_renderer(summary_path, out, numbers=None, options=None):
+    """A renderer of an adapter's own: here it only says it was called."""
+    return ("own", str(summary_path), str(out), numbers, options)
+
+
+def fast(observations):
+    """Runs at the wall."""
+    return np.ones((len(observations), 1))
+
+
+def slow(observations):
+    """Creeps along: out of time before it reaches the wall."""
+    return np.full((len(observations), 1), 0.1)
+
+
+@pytest.fixture(scope="module")
+def summary_file(tmp_path_factory):
+    scenario = GymScenario("track", "tests.gym.test_gym_clips:TrackAdapter", 3)
+    job = SearchJob(
+        agents=("tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"),
+        scenario="track",
+        solver="random",
+        budget=2,
+        top_k=1,
+        solver_settings={"batch": 1},
+    )
+    out = write_outputs(tmp_path_factory.mktemp("search"), run_gym_search(job, scenario))
+    return out / "summary-001.json"
+
+
+def test_a_summary_of_any_environment_renders_as_browser_safe_h264_with_poster_and_sheet(tmp_path, summary_file):
+    result = render_gym(summary_file, tmp_path / "clip.mp4", [3, 1], RenderOptions(**FAST))
+    info = probe(result.clip)
+    video = re.search(r"Video: (\w+).*?, (\w+)(?:\(.*?\))?, (\d+)x(\d+)", info)
+    assert video and (video.group(1), video.group(2)) == ("h264", "yuv420p"), info
+    assert (int(video.group(3)), int(video.group(4))) == (result.width, result.height)
+    assert result.width % 16 == 0 and result.height % 16 == 0
+    assert top_level_boxes(result.clip).index("moov") < top_level_boxes(result.clip).index("mdat")
+    assert imageio_ffmpeg.count_frames_and_secs(str(result.clip))[0] == result.frames > 10
+    with Image.open(result.poster) as poster, Image.open(result.sheet) as sheet:
+        assert poster.size == (result.width, result.height) and sheet.width > poster.width
+
+
+def test_views_keep_the_environments_shape_side_by_side_in_robot_number_order(summary_file):
+    summary = json.loads(summary_file.read_text())
+    assert [o["event"] for o in summary["outcomes"]] == ["collision", "timeout"]
+    renderer = GymClipRenderer(summary, [3, 1], RenderOptions(width=480))
+    lay = renderer.layout
+    assert lay.columns == 2 and abs(lay.view_height / lay.panel - 80 / 120) < 1 / lay.panel  # never squeezed
+    image = np.asarray(renderer.draw(renderer.frames[-1]))
+    for slot, (k, number) in enumerate([(1, 1), (0, 3)]):  # Robot 1 (the slow agent) first
+        assert renderer.order[slot] == k
+        x0, y0 = lay.origin(slot)
+        view = image[y0 : y0 + lay.view_height, x0 : x0 + lay.panel]
+        expected = Image.fromarray(renderer.scene.views[k][-1]).resize((lay.panel, lay.view_height), Image.LANCZOS)
+        assert np.abs(view.astype(int) - np.asarray(expected)).mean() < 30  # its frame (a crash mark aside)
+        band = image[y0 + lay.view_height : y0 + lay.view_height + lay.band, x0 : x0 + lay.panel]
+        colour = np.array(robot_style(number)[0])
+        assert (np.abs(band.astype(int) - colour).sum(axis=2) < 30).sum() > 20  # its icon
+    crash = renderer.event_starts[summary["outcomes"][0]["time"]]
+    at_crash = next(frame for frame in renderer.frames if frame.video >= crash)
+    x0, y0 = lay.origin(1)  # the crashed agent's view
+    yellow = [
+        (
+            np.abs(np.asarray(renderer.draw(f))[y0 : y0 + lay.view_height, x0:].astype(int) - CRASH).sum(axis=2) < 30
+        ).sum()
+        for f in (at_crash, renderer.frames[-1])
+    ]
+    assert yellow[1] < yellow[0] / 4  # the burst gives way to a small mark
+    words = TrackAdapter.status_words
+    assert {"Robot 1", "Robot 3", words["timeout"]} <= renderer.texts
+    assert any(text.startswith(words["collision"]) for text in renderer.texts)
+    assert not any("fast" in text or "slow" in text for text in renderer.texts)  # never the real names
+
+
+def test_an_adapter_may_name_its_own_renderer(tmp_path, summary_file):
+    summary = json.loads(summary_file.read_text())
+    summary["scenario"]["adapter"] = "tests.gym.test_gym_clips:OwnClipsAdapter"
+    path = tmp_path / "summary.json"
+    path.write_text(json.dumps(summary))
+    assert render_gym(path, tmp_path / "clip.mp4", [1, 2]) == (
+        "own",
+        str(path),
+        str(tmp_path / "clip.mp4"),
+        [1, 2],
+        None,
+    )
