@@ -15,9 +15,7 @@ from PIL import Image
 from search.clips.render import CRASH, RenderOptions, robot_style
 from search.gym.adapter import Adapter
 from search.gym.clips import GymClipRenderer, render_gym
-from search.gym.problem import GymScenario
-from search.gym.summary import run_gym_search
-from search.solvers.runner import SearchJob, write_outputs
+from search.solvers.runner import SearchJob, run_search, write_outputs
 from tests.render.test_render import probe, top_level_boxes
 
 FAST = dict(speed=4.0, hold_start=0.2, hold_end=0.2, event_hold=0.2, width=480)
@@ -91,16 +89,17 @@ def slow(observations):
 
 @pytest.fixture(scope="module")
 def summary_file(tmp_path_factory):
-    scenario = GymScenario("track", "tests.gym.test_gym_clips:TrackAdapter", 3)
+    folder = tmp_path_factory.mktemp("search")
+    (folder / "track.toml").write_text('adapter = "tests.gym.test_gym_clips:TrackAdapter"\nseed = 3\n')
     job = SearchJob(
         agents=("tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"),
-        scenario="track",
+        scenario=str(folder / "track.toml"),
         solver="random",
         budget=2,
         top_k=1,
         solver_settings={"batch": 1},
     )
-    out = write_outputs(tmp_path_factory.mktemp("search"), run_gym_search(job, scenario))
+    out = write_outputs(folder, run_search(job))
     return out / "summary-001.json"
 
 

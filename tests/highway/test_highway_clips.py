@@ -12,10 +12,8 @@ from PIL import Image
 
 from search.clips.render import ROBOT_COLOURS, RenderOptions, robot_style
 from search.gym.clips import GymClipRenderer, render_gym
-from search.gym.summary import run_gym_search
 from search.highway.adapter import EGO_AT, TRAFFIC
-from search.highway.scenarios import SCENARIOS
-from search.solvers.runner import SearchJob, write_outputs
+from search.solvers.runner import SearchJob, run_search, write_outputs
 from tests.render.test_render import probe, top_level_boxes
 
 DRIVERS = ("tests.highway.drivers:cruise", "tests.highway.drivers:cautious")
@@ -26,7 +24,7 @@ def summary_file(tmp_path_factory):
     job = SearchJob(
         agents=DRIVERS, scenario="highway-dense", solver="random", budget=20, top_k=1, solver_settings={"batch": 1}
     )
-    out = write_outputs(tmp_path_factory.mktemp("search"), run_gym_search(job, SCENARIOS["highway-dense"]))
+    out = write_outputs(tmp_path_factory.mktemp("search"), run_search(job))
     return out / "summary-001.json"
 
 
