@@ -33,7 +33,7 @@ from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, mani
 from app.visible import VisibleClip, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.clips.render import RenderOptions, robot_label
-from search.solvers.domain import domain_for, domain_of_summary
+from search.solvers.domain import Domain, domain_for, domain_of_summary
 from search.solvers.runner import SearchJob, limit_threads, run_search, solver_config_class, write_outputs
 from search.solvers.summary import verify
 
@@ -87,9 +87,15 @@ def _key(inputs: dict) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def agent_identity(agent: str) -> dict:
+def study_domain(spec: BuildSpec) -> Domain:
+    """The one world of a study, from its agents and a scenario (an agent given as module:attribute may act in
+    any world)."""
+    return domain_for(spec.agents, spec.sets[0].scenarios[0])
+
+
+def agent_identity(agent: str, domain: Domain) -> dict:
     """What an agent's results depend on: its name and, for a network, the checksum of its file."""
-    path = domain_for([agent]).agent_file(agent)
+    path = domain.agent_file(agent)
     return {"agent": agent, "sha256": sha256_file(path)} if path is not None and path.is_file() else {"agent": agent}
 
 
@@ -114,7 +120,7 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
 def study_world(spec: BuildSpec) -> dict:
     """The world settings a study compares its agents in: those its imported checkpoints were trained in (a
     CrowdNav_DSRNN model's config), for every agent, in the evaluation and in every search alike."""
-    return domain_for(spec.agents).study_world(spec.agents)
+    return study_domain(spec).study_world(spec.agents)
 
 
 def under(world: dict | None, own: dict) -> dict:
@@ -133,9 +139,10 @@ def search_inputs(search: SearchJob) -> dict:
     input."""
     from search.solvers.reward import RewardConfig
 
+    domain = domain_for(search.agents, search.scenario)
     return {
-        "agents": [agent_identity(a) for a in search.agents],
-        "scenario": domain_for(search.agents, search.scenario).scenario_dict(search.scenario, search.world_settings),
+        "agents": [agent_identity(a, domain) for a in search.agents],
+        "scenario": domain.scenario_dict(search.scenario, search.world_settings),
         "solver": search.solver,
         "solver_settings": asdict(solver_config_class(search.solver)(**search.solver_settings)),
         "reward": RewardConfig(**search.reward_settings).to_dict(),
@@ -174,16 +181,15 @@ class Cache:
         (self.path(kind, inputs) / "inputs.json").write_text(json.dumps(inputs, sort_keys=True, indent=1))
 
 
-def evaluate_agents(
-    agents: list[str], episodes: int, seed: int, cache: Cache, log, world: dict | None = None, scenarios=None
-) -> dict[str, dict]:
+def evaluate_agents(spec: BuildSpec, domain: Domain, cache: Cache, log, world: dict | None = None) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
-    per input; in a world whose agents act in their scenario's world, in the first of ``scenarios[agent]``."""
+    per input; in a world whose agents act in their scenario's world, in the first scenario they are shown in."""
     results = {}
-    for agent in agents:
-        domain = domain_for([agent])
-        scenario = domain.eval_scenario((scenarios or {}).get(agent, []))
-        inputs = {"agent": agent_identity(agent), "episodes": episodes, "seed": seed} | (
+    episodes, seed = spec.eval_episodes, spec.eval_seed
+    for agent in spec.agents:
+        shown = [name for clip_set in spec.sets if agent in clip_set.agents for name in clip_set.scenarios]
+        scenario = domain.eval_scenario(shown)
+        inputs = {"agent": agent_identity(agent, domain), "episodes": episodes, "seed": seed} | (
             {"world": world} if world else {}
         )
         if scenario is not None:
@@ -310,12 +316,8 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         (out / folder).mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
-    domain = domain_for(spec.agents)
-    scenarios = {
-        agent: [name for clip_set in spec.sets if agent in clip_set.all_agents() for name in clip_set.scenarios]
-        for agent in spec.agents
-    }
-    evaluations = evaluate_agents(spec.agents, spec.eval_episodes, spec.eval_seed, cache, log, world, scenarios)
+    domain = study_domain(spec)
+    evaluations = evaluate_agents(spec, domain, cache, log, world)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
     scenario_reports = representativeness(spec, cache, log, world)
     clips = []
@@ -368,7 +370,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         label_seed=spec.seed,
         clips=clips,
         agents=evaluations,
-        sources={agent: domain_for([agent]).agent_source(agent, world or {}) for agent in spec.agents},
+        sources={agent: domain.agent_source(agent, world or {}) for agent in spec.agents},
         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
         representativeness=scenario_reports,
         world=None if study_shows == World() else study_shows.to_manifest(),
@@ -411,7 +413,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
                     scenarios_of.setdefault(pair, []).append(name)
     reports = []
     for pair, names in scenarios_of.items():
-        domain = domain_for(pair)
+        domain = domain_for(pair, names[0])
         distribution = settings.distribution or domain.default_distribution
         if distribution is None:
             continue  # a world with no distribution of starting states, and none named in the study
@@ -420,7 +422,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
         drawn_world = under(world, domain.own_world(distribution))
         reward = RewardConfig().to_dict()
         inputs = {
-            "agents": [agent_identity(a) for a in pair],
+            "agents": [agent_identity(a, domain) for a in pair],
             "scenarios": [s.to_dict() for s in fixed],
             "distribution": domain.scenario_dict(distribution, drawn_world),
             "states": settings.states,

@@ -257,7 +257,8 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
     key (or per bad table, where the values together are refused)."""
     domain: Domain | None
     try:
-        domain = domain_for([a for clip_set in build.sets for a in clip_set.all_agents()])
+        agents = [a for clip_set in build.sets for a in clip_set.all_agents()]
+        domain = domain_for(agents, build.sets[0].scenarios[0] if build.sets[0].scenarios else None)
     except ValueError as error:
         problems.append((("build", "sets"), str(error)))
         domain = None

@@ -34,6 +34,8 @@ say what it cannot know; ``renderer`` names a renderer of the adapter's own.
 from __future__ import annotations
 
 import copy
+import os
+import sys
 from abc import ABC, abstractmethod
 from importlib import import_module
 from typing import ClassVar
@@ -168,13 +170,9 @@ class Adapter(ABC):
 
 def load_adapter(spec: str, settings: dict | None = None) -> Adapter:
     """An adapter from ``module:Class`` and its settings."""
-    module_name, sep, attribute = spec.partition(":")
-    if not sep:
+    if ":" not in spec:
         raise ValueError(f"adapter {spec!r}: give it as module:Class, e.g. search.highway.adapter:HighwayAdapter")
-    try:
-        cls = getattr(import_module(module_name), attribute)
-    except (ImportError, AttributeError) as error:
-        raise ValueError(f"cannot load adapter {spec!r}: {error}") from None
+    cls = import_attribute(spec, "adapter")
     if not (isinstance(cls, type) and issubclass(cls, Adapter)):
         raise ValueError(f"adapter {spec!r} is not a subclass of search.gym.adapter.Adapter")
     adapter = cls(settings)
@@ -182,3 +180,17 @@ def load_adapter(spec: str, settings: dict | None = None) -> Adapter:
     if not shape or int(np.prod(shape)) < 1:
         raise ValueError(f"adapter {spec!r} defines no environment action: set env_action_shape, e.g. (2,)")
     return adapter
+
+
+def import_attribute(spec: str, what: str):
+    """The attribute ``module:attribute`` names. The working directory is on the import path, as for
+    ``python -m``, so a researcher's module beside their scenario files imports without installing it."""
+    module_name, _, attribute = spec.partition(":")
+    if os.getcwd() not in sys.path:
+        sys.path.append(os.getcwd())
+    try:
+        return getattr(import_module(module_name), attribute)
+    except (ImportError, AttributeError) as error:
+        raise ValueError(
+            f"cannot load {what} {spec!r}: {error} (a module is imported from the working directory or the Python path)"
+        ) from None

@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import zipfile
 from dataclasses import dataclass
-from importlib import import_module
 from pathlib import Path
 from typing import Any
 
@@ -63,12 +62,10 @@ def load_agent(spec: str, adapter) -> GymAgent:
         return GymAgent(spec, str(shipped), load_sb3(shipped))
     if spec.endswith(".zip"):
         return GymAgent(spec, str(Path(spec).resolve()), load_sb3(spec))
-    module_name, sep, attribute = spec.partition(":")
-    if sep:
-        try:
-            return GymAgent(spec, spec, getattr(import_module(module_name), attribute))
-        except (ImportError, AttributeError) as error:
-            raise ValueError(f"cannot load agent {spec!r}: {error}") from None
+    if ":" in spec:
+        from search.gym.adapter import import_attribute
+
+        return GymAgent(spec, spec, import_attribute(spec, "agent"))
     raise ValueError(
         f"unknown agent {spec!r}: give a shipped name ({', '.join(adapter.agent_names()) or 'none'}), "
         "a Stable-Baselines3 .zip file or module:attribute"

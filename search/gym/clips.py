@@ -16,7 +16,6 @@ import math
 import os
 import time
 from dataclasses import dataclass
-from importlib import import_module
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +43,7 @@ from search.clips.render import (
     robot_numbers,
     robot_style,
 )
-from search.gym.adapter import Adapter, load_adapter
+from search.gym.adapter import Adapter, import_attribute, load_adapter
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
 from search.gym.summary import replay
@@ -250,6 +249,5 @@ def render_gym(
     summary: dict[str, Any] = dict(load_summary(Path(summary_path)))
     own = GymScenario.from_dict(summary["scenario"]).load_adapter().renderer
     if own:
-        module, _, name = own.partition(":")
-        return getattr(import_module(module), name)(summary_path, out, numbers, options)
+        return import_attribute(own, "renderer")(summary_path, out, numbers, options)
     return encode(GymClipRenderer(summary, numbers, options), Path(out), started)

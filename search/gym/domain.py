@@ -107,6 +107,7 @@ class GymDomain(Domain):
             lambda actions, solver: build_gym_summary(
                 loaded, state, reward_config, np.asarray(actions).reshape(-1, *shape), solver
             ),
+            adapter.world(),
         )
 
     def rebuild(self, summary: dict) -> dict:

@@ -40,11 +40,13 @@ BUILTIN = (
 
 @dataclass(frozen=True)
 class Coupled:
-    """A search's problem with what turns a kept trajectory into a summary: ``summarize(env_actions, solver)``."""
+    """A search's problem with what turns a kept trajectory into a summary, ``summarize(env_actions, solver)``,
+    and the world its clips show."""
 
     problem: Any  # a search.solvers.problem.Problem
     scenario_name: str
     summarize: Callable[[np.ndarray, dict], dict]
+    world: World = World()
 
 
 class Domain(ABC):
@@ -126,10 +128,7 @@ class Domain(ABC):
         through the coupled problem, each rollout's clip built as its summary (exact, at twice the steps)."""
         from search.solvers.representative import roll_out_problem
 
-        world = self.world()
-        return roll_out_problem(
-            [self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, world, list(agents)
-        )
+        return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
 
     @abstractmethod
     def rebuild(self, summary: dict) -> dict:

@@ -253,9 +253,7 @@ def representative(
     return [summary for _, summary in chosen], record
 
 
-def roll_out_problem(
-    coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker, world: World, agents: list[str]
-) -> Rollouts:
+def roll_out_problem(coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
     """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
     state one without pushes and ``pushes`` under uniform pushes, stepped together until the search's end rule
     ends each; each scored by its summary's clip (the exact replay with its coda, as the clip will show it)."""
@@ -276,8 +274,7 @@ def roll_out_problem(
             running &= ~ended
             if not running.any():
                 break
-        contrast = [summary_contrast(found.summarize(env[row, : searched[row]], {}), world) for row in range(rows)]
-        parts.append(
-            Rollouts(np.full(rows, index), [env[row, : searched[row]] for row in range(rows)], np.array(contrast))
-        )
+        actions = [env[row, : searched[row]] for row in range(rows)]
+        contrast = [summary_contrast(found.summarize(a, {}), found.world) for a in actions]
+        parts.append(Rollouts(np.full(rows, index), actions, np.array(contrast)))
     return Rollouts.join(parts)

@@ -207,14 +207,15 @@ def _representative(
     if len(job.agents) != 2:
         raise ValueError(f"the representative solver votes which of two agents looks better; got {len(job.agents)}")
     scenarios = domain.draw_states(job.scenario, job.world_settings, rng, config.states)
-    agents, world = list(job.agents), domain.world(job.scenario)
+    agents = list(job.agents)
 
     def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
         return domain.roll_out(agents, states, job.reward_settings, pushes, rng, tracker)
 
     def replay(scenario, actions) -> tuple[float, dict]:
-        summary = domain.coupled(agents, scenario, job.reward_settings).summarize(actions, solver)
-        return summary_contrast(summary, world), summary
+        coupled = domain.coupled(agents, scenario, job.reward_settings)
+        summary = coupled.summarize(actions, solver)
+        return summary_contrast(summary, coupled.world), summary
 
     summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay)
     for summary, chosen in zip(summaries, vote["chosen"], strict=True):
