@@ -100,7 +100,7 @@ def load_policy(spec: str) -> Policy:
     interface, or a zero-argument callable that returns one)."""
     if spec in SCRIPTED:
         return SCRIPTED[spec]()
-    if spec in SHIPPED_AGENTS or Path(spec).suffix or "/" in spec:
+    if spec in SHIPPED_AGENTS or (Path(spec).suffix or "/" in spec) and (":" not in spec or Path(spec).is_file()):
         from search.agents.dsrnn import load_checkpoint_policy  # torch only when a network is asked for
 
         return load_checkpoint_policy(AGENTS_DIR / f"{spec}.pt" if spec in SHIPPED_AGENTS else spec, name=spec)
@@ -112,14 +112,28 @@ def load_policy(spec: str) -> Policy:
             target = getattr(import_module(module_name), attribute)
         except (ImportError, AttributeError) as error:
             raise ValueError(f"cannot load policy {spec!r}: {error}") from None
-        policy = target() if callable(target) and not hasattr(target, "act") else target
+        policy = target() if callable(target) and not hasattr(target, "act") and _takes_nothing(target) else target
         if not (hasattr(policy, "act") and hasattr(policy, "initial_state")):
-            raise ValueError(f"{spec!r} is not a policy: it needs act() and initial_state()")
+            raise ValueError(
+                f"{spec!r} is not a crowd policy: it needs act() and initial_state() (an agent of a Gymnasium "
+                "world acts in the world its scenario file names: give the scenario, e.g. --scenario FILE)"
+            )
         return policy
     raise ValueError(
         f"unknown agent {spec!r}: use one of {sorted(SCRIPTED) + list(SHIPPED_AGENTS)}, a checkpoint "
         "file or module:attribute"
     )
+
+
+def _takes_nothing(target) -> bool:
+    """Whether ``target`` can be called with no arguments (a factory of policies, not a function of observations)."""
+    import inspect
+
+    try:
+        inspect.signature(target).bind()
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def trained_world(spec: str) -> dict:
