@@ -8,7 +8,6 @@ import json
 import re
 
 import pytest
-
 from fastapi.testclient import TestClient
 
 from app.store.database import migrate
