@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from app.visible import World
+from app.visible import VisibleClip, World
 from search.gym.adapter import Adapter, load_adapter
 from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
@@ -110,6 +110,13 @@ class GymDomain(Domain):
             adapter.world(),
         )
 
+    def roll_out(self, agents, states, reward, pushes, rng, tracker):
+        """Rollouts scored from the problem's own record of each agent's ending, as its summary would say it (no
+        replay; `tests/gym/test_any_world.py` checks it against the summaries)."""
+        from search.solvers.representative import roll_out_problem
+
+        return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
+
     def rebuild(self, summary: dict) -> dict:
         from search.gym.summary import rebuild
 
@@ -168,3 +175,23 @@ class GymDomain(Domain):
 
     def world(self, scenario: str | None = None) -> World:
         return self.adapter(scenario).world()
+
+
+def shown(coupled: Coupled, row: int, steps: int) -> float:
+    """The visible contrast of a row of a Gymnasium problem that just ended: each agent's event and its time, as
+    `search.gym.summary.build_gym_summary` records them."""
+    from search.sim.world import OUTCOME_NAMES
+    from search.solvers.representative import visible_contrast
+
+    dt = coupled.problem.adapter.dt
+    outcomes = tuple(
+        {
+            "event": OUTCOME_NAMES[i.outcome],
+            "time": float(i.event_step * dt) if i.event_step else None,
+            "min_human_distance": None,
+        }
+        for i in coupled.problem.rows[row]
+    )
+    return visible_contrast(
+        VisibleClip(("first", "second"), outcomes, (0.0, 0.0), max(steps * dt, 1e-6), coupled.world)
+    )

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -34,6 +35,8 @@ from search.solvers.rollout import Tracker
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
 RollOut = Callable[[list, int, np.random.Generator, Tracker], "Rollouts"]
+# What a rollout's clip shows the moment its row ends: (a Coupled, the row, the steps it took) -> visible contrast.
+Shown = Callable[[Any, int, int], float]
 
 OBSERVER = Observer()
 
@@ -253,10 +256,14 @@ def representative(
     return [summary for _, summary in chosen], record
 
 
-def roll_out_problem(coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+def roll_out_problem(
+    coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
+) -> Rollouts:
     """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
     state one without pushes and ``pushes`` under uniform pushes, stepped together until the search's end rule
-    ends each; each scored by its summary's clip (the exact replay with its coda, as the clip will show it)."""
+    ends each. Each is scored by what its clip shows: ``shown(coupled, row, steps)`` reads it from the problem the
+    moment the row ends (a domain's fast path), or else each rollout's summary is built (exact, at twice the
+    steps)."""
     parts = []
     for index, found in enumerate(coupled):
         problem = found.problem
@@ -264,6 +271,7 @@ def roll_out_problem(coupled: list, pushes: int, rng: np.random.Generator, track
         env = np.zeros((rows, horizon, *problem.action_shape))
         env[1:] = rng.uniform(-bound, bound, (rows - 1, horizon, *problem.action_shape))
         searched = np.full(rows, horizon)
+        contrast = np.zeros(rows)
         running = np.ones(rows, dtype=bool)
         problem.reset(rows)
         for t in range(1, horizon + 1):
@@ -272,9 +280,12 @@ def roll_out_problem(coupled: list, pushes: int, rng: np.random.Generator, track
             ended = running & np.asarray(terminal, dtype=bool)
             searched[ended] = t
             running &= ~ended
+            for row in np.flatnonzero(ended) if shown is not None else ():
+                contrast[row] = shown(found, int(row), t)
             if not running.any():
                 break
         actions = [env[row, : searched[row]] for row in range(rows)]
-        contrast = [summary_contrast(found.summarize(a, {}), found.world) for a in actions]
-        parts.append(Rollouts(np.full(rows, index), actions, np.array(contrast)))
+        if shown is None:
+            contrast = np.array([summary_contrast(found.summarize(a, {}), found.world) for a in actions])
+        parts.append(Rollouts(np.full(rows, index), actions, contrast))
     return Rollouts.join(parts)

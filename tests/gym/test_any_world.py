@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
@@ -147,3 +148,20 @@ def test_a_study_renders_bundles_and_serves_in_the_worlds_own_words(world, capsy
         seen = "\n".join(walk(client, start(client)))
     assert "Clip of two agents side by side" in seen and "FOIL" not in seen and "TRACK" in seen
     assert not re.search(r"person|people|crowd", seen, re.IGNORECASE)
+
+
+def test_the_fast_rollouts_score_every_clip_as_its_summary_does(world):
+    """The Gymnasium domain reads each rollout's ending from the problem; the interface's default builds each
+    rollout's summary. Both must see the same clips."""
+    from search.solvers.domain import Domain, domain_for
+    from search.solvers.rollout import Tracker
+
+    domain = domain_for([FAST, SLOW], "track-starts.toml")
+    states = domain.draw_states("track-starts.toml", {}, np.random.default_rng(0), 6)
+    fast, exact = (
+        roll_out(domain, [FAST, SLOW], states, {"horizon": 6}, 3, np.random.default_rng(1), Tracker(10**6, 1))
+        for roll_out in (type(domain).roll_out, Domain.roll_out)
+    )
+    assert np.array_equal(fast.contrast, exact.contrast) and np.array_equal(fast.state, exact.state)
+    assert all(np.array_equal(a, b) for a, b in zip(fast.actions, exact.actions, strict=True))
+    assert set(np.sign(fast.contrast)) == {-1.0}  # the slow runner looks better in every rollout
