@@ -142,11 +142,11 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
         for k, instance in enumerate(p.rows[0]):
             env: Any = instance.env
             if not views[k]:  # just reset
-                frames_per_step = adapter.record(env, lambda env=env, k=k: views[k].append(np.asarray(env.render())))
+                frames_per_step = adapter.record(env, lambda env=env, k=k: views[k].append(np.array(env.render())))
             elif instance.event_step not in (0, int(p.t[0])):  # ended earlier: its view stays where it ended
                 continue
             adapter.mark_agent(env, colours[k])
-            views[k].append(np.asarray(env.render()))
+            views[k].append(np.array(env.render()))  # a copy: an environment may reuse its buffer
             captions[k].append(adapter.caption(env))
 
     env_actions = np.array(summary["env_actions"], dtype=np.float64).reshape(-1, *adapter.env_action_shape)
