@@ -21,37 +21,20 @@ OFFLINE_MODULES = ("numpy", "numba", "torch", "gymnasium", "tqdm", "imageio_ffmp
 
 
 def _train(args: argparse.Namespace) -> int:
-    from search.highway.train import is_highway_config
+    from search.solvers.domain import domain_of_training
 
-    if is_highway_config(args.config):
-        from search.highway.train import load_config, train
-    else:
-        from search.agents.train import load_train_config as load_config
-        from search.agents.train import train
-    last = train(load_config(args.config), args.out)
-    print(f"last checkpoint: {last}")
+    print(f"last checkpoint: {domain_of_training(Path(args.config)).train(Path(args.config), Path(args.out))}")
     return 0
 
 
 def _release(args: argparse.Namespace) -> int:
-    from search.agents.policies import AGENTS_DIR
-    from search.agents.release import release, validate_run
-    from search.highway.release import is_highway_run
+    from search.solvers.domain import domain_of_training
 
-    if is_highway_run(args.run_dir):
-        from search.highway import release as highway
-
-        if args.validate_only:
-            highway.validate_run(args.run_dir, args.every)
-        else:
-            print(
-                json.dumps(highway.release(args.run_dir, args.out, args.episodes, args.every, jobs=args.jobs), indent=1)
-            )
-        return 0
+    domain = domain_of_training(args.run_dir)
     if args.validate_only:
-        validate_run(args.run_dir, args.episodes, args.every)
+        domain.validate_run(args.run_dir, args.episodes, args.every)
     else:
-        print(json.dumps(release(args.run_dir, args.out or AGENTS_DIR, args.episodes, args.every), indent=1))
+        print(json.dumps(domain.release(args.run_dir, args.out, args.episodes, args.every, args.jobs), indent=1))
     return 0
 
 

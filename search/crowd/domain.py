@@ -169,6 +169,25 @@ class CrowdDomain(Domain):
                 }
         return source | {"world": WorldConfig.from_dict(world).to_dict()}
 
+    def claims_training(self, path: Path) -> bool:
+        return True
+
+    def train(self, config: Path, out: Path) -> Path:
+        from search.agents.train import load_train_config, train
+
+        return train(load_train_config(config), out)
+
+    def release(self, run_dir: Path, out: Path | None, episodes: int, every: int, jobs: int) -> dict:
+        from search.agents.policies import AGENTS_DIR
+        from search.agents.release import release
+
+        return release(run_dir, out or AGENTS_DIR, episodes, every)
+
+    def validate_run(self, run_dir: Path, episodes: int, every: int) -> None:
+        from search.agents.release import validate_run
+
+        validate_run(run_dir, episodes, every)
+
     def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
         from search.clips.render import render
         from search.clips.scene import load_scene

@@ -38,6 +38,27 @@ class HighwayDomain(GymDomain):
         """The scenario's adapter; the highway's own default world when no scenario is given."""
         return HighwayAdapter() if scenario is None else super().adapter(scenario)
 
+    def claims_training(self, path: Path) -> bool:
+        from search.highway.release import is_highway_run
+        from search.highway.train import is_highway_config
+
+        return is_highway_run(path) if path.is_dir() else is_highway_config(path)
+
+    def train(self, config: Path, out: Path) -> Path:
+        from search.highway.train import load_config, train
+
+        return train(load_config(config), out)
+
+    def release(self, run_dir: Path, out: Path | None, episodes: int, every: int, jobs: int) -> dict:
+        from search.highway.release import release
+
+        return release(run_dir, out, episodes, every, jobs=jobs)
+
+    def validate_run(self, run_dir: Path, episodes: int, every: int) -> None:
+        from search.highway.release import validate_run
+
+        validate_run(run_dir, every)
+
     def eval_scenario(self, scenarios):
         """None: the shipped agents are judged in their training traffic, as their model cards report."""
         return None

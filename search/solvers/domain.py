@@ -156,6 +156,23 @@ class Domain(ABC):
     def agent_source(self, agent: str, world: dict) -> dict:
         """Where an agent came from, for the manifest."""
 
+    # training and releasing the world's own agents
+    def claims_training(self, path: Path) -> bool:
+        """Whether a training config file or a training run's folder is this world's."""
+        return False
+
+    def train(self, config: Path, out: Path) -> Path:
+        """``foil train``: train from a config file into ``out``; the last checkpoint."""
+        raise ValueError(f"the {self.name} world has no trainer of its own: train agents with your own tools")
+
+    def release(self, run_dir: Path, out: Path | None, episodes: int, every: int, jobs: int) -> dict:
+        """``foil release``: choose the shipped agents from a run and write them with their model cards."""
+        raise ValueError(f"the {self.name} world ships no agents of its own")
+
+    def validate_run(self, run_dir: Path, episodes: int, every: int) -> None:
+        """``foil release --validate-only``: print the run's validation curve."""
+        raise ValueError(f"the {self.name} world ships no agents of its own")
+
     # clips
     @abstractmethod
     def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
@@ -216,6 +233,12 @@ def _narrowest(kinds: list[Domain], found: dict[str, Domain | None]) -> list[Dom
         return kinds
     keep = narrow[0]
     return [keep] + [d for d in kinds if not isinstance(keep, type(d)) and d is not keep]
+
+
+def domain_of_training(path: Path) -> Domain:
+    """The world a training config or run folder belongs to (the last domain, the crowd, by default)."""
+    installed = domains()
+    return next((d for d in installed if d.claims_training(Path(path))), installed[-1])
 
 
 def domain_of_summary(summary: dict) -> Domain:
