@@ -33,7 +33,7 @@ from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, mani
 from app.visible import VisibleClip, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.clips.render import RenderOptions, robot_label
-from search.solvers.domain import Domain, domain_for, domain_of_summary
+from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
 from search.solvers.runner import SearchJob, limit_threads, run_search, solver_config_class, write_outputs
 from search.solvers.summary import verify
 
@@ -181,11 +181,14 @@ class Cache:
         (self.path(kind, inputs) / "inputs.json").write_text(json.dumps(inputs, sort_keys=True, indent=1))
 
 
-def evaluate_agents(spec: BuildSpec, domain: Domain, cache: Cache, log, world: dict | None = None) -> dict[str, dict]:
+def evaluate_agents(
+    spec: BuildSpec, domain: Domain, cache: Cache, log, world: dict | None = None, workers: int = 1
+) -> dict[str, dict]:
     """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
-    per input; in a world whose agents act in their scenario's world, in the first scenario they are shown in."""
-    results = {}
-    episodes, seed = spec.eval_episodes, spec.eval_seed
+    per input, ``workers`` at a time; in a world whose agents act in their scenario's world, in the first scenario
+    they are shown in."""
+    episodes, seed, world = spec.eval_episodes, spec.eval_seed, world or {}
+    todo, inputs_of = {}, {}
     for agent in spec.agents:
         shown = [name for clip_set in spec.sets if agent in clip_set.agents for name in clip_set.scenarios]
         scenario = domain.eval_scenario(shown)
@@ -193,22 +196,44 @@ def evaluate_agents(spec: BuildSpec, domain: Domain, cache: Cache, log, world: d
             {"world": world} if world else {}
         )
         if scenario is not None:
-            inputs["scenario"] = domain.scenario_dict(scenario, world or {})
-        folder = cache.path("eval", inputs)
+            inputs["scenario"] = domain.scenario_dict(scenario, world)
+        inputs_of[agent] = inputs
         if cache.valid("eval", inputs, "eval.json"):
             log(f"eval {agent}: cached")
         else:
-            started = time.perf_counter()
-            result = domain.evaluate(agent, episodes, seed, world or {}, scenario) | {"agent": agent}
-            folder = cache.store("eval", inputs)
-            (folder / "eval.json").write_text(json.dumps(result, indent=1))
-            cache.seal("eval", inputs)
-            log(
-                f"eval {agent}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} "
-                f"({time.perf_counter() - started:.1f} s)"
-            )
-        results[agent] = json.loads((folder / "eval.json").read_text())
-    return results
+            todo[agent] = (_evaluate, (domain.name, agent, episodes, seed, world, scenario))
+    for agent, (result, seconds) in in_processes(todo, workers):
+        folder = cache.store("eval", inputs_of[agent])
+        (folder / "eval.json").write_text(json.dumps(result, indent=1))
+        cache.seal("eval", inputs_of[agent])
+        log(f"eval {agent}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} ({seconds:.1f} s)")
+    return {
+        agent: json.loads((cache.path("eval", inputs_of[agent]) / "eval.json").read_text()) for agent in spec.agents
+    }
+
+
+def _evaluate(domain: str, agent: str, episodes: int, seed: int, world: dict, scenario: str | None):
+    """One agent's evaluation and the seconds it took (in a worker process: the domain is found by name)."""
+    started = time.perf_counter()
+    result = domain_named(domain).evaluate(agent, episodes, seed, world, scenario) | {"agent": agent}
+    return result, time.perf_counter() - started
+
+
+def in_processes(tasks: dict, workers: int):
+    """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (in this one
+    when one worker or one task), yielding (key, result) as each finishes."""
+    if workers <= 1 or len(tasks) <= 1:
+        for key, (function, arguments) in tasks.items():
+            yield key, function(*arguments)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
+    with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=context, initializer=limit_threads) as pool:
+        futures = {pool.submit(function, *arguments): key for key, (function, arguments) in tasks.items()}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
 
 
 def _describe(job: ClipJob) -> str:
@@ -243,26 +268,11 @@ def run_searches(jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log,
         if _key(inputs) not in todo and not _reusable(job, inputs, cache, log):
             todo[_key(inputs)] = (job, search, inputs)
 
-    def finished(job: ClipJob, inputs: dict, seconds: float) -> None:
+    tasks = {key: (_run_search, (search, cache.store("search", inputs))) for key, (_, search, inputs) in todo.items()}
+    for key, seconds in in_processes(tasks, workers):
+        job, _, inputs = todo[key]
         cache.seal("search", inputs)
         log(f"{_describe(job)}: {seconds:.1f} s")
-
-    if workers <= 1 or len(todo) <= 1:
-        for job, search, inputs in todo.values():
-            finished(job, inputs, _run_search(search, cache.store("search", inputs)))
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
-    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=context, initializer=limit_threads) as pool:
-        futures = {
-            pool.submit(_run_search, search, cache.store("search", inputs)): key
-            for key, (_, search, inputs) in todo.items()
-        }
-        for future in as_completed(futures):
-            job, _, inputs = todo[futures[future]]
-            finished(job, inputs, future.result())
 
 
 def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
@@ -317,9 +327,9 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     domain = study_domain(spec)
-    evaluations = evaluate_agents(spec, domain, cache, log, world)
+    evaluations = evaluate_agents(spec, domain, cache, log, world, workers)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
-    scenario_reports = representativeness(spec, cache, log, world)
+    scenario_reports = representativeness(spec, cache, log, world, workers)
     clips = []
     for job, search in zip(jobs, inputs, strict=True):
         summary = out / "summaries" / f"{job.id}.json"
@@ -392,16 +402,12 @@ def clip_summary(folder: Path, select: str, world: World) -> Path:
     return paths[largest_contrast([json.loads(p.read_text()) for p in paths], world)]
 
 
-def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None) -> list[dict]:
+def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None, workers: int = 1) -> list[dict]:
     """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
     there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`, by
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
-    vote. ``world`` is the study's comparison world (``study_world``), beneath each scenario's and the
-    distribution's own settings."""
-    import numpy as np
-
-    from search.solvers.representative import RepresentativeConfig
-    from search.solvers.representative import representativeness as measure
+    vote; pairs measured ``workers`` at a time. ``world`` is the study's comparison world (``study_world``),
+    beneath each scenario's and the distribution's own settings."""
     from search.solvers.reward import RewardConfig
 
     settings = spec.representativeness
@@ -411,7 +417,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
             for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
                 if not domain_for(pair, name).is_distribution(name):
                     scenarios_of.setdefault(pair, []).append(name)
-    reports = []
+    measured, todo = {}, {}
     for pair, names in scenarios_of.items():
         domain = domain_for(pair, names[0])
         distribution = settings.distribution or domain.default_distribution
@@ -420,7 +426,6 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
         names = list(dict.fromkeys(names))
         fixed = [domain.state(name, under(world, domain.own_world(name))) for name in names]
         drawn_world = under(world, domain.own_world(distribution))
-        reward = RewardConfig().to_dict()
         inputs = {
             "agents": [agent_identity(a, domain) for a in pair],
             "scenarios": [s.to_dict() for s in fixed],
@@ -428,33 +433,48 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
             "states": settings.states,
             "pushes": settings.pushes,
             "seed": settings.seed,
-            "reward": reward,
+            "reward": RewardConfig().to_dict(),
         }
-        folder = cache.path("representativeness", inputs)
+        measured[pair] = (names, distribution, inputs)
         if not cache.valid("representativeness", inputs, "report.json"):
-            started = time.perf_counter()
-            rng = np.random.default_rng(settings.seed)
-            drawn = domain.draw_states(distribution, drawn_world, rng, settings.states)
-            found = measure(
-                lambda states, pushes, rng, tracker, pair=pair, domain=domain, reward=reward: domain.roll_out(
-                    pair, states, reward, pushes, rng, tracker
-                ),
-                fixed,
-                drawn,
-                RepresentativeConfig(states=settings.states, pushes=settings.pushes),
-                rng,
-            )
-            folder = cache.store("representativeness", inputs)
-            (folder / "report.json").write_text(json.dumps(found, indent=1))
-            cache.seal("representativeness", inputs)
-            log(f"representativeness {pair[0]}-{pair[1]}: {time.perf_counter() - started:.1f} s")
-        for name, found in zip(names, json.loads((folder / "report.json").read_text()), strict=True):
+            todo[pair] = (_representativeness, (domain.name, pair, fixed, distribution, drawn_world, settings))
+    for pair, (found, seconds) in in_processes(todo, workers):
+        folder = cache.store("representativeness", measured[pair][2])
+        (folder / "report.json").write_text(json.dumps(found, indent=1))
+        cache.seal("representativeness", measured[pair][2])
+        log(f"representativeness {pair[0]}-{pair[1]}: {seconds:.1f} s")
+    reports = []
+    for pair, (names, distribution, inputs) in measured.items():
+        found = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
+        for name, one in zip(names, found, strict=True):
             report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
-                key: value for key, value in found.items() if key != "scenario"
+                key: value for key, value in one.items() if key != "scenario"
             }
             reports.append(report)
             log(describe_representativeness(report))
     return reports
+
+
+def _representativeness(domain_name: str, pair, fixed: list, distribution: str, world: dict, settings):
+    """One pair's representativeness reports and the seconds they took (in a worker process: the domain is
+    found by name)."""
+    import numpy as np
+
+    from search.solvers.representative import RepresentativeConfig
+    from search.solvers.representative import representativeness as measure
+    from search.solvers.reward import RewardConfig
+
+    started, domain, reward = time.perf_counter(), domain_named(domain_name), RewardConfig().to_dict()
+    rng = np.random.default_rng(settings.seed)
+    drawn = domain.draw_states(distribution, world, rng, settings.states)
+    found = measure(
+        lambda states, pushes, rng, tracker: domain.roll_out(pair, states, reward, pushes, rng, tracker),
+        fixed,
+        drawn,
+        RepresentativeConfig(states=settings.states, pushes=settings.pushes),
+        rng,
+    )
+    return found, time.perf_counter() - started
 
 
 def describe_representativeness(report: dict) -> str:
