@@ -99,7 +99,10 @@ def test_report_files(known_db, tmp_path):
     for name in (
         "report.html",
         "table1.csv",
-        "accuracy_tests.csv",
+        "pooled_tests.csv",
+        "model.csv",
+        "model_accuracy.csv",
+        "model_contrasts.csv",
         "ratings.csv",
         "rating_tests.csv",
         "exclusions.csv",
