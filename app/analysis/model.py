@@ -7,10 +7,11 @@ Why this estimator (docs/analysis.md, "The model"): a logistic mixed model with 
 participant and clip is the field's convention, but statsmodels' only such model (a variational Bayes fit)
 rejects a true null in about half of simulated studies, and with a handful of clips per scheme a Wald test on
 any fit of it is too liberal. The two-way cluster-robust covariance (Cameron, Gelbach and Miller 2011) with the
-CR2 small-sample correction of each part (Bell and McCaffrey 2002), read against a t distribution on as many degrees of freedom
-as there are clips (or participants, if fewer) beyond the model's parameters, keeps the false-positive rate at
-its nominal 5% in Foil's designs (benchmarks/bench_model.py). It makes no assumption about how answers of a
-participant or of a clip correlate, so by-participant scheme slopes are covered without fitting them.
+CR2 small-sample correction of each part (Bell and McCaffrey 2002), read against a t distribution on as many
+degrees of freedom as there are clips (or participants, if fewer) beyond the model's parameters, keeps the
+false-positive rate at or below its nominal 5% in Foil's designs (benchmarks/bench_model.py). It makes no
+assumption about how answers of a participant or of a clip correlate, so by-participant scheme slopes are
+covered without fitting them.
 """
 
 from __future__ import annotations
