@@ -68,7 +68,7 @@ def test_two_participants_get_no_test_from_the_model(survey_db, paper_study, bun
     assert html.index('id="model"') < html.index('id="table1"') < html.index('id="appendix"')
 
 
-def test_power_and_prereg_commands(known_db, paper_study, bundle_dir, tmp_path, capsys):
+def test_power_and_prereg_commands(known_db, paper_study, bundle_dir, tmp_path, capsys):  # noqa: F811
     from search.cli import main
 
     db, _ = known_db
