@@ -184,8 +184,8 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
     formula = "correct ~ " + " + ".join(["scheme", *covariates])
     if fit is None:
         return ModelResult(False, "not estimable: the fit does not converge", formula, participants, clips)
-    scheme = np.asarray(answers.scheme)
-    boundary = [s for s in present if len(set(y[scheme == s])) == 1]
+    scheme_of = np.asarray(answers.scheme)
+    boundary = [s for s in present if len(set(y[scheme_of == s])) == 1]
     if boundary:
         notes.append(
             f"every answer under {', '.join(boundary)} is the same (all right or all wrong): "
@@ -204,7 +204,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
     beta, fitted = fit
     weight = fitted * (1 - fitted)
     residual = y - fitted
-    bread = np.linalg.inv((x * weight[:, None]).T @ x)
+    bread = np.asarray(np.linalg.inv((x * weight[:, None]).T @ x), dtype=np.float64)
     by_participant, by_clip = (
         _meat(x, residual, weight, bread, np.unique(groups, return_inverse=True)[1])
         for groups in (answers.participant, answers.clip)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import dataclass, replace
+from functools import cache
 
 import numpy as np
 
@@ -76,6 +77,7 @@ def layout(study: Study, task: str, participants: int) -> Layout:
     )
 
 
+@cache
 def log_odds_for(accuracy: float, sd: float) -> float:
     """The log odds whose expit, averaged over a normal effect of standard deviation `sd`, is `accuracy`."""
     from scipy import optimize, special
