@@ -19,11 +19,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
-from numpy.typing import NDArray
+if TYPE_CHECKING:  # numpy is imported where it runs: the server imports this module at start-up
+    import numpy as np
+    from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+    Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,8 @@ def _design(answers: Answers, schemes: list[str], covariates: tuple[str, ...]) -
     """One indicator per scheme (no intercept: each scheme's log odds at the reference levels), then indicators of
     the other levels of each covariate, leaving out any column the earlier ones already determine (a scheme
     whose clips come from a scenario of its own, as the representative scheme's)."""
+    import numpy as np
+
     scheme = np.asarray(answers.scheme)
     columns = [(scheme == s).astype(float) for s in schemes]
     for covariate in covariates:
@@ -103,6 +107,8 @@ def _fit(y: Array, x: Array) -> tuple[Array, Array] | None:
     coefficients and fitted probabilities. Unlike the maximum-likelihood fit its estimates stay finite when a
     scheme, pair or scenario has only right (or only wrong) answers, which small studies and clear clips give;
     its bias is smaller too. None when it does not converge."""
+    import numpy as np
+
     beta = np.zeros(x.shape[1])
     for _ in range(200):
         mu = 1 / (1 + np.exp(-(x @ beta)))
@@ -123,6 +129,8 @@ def _meat(x: Array, residual: Array, weight: Array, bread: Array, groups: NDArra
     small standard errors (the stronger (I - H_gg)^-1 of Mancl and DeRouen made the tests too conservative in
     the simulations). Where a cluster alone determines a parameter (a scheme with one clip) the inverse square
     root is taken of the pseudo-inverse, as clubSandwich does."""
+    import numpy as np
+
     meat = np.zeros((x.shape[1], x.shape[1]))
     order = np.argsort(groups, kind="stable")
     bounds = np.flatnonzero(np.diff(groups[order])) + 1
@@ -166,6 +174,8 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
 
     A scheme's accuracy is the mean of the fitted probabilities of its answers, which for this model is its raw
     accuracy (Table 1): what the model adds is an interval that counts participants and clips, not answers."""
+    import numpy as np
+
     present = [s for s in schemes if s in set(answers.scheme)]
     participants = len(set(answers.participant))
     clips = len(set(answers.clip))
@@ -281,6 +291,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
 def _scheme_test(beta: Array, cov: Array, k: int, df: int) -> tuple[str, float | None]:
     """Do the schemes differ? A Wald F test that the k schemes' log odds are equal, on (k - 1, df) degrees of
     freedom (for two schemes the square of the odds ratio's t test)."""
+    import numpy as np
     from scipy import stats
 
     if k < 2:

@@ -14,12 +14,14 @@ import math
 import sys
 from dataclasses import dataclass, replace
 from functools import cache
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from app.analysis.model import Answers, ModelResult, fit_accuracy
 from app.survey.assignment import conditions
 from app.survey.study import Study
+
+if TYPE_CHECKING:  # numpy is imported where it runs: the report (and so the server) imports this module
+    import numpy as np
 
 ALPHA = 0.05
 TARGETS = (0.8, 0.9)
@@ -51,6 +53,8 @@ def tasks(study: Study) -> list[str]:
 def layout(study: Study, task: str, participants: int) -> Layout:
     """The answers of `participants` participants in the study's design, conditions assigned in turn as the
     balanced assignment does. A ranking's clip is its block: the scheme's clips of the scenario it ranks."""
+    import numpy as np
+
     columns: dict[str, list[str]] = {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair")}
     design = conditions(study)
     for k in range(participants):
@@ -80,6 +84,7 @@ def layout(study: Study, task: str, participants: int) -> Layout:
 @cache
 def log_odds_for(accuracy: float, sd: float) -> float:
     """The log odds whose expit, averaged over a normal effect of standard deviation `sd`, is `accuracy`."""
+    import numpy as np
     from scipy import optimize, special
 
     nodes, weights = np.polynomial.hermite_e.hermegauss(40)
@@ -96,6 +101,7 @@ class Assumptions:
 
 def simulate(study: Study, task: str, plan: Layout, assume: Assumptions, rng: np.random.Generator) -> Answers:
     """One simulated study's answers in the layout's design."""
+    import numpy as np
     from scipy import special
 
     schemes = list(study.design.schemes)
@@ -110,6 +116,8 @@ def simulate(study: Study, task: str, plan: Layout, assume: Assumptions, rng: np
 def simulated_fits(
     study: Study, task: str, participants: int, assume: Assumptions, studies: int, seed: int
 ) -> list[ModelResult]:
+    import numpy as np
+
     rng = np.random.default_rng([seed, participants])
     plan = layout(study, task, participants)
     schemes = list(study.design.schemes)
