@@ -5,7 +5,7 @@ log-odds scale, fitted by the report's model (app/analysis/model.py) beside the 
 
 - no scheme effect (every scheme at the same accuracy): how often each test has p < 0.05;
 - an effect: how often the model's 95% intervals of the differences in accuracy between schemes cover the true
-  differences.
+  differences, and how often its test finds that the schemes differ (power).
 
     .venv/bin/python benchmarks/bench_model.py [--studies 500] [--participants 40]
 """
@@ -51,9 +51,10 @@ def main() -> None:
         f"{args.participant_sd}, clip SD {args.clip_sd} (log odds)\n"
     )
     print(
-        "| design | part | clips | df | false positives, model | false positives, pooled | coverage, model | ms/fit |"
+        "| design | part | clips | df | false positives, model | false positives, pooled | coverage, model "
+        "| power, model | ms/fit |"
     )
-    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for name in ("demo", "paper"):
         study = load_study(REPO / "studies" / f"{name}.toml")
         schemes = list(study.design.schemes)
@@ -62,7 +63,7 @@ def main() -> None:
             plan = layout(study, task, args.participants)
             null = Assumptions({s: NULL[task] for s in schemes}, args.participant_sd, args.clip_sd)
             effect = Assumptions(dict(zip(schemes, EFFECT[task], strict=False)), args.participant_sd, args.clip_sd)
-            model_hits = pooled_hits = covered = intervals = 0
+            model_hits = pooled_hits = covered = intervals = detected = 0
             df = 0
             started = time.perf_counter()
             for _ in range(args.studies):
@@ -73,6 +74,7 @@ def main() -> None:
                 pooled = pooled_p(answers)
                 pooled_hits += pooled is not None and pooled < 0.05
                 result = fit_accuracy(simulate(study, task, plan, effect, rng), schemes, chance(study, task))
+                detected += result.scheme_p is not None and result.scheme_p < 0.05
                 for c in result.contrasts:
                     truth = effect.accuracy[c.scheme] - effect.accuracy[c.reference]
                     covered += c.low <= truth <= c.high
@@ -80,7 +82,8 @@ def main() -> None:
             ms = 1000 * (time.perf_counter() - started) / (2 * args.studies)
             print(
                 f"| {name} | {task} | {plan.clips} | {df} | {model_hits / args.studies:.3f} | "
-                f"{pooled_hits / args.studies:.3f} | {covered / max(intervals, 1):.3f} | {ms:.0f} |",
+                f"{pooled_hits / args.studies:.3f} | {covered / max(intervals, 1):.3f} | "
+                f"{detected / args.studies:.3f} | {ms:.0f} |",
                 flush=True,
             )
 

@@ -171,7 +171,7 @@ MODEL_TEXT = (
     "outcome) as a logistic regression correct ~ scheme, with the pair of agents and the scenario as fixed effects "
     "where a part has more than one, fitted with Firth's penalty; its standard errors are clustered by participant "
     "and by clip at once (a ranking's clip is its ranked clips together), with the CR2 small-sample correction, and "
-    "its t tests have min(participants, clips) minus the number of parameters degrees of freedom. It stands in for "
+    "its t tests have min(participants, clips) minus 1 degrees of freedom. It stands in for "
     "the mixed model with crossed random effects for participant and clip, in R: glmer(correct ~ scheme + "
     "(1 | participant) + (1 | clip), family = binomial), and gives the same analysis with reliable p-values when a "
     "study has few clips per scheme; docs/analysis.md explains it"

@@ -7,11 +7,12 @@ Why this estimator (docs/analysis.md, "The model"): a logistic mixed model with 
 participant and clip is the field's convention, but statsmodels' only such model (a variational Bayes fit)
 rejects a true null in about half of simulated studies, and with a handful of clips per scheme a Wald test on
 any fit of it is too liberal. The two-way cluster-robust covariance (Cameron, Gelbach and Miller 2011) with the
-CR2 small-sample correction of each part (Bell and McCaffrey 2002), read against a t distribution on as many
-degrees of freedom as there are clips (or participants, if fewer) beyond the model's parameters, keeps the
-false-positive rate at or below its nominal 5% in Foil's designs (benchmarks/bench_model.py). It makes no
-assumption about how answers of a participant or of a clip correlate, so by-participant scheme slopes are
-covered without fitting them.
+CR2 small-sample correction of each part (Bell and McCaffrey 2002), read against a t distribution on G - 1 degrees
+of freedom with G the smaller number of clusters (clips, or participants if fewer), as Cameron, Gelbach and Miller
+recommend for two-way clustering, rejects a true null in 3-7% of simulated pairwise studies in Foil's designs
+(benchmarks/bench_model.py; G minus the parameters made the paper's test reject in 2%). It makes no assumption
+about how answers of a participant or of a clip correlate, so by-participant scheme slopes are covered without
+fitting them.
 """
 
 from __future__ import annotations
@@ -128,20 +129,24 @@ def _meat(x: Array, residual: Array, weight: Array, bread: Array, groups: NDArra
     (CR2: Bell and McCaffrey 2002, as R's clubSandwich): without it the few clusters of a small study give too
     small standard errors (the stronger (I - H_gg)^-1 of Mancl and DeRouen made the tests too conservative in
     the simulations). Where a cluster alone determines a parameter (a scheme with one clip) the inverse square
-    root is taken of the pseudo-inverse, as clubSandwich does."""
+    root is taken of the pseudo-inverse, as clubSandwich does.
+
+    H_gg has rank at most the number of parameters, so the correction is computed in the parameters' space, all
+    clusters at once: X_g' (I - H_gg)^-1/2 e_g = B^-1/2 f(C_g) B^1/2 X_g' e_g with C_g = B^1/2 X_g' W_g X_g B^1/2
+    and f(c) = (1 - c)^-1/2, which `foil power` needs to refit thousands of studies in seconds."""
     import numpy as np
 
-    meat = np.zeros((x.shape[1], x.shape[1]))
-    order = np.argsort(groups, kind="stable")
-    bounds = np.flatnonzero(np.diff(groups[order])) + 1
-    root = np.sqrt(weight)
-    for rows in np.split(order, bounds):
-        xg = x[rows] * root[rows, None]
-        values, vectors = np.linalg.eigh(np.eye(len(rows)) - xg @ bread @ xg.T)
-        scale = np.where(values > 1e-8, np.maximum(values, 1e-8) ** -0.5, 0.0)
-        score = xg.T @ (vectors @ (scale * (vectors.T @ (residual[rows] / root[rows]))))
-        meat += np.outer(score, score)
-    return meat
+    members = (groups[:, None] == np.arange(int(groups.max()) + 1)).astype(float).T  # cluster x answer
+    k = x.shape[1]
+    cross = (members @ ((x * weight[:, None])[:, :, None] * x[:, None, :]).reshape(len(x), k * k)).reshape(-1, k, k)
+    values, vectors = np.linalg.eigh(bread)
+    root = (vectors * np.sqrt(values)) @ vectors.T
+    inverse_root = (vectors / np.sqrt(values)) @ vectors.T
+    leverage, axes = np.linalg.eigh(root @ cross @ root)
+    scale = np.where(1 - leverage > 1e-8, np.maximum(1 - leverage, 1e-8) ** -0.5, 0.0)
+    rotated = np.einsum("gji,jk,gk->gi", axes, root, members @ (x * residual[:, None]))
+    scores = np.einsum("jk,gkl,gl->gj", inverse_root, axes, scale * rotated)
+    return np.asarray(scores.T @ scores, dtype=np.float64)
 
 
 def _t_quantile(df: int) -> float:
@@ -201,16 +206,16 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
             f"every answer under {', '.join(boundary)} is the same (all right or all wrong): "
             "a clustered interval is too narrow there; read Table 1's Wilson interval for it"
         )
-    df = min(participants, clips) - x.shape[1]
-    if df < 1:
+    if min(participants, clips) <= x.shape[1]:
         return ModelResult(
             False,
-            f"not tested: {participants} participants and {clips} clips leave no degrees of freedom for "
+            f"not tested: {participants} participants and {clips} clips are too few clusters for "
             f"{x.shape[1]} parameters; the intervals need more participants (or clips) than that",
             formula,
             participants,
             clips,
         )
+    df = min(participants, clips) - 1  # G - 1 with G the smaller number of clusters (Cameron et al. 2011)
     beta, fitted = fit
     weight = fitted * (1 - fitted)
     residual = y - fitted

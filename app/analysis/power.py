@@ -131,6 +131,15 @@ def power(results: list[ModelResult]) -> float:
     return sum(r.scheme_p is not None and r.scheme_p < ALPHA for r in results) / len(results)
 
 
+def monte_carlo_error(value: float, studies: int) -> float:
+    """Half the width of the 95% interval of a power estimated from `studies` simulated studies: the noise that
+    can make power dip from one N to the next. Wilson's, so that 0% and 100% get one too."""
+    from app.analysis.statistics import wilson_interval
+
+    low, high = wilson_interval(round(value * studies), studies) or (0.0, 1.0)
+    return (high - low) / 2
+
+
 def participant_grid(study: Study, largest: int, points: int = 10) -> list[int]:
     """About `points` numbers of participants up to `largest`, each a whole number of rounds of the conditions
     (so every condition is filled equally)."""
@@ -208,11 +217,11 @@ def run_power(
     for task, accuracy in accuracies.items():
         assume = Assumptions(accuracy, participant_sd, clip_sd)
         print(f"\n{task}: accuracies " + ", ".join(f"{s} {a:.2f}" for s, a in accuracy.items()))
-        print(f"{'participants':>12}  {'power':>6}")
+        print(f"{'participants':>12}  {'power':>6}  {'± (Monte Carlo, 95%)':>20}")
         reached: dict[float, int] = {}
         for n in grid:
             value = power(simulated_fits(study, task, n, assume, studies, seed))
-            print(f"{n:>12}  {value:>6.2f}", flush=True)
+            print(f"{n:>12}  {value:>6.2f}  {monte_carlo_error(value, studies):>20.2f}", flush=True)
             for target in TARGETS:
                 if value >= target:
                     reached.setdefault(target, n)

@@ -77,7 +77,7 @@ def plan(study_text: str, study: Study, manifest: Path, participants: int, rules
         "model": (
             "per part, logistic regression correct ~ scheme (+ pair + scenario where the part has more than one), "
             "Firth-penalised, standard errors clustered by participant and by clip (two-way, CR2 small-sample "
-            "correction), t tests on min(participants, clips) - parameters degrees of freedom; the "
+            "correction), t tests on min(participants, clips) - 1 degrees of freedom; the "
             "schemes differ: Wald F test; R: glmer(correct ~ scheme + (1 | participant) + (1 | clip), "
             "family = binomial) for the mixed model it stands in for"
         ),

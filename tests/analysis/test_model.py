@@ -43,7 +43,7 @@ def test_the_model_recovers_a_scheme_effect_and_its_accuracy_is_the_raw_one():
     truth = {schemes[0]: 0.9, schemes[1]: 0.6}
     answers = simulate(study, "pairwise", layout(study, "pairwise", 80), Assumptions(truth), np.random.default_rng(3))
     fit = fit_accuracy(answers, schemes, chance(study, "pairwise"))
-    assert fit.estimable and fit.clips == 12 and fit.participants == 80 and fit.df == 12 - 5
+    assert fit.estimable and fit.clips == 12 and fit.participants == 80 and fit.df == 12 - 1
     for estimate in fit.schemes:
         raw = np.mean([c for s, c in zip(answers.scheme, answers.correct, strict=True) if s == estimate.scheme])
         assert estimate.accuracy == pytest.approx(raw, abs=0.01)  # Firth's penalty pulls only slightly to 50%
@@ -51,6 +51,34 @@ def test_the_model_recovers_a_scheme_effect_and_its_accuracy_is_the_raw_one():
     (contrast,) = fit.contrasts
     assert contrast.low < truth[schemes[1]] - truth[schemes[0]] < contrast.high < 0
     assert contrast.odds_ratio < 1 and fit.scheme_p < 0.05
+
+
+def test_the_cr2_correction_in_the_parameters_space_equals_the_per_cluster_one():
+    """_meat computes (I - H_gg)^-1/2 in the parameters' space for all clusters at once; here it is taken of each
+    cluster's full H_gg, with the pseudo-inverse where a cluster alone determines a parameter (the demo's
+    representative scheme has one ranked set)."""
+    from app.analysis.model import _design, _fit, _meat
+
+    study = load_study(STUDIES / "demo.toml")
+    schemes = list(study.design.schemes)
+    for task in ("pairwise", "ranking"):
+        answers = simulate(study, task, layout(study, task, 24), Assumptions({s: 0.7 for s in schemes}),
+                           np.random.default_rng(2))  # fmt: skip
+        x = _design(answers, schemes, ("pair", "scenario") if task == "pairwise" else ("scenario",))
+        beta, fitted = _fit(np.asarray(answers.correct, dtype=float), x)
+        weight, residual = fitted * (1 - fitted), np.asarray(answers.correct) - fitted
+        bread = np.linalg.inv((x * weight[:, None]).T @ x)
+        for clusters in (answers.participant, answers.clip):
+            groups = np.unique(clusters, return_inverse=True)[1]
+            expected = np.zeros_like(bread)
+            for g in range(groups.max() + 1):
+                rows = groups == g
+                xg = x[rows] * np.sqrt(weight[rows, None])
+                values, vectors = np.linalg.eigh(np.eye(rows.sum()) - xg @ bread @ xg.T)
+                scale = np.where(values > 1e-8, np.maximum(values, 1e-8) ** -0.5, 0.0)
+                score = xg.T @ vectors @ (scale * (vectors.T @ (residual[rows] / np.sqrt(weight[rows]))))
+                expected += np.outer(score, score)
+            assert _meat(x, residual, weight, bread, groups) == pytest.approx(expected, rel=1e-9, abs=1e-9)
 
 
 def test_two_participants_get_no_test_from_the_model(survey_db, paper_study, bundle_dir, tmp_path):
@@ -78,6 +106,7 @@ def test_power_and_prereg_commands(known_db, paper_study, bundle_dir, tmp_path, 
     out = capsys.readouterr().out
     assert (
         f"pairwise: accuracies {SCHEMES[0]} 0.95, {SCHEMES[1]} 0.60" in out
+        and "± (Monte Carlo, 95%)" in out
         and "80% power:" in out
         and "90% power:" in out
     )
