@@ -142,3 +142,12 @@ def test_bad_input_says_what_is_wrong_and_how_to_fix_it(paper_study, tmp_path):
     with pytest.raises(ValueError, match="no manifest.json in bundle"):
         run_prereg(study_path=str(paper_study[0]), bundle=str(tmp_path), out=str(tmp_path), participants=4,
                    rules=ExclusionRules())  # fmt: skip
+
+
+def test_the_report_says_what_a_ranking_test_can_show(known_db, tmp_path):  # noqa: F811
+    db, study = known_db
+    data = tally_study(db, study)
+    html = render_report(data, tmp_path / "report")
+    ranking = data.model("ranking")
+    assert ranking.estimable and html.count("A ranking part has one ranked set per scheme and scenario") == 1
+    assert f"the spread of only {ranking.clips} sets" in html
