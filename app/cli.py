@@ -1,6 +1,6 @@
-"""The survey server's commands: `foil serve`, `export`, `report` and `simulate`, their arguments and what runs
-them. The `foil` command (search/cli.py) lists them beside the offline side's commands. Each imports its machinery
-only when it runs, so `foil --help` loads neither side."""
+"""The survey server's commands: `foil serve`, `export`, `report`, `simulate`, `power` and `prereg`, their
+arguments and what runs them. The `foil` command (search/cli.py) lists them beside the offline side's commands.
+Each imports its machinery only when it runs, so `foil --help` loads neither side."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from app.analysis.exclusions import ExclusionRules
 
-COMMANDS = ("serve", "export", "report", "simulate")
+COMMANDS = ("serve", "export", "report", "simulate", "power", "prereg")
 
 
 def comma_separated(text: str) -> list[str]:
@@ -46,7 +46,12 @@ def _report(args: argparse.Namespace) -> int:
     from app.analysis.report import run_report
 
     return run_report(
-        database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args), bundle=args.bundle
+        database_url=args.db,
+        study=args.study,
+        out=args.out,
+        rules=_exclusion_rules(args),
+        bundle=args.bundle,
+        prereg=args.prereg,
     )
 
 
@@ -61,6 +66,56 @@ def _simulate(args: argparse.Namespace) -> int:
         seed=args.seed,
         inattentive=args.inattentive,
         first=args.first,
+    )
+
+
+def _power(args: argparse.Namespace) -> int:
+    from app.analysis.power import run_power
+
+    return run_power(
+        study_path=args.study,
+        pairwise=args.pairwise,
+        ranking=args.ranking,
+        pilot=args.pilot,
+        participant_sd=args.participant_sd,
+        clip_sd=args.clip_sd,
+        largest=args.max_participants,
+        studies=args.studies,
+        seed=args.seed,
+    )
+
+
+def _prereg(args: argparse.Namespace) -> int:
+    from app.analysis.prereg import run_prereg
+
+    return run_prereg(
+        study_path=args.study,
+        bundle=args.bundle,
+        out=args.out,
+        participants=args.participants,
+        rules=_exclusion_rules(args),
+    )
+
+
+def _add_exclusion_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--min-seconds",
+        type=float,
+        help="exclude completions faster than this (default: a "
+        "fraction of the median, see --median-fraction; 0: no time rule)",
+    )
+    command.add_argument(
+        "--median-fraction",
+        type=float,
+        default=1 / 3,
+        help="exclude completions faster than this fraction of the median (default 1/3)",
+    )
+    command.add_argument(
+        "--include",
+        default="",
+        metavar="KINDS",
+        help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
+        "(default: none; pilots and bots are left out)",
     )
 
 
@@ -86,18 +141,7 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
             "whose file the server stored in the database (default: the only one stored)",
         )
         command.add_argument("--out", required=True, help="output directory")
-        command.add_argument(
-            "--min-seconds",
-            type=float,
-            help="exclude completions faster than this (default: a "
-            "fraction of the median, see --median-fraction; 0: no time rule)",
-        )
-        command.add_argument(
-            "--median-fraction",
-            type=float,
-            default=1 / 3,
-            help="exclude completions faster than this fraction of the median (default 1/3)",
-        )
+        _add_exclusion_options(command)
         if name == "report":
             command.add_argument(
                 "--bundle",
@@ -105,13 +149,10 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
                 help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
                 "the server recorded in the database): each clip's accuracy is shown beside its audit",
             )
-        command.add_argument(
-            "--include",
-            default="",
-            metavar="KINDS",
-            help="participant kinds to analyse beside real ones, comma-separated: pilot, bot "
-            "(default: none; pilots and bots are left out)",
-        )
+            command.add_argument(
+                "--prereg",
+                help="prereg.json from foil prereg: the report says whether the data match it, listing every deviation",
+            )
         command.set_defaults(handler=handler)
 
     simulate = commands.add_parser("simulate", help="bot participants take the study through a running server")
@@ -134,3 +175,23 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     simulate.add_argument("--seed", type=int, default=0, help="seed of the bots (default 0); bot k is bot-SEED-k")
     simulate.add_argument("--first", type=int, default=0, help="number of the first bot (default 0)")
     simulate.set_defaults(handler=_simulate)
+
+    power = commands.add_parser("power", help="participants a study needs: power by simulating its design")
+    power.add_argument("study", help="the study file")
+    power.add_argument("--pairwise", help="expected pairwise accuracy per scheme, e.g. adaptive=0.85,nfirst=0.7")
+    power.add_argument("--ranking", help="expected ranking accuracy per scheme, e.g. adaptive=0.5,nfirst=0.3")
+    power.add_argument("--pilot", help="a pilot's database URL: the accuracies the report's model estimates from it")
+    power.add_argument("--participant-sd", type=float, default=1.0, help="participants' SD in log odds (default 1)")
+    power.add_argument("--clip-sd", type=float, default=0.5, help="clips' SD in log odds (default 0.5)")
+    power.add_argument("--max-participants", type=int, default=120, help="largest N tried (default 120)")
+    power.add_argument("--studies", type=int, default=100, help="simulated studies per N (default 100)")
+    power.add_argument("--seed", type=int, default=0, help="seed of the simulation (default 0)")
+    power.set_defaults(handler=_power)
+
+    prereg = commands.add_parser("prereg", help="the preregistration: hypotheses, design, exclusions, model, N")
+    prereg.add_argument("study", help="the study file")
+    prereg.add_argument("--bundle", required=True, help="the study's bundle (its manifest.json is hashed)")
+    prereg.add_argument("--participants", type=int, required=True, help="planned participants (see foil power)")
+    prereg.add_argument("--out", required=True, help="output directory for prereg.md and prereg.json")
+    _add_exclusion_options(prereg)
+    prereg.set_defaults(handler=_prereg)

@@ -28,6 +28,8 @@ COMMANDS = [
     "export",
     "report",
     "simulate",
+    "power",
+    "prereg",
     "render",
     "bundle",
     "search",

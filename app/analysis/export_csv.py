@@ -165,6 +165,19 @@ def _question_codes(study: Study) -> dict[str, dict[str, Any]]:
     return codes
 
 
+# How `foil report` models accuracy (app/analysis/model.py), so that an analyst can reproduce it from long.csv.
+MODEL_TEXT = (
+    "foil report models each part's answers (long.csv rows with question_type choose or rank; correct is the "
+    "outcome) as a logistic regression correct ~ scheme, with the pair of agents and the scenario as fixed effects "
+    "where a part has more than one, fitted with Firth's penalty; its standard errors are clustered by participant "
+    "and by clip at once (a ranking's clip is its ranked clips together), with the CR2 small-sample correction, and "
+    "its t tests have min(participants, clips) minus 1 degrees of freedom. It stands in for "
+    "the mixed model with crossed random effects for participant and clip, in R: glmer(correct ~ scheme + "
+    "(1 | participant) + (1 | clip), family = binomial), and gives the same analysis with reliable p-values when a "
+    "study has few clips per scheme; docs/analysis.md explains it"
+)
+
+
 def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None) -> dict[str, Any]:
     """Everything an analyst needs to read the files: columns with their types, questions with their scales,
     conditions, exclusion rules, and the arguments that make pandas read each file with exact types."""
@@ -204,6 +217,7 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
             "too_fast_threshold_s": rules.threshold_s(median_s),
             "median_duration_s": median_s,
         },
+        "model": MODEL_TEXT,
         "neutralised_cells": "no piece of a cell can start a formula in a spreadsheet, however it splits cells (on a "
         "comma, semicolon, tab or line break) or trims spaces: an apostrophe is put at the "
         "start of the cell and right after each of those characters where the text then "
@@ -254,7 +268,7 @@ def codebook_markdown(book: dict[str, Any]) -> str:
         f"| {c['number']} | {', '.join(c['schemes'])} | {', '.join(c['part_scenarios'])} |" for c in book["conditions"]
     ]
     rules = book["exclusion_rules"]
-    lines += ["", "## Exclusion flags", ""]
+    lines += ["", "## Model", "", book["model"] + ".", "", "## Exclusion flags", ""]
     lines += [f"- `{reason}`: {text}" for reason, text in rules["reasons"].items()]
     lines += [
         f"- time threshold of this export: {rules['too_fast']}",

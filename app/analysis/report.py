@@ -21,7 +21,10 @@ from typing import TYPE_CHECKING, Any
 
 from app.analysis.answer_table import long_rows, participant_records
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.analysis.source import analysis_database, analysis_study, served_bundle
+from app.analysis.model import Answers, ModelResult, fit_accuracy
+from app.analysis.power import chance
+from app.analysis.prereg import deviations
+from app.analysis.source import analysis_database, analysis_study_text, served_bundle
 from app.analysis.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
 from app.page_templates import page_templates
 from app.store.database import Database
@@ -77,6 +80,9 @@ class ReportData:
     ratings: dict[str, dict[str, Counter[int]]]  # scale question -> scheme -> point -> answers
     per_clip: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> scheme, scenario, agents, Tally
     audits: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> the manifest's audit, when known
+    answers: dict[str, Answers] = field(default_factory=dict)  # task -> its scored answers, for the model
+    prereg: list[str] | None = None  # how the data differ from the preregistration (empty: they match), if given
+    _models: dict[str, ModelResult] = field(default_factory=dict, repr=False)
 
     @property
     def schemes(self) -> list[str]:
@@ -87,6 +93,16 @@ class ReportData:
         design = self.study.design
         named = [*design.scenarios, *(s for names in design.scheme_scenarios.values() for s in names)]
         return [ALL] + [s for s in dict.fromkeys(named) if s in seen]
+
+    def model(self, task: str) -> ModelResult:
+        """The report's model of the task's answers (app/analysis/model.py), fitted once."""
+        if task not in self._models:
+            empty = Answers((), (), (), (), (), ())
+            self._models[task] = fit_accuracy(self.answers.get(task, empty), self.schemes, chance(self.study, task))
+        return self._models[task]
+
+    def tasks(self) -> list[str]:
+        return [task for task in TASKS if any(part.kind == task for part in self.study.parts)]
 
     def accuracy_test(self, task: str, scope: str) -> TestResult:
         return accuracy_difference(
@@ -119,6 +135,9 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     }
     unscored = 0
     per_clip: dict[str, dict[str, Any]] = {}
+    columns: dict[str, dict[str, list[Any]]] = {
+        task: {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair", "correct")} for task in TASKS
+    }
     for record in participant_records(db, study.study.id):
         flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
         exclusions.before += 1
@@ -133,19 +152,29 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                     unscored += 1
                     continue
                 task = "pairwise" if kind == "choose" else "ranking"
+                pair = " vs ".join(sorted(row["agents"].split(";"))) if task == "pairwise" else ""
                 if task == "pairwise" and row.get("clip"):
                     entry = per_clip.setdefault(
                         row["clip"],
                         {
                             "scheme": row["scheme"],
                             "scenario": row["scenario"],
-                            "agents": " vs ".join(sorted(row["agents"].split(";"))),
+                            "agents": pair,
                             "better": row["truth"],
                             "tally": Tally(),
                         },
                     )
                     entry["tally"].correct += row["correct"]
                     entry["tally"].incorrect += 1 - row["correct"]
+                for name, value in (
+                    ("participant", row["participant"]),
+                    ("clip", row["clip"]),
+                    ("scheme", row["scheme"]),
+                    ("scenario", row["scenario"]),
+                    ("pair", pair),
+                    ("correct", row["correct"]),
+                ):
+                    columns[task][name].append(value)
                 for scope in (ALL, row["scenario"]):
                     tally = accuracy[(task, scope, row["scheme"])]
                     tally.correct += row["correct"]
@@ -159,6 +188,7 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
         unscored_rankings=unscored,
         ratings=ratings,
         per_clip=dict(sorted(per_clip.items())),
+        answers={task: Answers(**values) for task, values in columns.items()},
     )
 
 
@@ -202,7 +232,65 @@ def table1_rows(data: ReportData) -> list[dict[str, Any]]:
     return rows
 
 
-def accuracy_test_rows(data: ReportData) -> list[dict[str, Any]]:
+def model_rows(data: ReportData) -> list[dict[str, Any]]:
+    """Per part: what was fitted, on how many participants and clips, and the test that the schemes differ."""
+    rows = []
+    for task in data.tasks():
+        fit = data.model(task)
+        rows.append(
+            {
+                "task": task,
+                "model": fit.formula,
+                "participants": fit.participants,
+                "clips": fit.clips,
+                "df": fit.df if fit.estimable else "",
+                "test": fit.scheme_test if fit.estimable else "",
+                "p_value": _significant(fit.scheme_p),
+                "note": fit.note,
+            }
+        )
+    return rows
+
+
+def model_accuracy_rows(data: ReportData) -> list[dict[str, Any]]:
+    """Per part and scheme: the model's accuracy with its 95% interval, and the test against chance."""
+    return [
+        {
+            "task": task,
+            "scheme": e.scheme,
+            "answers": e.n,
+            "accuracy": _number(e.accuracy),
+            "ci95_low": _number(e.low),
+            "ci95_high": _number(e.high),
+            "chance": _number(chance(data.study, task)),
+            "p_vs_chance": _significant(e.p_chance),
+        }
+        for task in data.tasks()
+        for e in data.model(task).schemes
+    ]
+
+
+def model_contrast_rows(data: ReportData) -> list[dict[str, Any]]:
+    """Per part and pair of schemes: the difference in accuracy and the odds ratio, with 95% intervals."""
+    return [
+        {
+            "task": task,
+            "scheme": c.scheme,
+            "reference": c.reference,
+            "difference": _number(c.difference),
+            "ci95_low": _number(c.low),
+            "ci95_high": _number(c.high),
+            "odds_ratio": _number(c.odds_ratio),
+            "or_ci95_low": _number(c.or_low),
+            "or_ci95_high": _number(c.or_high),
+            "p_value": _significant(c.p_value),
+        }
+        for task in data.tasks()
+        for c in data.model(task).contrasts
+    ]
+
+
+def pooled_test_rows(data: ReportData) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for scope in data.scopes():
         for task in TASKS:
@@ -440,7 +528,10 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
             )
         tables = {
             "table1.csv": table1_rows(data),
-            "accuracy_tests.csv": accuracy_test_rows(data),
+            "model.csv": model_rows(data),
+            "model_accuracy.csv": model_accuracy_rows(data),
+            "model_contrasts.csv": model_contrast_rows(data),
+            "pooled_tests.csv": pooled_test_rows(data),
             "ratings.csv": rating_rows(data),
             "rating_tests.csv": rating_test_rows(data),
             "exclusions.csv": exclusion_rows(data),
@@ -463,6 +554,8 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
                 likert=bool(labelled),
                 figures_left_out=bool(scales) and not drawn,
                 figures_extra=FIGURES_EXTRA,
+                chance={task: chance(data.study, task) for task in data.tasks()},
+                prereg=data.prereg,
             )
         )
         if out is not None:
@@ -470,19 +563,46 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
     return html
 
 
+def _preregistration(path: str) -> dict[str, Any]:
+    """prereg.json as `foil prereg` wrote it, or a clear error."""
+    import json
+
+    file = Path(path)
+    if file.is_dir():
+        file = file / "prereg.json"
+    try:
+        fixed: dict[str, Any] = json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise ValueError(f"--prereg {path}: not a prereg.json written by foil prereg ({error})") from None
+    if not isinstance(fixed, dict) or fixed.get("version") != 1:
+        raise ValueError(f"--prereg {path}: not a prereg.json written by foil prereg (no version 1)")
+    return fixed
+
+
 def run_report(
-    *, database_url: str, study: str | None, out: str, rules: ExclusionRules, bundle: str | None = None
+    *,
+    database_url: str,
+    study: str | None,
+    out: str,
+    rules: ExclusionRules,
+    bundle: str | None = None,
+    prereg: str | None = None,
 ) -> int:
     """`foil report`: prints Table 1 in short and where the report went. The per-clip table shows each clip's
     audit from the manifest of ``bundle``, by default the bundle the server last served the study from."""
     if bundle and not (Path(bundle) / "manifest.json").is_file():
         raise ValueError(f"no manifest.json in bundle {bundle}: give the bundle the study was served from")
+    fixed = _preregistration(prereg) if prereg else None
     db = analysis_database(database_url)
     try:
-        data = tally_study(db, analysis_study(db, study), rules)
+        text, parsed = analysis_study_text(db, study)
+        data = tally_study(db, parsed, rules)
         bundle = bundle or served_bundle(db, data.study.study.id)
     finally:
         db.dispose()
+    if fixed is not None:
+        manifest = Path(bundle) / "manifest.json" if bundle else None
+        data = replace(data, prereg=deviations(fixed, text, manifest, data.exclusions.after, rules))
     if bundle is not None and (Path(bundle) / "manifest.json").is_file():
         data = replace(data, audits=_audits(bundle))
     else:
@@ -502,5 +622,10 @@ def run_report(
                 f"{row['scheme']}: pairwise {row['pairwise_correct']}/{row['pairwise_n']}, "
                 f"ranking {row['ranking_correct']}/{row['ranking_n']}"
             )
+    for task in data.tasks():
+        fit = data.model(task)
+        print(f"{task} model: " + (f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.estimable else fit.note))
+    if data.prereg:
+        print(f"{len(data.prereg)} deviations from the preregistration: " + "; ".join(data.prereg))
     print(f"report: {Path(out) / 'report.html'}")
     return 0

@@ -12,7 +12,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 
 from app.store.database import Database, DatabaseError, check_migrated
 from app.store.models import ServerSetting
-from app.survey.study import Study, load_study, parse_study
+from app.survey.study import Study, parse_study
 
 
 def analysis_database(url: str) -> Database:
@@ -63,8 +63,14 @@ def served_bundle(db: Database, study_id: str) -> str | None:
 def analysis_study(db: Database, study: str | Path | None) -> Study:
     """The study definition for a database: a study file, or the id of a study whose file the server stored
     (`remember_study`); without either, the only study stored."""
+    return analysis_study_text(db, study)[1]
+
+
+def analysis_study_text(db: Database, study: str | Path | None) -> tuple[str, Study]:
+    """`analysis_study` with the study file's text (`foil report` checks it against a preregistration)."""
     if study is not None and Path(study).is_file():
-        return load_study(study)
+        text = Path(study).read_text(encoding="utf-8")
+        return text, parse_study(text, source=str(study))
     with db.reading() as session:
         stored = dict(
             session.execute(
@@ -75,7 +81,8 @@ def analysis_study(db: Database, study: str | Path | None) -> Study:
     if study is None and len(texts) == 1:
         study = next(iter(texts))
     if study is not None and str(study) in texts:
-        return parse_study(texts[str(study)], source=f"the study file stored in the database for {study!r}")
+        text = texts[str(study)]
+        return text, parse_study(text, source=f"the study file stored in the database for {study!r}")
     if study is not None:
         raise ValueError(
             f"no study file {study} and no study {str(study)!r} stored in the database "

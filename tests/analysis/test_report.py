@@ -99,7 +99,10 @@ def test_report_files(known_db, tmp_path):
     for name in (
         "report.html",
         "table1.csv",
-        "accuracy_tests.csv",
+        "pooled_tests.csv",
+        "model.csv",
+        "model_accuracy.csv",
+        "model_contrasts.csv",
         "ratings.csv",
         "rating_tests.csv",
         "exclusions.csv",
@@ -247,4 +250,7 @@ def test_without_matplotlib_the_report_has_every_table_and_says_how_to_get_the_f
     assert files == sorted(name for name in os.listdir(tmp_path / "drawn") if not name.endswith((".png", ".svg")))
     html = (tmp_path / "plain" / "report.html").read_text()
     assert "<svg" not in html and "<code>pip install &#39;foil[figures]&#39;</code> adds it" in html
-    assert html.split("<h2")[:-1] == (tmp_path / "drawn" / "report.html").read_text().split("<h2")[:-1]
+    sections, drawn_sections = html.split("<h2"), (tmp_path / "drawn" / "report.html").read_text().split("<h2")
+    ratings = next(k for k, section in enumerate(sections) if section.startswith(' id="ratings"'))
+    assert sections[:ratings] == drawn_sections[:ratings]  # the figures are in the ratings section, before the appendix
+    assert sections[ratings + 1 :] == [s.replace("plain", "drawn") for s in drawn_sections[ratings + 1 :]]
