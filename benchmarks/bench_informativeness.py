@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 from app.analysis.statistics import wilson_interval
-from app.visible import VisibleClip, audit
+from app.visible import VisibleClip, World, audit
 from search.agents.evaluate import evaluate
 from search.agents.policies import load_policy
 from search.bundle.build import clip_summary
@@ -52,7 +52,7 @@ def ground_truth(episodes: int = 500) -> dict[str, float]:
 
 
 def judge(folder: Path, select: str, rewards: dict[str, float]) -> dict:
-    summary = json.loads(clip_summary(folder, select).read_text())
+    summary = json.loads(clip_summary(folder, select, World()).read_text())
     agents = [a["name"] for a in summary["agents"]]
     labels = [f"Robot {k + 1}" for k in range(len(agents))]
     better = max(agents, key=rewards.get)

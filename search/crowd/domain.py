@@ -3,7 +3,7 @@ search/agents), its scenarios and the ``training`` distribution, its summaries, 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,7 @@ class CrowdDomain(Domain):
 
         return name in shipped_scenarios() or Path(name).suffix == ".toml"
 
-    def claims_summary(self, summary: dict) -> bool:
+    def claims_summary(self, summary: Mapping[str, Any]) -> bool:
         scenario = summary.get("scenario")
         return isinstance(scenario, dict) and "robot" in scenario
 
@@ -94,9 +94,11 @@ class CrowdDomain(Domain):
 
     def draw_states(self, name: str, world: dict, rng: np.random.Generator, count: int) -> list:
         from search.crowd.summary import frozen_scenario
-        from search.sim.scenarios import load_scenario_or_distribution
+        from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
 
         loaded = load_scenario_or_distribution(name)
+        if not isinstance(loaded, ScenarioDistribution):
+            raise ValueError(f"{name!r} is one scenario, not a distribution of starting states")
         drawn = replace(loaded, world=loaded.world | world).sample(rng, count)
         return [frozen_scenario(s, s.world | world) for s in drawn]
 
@@ -119,7 +121,7 @@ class CrowdDomain(Domain):
 
         return roll_out(_policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
 
-    def rebuild(self, summary: dict) -> dict:
+    def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.crowd.summary import rebuild
 
         return rebuild(summary)
@@ -153,7 +155,9 @@ class CrowdDomain(Domain):
         from search.agents.policies import SCRIPTED, SHIPPED_AGENTS, trained_world
         from search.sim.world import WorldConfig
 
-        source = {"kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"}
+        source: dict[str, Any] = {
+            "kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"
+        }
         path = self.agent_file(agent)
         if path is not None and path.is_file():
             source |= {

@@ -11,7 +11,9 @@ smallest surface-to-surface distance between the robot and any human (negative a
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -103,7 +105,7 @@ def build_summary(
     }
 
 
-def rebuild(data: dict) -> dict:
+def rebuild(data: Mapping[str, Any]) -> dict:
     """The summary that the file's own inputs produce now."""
     agents = [entry["name"] for entry in data["agents"]]
     scenario = Scenario.from_dict(data["scenario"], source="summary scenario")

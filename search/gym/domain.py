@@ -5,7 +5,7 @@ adapter's."""
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,7 @@ class GymDomain(Domain):
     def claims_scenario(self, name: str) -> bool:
         return gym_file(name) is not None
 
-    def claims_summary(self, summary: dict) -> bool:
+    def claims_summary(self, summary: Mapping[str, Any]) -> bool:
         scenario = summary.get("scenario")
         return isinstance(scenario, dict) and scenario.get("domain") == "gym"
 
@@ -117,7 +117,7 @@ class GymDomain(Domain):
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
 
-    def rebuild(self, summary: dict) -> dict:
+    def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.gym.summary import rebuild
 
         return rebuild(summary)

@@ -9,6 +9,9 @@ has no people to measure against.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 
 from app.formats import SUMMARY_FORMAT
@@ -100,7 +103,7 @@ def build_gym_summary(
     }
 
 
-def rebuild(data: dict) -> dict:
+def rebuild(data: Mapping[str, Any]) -> dict:
     """The summary that the file's own inputs produce now."""
     scenario = GymScenario.from_dict(data["scenario"])
     adapter = scenario.load_adapter()

@@ -4,7 +4,9 @@ rendering hooks) and its words: cars in traffic, judged by how long they last.""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from search.gym.adapter import Adapter
 from search.gym.domain import GymDomain
@@ -24,7 +26,7 @@ class HighwayDomain(GymDomain):
     def claims_scenario(self, name: str) -> bool:
         return name in SCENARIOS or name in DISTRIBUTIONS or name.startswith(AGENT_PREFIX)
 
-    def claims_summary(self, summary: dict) -> bool:
+    def claims_summary(self, summary: Mapping[str, Any]) -> bool:
         return super().claims_summary(summary) and summary["scenario"].get("adapter") == ADAPTER
 
     def describe_agents(self) -> str:

@@ -13,7 +13,7 @@ file names an adapter, and the Gymnasium domain takes it from there (docs/gym.md
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from importlib import import_module
@@ -66,7 +66,7 @@ class Domain(ABC):
     def claims_scenario(self, name: str) -> bool: ...
 
     @abstractmethod
-    def claims_summary(self, summary: dict) -> bool: ...
+    def claims_summary(self, summary: Mapping[str, Any]) -> bool: ...
 
     @abstractmethod
     def describe_agents(self) -> str:
@@ -131,7 +131,7 @@ class Domain(ABC):
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
 
     @abstractmethod
-    def rebuild(self, summary: dict) -> dict:
+    def rebuild(self, summary: Mapping[str, Any]) -> Any:
         """The summary that the file's own inputs produce now (``foil verify`` compares it with the file)."""
 
     # agents
@@ -241,7 +241,7 @@ def domain_of_training(path: Path) -> Domain:
     return next((d for d in installed if d.claims_training(Path(path))), installed[-1])
 
 
-def domain_of_summary(summary: dict) -> Domain:
+def domain_of_summary(summary: Mapping[str, Any]) -> Domain:
     for domain in domains():
         if domain.claims_summary(summary):
             return domain

@@ -280,8 +280,9 @@ def roll_out_problem(
             ended = running & np.asarray(terminal, dtype=bool)
             searched[ended] = t
             running &= ~ended
-            for row in np.flatnonzero(ended) if shown is not None else ():
-                contrast[row] = shown(found, int(row), t)
+            if shown is not None:
+                for row in np.flatnonzero(ended):
+                    contrast[row] = shown(found, int(row), t)
             if not running.any():
                 break
         actions = [env[row, : searched[row]] for row in range(rows)]
