@@ -18,7 +18,14 @@ import json
 from pathlib import Path
 from typing import Any, Literal, TypedDict, cast
 
-from pydantic import BaseModel, ConfigDict, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    SerializerFunctionWrapHandler,
+    field_validator,
+    model_serializer,
+    model_validator,
+)
 
 from app.visible import World
 
@@ -151,14 +158,18 @@ class Manifest(BaseModel):
         World.from_manifest(world)  # a world this server cannot speak of is refused at start-up
         return world
 
+    @model_serializer(mode="wrap")
+    def _crowd_leaves_world_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """A crowd manifest leaves `world` out, so it reads byte for byte as it did before worlds had a key."""
+        data: dict[str, Any] = handler(self)
+        if self.world is None:
+            data.pop("world", None)
+        return data
+
     def shown_world(self) -> World:
         return World.from_manifest(self.world)
 
 
 def manifest_json(manifest: Manifest) -> str:
-    """A manifest's file text: the one way manifests are written. A crowd manifest leaves `world` out, so it reads
-    byte for byte as it did before worlds had a key."""
-    return (
-        json.dumps(manifest.model_dump(mode="json", exclude={"world"} if manifest.world is None else None), indent=1)
-        + "\n"
-    )
+    """A manifest's file text: the one way manifests are written."""
+    return json.dumps(manifest.model_dump(mode="json"), indent=1) + "\n"

@@ -283,31 +283,41 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
     return pair[0] if first > second else pair[1]
 
 
-def render_clip(job: ClipJob, summary: Path, out: Path, options: RenderOptions, cache: Cache, log) -> None:
-    """Render a clip unless the same summary, numbers, options and renderer already made the file there."""
-    domain = domain_of_summary(json.loads(summary.read_text()))
-    inputs = {
-        "summary": sha256_file(summary),
-        "numbers": list(job.numbers),
-        "options": asdict(options),
-        "renderer": [
-            sha256_file(path) for path in domain_of_summary(json.loads(summary.read_text())).renderer_files(summary)
-        ],
-        "clip": out.name,
-    }
-    folder = cache.path("render", inputs)
-    if (
-        cache.valid("render", inputs, "sha256")
-        and out.is_file()
-        and (folder / "sha256").read_text() == sha256_file(out)
-    ):
-        log(f"render {job.id}: cached")
-        return
-    result = domain.render(summary, out, list(job.numbers), options)
-    folder = cache.store("render", inputs)
-    (folder / "sha256").write_text(sha256_file(out))
-    cache.seal("render", inputs)
-    log(f"render {job.id}: {result.frames} frames in {result.render_s:.1f} s")
+def render_clips(clips: list[tuple[ClipJob, Path, Path]], options: RenderOptions, cache: Cache, log, workers: int = 1):
+    """Render each (job, summary, clip) ``workers`` at a time, unless the same summary, numbers, options and
+    renderer already made the file there."""
+    todo, inputs_of = {}, {}
+    for job, summary, out in clips:
+        domain = domain_of_summary(json.loads(summary.read_text()))
+        inputs = {
+            "summary": sha256_file(summary),
+            "numbers": list(job.numbers),
+            "options": asdict(options),
+            "renderer": [sha256_file(path) for path in domain.renderer_files(summary)],
+            "clip": out.name,
+        }
+        folder = cache.path("render", inputs)
+        if (
+            cache.valid("render", inputs, "sha256")
+            and out.is_file()
+            and (folder / "sha256").read_text() == sha256_file(out)
+        ):
+            log(f"render {job.id}: cached")
+            continue
+        inputs_of[job.id] = (inputs, out)
+        todo[job.id] = (_render, (domain.name, summary, out, list(job.numbers), options))
+    for clip_id, frames in in_processes(todo, workers):
+        inputs, out = inputs_of[clip_id]
+        folder = cache.store("render", inputs)
+        (folder / "sha256").write_text(sha256_file(out))
+        cache.seal("render", inputs)
+        log(f"render {clip_id}: {frames}")
+
+
+def _render(domain: str, summary: Path, out: Path, numbers: list[int], options: RenderOptions) -> str:
+    """Render one clip (in a worker process: the domain is found by name); what it took, for the log."""
+    result = domain_named(domain).render(summary, out, numbers, options)
+    return f"{result.frames} frames in {result.render_s:.1f} s"
 
 
 def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, workers: int = 1) -> Manifest:
@@ -330,13 +340,24 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     evaluations = evaluate_agents(spec, domain, cache, log, world, workers)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
     scenario_reports = representativeness(spec, cache, log, world, workers)
-    clips = []
     for job, search in zip(jobs, inputs, strict=True):
-        summary = out / "summaries" / f"{job.id}.json"
         shown = domain.world(job.scenario)
+        summary = out / "summaries" / f"{job.id}.json"
         shutil.copyfile(clip_summary(cache.path("search", search), job.scheme.select, shown), summary)
-        clip = out / "clips" / f"{job.id}.mp4"
-        render_clip(job, summary, clip, spec.render, cache, log)
+    render_clips(
+        [(job, out / "summaries" / f"{job.id}.json", out / "clips" / f"{job.id}.mp4") for job in jobs],
+        spec.render,
+        cache,
+        log,
+        workers,
+    )
+    clips = []
+    for job in jobs:
+        summary, clip, shown = (
+            out / "summaries" / f"{job.id}.json",
+            out / "clips" / f"{job.id}.mp4",
+            domain.world(job.scenario),
+        )
         order = sorted(range(2), key=lambda k: job.numbers[k])
         data = json.loads(summary.read_text())
         agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
