@@ -12,6 +12,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 
 from app.store.database import migrate
+from app.survey.study import load_study
 from app.web.settings import ServerSettings, TransportLimits
 from app.web.transport import survey_protocol
 
@@ -25,6 +26,7 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
     given: dict[str, Any] = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
     settings = ServerSettings(**{key: value for key, value in given.items() if value is not None})
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
+    load_study(settings.study_path())  # a bad study file is named first, whatever listens on the port
     listening = _bind(host, port)  # before anything is changed: a port in use touches no database
     try:
         migrate(settings.database_url)

@@ -52,11 +52,16 @@ def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):
     assert f"the admin pages are at http://127.0.0.1:{port}/admin" in server.stdout.read()
 
 
-def test_foil_serve_refuses_a_bad_study_with_its_line(tmp_path, bundle_dir):
+def test_foil_serve_refuses_a_bad_study_with_its_line_even_when_its_port_is_taken(tmp_path, bundle_dir):
+    """The study's error, not the port's: a `make demo` serving on the same port changes nothing."""
     study = tmp_path / "study.toml"
     study.write_text(study_text().replace("[build]", "[unknown_table]"))
-    server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), cwd=tmp_path)
-    output, _ = server.communicate(timeout=30)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = str(taken.getsockname()[1])
+        server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", port, cwd=tmp_path)
+        output, _ = server.communicate(timeout=30)
     assert server.returncode == 2
     assert "foil serve: error:" in output and "unknown_table: unknown key" in output and ", line " in output
 
