@@ -60,6 +60,7 @@ class VisibleClip:
     outcomes: tuple[Mapping[str, Any], ...]
     progress: tuple[float, ...]
     end_s: float
+    to_goal: tuple[float | None, ...] = ()  # metres from the goal at the end, where known
 
     @classmethod
     def of_summary(cls, summary: Mapping[str, Any], agents: list[str], labels: list[str]) -> VisibleClip:
@@ -72,6 +73,7 @@ class VisibleClip:
             outcomes=tuple(summary["outcomes"][k] for k in order),
             progress=tuple(_progress(summary, k) for k in order),
             end_s=max(float(steps[-1]["t"]), 1e-6),
+            to_goal=tuple(_to_goal(summary, k) for k in order),
         )
 
     def scores(self, observer: Observer) -> dict[str, float]:
@@ -84,13 +86,16 @@ class VisibleClip:
         outcome = self.outcomes[self.labels.index(label)]
         event = outcome.get("event")
         if event == "success":
-            text = f"{label} reached the goal after {float(outcome.get('time') or self.end_s):.0f} seconds"
+            text = f"{label} reached the goal after {one_decimal(float(outcome.get('time') or self.end_s))} seconds"
         elif event == "collision":
             text = f"{label} bumped into a person"
         elif event == "timeout":
             text = f"{label} ran out of time before reaching the goal"
-        else:  # still moving when the clip ends, as the clip's "still on its way"
+        else:  # still moving when the clip ends, as the clip's "still on its way", and as close as the clip says
             text = f"{label} was still on its way when the clip ended"
+            to_goal = self.to_goal[self.labels.index(label)] if self.to_goal else None
+            if to_goal is not None:
+                text += f", {one_decimal(to_goal)} m from the goal"
         closest = outcome.get("min_human_distance")
         if closest is not None and event != "collision" and float(closest) < 0.5:
             text += " and came close to people"
@@ -110,15 +115,30 @@ def audit(clip: VisibleClip, better: str, observer: Observer | None = None) -> d
     return {"shows": shows, "why": f"{clip.describe(better)} {clip.describe(other)}"}
 
 
+def one_decimal(value: float) -> str:
+    """A time or distance as the clips write it, so that a page never says another number than its clip."""
+    return f"{value:.1f}"
+
+
+def _ends(summary: Mapping[str, Any], k: int) -> tuple[Sequence[float], Sequence[float], Sequence[float]] | None:
+    """Robot k's start, goal and place at the end of the clip (None when the summary lacks them)."""
+    try:
+        robot = summary["scenario"]["robot"]
+        return robot["start"], robot["goal"], summary["steps"][-1]["robots"][k]
+    except (KeyError, IndexError, TypeError):
+        return None
+
+
 def _progress(summary: Mapping[str, Any], k: int) -> float:
     """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
-    try:
-        start = summary["scenario"]["robot"]["start"]
-        goal = summary["scenario"]["robot"]["goal"]
-        end = summary["steps"][-1]["robots"][k]
-    except (KeyError, IndexError, TypeError):
-        return 0.0
-    return progress_towards(start, goal, end)
+    ends = _ends(summary, k)
+    return progress_towards(*ends) if ends else 0.0
+
+
+def _to_goal(summary: Mapping[str, Any], k: int) -> float | None:
+    """How far robot k's centre is from its goal at the end of the clip (None when unknown)."""
+    ends = _ends(summary, k)
+    return math.dist(ends[1], ends[2]) if ends else None
 
 
 def progress_towards(start: Sequence[float], goal: Sequence[float], end: Sequence[float]) -> float:

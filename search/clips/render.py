@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from app.visible import one_decimal
 from search.clips.scene import Scene, load_scene
 
 # Colours that stay apart under the common colour-vision deficiencies: Okabe-Ito's blue, vermillion, bluish green,
@@ -327,10 +328,13 @@ def _mix(colour, amount: float, base=ARENA) -> tuple[int, int, int]:
 STATUS_RUNNING = "on its way"
 
 
-def status_text(event: str, when: float) -> str:
-    """The legend line for an outcome, short enough for one side-by-side panel on a phone."""
+def status_text(event: str, when: float, to_goal: float = math.nan) -> str:
+    """The legend line for an outcome, short enough for one side-by-side panel on a phone; a robot still on its
+    way at the end says how far from its goal it stopped (one on the goal's rings has not reached it yet)."""
     words = {"success": "reached goal", "collision": "CRASHED", "timeout": "out of time", "running": "still on its way"}
-    return f"{words[event]} · {when:.1f} s" if event != "running" else words[event]
+    if event != "running":
+        return f"{words[event]} · {one_decimal(when)} s"
+    return words[event] if math.isnan(to_goal) else f"{words[event]} · {one_decimal(to_goal)} m to goal"
 
 
 @dataclass(frozen=True)
@@ -592,7 +596,8 @@ class ClipRenderer:
             event, when = self._event(k, t) or ("", t)
             if not event and t >= self.scene.end_time:
                 event = "running"
-            status = status_text(event, when) if event else STATUS_RUNNING
+            to_goal = math.dist(self.scene.robots[-1, k], self.scene.goals[k])
+            status = status_text(event, when, to_goal) if event else STATUS_RUNNING
             if event == "collision":
                 self._tag(image, status_xy, status, lay.text, anchor)
                 continue
