@@ -72,6 +72,40 @@ SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS}
 CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
 SERVER_CPUS, CLIENT_CPUS = (set(CPUS[:1]), set(CPUS[1:])) if len(CPUS) > 1 else (set(), set())
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
+# The paced runs' server imports this as sitecustomize (through PYTHONPATH): each second it writes the server's CPU
+# time, the event loop's largest lag (a 10 ms sleep that took longer) and the thread pool's busiest moment (threads
+# at work, tasks waiting for one), so that a slow request can be traced to where it waited.
+MONITOR = """
+import asyncio, os, time
+import uvicorn.server
+
+_startup = uvicorn.server.Server.startup
+
+
+async def _watch(path):
+    import anyio.to_thread
+
+    limiter = anyio.to_thread.current_default_thread_limiter()
+    with open(path, "w", buffering=1) as out:
+        second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
+        while True:
+            before = time.monotonic()
+            await asyncio.sleep(0.01)
+            lag = max(lag, time.monotonic() - before - 0.01)
+            stats = limiter.statistics()
+            busy, waiting = max(busy, stats.borrowed_tokens), max(waiting, stats.tasks_waiting)
+            if int(time.monotonic()) != second:
+                out.write(f"{second} {time.process_time():.3f} {lag * 1000:.1f} {busy} {waiting}\\n")
+                second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
+
+
+async def _startup_watched(self, sockets=None):
+    asyncio.get_running_loop().create_task(_watch(os.environ["BENCH_MONITOR"]))
+    return await _startup(self, sockets)
+
+
+uvicorn.server.Server.startup = _startup_watched
+"""
 RUNS = ["ceiling", "burst", "paced", "postgres", "crash", "cpu"]
 
 
@@ -172,13 +206,21 @@ def run_in_threads(target, count: int) -> float:
     return time.monotonic() - started
 
 
-def serve(bundle: Path, study: Path, workdir: Path, database_url: str | None = None) -> LiveServer:
+def serve(
+    bundle: Path, study: Path, workdir: Path, database_url: str | None = None, monitor: bool = False
+) -> LiveServer:
+    """`foil serve` in `workdir`; with `monitor`, watched second by second (MONITOR, into workdir/monitor.txt)."""
     workdir.mkdir()
+    env = dict(SURVEY_SETTINGS)
+    if monitor:
+        (workdir / "site").mkdir()
+        (workdir / "site" / "sitecustomize.py").write_text(MONITOR)
+        env |= {"PYTHONPATH": f"{REPO}{os.pathsep}{workdir / 'site'}", "BENCH_MONITOR": str(workdir / "monitor.txt")}
     return LiveServer(
         bundle=bundle,
         study=study,
         workdir=workdir,
-        env=SURVEY_SETTINGS,
+        env=env,
         database_url=database_url or f"sqlite:///{workdir / 'survey.sqlite3'}",
     )
 
@@ -234,10 +276,36 @@ def paced(
     ramp: float,
     database_url: str | None = None,
 ) -> dict:
-    with serve(bundle, study, workdir, database_url) as server:
+    with serve(bundle, study, workdir, database_url, monitor=True) as server:
         crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=1)
         wall = crowd.run()
-    return {"crowd": crowd, "wall": wall}
+    return {"crowd": crowd, "wall": wall, "seconds": seconds_table(workdir / "monitor.txt", crowd)}
+
+
+def seconds_table(monitor: Path, crowd: Crowd) -> list[dict]:
+    """The run second by second: the server's CPU (share of one core), the event loop's largest lag, the thread
+    pool's most threads at work and most tasks waiting, and the requests that began in that second with their
+    slowest and how many took over a second."""
+    rows = [list(map(float, line.split())) for line in monitor.read_text().splitlines()]
+    started: dict[int, list[float]] = defaultdict(list)
+    for exchange in crowd.log:
+        started[int(exchange.at - exchange.seconds)].append(exchange.seconds)
+    table = []
+    for (second, cpu, lag, busy, waiting), previous in zip(rows[1:], rows, strict=False):
+        times = started.get(int(second), [])
+        table.append(
+            {
+                "second": int(second),
+                "cpu": (cpu - previous[1]) * 100,
+                "lag_ms": lag,
+                "busy": int(busy),
+                "waiting": int(waiting),
+                "requests": len(times),
+                "slowest_s": max(times, default=0.0),
+                "over_1s": sum(t > 1 for t in times),
+            }
+        )
+    return [row for row in table if row["requests"]]
 
 
 def crash(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float) -> dict:
@@ -333,6 +401,31 @@ def database_table(crowds: dict[str, Crowd]) -> list[str]:
                 f"{quantile(pg, 0.99):.1f} | {quantile(pg, 0.95) / quantile(lite, 0.95):.2f} |"
             )
     return rows
+
+
+def seconds_summary(table: list[dict]) -> list[str]:
+    """The server's seconds in brief, and the slowest seconds (those whose requests took longest) in full."""
+    cpu, lag = [row["cpu"] for row in table], [row["lag_ms"] for row in table]
+    slow = sorted(table, key=lambda row: -row["slowest_s"])[:8]
+    start = table[0]["second"] if table else 0
+    return [
+        f"Second by second ({len(table)} s with requests): server CPU median {quantile(cpu, 0.5):.0f}% of a core, "
+        f"max {max(cpu, default=0):.0f}%; event-loop lag median {quantile(lag, 0.5):.0f} ms, p95 "
+        f"{quantile(lag, 0.95):.0f} ms, max {max(lag, default=0):.0f} ms ({sum(v > 100 for v in lag)} s over "
+        f"100 ms); thread pool at most {max((r['busy'] for r in table), default=0)} threads at work, at most "
+        f"{max((r['waiting'] for r in table), default=0)} tasks waiting for one "
+        f"({sum(r['waiting'] > 0 for r in table)} s with any waiting); "
+        f"{sum(r['over_1s'] for r in table)} requests over 1 s. The slowest seconds:",
+        "",
+        "| second | requests begun | over 1 s | slowest s | server CPU % | loop lag ms | threads at work | "
+        "tasks waiting |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        *(
+            f"| {r['second'] - start} | {r['requests']} | {r['over_1s']} | {r['slowest_s']:.2f} | {r['cpu']:.0f} | "
+            f"{r['lag_ms']:.0f} | {r['busy']} | {r['waiting']} |"
+            for r in sorted(slow, key=lambda row: row["second"])
+        ),
+    ]
 
 
 def latency_table(crowd: Crowd) -> list[str]:
@@ -448,6 +541,8 @@ def main() -> int:
                 f"{quantile(non_video, 0.95):.0f} ms.",
                 "",
                 *latency_table(crowd),
+                "",
+                *seconds_summary(slow["seconds"]),
             ]
             for error in crowd.errors[:10]:
                 print("error:", error)
@@ -484,6 +579,8 @@ def main() -> int:
                 f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors.",
                 "",
                 *database_table({"sqlite": sqlite_crowd, "postgresql": crowd}),
+                "",
+                *seconds_summary(slow["seconds"]),
             ]
         if "crash" in runs:
             print("crash ...", flush=True)
