@@ -30,15 +30,18 @@ from search.clips.scene import Scene, load_scene
 # orange, sky blue and reddish purple, and Paul Tol's purple (darker than Okabe-Ito's pink so its trail shows);
 # Okabe-Ito's yellow is kept for collisions. Robot N gets colour (N-1) mod 7 and shape (N-1) mod 6: 7 and 6 are
 # coprime, so the 42 numbers of a cycle each have a style of their own and any 6 consecutive numbers differ in both
-# colour and shape. The number is always drawn, so colour-blind viewers get shape and number.
+# colour and shape. The look-alikes (blue and sky blue, purple and reddish purple, vermillion and orange) sit 3
+# apart in the cycle, so any 3 consecutive numbers (a clip's pair or a ranking round, which `foil bundle` numbers
+# in a block) get clearly different colours. The number is always drawn, so colour-blind viewers get shape and
+# number.
 ROBOT_COLOURS = (
     (0, 114, 178),  # blue
     (213, 94, 0),  # vermillion
-    (170, 51, 119),  # purple
     (0, 158, 115),  # bluish green
-    (230, 159, 0),  # orange
-    (86, 180, 233),  # sky blue
     (204, 121, 167),  # reddish purple
+    (86, 180, 233),  # sky blue
+    (230, 159, 0),  # orange
+    (170, 51, 119),  # purple
 )
 ROBOT_SHAPES = ("circle", "square", "diamond", "triangle", "triangle-down", "plus")
 ROBOT_STYLES = tuple(
