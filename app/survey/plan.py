@@ -36,12 +36,14 @@ def _pick(
     scheme: str,
     scenario: str,
     pair: tuple[str, str],
+    part: str,
     rng: random.Random,
     used: dict[str, str] | None = None,
 ) -> ManifestClip:
-    """One of the matching clips (in id order), at random; where several match, preferring one whose labels
-    name no other agent than they already named for this participant (`used`: label -> agent)."""
-    options = bundle.matching(scheme, scenario, pair)
+    """One of the clips made for the part (`pairwise` or `ranking`; in id order), at random; where several match,
+    preferring one whose labels name no other agent than they already named for this participant (`used`: label
+    -> agent)."""
+    options = bundle.matching(scheme, scenario, pair, part)
     if used:
         clean = [
             c
@@ -75,9 +77,7 @@ def _number(label: str) -> tuple[bool, int]:
     return (not numbered, int(last) if numbered else 0)
 
 
-def _clip_fields(
-    part_no: int, clip: ManifestClip, questions: list[str], bundle: Bundle
-) -> dict[str, Any]:
+def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle: Bundle) -> dict[str, Any]:
     """The fields of a pairwise or watch screen showing `clip`."""
     return {
         "part": part_no,
@@ -105,7 +105,7 @@ def _true_order(clips: list[ManifestClip], agents: list[str]) -> list[str] | Non
 def _ranking_screens(
     part: RankingPart, part_no: int, scheme: str, scenario: str, bundle: Bundle, rng: random.Random, block: int
 ) -> list[Screen]:
-    clips = [_pick(bundle, scheme, scenario, pair, rng) for pair in itertools.combinations(part.agents, 2)]
+    clips = [_pick(bundle, scheme, scenario, pair, "ranking", rng) for pair in itertools.combinations(part.agents, 2)]
     rng.shuffle(clips)
     screens: list[Screen] = [
         Watch(kind="watch", **_clip_fields(part_no, clip, [], bundle), block=block, round_start=k == 0)
@@ -164,7 +164,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                         kind="pairwise",
                         **_clip_fields(
                             part_no,
-                            _pick(bundle, scheme, scenario[scheme], pair, rng, used),
+                            _pick(bundle, scheme, scenario[scheme], pair, "pairwise", rng, used),
                             list(part.questions),
                             bundle,
                         ),

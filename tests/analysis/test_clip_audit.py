@@ -46,7 +46,8 @@ def test_audit_names_what_happened():
     clip = VisibleClip.of_summary(
         summary(CRASH, SUCCESS, ends=((-3, -3), (5, 5))), ["lo", "hi"], ["Robot 1", "Robot 2"]
     )
-    assert audit(clip, "Robot 2")["why"] == ("Robot 2 reached the goal after 14.0 seconds. Robot 1 bumped into a person.")
+    why = audit(clip, "Robot 2")["why"]
+    assert why == "Robot 2 reached the goal after 14.0 seconds. Robot 1 bumped into a person."
     with pytest.raises(ValueError, match="compares two robots"):
         audit(clip, "Robot 3")
 

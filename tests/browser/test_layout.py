@@ -190,7 +190,8 @@ def test_the_answers_list_the_robots_in_the_order_of_the_clips_legend(server, ne
         assert labels == sorted(labels, key=lambda label: int(label.split()[-1]))
         options = page.evaluate("[...document.querySelectorAll('input[name=better]')].map(e => e.value)")
         ranked = page.evaluate(
-            "[...document.querySelectorAll('select[name^=ranking]')].map(s => [...s.options].slice(1).map(o => o.value))"
+            "[...document.querySelectorAll('select[name^=ranking]')]"
+            ".map(s => [...s.options].slice(1).map(o => o.value))"
         )
         assert all(order == labels for order in [options, *ranked] if order)
 
