@@ -275,6 +275,8 @@ def test_watch_only_screens_ranking_clips_and_places(server, new_context):
     shoot(page, "ranking")
     videos = page.locator(".round-clips video")
     assert videos.count() == 3
+    box_colour = page.evaluate("getComputedStyle(document.querySelector('.round-clips video')).backgroundColor")
+    assert min(int(v) for v in box_colour[box_colour.index("(") + 1 : -1].split(",")[:3]) > 200  # no dark edge
     for k in range(3):  # large enough to read the labels drawn in the clip: well over the 220 px of before
         assert videos.nth(k).bounding_box()["width"] >= 360
     ended = page.evaluate(
