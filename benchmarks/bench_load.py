@@ -470,6 +470,11 @@ def main() -> int:
         default="full",
         help="FOIL_SQLITE_SYNCHRONOUS of the survey server (default full, as deployed)",
     )
+    parser.add_argument(
+        "--bundle",
+        type=Path,
+        help="a built bundle with its study.toml (e.g. the demo's) instead of the paper study over 1-second clips",
+    )
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
     args = parser.parse_args()
     runs = set(args.runs.split(","))
@@ -487,9 +492,12 @@ def main() -> int:
         work = Path(tmp)
         (work / "clips").mkdir()
         (work / "bundle").mkdir()
-        bundle = write_bot_bundle(work / "clips", work / "bundle")
-        study = work / "study.toml"
-        study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
+        if args.bundle:
+            bundle, study, studied = args.bundle, args.bundle / "study.toml", f"the study of {args.bundle}"
+        else:
+            bundle, study = write_bot_bundle(work / "clips", work / "bundle"), work / "study.toml"
+            study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
+            studied = "the paper study, MTurk ids, balanced assignment, 1-second clips"
 
         if "ceiling" in runs:
             lines += [
@@ -533,8 +541,8 @@ def main() -> int:
             lines += [
                 "",
                 f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
-                f"before every form (the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests "
-                f"per participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
+                f"before every form ({studied}: {len(crowd.log) / args.participants:.0f} requests per "
+                f"participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
                 f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min, "
                 f"{len(non_video) / wall:.0f} non-video requests/s), "
                 f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "

@@ -201,7 +201,7 @@ def test_the_robots_of_a_clip_and_of_a_ranking_round_have_clearly_different_colo
     for name in ("demo", "paper"):
         spec, _ = load_build(REPO / "studies" / f"{name}.toml")
         jobs = plan_clips(spec)
-        rounds: dict[tuple, set[int]] = {}
+        rounds = {}
         for job in (job for job in jobs if "ranking" in job.parts):
             rounds.setdefault((job.scheme.name, job.scenario), set()).update(job.numbers)
         for numbers in [set(job.numbers) for job in jobs] + list(rounds.values()):
