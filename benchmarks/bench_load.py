@@ -73,13 +73,27 @@ CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 
 SERVER_CPUS, CLIENT_CPUS = (set(CPUS[:1]), set(CPUS[1:])) if len(CPUS) > 1 else (set(), set())
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
 # The paced runs' server imports this as sitecustomize (through PYTHONPATH): each second it writes the server's CPU
-# time, the event loop's largest lag (a 10 ms sleep that took longer) and the thread pool's busiest moment (threads
-# at work, tasks waiting for one), so that a slow request can be traced to where it waited.
+# time, the event loop's largest lag (a 10 ms sleep that took longer), the thread pool's busiest moment (threads at
+# work, tasks waiting for one) and the slowest write transaction's wait for its turn and its time holding it (from
+# the turn to the commit on disk), so that a slow request can be traced to where it waited.
 MONITOR = """
-import asyncio, os, time
+import asyncio, contextlib, os, threading, time
 import uvicorn.server
+from app.store import database
 
-_startup = uvicorn.server.Server.startup
+_startup, _writing = uvicorn.server.Server.startup, database.Database.writing
+_writes, _lock = {"turn": 0.0, "held": 0.0}, threading.Lock()
+
+
+@contextlib.contextmanager
+def _timed_writing(self):
+    asked = time.monotonic()
+    with _writing(self) as session:
+        began = time.monotonic()
+        yield session
+    with _lock:
+        _writes["turn"] = max(_writes["turn"], began - asked)
+        _writes["held"] = max(_writes["held"], time.monotonic() - began)
 
 
 async def _watch(path):
@@ -95,7 +109,13 @@ async def _watch(path):
             stats = limiter.statistics()
             busy, waiting = max(busy, stats.borrowed_tokens), max(waiting, stats.tasks_waiting)
             if int(time.monotonic()) != second:
-                out.write(f"{second} {time.process_time():.3f} {lag * 1000:.1f} {busy} {waiting}\\n")
+                with _lock:
+                    turn, held = _writes["turn"], _writes["held"]
+                    _writes.update(turn=0.0, held=0.0)
+                out.write(
+                    f"{second} {time.process_time():.3f} {lag * 1000:.1f} {busy} {waiting} {turn * 1000:.1f} "
+                    f"{held * 1000:.1f}\\n"
+                )
                 second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
 
 
@@ -105,6 +125,7 @@ async def _startup_watched(self, sockets=None):
 
 
 uvicorn.server.Server.startup = _startup_watched
+database.Database.writing = _timed_writing
 """
 RUNS = ["ceiling", "burst", "paced", "postgres", "crash", "cpu"]
 
@@ -284,14 +305,14 @@ def paced(
 
 def seconds_table(monitor: Path, crowd: Crowd) -> list[dict]:
     """The run second by second: the server's CPU (share of one core), the event loop's largest lag, the thread
-    pool's most threads at work and most tasks waiting, and the requests that began in that second with their
-    slowest and how many took over a second."""
+    pool's most threads at work and most tasks waiting, the slowest write's wait for its turn and time holding it,
+    and the requests that began in that second with their slowest and how many took over a second."""
     rows = [list(map(float, line.split())) for line in monitor.read_text().splitlines()]
     started: dict[int, list[float]] = defaultdict(list)
     for exchange in crowd.log:
         started[int(exchange.at - exchange.seconds)].append(exchange.seconds)
     table = []
-    for (second, cpu, lag, busy, waiting), previous in zip(rows[1:], rows, strict=False):
+    for (second, cpu, lag, busy, waiting, turn, held), previous in zip(rows[1:], rows, strict=False):
         times = started.get(int(second), [])
         table.append(
             {
@@ -300,6 +321,8 @@ def seconds_table(monitor: Path, crowd: Crowd) -> list[dict]:
                 "lag_ms": lag,
                 "busy": int(busy),
                 "waiting": int(waiting),
+                "turn_ms": turn,
+                "held_ms": held,
                 "requests": len(times),
                 "slowest_s": max(times, default=0.0),
                 "over_1s": sum(t > 1 for t in times),
@@ -415,14 +438,16 @@ def seconds_summary(table: list[dict]) -> list[str]:
         f"100 ms); thread pool at most {max((r['busy'] for r in table), default=0)} threads at work, at most "
         f"{max((r['waiting'] for r in table), default=0)} tasks waiting for one "
         f"({sum(r['waiting'] > 0 for r in table)} s with any waiting); "
+        f"slowest write's wait for its turn {max((r['turn_ms'] for r in table), default=0):.0f} ms, holding it "
+        f"{max((r['held_ms'] for r in table), default=0):.0f} ms; "
         f"{sum(r['over_1s'] for r in table)} requests over 1 s. The slowest seconds:",
         "",
         "| second | requests begun | over 1 s | slowest s | server CPU % | loop lag ms | threads at work | "
-        "tasks waiting |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "tasks waiting | write: turn ms | write: held ms |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         *(
             f"| {r['second'] - start} | {r['requests']} | {r['over_1s']} | {r['slowest_s']:.2f} | {r['cpu']:.0f} | "
-            f"{r['lag_ms']:.0f} | {r['busy']} | {r['waiting']} |"
+            f"{r['lag_ms']:.0f} | {r['busy']} | {r['waiting']} | {r['turn_ms']:.0f} | {r['held_ms']:.0f} |"
             for r in sorted(slow, key=lambda row: row["second"])
         ),
     ]
