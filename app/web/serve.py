@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import errno
 import logging
+import queue
 import socket
+from logging.handlers import QueueHandler, QueueListener
 from pathlib import Path
 from typing import Any
 
@@ -54,8 +56,36 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
         http=survey_protocol(limits),
         timeout_keep_alive=limits.keep_alive_s,
     )
-    uvicorn.Server(config).run(sockets=[listening])
+    listeners = _log_off_the_loop()  # after uvicorn.Config has set up its loggers
+    try:
+        uvicorn.Server(config).run(sockets=[listening])
+    finally:
+        for listener in listeners:
+            listener.stop()  # writes what is still queued
     return 0
+
+
+class _Queued(QueueHandler):
+    """Hands the record itself to the writing thread: uvicorn's access formatter needs its arguments."""
+
+    def prepare(self, record: logging.LogRecord) -> logging.LogRecord:
+        return record
+
+
+def _log_off_the_loop() -> list[QueueListener]:
+    """Every logger's lines (uvicorn's access log above all, a line per request) are written by a thread of its own:
+    the event loop only queues them. Written on the loop, a terminal or pipe that stops reading for a while (a
+    paused terminal, a stalled SSH session) held up every request once its buffer was full."""
+    listeners = []
+    for name in ("", "uvicorn", "uvicorn.error", "uvicorn.access"):
+        logger = logging.getLogger(name)
+        if logger.handlers:
+            records: queue.SimpleQueue[logging.LogRecord] = queue.SimpleQueue()
+            listeners.append(QueueListener(records, *logger.handlers, respect_handler_level=True))
+            logger.handlers = [_Queued(records)]
+    for listener in listeners:
+        listener.start()
+    return listeners
 
 
 def _bind(host: str, port: int) -> socket.socket:

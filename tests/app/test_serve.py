@@ -133,3 +133,27 @@ def test_the_server_never_imports_search_torch_or_the_highway_packages():
     )
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_a_server_whose_output_nobody_reads_keeps_answering(tmp_path, bundle_dir):
+    """The access log (a line per request, on by default) goes through a pipe that nobody reads, as a paused
+    terminal would: once the pipe's buffer is full the writing waits, and no request may wait with it."""
+    study = tmp_path / "study.toml"
+    study.write_text(study_text(platform='"none"'))
+    port = free_port()
+    server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", str(port), cwd=tmp_path)
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+            deadline = time.monotonic() + 30
+            while True:
+                try:
+                    client.get("/static/favicon.svg")
+                    break
+                except httpx.ConnectError:
+                    assert server.poll() is None and time.monotonic() < deadline, "server did not start"
+                    time.sleep(0.2)
+            for _ in range(2000):  # about 140 KB of access log, over twice a pipe's 64 KB
+                assert client.get("/static/favicon.svg").status_code == 200
+    finally:
+        server.kill()
+        server.wait(timeout=30)
