@@ -74,10 +74,12 @@ SERVER_CPUS, CLIENT_CPUS = (set(CPUS[:1]), set(CPUS[1:])) if len(CPUS) > 1 else 
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
 # The paced runs' server imports this as sitecustomize (through PYTHONPATH): each second it writes the server's CPU
 # time, the event loop's largest lag (a 10 ms sleep that took longer), the thread pool's busiest moment (threads at
-# work, tasks waiting for one) and the slowest write transaction's wait for its turn and its time holding it (from
-# the turn to the commit on disk), so that a slow request can be traced to where it waited.
+# work, tasks waiting for one), the slowest write transaction's wait for its turn and its time holding it (from
+# the turn to the commit on disk), and how long the event loop's thread was ready to run but waited for a CPU (the
+# machine's other work), so that a slow request can be traced to where it waited. A thread of its own writes the
+# lines, so the watch never waits on the disk.
 MONITOR = """
-import asyncio, contextlib, os, threading, time
+import asyncio, contextlib, os, queue, threading, time
 import uvicorn.server
 from app.store import database
 
@@ -96,27 +98,41 @@ def _timed_writing(self):
         _writes["held"] = max(_writes["held"], time.monotonic() - began)
 
 
+def _write(path, lines):
+    with open(path, "w", buffering=1) as out:
+        while True:
+            out.write(lines.get())
+
+
+def _run_queue_s(path):
+    with open(path) as stat:
+        return int(stat.read().split()[1]) / 1e9
+
+
 async def _watch(path):
     import anyio.to_thread
 
     limiter = anyio.to_thread.current_default_thread_limiter()
-    with open(path, "w", buffering=1) as out:
-        second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
-        while True:
-            before = time.monotonic()
-            await asyncio.sleep(0.01)
-            lag = max(lag, time.monotonic() - before - 0.01)
-            stats = limiter.statistics()
-            busy, waiting = max(busy, stats.borrowed_tokens), max(waiting, stats.tasks_waiting)
-            if int(time.monotonic()) != second:
-                with _lock:
-                    turn, held = _writes["turn"], _writes["held"]
-                    _writes.update(turn=0.0, held=0.0)
-                out.write(
-                    f"{second} {time.process_time():.3f} {lag * 1000:.1f} {busy} {waiting} {turn * 1000:.1f} "
-                    f"{held * 1000:.1f}\\n"
-                )
-                second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
+    lines = queue.SimpleQueue()
+    threading.Thread(target=_write, args=(path, lines), daemon=True).start()
+    schedstat = f"/proc/self/task/{threading.get_native_id()}/schedstat"
+    second, lag, busy, waiting, ready = int(time.monotonic()), 0.0, 0, 0, _run_queue_s(schedstat)
+    while True:
+        before = time.monotonic()
+        await asyncio.sleep(0.01)
+        lag = max(lag, time.monotonic() - before - 0.01)
+        stats = limiter.statistics()
+        busy, waiting = max(busy, stats.borrowed_tokens), max(waiting, stats.tasks_waiting)
+        if int(time.monotonic()) != second:
+            with _lock:
+                turn, held = _writes["turn"], _writes["held"]
+                _writes.update(turn=0.0, held=0.0)
+            was, ready = ready, _run_queue_s(schedstat)
+            lines.put(
+                f"{second} {time.process_time():.3f} {lag * 1000:.1f} {busy} {waiting} {turn * 1000:.1f} "
+                f"{held * 1000:.1f} {(ready - was) * 1000:.1f}\\n"
+            )
+            second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
 
 
 async def _startup_watched(self, sockets=None):
@@ -228,11 +244,22 @@ def run_in_threads(target, count: int) -> float:
 
 
 def serve(
-    bundle: Path, study: Path, workdir: Path, database_url: str | None = None, monitor: bool = False
+    bundle: Path,
+    study: Path,
+    workdir: Path,
+    database_url: str | None = None,
+    monitor: bool = False,
+    stalled_output: float = 0,
 ) -> LiveServer:
-    """`foil serve` in `workdir`; with `monitor`, watched second by second (MONITOR, into workdir/monitor.txt)."""
+    """`foil serve` in `workdir`; with `monitor`, watched second by second (MONITOR, into workdir/monitor.txt); with
+    `stalled_output`, its access log on and its output read as a terminal would, except that every other
+    `stalled_output` seconds nothing reads it (a paused or scrolled-back terminal, a stalled SSH session)."""
     workdir.mkdir()
     env = dict(SURVEY_SETTINGS)
+    if stalled_output:
+        env["FOIL_ACCESS_LOG"] = "1"
+        os.mkfifo(workdir / "server.log")
+        threading.Thread(target=_stalling_reader, args=(workdir / "server.log", stalled_output), daemon=True).start()
     if monitor:
         (workdir / "site").mkdir()
         (workdir / "site" / "sitecustomize.py").write_text(MONITOR)
@@ -244,6 +271,15 @@ def serve(
         env=env,
         database_url=database_url or f"sqlite:///{workdir / 'survey.sqlite3'}",
     )
+
+
+def _stalling_reader(fifo: Path, stall_s: float) -> None:
+    with open(fifo, "rb", buffering=0) as pipe:
+        while True:
+            if int(time.monotonic() / stall_s) % 2:
+                time.sleep(0.05)
+            elif not pipe.read(1 << 16):
+                return
 
 
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
@@ -296,8 +332,9 @@ def paced(
     pause: float,
     ramp: float,
     database_url: str | None = None,
+    stalled_output: float = 0,
 ) -> dict:
-    with serve(bundle, study, workdir, database_url, monitor=True) as server:
+    with serve(bundle, study, workdir, database_url, monitor=True, stalled_output=stalled_output) as server:
         crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=1)
         wall = crowd.run()
     return {"crowd": crowd, "wall": wall, "seconds": seconds_table(workdir / "monitor.txt", crowd)}
@@ -312,7 +349,7 @@ def seconds_table(monitor: Path, crowd: Crowd) -> list[dict]:
     for exchange in crowd.log:
         started[int(exchange.at - exchange.seconds)].append(exchange.seconds)
     table = []
-    for (second, cpu, lag, busy, waiting, turn, held), previous in zip(rows[1:], rows, strict=False):
+    for (second, cpu, lag, busy, waiting, turn, held, ready), previous in zip(rows[1:], rows, strict=False):
         times = started.get(int(second), [])
         table.append(
             {
@@ -323,6 +360,7 @@ def seconds_table(monitor: Path, crowd: Crowd) -> list[dict]:
                 "waiting": int(waiting),
                 "turn_ms": turn,
                 "held_ms": held,
+                "ready_ms": ready,
                 "requests": len(times),
                 "slowest_s": max(times, default=0.0),
                 "over_1s": sum(t > 1 for t in times),
@@ -439,15 +477,18 @@ def seconds_summary(table: list[dict]) -> list[str]:
         f"{max((r['waiting'] for r in table), default=0)} tasks waiting for one "
         f"({sum(r['waiting'] > 0 for r in table)} s with any waiting); "
         f"slowest write's wait for its turn {max((r['turn_ms'] for r in table), default=0):.0f} ms, holding it "
-        f"{max((r['held_ms'] for r in table), default=0):.0f} ms; "
+        f"{max((r['held_ms'] for r in table), default=0):.0f} ms; the loop's thread waited for a CPU "
+        f"{sum(r['ready_ms'] for r in table) / 1000:.1f} s in all, at most "
+        f"{max((r['ready_ms'] for r in table), default=0):.0f} ms in a second; "
         f"{sum(r['over_1s'] for r in table)} requests over 1 s. The slowest seconds:",
         "",
         "| second | requests begun | over 1 s | slowest s | server CPU % | loop lag ms | threads at work | "
-        "tasks waiting | write: turn ms | write: held ms |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "tasks waiting | write: turn ms | write: held ms | loop waited for a CPU ms |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         *(
             f"| {r['second'] - start} | {r['requests']} | {r['over_1s']} | {r['slowest_s']:.2f} | {r['cpu']:.0f} | "
-            f"{r['lag_ms']:.0f} | {r['busy']} | {r['waiting']} | {r['turn_ms']:.0f} | {r['held_ms']:.0f} |"
+            f"{r['lag_ms']:.0f} | {r['busy']} | {r['waiting']} | {r['turn_ms']:.0f} | {r['held_ms']:.0f} | "
+            f"{r['ready_ms']:.0f} |"
             for r in sorted(slow, key=lambda row: row["second"])
         ),
     ]
@@ -499,6 +540,13 @@ def main() -> int:
         "--bundle",
         type=Path,
         help="a built bundle with its study.toml (e.g. the demo's) instead of the paper study over 1-second clips",
+    )
+    parser.add_argument(
+        "--stalled-output",
+        type=float,
+        default=0,
+        metavar="S",
+        help="the paced runs' server with its access log on, its output unread for S seconds every 2S seconds",
     )
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
     args = parser.parse_args()
@@ -557,9 +605,16 @@ def main() -> int:
         if "paced" in runs:
             load = os.getloadavg()[0]
             print("paced ...", flush=True)
-            slow = paced(bundle, study, work / "paced", args.participants, args.pause, args.ramp)
+            slow = paced(
+                bundle, study, work / "paced", args.participants, args.pause, args.ramp, None, args.stalled_output
+            )
             crowd, wall = slow["crowd"], slow["wall"]
             sqlite_crowd = crowd
+            output = (
+                f"access log on, its output unread {args.stalled_output:.0f} s of every {2 * args.stalled_output:.0f}; "
+                if args.stalled_output
+                else ""
+            )
             non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
             bad_status = sum(e.status >= 400 for e in crowd.log)
             ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
@@ -567,7 +622,7 @@ def main() -> int:
                 "",
                 f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
                 f"before every form ({studied}: {len(crowd.log) / args.participants:.0f} requests per "
-                f"participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
+                f"participant; {output}load average {load:.1f} before): {crowd.completed} of {args.participants} "
                 f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min, "
                 f"{len(non_video) / wall:.0f} non-video requests/s), "
                 f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "
@@ -598,6 +653,7 @@ def main() -> int:
                     args.pause,
                     args.ramp,
                     database_url=server.url,
+                    stalled_output=args.stalled_output,
                 )
             finally:
                 server.stop()
