@@ -10,7 +10,10 @@ Six runs, each bounded in time and count (--runs picks some):
            Ceiling and burst alternate for --rounds; in both the clients run in --processes processes (one
            interpreter lock each) pinned to all cores but the first, and the server is pinned to the first;
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
-           completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors;
+           completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors; and
+           the server second by second (MONITOR: CPU, event-loop lag, thread pool, SQLite's write turn, the
+           loop's wait for a CPU) with its slowest seconds. --bundle runs it on a built bundle's own study (the
+           demo's), --stalled-output with the access log on and the server's output unread now and then;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
            the bots reopen their links and finish; then the database is audited;
   postgres the paced run again on a throwaway PostgreSQL server (tests/support/postgres.py; Debian's postgresql,
