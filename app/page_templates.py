@@ -3,12 +3,15 @@ renders every page the server writes: participant and admin pages and the report
 
 from __future__ import annotations
 
+from datetime import datetime
 from functools import cache
 from html import escape
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader
 from markupsafe import Markup
+
+from app.store.database import as_utc
 
 APP_DIR = Path(__file__).resolve().parent
 
@@ -49,9 +52,16 @@ def _number(value: float | None) -> str:
     return "–" if value is None else f"{value:.3g}"
 
 
+def _moment(value: datetime | None) -> str:
+    """A stored time in ISO 8601 with its time zone, to the minute."""
+    return "–" if value is None else as_utc(value).isoformat(timespec="minutes")
+
+
 @cache
 def page_templates() -> Environment:
     """Compiled once per process: no check for changed files on every page."""
     env = Environment(loader=FileSystemLoader(TEMPLATES_DIR), autoescape=True, auto_reload=False)
-    env.filters.update(paragraphs=_paragraphs, strong=_strong, percent=_percent, p=_p_value, num=_number)
+    env.filters.update(
+        paragraphs=_paragraphs, strong=_strong, percent=_percent, p=_p_value, num=_number, moment=_moment
+    )
     return env

@@ -26,7 +26,7 @@ class Words:
     """What a world's pages call the things its clips show; the defaults are the crowd's. Legend lines are plain
     text where ``**text**`` reads in bold (the pages escape everything else); an empty `legend_trails` or
     `others_marker` leaves that line or marker out. The outcome phrases follow a robot's label ("Robot 2 ...");
-    `success` and `collision` may say ``{seconds}``, the whole seconds the clip shows it took."""
+    `success` and `collision` may say ``{seconds}``, the seconds the clip shows it took (one decimal, as the clip)."""
 
     clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
     example_caption: str = (  # under the instructions' example clip, unless the study file says otherwise
@@ -149,6 +149,7 @@ class VisibleClip:
     outcomes: tuple[Mapping[str, Any], ...]
     progress: tuple[float, ...]
     end_s: float
+    to_goal: tuple[float | None, ...] = ()  # metres from the goal at the end, where known
     world: World = World()
 
     @classmethod
@@ -166,6 +167,7 @@ class VisibleClip:
             progress=tuple(_progress(summary, k) for k in order),
             end_s=max(float(steps[-1]["t"]), 1e-6),
             world=world or World(),
+            to_goal=tuple(_to_goal(summary, k) for k in order),
         )
 
     def scores(self, observer: Observer) -> dict[str, float]:
@@ -183,8 +185,10 @@ class VisibleClip:
         phrase = {"success": words.success, "collision": words.collision, "timeout": words.timeout}.get(
             str(event), words.running
         )
-        seconds = f"{float(outcome.get('time') or self.end_s):.0f}"
-        text = f"{label} {phrase.format(seconds=seconds)}"
+        text = f"{label} {phrase.format(seconds=one_decimal(float(outcome.get('time') or self.end_s)))}"
+        to_goal = self.to_goal[self.labels.index(label)] if self.to_goal else None
+        if event not in ("success", "collision", "timeout") and to_goal is not None:
+            text += f", {one_decimal(to_goal)} m from the goal"
         closest = outcome.get("min_human_distance")
         if closest is not None and event != "collision" and float(closest) < 0.5:
             text += f" and {words.close_call}"
@@ -204,15 +208,30 @@ def audit(clip: VisibleClip, better: str, observer: Observer | None = None) -> d
     return {"shows": shows, "why": f"{clip.describe(better)} {clip.describe(other)}"}
 
 
+def one_decimal(value: float) -> str:
+    """A time or distance as the clips write it, so that a page never says another number than its clip."""
+    return f"{value:.1f}"
+
+
+def _ends(summary: Mapping[str, Any], k: int) -> tuple[Sequence[float], Sequence[float], Sequence[float]] | None:
+    """Robot k's start, goal and place at the end of the clip (None when the summary lacks them)."""
+    try:
+        robot = summary["scenario"]["robot"]
+        return robot["start"], robot["goal"], summary["steps"][-1]["robots"][k]
+    except (KeyError, IndexError, TypeError):
+        return None
+
+
 def _progress(summary: Mapping[str, Any], k: int) -> float:
     """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
-    try:
-        start = summary["scenario"]["robot"]["start"]
-        goal = summary["scenario"]["robot"]["goal"]
-        end = summary["steps"][-1]["robots"][k]
-    except (KeyError, IndexError, TypeError):
-        return 0.0
-    return progress_towards(start, goal, end)
+    ends = _ends(summary, k)
+    return progress_towards(*ends) if ends else 0.0
+
+
+def _to_goal(summary: Mapping[str, Any], k: int) -> float | None:
+    """How far robot k's centre is from its goal at the end of the clip (None when unknown)."""
+    ends = _ends(summary, k)
+    return math.dist(ends[1], ends[2]) if ends else None
 
 
 def progress_towards(start: Sequence[float], goal: Sequence[float], end: Sequence[float]) -> float:

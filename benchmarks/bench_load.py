@@ -10,7 +10,10 @@ Six runs, each bounded in time and count (--runs picks some):
            Ceiling and burst alternate for --rounds; in both the clients run in --processes processes (one
            interpreter lock each) pinned to all cores but the first, and the server is pinned to the first;
   paced    --participants bots arriving over --ramp seconds, each pausing --pause seconds before every form:
-           completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors;
+           completed sessions per minute, requests per second, p50/p95/p99 latency per page type, errors; and
+           the server second by second (MONITOR: CPU, event-loop lag, thread pool, SQLite's write turn, the
+           loop's wait for a CPU) with its slowest seconds. --bundle runs it on a built bundle's own study (the
+           demo's), --stalled-output with the access log on and the server's output unread now and then;
   crash    --crash-participants paced bots; the server is killed with SIGKILL halfway through and restarted;
            the bots reopen their links and finish; then the database is audited;
   postgres the paced run again on a throwaway PostgreSQL server (tests/support/postgres.py; Debian's postgresql,
@@ -72,6 +75,77 @@ SURVEY_SETTINGS = {"FOIL_ACCESS_LOG": "0", **CROWD_FROM_ONE_ADDRESS}
 CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
 SERVER_CPUS, CLIENT_CPUS = (set(CPUS[:1]), set(CPUS[1:])) if len(CPUS) > 1 else (set(), set())
 ORDER = ["landing", "consent", "study page", "answer", "clip"]
+# The paced runs' server imports this as sitecustomize (through PYTHONPATH): each second it writes the server's CPU
+# time, the event loop's largest lag (a 10 ms sleep that took longer), the thread pool's busiest moment (threads at
+# work, tasks waiting for one), the slowest write transaction's wait for its turn and its time holding it (from
+# the turn to the commit on disk), and how long the event loop's thread was ready to run but waited for a CPU (the
+# machine's other work), so that a slow request can be traced to where it waited. A thread of its own writes the
+# lines, so the watch never waits on the disk.
+MONITOR = """
+import asyncio, contextlib, os, queue, threading, time
+import uvicorn.server
+from app.store import database
+
+_startup, _writing = uvicorn.server.Server.startup, database.Database.writing
+_writes, _lock = {"turn": 0.0, "held": 0.0}, threading.Lock()
+
+
+@contextlib.contextmanager
+def _timed_writing(self):
+    asked = time.monotonic()
+    with _writing(self) as session:
+        began = time.monotonic()
+        yield session
+    with _lock:
+        _writes["turn"] = max(_writes["turn"], began - asked)
+        _writes["held"] = max(_writes["held"], time.monotonic() - began)
+
+
+def _write(path, lines):
+    with open(path, "w", buffering=1) as out:
+        while True:
+            out.write(lines.get())
+
+
+def _run_queue_s(path):
+    with open(path) as stat:
+        return int(stat.read().split()[1]) / 1e9
+
+
+async def _watch(path):
+    import anyio.to_thread
+
+    limiter = anyio.to_thread.current_default_thread_limiter()
+    lines = queue.SimpleQueue()
+    threading.Thread(target=_write, args=(path, lines), daemon=True).start()
+    schedstat = f"/proc/self/task/{threading.get_native_id()}/schedstat"
+    second, lag, busy, waiting, ready = int(time.monotonic()), 0.0, 0, 0, _run_queue_s(schedstat)
+    while True:
+        before = time.monotonic()
+        await asyncio.sleep(0.01)
+        lag = max(lag, time.monotonic() - before - 0.01)
+        stats = limiter.statistics()
+        busy, waiting = max(busy, stats.borrowed_tokens), max(waiting, stats.tasks_waiting)
+        if int(time.monotonic()) != second:
+            with _lock:
+                turn, held = _writes["turn"], _writes["held"]
+                _writes.update(turn=0.0, held=0.0)
+            was, ready = ready, _run_queue_s(schedstat)
+            lines.put(
+                f"{second} {time.process_time():.3f} {lag * 1000:.1f} {busy} {waiting} {turn * 1000:.1f} "
+                f"{held * 1000:.1f} {(ready - was) * 1000:.1f}\\n"
+            )
+            second, lag, busy, waiting = int(time.monotonic()), 0.0, 0, 0
+
+
+async def _startup_watched(self, sockets=None):
+    asyncio.get_running_loop().create_task(_watch(os.environ["BENCH_MONITOR"]))
+    return await _startup(self, sockets)
+
+
+uvicorn.server.Server.startup = _startup_watched
+database.Database.writing = _timed_writing
+"""
 RUNS = ["ceiling", "burst", "paced", "postgres", "crash", "cpu"]
 
 
@@ -172,15 +246,43 @@ def run_in_threads(target, count: int) -> float:
     return time.monotonic() - started
 
 
-def serve(bundle: Path, study: Path, workdir: Path, database_url: str | None = None) -> LiveServer:
+def serve(
+    bundle: Path,
+    study: Path,
+    workdir: Path,
+    database_url: str | None = None,
+    monitor: bool = False,
+    stalled_output: float = 0,
+) -> LiveServer:
+    """`foil serve` in `workdir`; with `monitor`, watched second by second (MONITOR, into workdir/monitor.txt); with
+    `stalled_output`, its access log on and its output read as a terminal would, except that every other
+    `stalled_output` seconds nothing reads it (a paused or scrolled-back terminal, a stalled SSH session)."""
     workdir.mkdir()
+    env = dict(SURVEY_SETTINGS)
+    if stalled_output:
+        env["FOIL_ACCESS_LOG"] = "1"
+        os.mkfifo(workdir / "server.log")
+        threading.Thread(target=_stalling_reader, args=(workdir / "server.log", stalled_output), daemon=True).start()
+    if monitor:
+        (workdir / "site").mkdir()
+        (workdir / "site" / "sitecustomize.py").write_text(MONITOR)
+        env |= {"PYTHONPATH": f"{REPO}{os.pathsep}{workdir / 'site'}", "BENCH_MONITOR": str(workdir / "monitor.txt")}
     return LiveServer(
         bundle=bundle,
         study=study,
         workdir=workdir,
-        env=SURVEY_SETTINGS,
+        env=env,
         database_url=database_url or f"sqlite:///{workdir / 'survey.sqlite3'}",
     )
+
+
+def _stalling_reader(fifo: Path, stall_s: float) -> None:
+    with open(fifo, "rb", buffering=0) as pipe:
+        while True:
+            if int(time.monotonic() / stall_s) % 2:
+                time.sleep(0.05)
+            elif not pipe.read(1 << 16):
+                return
 
 
 def burst(bundle: Path, study: Path, workdir: Path, concurrency: int, seconds: float, processes: int) -> dict:
@@ -233,11 +335,41 @@ def paced(
     pause: float,
     ramp: float,
     database_url: str | None = None,
+    stalled_output: float = 0,
 ) -> dict:
-    with serve(bundle, study, workdir, database_url) as server:
+    with serve(bundle, study, workdir, database_url, monitor=True, stalled_output=stalled_output) as server:
         crowd = Crowd(server.url, str(bundle), participants, pause_s=pause, ramp_s=ramp, seed=1)
         wall = crowd.run()
-    return {"crowd": crowd, "wall": wall}
+    return {"crowd": crowd, "wall": wall, "seconds": seconds_table(workdir / "monitor.txt", crowd)}
+
+
+def seconds_table(monitor: Path, crowd: Crowd) -> list[dict]:
+    """The run second by second: the server's CPU (share of one core), the event loop's largest lag, the thread
+    pool's most threads at work and most tasks waiting, the slowest write's wait for its turn and time holding it,
+    and the requests that began in that second with their slowest and how many took over a second."""
+    rows = [list(map(float, line.split())) for line in monitor.read_text().splitlines()]
+    started: dict[int, list[float]] = defaultdict(list)
+    for exchange in crowd.log:
+        started[int(exchange.at - exchange.seconds)].append(exchange.seconds)
+    table = []
+    for (second, cpu, lag, busy, waiting, turn, held, ready), previous in zip(rows[1:], rows, strict=False):
+        times = started.get(int(second), [])
+        table.append(
+            {
+                "second": int(second),
+                "cpu": (cpu - previous[1]) * 100,
+                "lag_ms": lag,
+                "busy": int(busy),
+                "waiting": int(waiting),
+                "turn_ms": turn,
+                "held_ms": held,
+                "ready_ms": ready,
+                "requests": len(times),
+                "slowest_s": max(times, default=0.0),
+                "over_1s": sum(t > 1 for t in times),
+            }
+        )
+    return [row for row in table if row["requests"]]
 
 
 def crash(bundle: Path, study: Path, workdir: Path, participants: int, pause: float, ramp: float) -> dict:
@@ -335,6 +467,36 @@ def database_table(crowds: dict[str, Crowd]) -> list[str]:
     return rows
 
 
+def seconds_summary(table: list[dict]) -> list[str]:
+    """The server's seconds in brief, and the slowest seconds (those whose requests took longest) in full."""
+    cpu, lag = [row["cpu"] for row in table], [row["lag_ms"] for row in table]
+    slow = sorted(table, key=lambda row: -row["slowest_s"])[:8]
+    start = table[0]["second"] if table else 0
+    return [
+        f"Second by second ({len(table)} s with requests): server CPU median {quantile(cpu, 0.5):.0f}% of a core, "
+        f"max {max(cpu, default=0):.0f}%; event-loop lag median {quantile(lag, 0.5):.0f} ms, p95 "
+        f"{quantile(lag, 0.95):.0f} ms, max {max(lag, default=0):.0f} ms ({sum(v > 100 for v in lag)} s over "
+        f"100 ms); thread pool at most {max((r['busy'] for r in table), default=0)} threads at work, at most "
+        f"{max((r['waiting'] for r in table), default=0)} tasks waiting for one "
+        f"({sum(r['waiting'] > 0 for r in table)} s with any waiting); "
+        f"slowest write's wait for its turn {max((r['turn_ms'] for r in table), default=0):.0f} ms, holding it "
+        f"{max((r['held_ms'] for r in table), default=0):.0f} ms; the loop's thread waited for a CPU "
+        f"{sum(r['ready_ms'] for r in table) / 1000:.1f} s in all, at most "
+        f"{max((r['ready_ms'] for r in table), default=0):.0f} ms in a second; "
+        f"{sum(r['over_1s'] for r in table)} requests over 1 s. The slowest seconds:",
+        "",
+        "| second | requests begun | over 1 s | slowest s | server CPU % | loop lag ms | threads at work | "
+        "tasks waiting | write: turn ms | write: held ms | loop waited for a CPU ms |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        *(
+            f"| {r['second'] - start} | {r['requests']} | {r['over_1s']} | {r['slowest_s']:.2f} | {r['cpu']:.0f} | "
+            f"{r['lag_ms']:.0f} | {r['busy']} | {r['waiting']} | {r['turn_ms']:.0f} | {r['held_ms']:.0f} | "
+            f"{r['ready_ms']:.0f} |"
+            for r in sorted(slow, key=lambda row: row["second"])
+        ),
+    ]
+
+
 def latency_table(crowd: Crowd) -> list[str]:
     by_kind: dict[str, list[float]] = defaultdict(list)
     for exchange in crowd.log:
@@ -377,6 +539,18 @@ def main() -> int:
         default="full",
         help="FOIL_SQLITE_SYNCHRONOUS of the survey server (default full, as deployed)",
     )
+    parser.add_argument(
+        "--bundle",
+        type=Path,
+        help="a built bundle with its study.toml (e.g. the demo's) instead of the paper study over 1-second clips",
+    )
+    parser.add_argument(
+        "--stalled-output",
+        type=float,
+        default=0,
+        metavar="S",
+        help="the paced runs' server with its access log on, its output unread for S seconds every 2S seconds",
+    )
     parser.add_argument("--write", action="store_true", help="append the results to BENCHMARKS.md")
     args = parser.parse_args()
     runs = set(args.runs.split(","))
@@ -394,9 +568,12 @@ def main() -> int:
         work = Path(tmp)
         (work / "clips").mkdir()
         (work / "bundle").mkdir()
-        bundle = write_bot_bundle(work / "clips", work / "bundle")
-        study = work / "study.toml"
-        study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
+        if args.bundle:
+            bundle, study, studied = args.bundle, args.bundle / "study.toml", f"the study of {args.bundle}"
+        else:
+            bundle, study = write_bot_bundle(work / "clips", work / "bundle"), work / "study.toml"
+            study.write_text(study_text(assignment='"balanced"'))  # MTurk ids, balanced assignment
+            studied = "the paper study, MTurk ids, balanced assignment, 1-second clips"
 
         if "ceiling" in runs:
             lines += [
@@ -431,23 +608,32 @@ def main() -> int:
         if "paced" in runs:
             load = os.getloadavg()[0]
             print("paced ...", flush=True)
-            slow = paced(bundle, study, work / "paced", args.participants, args.pause, args.ramp)
+            slow = paced(
+                bundle, study, work / "paced", args.participants, args.pause, args.ramp, None, args.stalled_output
+            )
             crowd, wall = slow["crowd"], slow["wall"]
             sqlite_crowd = crowd
+            output = (
+                f"access log on, its output unread {args.stalled_output:.0f} s of every {2 * args.stalled_output:.0f}; "
+                if args.stalled_output
+                else ""
+            )
             non_video = [e.seconds * 1000 for e in crowd.log if e.kind != "clip"]
             bad_status = sum(e.status >= 400 for e in crowd.log)
             ok &= crowd.completed == args.participants and not crowd.errors and not bad_status
             lines += [
                 "",
                 f"Paced: {args.participants} bots arriving over {args.ramp:.0f} s, {args.pause:.0f} s "
-                f"before every form (the paper study, MTurk ids, balanced assignment: 15 screens, 46 requests "
-                f"per participant; load average {load:.1f} before): {crowd.completed} of {args.participants} "
+                f"before every form ({studied}: {len(crowd.log) / args.participants:.0f} requests per "
+                f"participant; {output}load average {load:.1f} before): {crowd.completed} of {args.participants} "
                 f"completed in {wall:.0f} s ({crowd.completed / wall * 60:.0f} completed sessions/min, "
                 f"{len(non_video) / wall:.0f} non-video requests/s), "
                 f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors; p95 of non-video requests "
                 f"{quantile(non_video, 0.95):.0f} ms.",
                 "",
                 *latency_table(crowd),
+                "",
+                *seconds_summary(slow["seconds"]),
             ]
             for error in crowd.errors[:10]:
                 print("error:", error)
@@ -470,6 +656,7 @@ def main() -> int:
                     args.pause,
                     args.ramp,
                     database_url=server.url,
+                    stalled_output=args.stalled_output,
                 )
             finally:
                 server.stop()
@@ -484,6 +671,8 @@ def main() -> int:
                 f"{len(crowd.errors)} bot errors, {bad_status} HTTP errors.",
                 "",
                 *database_table({"sqlite": sqlite_crowd, "postgresql": crowd}),
+                "",
+                *seconds_summary(slow["seconds"]),
             ]
         if "crash" in runs:
             print("crash ...", flush=True)

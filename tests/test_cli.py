@@ -16,6 +16,7 @@ import pytest
 
 from app.cli import COMMANDS as SERVER_COMMANDS
 from search.cli import OFFLINE_MODULES, build_parser, main
+from tests.support.live_server import free_port
 from tests.support.survey import study_text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -92,7 +93,10 @@ def test_the_server_commands_run_without_the_offline_side(tmp_path, bundle_dir):
     """`foil serve` goes on to check its study (and refuses this one), not to ask for the offline side."""
     study = tmp_path / "study.toml"
     study.write_text(study_text().replace("[build]", "[unknown_table]"))
-    done = foil_without(OFFLINE_MODULES, "serve", "--bundle", str(bundle_dir), "--study", str(study), cwd=tmp_path)
+    port = str(free_port())
+    done = foil_without(
+        OFFLINE_MODULES, "serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", port, cwd=tmp_path
+    )
     assert done.returncode == 2
     assert "foil serve: error:" in done.stderr and "unknown_table" in done.stderr and "foil[search]" not in done.stderr
 

@@ -362,6 +362,28 @@ def exclusion_rows(data: ReportData) -> list[dict[str, Any]]:
     return rows
 
 
+def per_clip_rows(data: ReportData) -> list[dict[str, Any]]:
+    """Part one's accuracy per clip with the clip's audit, as report.html's table shows it."""
+    rows = []
+    for clip, entry in data.per_clip.items():
+        tally, audit = entry["tally"], data.audits.get(clip, {})
+        rows.append(
+            {
+                "clip": clip,
+                "scheme": entry["scheme"],
+                "scenario": entry["scenario"],
+                "agents": entry["agents"],
+                "better": entry["better"],
+                "answers": tally.n,
+                "correct": tally.correct,
+                "accuracy": _number(tally.accuracy),
+                "audit_shows": audit.get("shows", ""),
+                "audit_why": audit.get("why", ""),
+            }
+        )
+    return rows
+
+
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     with path.open("w", encoding="utf-8", newline="") as handle:
         if rows:
@@ -535,6 +557,7 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
             "ratings.csv": rating_rows(data),
             "rating_tests.csv": rating_test_rows(data),
             "exclusions.csv": exclusion_rows(data),
+            "per_clip.csv": per_clip_rows(data),
         }
         if out is not None:
             for name, rows in tables.items():
@@ -615,7 +638,7 @@ def run_report(
     if data.scale_questions() and not figures_installed():
         print(f"warning: the report has no figures: they need matplotlib: {FIGURES_EXTRA}", file=sys.stderr)
     e = data.exclusions
-    print(f"{e.before} participants, {e.after} analysed after exclusions")
+    print(f"{e.before} participant{'s' * (e.before != 1)}, {e.after} analysed after exclusions")
     for row in table1_rows(data):
         if row["scope"] == ALL:
             print(

@@ -17,7 +17,7 @@ from sqlalchemy import Connection, Dialect, bindparam, func, select
 from sqlalchemy.orm import Session
 
 from app.store.models import Participant
-from app.survey.study import Study
+from app.survey.study import PairwisePart, Study
 
 
 @dataclass(frozen=True)
@@ -27,8 +27,15 @@ class Condition:
     rotation: int  # how far the scenarios are rotated across the parts
 
     def describe(self, study: Study) -> str:
-        scenarios = ", ".join(f"part {p + 1}: {study.part_scenario(p, self.rotation)}" for p in range(len(study.parts)))
-        return f"{' then '.join(self.schemes)}; {scenarios}"
+        """Per part, the schemes in the order it shows them (a pairwise part that shuffles its clips mixes the
+        schemes; a ranking part has a round per scheme in turn) and the scenarios it shows them on."""
+        parts = []
+        for p, part in enumerate(study.parts):
+            mixed = isinstance(part, PairwisePart) and part.order == "shuffled" and len(self.schemes) > 1
+            order = f"{', '.join(self.schemes)} shuffled together" if mixed else " then ".join(self.schemes)
+            scenarios = dict.fromkeys(study.part_scenario(p, self.rotation, scheme) for scheme in self.schemes)
+            parts.append(f"part {p + 1}: {order} on {', '.join(scenarios)}")
+        return "; ".join(parts)
 
 
 def conditions(study: Study) -> list[Condition]:

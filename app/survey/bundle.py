@@ -32,9 +32,12 @@ class Bundle:
     paths: dict[str, Path]  # sha256 -> file, what /clips/{sha256}.mp4 serves
     world: World = World()  # the world the clips show: its rule and the words its pages use
 
-    def matching(self, scheme: str, scenario: str, agents: tuple[str, str]) -> list[ManifestClip]:
-        """The two-agent clips of a scheme, scenario and pair (in either order), in id order."""
-        return list(self._pairs.get((scheme, scenario, frozenset(agents)), ()))
+    def matching(self, scheme: str, scenario: str, agents: tuple[str, str], part: str = "") -> list[ManifestClip]:
+        """The two-agent clips of a scheme, scenario and pair (in either order), in id order; with `part`, those
+        made for that part where there are any (a clip whose entry names no parts serves every part)."""
+        clips = list(self._pairs.get((scheme, scenario, frozenset(agents)), ()))
+        made_for = [clip for clip in clips if not clip.parts or part in clip.parts]
+        return made_for if part and made_for else clips
 
     @cached_property
     def _pairs(self) -> dict[tuple[str, str, frozenset[str]], list[ManifestClip]]:

@@ -36,12 +36,14 @@ def _pick(
     scheme: str,
     scenario: str,
     pair: tuple[str, str],
+    part: str,
     rng: random.Random,
     used: dict[str, str] | None = None,
 ) -> ManifestClip:
-    """One of the matching clips (in id order), at random; where several match, preferring one whose labels
-    name no other agent than they already named for this participant (`used`: label -> agent)."""
-    options = bundle.matching(scheme, scenario, pair)
+    """One of the clips made for the part (`pairwise` or `ranking`; in id order), at random; where several match,
+    preferring one whose labels name no other agent than they already named for this participant (`used`: label
+    -> agent)."""
+    options = bundle.matching(scheme, scenario, pair, part)
     if used:
         clean = [
             c
@@ -61,16 +63,21 @@ def _shape(bundle: Bundle, clip: ManifestClip) -> Shape:
     return Shape(clip_ms=shape.ms, width=shape.width, height=shape.height)
 
 
-def _robots(pairs: list[tuple[str, str]], rng: random.Random) -> list[Robot]:
-    """Answer options as (label, agent), in a random order so that no robot is always offered first."""
+def _robots(pairs: list[tuple[str, str]]) -> list[Robot]:
+    """Answer options as (label, agent) in the order the clips' legends list them, by robot number (the numbers
+    are drawn per clip or round when the bundle is built, so no agent is always offered first)."""
     robots = [Robot(label=label, agent=agent) for agent, label in dict(pairs).items()]
-    rng.shuffle(robots)
-    return robots
+    return sorted(robots, key=lambda robot: _number(robot.label))
 
 
-def _clip_fields(
-    part_no: int, clip: ManifestClip, questions: list[str], rng: random.Random, bundle: Bundle
-) -> dict[str, Any]:
+def _number(label: str) -> tuple[bool, int]:
+    """Sorts a label such as "Robot 7" by its number; a label without one keeps its place after the numbered."""
+    last = label.rsplit(" ", 1)[-1]
+    numbered = last.isascii() and last.isdigit()
+    return (not numbered, int(last) if numbered else 0)
+
+
+def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle: Bundle) -> dict[str, Any]:
     """The fields of a pairwise or watch screen showing `clip`."""
     return {
         "part": part_no,
@@ -78,7 +85,7 @@ def _clip_fields(
         "media": clip.sha256.lower(),
         "scheme": clip.scheme,
         "scenario": clip.scenario,
-        "robots": _robots(list(zip(clip.agents, clip.labels, strict=True)), rng),
+        "robots": _robots(list(zip(clip.agents, clip.labels, strict=True))),
         "better": clip.better,
         "questions": questions,
         **_shape(bundle, clip).model_dump(exclude_unset=True),
@@ -98,10 +105,10 @@ def _true_order(clips: list[ManifestClip], agents: list[str]) -> list[str] | Non
 def _ranking_screens(
     part: RankingPart, part_no: int, scheme: str, scenario: str, bundle: Bundle, rng: random.Random, block: int
 ) -> list[Screen]:
-    clips = [_pick(bundle, scheme, scenario, pair, rng) for pair in itertools.combinations(part.agents, 2)]
+    clips = [_pick(bundle, scheme, scenario, pair, "ranking", rng) for pair in itertools.combinations(part.agents, 2)]
     rng.shuffle(clips)
     screens: list[Screen] = [
-        Watch(kind="watch", **_clip_fields(part_no, clip, [], rng, bundle), block=block, round_start=k == 0)
+        Watch(kind="watch", **_clip_fields(part_no, clip, [], bundle), block=block, round_start=k == 0)
         for k, clip in enumerate(clips)
     ]
     labels = [(agent, label) for clip in clips for agent, label in zip(clip.agents, clip.labels, strict=True)]
@@ -115,7 +122,7 @@ def _ranking_screens(
             clips=[clip.id for clip in clips],
             media_list=[clip.sha256.lower() for clip in clips],
             shapes=[_shape(bundle, clip) for clip in clips],
-            robots=_robots(labels, rng),
+            robots=_robots(labels),
             true_order=_true_order(clips, part.agents),
             questions=list(part.questions),
         )
@@ -157,9 +164,8 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                         kind="pairwise",
                         **_clip_fields(
                             part_no,
-                            _pick(bundle, scheme, scenario[scheme], pair, rng, used),
+                            _pick(bundle, scheme, scenario[scheme], pair, "pairwise", rng, used),
                             list(part.questions),
-                            rng,
                             bundle,
                         ),
                     )

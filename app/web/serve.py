@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import errno
 import logging
+import queue
 import socket
+from logging.handlers import QueueHandler, QueueListener
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +14,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 
 from app.store.database import migrate
+from app.survey.study import load_study
 from app.web.settings import ServerSettings, TransportLimits
 from app.web.transport import survey_protocol
 
@@ -25,6 +28,7 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
     given: dict[str, Any] = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
     settings = ServerSettings(**{key: value for key, value in given.items() if value is not None})
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
+    load_study(settings.study_path())  # a bad study file is named first, whatever listens on the port
     listening = _bind(host, port)  # before anything is changed: a port in use touches no database
     try:
         migrate(settings.database_url)
@@ -52,8 +56,36 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
         http=survey_protocol(limits),
         timeout_keep_alive=limits.keep_alive_s,
     )
-    uvicorn.Server(config).run(sockets=[listening])
+    listeners = _log_off_the_loop()  # after uvicorn.Config has set up its loggers
+    try:
+        uvicorn.Server(config).run(sockets=[listening])
+    finally:
+        for listener in listeners:
+            listener.stop()  # writes what is still queued
     return 0
+
+
+class _Queued(QueueHandler):
+    """Hands the record itself to the writing thread: uvicorn's access formatter needs its arguments."""
+
+    def prepare(self, record: logging.LogRecord) -> logging.LogRecord:
+        return record
+
+
+def _log_off_the_loop() -> list[QueueListener]:
+    """Every logger's lines (uvicorn's access log above all, a line per request) are written by a thread of its own:
+    the event loop only queues them. Written on the loop, a terminal or pipe that stops reading for a while (a
+    paused terminal, a stalled SSH session) held up every request once its buffer was full."""
+    listeners = []
+    for name in ("", "uvicorn", "uvicorn.error", "uvicorn.access"):
+        logger = logging.getLogger(name)
+        if logger.handlers:
+            records: queue.SimpleQueue[logging.LogRecord] = queue.SimpleQueue()
+            listeners.append(QueueListener(records, *logger.handlers, respect_handler_level=True))
+            logger.handlers = [_Queued(records)]
+    for listener in listeners:
+        listener.start()
+    return listeners
 
 
 def _bind(host: str, port: int) -> socket.socket:

@@ -70,17 +70,28 @@ def plan_clips(spec: BuildSpec) -> list[ClipJob]:
                     numbers = tuple(shared[a] for a in pair)
                 else:
                     numbers, first = tuple(random.Random(name).sample([first, first + 1], 2)), first + 2
-                jobs.append(
-                    ClipJob(
-                        id="clip-" + hashlib.sha256(name.encode()).hexdigest()[:10],
-                        scheme=spec.schemes[scheme],
-                        scenario=scenario,
-                        pair=pair,
-                        numbers=numbers,
-                        parts=clip_set.parts,
+                for parts, suffix, drawn in _draws(spec.schemes[scheme], clip_set.parts):
+                    jobs.append(
+                        ClipJob(
+                            id="clip-" + hashlib.sha256(f"{name}{suffix}".encode()).hexdigest()[:10],
+                            scheme=drawn,
+                            scenario=scenario,
+                            pair=pair,
+                            numbers=numbers,
+                            parts=parts,
+                        )
                     )
-                )
     return jobs
+
+
+def _draws(scheme: Scheme, parts: tuple[str, ...]) -> list[tuple[tuple[str, ...], str, Scheme]]:
+    """The clips of a set's pair under a scheme, as (parts fed, suffix of the clip's name, scheme): one for all the
+    set's parts. The representative solver draws its starting states at random, so a set feeding both parts gets
+    a draw of its own (seed + 1) for the ranking, whose round would otherwise replay part one's clips."""
+    if scheme.solver != "representative" or not {"pairwise", "ranking"} <= set(parts):
+        return [(parts, "", scheme)]
+    ranking = replace(scheme, seed=scheme.seed + 1)
+    return [(tuple(part for part in parts if part != "ranking"), "", scheme), (("ranking",), "/ranking", ranking)]
 
 
 def _key(inputs: dict) -> str:

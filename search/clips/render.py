@@ -23,21 +23,25 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from app.visible import one_decimal
 from search.clips.scene import Scene, load_scene
 
 # Colours that stay apart under the common colour-vision deficiencies: Okabe-Ito's blue, vermillion, bluish green,
 # orange, sky blue and reddish purple, and Paul Tol's purple (darker than Okabe-Ito's pink so its trail shows);
 # Okabe-Ito's yellow is kept for collisions. Robot N gets colour (N-1) mod 7 and shape (N-1) mod 6: 7 and 6 are
 # coprime, so the 42 numbers of a cycle each have a style of their own and any 6 consecutive numbers differ in both
-# colour and shape. The number is always drawn, so colour-blind viewers get shape and number.
+# colour and shape. The look-alikes (blue and sky blue, purple and reddish purple, vermillion and orange) sit 3
+# apart in the cycle, so any 3 consecutive numbers (a clip's pair or a ranking round, which `foil bundle` numbers
+# in a block) get clearly different colours. The number is always drawn, so colour-blind viewers get shape and
+# number.
 ROBOT_COLOURS = (
     (0, 114, 178),  # blue
     (213, 94, 0),  # vermillion
-    (170, 51, 119),  # purple
     (0, 158, 115),  # bluish green
-    (230, 159, 0),  # orange
-    (86, 180, 233),  # sky blue
     (204, 121, 167),  # reddish purple
+    (86, 180, 233),  # sky blue
+    (230, 159, 0),  # orange
+    (170, 51, 119),  # purple
 )
 ROBOT_SHAPES = ("circle", "square", "diamond", "triangle", "triangle-down", "plus")
 ROBOT_STYLES = tuple(
@@ -343,10 +347,13 @@ def _mix(colour, amount: float, base=ARENA) -> tuple[int, int, int]:
 STATUS_RUNNING = "on its way"
 
 
-def status_text(event: str, when: float) -> str:
-    """The legend line for an outcome, short enough for one side-by-side panel on a phone."""
+def status_text(event: str, when: float, to_goal: float = math.nan) -> str:
+    """The legend line for an outcome, short enough for one side-by-side panel on a phone; a robot still on its
+    way at the end says how far from its goal it stopped (one on the goal's rings has not reached it yet)."""
     words = {"success": "reached goal", "collision": "CRASHED", "timeout": "out of time", "running": "still on its way"}
-    return f"{words[event]} · {when:.1f} s" if event != "running" else words[event]
+    if event != "running":
+        return f"{words[event]} · {one_decimal(when)} s"
+    return words[event] if math.isnan(to_goal) else f"{words[event]} · {one_decimal(to_goal)} m to goal"
 
 
 @dataclass(frozen=True)
@@ -598,7 +605,8 @@ class ClipRenderer:
             event, when = self._event(k, t) or ("", t)
             if not event and t >= self.scene.end_time:
                 event = "running"
-            status = status_text(event, when) if event else STATUS_RUNNING
+            to_goal = math.dist(self.scene.robots[-1, k], self.scene.goals[k])
+            status = status_text(event, when, to_goal) if event else STATUS_RUNNING
             if event == "collision":
                 self._tag(image, status_xy, status, lay.text, anchor)
                 continue

@@ -48,7 +48,8 @@ def test_audit_names_what_happened():
     clip = VisibleClip.of_summary(
         summary(CRASH, SUCCESS, ends=((-3, -3), (5, 5))), ["lo", "hi"], ["Robot 1", "Robot 2"]
     )
-    assert audit(clip, "Robot 2")["why"] == ("Robot 2 reached the goal after 14 seconds. Robot 1 bumped into a person.")
+    why = audit(clip, "Robot 2")["why"]
+    assert why == "Robot 2 reached the goal after 14.0 seconds. Robot 1 bumped into a person."
     with pytest.raises(ValueError, match="compares two robots"):
         audit(clip, "Robot 3")
 
@@ -60,8 +61,8 @@ def test_the_audit_says_what_the_clip_says_of_a_robot_still_moving_at_its_end():
 
     clip = VisibleClip.of_summary(summary(RUNNING, LATE, ends=((0, 0), (5, 5))), ["lo", "hi"], ["Robot 1", "Robot 2"])
     why = audit(clip, "Robot 2")["why"]
-    assert "Robot 1 was still on its way when the clip ended" in why and "in time" not in why
-    assert status_text("running", 25.0) == "still on its way"
+    assert "Robot 1 was still on its way when the clip ended, 7.1 m from the goal." in why and "in time" not in why
+    assert status_text("running", 25.0, 7.07) == "still on its way · 7.1 m to goal"
     timed_out = {"event": "timeout", "time": 50.0, "min_human_distance": 0.8}
     clip = VisibleClip.of_summary(summary(timed_out, LATE, ends=((0, 0), (5, 5))), ["lo", "hi"], ["A", "B"])
     assert "A ran out of time before reaching the goal" in audit(clip, "B")["why"]
@@ -92,7 +93,7 @@ def test_the_survival_rule_judges_how_long_a_robot_lasted(lo, hi, shows):
 def test_a_world_describes_its_clips_in_its_own_words():
     crashes = summary({"event": "collision", "time": 4.0}, {"event": "collision", "time": 15.4})
     clip = VisibleClip.of_summary(crashes, ["lo", "hi"], ["A", "B"], HIGHWAY)
-    assert audit(clip, "B")["why"] == "B crashed after 15 seconds. A crashed after 4 seconds."
+    assert audit(clip, "B")["why"] == "B crashed after 15.4 seconds. A crashed after 4.0 seconds."
     assert VisibleClip.of_summary(crashes, ["lo", "hi"], ["A", "B"]).describe("A") == "A bumped into a person."
 
 
@@ -123,3 +124,33 @@ def test_a_world_this_version_cannot_read_is_refused_by_name(data, message):
 def test_a_clip_is_judged_by_a_known_rule():
     with pytest.raises(ValueError, match="not 'fastest'"):
         Observer().visible_score({"event": "success", "time": 3.0}, 10.0, 1.0, rule="fastest")
+
+
+@pytest.mark.parametrize("time, shown", [(7.5, "7.5"), (10.5, "10.5"), (8.0, "8.0"), (17.25, "17.2")])
+def test_a_page_says_the_time_its_clip_says(time, shown):
+    """Not rounded another way: a clip showing "7.5 s" is not summarised "after 8 seconds"."""
+    from search.clips.render import status_text
+
+    arrived = {"event": "success", "time": time, "min_human_distance": 0.9}
+    clip = VisibleClip.of_summary(summary(arrived, LATE, ends=((5, 5), (5, 5))), ["lo", "hi"], ["A", "B"])
+    assert clip.describe("A") == f"A reached the goal after {shown} seconds."
+    assert status_text("success", time) == f"reached goal · {shown} s"
+
+
+def test_a_robot_that_stops_beside_its_goal_says_how_close_it_got():
+    """A robot whose marker sits on the goal's rings at the end has not reached the goal (the world judges its
+    centre within its radius of the goal): clip and page both say how far it still was."""
+    from search.clips.render import ClipRenderer, Frame
+    from search.clips.scene import scene_from_summary
+    from search.sim.scenarios import load_scenario
+    from tests.support.summaries import summary_from_simulation
+
+    data = summary_from_simulation(["goal", "orca"], load_scenario("paper-bl-tr"))
+    goal = data["scenario"]["robot"]["goal"]
+    data["outcomes"][0] = {"event": "running", "time": None, "min_human_distance": 0.9}
+    data["steps"][-1]["robots"][0] = [goal[0] + 0.4, goal[1]]
+    clip = VisibleClip.of_summary(data, [agent["name"] for agent in data["agents"]], ["A", "B"])
+    assert clip.describe("A") == "A was still on its way when the clip ended, 0.4 m from the goal."
+    renderer = ClipRenderer(scene_from_summary(data))
+    renderer.draw(Frame(renderer.scene.end_time))
+    assert "still on its way · 0.4 m to goal" in renderer.texts

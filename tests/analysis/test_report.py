@@ -106,6 +106,7 @@ def test_report_files(known_db, tmp_path):
         "ratings.csv",
         "rating_tests.csv",
         "exclusions.csv",
+        "per_clip.csv",
         "likert.png",
         "likert.svg",
         "distribution-difficulty.png",
@@ -128,6 +129,11 @@ def test_report_files(known_db, tmp_path):
     with (out / "exclusions.csv").open() as handle:
         exclusions = {row["rule"].split(":")[0]: int(row["participants"]) for row in csv.DictReader(handle)}
     assert exclusions["participants in the database"] == 7 and exclusions["analysed (no rule applies)"] == 4
+    with (out / "per_clip.csv").open() as handle:
+        per_clip = list(csv.DictReader(handle))  # the report's per-clip table, as a file
+    assert [row["clip"] for row in per_clip] == list(tally_study(db, study).per_clip)
+    assert sum(int(row["answers"]) for row in per_clip) == 24 and all(row["scheme"] for row in per_clip)
+    assert all(f'<td class="text">{row["clip"]}</td>' in html for row in per_clip)
 
 
 def test_absolute_time_threshold_and_rule_off(known_db):

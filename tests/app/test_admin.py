@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import zipfile
 
 import pytest
@@ -61,7 +62,9 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
 
     log_in(client)
     overview = client.get("/admin").text
-    assert "Median duration of the 1 completed" in overview
+    assert "Median duration of the 1 completed" in overview and "2 participants." in overview
+    moment = r"<td>\d{4}-\d\d-\d\dT\d\d:\d\d\+00:00</td>"  # ISO 8601 with the time zone
+    assert len(re.findall(moment, overview)) == 4  # each participant's start and last activity
     assert "done1" in overview and "half2" in overview
     finished, started = stored(client, Participant)
     row = overview.split("<tbody>")[1].split("</tbody>")[0]
@@ -72,6 +75,7 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
     detail = client.get(f"/admin/participants/{started.code}").text
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in detail and "<script>alert(1)" not in detail
     assert "half2" in detail
+    assert re.search(r"<dt>Started</dt><dd>\d{4}-\d\d-\d\dT\d\d:\d\d\+00:00</dd>", detail)
     token = FormReader(detail).hidden["csrf_token"]
     assert (
         client.post(
@@ -122,7 +126,7 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
     report = client.get("/admin/report")
     assert report.status_code == 200 and "Table 1" in report.text and "<script" not in report.text
     assert "style-src 'unsafe-inline'" in report.headers["content-security-policy"]
-    assert "uses the 1 analysed participants only" in report.text  # the other one is flagged and incomplete
+    assert "uses the one analysed participant only" in report.text  # the other one is flagged and incomplete
 
 
 def test_csv_neutralises_spreadsheet_formulas(make_client):

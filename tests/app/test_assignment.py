@@ -35,7 +35,9 @@ def test_paper_conditions_are_scheme_order_times_scenario_order():
         (("nfirst", "adaptive"), 0),
         (("nfirst", "adaptive"), 1),
     ]
-    assert found[1].describe(study) == "adaptive then nfirst; part 1: paper-tl-br, part 2: paper-bl-tr"
+    assert found[1].describe(study) == (  # part one mixes the schemes' clips; part two has a round per scheme
+        "part 1: adaptive, nfirst shuffled together on paper-tl-br; part 2: adaptive then nfirst on paper-bl-tr"
+    )
 
 
 def test_concurrent_arrivals_are_balanced(make_client):

@@ -20,7 +20,7 @@ def test_paper_study_whole_session_on_mturk(make_client):
     client = make_client({"platform": '"mturk"'})
     seen = walk(client, start(client, "?workerId=W1&assignmentId=A1&hitId=H1"))
     assert "Pick any number from 1 to 4" in seen[0]
-    assert "FOIL-PAPER-7Q2K" in seen[-1]
+    assert "FOIL-PAPER-7Q2K" in seen[-1] and "Paste the code into the study page you came from." in seen[-1]
     (person,) = stored(client, Participant)
     assert person.status == "completed" and person.condition == 2 and person.slot is None
     assert (person.external_id, person.platform_study_id, person.platform_session_id) == ("W1", "H1", "A1")
@@ -111,6 +111,8 @@ def test_anonymous_pilot_resumes_by_cookie(make_client):
     page = start(client)
     client.post("/study", data=answer_for(page))
     assert FormReader(client.get("/").text).hidden["step"] == "1"  # the link again: same record
+    done = finish(client, client.get("/").text)
+    assert "FOIL-PAPER-7Q2K" in done and "study page you came from" not in done  # no platform page to paste into
     stranger = TestClient(client.app)
     start(stranger)
     assert len(stored(client, Participant)) == 2
@@ -191,6 +193,6 @@ def test_sqlite_commits_reach_the_disk_unless_normal_is_asked_for(make_client, s
     with db.engine.connect() as connection:
         assert connection.exec_driver_sql("PRAGMA synchronous").scalar() == (1 if synchronous == "normal" else 2)
     seen = walk(client, start(client, "?workerId=W1&assignmentId=A1&hitId=H1"))
-    assert "FOIL-PAPER-7Q2K" in seen[-1]
+    assert "FOIL-PAPER-7Q2K" in seen[-1] and "Paste the code into the study page you came from." in seen[-1]
     (person,) = stored(client, Participant)
     assert person.status == "completed" and len(stored(client, Response)) == len(person.plan)

@@ -52,11 +52,16 @@ def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):
     assert f"the admin pages are at http://127.0.0.1:{port}/admin" in server.stdout.read()
 
 
-def test_foil_serve_refuses_a_bad_study_with_its_line(tmp_path, bundle_dir):
+def test_foil_serve_refuses_a_bad_study_with_its_line_even_when_its_port_is_taken(tmp_path, bundle_dir):
+    """The study's error, not the port's: a `make demo` serving on the same port changes nothing."""
     study = tmp_path / "study.toml"
     study.write_text(study_text().replace("[build]", "[unknown_table]"))
-    server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), cwd=tmp_path)
-    output, _ = server.communicate(timeout=30)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = str(taken.getsockname()[1])
+        server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", port, cwd=tmp_path)
+        output, _ = server.communicate(timeout=30)
     assert server.returncode == 2
     assert "foil serve: error:" in output and "unknown_table: unknown key" in output and ", line " in output
 
@@ -128,3 +133,27 @@ def test_the_server_never_imports_search_torch_or_the_highway_packages():
     )
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_a_server_whose_output_nobody_reads_keeps_answering(tmp_path, bundle_dir):
+    """The access log (a line per request, on by default) goes through a pipe that nobody reads, as a paused
+    terminal would: once the pipe's buffer is full the writing waits, and no request may wait with it."""
+    study = tmp_path / "study.toml"
+    study.write_text(study_text(platform='"none"'))
+    port = free_port()
+    server = foil("serve", "--bundle", str(bundle_dir), "--study", str(study), "--port", str(port), cwd=tmp_path)
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+            deadline = time.monotonic() + 30
+            while True:
+                try:
+                    client.get("/static/favicon.svg")
+                    break
+                except httpx.ConnectError:
+                    assert server.poll() is None and time.monotonic() < deadline, "server did not start"
+                    time.sleep(0.2)
+            for _ in range(2000):  # about 140 KB of access log, over twice a pipe's 64 KB
+                assert client.get("/static/favicon.svg").status_code == 200
+    finally:
+        server.kill()
+        server.wait(timeout=30)

@@ -24,12 +24,18 @@ SHOTS = ARTIFACTS / "layout"
 NEXT = "fieldset[data-answers] button[type=submit]"
 
 
+FIRST_ROBOT = 13  # the bundle's robots are Robots 13 to 15: the numbers of the demo's representative round
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     def with_summaries(bundle):
         (bundle / "summaries").mkdir()
-        for clip in json.loads((bundle / "manifest.json").read_text())["clips"]:
+        manifest = json.loads((bundle / "manifest.json").read_text())
+        for clip in manifest["clips"]:
             (bundle / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], misleading=False)))
+            clip["labels"] = [f"Robot {int(label.split()[-1]) + FIRST_ROBOT - 1}" for label in clip["labels"]]
+        (bundle / "manifest.json").write_text(json.dumps(manifest))
 
     with long_clip_server(tmp_path_factory.mktemp("browser-layout"), with_summaries) as live:
         yield live
@@ -48,10 +54,15 @@ def pilot(server) -> str:
         db.dispose()
 
 
-def to_first_clip(page, server) -> None:
+def to_instructions(page, server) -> None:
     page.goto(server.url + "/" + pilot(server))
     with page.expect_navigation():
         page.click("button[value=agree]")
+    page.wait_for_function("() => document.querySelector('video').readyState >= 2")
+
+
+def to_first_clip(page, server) -> None:
+    to_instructions(page, server)
     with page.expect_navigation():  # a pilot is not held to the example's playing time
         page.evaluate(
             "() => { document.querySelector('fieldset[data-answers]').disabled = false; "
@@ -92,6 +103,117 @@ def test_the_whole_clip_and_its_controls_are_in_the_first_view_on_a_desktop(serv
     assert page.evaluate("document.documentElement.scrollWidth") <= viewport["width"]
     question = box(page, "input[name=better]")
     assert question["left"] > video["left"] + video["width"]  # the questions beside the clip
+
+
+@pytest.mark.parametrize("viewport", DESKTOPS, ids=lambda v: f"{v['width']}x{v['height']}")
+def test_the_example_clip_and_the_unlocked_questions_fit_the_first_view_on_a_desktop(server, new_context, viewport):
+    """The instructions' example clip stands beside their text, and once a clip has played, its questions, its
+    robot key and the Next button fit beside it: nothing cut off at the window's bottom edge."""
+    page = new_context(viewport).new_page()
+    to_instructions(page, server)
+    shoot(page, f"instructions-{viewport['width']}x{viewport['height']}")
+    example, play = box(page, "video[data-example]"), box(page, "[data-play]")
+    assert 0 <= example["top"] and example["bottom"] <= viewport["height"] and play["bottom"] <= viewport["height"]
+    assert example["height"] >= 0.55 * viewport["height"]
+    with page.expect_navigation():
+        page.evaluate(
+            "() => { document.querySelector('fieldset[data-answers]').disabled = false; "
+            "document.querySelector('form[data-step-form]').requestSubmit(); }"
+        )
+    page.wait_for_function("() => document.querySelector('video').readyState >= 2")
+    page.click("[data-play]")
+    page.wait_for_function("() => document.querySelector('video').ended", timeout=20_000)
+    assert page.locator(NEXT).is_enabled()
+    shoot(page, f"unlocked-{viewport['width']}x{viewport['height']}")
+    assert page.evaluate("window.scrollY") == 0
+    for selector in (NEXT, ".screen-clip .robot-key", "[data-status]"):
+        assert box(page, selector)["bottom"] <= viewport["height"], selector
+
+
+def test_a_phone_shows_the_play_button_first_a_full_width_example_and_a_short_ranking_page(server, new_context):
+    page = new_context(PHONE).new_page()
+    to_instructions(page, server)
+    assert box(page, "video[data-example]")["width"] >= PHONE["width"] - 40
+    with page.expect_navigation():
+        page.evaluate(
+            "() => { document.querySelector('fieldset[data-answers]').disabled = false; "
+            "document.querySelector('form[data-step-form]').requestSubmit(); }"
+        )
+    page.wait_for_function("() => document.querySelector('video').readyState >= 2")
+    shoot(page, "first-clip-phone")
+    assert box(page, "[data-play]")["bottom"] <= PHONE["height"]  # the clip and its Play button in the first view
+    for _ in range(20):
+        if page.locator("select[name^=ranking]").count():
+            break
+        answer_unwatched(page)
+    page.screenshot(path=str(SHOTS / "ranking-phone-full.png"), full_page=True)
+    figures = [page.locator(".round-clips figure").nth(k).bounding_box() for k in range(3)]
+    assert len({round(figure["y"]) for figure in figures}) == 1  # one row, scrolled sideways: one clip high
+    assert figures[0]["width"] >= 0.8 * (PHONE["width"] - 32)  # each clip still nearly the column's width
+    assert page.evaluate("document.documentElement.scrollHeight") <= 3.5 * PHONE["height"]
+    assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
+
+
+def lab(rgb: tuple[float, float, float]) -> list[float]:
+    """CIE L*a*b* (D65) of an sRGB colour."""
+    linear = [v / 255 / 12.92 if v / 255 <= 0.04045 else ((v / 255 + 0.055) / 1.055) ** 2.4 for v in rgb]
+    xyz = [
+        (0.4124 * linear[0] + 0.3576 * linear[1] + 0.1805 * linear[2]) / 0.9505,
+        0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2],
+        (0.0193 * linear[0] + 0.1192 * linear[1] + 0.9505 * linear[2]) / 1.089,
+    ]
+    f = [v ** (1 / 3) if v > 0.008856 else 7.787 * v + 16 / 116 for v in xyz]
+    return [116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])]
+
+
+def each_screen_with_robots(page, server, look) -> int:
+    """`look(page, labels)` on every screen with a robot key, from the first clip to the first ranking page; how
+    many screens it looked at."""
+    to_first_clip(page, server)
+    seen = 0
+    for _ in range(20):
+        labels = [text.strip() for text in page.locator(".robot-key li").all_inner_texts()]
+        if labels:
+            look(page, labels)
+            seen += 1
+            if page.locator("select[name^=ranking]").count():
+                break
+        answer_unwatched(page)
+    assert seen >= 7  # six pairwise screens, a ranking round's clips and its ranking page
+    return seen
+
+
+def test_the_answers_list_the_robots_in_the_order_of_the_clips_legend(server, new_context):
+    """A clip's legend lists its robots by number (search/clips/render.py); so do the key and every answer."""
+
+    def look(page, labels):
+        assert labels == sorted(labels, key=lambda label: int(label.split()[-1]))
+        options = page.evaluate("[...document.querySelectorAll('input[name=better]')].map(e => e.value)")
+        ranked = page.evaluate(
+            "[...document.querySelectorAll('select[name^=ranking]')]"
+            ".map(s => [...s.options].slice(1).map(o => o.value))"
+        )
+        assert all(order == labels for order in [options, *ranked] if order)
+
+    each_screen_with_robots(new_context(DESKTOPS[0]).new_page(), server, look)
+
+
+def test_the_robots_of_a_clip_and_of_a_round_have_clearly_different_colours(server, new_context):
+    """The key's colours are the clips' own (search/clips/render.py) and far apart (CIE76 distance over 50): not
+    Robot 13 in sky blue beside Robot 15 in blue."""
+    from search.clips.render import robot_style
+
+    def look(page, labels):
+        colours = page.evaluate(
+            "[...document.querySelectorAll('.robot-key .marker')].map(m => getComputedStyle(m).backgroundColor)"
+        )
+        rgb = [tuple(float(v) for v in colour[colour.index("(") + 1 : -1].split(",")) for colour in colours]
+        assert sorted(rgb) == sorted(robot_style(int(label.split()[-1]))[0] for label in labels)
+        for i, a in enumerate(rgb):
+            for b in rgb[i + 1 :]:
+                assert sum((x - y) ** 2 for x, y in zip(lab(a), lab(b), strict=True)) ** 0.5 > 50, labels
+
+    each_screen_with_robots(new_context(DESKTOPS[0]).new_page(), server, look)
 
 
 def test_the_phone_keeps_one_column(server, new_context):
@@ -153,6 +275,8 @@ def test_watch_only_screens_ranking_clips_and_places(server, new_context):
     shoot(page, "ranking")
     videos = page.locator(".round-clips video")
     assert videos.count() == 3
+    box_colour = page.evaluate("getComputedStyle(document.querySelector('.round-clips video')).backgroundColor")
+    assert min(int(v) for v in box_colour[box_colour.index("(") + 1 : -1].split(",")[:3]) > 200  # no dark edge
     for k in range(3):  # large enough to read the labels drawn in the clip: well over the 220 px of before
         assert videos.nth(k).bounding_box()["width"] >= 360
     ended = page.evaluate(

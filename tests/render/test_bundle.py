@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import asdict
 from pathlib import Path
@@ -326,6 +327,33 @@ def test_shipped_study_files_build_and_serve(name):
     without_one = dict(list(bundle.clips.items())[1:])
     with pytest.raises(BundleError, match="needs a clip of"):
         check_study_against_bundle(study, Bundle(root=ROOT, clips=without_one, paths={}))
+
+
+def test_each_part_draws_its_own_representative_clips():
+    """The demo's representative scheme draws its starting states at random: part one and the ranking round each
+    get a draw of their own (seeds 0 and 1), and every plan shows each part its own clips, so the round does not
+    replay part one's three clips."""
+    import random
+
+    from app.survey.assignment import conditions
+    from app.survey.plan import build_plan
+    from app.survey.screens import Pairwise, Watch
+    from app.survey.study import load_study
+
+    spec, _ = load_build(ROOT / "studies" / "demo.toml")
+    jobs = [job for job in plan_clips(spec) if job.scheme.name == "representative"]
+    assert sorted(job.parts for job in jobs) == [("pairwise",)] * 3 + [("ranking",)] * 3
+    assert sorted(job.scheme.seed for job in jobs) == [0, 0, 0, 1, 1, 1]
+    assert len({json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in jobs}) == 6
+    study = load_study(ROOT / "studies" / "demo.toml")
+    bundle = planned_bundle(plan_clips(spec), ROOT)
+    for condition in conditions(study):
+        plan = build_plan(study, bundle, condition, random.Random(condition.index))
+        shown = {
+            kind: {s.clip for s in plan if isinstance(s, kind) and s.scheme == "representative"}
+            for kind in (Pairwise, Watch)
+        }
+        assert len(shown[Pairwise]) == len(shown[Watch]) == 3 and not shown[Pairwise] & shown[Watch]
 
 
 def test_paper_build_reproduces_the_papers_clip_set():

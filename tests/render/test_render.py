@@ -31,6 +31,7 @@ from search.clips.render import (
 )
 from search.clips.scene import SummaryError, load_scene, scene_from_summary
 from search.sim.scenarios import load_scenario
+from tests.support.live_server import REPO
 from tests.support.summaries import summary_from_simulation, visible
 
 FAST = RenderOptions(speed=4.0, hold_start=0.25, hold_end=0.25, event_hold=0.25)
@@ -189,6 +190,27 @@ def test_every_robot_style_is_distinct():
         for b in numbers[a:]:
             overlap = (masks[a] & masks[b]).sum() / (masks[a] | masks[b]).sum()
             assert overlap < 0.85, (robot_style(a)[1], robot_style(b)[1], overlap)
+
+
+def test_the_robots_of_a_clip_and_of_a_ranking_round_have_clearly_different_colours():
+    """Not two blues (Robot 13 sky blue beside Robot 15 blue): `foil bundle` numbers a round's robots, and a clip's
+    pair, in a block of consecutive numbers, and any three consecutive numbers are far apart in colour."""
+    from search.bundle.build import plan_clips
+    from search.bundle.spec import load_build
+
+    for name in ("demo", "paper"):
+        spec, _ = load_build(REPO / "studies" / f"{name}.toml")
+        jobs = plan_clips(spec)
+        rounds = {}
+        for job in (job for job in jobs if "ranking" in job.parts):
+            rounds.setdefault((job.scheme.name, job.scenario), set()).update(job.numbers)
+        for numbers in [set(job.numbers) for job in jobs] + list(rounds.values()):
+            assert max(numbers) - min(numbers) < 3, numbers  # a block of at most three consecutive numbers
+    for first in range(1, len(ROBOT_STYLES) + 1):
+        colours = [robot_style(n)[0] for n in range(first, first + 3)]
+        for i, a in enumerate(colours):
+            for b in colours[i + 1 :]:
+                assert np.linalg.norm(lab(a) - lab(b)) > 50, (first, a, b)
 
 
 def number_height(sprite, ink, within: float) -> int:

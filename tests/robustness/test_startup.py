@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from tests.support.live_server import foil
+from tests.support.live_server import foil, free_port
 from tests.support.survey import study_text
 
 pytestmark = pytest.mark.slow  # a foil serve process per broken bundle
@@ -50,7 +50,7 @@ def test_foil_serve_refuses_a_broken_bundle_naming_the_problem(tmp_path, bundle_
     expected = breaking(bundle)
     study = tmp_path / "study.toml"
     study.write_text(study_text())
-    server = foil("serve", "--bundle", str(bundle), "--study", str(study), "--port", "9", cwd=tmp_path)
+    server = foil("serve", "--bundle", str(bundle), "--study", str(study), "--port", str(free_port()), cwd=tmp_path)
     output, _ = server.communicate(timeout=60)
     assert server.returncode == 2, output
     assert "foil serve: error:" in output and expected in output, output

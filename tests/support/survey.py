@@ -298,6 +298,7 @@ def planned_bundle(jobs: list, root: Path):
             agents=list(job.pair),
             labels=[robot_label(number) for number in job.numbers],
             better=job.pair[0],
+            parts=list(job.parts),
         )
         for n, job in enumerate(jobs)
     }
