@@ -3,15 +3,13 @@ renders every page the server writes: participant and admin pages and the report
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import UTC, datetime
 from functools import cache
 from html import escape
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader
 from markupsafe import Markup
-
-from app.store.database import as_utc
 
 APP_DIR = Path(__file__).resolve().parent
 
@@ -54,7 +52,9 @@ def _number(value: float | None) -> str:
 
 def _moment(value: datetime | None) -> str:
     """A stored time in ISO 8601 with its time zone, to the minute."""
-    return "–" if value is None else as_utc(value).isoformat(timespec="minutes")
+    if value is None:
+        return "–"
+    return (value if value.tzinfo else value.replace(tzinfo=UTC)).isoformat(timespec="minutes")  # stored in UTC
 
 
 @cache

@@ -75,7 +75,7 @@ def test_a_highway_bundle_speaks_of_cars_and_never_of_people(make_client, crowd_
     assert "<strong>CRASH</strong> mark a car hitting another car" in shown and "Trails:" not in shown
     assert "Clip of two self-driving cars on a highway" in shown and CARS.words.example_caption in shown
     assert (
-        re.search(r"Robot \d crashed after 6 seconds\.", shown)
+        re.search(r"Robot \d crashed after 6.0 seconds\.", shown)
         and "drove through and came close to other cars" in shown
     )
     assert CROWD_WORDS.findall(shown) == []
@@ -94,7 +94,7 @@ def test_a_crowd_bundle_reads_as_before(make_client, crowd_bundle):
     )
     assert "Clip of two robots in a crowd" in shown and "walk through a crowd to the same goal." in shown
     assert re.search(r"Robot \d bumped into a person\.", shown)
-    assert re.search(r"Robot \d reached the goal after 9 seconds\.", shown)
+    assert re.search(r"Robot \d reached the goal after 9.0 seconds\.", shown)
 
 
 def test_a_legend_line_is_text_whatever_the_manifest_says(make_client, crowd_bundle, tmp_path):
@@ -107,7 +107,7 @@ def test_the_bots_judge_and_explain_by_the_bundles_world(crowd_bundle, tmp_path)
     clips = ClipIndex(with_world(crowd_bundle, tmp_path / "highway", CARS.to_manifest())).clips.values()
     assert {clip.world for clip in clips} == {CARS}
     said = " ".join(clip.describe(label) for clip in clips for label in clip.labels)
-    assert "crashed after 6 seconds" in said and CROWD_WORDS.findall(said) == []
+    assert "crashed after 6.0 seconds" in said and CROWD_WORDS.findall(said) == []
 
 
 def test_only_a_world_of_its_own_is_written_into_a_manifest(crowd_bundle):
