@@ -1,0 +1,784 @@
+"""highway-env's ``highway-fast-v0`` for a batch of ``B`` traffic states stepped at once, exactly as highway-env
+steps one.
+
+Covered: one straight road of any number of lanes, the ego vehicle with continuous control (acceleration and
+steering, ``ContinuousAction``) or meta-actions (``DiscreteMetaAction``), the other vehicles' IDM and MOBIL (with
+Foil's environment action: search.highway.adapter), the bicycle model, collisions of the ego, leaving the road,
+the Kinematics observation and the reward; a seed places the same traffic as highway-env's ``reset(seed=...)``
+(its own generator, called in its order). ``spec_of`` says what is not covered; ``make_batch`` then falls back to
+highway-env with a one-line notice.
+
+Exactness: every step agrees bit for bit with highway-env on the same machine (tests/highway/test_kernel.py;
+benchmarks/bench_highway_exact.py over 1,000 episodes). Three things make that possible:
+
+- numpy evaluates tan, arctan, arcsin and power with its own SIMD routines (SVML on AVX-512), which differ from
+  the C library's by an ulp now and then; so every transcendental function is evaluated here by numpy's own
+  ufuncs on the same float64 values (vectorised over the batch; numpy's result for a value does not depend on
+  the array around it), and numba does the branchy decisions with + - * / and sqrt only, which are exact;
+- highway-env's two-element ``np.dot`` and ``np.linalg.norm`` go through BLAS, which fuses the last
+  multiply-add; ``FUSED`` probes that once and numba's ``_dot2`` does the same;
+- the one computation that is neither (the polygons' separating-axis test, with its matrix products) is left to
+  highway-env's own code, called only for the rare pairs that numba cannot prove to be clearly apart.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+from highway_env import utils
+from highway_env.envs.common.abstract import AbstractEnv
+from highway_env.road.lane import AbstractLane
+from highway_env.road.road import RoadNetwork
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
+from highway_env.vehicle.kinematics import Vehicle
+from highway_env.vehicle.objects import RoadObject
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+from search.highway.adapter import LANE_THRESHOLD, PERTURBED, SPEED_RANGE
+
+_jit = numba.njit(cache=True, nogil=True)
+
+# highway-env's constants, read from its classes
+LENGTH, WIDTH = float(Vehicle.LENGTH), float(Vehicle.WIDTH)
+DIAGONAL = float(np.sqrt(Vehicle.LENGTH**2 + Vehicle.WIDTH**2))
+MAX_SPEED, MIN_SPEED = float(Vehicle.MAX_SPEED), float(Vehicle.MIN_SPEED)
+LANE_WIDTH = float(AbstractLane.DEFAULT_WIDTH)
+ROAD_LENGTH = 10000.0  # RoadNetwork.straight_road_network's default
+VEHICLE_LENGTH = float(AbstractLane.VEHICLE_LENGTH)  # how far past its ends a lane still holds a vehicle
+END = ROAD_LENGTH + VEHICLE_LENGTH
+SPEED_LIMIT = 30.0  # HighwayEnv._create_road's
+ACC_MAX = float(IDMVehicle.ACC_MAX)
+COMFORT_ACC_MAX = float(IDMVehicle.COMFORT_ACC_MAX)
+DISTANCE_WANTED = float(IDMVehicle.DISTANCE_WANTED)
+TIME_WANTED = float(IDMVehicle.TIME_WANTED)
+TWO_SQRT_AB = float(2 * np.sqrt(-IDMVehicle.COMFORT_ACC_MAX * IDMVehicle.COMFORT_ACC_MIN))
+POLITENESS = float(IDMVehicle.POLITENESS)
+MIN_ACC_GAIN = float(IDMVehicle.LANE_CHANGE_MIN_ACC_GAIN)
+MAX_BRAKING_IMPOSED = float(IDMVehicle.LANE_CHANGE_MAX_BRAKING_IMPOSED)
+LANE_CHANGE_DELAY = float(IDMVehicle.LANE_CHANGE_DELAY)
+MAX_STEERING = float(ControlledVehicle.MAX_STEERING_ANGLE)
+PERCEPTION = float(AbstractEnv.PERCEPTION_DISTANCE)
+IDM_TYPE = "highway_env.vehicle.behavior.IDMVehicle"
+SEPARATION_MARGIN = 1e-6  # m: far above float64 rounding at highway coordinates (about 1e-12 m)
+META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # DiscreteMetaAction.ACTIONS_ALL
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):  # type: ignore[no-untyped-def]
+    """a * b + c rounded once (LLVM's fma: the hardware instruction, or the C library's where there is none)."""
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        double = ir.DoubleType()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(double, [double] * 3), "llvm.fma.f64")
+        return builder.call(fn, args)
+
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+def _blas_fuses() -> bool:
+    """Whether numpy's BLAS computes a two-element dot product with a fused multiply-add (OpenBLAS does on
+    FMA-capable x86): then a0*b0 + a1*b1 is fma(a1, b1, a0*b0)."""
+    a, b = np.array([1.0, 1.0 + 2.0**-30]), np.array([-1.0, 1.0 - 2.0**-30])
+    return bool(np.dot(a, b) != 0.0)
+
+
+FUSED = _blas_fuses()
+
+
+@_jit
+def _dot2(a0: float, a1: float, b0: float, b1: float, fused: bool) -> float:
+    """numpy's np.dot of two 2-vectors, bit for bit."""
+    if fused:
+        return _fma(a1, b1, a0 * b0)
+    return a0 * b0 + a1 * b1
+
+
+@dataclass(frozen=True)
+class KernelSpec:
+    """The highway-env settings a kernel runs (from the environment's resolved config: ``spec_of``)."""
+
+    lanes: int
+    others: int
+    density: float
+    ego_spacing: float
+    initial_lane: int | None
+    frames: int  # simulation steps per decision
+    dt: float
+    duration: float
+    time_step: float  # 1 / policy frequency: what env.time advances by per decision
+    discrete: bool
+    acceleration_range: tuple[float, float]
+    steering_range: tuple[float, float]
+    clip_action: bool
+    target_speeds: tuple[float, ...]
+    observed: int
+    collision_reward: float
+    right_lane_reward: float
+    high_speed_reward: float
+    on_road_reward: float
+    reward_speed_range: tuple[float, float]
+    normalize_reward: bool
+    offroad_terminal: bool
+
+
+def spec_of(config: dict) -> KernelSpec | str:
+    """The kernel's settings for a ``highway-fast-v0`` config (as resolved by highway-env), or why the kernel
+    does not cover it."""
+    observation, action = dict(config["observation"]), dict(config["action"])
+    if observation.pop("type") != "Kinematics" or set(observation) - {"vehicles_count"}:
+        return f"observation {config['observation']} (the kernel has the Kinematics observation's defaults)"
+    kind = action.pop("type")
+    defaults = {"longitudinal": True, "lateral": True, "dynamical": False, "speed_range": None}
+    if kind == "ContinuousAction":
+        extra = set(action) - {"acceleration_range", "steering_range", "clip"} - set(defaults)
+    elif kind == "DiscreteMetaAction":
+        extra = set(action) - {"target_speeds"} - set(defaults)
+    else:
+        extra = {"type"}
+    if extra or any(action.get(key, value) != value for key, value in defaults.items()):
+        return f"action {config['action']}"
+    others = {
+        "other_vehicles_type": IDM_TYPE,
+        "controlled_vehicles": 1,
+        "manual_control": False,
+    }
+    for key, value in others.items():
+        if config[key] != value:
+            return f"{key} {config[key]!r}"
+    if config["simulation_frequency"] % config["policy_frequency"]:
+        return "a simulation frequency that is not a multiple of the policy frequency"
+    ranges = {"acceleration_range": (-5.0, 5.0), "steering_range": (-np.pi / 4, np.pi / 4)}  # ContinuousAction's
+    return KernelSpec(
+        lanes=int(config["lanes_count"]),
+        others=int(config["vehicles_count"]),
+        density=config["vehicles_density"],
+        ego_spacing=config["ego_spacing"],
+        initial_lane=config["initial_lane_id"],
+        frames=int(config["simulation_frequency"] // config["policy_frequency"]),
+        dt=1 / config["simulation_frequency"],
+        duration=config["duration"],
+        time_step=1 / config["policy_frequency"],
+        discrete=kind == "DiscreteMetaAction",
+        acceleration_range=tuple(action.get("acceleration_range") or ranges["acceleration_range"]),  # type: ignore[arg-type]
+        steering_range=tuple(action.get("steering_range") or ranges["steering_range"]),  # type: ignore[arg-type]
+        clip_action=bool(action.get("clip", True)),
+        target_speeds=tuple(float(s) for s in (action.get("target_speeds") or MDPVehicle.DEFAULT_TARGET_SPEEDS)),
+        observed=int(observation.get("vehicles_count", 5)),
+        collision_reward=config["collision_reward"],
+        right_lane_reward=config["right_lane_reward"],
+        high_speed_reward=config["high_speed_reward"],
+        on_road_reward=config.get("on_road_reward", 0),
+        reward_speed_range=tuple(config["reward_speed_range"]),  # type: ignore[arg-type]
+        normalize_reward=bool(config["normalize_reward"]),
+        offroad_terminal=bool(config["offroad_terminal"]),
+    )
+
+
+FIELDS = {  # per vehicle, (B, N); vehicle 0 is the ego, the others in highway-env's creation order
+    "x": np.float64,
+    "y": np.float64,
+    "heading": np.float64,
+    "speed": np.float64,
+    "lane": np.int64,  # the closest lane (lane_index[2])
+    "target_lane": np.int64,
+    "target_speed": np.float64,
+    "own_target_speed": np.float64,  # the target speed before any environment action (Foil's adapter)
+    "delta": np.float64,  # IDM's velocity exponent
+    "timer": np.float64,
+    "crashed": np.bool_,
+    "impact_x": np.float64,
+    "impact_y": np.float64,
+    "impacted": np.bool_,  # an impact is pending (applied, and the vehicle crashed, on its next move)
+    "steering": np.float64,  # the stored action (highway-env repeats it, and clip_actions edits it in place)
+    "acceleration": np.float64,
+}
+
+
+@dataclass
+class HighwayState:
+    """B traffic states as plain arrays: copying one is a snapshot, assigning it back a restore."""
+
+    arrays: dict[str, np.ndarray]
+    time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # env.time per state
+
+    @classmethod
+    def empty(cls, batch: int, vehicles: int) -> HighwayState:
+        arrays = {name: np.zeros((batch, vehicles), dtype) for name, dtype in FIELDS.items()}
+        return cls(arrays, np.zeros(batch))
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        try:
+            return self.__dict__["arrays"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def copy(self) -> HighwayState:
+        return HighwayState({k: v.copy() for k, v in self.arrays.items()}, self.time.copy())
+
+    def take(self, rows: np.ndarray | list[int]) -> HighwayState:
+        return HighwayState({k: v[rows] for k, v in self.arrays.items()}, self.time[rows])
+
+    def assign(self, rows: np.ndarray | list[int], other: HighwayState) -> None:
+        for name, values in self.arrays.items():
+            values[rows] = other.arrays[name]
+        self.time[rows] = other.time
+
+    def equals(self, other: HighwayState) -> bool:
+        """Bit for bit (NaN-free states)."""
+        return all(np.array_equal(v, other.arrays[k]) for k, v in self.arrays.items()) and np.array_equal(
+            self.time, other.time
+        )
+
+
+def _not_zero(x: np.ndarray, eps: float = 1e-2) -> np.ndarray:
+    """highway_env.utils.not_zero over an array."""
+    return np.where(np.abs(x) > eps, x, np.where(x >= 0, eps, -eps))
+
+
+def _wrap_to_pi(x: np.ndarray) -> np.ndarray:
+    return ((x + np.pi) % (2 * np.pi)) - np.pi
+
+
+def closest_lanes(x: np.ndarray, y: np.ndarray, heading: np.ndarray, lanes: int) -> np.ndarray:
+    """RoadNetwork.get_closest_lane_index on the straight road: L1 distance plus heading, first minimum."""
+    angle = 1.0 * np.abs(_wrap_to_pi(heading - 0.0))
+    outside = np.where(x - ROAD_LENGTH > 0, x - ROAD_LENGTH, 0.0)
+    before = np.where(0 - x > 0, 0 - x, 0.0)
+    distances = [((np.abs(y - LANE_WIDTH * k) + outside) + before) + angle for k in range(lanes)]
+    return np.argmin(np.stack(distances, axis=-1), axis=-1)
+
+
+def steering_control(state: HighwayState, rows: np.ndarray) -> np.ndarray:
+    """ControlledVehicle.steering_control towards each vehicle's target lane (rows: a boolean mask)."""
+    speed, heading = state.speed[rows], state.heading[rows]
+    lateral = state.y[rows] - LANE_WIDTH * state.target_lane[rows]
+    lateral_speed_command = -ControlledVehicle.KP_LATERAL * lateral
+    heading_command = np.arcsin(np.clip(lateral_speed_command / _not_zero(speed), -1, 1))
+    heading_ref = 0.0 + np.clip(heading_command, -np.pi / 4, np.pi / 4)
+    heading_rate_command = ControlledVehicle.KP_HEADING * _wrap_to_pi(heading_ref - heading)
+    slip_angle = np.arcsin(np.clip(LENGTH / 2 / _not_zero(speed) * heading_rate_command, -1, 1))
+    steering = np.clip(np.arctan(2 * np.tan(slip_angle)), -MAX_STEERING, MAX_STEERING)
+    return np.clip(steering, -MAX_STEERING, MAX_STEERING)
+
+
+@_jit
+def _neighbours(x: np.ndarray, y: np.ndarray, b: int, i: int, lane: int) -> tuple[int, int]:
+    """Road.neighbour_vehicles: the vehicles just ahead of and just behind vehicle i on a lane (-1: none)."""
+    s = x[b, i]
+    front, rear = -1, -1
+    s_front, s_rear = 0.0, 0.0
+    for v in range(x.shape[1]):
+        if v == i:
+            continue
+        s_v = x[b, v]
+        if not (abs(y[b, v] - LANE_WIDTH * lane) <= LANE_WIDTH / 2 + 1 and -VEHICLE_LENGTH <= s_v < END):
+            continue
+        if s <= s_v and (front < 0 or s_v <= s_front):
+            s_front, front = s_v, v
+        if s_v < s and (rear < 0 or s_v > s_rear):
+            s_rear, rear = s_v, v
+    return front, rear
+
+
+@_jit
+def _desired_gap(
+    x: np.ndarray, speed: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray, b: int, i: int, f: int, fused: bool
+) -> float:
+    """IDMVehicle.desired_gap (projected)."""
+    dvx = speed[b, i] * cos_h[b, i] - speed[b, f] * cos_h[b, f]
+    dvy = speed[b, i] * sin_h[b, i] - speed[b, f] * sin_h[b, f]
+    dv = _dot2(dvx, dvy, cos_h[b, i], sin_h[b, i], fused)
+    return DISTANCE_WANTED + speed[b, i] * TIME_WANTED + speed[b, i] * dv / TWO_SQRT_AB
+
+
+@_jit
+def _acceleration(
+    x: np.ndarray,
+    speed: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    power: np.ndarray,
+    b: int,
+    me: int,
+    ego: int,
+    front: int,
+    fused: bool,
+) -> float:
+    """IDMVehicle.acceleration as vehicle ``me`` computes it for vehicle ``ego`` behind ``front`` (-1: none);
+    power[b, ego, me] holds numpy's power of ego's speed ratio to me's exponent."""
+    if ego < 0:
+        return 0.0
+    acceleration = COMFORT_ACC_MAX * (1 - power[b, ego, me])
+    if front >= 0:
+        d = x[b, front] - x[b, ego]
+        if abs(d) <= 1e-2:
+            d = 1e-2 if d >= 0 else -1e-2
+        gap = _desired_gap(x, speed, cos_h, sin_h, b, ego, front, fused) / d
+        acceleration -= COMFORT_ACC_MAX * (gap * gap)
+    return acceleration
+
+
+@_jit
+def _mobil(
+    x: np.ndarray,
+    y: np.ndarray,
+    speed: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    lane: np.ndarray,
+    power: np.ndarray,
+    b: int,
+    i: int,
+    candidate: int,
+    fused: bool,
+) -> bool:
+    """IDMVehicle.mobil for a vehicle without a route."""
+    new_preceding, new_following = _neighbours(x, y, b, i, candidate)
+    new_following_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, new_following, new_preceding, fused)
+    new_following_pred_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, new_following, i, fused)
+    if new_following_pred_a < -MAX_BRAKING_IMPOSED:
+        return False
+    old_preceding, old_following = _neighbours(x, y, b, i, lane[b, i])
+    self_pred_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, i, new_preceding, fused)
+    self_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, i, old_preceding, fused)
+    old_following_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, old_following, i, fused)
+    old_following_pred_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, old_following, old_preceding, fused)
+    jerk = (
+        self_pred_a
+        - self_a
+        + POLITENESS * (new_following_pred_a - new_following_a + old_following_pred_a - old_following_a)
+    )
+    return not jerk < MIN_ACC_GAIN
+
+
+@_jit
+def _decide(
+    x: np.ndarray,
+    y: np.ndarray,
+    speed: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    lane: np.ndarray,
+    target_lane: np.ndarray,
+    crashed: np.ndarray,
+    timer: np.ndarray,
+    power: np.ndarray,
+    ego_controlled: bool,
+    lanes: int,
+    fused: bool,
+    acceleration: np.ndarray,
+) -> None:
+    """IDMVehicle.act of every other vehicle, in road order: MOBIL's lane decision (or the abort of a lane
+    change someone else is making into the same lane), then IDM's acceleration. Steering comes after (numpy)."""
+    n_worlds, n = x.shape
+    for b in range(n_worlds):
+        for i in range(1, n):
+            if crashed[b, i]:
+                continue
+            if lane[b, i] != target_lane[b, i]:
+                for v in range(n):
+                    if (
+                        v != i
+                        and lane[b, v] != target_lane[b, i]
+                        and (v > 0 or ego_controlled)
+                        and target_lane[b, v] == target_lane[b, i]
+                    ):
+                        d = x[b, v] - x[b, i]
+                        if 0 < d < _desired_gap(x, speed, cos_h, sin_h, b, i, v, fused):
+                            target_lane[b, i] = lane[b, i]
+                            break
+            elif LANE_CHANGE_DELAY < timer[b, i]:
+                timer[b, i] = 0.0
+                for candidate in (lane[b, i] - 1, lane[b, i] + 1):
+                    if candidate < 0 or candidate >= lanes:
+                        continue
+                    if not (abs(y[b, i] - LANE_WIDTH * candidate) <= 2 * LANE_WIDTH and 0 <= x[b, i] < END):
+                        continue
+                    if abs(speed[b, i]) < 1:
+                        continue
+                    if _mobil(x, y, speed, cos_h, sin_h, lane, power, b, i, candidate, fused):
+                        target_lane[b, i] = candidate
+            front, _ = _neighbours(x, y, b, i, lane[b, i])
+            a = _acceleration(x, speed, cos_h, sin_h, power, b, i, i, front, fused)
+            if lane[b, i] != target_lane[b, i]:
+                front, _ = _neighbours(x, y, b, i, target_lane[b, i])
+                target_a = _acceleration(x, speed, cos_h, sin_h, power, b, i, i, front, fused)
+                if target_a < a:
+                    a = target_a
+            acceleration[b, i] = min(max(a, -ACC_MAX), ACC_MAX)
+
+
+@_jit
+def _clearly_apart(
+    x: np.ndarray,
+    y: np.ndarray,
+    speed: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    b: int,
+    j: int,
+    dt: float,
+) -> bool:
+    """Whether highway-env's separating-axis test of the ego against vehicle j (with their moves over dt) must
+    find an axis that separates them: one separates them here by more than SEPARATION_MARGIN."""
+    corners = np.empty((2, 4, 2))
+    for k, v in enumerate((0, j)):
+        c, s = cos_h[b, v], sin_h[b, v]
+        for m, (px, py) in enumerate(
+            ((-LENGTH / 2, -WIDTH / 2), (-LENGTH / 2, WIDTH / 2), (LENGTH / 2, WIDTH / 2), (LENGTH / 2, -WIDTH / 2))
+        ):
+            corners[k, m, 0] = c * px - s * py + x[b, v]
+            corners[k, m, 1] = s * px + c * py + y[b, v]
+    move_x = (speed[b, 0] * cos_h[b, 0] - speed[b, j] * cos_h[b, j]) * dt
+    move_y = (speed[b, 0] * sin_h[b, 0] - speed[b, j] * sin_h[b, j]) * dt
+    for k in range(2):
+        for m in range(4):
+            p, q = corners[k, m], corners[k, (m + 1) % 4]
+            nx, ny = -q[1] + p[1], q[0] - p[0]
+            norm = np.sqrt(nx * nx + ny * ny)
+            nx, ny = nx / norm, ny / norm
+            lo = np.empty(2)
+            hi = np.empty(2)
+            for r in range(2):
+                lo[r], hi[r] = np.inf, -np.inf
+                for t in range(4):
+                    projected = corners[r, t, 0] * nx + corners[r, t, 1] * ny
+                    lo[r], hi[r] = min(lo[r], projected), max(hi[r], projected)
+            projection = nx * move_x + ny * move_y
+            if projection < 0:
+                lo[0] += projection
+            else:
+                hi[0] += projection
+            distance = lo[1] - hi[0] if lo[0] < lo[1] else lo[0] - hi[1]
+            if distance > SEPARATION_MARGIN:
+                return True
+    return False
+
+
+@_jit
+def _collision_candidates(
+    x: np.ndarray,
+    y: np.ndarray,
+    speed: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    dt: float,
+    fused: bool,
+    out: np.ndarray,
+) -> int:
+    """The (state, vehicle) pairs whose collision with the ego highway-env's test must decide, in its order;
+    every other pair is apart (RoadObject._is_colliding's quick distance check, exactly, then _clearly_apart)."""
+    count = 0
+    for b in range(x.shape[0]):
+        for j in range(1, x.shape[1]):
+            dx, dy = x[b, j] - x[b, 0], y[b, j] - y[b, 0]
+            if np.sqrt(_dot2(dx, dy, dx, dy, fused)) > (DIAGONAL + DIAGONAL) / 2 + speed[b, 0] * dt:
+                continue
+            if _clearly_apart(x, y, speed, cos_h, sin_h, b, j, dt):
+                continue
+            out[count, 0], out[count, 1] = b, j
+            count += 1
+    return count
+
+
+@_jit
+def _observe(
+    x: np.ndarray,
+    y: np.ndarray,
+    speed: np.ndarray,
+    cos_h: np.ndarray,
+    sin_h: np.ndarray,
+    y_range: float,
+    fused: bool,
+    out: np.ndarray,
+) -> None:
+    """KinematicObservation (presence, x, y, vx, vy; relative to the ego, normalised and clipped): the ego, then
+    the nearest vehicles not more than 2 lengths behind and within the perception distance, by longitudinal
+    distance (ties in road order), zeros for the missing."""
+    n_worlds, n = x.shape
+    observed = out.shape[1]
+    order = np.empty(n, np.int64)
+    key = np.empty(n)
+    ranges = ((-5.0 * 40.0, 5.0 * 40.0), (-y_range, y_range), (-2 * 40.0, 2 * 40.0), (-2 * 40.0, 2 * 40.0))
+    row = np.empty(4)
+    for b in range(n_worlds):
+        out[b] = 0
+        count = 0
+        for v in range(1, n):
+            dx, dy = x[b, v] - x[b, 0], y[b, v] - y[b, 0]
+            if np.sqrt(_dot2(dx, dy, dx, dy, fused)) < PERCEPTION and -2 * LENGTH < dx:
+                k = count  # insertion sort, stable
+                while k > 0 and key[k - 1] > abs(dx):
+                    key[k], order[k] = key[k - 1], order[k - 1]
+                    k -= 1
+                key[k], order[k] = abs(dx), v
+                count += 1
+        count = min(count, observed - 1)
+        for r in range(count + 1):
+            v = 0 if r == 0 else order[r - 1]
+            row[0], row[1] = x[b, v], y[b, v]
+            row[2], row[3] = speed[b, v] * cos_h[b, v], speed[b, v] * sin_h[b, v]
+            if r > 0:
+                row[0] -= x[b, 0]
+                row[1] -= y[b, 0]
+                row[2] -= speed[b, 0] * cos_h[b, 0]
+                row[3] -= speed[b, 0] * sin_h[b, 0]
+            out[b, r, 0] = 1.0
+            for f in range(4):
+                low, high = ranges[f]
+                value = -1 + (row[f] - low) * 2 / (high - low)
+                out[b, r, f + 1] = min(max(value, -1.0), 1.0)
+
+
+class _Body:
+    """What highway-env's collision test (RoadObject._is_colliding) reads of a vehicle, over kernel values."""
+
+    LENGTH, WIDTH, diagonal = Vehicle.LENGTH, Vehicle.WIDTH, DIAGONAL
+    polygon = RoadObject.polygon
+    direction = RoadObject.direction
+    velocity = Vehicle.velocity
+    _is_colliding = RoadObject._is_colliding
+
+    def __init__(self, state: HighwayState, b: int, v: int):
+        self.position = np.array([state.x[b, v], state.y[b, v]])
+        self.heading, self.speed = state.heading[b, v], state.speed[b, v]
+
+
+class HighwayKernel:
+    """B highway-env traffic states stepped together: ``reset`` from seeds, ``apply`` an environment action,
+    ``step`` the ego actions; the state is plain arrays (``state``), so snapshots are copies."""
+
+    def __init__(self, spec: KernelSpec, batch: int):
+        self.spec, self.batch = spec, batch
+        self.state = HighwayState.empty(batch, spec.others + 1)
+        self.rngs: list[np.random.Generator | None] = [None] * batch
+        self.network = RoadNetwork.straight_road_network(spec.lanes, speed_limit=SPEED_LIMIT)
+        self.terminated = np.zeros(batch, bool)
+        self._pairs = np.empty((batch * spec.others, 2), np.int64)
+
+    # --- reset -----------------------------------------------------------------------------------------------
+
+    def reset(self, seeds: list[int | None] | np.ndarray, rows: np.ndarray | list[int] | None = None) -> np.ndarray:
+        """highway-env's reset(seed=...) of each row (all rows by default); a seed of None continues that row's
+        generator, as reset() without a seed does. Returns the observations of the reset rows."""
+        rows = np.arange(self.batch) if rows is None else np.asarray(rows)
+        from gymnasium.utils import seeding
+
+        for b, seed in zip(rows, seeds, strict=True):
+            if seed is not None or self.rngs[b] is None:
+                self.rngs[b] = seeding.np_random(None if seed is None else int(seed))[0]
+            self._place(int(b), self.rngs[b])
+        state = self.state
+        state.lane[rows] = closest_lanes(state.x[rows], state.y[rows], state.heading[rows], self.spec.lanes)
+        state.target_lane[rows] = state.lane[rows]
+        if self.spec.discrete:
+            speeds = np.array(self.spec.target_speeds)
+            state.target_speed[rows, 0] = speeds[_speed_index(speeds, state.target_speed[rows, 0])]
+        state.time[rows] = 0
+        self.terminated[rows] = False
+        return self.observe()[rows]
+
+    def _place(self, b: int, rng: np.random.Generator) -> None:
+        """HighwayEnv._create_vehicles with Vehicle.create_random's calls on the generator, in their order."""
+        spec, state = self.spec, self.state
+        for name in FIELDS:
+            state.arrays[name][b] = 0
+        xs: list[float] = []
+        for v in range(spec.others + 1):
+            rng.choice(list(self.network.graph.keys()))
+            rng.choice(list(self.network.graph["0"].keys()))
+            lane_id = spec.initial_lane if v == 0 and spec.initial_lane is not None else rng.choice(spec.lanes)
+            lane = self.network.get_lane(("0", "1", lane_id))
+            speed = 25.0 if v == 0 else rng.uniform(0.7 * lane.speed_limit, 0.8 * lane.speed_limit)
+            spacing = spec.ego_spacing if v == 0 else 1 / spec.density
+            offset = spacing * (12 + 1.0 * speed) * np.exp(-5 / 40 * spec.lanes)
+            x0 = np.max(xs) if xs else 3 * offset
+            x0 += offset * rng.uniform(0.9, 1.1)
+            position = lane.position(x0, 0)
+            xs.append(lane.local_coordinates(position)[0])
+            state.x[b, v], state.y[b, v] = position
+            state.heading[b, v] = lane.heading_at(x0)
+            state.speed[b, v] = state.target_speed[b, v] = state.own_target_speed[b, v] = speed
+            if v > 0:
+                state.delta[b, v] = rng.uniform(low=IDMVehicle.DELTA_RANGE[0], high=IDMVehicle.DELTA_RANGE[1])
+                state.timer[b, v] = (np.sum(position) * np.pi) % LANE_CHANGE_DELAY
+
+    # --- environment action ----------------------------------------------------------------------------------
+
+    def apply(self, env_action: np.ndarray, rows: np.ndarray | None = None) -> None:
+        """Foil's environment action (search.highway.adapter), (B, PERTURBED, 2) in [-1, 1], on the first
+        PERTURBED other vehicles: target speed = own + SPEED_RANGE * [0]; [1] beyond +-LANE_THRESHOLD commands a
+        lane change right (+) or left (-) where there is a lane and none is under way."""
+        state = self.state
+        rows = np.arange(self.batch) if rows is None else np.asarray(rows)
+        action = np.asarray(env_action, dtype=np.float64).reshape(len(rows), -1, 2)
+        k = min(action.shape[1], PERTURBED, self.spec.others)
+        cols = np.arange(1, k + 1)
+        grid = np.ix_(rows, cols)
+        state.target_speed[grid] = state.own_target_speed[grid] + SPEED_RANGE * action[:, :k, 0]
+        lane = state.lane[grid]
+        wanted = lane + np.where(action[:, :k, 1] > 0, 1, -1)
+        change = (np.abs(action[:, :k, 1]) > LANE_THRESHOLD) & (lane == state.target_lane[grid])
+        change &= (wanted >= 0) & (wanted < self.spec.lanes)
+        state.target_lane[grid] = np.where(change, wanted, state.target_lane[grid])
+
+    # --- step ------------------------------------------------------------------------------------------------
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """env.step(action) of every state: (observations (B, V, 5) float32, rewards, terminated, truncated)."""
+        spec, state = self.spec, self.state
+        state.time += spec.time_step
+        self._ego_act(np.asarray(actions))
+        for _ in range(spec.frames):
+            self._frame()
+        observation = self.observe()
+        reward, on_road = self._reward()
+        self.terminated = state.crashed[:, 0] | (spec.offroad_terminal & ~on_road)
+        return observation, reward, self.terminated.copy(), state.time >= spec.duration
+
+    def _ego_act(self, actions: np.ndarray) -> None:
+        """The action type's act(action), before the first frame."""
+        spec, state = self.spec, self.state
+        if not spec.discrete:
+            if spec.clip_action:
+                actions = np.clip(actions, -1, 1)
+            state.acceleration[:, 0] = utils.lmap(actions[:, 0], [-1, 1], spec.acceleration_range)
+            state.steering[:, 0] = utils.lmap(actions[:, 1], [-1, 1], spec.steering_range)
+            return
+        names = np.array(META_ACTIONS)[actions.astype(np.int64)]
+        speeds = np.array(spec.target_speeds)
+        index = _speed_index(speeds, state.speed[:, 0]) + np.where(names == "FASTER", 1, -1)
+        index = np.clip(index, 0, speeds.size - 1)
+        longitudinal = (names == "FASTER") | (names == "SLOWER")
+        state.target_speed[:, 0] = np.where(longitudinal, speeds[index], state.target_speed[:, 0])
+        side = np.where(names == "LANE_RIGHT", 1, np.where(names == "LANE_LEFT", -1, 0))
+        wanted = np.clip(state.target_lane[:, 0] + side, 0, spec.lanes - 1)
+        reachable = (np.abs(state.y[:, 0] - LANE_WIDTH * wanted) <= 2 * LANE_WIDTH) & (0 <= state.x[:, 0])
+        reachable &= state.x[:, 0] < END
+        state.target_lane[:, 0] = np.where((side != 0) & reachable, wanted, state.target_lane[:, 0])
+
+    def _frame(self) -> None:
+        """One simulation step: road.act() (every vehicle decides), road.step(dt) (every vehicle moves, then the
+        ego's collisions)."""
+        spec, state = self.spec, self.state
+        cos_h, sin_h = np.cos(state.heading), np.sin(state.heading)
+        target = np.clip(state.target_speed, 0, SPEED_LIMIT)
+        if not spec.discrete:
+            target[:, 0] = 0.0  # a Vehicle has no target speed: IDM reads 0
+        ratio = np.where(state.speed < 0, 0.0, state.speed) / np.abs(_not_zero(target))
+        power = np.power(
+            np.ascontiguousarray(np.broadcast_to(ratio[:, :, None], ratio.shape + ratio.shape[1:])),
+            np.ascontiguousarray(np.broadcast_to(state.delta[:, None, :], ratio.shape + ratio.shape[1:])),
+        )
+        _decide(
+            state.x,
+            state.y,
+            state.speed,
+            cos_h,
+            sin_h,
+            state.lane,
+            state.target_lane,
+            state.crashed,
+            state.timer,
+            power,
+            spec.discrete,
+            spec.lanes,
+            FUSED,
+            state.acceleration,
+        )
+        steered = ~state.crashed
+        if not spec.discrete:
+            steered[:, 0] = False
+        state.steering[steered] = steering_control(state, steered)
+        if spec.discrete:
+            state.acceleration[:, 0] = ControlledVehicle.KP_A * (state.target_speed[:, 0] - state.speed[:, 0])
+        self._move()
+        cos_h, sin_h = np.cos(state.heading), np.sin(state.heading)
+        count = _collision_candidates(state.x, state.y, state.speed, cos_h, sin_h, spec.dt, FUSED, self._pairs)
+        for b, j in self._pairs[:count]:
+            ego, other = _Body(state, b, 0), _Body(state, b, j)
+            intersecting, will_intersect, transition = ego._is_colliding(other, spec.dt)
+            if will_intersect:
+                state.impact_x[b, 0], state.impact_y[b, 0] = transition / 2
+                state.impact_x[b, j], state.impact_y[b, j] = -transition / 2
+                state.impacted[b, 0] = state.impacted[b, j] = True
+            if intersecting:
+                state.crashed[b, 0] = state.crashed[b, j] = True
+
+    def _move(self) -> None:
+        """Vehicle.step(dt) of every vehicle (IDMVehicle's timer included)."""
+        spec, state = self.spec, self.state
+        dt = spec.dt
+        state.timer[:, 1:] += dt
+        crashed = state.crashed
+        state.steering[crashed] = 0
+        state.acceleration[crashed] = -1.0 * state.speed[crashed]
+        fast, slow = state.speed > MAX_SPEED, state.speed < MIN_SPEED
+        limit = np.where(fast, 1.0 * (MAX_SPEED - state.speed), 1.0 * (MIN_SPEED - state.speed))
+        acc = state.acceleration
+        state.acceleration[:] = np.where(fast & (limit < acc), limit, np.where(slow & (limit > acc), limit, acc))
+        beta = np.arctan(1 / 2 * np.tan(state.steering))
+        state.x += state.speed * np.cos(state.heading + beta) * dt
+        state.y += state.speed * np.sin(state.heading + beta) * dt
+        hit = state.impacted
+        state.x[hit] += state.impact_x[hit]
+        state.y[hit] += state.impact_y[hit]
+        state.crashed |= hit
+        hit[:] = False
+        state.heading += state.speed * np.sin(beta) / (LENGTH / 2) * dt
+        state.speed += state.acceleration * dt
+        state.lane[:] = closest_lanes(state.x, state.y, state.heading, self.spec.lanes)
+
+    # --- observation and reward --------------------------------------------------------------------------------
+
+    def observe(self) -> np.ndarray:
+        """The Kinematics observation of every state, (B, V, 5) float32."""
+        state = self.state
+        out = np.empty((self.batch, self.spec.observed, 5))
+        y_range = LANE_WIDTH * self.spec.lanes
+        _observe(state.x, state.y, state.speed, np.cos(state.heading), np.sin(state.heading), y_range, FUSED, out)
+        return out.astype(np.float32)
+
+    def on_road(self) -> np.ndarray:
+        """The ego is on its closest lane (Vehicle.on_road)."""
+        state = self.state
+        x, lateral = state.x[:, 0], state.y[:, 0] - LANE_WIDTH * state.lane[:, 0]
+        return (np.abs(lateral) <= LANE_WIDTH / 2) & (-VEHICLE_LENGTH <= x) & (x < END)
+
+    def _reward(self) -> tuple[np.ndarray, np.ndarray]:
+        """HighwayEnv._reward: speed, right lane and collision terms, normalised, times on-road."""
+        spec, state = self.spec, self.state
+        on_road = self.on_road()
+        lane = state.target_lane[:, 0] if spec.discrete else state.lane[:, 0]
+        forward_speed = state.speed[:, 0] * np.cos(state.heading[:, 0])
+        scaled_speed = utils.lmap(forward_speed, spec.reward_speed_range, [0, 1])
+        terms = (
+            (spec.collision_reward, state.crashed[:, 0].astype(np.float64)),
+            (spec.right_lane_reward, lane / max(spec.lanes - 1, 1)),
+            (spec.high_speed_reward, np.clip(scaled_speed, 0, 1)),
+            (spec.on_road_reward, on_road.astype(np.float64)),
+        )
+        reward = np.zeros(self.batch)
+        for weight, term in terms:
+            reward = reward + weight * term
+        if spec.normalize_reward:
+            best = spec.high_speed_reward + spec.right_lane_reward
+            reward = utils.lmap(reward, [spec.collision_reward, best], [0, 1])
+        return reward * on_road.astype(np.float64), on_road
+
+
+def _speed_index(speeds: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """MDPVehicle.speed_to_index."""
+    x = (speed - speeds[0]) / (speeds[-1] - speeds[0])
+    return np.clip(np.round(x * (speeds.size - 1)), 0, speeds.size - 1).astype(np.int64)
+
+
+def notice(reason: str) -> None:
+    """The one line that says a highway setting runs in highway-env itself, not in the kernel."""
+    print(f"highway kernel: {reason} is not covered; stepping highway-env itself", file=sys.stderr)
