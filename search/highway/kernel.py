@@ -30,8 +30,8 @@ import numba
 import numpy as np
 from highway_env import utils
 from highway_env.envs.common.abstract import AbstractEnv
+from highway_env.envs.common.action import ContinuousAction
 from highway_env.road.lane import AbstractLane
-from highway_env.road.road import RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
 from highway_env.vehicle.kinematics import Vehicle
@@ -43,6 +43,7 @@ from numba.extending import intrinsic
 from search.highway.adapter import LANE_THRESHOLD, PERTURBED, SPEED_RANGE
 
 _jit = numba.njit(cache=True, nogil=True)
+_inline = numba.njit(cache=True, nogil=True, inline="always")  # helpers of the per-vehicle loops
 
 # highway-env's constants, read from its classes
 LENGTH, WIDTH = float(Vehicle.LENGTH), float(Vehicle.WIDTH)
@@ -91,7 +92,7 @@ def _blas_fuses() -> bool:
 FUSED = _blas_fuses()
 
 
-@_jit
+@_inline
 def _dot2(a0: float, a1: float, b0: float, b1: float, fused: bool) -> float:
     """numpy's np.dot of two 2-vectors, bit for bit."""
     if fused:
@@ -151,9 +152,14 @@ def spec_of(config: dict) -> KernelSpec | str:
     for key, value in others.items():
         if config[key] != value:
             return f"{key} {config[key]!r}"
+    if int(observation.get("vehicles_count", 5)) < 2:
+        return "an observation of the ego alone"
     if config["simulation_frequency"] % config["policy_frequency"]:
         return "a simulation frequency that is not a multiple of the policy frequency"
-    ranges = {"acceleration_range": (-5.0, 5.0), "steering_range": (-np.pi / 4, np.pi / 4)}  # ContinuousAction's
+    ranges = {
+        "acceleration_range": ContinuousAction.ACCELERATION_RANGE,
+        "steering_range": ContinuousAction.STEERING_RANGE,
+    }
     return KernelSpec(
         lanes=int(config["lanes_count"]),
         others=int(config["vehicles_count"]),
@@ -254,20 +260,26 @@ def closest_lanes(x: np.ndarray, y: np.ndarray, heading: np.ndarray, lanes: int)
     return np.argmin(np.stack(distances, axis=-1), axis=-1)
 
 
-def steering_control(state: HighwayState, rows: np.ndarray) -> np.ndarray:
-    """ControlledVehicle.steering_control towards each vehicle's target lane (rows: a boolean mask)."""
-    speed, heading = state.speed[rows], state.heading[rows]
-    lateral = state.y[rows] - LANE_WIDTH * state.target_lane[rows]
+def _clip(x: np.ndarray, low: float, high: float) -> np.ndarray:
+    """np.clip without its wrapper's overhead (the same values: no NaN here)."""
+    return np.minimum(np.maximum(x, low), high)
+
+
+def steering_control(state: HighwayState) -> np.ndarray:
+    """ControlledVehicle.steering_control of every vehicle towards its target lane (clipped twice, as
+    IDMVehicle.act clips it again)."""
+    speed = _not_zero(state.speed)
+    lateral = state.y - LANE_WIDTH * state.target_lane
     lateral_speed_command = -ControlledVehicle.KP_LATERAL * lateral
-    heading_command = np.arcsin(np.clip(lateral_speed_command / _not_zero(speed), -1, 1))
-    heading_ref = 0.0 + np.clip(heading_command, -np.pi / 4, np.pi / 4)
-    heading_rate_command = ControlledVehicle.KP_HEADING * _wrap_to_pi(heading_ref - heading)
-    slip_angle = np.arcsin(np.clip(LENGTH / 2 / _not_zero(speed) * heading_rate_command, -1, 1))
-    steering = np.clip(np.arctan(2 * np.tan(slip_angle)), -MAX_STEERING, MAX_STEERING)
-    return np.clip(steering, -MAX_STEERING, MAX_STEERING)
+    heading_command = np.arcsin(_clip(lateral_speed_command / speed, -1, 1))
+    heading_ref = 0.0 + _clip(heading_command, -np.pi / 4, np.pi / 4)
+    heading_rate_command = ControlledVehicle.KP_HEADING * _wrap_to_pi(heading_ref - state.heading)
+    slip_angle = np.arcsin(_clip(LENGTH / 2 / speed * heading_rate_command, -1, 1))
+    steering = _clip(np.arctan(2 * np.tan(slip_angle)), -MAX_STEERING, MAX_STEERING)
+    return _clip(steering, -MAX_STEERING, MAX_STEERING)
 
 
-@_jit
+@_inline
 def _neighbours(x: np.ndarray, y: np.ndarray, b: int, i: int, lane: int) -> tuple[int, int]:
     """Road.neighbour_vehicles: the vehicles just ahead of and just behind vehicle i on a lane (-1: none)."""
     s = x[b, i]
@@ -286,7 +298,7 @@ def _neighbours(x: np.ndarray, y: np.ndarray, b: int, i: int, lane: int) -> tupl
     return front, rear
 
 
-@_jit
+@_inline
 def _desired_gap(
     x: np.ndarray, speed: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray, b: int, i: int, f: int, fused: bool
 ) -> float:
@@ -297,24 +309,25 @@ def _desired_gap(
     return DISTANCE_WANTED + speed[b, i] * TIME_WANTED + speed[b, i] * dv / TWO_SQRT_AB
 
 
-@_jit
+@_inline
 def _acceleration(
     x: np.ndarray,
     speed: np.ndarray,
     cos_h: np.ndarray,
     sin_h: np.ndarray,
-    power: np.ndarray,
+    power: tuple[np.ndarray, np.ndarray, np.ndarray],
     b: int,
     me: int,
     ego: int,
     front: int,
     fused: bool,
 ) -> float:
-    """IDMVehicle.acceleration as vehicle ``me`` computes it for vehicle ``ego`` behind ``front`` (-1: none);
-    power[b, ego, me] holds numpy's power of ego's speed ratio to me's exponent."""
+    """IDMVehicle.acceleration as vehicle ``me`` computes it for vehicle ``ego`` behind ``front`` (-1: none).
+    IDM's power of ego's speed ratio to me's exponent comes from numpy (``_powers``)."""
     if ego < 0:
         return 0.0
-    acceleration = COMFORT_ACC_MAX * (1 - power[b, ego, me])
+    own, table, column = power
+    acceleration = COMFORT_ACC_MAX * (1 - (own[b, me] if ego == me else table[column[b, me], ego]))
     if front >= 0:
         d = x[b, front] - x[b, ego]
         if abs(d) <= 1e-2:
@@ -324,7 +337,7 @@ def _acceleration(
     return acceleration
 
 
-@_jit
+@_inline
 def _mobil(
     x: np.ndarray,
     y: np.ndarray,
@@ -332,7 +345,7 @@ def _mobil(
     cos_h: np.ndarray,
     sin_h: np.ndarray,
     lane: np.ndarray,
-    power: np.ndarray,
+    power: tuple[np.ndarray, np.ndarray, np.ndarray],
     b: int,
     i: int,
     candidate: int,
@@ -368,7 +381,7 @@ def _decide(
     target_lane: np.ndarray,
     crashed: np.ndarray,
     timer: np.ndarray,
-    power: np.ndarray,
+    power: tuple[np.ndarray, np.ndarray, np.ndarray],
     ego_controlled: bool,
     lanes: int,
     fused: bool,
@@ -558,8 +571,6 @@ class HighwayKernel:
         self.spec, self.batch = spec, batch
         self.state = HighwayState.empty(batch, spec.others + 1)
         self.rngs: list[np.random.Generator | None] = [None] * batch
-        self.network = RoadNetwork.straight_road_network(spec.lanes, speed_limit=SPEED_LIMIT)
-        self.terminated = np.zeros(batch, bool)
         self._pairs = np.empty((batch * spec.others, 2), np.int64)
 
     # --- reset -----------------------------------------------------------------------------------------------
@@ -581,33 +592,34 @@ class HighwayKernel:
             speeds = np.array(self.spec.target_speeds)
             state.target_speed[rows, 0] = speeds[_speed_index(speeds, state.target_speed[rows, 0])]
         state.time[rows] = 0
-        self.terminated[rows] = False
         return self.observe()[rows]
 
     def _place(self, b: int, rng: np.random.Generator) -> None:
-        """HighwayEnv._create_vehicles with Vehicle.create_random's calls on the generator, in their order."""
+        """HighwayEnv._create_vehicles: Vehicle.create_random's draws from the generator, in their order (its
+        choices of road draw nothing: there is one road), then their arithmetic, vectorised. Every vehicle is
+        placed ahead of the last one, so the farthest vehicle so far is the last one."""
         spec, state = self.spec, self.state
+        n = spec.others + 1
+        lanes, speeds, gaps, deltas = np.empty(n, np.int64), np.empty(n), np.empty(n), np.zeros(n)
+        for v in range(n):
+            ego = v == 0
+            lanes[v] = spec.initial_lane if ego and spec.initial_lane is not None else rng.integers(spec.lanes)
+            speeds[v] = 25.0 if ego else rng.uniform(0.7 * SPEED_LIMIT, 0.8 * SPEED_LIMIT)
+            gaps[v] = rng.uniform(0.9, 1.1)
+            if not ego:
+                deltas[v] = rng.uniform(low=IDMVehicle.DELTA_RANGE[0], high=IDMVehicle.DELTA_RANGE[1])
+        spacing = np.full(n, 1 / spec.density)
+        spacing[0] = spec.ego_spacing
+        offsets = spacing * (12 + 1.0 * speeds) * np.exp(-5 / 40 * spec.lanes)
+        steps = offsets * gaps
+        steps[0] += 3 * offsets[0]
+        x = np.cumsum(steps)
+        y = LANE_WIDTH * lanes
         for name in FIELDS:
             state.arrays[name][b] = 0
-        xs: list[float] = []
-        for v in range(spec.others + 1):
-            rng.choice(list(self.network.graph.keys()))
-            rng.choice(list(self.network.graph["0"].keys()))
-            lane_id = spec.initial_lane if v == 0 and spec.initial_lane is not None else rng.choice(spec.lanes)
-            lane = self.network.get_lane(("0", "1", lane_id))
-            speed = 25.0 if v == 0 else rng.uniform(0.7 * lane.speed_limit, 0.8 * lane.speed_limit)
-            spacing = spec.ego_spacing if v == 0 else 1 / spec.density
-            offset = spacing * (12 + 1.0 * speed) * np.exp(-5 / 40 * spec.lanes)
-            x0 = np.max(xs) if xs else 3 * offset
-            x0 += offset * rng.uniform(0.9, 1.1)
-            position = lane.position(x0, 0)
-            xs.append(lane.local_coordinates(position)[0])
-            state.x[b, v], state.y[b, v] = position
-            state.heading[b, v] = lane.heading_at(x0)
-            state.speed[b, v] = state.target_speed[b, v] = state.own_target_speed[b, v] = speed
-            if v > 0:
-                state.delta[b, v] = rng.uniform(low=IDMVehicle.DELTA_RANGE[0], high=IDMVehicle.DELTA_RANGE[1])
-                state.timer[b, v] = (np.sum(position) * np.pi) % LANE_CHANGE_DELAY
+        state.x[b], state.y[b], state.speed[b], state.delta[b] = x, y, speeds, deltas
+        state.target_speed[b] = state.own_target_speed[b] = speeds
+        state.timer[b, 1:] = ((x + y) * np.pi)[1:] % LANE_CHANGE_DELAY
 
     # --- environment action ----------------------------------------------------------------------------------
 
@@ -630,17 +642,31 @@ class HighwayKernel:
 
     # --- step ------------------------------------------------------------------------------------------------
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """env.step(action) of every state: (observations (B, V, 5) float32, rewards, terminated, truncated)."""
+    def step(
+        self, actions: np.ndarray, rows: np.ndarray | list[int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """env.step(action) of every state, or of ``rows`` only (the others stay as they are: an episode that
+        has ended is not stepped on): (observations (R, V, 5) float32, rewards, terminated, truncated)."""
+        if rows is None:
+            return self._step(np.asarray(actions))
+        rows = np.asarray(rows)
+        whole, self.state = self.state, self.state.take(rows)
+        try:
+            return self._step(np.asarray(actions))
+        finally:
+            part, self.state = self.state, whole
+            self.state.assign(rows, part)
+
+    def _step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         spec, state = self.spec, self.state
         state.time += spec.time_step
-        self._ego_act(np.asarray(actions))
+        self._ego_act(actions)
         for _ in range(spec.frames):
             self._frame()
         observation = self.observe()
         reward, on_road = self._reward()
-        self.terminated = state.crashed[:, 0] | (spec.offroad_terminal & ~on_road)
-        return observation, reward, self.terminated.copy(), state.time >= spec.duration
+        terminated = state.crashed[:, 0] | (spec.offroad_terminal & ~on_road)
+        return observation, reward, terminated, state.time >= spec.duration
 
     def _ego_act(self, actions: np.ndarray) -> None:
         """The action type's act(action), before the first frame."""
@@ -668,14 +694,7 @@ class HighwayKernel:
         ego's collisions)."""
         spec, state = self.spec, self.state
         cos_h, sin_h = np.cos(state.heading), np.sin(state.heading)
-        target = np.clip(state.target_speed, 0, SPEED_LIMIT)
-        if not spec.discrete:
-            target[:, 0] = 0.0  # a Vehicle has no target speed: IDM reads 0
-        ratio = np.where(state.speed < 0, 0.0, state.speed) / np.abs(_not_zero(target))
-        power = np.power(
-            np.ascontiguousarray(np.broadcast_to(ratio[:, :, None], ratio.shape + ratio.shape[1:])),
-            np.ascontiguousarray(np.broadcast_to(state.delta[:, None, :], ratio.shape + ratio.shape[1:])),
-        )
+        power = self._powers()
         _decide(
             state.x,
             state.y,
@@ -695,7 +714,7 @@ class HighwayKernel:
         steered = ~state.crashed
         if not spec.discrete:
             steered[:, 0] = False
-        state.steering[steered] = steering_control(state, steered)
+        state.steering[:] = np.where(steered, steering_control(state), state.steering)
         if spec.discrete:
             state.acceleration[:, 0] = ControlledVehicle.KP_A * (state.target_speed[:, 0] - state.speed[:, 0])
         self._move()
@@ -710,6 +729,24 @@ class HighwayKernel:
                 state.impacted[b, 0] = state.impacted[b, j] = True
             if intersecting:
                 state.crashed[b, 0] = state.crashed[b, j] = True
+
+    def _powers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """numpy's power of each vehicle's IDM speed ratio to the exponents _decide needs: each vehicle's own
+        (own[b, v]), and, for the vehicles that run MOBIL in this frame (their lane-change timer is up), every
+        vehicle's to theirs (table[column[b, v], u]: they judge their followers with their own exponent)."""
+        state = self.state
+        target = np.minimum(np.maximum(state.target_speed, 0), SPEED_LIMIT)
+        if not self.spec.discrete:
+            target[:, 0] = 0.0  # a Vehicle has no target speed: IDM reads 0
+        ratio = np.where(state.speed < 0, 0.0, state.speed) / np.abs(_not_zero(target))
+        own = np.power(ratio, state.delta)
+        deciders = (state.lane == state.target_lane) & (LANE_CHANGE_DELAY < state.timer) & ~state.crashed
+        deciders[:, 0] = False
+        rows, vehicles = np.nonzero(deciders)
+        column = np.full(ratio.shape, -1, np.int64)
+        column[rows, vehicles] = np.arange(len(rows))
+        exponents = np.repeat(state.delta[rows, vehicles], ratio.shape[1]).reshape(len(rows), ratio.shape[1])
+        return own, np.power(ratio[rows], exponents), column
 
     def _move(self) -> None:
         """Vehicle.step(dt) of every vehicle (IDMVehicle's timer included)."""
@@ -740,7 +777,7 @@ class HighwayKernel:
     def observe(self) -> np.ndarray:
         """The Kinematics observation of every state, (B, V, 5) float32."""
         state = self.state
-        out = np.empty((self.batch, self.spec.observed, 5))
+        out = np.empty((len(state.x), self.spec.observed, 5))
         y_range = LANE_WIDTH * self.spec.lanes
         _observe(state.x, state.y, state.speed, np.cos(state.heading), np.sin(state.heading), y_range, FUSED, out)
         return out.astype(np.float32)
@@ -764,7 +801,7 @@ class HighwayKernel:
             (spec.high_speed_reward, np.clip(scaled_speed, 0, 1)),
             (spec.on_road_reward, on_road.astype(np.float64)),
         )
-        reward = np.zeros(self.batch)
+        reward = np.zeros(len(state.x))
         for weight, term in terms:
             reward = reward + weight * term
         if spec.normalize_reward:
