@@ -1,8 +1,14 @@
-"""Highway benchmarks: the search's simulator steps per second against Agent Disagreements-style branching, and
-the highway study's bundle build time.
+"""Highway benchmarks: the batched kernel's steps per second against highway-env, the search's simulator steps per
+second against Agent Disagreements-style branching, and the highway study's bundle build time.
 
-    .venv/bin/python benchmarks/bench_highway.py                   # search speed (a few minutes on 2 cores)
+    .venv/bin/python benchmarks/bench_highway.py                   # kernel and search speed (a few minutes)
+    .venv/bin/python benchmarks/bench_highway.py --kernel-only     # the kernel's table alone
     .venv/bin/python benchmarks/bench_highway.py --bundle          # and a fresh build of studies/highway.toml
+
+Kernel: environment steps per second (one ego decision, five simulation steps, observation and reward) of the
+kernel (search.highway.kernel) at B = 1, 64 and 256 states per call, against highway-env stepped one environment
+at a time, on one core, under the same load: random ego actions and uniform environment actions on the scenario's
+traffic, an ended episode reset from a new seed (the kernel steps only running rows and resets ended ones).
 
 Speed: coupled simulator steps (one step of every agent's environment under one environment action, the unit of
 a search budget) per second of the whole MCTS loop on highway-dense with highway-lo and highway-hi, against the
@@ -27,6 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from search.gym.agents import load_agent  # noqa: E402
 from search.gym.problem import GymCoupledProblem  # noqa: E402
+from search.highway.adapter import PERTURBED  # noqa: E402
+from search.highway.batch import make_batch  # noqa: E402
 from search.highway.scenarios import SCENARIOS  # noqa: E402
 from search.solvers.mcts import MCTSConfig, mcts  # noqa: E402
 from search.solvers.reward import RewardConfig  # noqa: E402
@@ -68,6 +76,60 @@ def disagreement_branching(agents, scenario, budget: int) -> float:
     return steps / (time.perf_counter() - started)
 
 
+def _drive(rng: np.random.Generator, batch: int) -> tuple[np.ndarray, np.ndarray]:
+    """Random ego actions (steering small enough to stay on the road a while) and uniform environment actions."""
+    ego = (rng.uniform(-1, 1, (batch, 2)) * [0.5, 0.05]).astype(np.float32)
+    return ego, rng.uniform(-1, 1, (batch, PERTURBED, 2))
+
+
+def highway_env_speed(scenario, seconds: float) -> float:
+    """highway-env's environment steps per second, one environment at a time."""
+    adapter = scenario.load_adapter()
+    env, rng, seed = adapter.make(), np.random.default_rng(0), 0
+    env.reset(seed=seed)
+    steps, started = 0, time.perf_counter()
+    while time.perf_counter() - started < seconds:
+        ego, pushes = _drive(rng, 1)
+        adapter.apply(env, pushes[0])
+        _, _, terminated, truncated, _ = env.step(ego[0])
+        steps += 1
+        if terminated or truncated:
+            seed += 1
+            env.reset(seed=seed)
+    return steps / (time.perf_counter() - started)
+
+
+def kernel_speed(scenario, batch: int, seconds: float) -> float:
+    """The kernel's environment steps per second with ``batch`` states per call."""
+    kernel = make_batch(batch, scenario.settings)
+    rng, seed = np.random.default_rng(0), batch
+    kernel.reset(list(range(batch)))
+    kernel.step(np.zeros((batch, 2), np.float32))  # compiled (numba caches it on disk)
+    steps, started = 0, time.perf_counter()
+    while time.perf_counter() - started < seconds:
+        ego, pushes = _drive(rng, batch)
+        kernel.apply(pushes)
+        _, _, terminated, truncated = kernel.step(ego)
+        steps += batch
+        ended = np.flatnonzero(terminated | truncated)
+        if len(ended):
+            kernel.reset(list(range(seed, seed + len(ended))), ended)
+            seed += len(ended)
+    return steps / (time.perf_counter() - started)
+
+
+def kernel_table(scenario_name: str, seconds: float) -> None:
+    scenario = SCENARIOS[scenario_name]
+    reference = highway_env_speed(scenario, seconds)
+    print(f"\nEnvironment steps per second on {scenario_name}, one core ({seconds:.0f} s per row):\n")
+    print("| simulator | environment steps/s | vs highway-env |")
+    print("|---|---:|---:|")
+    print(f"| highway-env, one environment at a time | {reference:,.1f} | 1 |")
+    for batch in (1, 64, 256):
+        speed = kernel_speed(scenario, batch, seconds)
+        print(f"| kernel, B = {batch} | {speed:,.0f} | {speed / reference:,.0f}x |")
+
+
 def bundle_build() -> float:
     from search.bundle.build import build_bundle
 
@@ -85,7 +147,14 @@ def main() -> None:
     parser.add_argument("--agents", default="highway-lo,highway-hi")
     parser.add_argument("--scenario", default="highway-dense")
     parser.add_argument("--bundle", action="store_true", help="also time a fresh build of studies/highway.toml")
+    parser.add_argument("--kernel-only", action="store_true", help="only the kernel's table")
+    parser.add_argument("--seconds", type=float, default=10.0, help="seconds per row of the kernel's table")
     args = parser.parse_args()
+    print(f"{time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+    kernel_table(args.scenario, args.seconds)
+    print(f"(load average {os.getloadavg()[0]:.1f} after the kernel's table)")
+    if args.kernel_only:
+        return
     scenario = SCENARIOS[args.scenario]
     adapter = scenario.load_adapter()
     agents = [load_agent(name, adapter) for name in args.agents.split(",")]

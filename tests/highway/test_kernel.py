@@ -81,3 +81,26 @@ def test_an_uncovered_setting_runs_highway_env_with_a_notice(capsys):
     observations = batch.reset([0, 1])
     observations, rewards, terminated, truncated = batch.step(np.zeros((2, 2), np.float32))
     assert observations.shape == (2, 5, 5) and rewards.shape == (2,)
+
+
+def test_the_kernel_vector_environment_steps_as_sb3s_over_highway_env():
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from search.highway.env import make_env
+    from search.highway.vector import KernelVecEnv
+
+    reference, kernel = make_vec_env(lambda: make_env(), n_envs=3, seed=5), KernelVecEnv(3)
+    kernel.seed(5)
+    assert np.array_equal(reference.reset(), kernel.reset())
+    rng, ends = np.random.default_rng(0), 0
+    for _ in range(12):
+        actions = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
+        expected, got = reference.step(actions), kernel.step(actions)
+        for a, b in zip(expected[:3], got[:3], strict=True):
+            assert np.array_equal(a, b)
+        for a, b in zip(expected[3], got[3], strict=True):
+            assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
+            assert np.array_equal(a.get("terminal_observation"), b.get("terminal_observation"))
+            assert a.get("episode", {}).get("r") == b.get("episode", {}).get("r")
+        ends += int(expected[2].sum())
+    assert ends > 0  # episodes ended and were reset from highway-env's continuing generator
