@@ -8,6 +8,8 @@ Both take the same calls: ``reset(seeds, rows)``, ``apply(env_action, rows)`` (F
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from search.highway.adapter import HighwayAdapter
@@ -24,7 +26,7 @@ class EnvBatch:
     def _rows(self, rows: np.ndarray | list[int] | None) -> np.ndarray:
         return np.arange(self.batch) if rows is None else np.asarray(rows)
 
-    def reset(self, seeds: list[int | None] | np.ndarray, rows: np.ndarray | list[int] | None = None) -> np.ndarray:
+    def reset(self, seeds: Sequence[int | None] | np.ndarray, rows: np.ndarray | list[int] | None = None) -> np.ndarray:
         pairs = zip(self._rows(rows), seeds, strict=True)
         return np.stack([self.envs[b].reset(seed=None if s is None else int(s))[0] for b, s in pairs])
 

@@ -24,7 +24,8 @@ benchmarks/bench_highway_exact.py over 1,000 episodes). Three things make that p
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -96,7 +97,7 @@ FUSED = _blas_fuses()
 def _dot2(a0: float, a1: float, b0: float, b1: float, fused: bool) -> float:
     """numpy's np.dot of two 2-vectors, bit for bit."""
     if fused:
-        return _fma(a1, b1, a0 * b0)
+        return _fma(a1, b1, a0 * b0)  # type: ignore[call-arg]
     return a0 * b0 + a1 * b1
 
 
@@ -206,23 +207,39 @@ FIELDS = {  # per vehicle, (B, N); vehicle 0 is the ego, the others in highway-e
 }
 
 
-@dataclass
 class HighwayState:
-    """B traffic states as plain arrays: copying one is a snapshot, assigning it back a restore."""
+    """B traffic states as plain arrays (FIELDS, and env.time per state): copying one is a snapshot, assigning
+    it back a restore."""
 
-    arrays: dict[str, np.ndarray]
-    time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # env.time per state
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    lane: np.ndarray
+    target_lane: np.ndarray
+    target_speed: np.ndarray
+    own_target_speed: np.ndarray
+    delta: np.ndarray
+    timer: np.ndarray
+    crashed: np.ndarray
+    impact_x: np.ndarray
+    impact_y: np.ndarray
+    impacted: np.ndarray
+    steering: np.ndarray
+    acceleration: np.ndarray
+
+    def __init__(self, arrays: dict[str, np.ndarray], time: np.ndarray):
+        for name in FIELDS:
+            setattr(self, name, arrays[name])
+        self.time = time
 
     @classmethod
     def empty(cls, batch: int, vehicles: int) -> HighwayState:
-        arrays = {name: np.zeros((batch, vehicles), dtype) for name, dtype in FIELDS.items()}
-        return cls(arrays, np.zeros(batch))
+        return cls({name: np.zeros((batch, vehicles), dtype) for name, dtype in FIELDS.items()}, np.zeros(batch))
 
-    def __getattr__(self, name: str) -> np.ndarray:
-        try:
-            return self.__dict__["arrays"][name]
-        except KeyError:
-            raise AttributeError(name) from None
+    @property
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: getattr(self, name) for name in FIELDS}
 
     def copy(self) -> HighwayState:
         return HighwayState({k: v.copy() for k, v in self.arrays.items()}, self.time.copy())
@@ -232,14 +249,13 @@ class HighwayState:
 
     def assign(self, rows: np.ndarray | list[int], other: HighwayState) -> None:
         for name, values in self.arrays.items():
-            values[rows] = other.arrays[name]
+            values[rows] = getattr(other, name)
         self.time[rows] = other.time
 
     def equals(self, other: HighwayState) -> bool:
         """Bit for bit (NaN-free states)."""
-        return all(np.array_equal(v, other.arrays[k]) for k, v in self.arrays.items()) and np.array_equal(
-            self.time, other.time
-        )
+        same = all(np.array_equal(v, getattr(other, k)) for k, v in self.arrays.items())
+        return same and np.array_equal(self.time, other.time)
 
 
 def _not_zero(x: np.ndarray, eps: float = 1e-2) -> np.ndarray:
@@ -575,7 +591,7 @@ class HighwayKernel:
 
     # --- reset -----------------------------------------------------------------------------------------------
 
-    def reset(self, seeds: list[int | None] | np.ndarray, rows: np.ndarray | list[int] | None = None) -> np.ndarray:
+    def reset(self, seeds: Sequence[int | None] | np.ndarray, rows: np.ndarray | list[int] | None = None) -> np.ndarray:
         """highway-env's reset(seed=...) of each row (all rows by default); a seed of None continues that row's
         generator, as reset() without a seed does. Returns the observations of the reset rows."""
         rows = np.arange(self.batch) if rows is None else np.asarray(rows)

@@ -68,7 +68,7 @@ class Comparison:
     lengths: list[int] = field(default_factory=list)
 
 
-def _kernel_view(kernel: HighwayKernel, b: int, discrete: bool) -> dict[str, np.ndarray]:
+def _kernel_view(kernel: HighwayKernel, b: int | np.integer, discrete: bool) -> dict[str, np.ndarray]:
     state = kernel.state
     view = {name: state.arrays[name][b].copy() for name in ("x", "y", "heading", "speed", "lane", "crashed")}
     view["target_lane"] = state.target_lane[b].copy()
@@ -114,7 +114,7 @@ def compare(
     running = np.ones(len(seeds), bool)
     lengths = np.zeros(len(seeds), np.int64)
 
-    def check(b: int, what: str) -> bool:
+    def check(b: int | np.integer, what: str) -> bool:
         difference = _difference(env_state(envs[b], discrete), _kernel_view(kernel, b, discrete))
         if difference is None and not np.array_equal(observations[b], kernel_observations[b]):
             difference = f"observation {observations[b].tolist()} != {kernel_observations[b].tolist()}"

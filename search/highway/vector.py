@@ -75,4 +75,4 @@ class KernelVecEnv(VecEnv):
         raise AttributeError(f"the highway kernel's environments have no method {method_name!r}")
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
-        return [False] * len(self._get_indices(indices))
+        return [False] * len(list(self._get_indices(indices)))
