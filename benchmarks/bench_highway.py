@@ -8,7 +8,9 @@ second against Agent Disagreements-style branching, and the highway study's bund
 Kernel: environment steps per second (one ego decision, five simulation steps, observation and reward) of the
 kernel (search.highway.kernel) at B = 1, 64 and 256 states per call, against highway-env stepped one environment
 at a time, on one core, under the same load: random ego actions and uniform environment actions on the scenario's
-traffic, an ended episode reset from a new seed (the kernel steps only running rows and resets ended ones).
+traffic, an ended episode reset from a new seed (the kernel resets ended rows). Speeds are per second of this
+process's CPU time (time.process_time; everything here runs on one thread), so that other work on a shared
+machine slows both sides alike instead of whichever row it happens to overlap.
 
 Speed: coupled simulator steps (one step of every agent's environment under one environment action, the unit of
 a search budget) per second of the whole MCTS loop on highway-dense with highway-lo and highway-hi, against the
@@ -87,8 +89,8 @@ def highway_env_speed(scenario, seconds: float) -> float:
     adapter = scenario.load_adapter()
     env, rng, seed = adapter.make(), np.random.default_rng(0), 0
     env.reset(seed=seed)
-    steps, started = 0, time.perf_counter()
-    while time.perf_counter() - started < seconds:
+    steps, started = 0, time.process_time()
+    while time.process_time() - started < seconds:
         ego, pushes = _drive(rng, 1)
         adapter.apply(env, pushes[0])
         _, _, terminated, truncated, _ = env.step(ego[0])
@@ -96,7 +98,7 @@ def highway_env_speed(scenario, seconds: float) -> float:
         if terminated or truncated:
             seed += 1
             env.reset(seed=seed)
-    return steps / (time.perf_counter() - started)
+    return steps / (time.process_time() - started)
 
 
 def kernel_speed(scenario, batch: int, seconds: float) -> float:
@@ -105,8 +107,8 @@ def kernel_speed(scenario, batch: int, seconds: float) -> float:
     rng, seed = np.random.default_rng(0), batch
     kernel.reset(list(range(batch)))
     kernel.step(np.zeros((batch, 2), np.float32))  # compiled (numba caches it on disk)
-    steps, started = 0, time.perf_counter()
-    while time.perf_counter() - started < seconds:
+    steps, started = 0, time.process_time()
+    while time.process_time() - started < seconds:
         ego, pushes = _drive(rng, batch)
         kernel.apply(pushes)
         _, _, terminated, truncated = kernel.step(ego)
@@ -115,14 +117,14 @@ def kernel_speed(scenario, batch: int, seconds: float) -> float:
         if len(ended):
             kernel.reset(list(range(seed, seed + len(ended))), ended)
             seed += len(ended)
-    return steps / (time.perf_counter() - started)
+    return steps / (time.process_time() - started)
 
 
 def kernel_table(scenario_name: str, seconds: float) -> None:
     scenario = SCENARIOS[scenario_name]
     reference = highway_env_speed(scenario, seconds)
-    print(f"\nEnvironment steps per second on {scenario_name}, one core ({seconds:.0f} s per row):\n")
-    print("| simulator | environment steps/s | vs highway-env |")
+    print(f"\nEnvironment steps per CPU second on {scenario_name}, one core ({seconds:.0f} s per row):\n")
+    print("| simulator | environment steps per CPU second | vs highway-env |")
     print("|---|---:|---:|")
     print(f"| highway-env, one environment at a time | {reference:,.1f} | 1 |")
     for batch in (1, 64, 256):

@@ -9,16 +9,15 @@ the Kinematics observation and the reward; a seed places the same traffic as hig
 highway-env with a one-line notice.
 
 Exactness: every step agrees bit for bit with highway-env on the same machine (tests/highway/test_kernel.py;
-benchmarks/bench_highway_exact.py over 1,000 episodes). Three things make that possible:
+benchmarks/bench_highway_exact.py over 1,000 episodes), because every value is computed with the same
+floating-point operations in the same order:
 
 - numpy evaluates tan, arctan, arcsin and power with its own SIMD routines (SVML on AVX-512), which differ from
   the C library's by an ulp now and then; so every transcendental function is evaluated here by numpy's own
   ufuncs on the same float64 values (vectorised over the batch; numpy's result for a value does not depend on
-  the array around it), and numba does the branchy decisions with + - * / and sqrt only, which are exact;
+  the array around it), and numba does the branchy logic with + - * / and sqrt only, which are exact;
 - highway-env's two-element ``np.dot`` and ``np.linalg.norm`` go through BLAS, which fuses the last
-  multiply-add; ``FUSED`` probes that once and numba's ``_dot2`` does the same;
-- the one computation that is neither (the polygons' separating-axis test, with its matrix products) is left to
-  highway-env's own code, called only for the rare pairs that numba cannot prove to be clearly apart.
+  multiply-add on FMA hardware; ``FUSED`` probes that once and numba's ``_dot2`` does the same.
 """
 
 from __future__ import annotations
@@ -36,7 +35,6 @@ from highway_env.road.lane import AbstractLane
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
 from highway_env.vehicle.kinematics import Vehicle
-from highway_env.vehicle.objects import RoadObject
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
@@ -67,7 +65,6 @@ LANE_CHANGE_DELAY = float(IDMVehicle.LANE_CHANGE_DELAY)
 MAX_STEERING = float(ControlledVehicle.MAX_STEERING_ANGLE)
 PERCEPTION = float(AbstractEnv.PERCEPTION_DISTANCE)
 IDM_TYPE = "highway_env.vehicle.behavior.IDMVehicle"
-SEPARATION_MARGIN = 1e-6  # m: far above float64 rounding at highway coordinates (about 1e-12 m)
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # DiscreteMetaAction.ACTIONS_ALL
 
 
@@ -443,55 +440,76 @@ def _decide(
             acceleration[b, i] = min(max(a, -ACC_MAX), ACC_MAX)
 
 
+@_inline
+def _corners(x: float, y: float, c: float, s: float, out: np.ndarray) -> None:
+    """RoadObject.polygon: the rectangle's corners, the first repeated (c, s: cos and sin of the heading). Exact as
+    numpy's matrix product computes them: one product of each sum is by WIDTH / 2 = 1, so fusing changes nothing."""
+    for m, (px, py) in enumerate(
+        ((-LENGTH / 2, -WIDTH / 2), (-LENGTH / 2, WIDTH / 2), (LENGTH / 2, WIDTH / 2), (LENGTH / 2, -WIDTH / 2))
+    ):
+        out[m, 0] = (c * px + -s * py) + x
+        out[m, 1] = (s * px + c * py) + y
+    out[4] = out[0]
+
+
+@_inline
+def _project(polygon: np.ndarray, nx: float, ny: float, fused: bool) -> tuple[float, float]:
+    """utils.project_polygon."""
+    low = high = _dot2(polygon[0, 0], polygon[0, 1], nx, ny, fused)
+    for m in range(1, 5):
+        projected = _dot2(polygon[m, 0], polygon[m, 1], nx, ny, fused)
+        if projected < low:
+            low = projected
+        if projected > high:
+            high = projected
+    return low, high
+
+
+@_inline
+def _interval_distance(min_a: float, max_a: float, min_b: float, max_b: float) -> float:
+    return min_b - max_a if min_a < min_b else min_a - max_b
+
+
 @_jit
-def _clearly_apart(
-    x: np.ndarray,
-    y: np.ndarray,
-    speed: np.ndarray,
-    cos_h: np.ndarray,
-    sin_h: np.ndarray,
-    b: int,
-    j: int,
-    dt: float,
-) -> bool:
-    """Whether highway-env's separating-axis test of the ego against vehicle j (with their moves over dt) must
-    find an axis that separates them: one separates them here by more than SEPARATION_MARGIN."""
-    corners = np.empty((2, 4, 2))
-    for k, v in enumerate((0, j)):
-        c, s = cos_h[b, v], sin_h[b, v]
-        for m, (px, py) in enumerate(
-            ((-LENGTH / 2, -WIDTH / 2), (-LENGTH / 2, WIDTH / 2), (LENGTH / 2, WIDTH / 2), (LENGTH / 2, -WIDTH / 2))
-        ):
-            corners[k, m, 0] = c * px - s * py + x[b, v]
-            corners[k, m, 1] = s * px + c * py + y[b, v]
-    move_x = (speed[b, 0] * cos_h[b, 0] - speed[b, j] * cos_h[b, j]) * dt
-    move_y = (speed[b, 0] * sin_h[b, 0] - speed[b, j] * sin_h[b, j]) * dt
-    for k in range(2):
+def _polygons_intersecting(
+    a: np.ndarray, b: np.ndarray, move_x: float, move_y: float, fused: bool
+) -> tuple[bool, bool, float, float]:
+    """utils.are_polygons_intersecting (separating axes, with A's move relative to B's), bit for bit: (are
+    intersecting, will intersect, the translation that separates them when they will)."""
+    intersecting = will_intersect = True
+    min_distance = np.inf
+    axis_x = axis_y = 0.0
+    for polygon in (a, b):
         for m in range(4):
-            p, q = corners[k, m], corners[k, (m + 1) % 4]
-            nx, ny = -q[1] + p[1], q[0] - p[0]
-            norm = np.sqrt(nx * nx + ny * ny)
+            nx, ny = -polygon[m + 1, 1] + polygon[m, 1], polygon[m + 1, 0] - polygon[m, 0]
+            norm = np.sqrt(_dot2(nx, ny, nx, ny, fused))
             nx, ny = nx / norm, ny / norm
-            lo = np.empty(2)
-            hi = np.empty(2)
-            for r in range(2):
-                lo[r], hi[r] = np.inf, -np.inf
-                for t in range(4):
-                    projected = corners[r, t, 0] * nx + corners[r, t, 1] * ny
-                    lo[r], hi[r] = min(lo[r], projected), max(hi[r], projected)
-            projection = nx * move_x + ny * move_y
-            if projection < 0:
-                lo[0] += projection
+            min_a, max_a = _project(a, nx, ny, fused)
+            min_b, max_b = _project(b, nx, ny, fused)
+            if _interval_distance(min_a, max_a, min_b, max_b) > 0:
+                intersecting = False
+            velocity_projection = _dot2(nx, ny, move_x, move_y, fused)
+            if velocity_projection < 0:
+                min_a += velocity_projection
             else:
-                hi[0] += projection
-            distance = lo[1] - hi[0] if lo[0] < lo[1] else lo[0] - hi[1]
-            if distance > SEPARATION_MARGIN:
-                return True
-    return False
+                max_a += velocity_projection
+            distance = _interval_distance(min_a, max_a, min_b, max_b)
+            if distance > 0:
+                will_intersect = False
+            if not intersecting and not will_intersect:
+                break
+            if abs(distance) < min_distance:
+                min_distance = abs(distance)
+                dx = (((a[0, 0] + a[1, 0]) + a[2, 0]) + a[3, 0]) / 4 - (((b[0, 0] + b[1, 0]) + b[2, 0]) + b[3, 0]) / 4
+                dy = (((a[0, 1] + a[1, 1]) + a[2, 1]) + a[3, 1]) / 4 - (((b[0, 1] + b[1, 1]) + b[2, 1]) + b[3, 1]) / 4
+                axis_x, axis_y = (nx, ny) if _dot2(dx, dy, nx, ny, fused) > 0 else (-nx, -ny)
+    if not will_intersect:
+        return intersecting, False, 0.0, 0.0
+    return intersecting, True, min_distance * axis_x, min_distance * axis_y
 
 
 @_jit
-def _collision_candidates(
+def _collide(
     x: np.ndarray,
     y: np.ndarray,
     speed: np.ndarray,
@@ -499,21 +517,32 @@ def _collision_candidates(
     sin_h: np.ndarray,
     dt: float,
     fused: bool,
-    out: np.ndarray,
-) -> int:
-    """The (state, vehicle) pairs whose collision with the ego highway-env's test must decide, in its order;
-    every other pair is apart (RoadObject._is_colliding's quick distance check, exactly, then _clearly_apart)."""
-    count = 0
+    crashed: np.ndarray,
+    impacted: np.ndarray,
+    impact_x: np.ndarray,
+    impact_y: np.ndarray,
+) -> None:
+    """Road.step's collision checks after the moves: in highway-fast only the ego checks its collisions, against
+    every other vehicle in road order (RoadObject.handle_collisions: a quick distance test, then the polygons).
+    A pair that will intersect gets the separating translation as an impact, half each; intersecting crashes
+    both."""
+    ego, other = np.empty((5, 2)), np.empty((5, 2))
     for b in range(x.shape[0]):
         for j in range(1, x.shape[1]):
             dx, dy = x[b, j] - x[b, 0], y[b, j] - y[b, 0]
             if np.sqrt(_dot2(dx, dy, dx, dy, fused)) > (DIAGONAL + DIAGONAL) / 2 + speed[b, 0] * dt:
                 continue
-            if _clearly_apart(x, y, speed, cos_h, sin_h, b, j, dt):
-                continue
-            out[count, 0], out[count, 1] = b, j
-            count += 1
-    return count
+            _corners(x[b, 0], y[b, 0], cos_h[b, 0], sin_h[b, 0], ego)
+            _corners(x[b, j], y[b, j], cos_h[b, j], sin_h[b, j], other)
+            move_x = speed[b, 0] * cos_h[b, 0] * dt - speed[b, j] * cos_h[b, j] * dt
+            move_y = speed[b, 0] * sin_h[b, 0] * dt - speed[b, j] * sin_h[b, j] * dt
+            intersecting, will_intersect, tx, ty = _polygons_intersecting(ego, other, move_x, move_y, fused)
+            if will_intersect:
+                impact_x[b, 0], impact_y[b, 0] = tx / 2, ty / 2
+                impact_x[b, j], impact_y[b, j] = -tx / 2, -ty / 2
+                impacted[b, 0] = impacted[b, j] = True
+            if intersecting:
+                crashed[b, 0] = crashed[b, j] = True
 
 
 @_jit
@@ -565,20 +594,6 @@ def _observe(
                 out[b, r, f + 1] = min(max(value, -1.0), 1.0)
 
 
-class _Body:
-    """What highway-env's collision test (RoadObject._is_colliding) reads of a vehicle, over kernel values."""
-
-    LENGTH, WIDTH, diagonal = Vehicle.LENGTH, Vehicle.WIDTH, DIAGONAL
-    polygon = RoadObject.polygon
-    direction = RoadObject.direction
-    velocity = Vehicle.velocity
-    _is_colliding = RoadObject._is_colliding
-
-    def __init__(self, state: HighwayState, b: int, v: int):
-        self.position = np.array([state.x[b, v], state.y[b, v]])
-        self.heading, self.speed = state.heading[b, v], state.speed[b, v]
-
-
 class HighwayKernel:
     """B highway-env traffic states stepped together: ``reset`` from seeds, ``apply`` an environment action,
     ``step`` the ego actions; the state is plain arrays (``state``), so snapshots are copies."""
@@ -587,7 +602,6 @@ class HighwayKernel:
         self.spec, self.batch = spec, batch
         self.state = HighwayState.empty(batch, spec.others + 1)
         self.rngs: list[np.random.Generator | None] = [None] * batch
-        self._pairs = np.empty((batch * spec.others, 2), np.int64)
 
     # --- reset -----------------------------------------------------------------------------------------------
 
@@ -735,16 +749,19 @@ class HighwayKernel:
             state.acceleration[:, 0] = ControlledVehicle.KP_A * (state.target_speed[:, 0] - state.speed[:, 0])
         self._move()
         cos_h, sin_h = np.cos(state.heading), np.sin(state.heading)
-        count = _collision_candidates(state.x, state.y, state.speed, cos_h, sin_h, spec.dt, FUSED, self._pairs)
-        for b, j in self._pairs[:count]:
-            ego, other = _Body(state, b, 0), _Body(state, b, j)
-            intersecting, will_intersect, transition = ego._is_colliding(other, spec.dt)
-            if will_intersect:
-                state.impact_x[b, 0], state.impact_y[b, 0] = transition / 2
-                state.impact_x[b, j], state.impact_y[b, j] = -transition / 2
-                state.impacted[b, 0] = state.impacted[b, j] = True
-            if intersecting:
-                state.crashed[b, 0] = state.crashed[b, j] = True
+        _collide(
+            state.x,
+            state.y,
+            state.speed,
+            cos_h,
+            sin_h,
+            spec.dt,
+            FUSED,
+            state.crashed,
+            state.impacted,
+            state.impact_x,
+            state.impact_y,
+        )
 
     def _powers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """numpy's power of each vehicle's IDM speed ratio to the exponents _decide needs: each vehicle's own
