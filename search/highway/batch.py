@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from search.highway.adapter import HighwayAdapter
-from search.highway.kernel import HighwayKernel, HighwayState, notice, spec_of
+from search.highway.kernel import HighwayKernel, HighwayState, adapter_spec, notice
 
 
 class EnvBatch:
@@ -68,9 +68,7 @@ def make_batch(batch: int, settings: dict | None = None) -> KernelBatch | EnvBat
     """B highway environments with the adapter's settings (``discrete`` and highway-env config keys): the kernel,
     or highway-env itself with a one-line notice saying what the kernel does not cover."""
     adapter = HighwayAdapter(settings)
-    env = adapter.make()
-    spec = spec_of(env.unwrapped.config)
-    env.close()
+    spec = adapter_spec(adapter)
     if isinstance(spec, str):
         notice(spec)
         return EnvBatch(adapter, batch)

@@ -39,7 +39,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from search.highway.adapter import LANE_THRESHOLD, PERTURBED, SPEED_RANGE
+from search.highway.adapter import LANE_THRESHOLD, PERTURBED, SPEED_RANGE, HighwayAdapter
 
 _jit = numba.njit(cache=True, nogil=True)
 _inline = numba.njit(cache=True, nogil=True, inline="always")  # helpers of the per-vehicle loops
@@ -182,6 +182,14 @@ def spec_of(config: dict) -> KernelSpec | str:
         normalize_reward=bool(config["normalize_reward"]),
         offroad_terminal=bool(config["offroad_terminal"]),
     )
+
+
+def adapter_spec(adapter: HighwayAdapter) -> KernelSpec | str:
+    """The kernel's settings for a highway adapter's environment, or why the kernel does not cover it."""
+    env = adapter.make()
+    spec = spec_of(env.unwrapped.config)
+    env.close()
+    return spec
 
 
 FIELDS = {  # per vehicle, (B, N); vehicle 0 is the ego, the others in highway-env's creation order
