@@ -49,6 +49,7 @@ class KernelCoupledProblem(GymCoupledProblem):
         adapter: HighwayAdapter | None = None,
     ):
         super().__init__(agents, scenario, reward, adapter)
+        assert isinstance(self.adapter, HighwayAdapter)
         spec = adapter_spec(self.adapter)
         if isinstance(spec, str):
             raise ValueError(f"the highway kernel does not cover {spec}")
