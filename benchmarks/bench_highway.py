@@ -37,15 +37,17 @@ from search.gym.agents import load_agent  # noqa: E402
 from search.gym.problem import GymCoupledProblem  # noqa: E402
 from search.highway.adapter import PERTURBED  # noqa: E402
 from search.highway.batch import make_batch  # noqa: E402
+from search.highway.coupled import KernelCoupledProblem  # noqa: E402
 from search.highway.scenarios import SCENARIOS  # noqa: E402
 from search.solvers.mcts import MCTSConfig, mcts  # noqa: E402
 from search.solvers.reward import RewardConfig  # noqa: E402
 from search.solvers.rollout import Tracker  # noqa: E402
 
 
-def foil_search(agents, scenario, budget: int, batch: int) -> float:
-    """Coupled steps per second of MCTS (batched agents, snapshots at tree nodes)."""
-    problem = GymCoupledProblem(agents, scenario, RewardConfig())
+def foil_search(agents, scenario, budget: int, batch: int, kernel: bool = False) -> float:
+    """Coupled steps per second of MCTS (batched agents, snapshots at tree nodes), over highway-env instances or
+    on the kernel (search.highway.coupled)."""
+    problem = (KernelCoupledProblem if kernel else GymCoupledProblem)(agents, scenario, RewardConfig())
     tracker = Tracker(budget, 5)
     started = time.perf_counter()
     mcts(problem, tracker, np.random.default_rng(0), MCTSConfig(batch=batch))
@@ -162,6 +164,7 @@ def main() -> None:
     agents = [load_agent(name, adapter) for name in args.agents.split(",")]
     reference = disagreement_branching(agents, scenario, args.budget)
     ours = foil_search(agents, scenario, args.budget, args.batch)
+    on_kernel = {batch: foil_search(agents, scenario, args.budget, batch, kernel=True) for batch in (args.batch, 64)}
     load = os.getloadavg()[0]
     print(
         f"\n{time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, load average {load:.1f}; {args.agents} on "
@@ -171,6 +174,8 @@ def main() -> None:
     print("|---|---:|---:|")
     print(f"| deep copy at every branch, one environment at a time | {reference:,.1f} | 1.0 |")
     print(f"| Foil MCTS, batch {args.batch} | {ours:,.1f} | {ours / reference:.2f} |")
+    for batch, speed in on_kernel.items():
+        print(f"| Foil MCTS on the kernel, batch {batch} | {speed:,.1f} | {speed / reference:.1f} |")
     if args.bundle:
         print(f"\nfoil bundle studies/highway.toml from a fresh folder: {bundle_build() / 60:.1f} min")
 
