@@ -14,6 +14,7 @@ import numpy as np
 
 from search.gym.agents import GymAgent, load_agent
 from search.highway.adapter import HighwayAdapter
+from search.highway.batch import make_batch
 
 EPISODE_BASE = 1_000_000
 
@@ -25,21 +26,37 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return (centre - half) / (1 + z * z / n), (centre + half) / (1 + z * z / n)
 
 
-def evaluate(agent: GymAgent, episodes: int, seed: int = 0, adapter: HighwayAdapter | None = None) -> dict:
-    """Rates, mean reward and their 95% intervals over ``episodes`` test episodes."""
+def evaluate(
+    agent: GymAgent, episodes: int, seed: int = 0, adapter: HighwayAdapter | None = None, batch: int = 64
+) -> dict:
+    """Rates, mean reward and their 95% intervals over ``episodes`` test episodes, ``batch`` of them stepped at
+    once on the highway kernel (search.highway.batch). The agent still acts on one observation at a time: its
+    network's results depend on the batch around an observation in the last bits, and one at a time they are
+    the ones a lone highway-env episode gets."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
-    env = (adapter or HighwayAdapter()).make()
+    seeds = [EPISODE_BASE * (seed + 1) + i for i in range(episodes)]
+    envs = make_batch(min(batch, episodes), (adapter or HighwayAdapter()).settings)
     rewards, collisions, lengths = [], 0, []
-    for i in range(episodes):
-        observation, _ = env.reset(seed=EPISODE_BASE * (seed + 1) + i)
-        total, steps, done = 0.0, 0, False
-        while not done:
-            observation, reward, terminated, truncated, _ = env.step(agent.act(observation[None])[0])
-            total, steps, done = total + float(reward), steps + 1, terminated or truncated
-        collisions += bool(terminated)
-        rewards.append(total)
-        lengths.append(steps)
+    for start in range(0, episodes, envs.batch):
+        chunk = seeds[start : start + envs.batch]
+        rows = np.arange(len(chunk))
+        observations = envs.reset(chunk, rows)
+        totals, steps = [0.0] * len(chunk), np.zeros(len(chunk), np.int64)
+        running, crashed = np.ones(len(chunk), bool), np.zeros(len(chunk), bool)
+        while running.any():
+            live = rows[running]
+            actions = np.stack([agent.act(observations[b][None])[0] for b in live])
+            observations[live], reward, terminated, truncated = envs.step(actions, live)
+            for b, r in zip(live, reward, strict=True):
+                totals[b] = totals[b] + float(r)
+            steps[live] += 1
+            ended = terminated | truncated
+            crashed[live[ended]] = terminated[ended]
+            running[live[ended]] = False
+        collisions += int(crashed.sum())
+        rewards.extend(totals)
+        lengths.extend(steps.tolist())
     rewards = np.asarray(rewards)
     half = 1.96 * rewards.std(ddof=1) / math.sqrt(episodes)
     return {

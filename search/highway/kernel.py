@@ -5,8 +5,8 @@ Covered: one straight road of any number of lanes, the ego vehicle with continuo
 steering, ``ContinuousAction``) or meta-actions (``DiscreteMetaAction``), the other vehicles' IDM and MOBIL (with
 Foil's environment action: search.highway.adapter), the bicycle model, collisions of the ego, leaving the road,
 the Kinematics observation and the reward; a seed places the same traffic as highway-env's ``reset(seed=...)``
-(its own generator, called in its order). ``spec_of`` says what is not covered; ``make_batch`` then falls back to
-highway-env with a one-line notice.
+(its own generator, drawn from in its order). ``spec_of`` says what is not covered; search.highway.batch and
+search.highway.coupled then run highway-env itself, with a one-line notice (``notice``).
 
 Exactness: every step agrees bit for bit with highway-env on the same machine (tests/highway/test_kernel.py;
 benchmarks/bench_highway_exact.py over 1,000 episodes), because every value is computed with the same
@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from gymnasium.utils import seeding
 from highway_env import utils
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ContinuousAction
@@ -617,8 +618,6 @@ class HighwayKernel:
         """highway-env's reset(seed=...) of each row (all rows by default); a seed of None continues that row's
         generator, as reset() without a seed does. Returns the observations of the reset rows."""
         rows = np.arange(self.batch) if rows is None else np.asarray(rows)
-        from gymnasium.utils import seeding
-
         for b, seed in zip(rows, seeds, strict=True):
             if seed is not None or self.rngs[b] is None:
                 self.rngs[b] = seeding.np_random(None if seed is None else int(seed))[0]
@@ -661,7 +660,7 @@ class HighwayKernel:
 
     # --- environment action ----------------------------------------------------------------------------------
 
-    def apply(self, env_action: np.ndarray, rows: np.ndarray | None = None) -> None:
+    def apply(self, env_action: np.ndarray, rows: np.ndarray | list[int] | None = None) -> None:
         """Foil's environment action (search.highway.adapter), (B, PERTURBED, 2) in [-1, 1], on the first
         PERTURBED other vehicles: target speed = own + SPEED_RANGE * [0]; [1] beyond +-LANE_THRESHOLD commands a
         lane change right (+) or left (-) where there is a lane and none is under way."""

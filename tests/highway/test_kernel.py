@@ -104,3 +104,39 @@ def test_the_kernel_vector_environment_steps_as_sb3s_over_highway_env():
             assert a.get("episode", {}).get("r") == b.get("episode", {}).get("r")
         ends += int(expected[2].sum())
     assert ends > 0  # episodes ended and were reset from highway-env's continuing generator
+
+
+def test_evaluation_on_the_kernel_scores_the_episodes_highway_env_plays():
+    from search.highway.evaluate import EPISODE_BASE, evaluate
+
+    agent = load_agent("highway-lo", HighwayAdapter())
+    env, rewards, lengths = HighwayAdapter().make(), [], []
+    for i in range(3):  # evaluate's episodes, each played in highway-env
+        observation, _ = env.reset(seed=EPISODE_BASE * 3 + i)
+        total, done, steps = 0.0, False, 0
+        while not done:
+            observation, reward, terminated, truncated, _ = env.step(agent.act(observation[None])[0])
+            total, steps, done = total + float(reward), steps + 1, terminated or truncated
+        rewards.append(total)
+        lengths.append(steps)
+    result = evaluate(agent, 3, seed=2, batch=2)
+    assert result["reward_mean"] == float(np.mean(rewards)) and result["length_mean"] == float(np.mean(lengths))
+
+
+def test_ppo_learns_the_same_on_the_kernel_as_on_highway_env():
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from search.highway.env import make_env
+    from search.highway.vector import KernelVecEnv
+
+    torch.set_num_threads(1)
+    kernel = KernelVecEnv(2)
+    kernel.seed(3)
+    parameters = []
+    for envs in (make_vec_env(lambda: make_env(), n_envs=2, seed=3), kernel):
+        model = PPO("MlpPolicy", envs, n_steps=32, batch_size=32, n_epochs=1, seed=3, device="cpu")
+        model.learn(64)
+        parameters.append([p.detach().clone() for p in model.policy.parameters()])
+    assert all(torch.equal(a, b) for a, b in zip(*parameters, strict=True))
