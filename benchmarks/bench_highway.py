@@ -148,6 +148,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--budget", type=int, default=600, help="coupled steps per measurement (default 600)")
     parser.add_argument("--batch", type=int, default=8, help="MCTS batch (default 8)")
+    parser.add_argument(
+        "--kernel-budget", type=int, default=20_000, help="coupled steps of the searches on the kernel (default 20000)"
+    )
     parser.add_argument("--agents", default="highway-lo,highway-hi")
     parser.add_argument("--scenario", default="highway-dense")
     parser.add_argument("--bundle", action="store_true", help="also time a fresh build of studies/highway.toml")
@@ -164,11 +167,11 @@ def main() -> None:
     agents = [load_agent(name, adapter) for name in args.agents.split(",")]
     reference = disagreement_branching(agents, scenario, args.budget)
     ours = foil_search(agents, scenario, args.budget, args.batch)
-    on_kernel = {batch: foil_search(agents, scenario, args.budget, batch, kernel=True) for batch in (args.batch, 64)}
+    on_kernel = {b: foil_search(agents, scenario, args.kernel_budget, b, kernel=True) for b in (args.batch, 64)}
     load = os.getloadavg()[0]
     print(
         f"\n{time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, load average {load:.1f}; {args.agents} on "
-        f"{args.scenario}, {args.budget} coupled steps each\n"
+        f"{args.scenario}, {args.budget} coupled steps each ({args.kernel_budget} on the kernel)\n"
     )
     print("| method | coupled steps/s | vs Agent Disagreements-style branching |")
     print("|---|---:|---:|")
