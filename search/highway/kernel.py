@@ -32,6 +32,7 @@ from gymnasium.utils import seeding
 from highway_env import utils
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.action import ContinuousAction
+from highway_env.envs.highway_env import HighwayEnvFast
 from highway_env.road.lane import AbstractLane
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
@@ -101,7 +102,7 @@ def _dot2(a0: float, a1: float, b0: float, b1: float, fused: bool) -> float:
 
 @dataclass(frozen=True)
 class KernelSpec:
-    """The highway-env settings a kernel runs (from the environment's resolved config: ``spec_of``)."""
+    """The highway-env settings a kernel runs (``spec_of`` reads them from an environment)."""
 
     lanes: int
     others: int
@@ -127,9 +128,12 @@ class KernelSpec:
     offroad_terminal: bool
 
 
-def spec_of(config: dict) -> KernelSpec | str:
-    """The kernel's settings for a ``highway-fast-v0`` config (as resolved by highway-env), or why the kernel
-    does not cover it."""
+def spec_of(env) -> KernelSpec | str:
+    """The kernel's settings for a highway-env environment (its resolved config), or why the kernel does not
+    cover it: only highway-fast-v0 checks the ego's collisions alone, as the kernel does."""
+    if type(env.unwrapped) is not HighwayEnvFast:
+        return f"the environment {type(env.unwrapped).__name__} (the kernel is highway-fast-v0's)"
+    config = env.unwrapped.config
     observation, action = dict(config["observation"]), dict(config["action"])
     if observation.pop("type") != "Kinematics" or set(observation) - {"vehicles_count"}:
         return f"observation {config['observation']} (the kernel has the Kinematics observation's defaults)"
@@ -188,7 +192,7 @@ def spec_of(config: dict) -> KernelSpec | str:
 def adapter_spec(adapter: HighwayAdapter) -> KernelSpec | str:
     """The kernel's settings for a highway adapter's environment, or why the kernel does not cover it."""
     env = adapter.make()
-    spec = spec_of(env.unwrapped.config)
+    spec = spec_of(env)
     env.close()
     return spec
 
@@ -288,8 +292,8 @@ def _clip(x: np.ndarray, low: float, high: float) -> np.ndarray:
 
 
 def steering_control(state: HighwayState) -> np.ndarray:
-    """ControlledVehicle.steering_control of every vehicle towards its target lane (clipped twice, as
-    IDMVehicle.act clips it again)."""
+    """ControlledVehicle.steering_control of every vehicle towards its target lane (IDMVehicle.act clips it
+    again to the same range, which changes nothing)."""
     speed = _not_zero(state.speed)
     lateral = state.y - LANE_WIDTH * state.target_lane
     lateral_speed_command = -ControlledVehicle.KP_LATERAL * lateral
@@ -297,8 +301,7 @@ def steering_control(state: HighwayState) -> np.ndarray:
     heading_ref = 0.0 + _clip(heading_command, -np.pi / 4, np.pi / 4)
     heading_rate_command = ControlledVehicle.KP_HEADING * _wrap_to_pi(heading_ref - state.heading)
     slip_angle = np.arcsin(_clip(LENGTH / 2 / speed * heading_rate_command, -1, 1))
-    steering = _clip(np.arctan(2 * np.tan(slip_angle)), -MAX_STEERING, MAX_STEERING)
-    return _clip(steering, -MAX_STEERING, MAX_STEERING)
+    return _clip(np.arctan(2 * np.tan(slip_angle)), -MAX_STEERING, MAX_STEERING)
 
 
 @_inline

@@ -103,7 +103,7 @@ def compare(
     adapter = HighwayAdapter(settings)
     discrete = bool(adapter.settings.get("discrete", False))
     envs = [adapter.make() for _ in seeds]
-    spec = spec_of(envs[0].unwrapped.config)
+    spec = spec_of(envs[0])
     if isinstance(spec, str):
         raise ValueError(f"the kernel does not cover {spec}")
     kernel = HighwayKernel(spec, len(seeds))

@@ -24,7 +24,7 @@ class KernelVecEnv(VecEnv):
 
     def __init__(self, n: int, settings: dict | None = None):
         env = HighwayAdapter(settings).make()
-        spec = spec_of(env.unwrapped.config)
+        spec = spec_of(env)
         if isinstance(spec, str):
             raise ValueError(f"the highway kernel does not cover {spec}")
         super().__init__(n, env.observation_space, env.action_space)
