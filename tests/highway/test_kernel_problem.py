@@ -1,6 +1,8 @@
 """The coupled highway problem on the kernel against GymCoupledProblem over highway-env: the same rewards,
 events, positions and path lengths at every step, through snapshots, and the same search results."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,11 +16,14 @@ from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 
 
+def _drivers(*names):
+    """Scripted drivers (tests/highway/drivers.py): the shipped agents' exactness is bench_highway_exact's."""
+    return [load_agent(f"tests.highway.drivers:{name}", HighwayAdapter()) for name in names]
+
+
 @pytest.fixture(scope="module")
 def agents():
-    """Scripted drivers (tests/highway/drivers.py): the shipped agents' exactness is bench_highway_exact's."""
-    adapter = HighwayAdapter()
-    return [load_agent("tests.highway.drivers:cruise", adapter), load_agent("tests.highway.drivers:cautious", adapter)]
+    return _drivers("cruise", "cautious")
 
 
 def _same(reference: GymCoupledProblem, kernel: KernelCoupledProblem) -> None:
@@ -36,8 +41,12 @@ def _same(reference: GymCoupledProblem, kernel: KernelCoupledProblem) -> None:
             assert np.array_equal(reference.adapter.position(instance.env), position)
 
 
-def test_steps_and_snapshots_as_the_highway_env_problem(agents):
+@pytest.mark.parametrize("discrete", [False, True], ids=["continuous", "meta-actions"])
+def test_steps_and_snapshots_as_the_highway_env_problem(agents, discrete):
     scenario = SCENARIOS["highway-dense"]
+    if discrete:
+        scenario = replace(scenario, settings=scenario.settings | {"discrete": True})
+        agents = _drivers("idle", "faster")
     reference, kernel = GymCoupledProblem(agents, scenario), KernelCoupledProblem(agents, scenario)
     rng = np.random.default_rng(0)
     for problem in (reference, kernel):
