@@ -636,18 +636,26 @@ class HighwayKernel:
 
     def _place(self, b: int, rng: np.random.Generator) -> None:
         """HighwayEnv._create_vehicles: Vehicle.create_random's draws from the generator, in their order (its
-        choices of road draw nothing: there is one road), then their arithmetic, vectorised. Every vehicle is
-        placed ahead of the last one, so the farthest vehicle so far is the last one."""
+        choices of road draw nothing: there is one road; ``uniform(low, high)`` is ``low + (high - low) *
+        random()``, so the draws are taken as random() and scaled together), then their arithmetic, vectorised.
+        Every vehicle is placed ahead of the last one, so the farthest vehicle so far is the last one."""
         spec, state = self.spec, self.state
         n = spec.others + 1
-        lanes, speeds, gaps, deltas = np.empty(n, np.int64), np.empty(n), np.empty(n), np.zeros(n)
+        lanes, draws = np.empty(n, np.int64), np.zeros((n, 3))  # per vehicle: speed, gap, IDM exponent
+        integers, random = rng.integers, rng.random
         for v in range(n):
-            ego = v == 0
-            lanes[v] = spec.initial_lane if ego and spec.initial_lane is not None else rng.integers(spec.lanes)
-            speeds[v] = 25.0 if ego else rng.uniform(0.7 * SPEED_LIMIT, 0.8 * SPEED_LIMIT)
-            gaps[v] = rng.uniform(0.9, 1.1)
-            if not ego:
-                deltas[v] = rng.uniform(low=IDMVehicle.DELTA_RANGE[0], high=IDMVehicle.DELTA_RANGE[1])
+            if v == 0:
+                lanes[0] = spec.initial_lane if spec.initial_lane is not None else integers(spec.lanes)
+                draws[0, 1] = random()
+            else:
+                lanes[v] = integers(spec.lanes)
+                draws[v] = random(), random(), random()
+        low, high = (
+            np.array([[0.7 * SPEED_LIMIT, 0.9, IDMVehicle.DELTA_RANGE[0]]]).T,
+            np.array([[0.8 * SPEED_LIMIT, 1.1, IDMVehicle.DELTA_RANGE[1]]]).T,
+        )
+        speeds, gaps, deltas = low + (high - low) * draws.T
+        speeds[0], deltas[0] = 25.0, 0.0
         spacing = np.full(n, 1 / spec.density)
         spacing[0] = spec.ego_spacing
         offsets = spacing * (12 + 1.0 * speeds) * np.exp(-5 / 40 * spec.lanes)
@@ -655,8 +663,8 @@ class HighwayKernel:
         steps[0] += 3 * offsets[0]
         x = np.cumsum(steps)
         y = LANE_WIDTH * lanes
-        for name in FIELDS:
-            state.arrays[name][b] = 0
+        for values in state.arrays.values():
+            values[b] = 0
         state.x[b], state.y[b], state.speed[b], state.delta[b] = x, y, speeds, deltas
         state.target_speed[b] = state.own_target_speed[b] = speeds
         state.timer[b, 1:] = ((x + y) * np.pi)[1:] % LANE_CHANGE_DELAY
