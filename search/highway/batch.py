@@ -2,8 +2,8 @@
 highway-env itself, one environment at a time, where it does not (with a one-line notice, never silently).
 
 Both take the same calls: ``reset(seeds, rows)``, ``apply(env_action, rows)`` (Foil's environment action),
-``step(actions, rows)`` -> (observations, rewards, terminated, truncated), ``snapshot()``/``restore()`` and
-``ego_positions()``; ``rows`` selects the environments a call acts on (default: all).
+``step(actions, rows)`` -> (observations, rewards, terminated, truncated) and ``snapshot()``/``restore()``;
+``rows`` selects the environments a call acts on (default: all).
 """
 
 from __future__ import annotations
@@ -47,21 +47,15 @@ class EnvBatch:
     def restore(self, snapshot: list) -> None:
         self.envs = [self.adapter.restore_env(saved) for saved in snapshot]
 
-    def ego_positions(self) -> np.ndarray:
-        return np.stack([self.adapter.position(env) for env in self.envs])
-
 
 class KernelBatch(HighwayKernel):
-    """The kernel with the batch interface's snapshots and positions."""
+    """The kernel with the batch interface's snapshots."""
 
     def snapshot(self) -> HighwayState:
         return self.state.copy()
 
     def restore(self, snapshot: HighwayState) -> None:
         self.state = snapshot.copy()
-
-    def ego_positions(self) -> np.ndarray:
-        return np.stack([self.state.x[:, 0], self.state.y[:, 0]], axis=1)
 
 
 def make_batch(batch: int, settings: dict | None = None) -> KernelBatch | EnvBatch:

@@ -137,12 +137,11 @@ class KernelCoupledProblem(GymCoupledProblem):
         )
 
     def snapshot(self, index=None) -> KernelSnapshot:  # type: ignore[override]
-        self._rows.state = self.kernel.state
         return self.snapshot_of(self._rows, np.arange(self.batch) if index is None else index)
 
     def restore(self, snapshot: KernelSnapshot) -> None:  # type: ignore[override]
         self._rows = self.snapshot_of(snapshot, np.arange(snapshot.batch))
-        self.kernel.state = self._rows.state
+        self.kernel.state = self._rows.state  # one state: the kernel steps the rows' arrays in place
         self.t = self._rows.steps
 
     def assign(self, index, snapshot: KernelSnapshot) -> None:  # type: ignore[override]

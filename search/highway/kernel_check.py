@@ -10,7 +10,7 @@ terminated and truncated.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -65,7 +65,6 @@ class Comparison:
     steps: int = 0
     crashes: int = 0
     first_difference: str | None = None
-    lengths: list[int] = field(default_factory=list)
 
 
 def _kernel_view(kernel: HighwayKernel, b: int | np.integer, discrete: bool) -> dict[str, np.ndarray]:
@@ -150,7 +149,6 @@ def compare(
             if done or cut:
                 running[b] = False
                 result.crashes += bool(envs[b].unwrapped.vehicle.crashed)
-    result.lengths = lengths.tolist()
     for env in envs:
         env.close()
     return result
