@@ -99,7 +99,7 @@ class GymDomain(Domain):
         adapter = state.load_adapter()
         loaded = [self.agent(spec, adapter) for spec in agents]
         reward_config = RewardConfig.from_dict(reward)
-        problem = GymCoupledProblem(loaded, state, reward_config, adapter)
+        problem = self.problem(loaded, state, reward_config, adapter)
         shape = problem.action_shape
         return Coupled(
             problem,
@@ -117,6 +117,10 @@ class GymDomain(Domain):
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
 
+    def problem(self, agents: list[GymAgent], state: GymScenario, reward, adapter: Adapter) -> GymCoupledProblem:
+        """The coupled problem a search steps (its summaries replay in the environment itself)."""
+        return GymCoupledProblem(agents, state, reward, adapter)
+
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.gym.summary import rebuild
 
@@ -133,11 +137,15 @@ class GymDomain(Domain):
         return load_adapter(found.adapter, found.settings)
 
     def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
-        from search.gym.evaluate import evaluate
-
         adapter = self.adapter(scenario)
         adapter = type(adapter)(adapter.settings | world)
-        return evaluate(self.agent(agent, adapter), episodes, seed, adapter)
+        return self.evaluation(self.agent(agent, adapter), episodes, seed, adapter)
+
+    def evaluation(self, agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> dict:
+        """The test episodes, one at a time in the adapter's environment."""
+        from search.gym.evaluate import evaluate
+
+        return evaluate(agent, episodes, seed, adapter)
 
     def describe_evaluation(self, result: dict) -> str:
         from search.gym.evaluate import format_result
@@ -185,12 +193,8 @@ def shown(coupled: Coupled, row: int, steps: int) -> float:
 
     dt = coupled.problem.adapter.dt
     outcomes = tuple(
-        {
-            "event": OUTCOME_NAMES[i.outcome],
-            "time": float(i.event_step * dt) if i.event_step else None,
-            "min_human_distance": None,
-        }
-        for i in coupled.problem.rows[row]
+        {"event": OUTCOME_NAMES[outcome], "time": float(step * dt) if step else None, "min_human_distance": None}
+        for outcome, step in coupled.problem.endings(row)
     )
     return visible_contrast(
         VisibleClip(("first", "second"), outcomes, (0.0, 0.0), max(steps * dt, 1e-6), coupled.world)

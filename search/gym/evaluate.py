@@ -26,41 +26,48 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> dict:
-    """The ``foil eval --json`` object: rates with Wilson intervals, mean reward with its 95% interval, mean
-    time to success, mean episode length (seconds) and the time limit the environment allows (null when none)."""
+    """The ``foil eval --json`` object of ``episodes`` test episodes, one at a time in the adapter's environment."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
     env = adapter.make()
-    rewards, lengths, counts = [], [], dict.fromkeys(EVENTS, 0)
-    success_times = []
+    events, rewards, steps = [], [], []
     for i in range(episodes):
         observation, _ = env.reset(seed=EPISODE_BASE * (seed + 1) + i)
-        total, steps, done = 0.0, 0, False
+        total, taken, done = 0.0, 0, False
         while not done:
             observation, reward, terminated, truncated, info = env.step(agent.act(np.asarray(observation)[None])[0])
-            total, steps, done = total + float(reward), steps + 1, bool(terminated or truncated)
-        event = adapter.outcome(bool(terminated), bool(truncated), info)
-        if event not in EVENTS:
-            raise ValueError(f"adapter outcome {event!r}: use one of {EVENTS}")
-        counts[event] += 1
-        if event == "success":
-            success_times.append(steps * adapter.dt)
+            total, taken, done = total + float(reward), taken + 1, bool(terminated or truncated)
+        events.append(adapter.outcome(bool(terminated), bool(truncated), info))
         rewards.append(total)
-        lengths.append(steps * adapter.dt)
+        steps.append(taken)
+    limit = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None
+    return episodes_result(agent.name, seed, events, rewards, steps, adapter.dt, limit * adapter.dt if limit else None)
+
+
+def episodes_result(
+    agent: str, seed: int, events: list[str], rewards: list[float], steps: list[int], dt: float, limit: float | None
+) -> dict:
+    """The ``foil eval --json`` object of test episodes (each one's event, reward and steps): rates with Wilson
+    intervals, mean reward with its 95% interval, mean time to success, mean episode length (seconds) and the
+    time limit the environment allows (null when none)."""
+    episodes = len(events)
+    unknown = sorted(set(events) - set(EVENTS))
+    if unknown:
+        raise ValueError(f"adapter outcome {unknown[0]!r}: use one of {EVENTS}")
     values = np.asarray(rewards)
     half = 1.96 * values.std(ddof=1) / math.sqrt(episodes)
-    limit = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None
+    success_s = [n * dt for n, event in zip(steps, events, strict=True) if event == "success"]
     return {
-        "agent": agent.name,
+        "agent": agent,
         "episodes": episodes,
         "seed": seed,
-        **{f"{event}_rate": counts[event] / episodes for event in EVENTS},
-        **{f"{event}_ci95": list(wilson(counts[event], episodes)) for event in EVENTS},
+        **{f"{event}_rate": events.count(event) / episodes for event in EVENTS},
+        **{f"{event}_ci95": list(wilson(events.count(event), episodes)) for event in EVENTS},
         "reward_mean": float(values.mean()),
         "reward_ci95": [float(values.mean() - half), float(values.mean() + half)],
-        "nav_time_mean": float(np.mean(success_times)) if success_times else None,
-        "length_mean": float(np.mean(lengths)),
-        "time_limit": float(limit * adapter.dt) if limit else None,
+        "nav_time_mean": float(np.mean(success_s)) if success_s else None,
+        "length_mean": float(np.mean(steps) * dt),
+        "time_limit": limit,
     }
 
 

@@ -233,14 +233,23 @@ class GymCoupledProblem:
                 outcome[b, k] = instance.outcome
             scaled.append(row_scaled)
             positions.append(row_positions)
+        return self._score(actions, agent_actions, newly_done, outcome, scaled, positions)
+
+    def _score(self, actions, agent_actions, newly_done, outcome, scaled, positions) -> tuple[np.ndarray, np.ndarray]:
+        """The step's reward and terminal flags from its events, the agents' actions and their positions."""
+        n = len(self.agents)
         all_done = (outcome != RUNNING).all(axis=1)
         goal, end = self.reward.events(newly_done, outcome, all_done, self.t)
         self.last_events = goal, end
-        self.last_agent_actions = [[agent_actions[k][b] for k in range(n)] for b in range(batch)]
-        reward = np.array([self._divergence(goal[b], end[b], scaled[b], positions[b]) for b in range(batch)])
+        self.last_agent_actions = [[agent_actions[k][b] for k in range(n)] for b in range(self.batch)]
+        reward = np.array([self._divergence(goal[b], end[b], scaled[b], positions[b]) for b in range(self.batch)])
         if self.reward_config.plausibility:
             reward = reward + self.reward_config.plausibility * self.prior.log_prob(actions)
         return reward, goal | end
+
+    def endings(self, row: int) -> list[tuple[int, int]]:
+        """Each agent's outcome (an index into OUTCOME_NAMES) and the step its episode ended on (0: running)."""
+        return [(i.outcome, i.event_step) for i in self.rows[row]]
 
     def _divergence(self, goal: bool, end: bool, scaled: list, positions: list) -> float:
         c = self.reward_config

@@ -61,6 +61,18 @@ class HighwayDomain(GymDomain):
 
         validate_run(run_dir, every)
 
+    def evaluation(self, agent, episodes: int, seed: int, adapter: Adapter) -> dict:
+        """On the batched kernel: the same test episodes and result, many episodes at a time."""
+        from search.highway.evaluate import evaluate
+
+        return evaluate(agent, episodes, seed, adapter)
+
+    def problem(self, agents, state, reward, adapter):
+        """On the batched kernel where it covers the scenario (else highway-env, with a one-line notice)."""
+        from search.highway.coupled import coupled_problem
+
+        return coupled_problem(agents, state, reward, adapter)
+
     def eval_scenario(self, scenarios):
         """None: the shipped agents are judged in their training traffic, as their model cards report."""
         return None

@@ -19,8 +19,8 @@ from pathlib import Path
 
 from search.agents.release import ReleaseError, write_rows
 from search.gym.agents import GymAgent, load_sb3
-from search.gym.evaluate import evaluate
 from search.highway.adapter import AGENTS_DIR, HighwayAdapter
+from search.highway.evaluate import evaluate
 
 VALIDATION_EPISODES = 30
 VALIDATION_SEED, TEST_SEED = 1, 0

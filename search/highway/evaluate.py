@@ -1,0 +1,48 @@
+"""`foil eval` of a highway agent on the batched kernel: the test episodes of `search.gym.evaluate` (the same
+seeds, the same result), ``batch`` of them stepped at once, each exactly as highway-env plays it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from search.gym.agents import GymAgent
+from search.gym.evaluate import EPISODE_BASE, episodes_result
+from search.highway.adapter import HighwayAdapter
+from search.highway.batch import make_batch
+from search.highway.env import CONFIG, DURATION_S
+
+
+def evaluate(
+    agent: GymAgent, episodes: int, seed: int = 0, adapter: HighwayAdapter | None = None, batch: int = 64
+) -> dict:
+    """Rates, mean reward and their 95% intervals over ``episodes`` test episodes, ``batch`` of them stepped at
+    once on the highway kernel (search.highway.batch). The agent still acts on one observation at a time: its
+    network's results depend on the batch around an observation in the last bits, and one at a time they are
+    the ones a lone highway-env episode gets."""
+    if episodes < 2:
+        raise ValueError("evaluate at least 2 episodes (an interval needs them)")
+    adapter = adapter or HighwayAdapter()
+    seeds = [EPISODE_BASE * (seed + 1) + i for i in range(episodes)]
+    envs = make_batch(min(batch, episodes), adapter.settings)
+    events, rewards, lengths = [], [], []
+    for start in range(0, episodes, envs.batch):
+        chunk = seeds[start : start + envs.batch]
+        rows = np.arange(len(chunk))
+        observations = envs.reset(chunk, rows)
+        totals, steps = [0.0] * len(chunk), np.zeros(len(chunk), np.int64)
+        running, crashed, cut = np.ones(len(chunk), bool), np.zeros(len(chunk), bool), np.zeros(len(chunk), bool)
+        while running.any():
+            live = rows[running]
+            actions = np.stack([agent.act(observations[b][None])[0] for b in live])
+            observations[live], reward, terminated, truncated = envs.step(actions, live)
+            for b, r in zip(live, reward, strict=True):
+                totals[b] = totals[b] + float(r)
+            steps[live] += 1
+            ended = terminated | truncated
+            crashed[live[ended]], cut[live[ended]] = terminated[ended], truncated[ended]
+            running[live[ended]] = False
+        events.extend(adapter.outcome(bool(c), bool(t), {}) for c, t in zip(crashed, cut, strict=True))
+        rewards.extend(totals)
+        lengths.extend(steps.tolist())
+    duration = (CONFIG | adapter.settings).get("duration", DURATION_S)
+    return episodes_result(agent.name, seed, events, rewards, lengths, adapter.dt, float(duration) * adapter.dt)
