@@ -45,6 +45,7 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     from app.web.settings import ServerSettings
 
     text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
+    text = text.replace("budget = 2_000", "budget = 200").replace("states = 16", "states = 2")
     text = text.replace(
         "[build.eval]",
         "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\nevent_hold = 0.2\nwidth = 480\n\n[build.eval]",
@@ -54,10 +55,12 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     log = []
     manifest = build_bundle(study, tmp_path / "bundle", log=log.append)
     out = tmp_path / "bundle"
-    assert len(manifest.clips) == 13 and set(manifest.agents) == {"highway-lo", "highway-med", "highway-hi"}
+    assert len(manifest.clips) == 19 and set(manifest.agents) == {"highway-lo", "highway-med", "highway-hi"}
     for clip in manifest.clips:
         assert (out / clip.file).is_file() and (out / clip.poster).is_file() and clip.audit is not None
         assert json.loads((out / clip.summary).read_text())["scenario"]["domain"] == "gym"
+    assert manifest.world is not None and manifest.world["rule"] == "survival"
+    assert any(line.startswith("representativeness highway-dense") for line in log)
     assert "highway-hi" in (out / "index.html").read_text()
     database = f"sqlite:///{tmp_path / 'survey.sqlite3'}"
     migrate(database)
