@@ -196,6 +196,5 @@ def shown(coupled: Coupled, row: int, steps: int) -> float:
         {"event": OUTCOME_NAMES[outcome], "time": float(step * dt) if step else None, "min_human_distance": None}
         for outcome, step in coupled.problem.endings(row)
     )
-    return visible_contrast(
-        VisibleClip(("first", "second"), outcomes, (0.0, 0.0), max(steps * dt, 1e-6), coupled.world)
-    )
+    end_s = max(steps * dt, 1e-6)
+    return visible_contrast(VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world))

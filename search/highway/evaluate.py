@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from search.gym.adapter import Adapter
 from search.gym.agents import GymAgent
 from search.gym.evaluate import EPISODE_BASE, episodes_result
 from search.highway.adapter import HighwayAdapter
 from search.highway.batch import make_batch
-from search.highway.env import CONFIG, DURATION_S
+from search.highway.env import DURATION_S
 
 
-def evaluate(
-    agent: GymAgent, episodes: int, seed: int = 0, adapter: HighwayAdapter | None = None, batch: int = 64
-) -> dict:
+def evaluate(agent: GymAgent, episodes: int, seed: int = 0, adapter: Adapter | None = None, batch: int = 64) -> dict:
     """Rates, mean reward and their 95% intervals over ``episodes`` test episodes, ``batch`` of them stepped at
     once on the highway kernel (search.highway.batch). The agent still acts on one observation at a time: its
     network's results depend on the batch around an observation in the last bits, and one at a time they are
@@ -24,7 +23,9 @@ def evaluate(
     adapter = adapter or HighwayAdapter()
     seeds = [EPISODE_BASE * (seed + 1) + i for i in range(episodes)]
     envs = make_batch(min(batch, episodes), adapter.settings)
-    events, rewards, lengths = [], [], []
+    events: list[str] = []
+    rewards: list[float] = []
+    lengths: list[int] = []
     for start in range(0, episodes, envs.batch):
         chunk = seeds[start : start + envs.batch]
         rows = np.arange(len(chunk))
@@ -44,5 +45,5 @@ def evaluate(
         events.extend(adapter.outcome(bool(c), bool(t), {}) for c, t in zip(crashed, cut, strict=True))
         rewards.extend(totals)
         lengths.extend(steps.tolist())
-    duration = (CONFIG | adapter.settings).get("duration", DURATION_S)
-    return episodes_result(agent.name, seed, events, rewards, lengths, adapter.dt, float(duration) * adapter.dt)
+    duration = float(adapter.settings.get("duration", DURATION_S))
+    return episodes_result(agent.name, seed, events, rewards, lengths, adapter.dt, duration * adapter.dt)
