@@ -13,16 +13,27 @@ import numpy as np
 from search.solvers.domain import Coupled, Domain
 
 
-def _policies(agents: Sequence[str]) -> list:
-    from search.agents.policies import load_policy
-
-    return [load_policy(spec) for spec in agents]
-
-
 class CrowdDomain(Domain):
     name = "crowd"
     default_distribution = "training"
     time_limit_setting = "time_limit"
+
+    def __init__(self) -> None:
+        self._loaded: dict[tuple[str, int], Any] = {}
+
+    def _policies(self, agents: Sequence[str]) -> list:
+        """The agents' policies, each loaded once while its file is unchanged (a representative search asks for
+        them once per batch of states and once per replay)."""
+        from search.agents.policies import load_policy
+
+        def key(spec: str) -> tuple[str, int]:
+            path = Path(spec)
+            return spec, path.stat().st_mtime_ns if path.suffix and path.is_file() else 0
+
+        for spec in agents:
+            if key(spec) not in self._loaded:
+                self._loaded[key(spec)] = load_policy(spec)
+        return [self._loaded[key(spec)] for spec in agents]
 
     def claims_agent(self, spec: str) -> bool | None:
         if spec.endswith(".zip"):
@@ -107,7 +118,7 @@ class CrowdDomain(Domain):
         from search.crowd.summary import build_summary
         from search.solvers.reward import RewardConfig
 
-        policies, reward_config = _policies(agents), RewardConfig.from_dict(reward)
+        policies, reward_config = self._policies(agents), RewardConfig.from_dict(reward)
         return Coupled(
             CoupledProblem(policies, state, reward=reward_config),
             state.name,
@@ -119,7 +130,7 @@ class CrowdDomain(Domain):
         from search.crowd.rollouts import roll_out
         from search.solvers.reward import RewardConfig
 
-        return roll_out(_policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
+        return roll_out(self._policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
 
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.crowd.summary import rebuild
