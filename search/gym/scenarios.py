@@ -41,13 +41,10 @@ class GymDistribution:
     description: str = ""
 
     def to_dict(self) -> dict:
-        return {
-            "name": self.name,
-            "domain": "gym",
-            "adapter": self.adapter,
-            "distribution": {"seeds": list(self.seeds), "choices": {k: list(v) for k, v in self.choices.items()}},
-            "settings": dict(self.settings),
-            "description": self.description,
+        sampled = GymScenario(self.name, self.adapter, self.seeds[0], self.settings, self.description).to_dict()
+        del sampled["seed"]
+        return sampled | {
+            "distribution": {"seeds": list(self.seeds), "choices": {k: list(v) for k, v in self.choices.items()}}
         }
 
     def with_settings(self, settings: dict) -> GymDistribution:
