@@ -44,8 +44,8 @@ class Words:
         " says **CRASHED**."
     )
     legend_status: str = (
-        "Below the picture each robot's line says **reached goal**, **out of time** or **on its way** (**still on"
-        " its way** when the clip ends), with the time."
+        "Below the picture each robot's line says **reached goal** or **out of time** with the time, or **on its"
+        " way** (**still on its way** when the clip ends, with how far it stopped from its goal)."
     )
     success: str = "reached the goal after {seconds} seconds"
     collision: str = "bumped into a person"

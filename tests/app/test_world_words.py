@@ -88,9 +88,9 @@ def test_a_crowd_bundle_reads_as_before(make_client, crowd_bundle):
         "short tail showing where it walks.</li>" in shown
     )
     assert (
-        "<li>Below the picture each robot's line says <strong>reached goal</strong>, <strong>out of time</strong> or "
-        "<strong>on its way</strong> (<strong>still on its way</strong> when the clip ends), with the time.</li>"
-        in shown
+        "<li>Below the picture each robot's line says <strong>reached goal</strong> or <strong>out of time</strong> "
+        "with the time, or <strong>on its way</strong> (<strong>still on its way</strong> when the clip ends, with how "
+        "far it stopped from its goal).</li>" in shown
     )
     assert "Clip of two robots in a crowd" in shown and "walk through a crowd to the same goal." in shown
     assert re.search(r"Robot \d bumped into a person\.", shown)
