@@ -45,7 +45,7 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     from app.web.settings import ServerSettings
 
     text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
-    text = text.replace("budget = 2_000", "budget = 200").replace("states = 32", "states = 2")
+    text = text.replace("budget = 5_000", "budget = 200").replace("states = 64", "states = 2")
     text = text.replace(
         "[build.eval]",
         "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\nevent_hold = 0.2\nwidth = 480\n\n[build.eval]",
