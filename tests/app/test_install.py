@@ -144,7 +144,7 @@ def test_the_server_only_install_serves_exports_and_reports(tmp_path, bundle_dir
         exported.stdout
     )
     reported = run(foil, "report", "--db", database, "--out", "report", cwd=tmp_path, env=env)
-    assert "1 participants" in reported.stdout and "pip install 'foil[figures]'" in reported.stderr
+    assert "1 participant," in reported.stdout and "pip install 'foil[figures]'" in reported.stderr
     html = (tmp_path / "report" / "report.html").read_text()
     assert "pip install &#39;foil[figures]&#39;" in html and (tmp_path / "report" / "table1.csv").is_file()
     assert not list((tmp_path / "report").glob("*.png"))

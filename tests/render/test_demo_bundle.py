@@ -40,7 +40,7 @@ def test_every_representative_clip_of_the_demo_shows_the_better_robot(tmp_path):
     assert {json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in plan_clips(spec)} == demo_searches
     manifest = build_bundle(study, tmp_path / "out", log=lambda line: None)
     clips = [clip for clip in manifest.clips if clip.scheme == "representative"]
-    assert len(clips) == 3
+    assert len(clips) == 6  # three pairs, drawn once for each part
     for clip in clips:
         assert clip.audit.shows == "better", clip.audit.why
         assert verify(tmp_path / "out" / clip.summary) == []
