@@ -166,9 +166,11 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                     )
                     entry["tally"].correct += row["correct"]
                     entry["tally"].incorrect += 1 - row["correct"]
+                # a ranking's clips are listed in the order its participant saw them: the set is what was ranked
+                clip = row["clip"] if task == "pairwise" else ";".join(sorted(str(row["clip"]).split(";")))
                 for name, value in (
                     ("participant", row["participant"]),
-                    ("clip", row["clip"]),
+                    ("clip", clip),
                     ("scheme", row["scheme"]),
                     ("scenario", row["scenario"]),
                     ("pair", pair),

@@ -260,3 +260,12 @@ def test_without_matplotlib_the_report_has_every_table_and_says_how_to_get_the_f
     ratings = next(k for k, section in enumerate(sections) if section.startswith(' id="ratings"'))
     assert sections[:ratings] == drawn_sections[:ratings]  # the figures are in the ratings section, before the appendix
     assert sections[ratings + 1 :] == [s.replace("plain", "drawn") for s in drawn_sections[ratings + 1 :]]
+
+
+def test_a_ranked_set_is_one_cluster_whatever_order_its_clips_were_shown_in(known_db):
+    """Each participant sees a round's clips in an order of their own: the model clusters by the set ranked, so
+    the paper's design has one ranking cluster per scheme and scenario."""
+    db, study = known_db
+    answers = tally_study(db, study, ExclusionRules()).answers["ranking"]
+    sets = {(scheme, scenario) for scheme, scenario in zip(answers.scheme, answers.scenario, strict=True)}
+    assert len(set(answers.clip)) == len(sets) == 4
