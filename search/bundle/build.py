@@ -34,7 +34,7 @@ from app.visible import VisibleClip, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.clips.render import RenderOptions, robot_label
 from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
-from search.solvers.runner import SearchJob, limit_threads, run_search, solver_config_class, write_outputs
+from search.solvers.runner import SearchJob, in_processes, run_search, solver_config_class, write_outputs
 from search.solvers.summary import verify
 
 
@@ -228,23 +228,6 @@ def _evaluate(domain: str, agent: str, episodes: int, seed: int, world: dict, sc
     started = time.perf_counter()
     result = domain_named(domain).evaluate(agent, episodes, seed, world, scenario) | {"agent": agent}
     return result, time.perf_counter() - started
-
-
-def in_processes(tasks: dict, workers: int):
-    """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (in this one
-    when one worker or one task), yielding (key, result) as each finishes."""
-    if workers <= 1 or len(tasks) <= 1:
-        for key, (function, arguments) in tasks.items():
-            yield key, function(*arguments)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
-    with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=context, initializer=limit_threads) as pool:
-        futures = {pool.submit(function, *arguments): key for key, (function, arguments) in tasks.items()}
-        for future in as_completed(futures):
-            yield futures[future], future.result()
 
 
 def _describe(job: ClipJob) -> str:

@@ -257,6 +257,23 @@ def limit_threads() -> None:
         os.environ.setdefault(name, "1")
 
 
+def in_processes(tasks: dict, workers: int):
+    """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (in this one
+    when one worker or one task), yielding (key, result) as each finishes."""
+    if workers <= 1 or len(tasks) <= 1:
+        for key, (function, arguments) in tasks.items():
+            yield key, function(*arguments)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
+    with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=context, initializer=limit_threads) as pool:
+        futures = {pool.submit(function, *arguments): key for key, (function, arguments) in tasks.items()}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+
+
 def _job_in_worker(job: SearchJob) -> dict[str, str]:
     limit_threads()
     return run_search(job)
@@ -279,26 +296,14 @@ def run_all(
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)
     results: dict[int, dict[str, str]] = {}
     if backend == "ray":
-        for index, files in _run_ray(jobs, ray_address, workers):
-            results[index] = files
-            bar.update()
+        finished = _run_ray(jobs, ray_address, workers)
     elif backend == "process":
-        if workers == 1:
-            for index, job in enumerate(jobs):
-                results[index] = run_search(job)
-                bar.update()
-        else:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
-            context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
-            with ProcessPoolExecutor(workers, mp_context=context, initializer=limit_threads) as pool:
-                futures = {pool.submit(_job_in_worker, job): index for index, job in enumerate(jobs)}
-                for future in as_completed(futures):
-                    results[futures[future]] = future.result()
-                    bar.update()
+        finished = in_processes({index: (run_search, (job,)) for index, job in enumerate(jobs)}, workers)
     else:
         raise ValueError(f"unknown backend {backend!r}: use 'process' or 'ray'")
+    for index, files in finished:
+        results[index] = files
+        bar.update()
     bar.close()
 
     records = []
