@@ -204,10 +204,9 @@ class CrowdDomain(Domain):
         validate_run(run_dir, episodes, every)
 
     def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
-        from search.clips.render import render
-        from search.clips.scene import load_scene
+        from search.clips.render import render_file
 
-        return render(load_scene(summary), out, numbers, options)
+        return render_file(summary, out, numbers, options)
 
     def renderer_files(self, summary: Path) -> list[Path]:
         import search.clips.render as renderer
