@@ -387,6 +387,15 @@ class DSRNNPolicy(TorchPolicy):
         self.forward = net.act_mean
         self.net = net
 
+    def value(self, observation: Observation, state: PolicyState) -> np.ndarray:
+        """(B,) the critic's value of the state the observation shows, after the memory ``state`` holds (the
+        state is left as it was)."""
+        inputs = observation_tensors(observation, self.max_humans)
+        hidden = [torch.from_numpy(state[f"h{i}"]) for i in range(len(state))]
+        with torch.no_grad():
+            x, _ = self.net.step(*inputs, hidden)
+            return self.net._heads(x)[1].numpy().astype(np.float64)
+
 
 def save_checkpoint(path: str | Path, net: DSRNN, **extra) -> None:
     """Write a checkpoint that ``load_dsrnn`` reads; ``extra`` holds training state (steps, optimiser, ...)."""

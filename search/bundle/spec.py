@@ -8,6 +8,7 @@ The table as the researcher writes it (docs/clips.md)::
     [build]                            seed of the agent-to-robot-number mapping
     [build.eval]                       episodes and seed of each agent's `foil eval` (the ground truth)
     [build.representativeness]         the distribution the fixed scenarios are measured against
+    [build.budget]                     steps and clip_seconds every scheme is held to
     [build.render]                     RenderOptions fields
     [build.schemes.NAME]               solver, budget, seed, top_k, select; [.settings], [.reward], [.world]
     [[build.sets]]                     parts, schemes, scenarios; agents (every pair) or pairs
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import itertools
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -28,11 +29,13 @@ from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
 from search.clips.render import ROBOT_STYLES, RenderOptions
 from search.sim.settings import check_keys, check_values
 from search.solvers.baselines import CEMConfig, SamplingConfig
+from search.solvers.disagreements import DisagreementsConfig
 from search.solvers.domain import Domain, domain_for
+from search.solvers.highlights import HighlightsConfig
 from search.solvers.mcts import MCTSConfig
 from search.solvers.representative import RepresentativeConfig
 from search.solvers.reward import RewardConfig
-from search.solvers.runner import solver_config_class
+from search.solvers.runner import WATCHING, solver_config_class
 
 DOCS = "docs/clips.md"
 
@@ -42,7 +45,7 @@ class BuildError(TomlFileError):
 
 
 Scalar = bool | int | float | str
-SolverConfig = MCTSConfig | SamplingConfig | CEMConfig | RepresentativeConfig
+SolverConfig = MCTSConfig | SamplingConfig | CEMConfig | RepresentativeConfig | DisagreementsConfig | HighlightsConfig
 
 
 def _scalars(value: object) -> object:
@@ -68,8 +71,8 @@ class SchemeTable(Strict):
     """How one scheme's clips are found: a solver of `foil search` with its simulator-step budget, seed and top-K,
     and its solver, reward and world settings (checked against their fields when parsed)."""
 
-    solver: Text  # mcts, nfirst, random, cem, representative
-    budget: Positive
+    solver: Text  # mcts, nfirst, random, cem, representative, disagreements, highlights, highlights-div
+    budget: Positive | None = None  # simulator steps; [build.budget] steps when not given
     seed: Whole
     top_k: Positive = 1
     select: Literal["reward", "contrast"] = "reward"  # which of the top-K becomes the clip (docs/clips.md)
@@ -119,12 +122,20 @@ class Representativeness(Strict):
     seed: Whole = 0
 
 
+class BudgetTable(Strict):
+    """What every scheme of the study is held to: simulator steps per search and seconds of clip per question."""
+
+    steps: Positive | None = None
+    clip_seconds: Annotated[float, Field(gt=0)] | None = None
+
+
 class BuildTable(Strict):
     """The `[build]` table as written: which clips `foil bundle` searches for and renders (docs/clips.md)."""
 
     seed: Whole  # seeds which robot number each agent gets in each clip
     eval: EvalTable = EvalTable()
     representativeness: Representativeness = Representativeness()
+    budget: BudgetTable = BudgetTable()
     render: ScalarTable = {}  # RenderOptions fields
     schemes: Annotated[dict[str, SchemeTable], Field(min_length=1)]
     sets: Annotated[list[SetTable], Field(min_length=1)]
@@ -225,14 +236,15 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
                 continue
             solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
-            if distribution != (solvers == {"representative"}):
+            if any(s not in WATCHING and (s == "representative") != distribution for s in solvers):
                 problems.append(
                     (
                         ("build", "sets", i, "scenarios", j),
                         f"{scenario!r} is a {'distribution' if distribution else 'fixed scenario'}: the "
                         f"representative solver draws from a distribution (such as "
-                        f"{domain.default_distribution or 'a distribution file'!r}), the other solvers search from a "
-                        f"fixed scenario; give each kind a set of its own",
+                        f"{domain.default_distribution or 'a distribution file'!r}), the other searches from a "
+                        f"fixed scenario (the methods that watch agents play take either); give each kind a set of "
+                        f"its own",
                     )
                 )
     distribution_name = build.representativeness.distribution
@@ -290,10 +302,28 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
         except (TypeError, ValueError) as error:
             problems.append((at, str(error)))
             continue
+        budget = table.budget or build.budget.steps
+        if budget is None or (build.budget.steps and table.budget not in (None, build.budget.steps)):
+            problems.append(
+                (
+                    (*at, "budget"),
+                    "give each scheme a budget (simulator steps per search)"
+                    if budget is None
+                    else f"[build.budget] holds every scheme to {build.budget.steps} steps: leave budget out",
+                )
+            )
+            continue
+        if build.budget.clip_seconds is not None and domain is not None:
+            steps = round(build.budget.clip_seconds / domain.step_seconds(build.sets[0].scenarios[0], {}))
+            try:
+                solver_config, reward = held_to_clip(table.solver, solver_config, reward, steps, checked)
+            except ValueError as error:
+                problems.append((at, str(error)))
+                continue
         schemes[name] = Scheme(
             name=name,
             solver=table.solver,
-            budget=table.budget,
+            budget=budget,
             seed=table.seed,
             top_k=table.top_k,
             select=table.select,
@@ -302,6 +332,29 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
             world=checked["world"],
         )
     return schemes
+
+
+def held_to_clip(solver: str, config, reward: RewardConfig, steps: int, given: dict) -> tuple:
+    """A scheme's solver settings and reward with its clips held to ``steps`` steps of video per question: a
+    searched clip's horizon (it plays on to it), a disagreement's h, and each HIGHLIGHTS reel half of it (two
+    reels per question). A setting the study gave otherwise is refused."""
+
+    def held(table: str, key: str, value: int):
+        if key in given[table] and given[table][key] != value:
+            raise ValueError(f"[build.budget] clip_seconds makes {key} {value} steps here; leave {table}.{key} out")
+        return value
+
+    if solver == "disagreements":
+        return replace(config, horizon=held("settings", "horizon", steps)), reward
+    if solver in WATCHING:
+        context = steps // 2 // config.highlights
+        if context < 2:
+            raise ValueError(
+                f"{steps} steps of clip leave less than two steps for each of {config.highlights} highlights in "
+                "each reel: give fewer highlights or more clip_seconds"
+            )
+        return replace(config, context=held("settings", "context", context)), reward
+    return config, reward.with_horizon(held("reward", "horizon", steps))
 
 
 def _render_options(build: BuildTable, problems: list[Problem]) -> RenderOptions:

@@ -97,6 +97,11 @@ class CrowdDomain(Domain):
             return asdict(replace(scenario, world=scenario.world | world))
         return frozen_scenario(scenario, world).to_dict()
 
+    def step_seconds(self, name: str, world: dict) -> float:
+        from search.sim.world import WorldConfig
+
+        return float(self.scenario_dict(name, world).get("world", {}).get("dt", WorldConfig().dt))
+
     def state(self, name: str, world: dict) -> Any:
         from search.crowd.summary import frozen_scenario
         from search.sim.scenarios import load_scenario
@@ -122,7 +127,9 @@ class CrowdDomain(Domain):
         return Coupled(
             CoupledProblem(policies, state, reward=reward_config),
             state.name,
-            lambda actions, solver: build_summary(list(agents), policies, state, reward_config, actions, solver),
+            lambda actions, solver, follow=None, window=None, horizon=None: build_summary(
+                list(agents), policies, state, reward_config.with_horizon(horizon), actions, solver, follow, window
+            ),
         )
 
     def roll_out(self, agents, states, reward, pushes, rng, tracker):
@@ -131,6 +138,11 @@ class CrowdDomain(Domain):
         from search.solvers.reward import RewardConfig
 
         return roll_out(self._policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
+
+    def shown(self, coupled: Coupled, row: int, steps: int) -> float:
+        from search.crowd.rollouts import shown
+
+        return shown(coupled.problem.sim, row)
 
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.crowd.summary import rebuild

@@ -8,6 +8,7 @@ from search.sim.coupled import CoupledSimulator, Snapshot
 from search.sim.observation import Policy
 from search.sim.scenarios import Scenario
 from search.sim.world import WorldConfig, WorldState
+from search.solvers.highlights import box_alternatives
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 
@@ -41,7 +42,8 @@ class CoupledProblem:
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sim = self.sim
-        robot_actions, _, newly_done = sim.advance(actions)
+        robot_actions, agent_rewards, newly_done = sim.advance(actions)
+        self.agent_rewards = sim.gather(agent_rewards)
         state, batch = sim.state, sim.batch
         t = np.rint(state.time[:batch] / sim.config.dt).astype(np.int64)
         goal, end = self.reward.events(newly_done, sim.gather(state.outcome), sim.gather(state.done).all(axis=1), t)
@@ -49,6 +51,46 @@ class CoupledProblem:
             robot_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal, end
         )
         return reward, goal | end
+
+    # what the summary methods of the literature need (search.solvers.follow, disagreements, highlights)
+    @property
+    def override(self):
+        return self.sim.override
+
+    @override.setter
+    def override(self, override) -> None:
+        self.sim.override = override
+
+    @property
+    def proposed(self) -> list[np.ndarray]:
+        """Each agent's own choice on the last step, (B, 2) per agent."""
+        return list(self.sim.proposed.transpose(1, 0, 2))
+
+    def action_gap(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(B,) how far apart two agents' velocities are, in units of the robot's preferred speed."""
+        return np.linalg.norm(a - b, axis=-1) / self.sim.config.robot_v_pref
+
+    def alternatives(self, action: np.ndarray) -> list[np.ndarray]:
+        """Actions a robot might have taken instead of ``action`` (B, 2): itself, then each velocity coordinate
+        at either end of the preferred speed."""
+        speed = self.sim.config.robot_v_pref
+        return box_alternatives(action, np.full(2, -speed), np.full(2, speed))
+
+    def features(self) -> np.ndarray:
+        """(B, F) what a clip shows of each row: the first robot's position and velocity and every human's."""
+        sim, batch = self.sim, self.sim.batch
+        robot = np.concatenate([sim.gather(sim.state.robot_pos)[:, 0], sim.gather(sim.state.robot_vel)[:, 0]], axis=1)
+        humans = sim.state.human_pos[:batch].reshape(batch, -1)
+        return np.concatenate([robot, humans], axis=1)
+
+    def values(self, agent: int, of: int | None = None) -> np.ndarray | None:
+        """(B,) agent ``agent``'s estimate of the value of robot ``of``'s state (its own by default), with its own
+        memory, where its policy has a value."""
+        policy, sim = self.sim.policies[agent], self.sim
+        if not hasattr(policy, "value"):
+            return None
+        seen = sim.observations()[agent if of is None else of]
+        return np.asarray(policy.value(seen, sim.policy_states[agent]), dtype=np.float64)
 
     def snapshot(self, index=None) -> Snapshot:
         return self.sim.snapshot(index)

@@ -78,6 +78,21 @@ def roll_out(
     )
 
 
+def shown(sim: CoupledSimulator, row: int) -> float:
+    """The visible contrast of a row's clip if it ended now: its summary's outcomes and final positions."""
+    state = sim.state
+    return visible_contrast(
+        _clip(
+            sim.scenario,
+            sim.gather(state.outcome)[row],
+            sim.gather(state.event_time)[row],
+            sim.gather(state.min_clearance)[row],
+            sim.gather(state.robot_pos)[row],
+            float(state.time[row]),
+        )
+    )
+
+
 def _clip(scenario: Scenario, outcome, event_time, min_clearance, robot_pos, end_s: float) -> VisibleClip:
     """What a rollout's clip shows, as `VisibleClip.of_summary` reads it from a summary."""
     outcomes = tuple(

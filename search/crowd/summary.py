@@ -22,6 +22,7 @@ from search.agents.policies import SCRIPTED, load_policy
 from search.sim.coupled import replay
 from search.sim.scenarios import Scenario
 from search.sim.world import OUTCOME_NAMES
+from search.solvers.follow import Follow, recorded
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 
@@ -57,8 +58,11 @@ def build_summary(
     reward_config: RewardConfig,
     env_actions: np.ndarray,
     solver: dict,
+    follow: Follow | None = None,
+    window: tuple[int, int] | None = None,
 ) -> dict:
     """Replay ``env_actions`` from the scenario's initial state and record everything a clip or a check needs.
+    With ``follow`` the robots follow a leader (`search.solvers.follow`); ``window`` is the part a clip shows.
 
     The reward is the search's, over the searched steps. What the clip shows goes on after them: where the
     trajectory ended before every robot's episode did (a robot reached its goal first, or ``finish = "first"``),
@@ -66,14 +70,16 @@ def build_summary(
     ``env_actions``), and ``outcomes`` are those at the clip's end."""
     config = scenario.config()
     searched = len(env_actions)
-    trajectory = replay(policies, scenario, env_actions, stop_when_done=False, coda_to=reward_config.horizon)
+    trajectory = replay(
+        policies, scenario, env_actions, stop_when_done=False, coda_to=reward_config.horizon, override=follow
+    )
     prior = ActionPrior((config.human_num, 2), config.env_action_bound, reward_config.prior, reward_config.prior_sigma)
     total, terms, terminal = DivergenceReward(reward_config, prior).trajectory(trajectory.head(searched), config.dt)
     ends = np.flatnonzero(terminal)
     if ends.size == 0 or ends[0] != len(terminal) - 1:
         where = "never ends" if ends.size == 0 else f"ends at step {ends[0] + 1} of {len(terminal)}"
         raise ValueError(f"the trajectory {where}: a summary holds exactly one complete trajectory")
-    return {
+    summary = {
         "format": SUMMARY_FORMAT,
         "agents": [agent_entry(spec, policy) for spec, policy in zip(agents, policies, strict=True)],
         "scenario": scenario.to_dict(),
@@ -103,6 +109,7 @@ def build_summary(
         "reward": total,
         "reward_terms": terms,
     }
+    return recorded(summary, follow, window)
 
 
 def rebuild(data: Mapping[str, Any]) -> dict:
@@ -111,4 +118,8 @@ def rebuild(data: Mapping[str, Any]) -> dict:
     scenario = Scenario.from_dict(data["scenario"], source="summary scenario")
     reward_config = RewardConfig.from_dict(data["reward_parameters"])
     env_actions = np.array(data["env_actions"], dtype=np.float64)
-    return build_summary(agents, [load_policy(a) for a in agents], scenario, reward_config, env_actions, data["solver"])
+    policies = [load_policy(a) for a in agents]
+    window = data.get("window")
+    return build_summary(
+        agents, policies, scenario, reward_config, env_actions, data["solver"], Follow.of_summary(data), window
+    )

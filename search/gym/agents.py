@@ -34,6 +34,48 @@ class GymAgent:
         act = getattr(self.policy, "act", self.policy)
         return np.asarray(act(observations))
 
+    def action_values(self, observations: np.ndarray) -> np.ndarray | None:
+        """(B, A) the agent's value of each action (a DQN's Q, or an ``action_values`` method of its own), or None
+        for an agent that has none."""
+        if _sb3_family(self.policy) == "DQN":
+            with _torch_no_grad():
+                return self.policy.q_net(self._tensor(observations)).double().numpy()
+        own = getattr(self.policy, "action_values", None)
+        return None if own is None else np.asarray(own(observations), dtype=np.float64)
+
+    def value(self, observations: np.ndarray) -> np.ndarray | None:
+        """(B,) the agent's value of the state: the best action value, a PPO or A2C critic, an actor-critic's Q of
+        its own action (SAC, TD3, DDPG: the first critic), a ``value`` method of its own; None where it has none."""
+        family = _sb3_family(self.policy)
+        if family in ("PPO", "A2C"):
+            with _torch_no_grad():
+                return self.policy.policy.predict_values(self._tensor(observations)).double().numpy().reshape(-1)
+        if family in ("SAC", "TD3", "DDPG"):
+            with _torch_no_grad():
+                tensor = self._tensor(observations)
+                action = self.policy.actor(tensor, deterministic=True) if family == "SAC" else self.policy.actor(tensor)
+                return self.policy.critic(tensor, action)[0].double().numpy().reshape(-1)
+        values = self.action_values(observations)
+        if values is not None:
+            return values.max(axis=1)
+        own = getattr(self.policy, "value", None)
+        return None if own is None else np.asarray(own(observations), dtype=np.float64).reshape(-1)
+
+    def _tensor(self, observations: np.ndarray):
+        return self.policy.policy.obs_to_tensor(np.asarray(observations))[0]
+
+
+def _sb3_family(policy) -> str | None:
+    """The Stable-Baselines3 algorithm a loaded model is, or None for any other policy."""
+    kind = type(policy)
+    return kind.__name__ if kind.__module__.startswith("stable_baselines3.") else None
+
+
+def _torch_no_grad():
+    import torch
+
+    return torch.no_grad()
+
 
 def load_sb3(path: str | Path):
     """Any Stable-Baselines3 model file, its algorithm read from the file."""

@@ -70,6 +70,9 @@ class GymDomain(Domain):
         found = self.load(name).to_dict()
         return found | {"settings": found["settings"] | world}
 
+    def step_seconds(self, name: str, world: dict) -> float:
+        return float(self.adapter(name).dt)
+
     def state(self, name: str, world: dict) -> GymScenario:
         found = self.load(name)
         if isinstance(found, GymDistribution):
@@ -104,8 +107,14 @@ class GymDomain(Domain):
         return Coupled(
             problem,
             state.name,
-            lambda actions, solver: build_gym_summary(
-                loaded, state, reward_config, np.asarray(actions).reshape(-1, *shape), solver
+            lambda actions, solver, follow=None, window=None, horizon=None: build_gym_summary(
+                loaded,
+                state,
+                reward_config.with_horizon(horizon),
+                np.asarray(actions).reshape(-1, *shape),
+                solver,
+                follow,
+                window,
             ),
             adapter.world(),
         )
@@ -116,6 +125,9 @@ class GymDomain(Domain):
         from search.solvers.representative import roll_out_problem
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
+
+    def shown(self, coupled: Coupled, row: int, steps: int) -> float:
+        return shown(coupled, row, steps)
 
     def problem(self, agents: list[GymAgent], state: GymScenario, reward, adapter: Adapter) -> GymCoupledProblem:
         """The coupled problem a search steps (its summaries replay in the environment itself)."""

@@ -21,6 +21,7 @@ Pairs are combined by their mean or minimum, as in the crowd world.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -171,6 +172,7 @@ class GymCoupledProblem:
         self.reward = DivergenceReward(self.reward_config, self.prior)
         env = self.adapter.make(render=render)
         observation, _ = env.reset(seed=scenario.seed)
+        self.action_space = env.action_space
         self.divergence = Divergence(env.action_space, self.reward_config)
         saved = self.adapter.snapshot_env(env)
         self._initial = [Instance(saved, np.asarray(observation)) for _ in agents]  # every agent from one state
@@ -178,6 +180,11 @@ class GymCoupledProblem:
         self.t = np.zeros(0, dtype=np.int64)
         self.last_agent_actions: list[list[np.ndarray]] = []  # the last step's, per row and agent (for replays)
         self.last_events = np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)  # the last step's (goal, end)
+        self.override: Callable | None = (
+            None  # a search.solvers.follow.Follow or alike: the actions executed given those proposed
+        )
+        self.proposed: list[np.ndarray] = []  # each agent's own choice on the last step, (B, ...) per agent
+        self.agent_rewards = np.zeros((0, len(agents)))  # each agent's own reward on the last step
 
     @property
     def batch(self) -> int:
@@ -204,7 +211,8 @@ class GymCoupledProblem:
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         actions = np.asarray(actions, dtype=np.float64)
         batch, n = self.batch, len(self.agents)
-        agent_actions = self._act()
+        agent_actions = self._chosen()
+        self.agent_rewards = np.zeros((batch, n))
         newly_done = np.zeros((batch, n), dtype=bool)
         outcome = np.zeros((batch, n), dtype=np.int64)
         scaled, positions = [], []
@@ -216,7 +224,8 @@ class GymCoupledProblem:
                     # copies: an environment may move its position array in place
                     before = np.array(self.adapter.position(instance.env), dtype=np.float64)
                     self.adapter.apply(instance.env, np.clip(actions[b], -1.0, 1.0))
-                    observation, _, terminated, truncated, info = instance.env.step(agent_actions[k][b])
+                    observation, reward, terminated, truncated, info = instance.env.step(agent_actions[k][b])
+                    self.agent_rewards[b, k] = float(reward)
                     instance.observation = np.asarray(observation)
                     after = np.array(self.adapter.position(instance.env), dtype=np.float64)
                     instance.path_length += float(np.linalg.norm(after - before))
@@ -262,11 +271,50 @@ class GymCoupledProblem:
     def _act(self) -> list[np.ndarray]:
         """Each agent's actions for every row, in one batched call per agent (finished instances included: their
         action is never used)."""
-        out = []
-        for k, agent in enumerate(self.agents):
-            observations = np.stack([row[k].observation for row in self.rows])
-            out.append(agent.act(observations))
-        return out
+        return [agent.act(self.observations(k)) for k, agent in enumerate(self.agents)]
+
+    def _chosen(self) -> list[np.ndarray]:
+        """The actions executed this step: each agent's own (``proposed``), or what ``override`` makes of them."""
+        self.proposed = self._act()
+        return self.proposed if self.override is None else self.override(self.proposed, self.t)
+
+    # what the summary methods of the literature need (search.solvers.follow, disagreements, highlights)
+    def action_gap(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(B,) how far apart two agents' actions are: 1 or 0 for discrete actions; for Box actions the distance
+        with each coordinate scaled to [-1, 1]."""
+        if self.divergence.discrete:
+            return (np.asarray(a).reshape(len(a), -1)[:, 0] != np.asarray(b).reshape(len(b), -1)[:, 0]).astype(float)
+        scale = 2 / (self.divergence.high - self.divergence.low)
+        gap = (np.asarray(a, np.float64).reshape(len(a), -1) - np.asarray(b, np.float64).reshape(len(b), -1)) * scale
+        return np.linalg.norm(gap, axis=1)
+
+    def alternatives(self, action: np.ndarray) -> list[np.ndarray]:
+        """Actions an agent might have taken instead of ``action`` (B, ...): every discrete action, or the action
+        itself and each Box coordinate at either end of its range."""
+        if self.divergence.discrete:
+            return [np.full_like(np.asarray(action), a) for a in range(int(self.action_space.n))]
+        from search.solvers.highlights import box_alternatives
+
+        flat = np.asarray(action, np.float64).reshape(len(action), -1)
+        shape = np.asarray(action).shape
+        return [a.reshape(shape) for a in box_alternatives(flat, self.divergence.low, self.divergence.high)]
+
+    def observations(self, agent: int) -> np.ndarray:
+        return np.stack([row[agent].observation for row in self.rows])
+
+    def features(self) -> np.ndarray:
+        """(B, F) what each row's first agent observes, flattened: the state HIGHLIGHTS-DIV tells apart."""
+        observations = np.asarray(self.observations(0), dtype=np.float64)
+        return observations.reshape(len(observations), -1)
+
+    def values(self, agent: int, of: int | None = None) -> np.ndarray | None:
+        """(B,) agent ``agent``'s value of the state of agent ``of``'s instance (its own by default), where it has
+        one."""
+        return self.agents[agent].value(self.observations(agent if of is None else of))
+
+    def action_values(self, agent: int) -> np.ndarray | None:
+        """(B, A) agent ``agent``'s value of each action in its instance's state, where it has them."""
+        return self.agents[agent].action_values(self.observations(agent))
 
     def snapshot(self, index=None) -> GymSnapshot:
         rows = self.rows if index is None else [self.rows[i] for i in np.asarray(index).reshape(-1)]

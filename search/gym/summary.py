@@ -18,6 +18,7 @@ from app.formats import SUMMARY_FORMAT
 from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
 from search.sim.world import OUTCOME_NAMES
+from search.solvers.follow import Follow, recorded
 from search.solvers.reward import TERMS, RewardConfig, sequential_sum
 
 
@@ -76,12 +77,21 @@ def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -
 
 
 def build_gym_summary(
-    agents: list[GymAgent], scenario: GymScenario, reward_config: RewardConfig, env_actions: np.ndarray, solver: dict
+    agents: list[GymAgent],
+    scenario: GymScenario,
+    reward_config: RewardConfig,
+    env_actions: np.ndarray,
+    solver: dict,
+    follow: Follow | None = None,
+    window: tuple[int, int] | None = None,
 ) -> dict:
+    """The summary of ``env_actions`` replayed from the scenario's seed; with ``follow`` the agents follow a leader
+    (`search.solvers.follow`); ``window`` is the part a clip shows."""
     problem = GymCoupledProblem(agents, scenario, reward_config)
+    problem.override = follow
     record = replay(problem, env_actions)
     dt = problem.adapter.dt
-    return {
+    summary = {
         "format": SUMMARY_FORMAT,
         "agents": [{"name": agent.name, "source": agent.source} for agent in agents],
         "scenario": scenario.to_dict(),
@@ -101,6 +111,7 @@ def build_gym_summary(
         "reward": record["reward"],
         "reward_terms": record["reward_terms"],
     }
+    return recorded(summary, follow, window)
 
 
 def rebuild(data: Mapping[str, Any]) -> dict:
@@ -109,6 +120,6 @@ def rebuild(data: Mapping[str, Any]) -> dict:
     adapter = scenario.load_adapter()
     agents = [load_agent(entry["name"], adapter) for entry in data["agents"]]
     env_actions = np.array(data["env_actions"], dtype=np.float64).reshape(-1, *adapter.env_action_shape)
-    return build_gym_summary(
-        agents, scenario, RewardConfig.from_dict(data["reward_parameters"]), env_actions, data["solver"]
-    )
+    reward_config = RewardConfig.from_dict(data["reward_parameters"])
+    follow, window = Follow.of_summary(data), data.get("window")
+    return build_gym_summary(agents, scenario, reward_config, env_actions, data["solver"], follow, window)

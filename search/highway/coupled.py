@@ -73,13 +73,14 @@ class KernelCoupledProblem(GymCoupledProblem):
     def reset(self, batch: int) -> None:
         self.restore(self.snapshot_of(self._start, np.zeros(batch, np.int64)))
 
-    def _act(self) -> list[np.ndarray]:
-        return [agent.act(np.ascontiguousarray(self._rows.observations[:, k])) for k, agent in enumerate(self.agents)]
+    def observations(self, agent: int) -> np.ndarray:
+        return np.ascontiguousarray(self._rows.observations[:, agent])
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         actions = np.asarray(actions, dtype=np.float64)
         rows, n, state = self._rows, len(self.agents), self.kernel.state
-        agent_actions = self._act()
+        agent_actions = self._chosen()
+        self.agent_rewards = np.zeros((self.batch, n))
         running = rows.outcome == RUNNING
         self.t = rows.steps = self.t + 1
         live = np.flatnonzero(running.reshape(-1))  # kernel rows, b * n + k
@@ -87,11 +88,12 @@ class KernelCoupledProblem(GymCoupledProblem):
         if len(live):
             self.kernel.apply(np.clip(actions[live // n], -1.0, 1.0), live)
             ego_actions = np.stack([agent_actions[i % n][i // n] for i in live])
-            observations, _, terminated, truncated = self.kernel.step(ego_actions, live)
+            observations, rewards, terminated, truncated = self.kernel.step(ego_actions, live)
         newly_done = np.zeros(running.shape, bool)
         for j, i in enumerate(live):
             b, k = divmod(int(i), n)
             rows.observations[b, k] = observations[j]
+            self.agent_rewards[b, k] = rewards[j]
             after = np.array([state.x[i, 0], state.y[i, 0]])
             rows.path_length[b, k] += float(np.linalg.norm(after - before[j]))
             if terminated[j] or truncated[j]:

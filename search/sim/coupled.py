@@ -12,6 +12,7 @@ so a search branches from any node without replaying from reset.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import cache
@@ -24,6 +25,10 @@ from search.sim import world
 from search.sim.observation import Observation, Policy, PolicyState, observe_agents
 from search.sim.scenarios import Scenario
 from search.sim.world import WorldConfig, WorldState
+
+# what turns the agents' proposed actions (one (B, 2) array per agent) into those executed, given each row's steps
+# taken so far: `search.solvers.follow.Follow`
+Override = Callable[[list[np.ndarray], np.ndarray], list[np.ndarray]]
 
 
 @dataclass
@@ -61,6 +66,10 @@ class CoupledSimulator:
         self.scenario = scenario
         self.config = scenario.config(config)
         self.batch = batch
+        self.override: Override | None = (
+            None  # a search.solvers.follow.Follow or alike: the actions executed given those proposed
+        )
+        self.proposed = np.zeros((batch, len(policies), 2))  # each agent's own choice on the last step
         self.reset()
 
     @property
@@ -133,6 +142,10 @@ class CoupledSimulator:
             actions[:, k] = action
             if observation.done.any():
                 actions[observation.done, k] = 0.0
+        self.proposed = actions
+        if self.override is not None:
+            taken = np.rint(self.state.time[: self.batch] / self.config.dt).astype(np.int64)
+            actions = np.stack(self.override(list(actions.transpose(1, 0, 2)), taken), axis=1)
         robot_action = actions if self.shared_crowd else actions.transpose(1, 0, 2).reshape(-1, 1, 2)
         human_vel = humans.result() if humans else world.human_velocities(self.state, self.config, crowd_action)
         was_done = self.gather(self.state.done).copy()
@@ -223,13 +236,16 @@ def replay(
     config: WorldConfig | None = None,
     stop_when_done: bool = True,
     coda_to: int = 0,
+    override: Override | None = None,
 ) -> Trajectory:
     """Run one coupled scenario from its initial state under a sequence of environment actions.
 
     With ``coda_to`` the run goes on after the last action without pushes (zero environment actions) until every
     robot's episode has ended or ``coda_to`` steps have been taken in all: a clip's coda, which shows how the
-    robots still on their way fare after the search's trajectory ended."""
+    robots still on their way fare after the search's trajectory ended. ``override`` turns the robots' proposed
+    actions into those executed (`search.solvers.follow`)."""
     sim = CoupledSimulator(policies, scenario, config, batch=1)
+    sim.override = override
     env_actions = np.asarray(env_actions, dtype=np.float64)
     n = sim.config.human_num
     if env_actions.ndim < 1 or env_actions.size % max(2 * n, 1):

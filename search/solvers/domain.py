@@ -41,11 +41,13 @@ BUILTIN = (
 @dataclass(frozen=True)
 class Coupled:
     """A search's problem with what turns a kept trajectory into a summary, ``summarize(env_actions, solver)``,
-    and the world its clips show."""
+    and the world its clips show. ``summarize`` also takes ``follow`` (a `search.solvers.follow.Follow`: the
+    agents followed a leader), ``window`` (the steps a clip shows) and ``horizon`` (the reward's horizon, where
+    the summary ends before the search's)."""
 
     problem: Any  # a search.solvers.problem.Problem
     scenario_name: str
-    summarize: Callable[[np.ndarray, dict], dict]
+    summarize: Callable[..., dict]
     world: World = World()
 
 
@@ -102,6 +104,11 @@ class Domain(ABC):
         """The scenario or distribution ``name`` under ``world``, complete (every default written in)."""
 
     @abstractmethod
+    def step_seconds(self, name: str, world: dict) -> float:
+        """Simulated seconds per step in scenario or distribution ``name`` under ``world``: how a study's seconds of
+        clip become steps."""
+
+    @abstractmethod
     def state(self, name: str, world: dict) -> Any:
         """The fixed scenario ``name`` under ``world``, complete."""
 
@@ -129,6 +136,12 @@ class Domain(ABC):
         from search.solvers.representative import roll_out_problem
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
+
+    def shown(self, coupled: Coupled, row: int, steps: int) -> float:
+        """The visible contrast (`search.solvers.representative.visible_contrast`) of the clip of row ``row`` of a
+        coupled problem that has taken ``steps`` steps, read from the problem as its summary would say it: how
+        the summary methods that fork (Agent Disagreements) score a fork without replaying it."""
+        raise NotImplementedError(f"the {self.name} world cannot read a clip's contrast from its problem")
 
     @abstractmethod
     def rebuild(self, summary: Mapping[str, Any]) -> Any:

@@ -26,7 +26,7 @@ steps. The tests hold the formula written with numpy arrays, as the reference th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import import_module
 
 import numba
@@ -76,6 +76,10 @@ class RewardConfig(ConfigTable):
             if not ok:
                 raise ValueError(f"invalid reward config: {message}")
         heuristic_function(self.heuristic)
+
+    def with_horizon(self, horizon: int | None) -> RewardConfig:
+        """This objective over ``horizon`` steps (itself for None): a summary that ends where its clip does."""
+        return self if horizon is None or horizon == self.horizon else replace(self, horizon=int(horizon))
 
 
 def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarray:

@@ -13,27 +13,38 @@ import json
 import os
 import re
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from app.formats import summary_json
 from search.sim.settings import check_keys, field_types
 from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
+from search.solvers.disagreements import Disagreement, DisagreementsConfig, disagreements
 from search.solvers.domain import Domain, domain_for
+from search.solvers.episodes import Episodes, draw_episodes
+from search.solvers.follow import Follow
+from search.solvers.highlights import HighlightsConfig, HighlightsDivConfig, Moment, highlights
 from search.solvers.mcts import MCTSConfig, mcts
 from search.solvers.representative import RepresentativeConfig, representative, summary_contrast
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 
-SOLVERS = {
+SOLVERS: dict[str, tuple[Callable[..., Any], type]] = {
     "mcts": (mcts, MCTSConfig),
     "nfirst": (n_first, SamplingConfig),
     "random": (random_search, SamplingConfig),
     "cem": (cem, CEMConfig),
     "representative": (representative, RepresentativeConfig),  # draws its own states: see _representative
+    # the field's summary methods: they play episodes and choose their own summaries (see _watching)
+    "disagreements": (disagreements, DisagreementsConfig),
+    "highlights": (highlights, HighlightsConfig),
+    "highlights-div": (highlights, HighlightsDivConfig),
 }
+WATCHING = ("disagreements", "highlights", "highlights-div")
 
 
 @dataclass(frozen=True)
@@ -108,7 +119,8 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     domain = domain_for(job.agents, job.scenario)
     job = replace(job, world_settings=domain.comparison_world(job.agents, job.world_settings, job.scenario))
     reward_config = RewardConfig.from_dict(job.reward_settings)
-    if job.solver == "representative":
+    if job.solver == "representative" or job.solver in WATCHING:
+        own = _representative if job.solver == "representative" else _watching
         return search_files(
             job,
             None,
@@ -117,7 +129,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
             started,
             progress,
             None,
-            vote=lambda tracker, rng, config, solver: _representative(job, domain, tracker, rng, config, solver),
+            choose=lambda tracker, rng, config, solver: own(job, domain, tracker, rng, config, solver),
         )
     coupled = domain.coupled(job.agents, domain.state(job.scenario, job.world_settings), job.reward_settings)
     return search_files(
@@ -133,11 +145,12 @@ def search_files(
     started: float,
     progress: bool,
     summarize,
-    vote=None,
+    choose=None,
 ) -> dict[str, str]:
     """Search ``problem`` with the job's solver and write its files; ``summarize(env_actions, solver)`` builds the
-    summary of a kept trajectory (any domain's). ``vote(tracker, rng, solver_config, solver)`` (the representative
-    solver) replaces both: it gives the summaries in its own order and the record of its vote."""
+    summary of a kept trajectory (any domain's). ``choose(tracker, rng, solver_config, solver)`` (the solvers that
+    choose their own summaries) replaces both: it gives the summaries in its own order and a record for run.json
+    (``vote`` for the representative solver, ``method`` for the others)."""
     solve, config_class = SOLVERS[job.solver]
     solver_config = config_class(**job.solver_settings)
     tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
@@ -145,8 +158,8 @@ def search_files(
     solver = {"name": job.solver, "parameters": asdict(solver_config), "seed": job.seed, "budget": job.budget}
     voted = None
     try:
-        if vote is not None:
-            summaries, voted = vote(tracker, rng, solver_config, solver)
+        if choose is not None:
+            summaries, voted = choose(tracker, rng, solver_config, solver)
         else:
             solve(problem, tracker, rng, solver_config)
     finally:
@@ -183,7 +196,7 @@ def search_files(
         ],
     }
     if voted is not None:
-        record["vote"] = voted
+        record["vote" if job.solver == "representative" else "method"] = voted
     files["run.json"] = json.dumps(record, indent=1) + "\n"
     return files
 
@@ -225,6 +238,50 @@ def _representative(
             "search_contrast": chosen["contrast"],
         }
     return summaries, vote
+
+
+def _watching(
+    job: SearchJob, domain: Domain, tracker: Tracker, rng: np.random.Generator, config, solver: dict
+) -> tuple[list, dict]:
+    """The summaries of a method that watches the agents play (Agent Disagreements, HIGHLIGHTS, HIGHLIGHTS-DIV),
+    from the job's scenario, or from states drawn from it when it is a distribution."""
+    if len(job.agents) != 2:
+        raise ValueError(f"the {job.solver} method compares two agents; got {len(job.agents)}")
+    if domain.is_distribution(job.scenario):
+        states = domain.draw_states(job.scenario, job.world_settings, rng, config.episodes)
+    else:
+        states = [domain.state(job.scenario, job.world_settings)]
+    agents = list(job.agents)
+    groups = draw_episodes(lambda s: domain.coupled(agents, s, job.reward_settings), states, config.episodes, rng)
+    shown = domain.shown
+
+    def summary(group: Episodes, episode: int, end: int, follow: Follow, window: tuple[int, int], note: dict):
+        actions = group.env[episode - group.first, :end]
+        return group.coupled.summarize(actions, solver | note, follow=follow, window=window, horizon=end)
+
+    if job.solver == "disagreements":
+
+        def of_disagreement(group: Episodes, d: Disagreement) -> dict:
+            end = d.step + d.branch
+            window = (max(0, d.step - config.horizon // 2), end)
+            note = {"episode": d.episode, "disagreement_step": d.step, "importance": d.importance}
+            return summary(group, d.episode, end, Follow(0, d.step), window, note)
+
+        return _spent(disagreements(groups, tracker, config, shown, of_disagreement), tracker)
+
+    def of_moment(group: Episodes, agent: int, m: Moment) -> dict:
+        first, end = m.window(config.context)
+        note = {"reel": agents[agent], "episode": m.episode, "state_step": m.step, "importance": m.importance}
+        return summary(group, m.episode, end, Follow(agent, end), (first, end), note)
+
+    return _spent(highlights(groups, tracker, config, of_moment), tracker)
+
+
+def _spent(chosen: tuple[list, dict], tracker: Tracker) -> tuple[list, dict]:
+    """The summaries with the steps the whole search took, as every solver's summaries say."""
+    for summary in chosen[0]:
+        summary["solver"]["budget_used"] = tracker.steps
+    return chosen
 
 
 def write_outputs(out: str | Path, files: dict[str, str]) -> Path:

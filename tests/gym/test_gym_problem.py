@@ -12,7 +12,7 @@ from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario, GymSnapshot
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-from search.solvers.runner import SOLVERS, SearchJob, run_search, write_outputs
+from search.solvers.runner import SOLVERS, WATCHING, SearchJob, run_search, write_outputs
 from search.solvers.summary import verify
 
 ADAPTER = "tests.gym.corridor:CorridorAdapter"
@@ -124,7 +124,7 @@ def test_events_map_to_success_collision_and_timeout():
     assert np.array_equal(p.rows[0][0].env.walker, where)  # a finished agent stands still
 
 
-@pytest.mark.parametrize("solver", sorted(set(SOLVERS) - {"representative"}))  # it draws crowd states
+@pytest.mark.parametrize("solver", sorted(set(SOLVERS) - {"representative", *WATCHING}))  # searches of a problem
 def test_every_solver_searches_the_gym_problem(solver):
     p = problem(horizon=40)
     tracker = Tracker(300, 5)

@@ -1,0 +1,248 @@
+"""HIGHLIGHTS (Amir & Amir, AAMAS 2018) and HIGHLIGHTS-DIV (Amir, Doshi-Velez & Sarne 2019), in any world: each
+agent's summary is a reel of the most important moments of its own episodes.
+
+1. Each agent plays the episodes (`search.solvers.episodes`) on its own: every instance follows it
+   (`search.solvers.follow`), so what the clip shows is that agent alone.
+2. A state's importance is how much it matters what the agent does there. From the agent's action values Q
+   (a DQN, or any agent with ``action_values``): ``max_min`` = max Q - min Q (HIGHLIGHTS), or ``second_best`` =
+   max Q - the second largest. An agent with no action values (a continuous policy, a scripted one) gets the
+   stand-in ``rollouts``, measured from the simulator: from a snapshot of the state, each alternative action (every
+   discrete action; for Box actions the agent's own and each coordinate at either end of its range) is taken once
+   and the agent's policy goes on for ``lookahead`` steps; the importance is the spread (max - min) of the agent's
+   own discounted returns over the alternatives.
+3. Greedy selection: the most important states first, each kept if it lies at least ``gap`` steps from the states
+   already kept in its episode, until ``highlights`` are kept. Each shows ``context`` steps around its state.
+4. HIGHLIGHTS-DIV also skips a state that is closer than ``diversity`` to one already kept, in a true distance:
+   the root mean square difference of the states' features (what the clip shows: positions and velocities of
+   the agent and the others, or the agent's observation), each feature standardised over the agent's states.
+   The original compared the sum of the frames' pixels, which calls two different scenes alike whenever their
+   pixel sums are close (a known defect).
+
+The summaries come out per agent (the first agent's, then the second's), each agent's in the order of its
+episodes. Each is one moment: it replays its episode with every agent following the reel's agent and shows the
+``window`` around the state. Budget: each agent gets half the simulator steps (playing, then measuring
+importance); where the stand-in's rollouts of every state do not fit, an evenly spaced share of the states is
+measured and only those can be chosen.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from search.solvers.episodes import Episodes, continuing, play
+from search.solvers.follow import Follow
+from search.solvers.rollout import Tracker
+
+IMPORTANCE = ("auto", "max_min", "second_best", "rollouts")
+ALWAYS = np.iinfo(np.int64).max
+
+
+@dataclass(frozen=True)
+class HighlightsConfig:
+    episodes: int = 3  # episodes each agent plays
+    highlights: int = 5  # moments in each agent's reel (k)
+    context: int = 10  # steps each moment shows, its important state in the middle
+    gap: int = 10  # fewest steps between two moments' states in one episode
+    importance: str = "auto"  # "max_min", "second_best" (action values), "rollouts"; "auto": max_min where it can
+    lookahead: int = 5  # the stand-in's steps after each alternative action
+    discount: float = 0.99  # of the stand-in's returns
+    diversity: float = 0.0  # HIGHLIGHTS-DIV: the smallest feature distance between two moments (0: HIGHLIGHTS)
+
+    def __post_init__(self):
+        checks = [
+            (self.episodes >= 1 and self.highlights >= 1, "episodes and highlights must be >= 1"),
+            (self.context >= 2, "context must be >= 2 steps"),
+            (self.gap >= 0 and self.diversity >= 0, "gap and diversity must be >= 0"),
+            (self.lookahead >= 1, "lookahead must be >= 1"),
+            (0 < self.discount <= 1, "discount must be in (0, 1]"),
+            (self.importance in IMPORTANCE, f"importance must be one of {IMPORTANCE}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"invalid highlights setting: {message}")
+
+
+@dataclass(frozen=True)
+class HighlightsDivConfig(HighlightsConfig):
+    diversity: float = 0.5
+
+
+def box_alternatives(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> list[np.ndarray]:
+    """``action`` (B, d) itself, then, for each coordinate, the action with that coordinate at ``low`` and at
+    ``high``: the alternatives the stand-in importance tries for Box actions."""
+    out = [np.array(action, dtype=np.float64)]
+    for i in range(action.shape[-1]):
+        for end in (low[i], high[i]):
+            changed = np.array(action, dtype=np.float64)
+            changed[..., i] = end
+            out.append(changed)
+    return out
+
+
+def q_importance(values: np.ndarray, kind: str) -> np.ndarray:
+    """HIGHLIGHTS' state importance from action values (B, A): max - min, or max - second best."""
+    ordered = np.sort(values, axis=1)
+    return ordered[:, -1] - (ordered[:, 0] if kind == "max_min" else ordered[:, -2])
+
+
+@dataclass
+class Moment:
+    episode: int  # index among all episodes
+    step: int  # steps the agent had taken: the state is s_step
+    length: int  # steps its episode lasted (or was played)
+    importance: float
+    features: np.ndarray
+
+    def window(self, context: int) -> tuple[int, int]:
+        first = max(0, self.step - context // 2)
+        return first, min(self.length, first + context)
+
+
+@dataclass(frozen=True)
+class Forced:
+    """Every agent takes ``actions`` (one per row) on the step each row takes from ``at`` steps, and follows
+    ``leader`` on every other step: one alternative action, then the agent's own policy."""
+
+    leader: int
+    at: np.ndarray  # (B,)
+    actions: np.ndarray  # (B, ...)
+
+    def __call__(self, proposed: list[np.ndarray], taken: np.ndarray) -> list[np.ndarray]:
+        executed = Follow(self.leader, ALWAYS)(proposed, taken)
+        forced = np.asarray(taken) == self.at
+        for action in executed:
+            action[forced] = self.actions[forced].astype(action.dtype)
+        return executed
+
+
+def importance_kind(problem, agent: int, config: HighlightsConfig) -> str:
+    has_q = getattr(problem, "action_values", None) is not None and problem.action_values(agent) is not None
+    if config.importance in ("max_min", "second_best") and not has_q:
+        raise ValueError(f"{config.importance} importance needs the agent's action values; it has none")
+    if config.importance == "auto":
+        return "max_min" if has_q else "rollouts"
+    return config.importance
+
+
+def play_agent(group: Episodes, agent: int, tracker: Tracker, config: HighlightsConfig, budget: int):
+    """The agent's episodes of one group: per state the episode row, step, features, Q importance (where used)
+    and a snapshot and proposed action (for the stand-in); and each row's length."""
+    problem = group.coupled.problem
+    problem.reset(len(group.env))
+    problem.override = Follow(agent, ALWAYS)
+    kind = importance_kind(problem, agent, config)
+    states = []  # (step, running rows, features, importance or None, snapshot, proposed)
+    lengths = np.zeros(len(group.env), dtype=np.int64)
+    running = np.ones(len(group.env), dtype=bool)
+    for t in range(group.env.shape[1]):
+        if tracker.steps >= budget:
+            break
+        features = problem.features()
+        q = None if kind == "rollouts" else q_importance(problem.action_values(agent), kind)
+        before = problem.snapshot() if kind == "rollouts" else None
+        _, terminal = problem.step(group.env[:, t])
+        tracker.count(int(running.sum()))
+        lengths[running] = t + 1
+        states.append((t, running.copy(), features, q, before, np.asarray(problem.proposed[agent]).copy()))
+        running &= ~np.asarray(terminal, dtype=bool)
+        if not running.any():
+            break
+    return kind, states, lengths
+
+
+def rollout_importance(group: Episodes, agent: int, states: list, tracker: Tracker, config: HighlightsConfig):
+    """The stand-in importance of the states (step, rows) that fit in the budget: {(row, step): importance}."""
+    problem = group.coupled.problem
+    every = [(i, row) for i, (t, running, *_rest) in enumerate(states) for row in np.flatnonzero(running)]
+    if not every:
+        return {}
+    alternatives = len(problem.alternatives(states[0][5][:1]))
+    cost = alternatives * config.lookahead
+    count = min(len(every), max(1, tracker.remaining // cost))
+    chosen = [every[j] for j in np.linspace(0, len(every) - 1, count).round().astype(int)]
+    parts, at, actions, env = [], [], [], []
+    for i, row in chosen:
+        t, _, _, _, before, proposed = states[i]
+        problem.restore(before)
+        parts.append(problem.snapshot([row] * alternatives))
+        actions += [a[0] for a in problem.alternatives(proposed[row : row + 1])]
+        at += [t] * alternatives
+        env += [continuing(group.env[row], t, config.lookahead)] * alternatives
+    problem.restore(problem.concat(parts))
+    problem.override = Forced(agent, np.array(at), np.array(actions))
+    returns = np.zeros(len(at))
+
+    def add(t: int, running: np.ndarray) -> None:
+        returns[running] += config.discount ** (t - 1) * problem.agent_rewards[running, agent]
+
+    play(problem, np.stack(env), tracker, add)
+    spread = returns.reshape(len(chosen), alternatives)
+    return {(int(row), states[i][0]): float(s.max() - s.min()) for (i, row), s in zip(chosen, spread, strict=True)}
+
+
+def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
+    """Greedy: most important first, at least ``gap`` steps from the kept ones of its episode and (DIV) no closer
+    than ``diversity`` to any kept one; the kept ones in episode order."""
+    if not moments:
+        return []
+    features = np.stack([m.features for m in moments])
+    scale = features.std(axis=0)
+    scale[scale == 0] = 1.0
+    standard = (features - features.mean(axis=0)) / scale
+    kept: list[int] = []
+    for i in sorted(range(len(moments)), key=lambda i: -moments[i].importance):
+        m = moments[i]
+        if any(moments[j].episode == m.episode and abs(moments[j].step - m.step) < config.gap for j in kept):
+            continue
+        if config.diversity and any(
+            np.sqrt(np.mean((standard[i] - standard[j]) ** 2)) < config.diversity for j in kept
+        ):
+            continue
+        kept.append(i)
+        if len(kept) == config.highlights:
+            break
+    return sorted((moments[i] for i in kept), key=lambda m: (m.episode, m.step))
+
+
+def agent_moments(groups: list[Episodes], agent: int, tracker: Tracker, config: HighlightsConfig, budget: int):
+    """Every scored state of the agent's episodes, and the importance used."""
+    moments, kind = [], ""
+    for group in groups:
+        kind, states, lengths = play_agent(group, agent, tracker, config, budget)
+        if kind == "rollouts":
+            scores = rollout_importance(group, agent, states, tracker, config)
+        else:
+            scores = {
+                (int(row), t): float(q[row]) for t, running, _, q, _, _ in states for row in np.flatnonzero(running)
+            }
+        for t, running, features, *_ in states:
+            for row in np.flatnonzero(running):
+                if (int(row), t) in scores:
+                    episode = group.first + int(row)
+                    moments.append(Moment(episode, t, int(lengths[row]), scores[(int(row), t)], features[row]))
+    return moments, kind
+
+
+def highlights(
+    groups: list[Episodes],
+    tracker: Tracker,
+    config: HighlightsConfig,
+    summarize: Callable[[Episodes, int, Moment], dict],
+) -> tuple[list[dict], dict]:
+    """Both agents' reels as summaries (the first agent's moments, then the second's) and the search's record.
+    ``summarize(group, agent, moment)`` builds a moment's summary."""
+    by_episode = {group.first + e: group for group in groups for e in range(len(group.env))}
+    summaries, record = [], {}
+    for agent in (0, 1):
+        moments, kind = agent_moments(groups, agent, tracker, config, tracker.budget * (agent + 1) // 2)
+        kept = select(moments, config)
+        summaries += [summarize(by_episode[m.episode], agent, m) for m in kept]
+        record[f"agent_{agent}"] = {
+            "importance": kind,
+            "states": len(moments),
+            "chosen": [{"episode": m.episode, "step": m.step, "importance": m.importance} for m in kept],
+        }
+    return summaries, record
