@@ -63,6 +63,8 @@ PHONE_WIDTH = 360  # the narrowest screen a clip must stay readable on
 MIN_PHONE_TEXT = 13  # px of legend text on that screen
 MIN_PHONE_MARKER = 10  # px radius of a person's or robot's marker on that screen, so its number is about 10 px tall
 CRASH_TAG_SECONDS = 3.0  # of video after a collision's pause
+PARTING_SECONDS = 1.0  # of video around the moment agents that followed a leader part, during which it is marked
+PARTING_CAPTION = "Here the {count} robots would act differently"  # {count}: "two", "three", ...
 
 
 @dataclass(frozen=True)
@@ -340,11 +342,17 @@ def _paste(frame: Image.Image, sprite: tuple[Image.Image, int], xy) -> None:
     frame.paste(image, (int(round(xy[0])) - half, int(round(xy[1])) - half), image)
 
 
+def _leader_last(order: list[int], leader: int | None) -> list[int]:
+    """A drawing order with the followed leader last, on top of those that move with it."""
+    return order if leader is None else [k for k in order if k != leader] + [leader]
+
+
 def _mix(colour, amount: float, base=ARENA) -> tuple[int, int, int]:
     return tuple(int(round(b + (c - b) * amount)) for c, b in zip(colour, base, strict=True))
 
 
 STATUS_RUNNING = "on its way"
+COUNTS = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six"}  # how many agents a caption speaks of
 
 
 def status_text(event: str, when: float, to_goal: float = math.nan) -> str:
@@ -370,7 +378,8 @@ class ClipRenderer:
     def __init__(self, scene: Scene, numbers: list[int] | None = None, options: RenderOptions | None = None):
         self.scene = scene
         self.options = options or RenderOptions()
-        self.numbers = robot_numbers(numbers, scene.n_agents)
+        numbers = robot_numbers(numbers, len(scene.agents))  # one per summary agent, drawn or not
+        self.numbers = numbers if scene.shown is None else [numbers[k] for k in scene.shown]
         self.layout = Layout.make(scene, self.options)
         self.robot_px = self.layout.marker(scene.robot_radius)
         self.sprites = Sprites(
@@ -378,6 +387,7 @@ class ClipRenderer:
         )
         # on-screen order: by robot number; panel p shows the agent self.order[p] when each robot has its own crowd
         self.order = sorted(range(scene.n_agents), key=lambda k: self.numbers[k])
+        self.stack = _leader_last(self.order[::-1], scene.leader)  # drawing order: the last on top
         self.panel_of = [self.order.index(k) if scene.n_panels > 1 else 0 for k in range(scene.n_agents)]
         self.pixels_robots = np.stack(
             [self.layout.to_pixel(self.panel_of[k], scene.robots[:, k]) for k in range(scene.n_agents)], axis=1
@@ -389,6 +399,7 @@ class ClipRenderer:
         self.texts: set[str] = set()  # every string drawn, so tests can check that no real name appears
         self.background = self._background()
         self.frames, self.event_starts = self._schedule()
+        self.parting_video = self._parting_video()
 
     # -- timeline -----------------------------------------------------------------------------------------------
 
@@ -412,6 +423,22 @@ class ClipRenderer:
             frames.append(Frame(t, len(frames) * tick))
         frames += [Frame(end, (len(frames) + h) * tick) for h in range(round(o.hold_end * o.fps))]
         return frames, starts
+
+    def _parting_video(self) -> float:
+        """The second of video at which the agents part (the first frame that reaches it after the opening
+        hold), or inf in a clip without that moment."""
+        if self.scene.parting is None:
+            return math.inf
+        played = self.frames[round(self.options.hold_start * self.options.fps) :]
+        return next((f.video for f in played if f.time >= self.scene.parting - 1e-9), math.inf)
+
+    def _parting_shown(self, frame: Frame) -> bool:
+        """Whether a frame marks the moment the agents part: PARTING_SECONDS of video around it, or a still of it."""
+        if self.scene.parting is None:
+            return False
+        if not math.isfinite(frame.video):
+            return abs(frame.time - self.scene.parting) < 1e-9
+        return abs(frame.video - self.parting_video) <= PARTING_SECONDS / 2
 
     def _since(self, when: float, frame: Frame) -> float:
         """Seconds of video since the pause for the event at ``when`` began (inf in a still)."""
@@ -518,7 +545,7 @@ class ClipRenderer:
         draw = ImageDraw.Draw(image)
         i, robots, humans = self._state(frame.time)
         self._draw_human_tails(draw, i, humans)
-        for k in self.order[::-1]:
+        for k in self.stack:
             self._draw_trail(draw, k, i, frame.time, robots[k])
         happened = [self._event(k, frame.time) for k in range(scene.n_agents)]
         for k in self.order:  # under everything, so the person who was hit stays visible
@@ -532,6 +559,10 @@ class ClipRenderer:
             if happened[k]:
                 self._draw_event(image, happened[k], robots[k], frame)
         self._draw_header(image, frame.time)
+        if scene.parting is not None and scene.leader is not None and self._parting_shown(frame):
+            _, at, _ = self._state(scene.parting)
+            self._draw_ring(image, at[scene.leader], self.robot_px * 2.3)
+            self._draw_parting_caption(image, PARTING_CAPTION)
         self._draw_legend(image, frame.time)
         return image
 
@@ -539,7 +570,7 @@ class ClipRenderer:
         """Robots on top of each other (both start at the same place) are drawn as one split marker, a vertical
         slice of each, so none is hidden."""
         near = self.robot_px * 0.5
-        for k in self.order[::-1]:
+        for k in self.stack:
             together = [
                 j
                 for j in self.order
@@ -585,6 +616,25 @@ class ClipRenderer:
         self._text(image, (lay.text * 0.6, y), f"Time {t:4.1f} s", lay.text, INK, "lm")
         if self.options.speed != 1.0:
             self._text(image, (lay.width / 2, y), f"playing {self.options.speed:g}x", lay.text, MUTED, "mm")
+
+    def _draw_parting_caption(self, image: Image.Image, caption: str) -> None:
+        """The caption of the moment agents part: white on ink at the header's right, over the scale bar and the
+        speed but never the clock."""
+        lay = self.layout
+        text = caption.format(count=COUNTS.get(len(self.numbers), str(len(self.numbers))))
+        right = lay.width - lay.text * 0.6
+        stamp, (x0, _) = _text_stamp(text, lay.text, (255, 255, 255), "rm", True)
+        box = (right + x0 - lay.text * 0.5, lay.header * 0.1, lay.width, lay.header * 0.9)
+        ImageDraw.Draw(image).rectangle(box, fill=INK)
+        self._text(image, (right, lay.header / 2), text, lay.text, (255, 255, 255), "rm", bold=True)
+
+    def _draw_ring(self, image: Image.Image, xy, radius: float) -> None:
+        """A ring at the place the agents part: ink with a white halo, so it reads on any background."""
+        draw = ImageDraw.Draw(image)
+        width = max(3, int(self.layout.text / 8))
+        for extra, colour in ((width, (255, 255, 255)), (0, INK)):
+            r = radius + extra / 2
+            draw.ellipse((xy[0] - r, xy[1] - r, xy[0] + r, xy[1] + r), outline=colour, width=width + extra)
 
     def _draw_legend(self, image: Image.Image, t: float) -> None:
         """One entry per robot: its icon, its name, and what has happened to it in words and a badge."""
@@ -656,7 +706,8 @@ def encoder_args(options: RenderOptions) -> list[str]:
 
 def contact_sheet(renderer: ClipRenderer, columns: int = 3) -> Image.Image:
     """Key frames (start, every event, the end, evenly spaced in between) in a grid with their times."""
-    times = sorted({0.0, renderer.scene.end_time, *renderer.scene.event_times()})
+    parting = [] if renderer.scene.parting is None else [renderer.scene.parting]
+    times = sorted({0.0, renderer.scene.end_time, *renderer.scene.event_times(), *parting})
     while len(times) < 2 * columns:
         j = int(np.argmax(np.diff(times)))
         times.insert(j + 1, (times[j] + times[j + 1]) / 2)

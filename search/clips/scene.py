@@ -2,6 +2,12 @@
 
 The renderer needs only this much of a summary, checked here with errors that say which part of the file is
 wrong, so a bad or truncated summary fails before any frame is drawn.
+
+A summary may say which part a clip shows and whether the agents followed a leader (the summaries of Agent
+Disagreements and HIGHLIGHTS, docs/clips.md): ``window = [first, last]`` keeps the states s_first..s_last (s_0 is
+the initial state, s_i the one after step i) with the clock restarted at s_first, and ``follow = {leader, steps}``
+either leaves the leader alone (it was followed throughout: the others are where it is) or marks the moment the
+agents part (s_steps, when it lies in the window).
 """
 
 from __future__ import annotations
@@ -31,6 +37,9 @@ class Scene:
     robot_radius: float
     human_radius: float
     dt: float
+    shown: tuple[int, ...] | None = None  # the summary's agents drawn, by index (None: all); a leader alone: one
+    leader: int | None = None  # the agent the others followed (an index into the drawn agents)
+    parting: float | None = None  # when agents that followed a leader part: a disagreement clip's moment
 
     @property
     def n_agents(self) -> int:
@@ -144,6 +153,8 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
         humans.append(crowd)
     if len(times) < 2:
         fail("steps must hold at least one step after the initial state")
+    first, last = window_of(summary, len(times) - 1, source)
+    follow = follow_of(summary, n_agents, source)
 
     outcomes = summary["outcomes"]
     if not isinstance(outcomes, list) or len(outcomes) != n_agents:
@@ -160,17 +171,74 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
             fail(f"outcomes[{k}].time must be a time within the steps (0 to {times[-1]} s), got {when!r}")
         parsed.append((str(event), float(when)))
 
+    # the window: the clock restarts at its first state; an outcome after its last is still running there, one
+    # before its first is shown from the start
+    t0, t1 = times[first], times[last]
+    parsed = [("running", t1 - t0) if e == "running" or w > t1 + 1e-6 else (e, max(w - t0, 0.0)) for e, w in parsed]
+    shown, leader, parting = None, None, None
+    if follow is not None and follow[1] >= len(times) - 1:  # followed throughout: the leader alone
+        shown, leader = (follow[0],), 0
+    elif follow is not None:
+        leader = follow[0]
+        parting = times[follow[1]] - t0 if first <= follow[1] <= last else None
+    drawn = list(shown) if shown is not None else list(range(n_agents))
+    robots_shown = np.stack(robots)[first : last + 1, drawn]
+    humans_shown = np.stack(humans)[first : last + 1]
+    if panels > 1:
+        humans_shown = humans_shown[:, drawn]
     return Scene(
         agents=tuple(str(a["name"]) for a in agents),
-        times=np.asarray(times),
-        robots=np.stack(robots),
-        humans=np.stack(humans),
-        starts=np.tile(np.asarray(scenario.robot_start, dtype=np.float64), (n_agents, 1)),
-        goals=np.tile(np.asarray(scenario.robot_goal, dtype=np.float64), (n_agents, 1)),
-        outcomes=tuple(parsed),
+        times=np.asarray(times[first : last + 1]) - t0,
+        robots=robots_shown,
+        humans=humans_shown,
+        starts=np.tile(np.asarray(scenario.robot_start, dtype=np.float64), (len(drawn), 1)),
+        goals=np.tile(np.asarray(scenario.robot_goal, dtype=np.float64), (len(drawn), 1)),
+        outcomes=tuple(parsed[k] for k in drawn),
         robot_radius=config.robot_radius,
         human_radius=config.human_radius,
         dt=config.dt,
+        shown=shown,
+        leader=leader,
+        parting=parting,
+    )
+
+
+def window_of(summary: dict, states: int, source: str = "summary") -> tuple[int, int]:
+    """A summary's ``window`` as (first, last) state indices (``states`` states after the initial one); the whole
+    clip without one."""
+    value = summary.get("window")
+    if value is None:
+        return 0, states
+    if (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+        and 0 <= value[0] < value[1] <= states
+    ):
+        return value[0], value[1]
+    raise SummaryError(
+        f"{source}: window must be [first, last] with 0 <= first < last <= {states} (the states a clip shows), "
+        f"got {value!r}"
+    )
+
+
+def follow_of(summary: dict, agents: int, source: str = "summary") -> tuple[int, int] | None:
+    """A summary's ``follow`` as (leader, steps): every agent took the leader's action on steps 1..steps."""
+    value = summary.get("follow")
+    if value is None:
+        return None
+    leader, steps = (value.get("leader"), value.get("steps")) if isinstance(value, dict) else (None, None)
+    if (
+        isinstance(leader, int)
+        and isinstance(steps, int)
+        and not isinstance(leader, bool)
+        and not isinstance(steps, bool)
+        and 0 <= leader < agents
+        and steps >= 0
+    ):
+        return leader, steps
+    raise SummaryError(
+        f"{source}: follow must be {{leader, steps}} with a leader from 0 to {agents - 1} and steps >= 0, got {value!r}"
     )
 
 

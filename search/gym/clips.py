@@ -8,6 +8,11 @@ them larger (wide views such as a road's), and each has its robot's label, statu
 whose episode ended stays where it ended. A crash shows a burst for a moment, then a small mark, so the rest of
 that view stays readable. The adapter's hooks (search/gym/adapter.py) say what this renderer cannot know; an
 adapter that names its own ``renderer`` gets that instead.
+
+A summary's ``window`` and ``follow`` (docs/clips.md) are honoured as the crowd renderer honours them: the replay
+follows the leader as the search did (``problem.override``), the clip shows the window's states with the clock
+from 0, a leader followed throughout is shown alone, and the moment the agents part is captioned in the adapter's
+words (an optional ``parting_caption`` hook) with a ring where its ``crash_point`` puts the agent.
 """
 
 from __future__ import annotations
@@ -43,14 +48,17 @@ from search.clips.render import (
     robot_numbers,
     robot_style,
 )
+from search.clips.scene import follow_of, window_of
 from search.gym.adapter import Adapter, import_attribute, load_adapter
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
 from search.gym.summary import replay
+from search.solvers.follow import Follow
 from search.solvers.reward import RewardConfig
 
 SCREEN = (16, 10)  # the screen shape a clip is fitted into when choosing how to arrange its views
 BURST_SECONDS = 1.5  # of video a crash's burst shows before the small mark replaces it
+PARTING_CAPTION = "Here the {count} agents would act differently"  # unless the adapter has a parting_caption
 
 
 @dataclass(frozen=True)
@@ -105,10 +113,16 @@ class GymScene:
         end_time: float,
         frames_per_step: int,
         dt: float,
+        shown: tuple[int, ...] | None = None,
+        parting: float | None = None,
+        parting_points: list[tuple[float, float] | None] | None = None,
     ):
         self.views, self.captions, self.outcomes, self.crash_points = views, captions, outcomes, crash_points
         self.end_time, self.frames_per_step, self.dt = end_time, frames_per_step, dt
         self.n_agents = len(views)
+        self.shown = shown  # as the crowd's Scene: the agents drawn (None: all; a leader followed throughout alone)
+        self.parting = parting  # when agents that followed a leader part (a disagreement clip), else None
+        self.parting_points = parting_points or [None] * self.n_agents  # where each agent is then, as crash_point
 
     def event_times(self) -> list[float]:
         return sorted({when for event, when in self.outcomes if event != "running"})
@@ -125,7 +139,11 @@ class GymScene:
 
 def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymScene, Adapter]:
     """Replay a summary with rendering environments (views at most ``width`` px wide), capturing each agent's
-    frames and captions until its episode ends."""
+    frames and captions until its episode ends; then keep its window."""
+    steps = len(summary["steps"])
+    first, last = window_of(summary, steps)
+    follow = follow_of(summary, len(summary["agents"]))
+    parting_step = follow[1] if follow is not None and first <= follow[1] <= last and follow[1] < steps else None
     scenario = GymScenario.from_dict(summary["scenario"])
     adapter = load_adapter(scenario.adapter, scenario.settings | scenario.load_adapter().view_settings(width))
     agents = [load_agent(entry["name"], adapter) for entry in summary["agents"]]
@@ -135,6 +153,7 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
     colours = [robot_style(n)[0] for n in numbers]
     views: list[list[np.ndarray]] = [[] for _ in agents]
     captions: list[list[str]] = [[] for _ in agents]
+    parting_points: list[tuple[float, float] | None] = [None] * len(agents)
     frames_per_step = 1
 
     def capture(p: GymCoupledProblem) -> None:
@@ -148,13 +167,44 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
             adapter.mark_agent(env, colours[k])
             views[k].append(np.array(env.render()))  # a copy: an environment may reuse its buffer
             captions[k].append(adapter.caption(env))
+        if int(p.t[0]) == parting_step:
+            parting_points[:] = [adapter.crash_point(instance.env) for instance in p.rows[0]]
 
+    problem.override = Follow.of_summary(summary)  # the agents follow a leader as they did in the search
     env_actions = np.array(summary["env_actions"], dtype=np.float64).reshape(-1, *adapter.env_action_shape)
     replay(problem, env_actions, capture)
     outcomes = [(o["event"], float(o["time"]) if o["time"] is not None else math.inf) for o in summary["outcomes"]]
     crash_points = [adapter.crash_point(instance.env) for instance in problem.rows[0]]
-    end = float(summary["steps"][-1]["t"])
-    return GymScene(views, captions, outcomes, crash_points, end, frames_per_step, adapter.dt), adapter
+
+    def time_of(state: int) -> float:
+        return float(summary["steps"][state - 1]["t"]) if state else 0.0
+
+    t0, t1 = time_of(first), time_of(last)
+    if summary.get("window") is not None:  # its states, the clock from its first; an outcome after it is running
+        views = [_part(frames, first * frames_per_step, last * frames_per_step) for frames in views]
+        captions = [_part(texts, first, last) for texts in captions]
+        outcomes = [
+            ("running", math.inf) if e == "running" or w > t1 + 1e-6 else (e, max(w - t0, 0.0)) for e, w in outcomes
+        ]
+    shown = (follow[0],) if follow is not None and follow[1] >= steps else None  # followed throughout: alone
+    scene = GymScene(
+        views,
+        captions,
+        outcomes,
+        crash_points,
+        t1 - t0,
+        frames_per_step,
+        adapter.dt,
+        shown=shown,
+        parting=None if parting_step is None else time_of(parting_step) - t0,
+        parting_points=parting_points,
+    )
+    return scene, adapter
+
+
+def _part(items: list, first: int, last: int) -> list:
+    """Items first..last of a capture; one that ended before ``first`` keeps its last item (it stays there)."""
+    return items[min(first, len(items) - 1) : last + 1]
 
 
 class GymClipRenderer(ClipRenderer):
@@ -169,9 +219,10 @@ class GymClipRenderer(ClipRenderer):
         agents = len(summary["agents"])
         self.options = options or RenderOptions()
         self.numbers = robot_numbers(numbers, agents)
-        self.order = sorted(range(agents), key=lambda k: self.numbers[k])
         self.scene, self.adapter = load_gym_scene(summary, self.numbers, self.options.width or 960)
-        self.layout = GymLayout.make(agents, self.scene.views[0][0].shape[:2], self.options)
+        shown = self.scene.shown if self.scene.shown is not None else range(agents)
+        self.order = sorted(shown, key=lambda k: self.numbers[k])
+        self.layout = GymLayout.make(len(self.order), self.scene.views[0][0].shape[:2], self.options)
         text = self.layout.text
         self.sprites = Sprites(self.numbers, 0, 1.0, text * 0.6, text)
         self.crash_mark = _sprite(text * 0.45, 1.0, _paint_burst)  # what stays of a crash once its burst is over
@@ -179,6 +230,7 @@ class GymClipRenderer(ClipRenderer):
         self.texts: set[str] = set()
         self._views: dict[int, tuple[int, Image.Image]] = {}  # per agent, its last scaled view
         self.frames, self.event_starts = self._schedule()
+        self.parting_video = self._parting_video()
 
     def draw(self, frame: Frame) -> Image.Image:
         lay, t = self.layout, frame.time
@@ -194,9 +246,14 @@ class GymClipRenderer(ClipRenderer):
             if happened and event == "collision" and point is not None:
                 sprite = self.sprites.crash if self._bursting(when, frame) else self.crash_mark
                 _paste(image, sprite, (x0 + point[0] * lay.panel, y0 + point[1] * lay.view_height))
+            at = self.scene.parting_points[k]
+            if at is not None and self._parting_shown(frame):
+                self._draw_ring(image, (x0 + at[0] * lay.panel, y0 + at[1] * lay.view_height), lay.text * 1.1)
             shown = event if happened or t >= self.scene.end_time else ""
             self._draw_status(image, k, (x0, y0 + lay.view_height), shown, when, t)
         self._draw_header(image, t)
+        if self._parting_shown(frame):
+            self._draw_parting_caption(image, getattr(self.adapter, "parting_caption", PARTING_CAPTION))
         return image
 
     def _view(self, k: int, t: float) -> Image.Image:

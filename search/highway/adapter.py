@@ -19,7 +19,8 @@ under the uniform prior) rather than constant weaving. The ego vehicle is never 
 Clips (the generic renderer, search/gym/clips.py, through this adapter's hooks): a view follows the ego along the
 road and keeps the whole road across it, so it is no taller than the road; the ego wears its robot's colour and
 all other traffic one grey that no robot colour is near; the caption is the ego's speed; every simulation step
-(5 per simulated second) is captured through highway-env's video-recording hook.
+(5 per simulated second) is captured through highway-env's video-recording hook; where cars that followed one
+part, the header says so in a driver's words.
 """
 
 from __future__ import annotations
@@ -129,6 +130,8 @@ class HighwayAdapter(Adapter):
         "timeout": "out of time",
         "running": "on its way",
     }
+
+    parting_caption = "Here the {count} cars would drive differently"  # a disagreement clip's moment ({count}: two)
 
     def view_settings(self, width_px: int) -> dict:
         lanes = int(self.settings.get("lanes_count", CONFIG["lanes_count"]))

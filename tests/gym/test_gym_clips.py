@@ -4,6 +4,7 @@ that defines none of the clip hooks, renders through the generic renderer; an ad
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import gymnasium
@@ -12,11 +13,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from search.clips.render import CRASH, RenderOptions, robot_style
+from search.clips.render import CRASH, PARTING_SECONDS, RenderOptions, robot_style
 from search.gym.adapter import Adapter
 from search.gym.clips import GymClipRenderer, render_gym
 from search.solvers.runner import SearchJob, run_search, write_outputs
-from tests.render.test_render import probe, top_level_boxes
+from tests.render.test_render import colour_mask, probe, top_level_boxes
 
 FAST = dict(speed=4.0, hold_start=0.2, hold_end=0.2, event_hold=0.2, width=480)
 
@@ -160,3 +161,89 @@ def test_an_adapter_may_name_its_own_renderer(tmp_path, summary_file):
         [1, 2],
         None,
     )
+
+
+# Clips of the summaries of Agent Disagreements and HIGHLIGHTS (docs/clips.md): the keys written into the search's
+# summary by hand; the replay follows the leader as a search that follows would.
+
+PLAIN = dict(hold_start=0, hold_end=0, event_hold=0, width=480)  # one frame per 1/24 s of the summary
+
+
+def with_keys(summary_file, **keys) -> dict:
+    return json.loads(summary_file.read_text()) | keys
+
+
+def test_a_window_shows_its_states_with_the_clock_from_zero(tmp_path, summary_file):
+    """States 1..4 (0.5 s to 2 s) of a clip whose fast agent crashes at 1.5 s and whose slow one runs out of
+    time at 3 s: 1.5 s of states, the crash at 1.0 s, the slow agent still running at the end."""
+    full = GymClipRenderer(json.loads(summary_file.read_text()), [3, 1], RenderOptions(**PLAIN))
+    summary = with_keys(summary_file, window=[1, 4])
+    renderer = GymClipRenderer(summary, [3, 1], RenderOptions(**PLAIN))
+    scene = renderer.scene
+    assert scene.end_time == 1.5 and scene.outcomes == [("collision", 1.0), ("running", math.inf)]
+    for k in range(2):
+        assert np.array_equal(scene.views[k][0], full.scene.views[k][1])  # s_1 first
+    path = tmp_path / "window.json"
+    path.write_text(json.dumps(summary))
+    result = render_gym(path, tmp_path / "window.mp4", [3, 1], RenderOptions(**PLAIN))
+    assert result.frames == 1.5 * 24 + 1 == imageio_ffmpeg.count_frames_and_secs(str(result.clip))[0]
+    renderer.draw(renderer.frames[-1])
+    assert {"Time  1.5 s", TrackAdapter.status_words["running"]} <= renderer.texts
+    assert TrackAdapter.status_words["timeout"] not in renderer.texts
+
+
+def test_a_leader_followed_throughout_is_shown_alone(summary_file):
+    """Every agent took the slow agent's actions on every step: one full-width view, the slow agent's (Robot 1)."""
+    renderer = GymClipRenderer(with_keys(summary_file, follow={"leader": 1, "steps": 6}), [3, 1], RenderOptions(**FAST))
+    assert renderer.order == [1] and renderer.layout.columns == 1 and renderer.layout.panel == 480
+    for frame in (renderer.frames[0], renderer.frames[-1]):
+        image = renderer.draw(frame)
+        assert colour_mask(image, robot_style(3)[0], tolerance=20).sum() == 0
+        assert colour_mask(image, robot_style(1)[0], tolerance=3).sum() > 20
+    assert "Robot 1" in renderer.texts and "Robot 3" not in renderer.texts
+
+
+class PartingAdapter(TrackAdapter):
+    parting_caption = "Here the {count} blocks would move differently"
+
+
+def test_the_moment_the_agents_part_is_captioned_in_the_adapters_words(summary_file):
+    """Both agents take the slow agent's actions on steps 1 and 2, then each its own: their views are one until
+    s_2 and part after it; the header says so for about a second of video around s_2."""
+    summary = with_keys(summary_file, follow={"leader": 1, "steps": 2})
+    plain = GymClipRenderer(json.loads(summary_file.read_text()), [3, 1], RenderOptions(**FAST))
+    renderer = GymClipRenderer(summary, [3, 1], RenderOptions(**FAST))
+    views = renderer.scene.views
+    assert all(np.array_equal(views[0][i], views[1][i]) for i in range(3))
+    assert not np.array_equal(views[0][3], views[1][3])
+    assert renderer.scene.parting == 1.0 and len(renderer.frames) == len(plain.frames)
+    header = slice(0, renderer.layout.header)
+    for frame in renderer.frames:
+        differs = not np.array_equal(np.asarray(renderer.draw(frame))[header], np.asarray(plain.draw(frame))[header])
+        assert differs == (abs(frame.video - renderer.parting_video) <= PARTING_SECONDS / 2), frame
+    assert "Here the two agents would act differently" in renderer.texts
+
+    summary["scenario"]["adapter"] = "tests.gym.test_gym_clips:PartingAdapter"
+    own = GymClipRenderer(summary, [3, 1], RenderOptions(**FAST))
+    own.draw(next(f for f in own.frames if f.video >= own.parting_video))
+    assert "Here the two blocks would move differently" in own.texts
+
+
+def test_highway_cars_part_in_a_drivers_words(tmp_path):
+    """A highway search's summary with its cars following the cautious driver (who lasts the drive) for 3 s:
+    both egos are at one place at that moment, and the caption speaks of cars."""
+    job = SearchJob(
+        agents=("tests.highway.drivers:cruise", "tests.highway.drivers:cautious"),
+        scenario="highway-dense",
+        solver="random",
+        budget=20,
+        top_k=1,
+        solver_settings={"batch": 1},
+    )
+    summary = json.loads((write_outputs(tmp_path, run_search(job)) / "summary-001.json").read_text())
+    assert summary["outcomes"][1]["event"] == "success"
+    renderer = GymClipRenderer(summary | {"follow": {"leader": 1, "steps": 3}, "window": [1, 8]}, [1, 2])
+    points = renderer.scene.parting_points
+    assert renderer.scene.parting == 2.0 and points[0] is not None and points[0] == points[1]
+    renderer.draw(next(f for f in renderer.frames if f.video >= renderer.parting_video))
+    assert "Here the two cars would drive differently" in renderer.texts

@@ -376,6 +376,13 @@ BAD = [
     (lambda s: s["outcomes"].pop(), "one entry per agent"),
     (lambda s: s["scenario"].pop("robot"), "scenario is not a valid initial state"),
     (lambda s: s.update(agents=[{"name": "only"}]), "at least two"),
+    (lambda s: s.update(window=[5, 3]), r"window must be \[first, last\] with 0 <= first < last <= 67"),
+    (lambda s: s.update(window=[0, 68]), r"window must be .* got \[0, 68\]"),
+    (
+        lambda s: s.update(follow={"leader": 2, "steps": 3}),
+        r"follow must be \{leader, steps\} with a leader from 0 to 1",
+    ),
+    (lambda s: s.update(follow={"leader": 0}), "follow must be"),
     (
         lambda s: s["scenario"]["world"].update(robot_visible=True),
         r"steps\[0\].humans holds one crowd, but the robots "
