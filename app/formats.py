@@ -7,8 +7,8 @@ imports the offline side) and the bundle builder share it. docs/formats.md descr
   exactly and to draw it. Written by ``search.solvers.summary``, read by ``foil verify``, the renderer, the
   bundle's audit and the bots.
 - manifest.json (``foil.bundle/1``): a bundle's clips, each with its agents, on-screen labels, ground truth,
-  audit and checksum, and the world they show (``app.visible.World``). Written by ``foil bundle``, read by the
-  server and the bots.
+  audit and checksum (or, for a summary method that shows each agent on its own, one reel per agent), and the world
+  they show (``app.visible.World``). Written by ``foil bundle``, read by the server and the bots.
 """
 
 from __future__ import annotations
@@ -16,16 +16,18 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Any, Literal, TypedDict, cast
+from typing import Annotated, Any, Literal, TypedDict, cast
 
 from pydantic import (
     BaseModel,
     ConfigDict,
+    Field,
     SerializerFunctionWrapHandler,
     field_validator,
     model_serializer,
     model_validator,
 )
+from typing_extensions import TypedDict as CheckedDict  # the one pydantic validates on Python 3.11
 
 from app.visible import World
 
@@ -103,15 +105,35 @@ class ClipAudit(BaseModel):
     why: str
 
 
+class ManifestReel(BaseModel):
+    """One agent's reel (HIGHLIGHTS): a video of its most important moments, cut from its own episodes."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    agent: str  # the real name, one of the clip's agents
+    file: Annotated[str, Field(min_length=1)]  # relative to the bundle
+    sha256: Annotated[str, Field(min_length=1)]
+    poster: str = ""
+    summaries: list[str] = []  # the summary.json of each segment, relative to the bundle, in the order shown
+
+
+class ClipSpent(CheckedDict):
+    """What making a clip cost: the simulator steps its search used and the seconds of video its question shows."""
+
+    sim_steps: Annotated[int, Field(ge=0)]
+    clip_seconds: Annotated[float, Field(ge=0)]  # for reels, both reels together
+
+
 class ManifestClip(BaseModel):
-    """One clip of a bundle. Fields after ``audit`` are for the researcher's gallery and analysis; the server
-    needs only those before."""
+    """One clip of a bundle: either a coupled clip (`file`, `sha256`: every agent in one video) or a pair of reels
+    (`reels`: one video per agent, in the order of `agents`; then `file`, `sha256` and `summary` are empty). Fields
+    after ``audit`` are for the researcher's gallery and analysis; the server needs only those before, and `reels`."""
 
     model_config = ConfigDict(extra="ignore", frozen=True)
 
     id: str
-    file: str  # relative to the bundle
-    sha256: str
+    file: str = ""  # relative to the bundle
+    sha256: str = ""
     scheme: str
     scenario: str
     agents: list[str]  # in on-screen order
@@ -125,6 +147,8 @@ class ManifestClip(BaseModel):
     solver: str = ""
     reward: float | None = None  # the summary's divergence reward
     outcomes: list[dict[str, Any]] = []  # each agent's summary outcome, in on-screen order
+    reels: list[ManifestReel] = []  # a pair of reels: one per agent, in the order of `agents`
+    spent: ClipSpent | None = None  # what the clip cost; absent from manifests written before it was recorded
 
     @model_validator(mode="after")
     def _consistent(self) -> ManifestClip:
@@ -134,7 +158,26 @@ class ManifestClip(BaseModel):
             raise ValueError(f"better {self.better!r} is not one of its agents")
         if len(set(self.labels)) != len(self.labels):
             raise ValueError("labels must differ from each other")
+        if self.reels:
+            if [reel.agent for reel in self.reels] != self.agents:
+                shown = [reel.agent for reel in self.reels]
+                raise ValueError(f"reels must be one per agent in the order of agents {self.agents}, not {shown}")
+            if self.file or self.sha256 or self.summary:
+                raise ValueError("a clip of reels has no file, sha256 or summary of its own: each reel has them")
+        elif not (self.file and self.sha256):
+            raise ValueError("a clip needs its file and sha256, or one reel per agent")
         return self
+
+    @model_serializer(mode="wrap")
+    def _leaves_new_keys_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """A coupled clip leaves `reels` out and a clip without a cost `spent`, so a manifest written before they
+        existed reads and writes byte for byte as it did."""
+        data: dict[str, Any] = handler(self)
+        if not self.reels:
+            data.pop("reels", None)
+        if self.spent is None:
+            data.pop("spent", None)
+        return data
 
 
 class Manifest(BaseModel):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import random
+import statistics
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any
@@ -29,6 +30,10 @@ class Words:
     `success` and `collision` may say ``{seconds}``, the seconds the clip shows it took (one decimal, as the clip)."""
 
     clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
+    # a pair of reels (each robot on its own, in moments of its own runs): the line above them and each reel's
+    # accessible name, which the page follows with the robot's label
+    reels_intro: str = "Each robot is shown on its own, in moments from its own runs through a crowd."
+    reel_title: str = "Clip of one robot on its own in a crowd"
     example_caption: str = (  # under the instructions' example clip, unless the study file says otherwise
         "An example: two robots, each with its own colour, shape and name, walk through a crowd to the same goal."
     )
@@ -131,7 +136,7 @@ class Observer:
             score -= self.closeness_weight * max(0.0, self.comfort_m - float(closest))
         return score
 
-    def perceive(self, clip: VisibleClip, rng: random.Random) -> dict[str, float]:
+    def perceive(self, clip: Visible, rng: random.Random) -> dict[str, float]:
         """Each on-screen label's perceived score for one viewing (``rng``: a ``random.Random``)."""
         return {label: score + rng.gauss(0.0, self.noise) for label, score in clip.scores(self).items()}
 
@@ -160,6 +165,22 @@ class VisibleClip:
         (the crowd's when None)."""
         names = [agent["name"] for agent in summary["agents"]]
         order = [names.index(agent) for agent in agents]  # the summary's index of each label's robot
+        return cls._of_robots(summary, order, labels, world)
+
+    @classmethod
+    def of_segment(cls, summary: Mapping[str, Any], label: str, world: World | None = None) -> VisibleClip:
+        """One segment of a reel as a clip of the one robot labelled ``label``: in a segment every agent's instance
+        follows the reel's agent (the summary's ``follow.leader``), so the leader's outcome is what it shows."""
+        follow = summary.get("follow")
+        if not isinstance(follow, Mapping) or not isinstance(follow.get("leader"), int):
+            raise ValueError(f"a reel's segment says whom its robots follow (follow.leader); this one has {follow!r}")
+        return cls._of_robots(summary, [follow["leader"]], [label], world)
+
+    @classmethod
+    def _of_robots(
+        cls, summary: Mapping[str, Any], order: Sequence[int], labels: Sequence[str], world: World | None
+    ) -> VisibleClip:
+        """The clip of the summary's robots ``order`` (its indices), labelled ``labels``."""
         steps = summary.get("steps") or [{"t": 1.0}]
         return cls(
             labels=tuple(labels),
@@ -195,9 +216,59 @@ class VisibleClip:
         return text + "."
 
 
-def audit(clip: VisibleClip, better: str, observer: Observer | None = None) -> dict[str, str]:
-    """Whether a two-robot clip visibly shows the better robot (label ``better``) as better, as worse, or shows
-    no difference, judged without perception noise: ``{"shows": "better" | "worse" | "tie", "why": ...}``."""
+@dataclass(frozen=True)
+class VisibleReels:
+    """What a pair of reels shows (HIGHLIGHTS: each agent on its own, in moments of its own episodes): per on-screen
+    label the segments of its reel, each a one-robot `VisibleClip`. A robot is judged by its visible score averaged
+    over its reel's segments, by the same observer as a clip of both."""
+
+    labels: tuple[str, ...]
+    reels: tuple[tuple[VisibleClip, ...], ...]  # per label, its reel's segments in the order shown
+    world: World = World()
+
+    @classmethod
+    def of_summaries(
+        cls, reels: Sequence[Sequence[Mapping[str, Any]]], labels: Sequence[str], world: World | None = None
+    ) -> VisibleReels:
+        """The reels whose segments' summary.json objects are ``reels``, one list per label in ``labels``."""
+        if any(not segments for segments in reels):
+            raise ValueError("every reel needs the summary of at least one segment")
+        shown = tuple(
+            tuple(VisibleClip.of_segment(summary, label, world) for summary in segments)
+            for label, segments in zip(labels, reels, strict=True)
+        )
+        return cls(labels=tuple(labels), reels=shown, world=world or World())
+
+    @property
+    def reel_s(self) -> tuple[float, ...]:
+        """The seconds each reel shows."""
+        return tuple(sum(segment.end_s for segment in reel) for reel in self.reels)
+
+    @property
+    def end_s(self) -> float:
+        """The seconds the reels show, one after the other."""
+        return sum(self.reel_s)
+
+    def scores(self, observer: Observer) -> dict[str, float]:
+        return {
+            label: statistics.fmean(segment.scores(observer)[label] for segment in reel)
+            for label, reel in zip(self.labels, self.reels, strict=True)
+        }
+
+    def describe(self, label: str) -> str:
+        """How the robot labelled ``label`` ended in each moment of its reel, as one sentence in the world's words."""
+        reel = self.reels[self.labels.index(label)]
+        moments = "; ".join(segment.describe(label).removeprefix(f"{label} ").removesuffix(".") for segment in reel)
+        return f"{label}, in {len(reel)} moment{'' if len(reel) == 1 else 's'} of its own: {moments}."
+
+
+Visible = VisibleClip | VisibleReels  # what one question's video shows: a clip of both robots, or their reels
+
+
+def audit(clip: Visible, better: str, observer: Observer | None = None) -> dict[str, str]:
+    """Whether a two-robot clip (or pair of reels) visibly shows the better robot (label ``better``) as better, as
+    worse, or shows no difference, judged without perception noise: ``{"shows": "better" | "worse" | "tie", "why":
+    ...}``."""
     observer = observer or Observer()
     scores = clip.scores(observer)
     if better not in scores or len(scores) != 2:

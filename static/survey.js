@@ -1,9 +1,10 @@
-// Clip gating, playback record and page state. The answer controls stay disabled until the clip has played to
-// its end; on a first viewing seeking forward and faster playback are undone. Every clip event (plays, pauses,
-// seeks, rate changes, the tab being hidden) is logged and sent with the form, with the time on the page and the
-// viewport. What the participant typed or chose, the log and whether the clip was watched are kept in the
-// browser's storage for this screen, so a reload (phones reload background tabs) loses nothing; the server keeps
-// its own clock and refuses answers given sooner than the clip can have been watched.
+// Clip gating, playback record and page state. The answer controls stay disabled until the clip (on a screen of
+// reels: every reel, one playing at a time) has played to its end; on a first viewing seeking forward and faster
+// playback are undone. Every clip event (plays, pauses, seeks, rate changes, the tab being hidden; a reel's with
+// its place, `reel`) is logged and sent with the form, with the time on the page and the viewport. What the
+// participant typed or chose, the log and whether the clip was watched are kept in the browser's storage for this
+// screen, so a reload (phones reload background tabs) loses nothing; the server keeps its own clock and refuses
+// answers given sooner than the clip can have been watched.
 "use strict";
 
 (function () {
@@ -15,7 +16,7 @@
   const storageKey = stepField && csrf ? "foil:" + csrf.value.slice(0, 16) + ":" + stepField.value : null;
   const renderedWithLog = Boolean(events && events.value);
   let log = renderedWithLog ? safeParse(events.value) : [];
-  let state = { watched: false, values: {} };
+  let state = { watched: false, reels: [], values: {} };  // watched: every gated clip; reels: those of them ended
 
   function safeParse(text) {
     try { const value = JSON.parse(text); return Array.isArray(value) ? value : []; } catch (e) { return []; }
@@ -28,7 +29,8 @@
   function save() {
     const store = storage();
     if (!store || !storageKey) return;
-    try { store.setItem(storageKey, JSON.stringify({ log: log.slice(-400), watched: state.watched, values: state.values })); }
+    const kept = { log: log.slice(-400), watched: state.watched, reels: state.reels, values: state.values };
+    try { store.setItem(storageKey, JSON.stringify(kept)); }
     catch (e) { /* storage full or off: the page still works, a reload just starts it afresh */ }
   }
 
@@ -44,6 +46,7 @@
     try { kept = JSON.parse(store.getItem(storageKey) || "null"); } catch (e) { kept = null; }
     if (!kept || typeof kept !== "object" || prefix === "") return;
     state.watched = kept.watched === true;
+    state.reels = Array.isArray(kept.reels) ? kept.reels : [];
     state.values = kept.values && typeof kept.values === "object" ? kept.values : {};
     if (!renderedWithLog && Array.isArray(kept.log) && kept.log.length) {
       log = kept.log.concat([{ type: "reload", t: 0 }]);
@@ -51,9 +54,10 @@
     }
   }
 
-  function record(type, value) {
+  function record(type, value, reel) {
     const item = { type: type, t: Math.round(performance.now() - started) };
     if (typeof value === "number" && isFinite(value)) item.v = Math.round(value * 1000) / 1000;
+    if (typeof reel === "number") item.reel = reel;
     log.push(item);
     if (events) events.value = JSON.stringify(log.slice(-400));
     save();
@@ -90,6 +94,12 @@
     });
   }
 
+  function allWatched() {  // every clip the answers wait for has played to its end
+    return Array.prototype.every.call(document.querySelectorAll("[data-clip][data-gated]"), function (box) {
+      return box.hasAttribute("data-watched");
+    });
+  }
+
   function unlock() {
     if (answers) answers.disabled = false;
     const stale = document.getElementById("video-error");
@@ -105,16 +115,23 @@
     const fill = box.querySelector("[data-fill]");
     const gated = box.hasAttribute("data-gated");
     const nextOnly = box.hasAttribute("data-next-only");  // a clip to watch, no questions: only Next unlocks
+    const reel = box.hasAttribute("data-reel") ? parseInt(box.dataset.reel, 10) : null;  // its place among reels
+    const unlocks = nextOnly ? "The Next button unlocks when the clip ends."
+                  : reel !== null ? "You can answer when each robot's clip has ended." : "You can answer when the clip ends.";
     const width = parseFloat(video.getAttribute("width")), height = parseFloat(video.getAttribute("height"));
     if (width > 0 && height > 0) box.style.setProperty("--ratio", String(width / height));
-    let watched = box.hasAttribute("data-watched") || (gated && state.watched && !box.hasAttribute("data-refused"));
-    if (box.hasAttribute("data-refused")) { state.watched = false; save(); }
+    const keptWatched = state.watched || (reel !== null && state.reels.indexOf(reel) >= 0);
+    let watched = box.hasAttribute("data-watched") || (gated && keptWatched && !box.hasAttribute("data-refused"));
+    if (box.hasAttribute("data-refused")) { state.watched = false; state.reels = []; save(); }
+    if (watched) box.setAttribute("data-watched", "");
     let loaded = false;
     let furthest = 0;  // the furthest point reached by playing, on a first viewing
     let undoing = false;
     // A ranking round's clips show their last frame (how they ended) until played; those seeks are not logged.
     const showsEnd = video.hasAttribute("data-round");
     let atEnd = false;
+
+    function note(type, value) { record(type, value, reel); }  // an event of this clip
 
     function say(text, failed) {
       status.textContent = text;
@@ -124,7 +141,7 @@
     const timeout = parseFloat(box.dataset.timeout || "20") * 1000;
     const timer = setTimeout(function () {
       if (!loaded) {
-        record("timeout");
+        note("timeout");
         say("The clip is taking too long to load. Check your internet connection and reload the page. " +
             "If it still does not load, please contact the researchers.", true);
       }
@@ -134,23 +151,30 @@
       if (loaded) return;
       loaded = true;
       clearTimeout(timer);
-      record("loaded");
+      note("loaded");
       if (showsEnd && video.duration) {
         atEnd = undoing = true;
         video.currentTime = Math.max(0, video.duration - 0.05);
       }
-      say(gated && !watched ? "Press Play clip (or tap the picture). " + (nextOnly ? "The Next button unlocks when the clip ends."
-                                                                               : "You can answer when the clip ends.")
-                            : "Ready. You can replay the clip.");
+      say(gated && !watched ? "Press Play clip (or tap the picture). " + unlocks : "Ready. You can replay the clip.");
     });
     video.addEventListener("error", function () {
       clearTimeout(timer);
-      record("error");
+      note("error");
       say("The clip could not be loaded. Please reload the page; if it still fails, contact the researchers.", true);
     });
-    video.addEventListener("play", function () { record("play"); button.textContent = "Pause"; say("Playing…"); });
+    video.addEventListener("play", function () {
+      note("play");
+      button.textContent = "Pause";
+      say("Playing…");
+      if (reel !== null) {  // one reel at a time: the server holds the answers for the reels' times added up
+        box.closest("[data-reels]").querySelectorAll("video").forEach(function (other) {
+          if (other !== video && !other.paused) other.pause();
+        });
+      }
+    });
     video.addEventListener("pause", function () {
-      if (!video.ended) { record("pause"); button.textContent = "Play clip"; say("Paused. Press Play clip to go on."); }
+      if (!video.ended) { note("pause"); button.textContent = "Play clip"; say("Paused. Press Play clip to go on."); }
     });
     video.addEventListener("timeupdate", function () {
       if (!video.seeking && video.currentTime > furthest && video.currentTime - furthest < 1.5) furthest = video.currentTime;
@@ -159,34 +183,48 @@
     video.addEventListener("seeking", function () {
       if (undoing) { undoing = false; return; }
       if (!watched && video.currentTime > furthest + 0.5) {
-        record("seek_blocked", video.currentTime);
+        note("seek_blocked", video.currentTime);
         undoing = true;
         video.currentTime = furthest;
         say("Please watch the whole clip once before skipping ahead.", true);
         return;
       }
-      record("seek", video.currentTime);
+      note("seek", video.currentTime);
     });
     video.addEventListener("ratechange", function () {
-      record("ratechange", video.playbackRate);
+      note("ratechange", video.playbackRate);
       if (!watched && video.playbackRate !== 1) video.playbackRate = 1;
     });
     video.addEventListener("ended", function () {
       if (!watched && video.duration && furthest + 1.5 < video.duration) {  // reached by a skip, not by playing
-        record("seek_blocked", video.currentTime);
+        note("seek_blocked", video.currentTime);
         undoing = true;
         video.currentTime = furthest;
         button.textContent = "Play clip";
         say("Please watch the whole clip once before skipping ahead. Press Play clip to go on.", true);
         return;
       }
-      record("ended");
+      note("ended");
       watched = true;
-      if (gated) { state.watched = true; save(); }
+      box.setAttribute("data-watched", "");
+      if (gated) {
+        if (reel !== null && state.reels.indexOf(reel) < 0) state.reels.push(reel);
+        state.watched = allWatched();
+        save();
+      }
       button.textContent = "Replay clip";
-      say(!gated ? "Clip finished. You can replay it." : nextOnly ? "Clip finished. Press Next to go on, or replay the clip."
-                                                            : "Clip finished. You can now answer, or replay the clip.");
-      if (gated) unlock();
+      say(!gated ? "Clip finished. You can replay it."
+          : !allWatched() ? "Clip finished. Now play the other robot's clip: you can answer when it has ended."
+          : nextOnly ? "Clip finished. Press Next to go on, or replay the clip."
+          : "Clip finished. You can now answer, or replay the clip.");
+      if (gated && allWatched()) {
+        unlock();
+        if (reel !== null) {  // every reel's line says so, not only the last one's
+          box.closest("[data-reels]").querySelectorAll("[data-status]").forEach(function (line) {
+            line.textContent = "Clip finished. You can now answer, or replay the clips.";
+          });
+        }
+      }
     });
     video.addEventListener("contextmenu", function (event) { event.preventDefault(); });  // no "Show controls"
 
@@ -204,7 +242,7 @@
     video.addEventListener("click", toggle);  // tapping the picture plays and pauses it
     video.controls = false;
     if (watched && gated) {
-      unlock();
+      if (allWatched()) unlock();
       button.textContent = "Replay clip";
     }
     video.load();

@@ -151,8 +151,18 @@ LONG_COLUMNS = [
     Column("correct", "Int64", "1 when the answer equals `truth`, 0 when not, empty when there is no right answer"),
     Column("time_on_page_ms", "Int64", "time on the page measured by the browser, in ms"),
     Column("server_ms", "Int64", "time from the screen becoming current to its submission, measured by the server"),
-    Column("plays", "Int64", "how often the clip was started (1 = watched once, no replay), across reloads"),
-    Column("clip_ms", "Int64", "the clip's playing time in ms (from its file); time_on_screen_ms should exceed it"),
+    Column(
+        "plays",
+        "Int64",
+        "how often the clip was started (1 = watched once, no replay; a pair of reels: each reel's starts added up), "
+        "across reloads",
+    ),
+    Column(
+        "clip_ms",
+        "Int64",
+        "the clip's playing time in ms (from its file; a pair of reels: both together); time_on_screen_ms should "
+        "exceed it",
+    ),
     Column("time_on_screen_ms", "Int64", "time the screen was current before it was answered (server clock, ms)"),
     Column("seeks", "Int64", "seeks within the clip (allowed once it had been watched to the end)"),
     Column("seeks_blocked", "Int64", "seeks forward on the first viewing, undone by the page"),

@@ -2,9 +2,10 @@
 way a viewer would.
 
 A bot reads each page's form, fetches the clip the page points to (as a browser would), and answers from what the
-clip visibly shows. It knows a clip by its address (the sha256 in /clips/SHA.mp4), finds it in the bundle and
-reads the clip's summary.json: which robot collided, which reached the goal and when, which timed out, how close
-each came to people. The observer model turns that into a score per robot, by the rule of the bundle's world
+clip visibly shows. It knows a clip by its address (the sha256 in /clips/SHA.mp4; a pair of reels by both reels'),
+finds it in the bundle and reads the clip's summary.json (a reel's: its segments'): which robot collided, which
+reached the goal and when, which timed out, how close each came to people. The observer model turns that into a
+score per robot (a reel's robot: averaged over its segments), by the rule of the bundle's world
 (`app.visible.World`), plus Gaussian perception noise; the ground truth (`better` in the manifest, the agents'
 evaluations) is never read.
 """
@@ -20,13 +21,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from app.formats import Manifest, load_summary
+from app.formats import Manifest, Summary, load_summary
 from app.survey.clip_length import clip_shape
-from app.visible import Observer, VisibleClip, contrast
+from app.visible import Observer, Visible, VisibleClip, VisibleReels, contrast
 
 
 class ClipIndex:
-    """The bundle's clips by sha256, each as a VisibleClip read from its summary.json, judged by the rule and
+    """The bundle's clips by address (a clip's sha256; a pair of reels' sha256s joined by "+", in the order shown),
+    each as what it visibly shows, read from its summary.json (a reel's, from its segments'), judged by the rule and
     described in the words of the bundle's world."""
 
     def __init__(self, bundle_dir: str | Path):
@@ -36,24 +38,38 @@ class ClipIndex:
         except FileNotFoundError:
             raise ValueError(f"no manifest.json in bundle {root}") from None
         world = manifest.shown_world()
-        self.clips: dict[str, VisibleClip] = {}
-        self.lengths_ms: dict[str, int] = {}  # what the server holds each clip's answers for
+        self.clips: dict[str, Visible] = {}
+        self.lengths_ms: dict[str, int] = {}  # what the server holds each clip's answers for (reels: their sum)
         for entry in manifest.clips:
-            path = root / entry.summary
-            if not entry.summary or not path.is_file():
-                raise ValueError(f"clip {entry.id!r}: no summary file {path}; the bots judge clips from it")
-            self.clips[entry.sha256.lower()] = VisibleClip.of_summary(
-                load_summary(path), entry.agents, entry.labels, world
-            )
-            clip_file = root / entry.file
-            if clip_file.is_file():
-                self.lengths_ms[entry.sha256.lower()] = clip_shape(clip_file).ms
+            if entry.reels:
+                if not all(reel.summaries for reel in entry.reels):
+                    raise ValueError(f"clip {entry.id!r}: a reel lists no segments; the bots judge reels by them")
+                key = "+".join(reel.sha256.lower() for reel in entry.reels)
+                segments = [[_summary(root, entry.id, name) for name in reel.summaries] for reel in entry.reels]
+                self.clips[key] = VisibleReels.of_summaries(segments, entry.labels, world)
+                files = [root / reel.file for reel in entry.reels]
+            else:
+                key = entry.sha256.lower()
+                summary = _summary(root, entry.id, entry.summary)
+                self.clips[key] = VisibleClip.of_summary(summary, entry.agents, entry.labels, world)
+                files = [root / entry.file]
+            if all(file.is_file() for file in files):
+                self.lengths_ms[key] = sum(clip_shape(file).ms for file in files)
 
-    def at(self, url: str) -> tuple[str, VisibleClip]:
-        match = re.search(r"/clips/([0-9a-f]{64})\.mp4", url)
-        if not match or match.group(1) not in self.clips:
-            raise ValueError(f"the page shows clip {url!r}, which is not in the bundle given to the bots")
-        return match.group(1), self.clips[match.group(1)]
+    def at(self, urls: list[str]) -> tuple[str, Visible]:
+        """The clip a page shows in the videos at ``urls``: its address and what it shows."""
+        shas = re.findall(r"/clips/([0-9a-f]{64})\.mp4", " ".join(urls))
+        key = "+".join(shas)
+        if len(shas) != len(urls) or key not in self.clips:
+            raise ValueError(f"the page shows clip {' and '.join(urls)}, which is not in the bundle given to the bots")
+        return key, self.clips[key]
+
+
+def _summary(root: Path, clip: str, name: str) -> Summary:
+    path = root / name
+    if not name or not path.is_file():
+        raise ValueError(f"clip {clip!r}: no summary file {path}; the bots judge clips from it")
+    return load_summary(path)
 
 
 # The tags of a page that a form is made of (name, attributes), and one attribute (name, value in double quotes,
@@ -95,7 +111,7 @@ class PageForm:
         self.legends: dict[str, str] = {}  # radio group or select prefix -> its question
         self.selects: dict[str, list[str]] = {}
         self.textareas: list[str] = []
-        self.video = ""
+        self.videos: list[str] = []  # the screen's clip, or its reels in the order shown
         self.answerable = False  # a study screen (not the instructions' example)
         legend = ""  # the legend of the innermost fieldset begun so far
         legend_at = label_at = -1  # where the legend or label being read begins
@@ -142,7 +158,7 @@ class PageForm:
             elif tag == "textarea":
                 self.textareas.append(a["name"])
             elif tag == "video" and "data-example" not in a and "data-round" not in a:
-                self.video = a.get("src", "")  # the screen's clip; not the instructions' example or a replay
+                self.videos.append(a.get("src", ""))  # the screen's; not the instructions' example or a replay
         code = COMPLETION_CODE.search(page)
         self.code = (
             "".join(
@@ -185,7 +201,7 @@ class BotRun:
     external_id: str
     completed: bool = False
     completion_code: str = ""
-    answers: list[dict[str, Any]] = field(default_factory=list)  # {step, clip (sha256 or None), question, value}
+    answers: list[dict[str, Any]] = field(default_factory=list)  # {step, clip (address or None), question, value}
 
 
 class Bot:
@@ -250,8 +266,8 @@ class Bot:
             elif "step" in form.hidden:
                 shown = time.monotonic()
                 data = self.answer(form)
-                if form.video and not self.fast:  # watch the clip: the server's clock checks it
-                    wait = self.clips.lengths_ms.get(self.clips.at(form.video)[0], 0) / 1000 + 0.2
+                if form.videos and not self.fast:  # watch the clip: the server's clock checks it
+                    wait = self.clips.lengths_ms.get(self.clips.at(form.videos)[0], 0) / 1000 + 0.2
                     time.sleep(max(0.0, shown + wait - time.monotonic()))
                 response = self.client.post("/study", data=data)
                 if response.status_code == 422 and self._choose_again(form, data):
@@ -266,12 +282,13 @@ class Bot:
                 return self.run
         raise BotError(f"bot {self.run.external_id}: the study did not end after {max_pages} pages")
 
-    def _watch(self, form: PageForm) -> tuple[str, VisibleClip, dict[str, float], int]:
-        """Fetch the start of the clip like a browser (Range request) and look at it."""
-        sha, clip = self.clips.at(form.video)
-        response = self.client.get(form.video, headers={"Range": "bytes=0-1023"})
-        if response.status_code not in (200, 206):
-            raise BotError(f"clip {form.video}: HTTP {response.status_code}")
+    def _watch(self, form: PageForm) -> tuple[str, Visible, dict[str, float], int]:
+        """Fetch the start of the clip (of each reel) like a browser (Range request) and look at it."""
+        sha, clip = self.clips.at(form.videos)
+        for video in form.videos:
+            response = self.client.get(video, headers={"Range": "bytes=0-1023"})
+            if response.status_code not in (200, 206):
+                raise BotError(f"clip {video}: HTTP {response.status_code}")
         return sha, clip, self.observer.perceive(clip, self.rng), int(clip.end_s * 1000)
 
     def answer(self, form: PageForm) -> dict[str, str]:
@@ -279,11 +296,9 @@ class Bot:
         step = int(form.hidden["step"])
         seen: dict[str, float]
         sha, clip, seen, clip_ms = None, None, {}, 0
-        if form.video:
+        if form.videos:
             sha, clip, seen, clip_ms = self._watch(form)
-            data["video_events"] = json.dumps(
-                [{"type": "loaded", "t": 40}, {"type": "play", "t": 800}, {"type": "ended", "t": 800 + clip_ms}]
-            )
+            data["video_events"] = json.dumps(_played(clip))
             if form.answerable and not (form.radios or form.textareas):
                 self.block.append((sha, seen))  # a clip of a ranking block: remember it for the ranking
         ranked = self._ranking() if form.selects else []
@@ -371,12 +386,26 @@ class Bot:
             x = 1 - x
         return 1 + round(x * (len(options) - 1))
 
-    def _explain(self, clip: VisibleClip | None, seen: dict[str, float], ranked: list[str]) -> str:
+    def _explain(self, clip: Visible | None, seen: dict[str, float], ranked: list[str]) -> str:
         if clip is not None and seen:
             return clip.describe(max(seen, key=seen.__getitem__))
         if ranked:
             return f"{ranked[0]} did best in the clips and {ranked[-1]} worst."
         return "It looked that way in the clips."
+
+
+def _played(clip: Visible) -> list[dict[str, Any]]:
+    """The page's record of the clip loaded and played to its end; of a pair of reels, one reel after the other."""
+    if isinstance(clip, VisibleReels):
+        tags, lengths = [{"reel": k} for k in range(len(clip.reels))], list(clip.reel_s)
+    else:
+        tags, lengths = [{}], [clip.end_s]
+    events = [{"type": "loaded", "t": 40} | tag for tag in tags]
+    t = 800
+    for tag, seconds in zip(tags, lengths, strict=True):
+        events += [{"type": "play", "t": t} | tag, {"type": "ended", "t": t + int(seconds * 1000)} | tag]
+        t += int(seconds * 1000)
+    return events
 
 
 def simulate(

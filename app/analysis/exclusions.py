@@ -12,8 +12,8 @@ from sqlalchemy import Row, select
 
 from app.store.database import Database, as_utc
 from app.store.models import Participant, Response
-from app.survey.answers import VIEW_TOLERANCE_MS  # the server's own check, applied again to what was saved
-from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip
+from app.survey.answers import VIEW_TOLERANCE_MS, full_view_at  # the server's own check, applied again
+from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip, watching_ms
 
 REASONS = {
     "pilot_or_bot": "a pilot (preview link) or a bot (`foil simulate`), not a real participant",
@@ -91,12 +91,12 @@ def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("re
 
 
 def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | Attention) -> dict[str, Any]:
-    """How a clip screen was watched, from its response and the plan's screen: the clip's length, time on screen
-    (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden; `skipped` when the screen was
-    answered sooner than the clip plays (by the server's clock), or with playback faster than normal before the
-    clip first ended."""
+    """How a clip screen was watched, from its response and the plan's screen: the clip's length (a pair of reels:
+    theirs together), time on screen (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden;
+    `skipped` when the screen was answered sooner than the clip plays (by the server's clock), or with playback
+    faster than normal before the clip (every reel) first ended."""
     events = response.video_events or []
-    clip_ms = screen.clip_ms
+    clip_ms = watching_ms(screen)
     hidden_ms, hidden_at = 0, None
     for event in events:
         if event["type"] == "hidden":
@@ -104,7 +104,7 @@ def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | A
         elif event["type"] in ("visible", "reload") and hidden_at is not None:
             hidden_ms += max(0, event["t"] - hidden_at) if event["type"] == "visible" else 0
             hidden_at = None
-    first_end = next((i for i, e in enumerate(events) if e["type"] == "ended"), None)
+    first_end = full_view_at(events, len(screen.clips_to_watch()))
     before_end = events if first_end is None else events[:first_end]
     sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
     skipped = bool(shows_clip(screen) and (sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))

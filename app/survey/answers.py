@@ -19,12 +19,13 @@ from starlette.datastructures import FormData
 
 from app.store import queries
 from app.store.database import Database, as_utc
-from app.survey.screens import Asked, Screen, parse_plan
+from app.survey.screens import Asked, Screen, parse_plan, watching_ms
 from app.survey.study import Study, digits
 
 # Clip events the page records: playback, seeks (`seek`: allowed, after a first full viewing; `seek_blocked`: a
 # seek forward on a first viewing, undone), playback rate changes (`ratechange`, its value in `v`), the tab being
-# hidden or shown again, and `reload` (the page was reloaded; the events before it come from the earlier load).
+# hidden or shown again, and `reload` (the page was reloaded; the events before it come from the earlier load). On
+# a screen of reels each reel's events carry its place on the screen, `reel` (0, 1, ...).
 VIDEO_EVENT_TYPES = {
     "play",
     "pause",
@@ -43,6 +44,7 @@ VIDEO_EVENT_TYPES = {
     "reload",
 }
 MAX_VIDEO_EVENTS = 500
+MAX_REELS = 8  # a place `reel` beyond this is no reel of any screen: left out of the record
 
 
 VIEWPORT = re.compile(r"^[0-9]{2,5}x[0-9]{2,5}$")
@@ -106,8 +108,24 @@ def _video_events(raw: str | None) -> list[dict[str, Any]] | None:
         v = event.get("v")
         if isinstance(v, int | float) and not isinstance(v, bool) and -1e6 < v < 1e6:
             item["v"] = round(float(v), 3)
+        reel = event.get("reel")
+        if isinstance(reel, int) and not isinstance(reel, bool) and 0 <= reel < MAX_REELS:
+            item["reel"] = reel
         clean.append(item)
     return clean
+
+
+def full_view_at(events: list[dict[str, Any]], clips: int) -> int | None:
+    """The index of the event by which the record shows every clip of the screen played to its end: its one clip
+    (any `ended`), or each of its reels (an `ended` of every `reel`); None when it shows none such."""
+    ended: set[int | None] = set()
+    wanted = {None} if clips == 1 else set(range(clips))
+    for at, event in enumerate(events):
+        if event["type"] == "ended":
+            ended.add(None if clips == 1 else event.get("reel"))
+            if wanted <= ended:
+                return at
+    return None
 
 
 def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
@@ -122,11 +140,15 @@ def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
     if events is None:
         out.errors["video"] = "The page sent a malformed record of the clip's playback; reload the page."
     elif (
-        screen.clip_to_watch() is not None
+        (clips := len(screen.clips_to_watch()))
         and study.study.require_full_view
-        and not any(e["type"] == "ended" for e in events)
+        and full_view_at(events, clips) is None
     ):
-        out.errors["video"] = "Please watch the clip to the end before going on."
+        out.errors["video"] = (
+            "Please watch the clip to the end before going on."
+            if clips == 1
+            else "Please watch each robot's clip to the end before going on."
+        )
     out.video_events = events or []
     client_ms = _one(form, "time_on_page_ms") or ""
     out.client_ms = int(client_ms) if digits(client_ms) and len(client_ms) < 10 else None
@@ -135,18 +157,24 @@ def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
     return out
 
 
-def viewing_problem(clip_ms: int | None, started_at: datetime, now: datetime) -> str | None:
-    """Why the server cannot accept a clip's answers yet: the screen has not been open as long as the clip plays
-    (by the server's own clock, since the screen became current), so the clip cannot have been watched."""
+def viewing_problem(screen: Screen, started_at: datetime, now: datetime) -> str | None:
+    """Why the server cannot accept a clip's answers yet: the screen has not been open as long as its clip plays
+    (its reels, one after the other: `watching_ms`), by the server's own clock since the screen became current, so
+    the clip cannot have been watched."""
+    clip_ms = watching_ms(screen)
     if not clip_ms:
         return None
     open_ms = (now - as_utc(started_at)).total_seconds() * 1000
     if open_ms + VIEW_TOLERANCE_MS >= clip_ms:
         return None
+    if len(screen.clips_to_watch()) == 1:
+        plays, watch = f"The clip plays for {clip_ms / 1000:.0f} seconds", "play the clip from the start to the end"
+    else:
+        plays, watch = f"The robots' clips play for {clip_ms / 1000:.0f} seconds together", "play each robot's clip"
     return (
-        f"The clip plays for {clip_ms / 1000:.0f} seconds, but this page has been open for only "
-        f"{open_ms / 1000:.0f} seconds, so it cannot have been watched to the end at normal speed. Nothing was "
-        "saved. Please play the clip from the start to the end, then answer again."
+        f"{plays}, but this page has been open for only {open_ms / 1000:.0f} seconds, so it cannot have been "
+        f"watched to the end at normal speed. Nothing was saved. Please {watch} from the start to the end, then "
+        "answer again."
     )
 
 
@@ -209,9 +237,8 @@ def _save_once(
         checked = check_screen(study, screen, form)
         now = datetime.now(UTC)
         fast = fast_link and participant.kind in ("pilot", "bot")
-        clip = screen.clip_to_watch()
-        if clip is not None and study.study.require_full_view and not fast and "video" not in checked.errors:
-            problem = viewing_problem(clip.shape.clip_ms, participant.step_started_at, now)
+        if screen.clips_to_watch() and study.study.require_full_view and not fast and "video" not in checked.errors:
+            problem = viewing_problem(screen, participant.step_started_at, now)
             if problem:
                 checked.errors["video"] = problem
         if checked.errors:

@@ -2,7 +2,8 @@
 
 A clip is named by (scheme, scenario, pair of agents); the manifest entries whose scheme and scenario are equal
 and whose `agents` are that pair in any order all match. Everything is checked once at start-up: files inside the
-bundle, checksums, and that every clip the study needs is there.
+bundle (a clip's, or each of its reels'), checksums, and that every clip the study needs is there and can be shown
+where the study shows it (a pair of reels only on a pairwise part's screen).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import NamedTuple
 
 from pydantic import ValidationError
 
@@ -29,7 +31,7 @@ class BundleError(ValueError):
 class Bundle:
     root: Path
     clips: dict[str, ManifestClip]  # by id
-    paths: dict[str, Path]  # sha256 -> file, what /clips/{sha256}.mp4 serves
+    paths: dict[str, Path]  # sha256 -> file (a clip's or a reel's), what /clips/{sha256}.mp4 serves
     world: World = World()  # the world the clips show: its rule and the words its pages use
 
     def matching(self, scheme: str, scenario: str, agents: tuple[str, str], part: str = "") -> list[ManifestClip]:
@@ -73,15 +75,16 @@ def load_bundle(root: str | Path) -> Bundle:
         if clip.id in clips:
             problems.append(f"clip id {clip.id!r} appears twice")
         clips[clip.id] = clip
-        path = (root / clip.file).resolve()
-        if not path.is_relative_to(root):
-            problems.append(f"clip {clip.id!r}: file {clip.file!r} lies outside the bundle")
-        elif not path.is_file():
-            problems.append(f"clip {clip.id!r}: file {clip.file!r} is missing")
-        elif sha256_file(path) != clip.sha256.lower():
-            problems.append(f"clip {clip.id!r}: {clip.file!r} does not match its sha256 (changed after bundling?)")
-        else:
-            paths[clip.sha256.lower()] = path
+        for file, sha256 in [(reel.file, reel.sha256) for reel in clip.reels] or [(clip.file, clip.sha256)]:
+            path = (root / file).resolve()
+            if not path.is_relative_to(root):
+                problems.append(f"clip {clip.id!r}: file {file!r} lies outside the bundle")
+            elif not path.is_file():
+                problems.append(f"clip {clip.id!r}: file {file!r} is missing")
+            elif sha256_file(path) != sha256.lower():
+                problems.append(f"clip {clip.id!r}: {file!r} does not match its sha256 (changed after bundling?)")
+            else:
+                paths[sha256.lower()] = path
     if problems:
         raise BundleError(f"bundle {root}:\n" + "\n".join(problems))
     return Bundle(root=root, clips=clips, paths=paths, world=manifest.shown_world())
@@ -91,31 +94,51 @@ def _part_scenarios(study: Study, part_index: int, scheme: str) -> list[str]:
     return list(dict.fromkeys(study.part_scenario(part_index, r, scheme) for r in study.rotations()))
 
 
-def required_clips(study: Study) -> list[tuple[ClipRef, str]]:
+class NeededClip(NamedTuple):
+    """A clip the study can show: what it is, where the study asks for it, and the kind of part that shows it
+    ("pairwise" or "ranking"; "" for the instructions' example and a video attention check)."""
+
+    ref: ClipRef
+    where: str
+    part: str = ""
+
+
+def required_clips(study: Study) -> list[NeededClip]:
     """Every clip the study can show under any condition, each with where the study asks for it."""
     refs = []
     if study.example is not None:
-        refs.append((study.example, "[example]"))
+        refs.append(NeededClip(study.example, "[example]"))
     for p, part in enumerate(study.parts):
         pairs = part.pairs if part.kind == "pairwise" else list(itertools.combinations(part.agents, 2))
         for scheme in study.design.schemes:
             for scenario in _part_scenarios(study, p, scheme):
                 for pair in pairs:
-                    refs.append((ClipRef(scheme=scheme, scenario=scenario, agents=pair), f"parts[{p}]"))
+                    ref = ClipRef(scheme=scheme, scenario=scenario, agents=pair)
+                    refs.append(NeededClip(ref, f"parts[{p}]", part.kind))
     for c, check in enumerate(study.attention_checks):
         if check.clip is not None:  # a video attention check
-            refs.append((check.clip, f"attention_checks[{c}] (a video attention check's clip)"))
+            refs.append(NeededClip(check.clip, f"attention_checks[{c}] (a video attention check's clip)"))
     return refs
 
 
 def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
-    """Refuse a bundle that lacks a clip the study needs, or whose ranking clips label one robot two ways."""
+    """Refuse a bundle that lacks a clip the study needs, shows a pair of reels anywhere but on a pairwise part's
+    screen, or whose ranking clips label one robot two ways."""
     problems = []
-    for ref, where in required_clips(study):
-        if not bundle.matching(ref.scheme, ref.scenario, ref.agents):
+    for ref, where, kind in required_clips(study):
+        found = bundle.matching(ref.scheme, ref.scenario, ref.agents, kind)
+        if not found:
             problems.append(
                 f"{where} needs a clip of scheme {ref.scheme!r}, scenario {ref.scenario!r}, agents "
                 f"{ref.agents[0]!r} and {ref.agents[1]!r}; the manifest has none"
+            )
+        # A ranking page shows its round's clips side by side, and the example and a video attention check one
+        # video each: reels (two videos per clip) are shown on a pairwise part's screens only.
+        elif kind != "pairwise" and (reels := [clip.id for clip in found if clip.reels]):
+            problems.append(
+                f"{where} would show clips of reels ({', '.join(map(repr, reels))}) of scheme {ref.scheme!r}; only a "
+                "pairwise part shows reels, the example, a ranking part and a video attention check show clips of "
+                "both robots together"
             )
     for p, part in enumerate(study.parts):
         if part.kind != "ranking":

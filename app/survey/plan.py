@@ -11,7 +11,7 @@ import itertools
 import random
 from typing import Any
 
-from app.formats import ManifestClip
+from app.formats import ManifestClip, ManifestReel
 from app.survey.assignment import Condition
 from app.survey.bundle import Bundle
 from app.survey.clip_length import clip_shape
@@ -21,6 +21,7 @@ from app.survey.screens import (
     Instructions,
     Pairwise,
     Ranking,
+    Reel,
     Robot,
     Round,
     Screen,
@@ -54,9 +55,10 @@ def _pick(
     return rng.choice(options)
 
 
-def _shape(bundle: Bundle, clip: ManifestClip) -> Shape:
-    """The clip's playing time and picture size, from its file (nothing set for a bundle without its files)."""
-    path = bundle.paths.get(clip.sha256.lower())
+def _shape(bundle: Bundle, sha256: str) -> Shape:
+    """A clip's or reel's playing time and picture size, from its file (nothing set for a bundle without its
+    files)."""
+    path = bundle.paths.get(sha256.lower())
     if path is None:
         return Shape()
     shape = clip_shape(path)
@@ -78,18 +80,25 @@ def _number(label: str) -> tuple[bool, int]:
 
 
 def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle: Bundle) -> dict[str, Any]:
-    """The fields of a pairwise or watch screen showing `clip`."""
-    return {
+    """The fields of a pairwise or watch screen showing `clip`: its video, or its reels with their labels."""
+    fields: dict[str, Any] = {
         "part": part_no,
         "clip": clip.id,
-        "media": clip.sha256.lower(),
         "scheme": clip.scheme,
         "scenario": clip.scenario,
         "robots": _robots(list(zip(clip.agents, clip.labels, strict=True))),
         "better": clip.better,
         "questions": questions,
-        **_shape(bundle, clip).model_dump(exclude_unset=True),
     }
+    if clip.reels:
+        labelled = zip(clip.reels, clip.labels, strict=True)
+        return fields | {"reels": [_reel(bundle, reel, label) for reel, label in labelled]}
+    return fields | {"media": clip.sha256.lower(), **_shape(bundle, clip.sha256).model_dump(exclude_unset=True)}
+
+
+def _reel(bundle: Bundle, reel: ManifestReel, label: str) -> Reel:
+    """A reel as a screen shows it: its robot's label, its file's address and shape."""
+    return Reel(label=label, media=reel.sha256.lower(), **_shape(bundle, reel.sha256).model_dump(exclude_unset=True))
 
 
 def _true_order(clips: list[ManifestClip], agents: list[str]) -> list[str] | None:
@@ -121,7 +130,7 @@ def _ranking_screens(
             scenario=scenario,
             clips=[clip.id for clip in clips],
             media_list=[clip.sha256.lower() for clip in clips],
-            shapes=[_shape(bundle, clip) for clip in clips],
+            shapes=[_shape(bundle, clip.sha256) for clip in clips],
             robots=_robots(labels),
             true_order=_true_order(clips, part.agents),
             questions=list(part.questions),
@@ -189,7 +198,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                     video = {
                         "clip": clip.id,
                         "media": clip.sha256.lower(),
-                        **_shape(bundle, clip).model_dump(exclude_unset=True),
+                        **_shape(bundle, clip.sha256).model_dump(exclude_unset=True),
                     }
                 screen: Screen = Attention(
                     kind="attention",

@@ -1,5 +1,5 @@
 """The screens of a participant's plan, one model per kind, told apart by `kind`; each kind's behaviour is on its
-model: the answers its form asks for, the clip to watch first, what its page shows and how the admin pages name it.
+model: the answers its form asks for, the clips to watch first, what its page shows and how the admin pages name it.
 
 A plan is stored as JSON (app.store.models.ParticipantPlan): `parse_plan` reads it through the union, `dump_plan` writes
 it. Only the fields that were set are written, in the order declared here, so a plan reads and writes as the same
@@ -70,6 +70,19 @@ class Clip(NamedTuple):
     shape: Shape
 
 
+class Reel(_Stored):
+    """One robot's reel on a screen of reels (each robot on its own): its label, its file's sha256 and shape."""
+
+    label: str
+    media: str
+    clip_ms: int | None = None
+    width: int | None = None
+    height: int | None = None
+
+    def clip(self) -> Clip:
+        return Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))
+
+
 def clip_view(clip: Clip) -> dict[str, Any]:
     """A clip's address and box as a page shows it."""
     return {
@@ -109,9 +122,9 @@ class _Screen(_Stored):
         """The form fields a submission must hold, in the order they are checked and saved."""
         return [Asked(name, study.questions[name]) for name in self.question_names()]
 
-    def clip_to_watch(self) -> Clip | None:
-        """The clip that must be watched before the screen is answered; None when it shows none."""
-        return None
+    def clips_to_watch(self) -> list[Clip]:
+        """The clips that must be played to their end before the screen is answered: none, its clip, or its reels."""
+        return []
 
     def clip_names(self) -> list[str]:
         """The ids of the clips the screen is about (a ranking's: its round's clips), as the bundle names them."""
@@ -174,9 +187,11 @@ class _InPart(_Screen):
 
 
 class _ClipScreen(_InPart):
+    """A screen of one clip of two robots: a video of both (`media`), or a pair of reels, one per robot (`reels`)."""
+
     kind: Literal["pairwise", "watch"]
     clip: str
-    media: str  # the clip file's sha256: its address
+    media: str = ""  # the clip file's sha256: its address; empty for a pair of reels
     scheme: str
     scenario: str
     robots: list[Robot]  # in the order the robots are offered as answers
@@ -185,6 +200,7 @@ class _ClipScreen(_InPart):
     clip_ms: int | None = None
     width: int | None = None
     height: int | None = None
+    reels: list[Reel] = []  # in the order shown
 
     def offered(self) -> list[Robot]:
         return self.robots
@@ -195,11 +211,16 @@ class _ClipScreen(_InPart):
     def clip_names(self) -> list[str]:
         return [self.clip]
 
-    def clip_to_watch(self) -> Clip:
-        return Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))
+    def clips_to_watch(self) -> list[Clip]:
+        if self.reels:
+            return [reel.clip() for reel in self.reels]
+        return [Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))]
 
     def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
-        return super().page(study, bundle) | _showing(self.clip_to_watch())
+        view = super().page(study, bundle)
+        if self.reels:
+            return view | {"reels": [clip_view(reel.clip()) | {"label": reel.label} for reel in self.reels]}
+        return view | _showing(self.clips_to_watch()[0])
 
 
 class Pairwise(_ClipScreen):
@@ -280,14 +301,14 @@ class Attention(_InPart):
     def clip_names(self) -> list[str]:
         return [] if self.clip is None else [self.clip]
 
-    def clip_to_watch(self) -> Clip | None:
+    def clips_to_watch(self) -> list[Clip]:
         if self.media is None:
-            return None
-        return Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))
+            return []
+        return [Clip(self.media, Shape(clip_ms=self.clip_ms, width=self.width, height=self.height))]
 
     def page(self, study: Study, bundle: Bundle) -> dict[str, Any]:
         view = super().page(study, bundle)
-        if (clip := self.clip_to_watch()) is not None:
+        for clip in self.clips_to_watch():
             view |= _showing(clip)
         return view | {"attention_text": study.attention_checks[self.check].text, "options": self.options}
 
@@ -343,7 +364,18 @@ PLAN: TypeAdapter[list[Screen]] = TypeAdapter(list[Screen])
 
 def shows_clip(screen: Screen | None) -> TypeGuard[Pairwise | Watch | Attention]:
     """Whether the screen shows a clip that must be watched before it is answered."""
-    return screen is not None and screen.clip_to_watch() is not None
+    return screen is not None and bool(screen.clips_to_watch())
+
+
+def watching_ms(screen: Screen) -> int | None:
+    """How long the screen must have been open before its answers are taken, in ms (None when a clip's playing
+    time is unknown): its clip's playing time; on a screen of reels, the reels' playing times added up. That is the
+    ranking part's rule for several clips: a round's clips are watched one after another, each on its own screen
+    held for its playing time, so the round holds the participant for their sum; the page plays one reel at a time
+    (starting one pauses the other), so a screen of reels is held for its reels' sum likewise."""
+    times = [clip.shape.clip_ms for clip in screen.clips_to_watch()]
+    known = [ms for ms in times if ms]
+    return sum(known) if times and len(known) == len(times) else None
 
 
 def page_view(screen: Screen, study: Study, bundle: Bundle) -> dict[str, Any]:

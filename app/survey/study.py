@@ -104,6 +104,10 @@ class Texts(Strict):
     preview: Text = "Accept the HIT to start the study."
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
+    watch_reels: Text = (  # above a pair of reels, each robot's clip on its own
+        "Watch each robot's clip to the end, one after the other. The questions unlock when both have finished; "
+        "you can replay them."
+    )
     example_caption: str = ""  # under the instructions' example clip; empty: the caption of the bundle's world
     robot_names: Text = (
         "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "

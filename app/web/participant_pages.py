@@ -24,7 +24,7 @@ from starlette.datastructures import FormData
 
 from app.store import queries
 from app.store.models import Participant
-from app.survey.answers import Checked, Outcome, Refused, current_with_plan, save_answer
+from app.survey.answers import Checked, Outcome, Refused, current_with_plan, full_view_at, save_answer
 from app.survey.assignment import condition_for_slot, next_slot
 from app.survey.kinds import kind_from_link, pilot_token
 from app.survey.plan import build_plan
@@ -255,7 +255,7 @@ def _render_screen(
     events: str = "",
     status_code: int = 200,
     notice: str = "",
-    watched: bool | None = None,
+    watched: bool = False,
 ) -> HTMLResponse:
     name = screen.template
     if not (errors or values or events or notice):  # as first shown: the same page for everyone at this step
@@ -282,7 +282,7 @@ def _render_screen(
         errors=errors or {},
         values=values or {},
         video_events=events,
-        watched=('"ended"' in events) if watched is None else watched,
+        watched=watched,
         notice=notice,
     )
 
@@ -358,6 +358,10 @@ def _refused(
 ) -> HTMLResponse:
     """The screen again, with the participant's answers and why they were not saved."""
     values = {name: form.getlist(name) for name in form.keys() if name != "csrf_token"}
+    # the clip (every reel) stays unlocked when the record shows it played to its end and the server took that
+    watched = (
+        "video" not in checked.errors and full_view_at(checked.video_events, len(screen.clips_to_watch())) is not None
+    )
     return _render_screen(
         request,
         ctx,
@@ -367,7 +371,7 @@ def _refused(
         values=values,
         events=str(form.get("video_events") or "")[:20000],
         status_code=422,
-        watched=False if "video" in checked.errors else None,
+        watched=watched,
     )
 
 

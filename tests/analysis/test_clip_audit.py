@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from app.visible import Observer, VisibleClip, Words, World, audit
+from app.visible import Observer, VisibleClip, VisibleReels, Words, World, audit
 
 
 def summary(*outcomes: dict, ends: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.0)), t: float = 25.0):
@@ -154,3 +154,35 @@ def test_a_robot_that_stops_beside_its_goal_says_how_close_it_got():
     renderer = ClipRenderer(scene_from_summary(data))
     renderer.draw(Frame(renderer.scene.end_time))
     assert "still on its way · 0.4 m to goal" in renderer.texts
+
+
+def segment(leader: int, *outcomes: dict, ends=((0.0, 0.0), (0.0, 0.0))) -> dict:
+    """A segment of a reel: ``summary`` whose robots all follow robot ``leader``, whose outcome it shows."""
+    return summary(*outcomes, ends=ends) | {"follow": {"leader": leader, "steps": 100}}
+
+
+def test_a_robots_reel_is_judged_by_its_moments_on_average_read_at_the_robot_followed():
+    """A reel shows one robot in moments of its own runs: its score is the mean of its segments' scores, each the
+    outcome of the robot the segment's robots follow (not of the others, whose instances only move with it)."""
+    lo = [segment(0, SUCCESS, CRASH), segment(1, SUCCESS, CRASH)]  # arrives after 14 s (2.44), then crashes (-1)
+    hi = [segment(1, CRASH, LATE), segment(0, RUNNING, CRASH)]  # arrives after 24 s (2.04), then halfway (0.5)
+    reels = VisibleReels.of_summaries([lo, hi], ["Robot 1", "Robot 2"])
+    scores = reels.scores(Observer())
+    assert scores == pytest.approx({"Robot 1": (2.44 - 1) / 2, "Robot 2": (2.04 + 0.5) / 2})
+    assert reels.end_s == 100.0 and reels.reel_s == (50.0, 50.0)
+    verdict = audit(reels, "Robot 2")
+    assert verdict == {
+        "shows": "better",
+        "why": "Robot 2, in 2 moments of its own: reached the goal after 24.0 seconds; was still on its way when the "
+        "clip ended, 7.1 m from the goal. Robot 1, in 2 moments of its own: reached the goal after 14.0 seconds; "
+        "bumped into a person.",
+    }
+    assert audit(VisibleReels.of_summaries([hi, lo], ["Robot 1", "Robot 2"]), "Robot 2")["shows"] == "worse"
+    assert audit(VisibleReels.of_summaries([lo, lo[::-1]], ["A", "B"]), "B")["shows"] == "tie"
+
+
+def test_a_reel_needs_segments_that_say_whom_they_follow():
+    with pytest.raises(ValueError, match="says whom its robots follow"):
+        VisibleReels.of_summaries([[summary(SUCCESS, CRASH)], [segment(0, SUCCESS, CRASH)]], ["A", "B"])
+    with pytest.raises(ValueError, match="at least one segment"):
+        VisibleReels.of_summaries([[], [segment(0, SUCCESS, CRASH)]], ["A", "B"])

@@ -135,9 +135,9 @@ def test_each_kind_of_screen_asks_for_its_own_fields_and_names_its_clip(bundle_d
     asked = [(a.name, a.required) for a in closing.asks(study)]
     assert asked == [("age_range", True), ("robot_experience", False), ("confidence", False), ("feedback", False)]
 
-    assert pairwise.clip_to_watch() == Clip(pairwise.media, Shape(clip_ms=pairwise.clip_ms, width=64, height=64))
-    assert watch.clip_to_watch() is not None and video_check.clip_to_watch() is not None
-    assert [s.clip_to_watch() for s in (plain_check, ranking, instructions, closing)] == [None] * 4
+    assert pairwise.clips_to_watch() == [Clip(pairwise.media, Shape(clip_ms=pairwise.clip_ms, width=64, height=64))]
+    assert len(watch.clips_to_watch()) == len(video_check.clips_to_watch()) == 1
+    assert [s.clips_to_watch() for s in (plain_check, ranking, instructions, closing)] == [[]] * 4
     assert pairwise.clip_names() == [pairwise.clip] and ranking.clip_names() == ranking.clips
     assert video_check.clip_names() == [video_check.clip] and plain_check.clip_names() == closing.clip_names() == []
     assert [shows_clip(s) for s in (pairwise, video_check, plain_check, ranking, None)] == [1, 1, 0, 0, 0]

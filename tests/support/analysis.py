@@ -12,10 +12,12 @@ from pathlib import Path
 
 import imageio_ffmpeg
 
+from app.formats import Manifest, ManifestClip, ManifestReel, manifest_json, sha256_file
 from app.store.database import Database
 from app.store.models import Participant, Response
 from app.survey.assignment import conditions
 from app.survey.bundle import load_bundle
+from app.survey.clip_length import clip_shape
 from app.survey.plan import build_plan
 from app.survey.screens import dump_plan
 from tests.support.survey import AGENT_RANK, SECRET_NAMES, make_clip, write_bundle
@@ -73,27 +75,81 @@ def write_bot_bundle(folder: Path, root: Path) -> Path:
     files = []
     for n in range(n_clips):
         files.append(folder / f"{n:03d}.mp4")
-        subprocess.run(
-            [
-                imageio_ffmpeg.get_ffmpeg_exe(),
-                "-v",
-                "error",
-                "-y",
-                "-i",
-                str(base),
-                "-c",
-                "copy",
-                "-metadata",
-                f"comment=clip {n}",
-                str(files[-1]),
-            ],
-            check=True,
-        )
+        distinct_copy(base, files[-1], f"clip {n}")
     root = write_bundle(root, files, schemes=SCHEMES, scenarios=SCENARIOS, agents=AGENT_RANK, example=EXAMPLE)
     manifest = json.loads((root / "manifest.json").read_text())
     (root / "summaries").mkdir()
     for clip in manifest["clips"]:
         (root / clip["summary"]).write_text(json.dumps(summary_for(clip["agents"], clip["id"] == MISLEADING)))
+    return root
+
+
+def distinct_copy(source: Path, target: Path, comment: str) -> None:
+    """The same picture as `source` in a file of its own (its metadata says `comment`): the bots know a clip by its
+    file's sha256."""
+    subprocess.run(
+        [
+            imageio_ffmpeg.get_ffmpeg_exe(),
+            "-v",
+            "error",
+            "-y",
+            "-i",
+            str(source),
+            "-c",
+            "copy",
+            "-metadata",
+            f"comment={comment}",
+            str(target),
+        ],
+        check=True,
+    )
+
+
+def segment_summary(agents: list[str], leader: str) -> dict:
+    """A segment of `leader`'s reel: `summary_for` the robots `agents` (each as it does in SHOWN), with every robot
+    following `leader` throughout, so the segment shows the leader's outcome and not the others'."""
+    summary = summary_for(agents, misleading=False)
+    return summary | {"follow": {"leader": agents.index(leader), "steps": len(summary["steps"])}}
+
+
+def add_reels(root: Path, reel: Path) -> Path:
+    """The bundle in `root` (written by `write_bundle`) with a pair of reels for every clip the study's parts show,
+    made for the pairwise part, so every pairwise screen shows reels (the coupled clips serve the ranking part and
+    the example). Each robot's reel is a copy of `reel` of its own with two segments, in which the other robot
+    comes first and follows it: read right (by `follow.leader`), its visible score is what SHOWN says of it."""
+    manifest = Manifest.model_validate_json((root / "manifest.json").read_text())
+    (root / "reels").mkdir(exist_ok=True)
+    (root / "summaries").mkdir(exist_ok=True)
+    clips = []
+    for clip in manifest.clips:
+        if clip.scenario == EXAMPLE[1]:
+            clips.append(clip)
+            continue
+        clips.append(clip.model_copy(update={"parts": ["ranking"]}))
+        reels = []
+        for k, agent in enumerate(clip.agents):
+            other = clip.agents[1 - k]
+            file = f"reels/{clip.id}-{k}.mp4"
+            distinct_copy(reel, root / file, f"{clip.id} reel {k}")
+            segments = []
+            for n in range(2):
+                segments.append(f"summaries/{clip.id}-reel{k}-{n}.json")
+                (root / segments[-1]).write_text(json.dumps(segment_summary([other, agent], agent)))
+            reels.append(ManifestReel(agent=agent, file=file, sha256=sha256_file(root / file), summaries=segments))
+        clips.append(
+            ManifestClip(
+                id=f"{clip.id}-reels",
+                scheme=clip.scheme,
+                scenario=clip.scenario,
+                agents=clip.agents,
+                labels=clip.labels,
+                better=clip.better,
+                parts=["pairwise"],
+                reels=reels,
+                spent={"sim_steps": 1000, "clip_seconds": 2 * clip_shape(reel).ms / 1000},
+            )
+        )
+    (root / "manifest.json").write_text(manifest_json(manifest.model_copy(update={"clips": clips})))
     return root
 
 

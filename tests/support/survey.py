@@ -34,6 +34,15 @@ ADMIN_PASSWORD = "correct horse battery"
 WATCHED = json.dumps([{"type": "loaded", "t": 5}, {"type": "play", "t": 100}, {"type": "ended", "t": 1100}])
 
 
+def watched_reels(reels: list[int]) -> str:
+    """The page's record of the reels `reels` (their places on the screen) played to their end, one after the
+    other."""
+    events = [{"type": "loaded", "t": 5, "reel": k} for k in reels]
+    for n, k in enumerate(reels):
+        events += [{"type": "play", "t": 100 + 1100 * n, "reel": k}, {"type": "ended", "t": 1100 * (n + 1), "reel": k}]
+    return json.dumps(events)
+
+
 def make_clip(path: Path, source: str, size: str = "64x64", seconds: float = 1) -> None:
     """A real H.264 clip of ffmpeg's test `source` pattern."""
     subprocess.run(
@@ -153,12 +162,14 @@ expected = "Agree"
 
 
 class FormReader(HTMLParser):
-    """Collects a page's form fields: hidden values, radio groups, selects with their options, textareas."""
+    """Collects a page's form fields: hidden values, radio groups, selects with their options, textareas; and how
+    many reels it shows."""
 
     def __init__(self, page: str):
         super().__init__()
         self.hidden, self.radios, self.selects, self.textareas = {}, {}, {}, []
         self.disabled_answers = False
+        self.reels = 0
         self._select = None
         self.feed(page)
 
@@ -177,6 +188,8 @@ class FormReader(HTMLParser):
             self.textareas.append(a["name"])
         elif tag == "fieldset" and "data-answers" in a and "disabled" in a:
             self.disabled_answers = True
+        elif "data-reel" in a:
+            self.reels += 1
 
     def handle_endtag(self, tag):
         if tag == "select":
@@ -185,7 +198,7 @@ class FormReader(HTMLParser):
 
 def answer_for(page: str, choice: int = 0) -> dict:
     """A complete, valid answer to whatever screen `page` shows: the `choice`-th option of every radio group,
-    a different robot for every ranking place, words in every text box, and a watched clip."""
+    a different robot for every ranking place, words in every text box, and a watched clip (every reel)."""
     form = FormReader(page)
     data = dict(form.hidden)
     for name, values in form.radios.items():
@@ -195,7 +208,7 @@ def answer_for(page: str, choice: int = 0) -> dict:
     for name in form.textareas:
         data[name] = f"Answer to {name}: the robot kept its distance."
     if "video_events" in data:
-        data["video_events"] = WATCHED
+        data["video_events"] = watched_reels(list(range(form.reels))) if form.reels else WATCHED
         data["time_on_page_ms"] = "4321"
     return data
 

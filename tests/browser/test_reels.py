@@ -1,0 +1,115 @@
+"""In Chromium, against `foil serve` whose pairwise screens show pairs of reels (each robot on its own): the answers
+stay locked until every reel has played to its end, one reel plays at a time, and a desktop shows the reels side by
+side while a phone stacks them full width. Screenshots go to test-artifacts/browser/reels/."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from sqlalchemy import select
+
+from app.store.database import Database
+from app.store.models import Response
+from app.survey.kinds import pilot_token
+from tests.support.analysis import add_reels
+from tests.support.browser import ARTIFACTS, SERIOUS, long_clip_server
+from tests.support.survey import make_clip
+
+pytestmark = pytest.mark.browser
+DESKTOP = {"width": 1366, "height": 768}
+PHONE = {"width": 360, "height": 740}
+SHOTS = ARTIFACTS / "reels"
+NEXT = "fieldset[data-answers] button[type=submit]"
+REEL_S = 1.5
+
+
+@pytest.fixture(scope="module")
+def reels_server(tmp_path_factory):
+    work = tmp_path_factory.mktemp("browser-reels")
+    reel = work / "reel.mp4"
+    make_clip(reel, "testsrc2", size="72x88", seconds=REEL_S)
+    with long_clip_server(work, lambda bundle: add_reels(bundle, reel)) as live:
+        yield live
+
+
+def to_reels(page, server) -> None:
+    """A pilot's first screen after the instructions (the pilot is not held to the example's playing time; the page
+    gates every clip all the same)."""
+    db = Database(server.database_url)
+    try:
+        token = pilot_token(db, "paper")
+    finally:
+        db.dispose()
+    page.goto(f"{server.url}/?pilot={token}")
+    with page.expect_navigation():
+        page.click("button[value=agree]")
+    with page.expect_navigation():
+        page.evaluate(
+            "() => { document.querySelector('fieldset[data-answers]').disabled = false; "
+            "document.querySelector('form[data-step-form]').requestSubmit(); }"
+        )
+    assert page.locator("[data-reel] video").count() == 2
+    page.wait_for_function("() => [...document.querySelectorAll('[data-reel] video')].every(v => v.readyState >= 2)")
+
+
+def reel_boxes(page) -> list[dict]:
+    return page.evaluate("""() => [...document.querySelectorAll('[data-reel] video')].map(v => {
+        const r = v.getBoundingClientRect(); return {top: r.top, bottom: r.bottom, left: r.left, width: r.width}; })""")
+
+
+def ended(page, k: int) -> None:
+    page.wait_for_function(f"() => document.querySelectorAll('[data-reel] video')[{k}].ended", timeout=20_000)
+
+
+def test_the_answers_unlock_only_once_every_reel_has_played_to_its_end(reels_server, new_context):
+    page = new_context(DESKTOP).new_page()
+    to_reels(page, reels_server)
+    assert page.locator(NEXT).is_disabled()
+    page.click("[data-reel='0'] [data-play]")
+    page.wait_for_timeout(300)
+    page.click("[data-reel='1'] [data-play]")  # one reel at a time: the first one pauses
+    page.wait_for_function("() => document.querySelectorAll('[data-reel] video')[0].paused")
+    ended(page, 1)
+    assert page.locator(NEXT).is_disabled()  # one reel played to its end, the other not yet
+    assert "play the other robot's clip" in page.locator("[data-reel='1'] [data-status]").inner_text()
+    page.click("[data-reel='0'] [data-play]")
+    ended(page, 0)
+    assert page.locator(NEXT).is_enabled()
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "reels-desktop.png"))
+
+    first, second = reel_boxes(page)
+    assert abs(first["top"] - second["top"]) < 2 and second["left"] >= first["left"] + first["width"]  # side by side
+    assert max(first["bottom"], second["bottom"]) <= DESKTOP["height"]
+    next_button = page.locator(NEXT).bounding_box()  # the questions beside the reels, Next in the first view
+    assert next_button["x"] > second["left"] + second["width"] and next_button["y"] + next_button["height"] <= 768
+    found = page.evaluate("async () => (await axe.run(document, {resultTypes: ['violations']})).violations")
+    assert [v["id"] for v in found if v["impact"] in SERIOUS] == []
+
+    page.check("input[name=better] >> nth=0")
+    page.fill("textarea[name=justification]", "It kept its distance")
+    page.check("input[name=difficulty][value='3']")
+    events = json.loads(page.locator("[data-events]").input_value())
+    with page.expect_navigation():
+        page.click(NEXT)
+    assert page.locator("input[name=step]").get_attribute("value") == "2"
+    db = Database(reels_server.database_url)
+    try:
+        with db.reading() as session:
+            saved = session.scalars(select(Response).order_by(Response.id.desc())).first()
+    finally:
+        db.dispose()
+    assert saved.step == 1 and saved.video_events == events
+    assert [(e["type"], e["reel"]) for e in events if e["type"] == "ended"] == [("ended", 1), ("ended", 0)]
+
+
+def test_a_phone_stacks_the_reels_full_width(reels_server, new_context):
+    page = new_context(PHONE).new_page()
+    to_reels(page, reels_server)
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "reels-phone.png"), full_page=True)
+    first, second = reel_boxes(page)
+    assert second["top"] >= first["bottom"] and abs(first["left"] - second["left"]) < 2  # one above the other
+    assert min(first["width"], second["width"]) >= PHONE["width"] - 40  # full width, less the page's margins
+    assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
