@@ -1,155 +1,145 @@
-"""Which clip-generation scheme shows people the better robot: the representative solver, MCTS with outcome-contrast
-selection, and the paper's preset, judged against the ground truth.
+"""Which summary method shows people the better agent: every scheme of a study, judged against the ground truth.
 
-For every pair of the shipped agents and every search seed, each scheme's clip is judged the way `foil bundle`
-audits a clip (`app.visible.audit`: who bumped into a person, who reached the goal and when, how far the others
-got) against the ground truth (the higher mean test reward of `foil eval`). A seed's three clips of a scheme (on
-one scenario) rank the agents right when their visible winners order lo < med < hi as the ground truth does, i.e.
-when each shows its pair's better agent as better. The
-searches never see the ground truth; only this judge does.
+For every scheme of the study file's `[build]` (held to its `[build.budget]`: the same simulator steps and seconds
+of clip per question), every scenario and pair of agents its pairwise sets name, and seeds 0..N-1 of the scheme,
+the clip `foil bundle` would make is judged as the bundle audits it (`app.visible.audit`: outcomes, times, how far
+each got, for a pair of HIGHLIGHTS reels each agent's moments on average) against the ground truth (the higher mean
+test reward of `foil eval`). A seed's three clips of a scheme on one scenario rank the agents right when each shows
+its pair's better agent as better. The searches never see the ground truth; only this judge does.
 
-- **paper preset**: MCTS on the paper's two study scenarios with the paper's reading of the reward
-  (`finish=first` and its code's constants), the top-1 clip;
-- **MCTS, outcome selection**: MCTS on the same scenarios with the default reward, top-30, the clip with the
-  largest visible contrast (`select = "contrast"`);
-- **representative**: the representative solver on the training distribution, with the same budget.
+    python benchmarks/bench_informativeness.py --study studies/methods.toml [--seeds 20] [--jobs 2] [--out DIR]
 
-    python benchmarks/bench_informativeness.py [--budget 100000] [--seeds 20] [--jobs 2] [--out DIR]
-
-Prints a table: clips showing the better robot (Wilson 95% interval), rankings right, and each scheme's mean
-simulator steps and wall time per search.
+Prints a table per study: clips showing the better agent (Wilson 95% interval), worse, tie, rankings right, and
+each scheme's mean simulator steps, seconds of clip and wall time per search.
 """
 
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import platform
 import tempfile
 import time
+from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 
 from app.analysis.statistics import wilson_interval
-from app.visible import VisibleClip, World, audit
-from search.agents.evaluate import evaluate
-from search.agents.policies import load_policy
-from search.bundle.build import clip_summary
-from search.solvers.runner import SearchJob, run_all
-
-AGENTS = ("lo", "med", "hi")
-PAPER_SCENARIOS = ("paper-bl-tr", "paper-tl-br")
-PAPER_PRESET = {"finish": "first", "goal_bonus": 100.0, "alpha": 1.0, "beta": 1e4, "horizon_offset": -1e5}
-SCHEMES = {  # name: (solver, scenarios, reward settings, top-k, clip selection)
-    "paper preset, top-1": ("mcts", PAPER_SCENARIOS, PAPER_PRESET, 1, "reward"),
-    "MCTS, outcome selection of top-30": ("mcts", PAPER_SCENARIOS, {}, 30, "contrast"),
-    "representative (training distribution)": ("representative", ("training",), {}, 1, "reward"),
-}
-
-
-def ground_truth(episodes: int = 500) -> dict[str, float]:
-    return {name: evaluate(load_policy(name), episodes, seed=0)["reward_mean"] for name in AGENTS}
+from app.visible import VisibleClip, VisibleReels, audit
+from search.bundle.build import (
+    REELS,
+    Cache,
+    better_agent,
+    clip_summary,
+    evaluate_agents,
+    plan_clips,
+    reel_summaries,
+    search_job,
+    study_domain,
+    study_world,
+)
+from search.bundle.spec import load_build
+from search.clips.render import robot_label
+from search.solvers.runner import in_processes, run_search, write_outputs
 
 
-def judge(folder: Path, select: str, rewards: dict[str, float]) -> dict:
-    summary = json.loads(clip_summary(folder, select, World()).read_text())
-    agents = [a["name"] for a in summary["agents"]]
-    labels = [f"Robot {k + 1}" for k in range(len(agents))]
-    better = max(agents, key=rewards.get)
-    verdict = audit(VisibleClip.of_summary(summary, agents, labels), labels[agents.index(better)])
-    return verdict | {
-        "events": [o["event"] for o in summary["outcomes"]],
-        "end_s": summary["steps"][-1]["t"],
-        "scenario": summary["scenario"]["name"],
-    }
+def judge(job, folder: Path, evaluations: dict, world) -> dict:
+    """What the clip of a search shows against the ground truth, as the bundle audits it."""
+    labels = [robot_label(k + 1) for k in range(2)]
+    better = labels[job.pair.index(better_agent(job.pair, evaluations))]
+    if job.scheme.solver in REELS:
+        reels = [[json.loads(p.read_text()) for p in reel] for reel in reel_summaries(folder)]
+        visible: VisibleClip | VisibleReels = VisibleReels.of_summaries(reels, labels, world)
+        seconds = sum(r["window"][1] - r["window"][0] for reel in reels for r in reel)
+        step = reels[0][0]["steps"][0]["t"]
+        spent = reels[0][0]["solver"]["budget_used"]
+        events = ["/".join(r["outcomes"][r["follow"]["leader"]]["event"] for r in reel) for reel in reels]
+    else:
+        summary = json.loads(clip_summary(folder, job.scheme.select, world).read_text())
+        visible = VisibleClip.of_summary(summary, list(job.pair), labels, world)
+        first, last = summary.get("window", (0, len(summary["steps"])))
+        seconds, step = last - first, summary["steps"][0]["t"]
+        spent = summary["solver"]["budget_used"]
+        events = [o["event"] for o in summary["outcomes"]]
+    return audit(visible, better) | {"events": events, "clip_s": seconds * step, "sim_steps": spent}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--budget", type=int, default=100_000)
+    parser.add_argument("--study", type=Path, required=True)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--episodes", type=int, default=500, help="evaluation episodes for the ground truth")
     parser.add_argument("--out", type=Path, help="keep the searches and verdicts here (default: a temporary folder)")
-    parser.add_argument("--schemes", help="only the schemes whose names contain this text")
+    parser.add_argument("--schemes", help="only these schemes (comma-separated names of the study's)")
     args = parser.parse_args()
-    rewards = ground_truth(args.episodes)
-    print("ground truth (mean test reward):", {k: round(v, 2) for k, v in rewards.items()}, flush=True)
+    spec, _ = load_build(args.study)
     out = args.out or Path(tempfile.mkdtemp(prefix="informativeness-"))
-    pairs = list(itertools.combinations(AGENTS, 2))
-    rows = []
-    for name, (solver, scenarios, reward, top_k, select) in SCHEMES.items():
-        if args.schemes and args.schemes not in name:
-            continue
-        verdicts, rankings, steps, walls = [], [], [], []
-        for seed in range(args.seeds):
-            jobs = [
-                SearchJob(
-                    agents=pair,
-                    scenario=scenario,
-                    solver=solver,
-                    budget=args.budget,
-                    seed=seed,
-                    top_k=top_k,
-                    reward_settings=reward,
-                )
-                for scenario in scenarios
-                for pair in pairs
-            ]
-            folder = out / name.split(" ")[0].replace(",", "") / solver / f"seed{seed}"
-            study = run_all(jobs, folder, workers=args.jobs, progress=False)
-            steps += [job["sim_steps"] for job in study["jobs"]]
-            walls += [job["wall_s"] for job in study["jobs"]]
-            for scenario in scenarios:
-                found = [
-                    judge(folder / solver / job.label, select, rewards) | {"seed": seed, "job": job.label}
-                    for job in jobs
-                    if job.scenario == scenario
-                ]
-                verdicts += found
-                # the three clips rank the agents right exactly when each shows its pair's better agent winning
-                rankings.append(all(v["shows"] == "better" for v in found))
-                for v in found:
-                    print(
-                        f"  {name[:14]:<14} seed {seed:>2} {v['job']:<24} {v['shows']:<6} {v['scenario']:<12} "
-                        f"ends {v['end_s']:5.2f} s {'/'.join(v['events']):<17} {v['why']}",
-                        flush=True,
-                    )
-        better = sum(v["shows"] == "better" for v in verdicts)
-        rows.append(
-            {
-                "scheme": name,
-                "clips": len(verdicts),
-                "better": better,
-                "worse": sum(v["shows"] == "worse" for v in verdicts),
-                "tie": sum(v["shows"] == "tie" for v in verdicts),
-                "better_ci": wilson_interval(better, len(verdicts)),
-                "rankings": len(rankings),
-                "rankings_right": sum(rankings),
-                "rankings_ci": wilson_interval(sum(rankings), len(rankings)),
-                "sim_steps": sum(steps) / len(steps),
-                "wall_s": sum(walls) / len(walls),
-            }
-        )
-        (out / "rows.json").write_text(json.dumps(rows, indent=1))
-    print(
-        f"\n{args.seeds} seeds x {len(pairs)} pairs, budget {args.budget:,} simulator steps per search; "
-        f"{platform.machine()}, {time.strftime('%Y-%m-%d')}\n"
-    )
-    print(
-        "| scheme | shows the better robot [95% CI] | worse | tie | ranking right [95% CI] | "
-        "steps per search | wall s per search |"
-    )
-    print("|---|---|---:|---:|---|---:|---:|")
-    for r in rows:
-        low, high = r["better_ci"]
-        rlow, rhigh = r["rankings_ci"]
+    world, domain = study_world(spec), study_domain(spec)
+    evaluations = evaluate_agents(spec, domain, Cache(out / "cache"), lambda line: None, world, args.jobs)
+    truth = {name: round(e["reward_mean"], 2) for name, e in evaluations.items()}
+    print(f"{args.study}: ground truth (mean test reward): {truth}", flush=True)
+    wanted = args.schemes.split(",") if args.schemes else list(spec.schemes)
+    clips = [j for j in plan_clips(spec) if "pairwise" in j.parts and j.scheme.name in wanted]
+    tasks, where = {}, {}
+    for seed in range(args.seeds):
+        for job in clips:
+            drawn = replace(job, scheme=replace(job.scheme, seed=seed))
+            key = (job.scheme.name, job.scenario, job.pair, seed)
+            where[key] = (drawn, out / job.scheme.name / f"seed{seed}" / search_job(drawn, world).label)
+            tasks[key] = (run_search, (search_job(drawn, world),))
+    verdicts: dict[str, list] = defaultdict(list)
+    rounds: dict[tuple, list] = defaultdict(list)
+    walls: dict[str, list] = defaultdict(list)
+    for key, files in in_processes(tasks, args.jobs):
+        job, folder = where[key]
+        write_outputs(folder, files)
+        verdict = judge(job, folder, evaluations, domain.world(job.scenario))
+        verdicts[key[0]].append(verdict)
+        rounds[key[0], key[1], key[3]].append(verdict["shows"] == "better")
+        walls[key[0]].append(json.loads(files["run.json"])["wall_s"])
+        pair = "-".join(job.pair)
         print(
-            f"| {r['scheme']} | {r['better']} of {r['clips']} ({r['better'] / r['clips']:.0%}) "
-            f"[{low:.0%}, {high:.0%}] | {r['worse']} | {r['tie']} | {r['rankings_right']} of {r['rankings']} "
-            f"({r['rankings_right'] / r['rankings']:.0%}) [{rlow:.0%}, {rhigh:.0%}] | {r['sim_steps']:,.0f} | "
-            f"{r['wall_s']:.1f} |"
+            f"  {key[0]:<14} seed {key[3]:>2} {pair:<24} {key[1]:<18} {verdict['shows']:<6} "
+            f"{'|'.join(verdict['events']):<30} {verdict['why']}",
+            flush=True,
         )
+    print(
+        f"\n{args.study}: {args.seeds} seeds x every pair; budget {next(iter(spec.schemes.values())).budget:,} "
+        f"simulator steps per search; {platform.machine()}, {time.strftime('%Y-%m-%d')}\n"
+    )
+    print(
+        "| scheme | shows the better agent [95% CI] | worse | tie | ranking right [95% CI] | steps per search | "
+        "s of clip | wall s per search |"
+    )
+    print("|---|---|---:|---:|---|---:|---:|---:|")
+    rows = []
+    for name in wanted:
+        found = verdicts[name]
+        if not found:
+            continue
+        better = sum(v["shows"] == "better" for v in found)
+        right = [all(r) for (scheme, _, _), r in rounds.items() if scheme == name]
+        low, high = wilson_interval(better, len(found)) or (0.0, 1.0)  # never None: found is not empty
+        rlow, rhigh = wilson_interval(sum(right), len(right)) or (0.0, 1.0)
+        row = {
+            "scheme": f"{name} ({spec.schemes[name].solver})",
+            "clips": len(found),
+            "better": better,
+            "worse": sum(v["shows"] == "worse" for v in found),
+            "tie": sum(v["shows"] == "tie" for v in found),
+            "rankings": len(right),
+            "rankings_right": sum(right),
+            "sim_steps": sum(v["sim_steps"] for v in found) / len(found),
+            "clip_s": sum(v["clip_s"] for v in found) / len(found),
+            "wall_s": sum(walls[name]) / len(walls[name]),
+        }
+        rows.append(row)
+        print(
+            f"| {row['scheme']} | {better} of {len(found)} ({better / len(found):.0%}) [{low:.0%}, {high:.0%}] | "
+            f"{row['worse']} | {row['tie']} | {sum(right)} of {len(right)} ({sum(right) / len(right):.0%}) "
+            f"[{rlow:.0%}, {rhigh:.0%}] | {row['sim_steps']:,.0f} | {row['clip_s']:.1f} | {row['wall_s']:.1f} |"
+        )
+    (out / "rows.json").write_text(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

@@ -250,8 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
     search.add_argument(
         "--solver",
         default="mcts",
-        help="mcts (default), nfirst, random, cem or representative "
-        "(votes over states drawn from --scenario which agent looks better; docs/search.md)",
+        help="mcts (default), nfirst, random, cem, representative (votes over states drawn from --scenario which "
+        "agent looks better; docs/search.md), or the field's summary methods disagreements, highlights and "
+        "highlights-div (docs/methods.md)",
     )
     search.set_defaults(handler=_search)
 

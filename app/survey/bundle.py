@@ -3,7 +3,7 @@
 A clip is named by (scheme, scenario, pair of agents); the manifest entries whose scheme and scenario are equal
 and whose `agents` are that pair in any order all match. Everything is checked once at start-up: files inside the
 bundle (a clip's, or each of its reels'), checksums, and that every clip the study needs is there and can be shown
-where the study shows it (a pair of reels only on a pairwise part's screen).
+where the study shows it (a pair of reels only on a pairwise or ranking part's screens).
 """
 
 from __future__ import annotations
@@ -122,8 +122,8 @@ def required_clips(study: Study) -> list[NeededClip]:
 
 
 def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
-    """Refuse a bundle that lacks a clip the study needs, shows a pair of reels anywhere but on a pairwise part's
-    screen, or whose ranking clips label one robot two ways."""
+    """Refuse a bundle that lacks a clip the study needs, shows a pair of reels anywhere but on a pairwise or ranking
+    part's screens, or whose ranking clips label one robot two ways."""
     problems = []
     for ref, where, kind in required_clips(study):
         found = bundle.matching(ref.scheme, ref.scenario, ref.agents, kind)
@@ -132,13 +132,13 @@ def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
                 f"{where} needs a clip of scheme {ref.scheme!r}, scenario {ref.scenario!r}, agents "
                 f"{ref.agents[0]!r} and {ref.agents[1]!r}; the manifest has none"
             )
-        # A ranking page shows its round's clips side by side, and the example and a video attention check one
-        # video each: reels (two videos per clip) are shown on a pairwise part's screens only.
-        elif kind != "pairwise" and (reels := [clip.id for clip in found if clip.reels]):
+        # The example and a video attention check show one video each: reels (two videos per clip) are shown on
+        # the screens of a pairwise or ranking part only (a ranking round lists each of its reels).
+        elif kind not in ("pairwise", "ranking") and (reels := [clip.id for clip in found if clip.reels]):
             problems.append(
-                f"{where} would show clips of reels ({', '.join(map(repr, reels))}) of scheme {ref.scheme!r}; only a "
-                "pairwise part shows reels, the example, a ranking part and a video attention check show clips of "
-                "both robots together"
+                f"{where} would show clips of reels ({', '.join(map(repr, reels))}) of scheme {ref.scheme!r}; only "
+                "pairwise and ranking parts show reels, the example and a video attention check show clips of both "
+                "robots together"
             )
     for p, part in enumerate(study.parts):
         if part.kind != "ranking":

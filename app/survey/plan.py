@@ -96,6 +96,11 @@ def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle:
     return fields | {"media": clip.sha256.lower(), **_shape(bundle, clip.sha256).model_dump(exclude_unset=True)}
 
 
+def _videos(clip: ManifestClip) -> list[str]:
+    """The sha256 of each video of a clip: its file, or each of its reels."""
+    return [reel.sha256 for reel in clip.reels] or [clip.sha256]
+
+
 def _reel(bundle: Bundle, reel: ManifestReel, label: str) -> Reel:
     """A reel as a screen shows it: its robot's label, its file's address and shape."""
     return Reel(label=label, media=reel.sha256.lower(), **_shape(bundle, reel.sha256).model_dump(exclude_unset=True))
@@ -129,8 +134,8 @@ def _ranking_screens(
             scheme=scheme,
             scenario=scenario,
             clips=[clip.id for clip in clips],
-            media_list=[clip.sha256.lower() for clip in clips],
-            shapes=[_shape(bundle, clip.sha256) for clip in clips],
+            media_list=[sha.lower() for clip in clips for sha in _videos(clip)],
+            shapes=[_shape(bundle, sha) for clip in clips for sha in _videos(clip)],
             robots=_robots(labels),
             true_order=_true_order(clips, part.agents),
             questions=list(part.questions),

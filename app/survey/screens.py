@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 from app.survey.bundle import Bundle
 from app.survey.clip_length import clip_shape
 from app.survey.study import FEEDBACK, CheckedAnswer, FieldReader, Question, Study, TextQuestion, check_option
-from app.visible import VisibleClip
+from app.visible import VisibleClip, VisibleReels
 
 
 @dataclass(frozen=True)
@@ -397,9 +397,15 @@ def _outcomes(bundle: Bundle, sha: str) -> list[str]:
     """How each robot of a clip visibly ends, by its label in the words of the bundle's world (what the clip itself
     shows, from its summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
     clip = next((clip for clip in bundle.clips.values() if clip.sha256.lower() == sha), None)
-    if clip is None or not clip.summary:
-        return []
+    reel = next((reel for c in bundle.clips.values() for reel in c.reels if reel.sha256.lower() == sha), None)
     try:
+        if reel is not None:  # one robot's reel: how it ended in each of its moments
+            owner = next(c for c in bundle.clips.values() if reel in c.reels)
+            label = owner.labels[owner.agents.index(reel.agent)]
+            segments = [json.loads((bundle.root / path).read_text(encoding="utf-8")) for path in reel.summaries]
+            return [VisibleReels.of_summaries([segments], [label], bundle.world).describe(label)]
+        if clip is None or not clip.summary:
+            return []
         summary = json.loads((bundle.root / clip.summary).read_text(encoding="utf-8"))
         shown = VisibleClip.of_summary(summary, clip.agents, clip.labels, bundle.world)
     except (OSError, ValueError, KeyError, IndexError, TypeError):

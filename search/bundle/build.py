@@ -14,6 +14,7 @@ Bundle layout::
     manifest.json  study.toml  index.html
     clips/ID.mp4  clips/ID.poster.png  clips/ID.sheet.png      what participants see (by checksum, never by ID)
     summaries/ID.json                                          the summary each clip shows
+    clips/ID.reelK.mp4  summaries/ID.reelK-N.json              a pair of reels (HIGHLIGHTS): agent K's, its moments
     cache/                                                     evaluations and searches, keyed by their inputs
 """
 
@@ -28,9 +29,19 @@ import shutil
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
-from app.formats import MANIFEST_FORMAT, ClipAudit, Manifest, ManifestClip, manifest_json, sha256_file
-from app.visible import VisibleClip, World, audit
+from app.formats import (
+    MANIFEST_FORMAT,
+    ClipAudit,
+    Manifest,
+    ManifestClip,
+    ManifestReel,
+    manifest_json,
+    sha256_file,
+)
+from app.survey.clip_length import clip_shape
+from app.visible import VisibleClip, VisibleReels, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.clips.render import RenderOptions, robot_label
 from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
@@ -277,17 +288,19 @@ def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
     return pair[0] if first > second else pair[1]
 
 
-def render_clips(clips: list[tuple[ClipJob, Path, Path]], options: RenderOptions, cache: Cache, log, workers: int = 1):
-    """Render each (job, summary, clip) ``workers`` at a time, unless the same summary, numbers, options and
-    renderer already made the file there."""
+def render_clips(
+    clips: list[tuple[ClipJob, list[Path], Path]], options: RenderOptions, cache: Cache, log, workers: int = 1
+):
+    """Render each (job, summaries, clip) ``workers`` at a time, unless the same summaries, numbers, options and
+    renderer already made the file there. One summary is a clip; several are one agent's reel of moments."""
     todo, inputs_of = {}, {}
-    for job, summary, out in clips:
-        domain = domain_of_summary(json.loads(summary.read_text()))
+    for job, summaries, out in clips:
+        domain = domain_of_summary(json.loads(summaries[0].read_text()))
         inputs = {
-            "summary": sha256_file(summary),
+            "summary": sha256_file(summaries[0]) if len(summaries) == 1 else [sha256_file(s) for s in summaries],
             "numbers": list(job.numbers),
             "options": asdict(options),
-            "renderer": [sha256_file(path) for path in domain.renderer_files(summary)],
+            "renderer": [sha256_file(path) for path in domain.renderer_files(summaries[0]) + reel_files(summaries)],
             "clip": out.name,
         }
         folder = cache.path("render", inputs)
@@ -296,22 +309,46 @@ def render_clips(clips: list[tuple[ClipJob, Path, Path]], options: RenderOptions
             and out.is_file()
             and (folder / "sha256").read_text() == sha256_file(out)
         ):
-            log(f"render {job.id}: cached")
+            log(f"render {out.stem}: cached")
             continue
-        inputs_of[job.id] = (inputs, out)
-        todo[job.id] = (_render, (domain.name, summary, out, list(job.numbers), options))
-    for clip_id, frames in in_processes(todo, workers):
-        inputs, out = inputs_of[clip_id]
+        inputs_of[out.stem] = (inputs, out)
+        todo[out.stem] = (_render, (domain.name, summaries, out, list(job.numbers), options))
+    for name, frames in in_processes(todo, workers):
+        inputs, out = inputs_of[name]
         folder = cache.store("render", inputs)
         (folder / "sha256").write_text(sha256_file(out))
         cache.seal("render", inputs)
-        log(f"render {clip_id}: {frames}")
+        log(f"render {name}: {frames}")
 
 
-def _render(domain: str, summary: Path, out: Path, numbers: list[int], options: RenderOptions) -> str:
-    """Render one clip (in a worker process: the domain is found by name); what it took, for the log."""
-    result = domain_named(domain).render(summary, out, numbers, options)
+def reel_files(summaries: list[Path]) -> list[Path]:
+    """The source of the joining of a reel's moments, where the clip is one."""
+    import search.clips.reel as reel
+
+    return [Path(reel.__file__)] if len(summaries) > 1 else []
+
+
+def _render(domain: str, summaries: list[Path], out: Path, numbers: list[int], options: RenderOptions) -> str:
+    """Render one clip or reel (in a worker process: the domain is found by name); what it took, for the log. A
+    reel's moments start at once and hold their end briefly (the cards between them mark the cuts), so a question
+    of reels plays about as long as a clip of the same simulated seconds."""
+    from search.clips.reel import render_reel
+
+    world = domain_named(domain)
+    if len(summaries) == 1:
+        result = world.render(summaries[0], out, numbers, options)
+    else:
+        moment = replace(options, hold_start=0.0, hold_end=min(options.hold_end, REEL_HOLD_END))
+        result = render_reel(summaries, out, lambda s, o: world.render(s, o, numbers, moment), options)
     return f"{result.frames} frames in {result.render_s:.1f} s"
+
+
+def reel_summaries(folder: Path) -> list[list[Path]]:
+    """A HIGHLIGHTS search's summaries as one reel per agent (in the search's agent order), moments in order."""
+    reels: dict[int, list[Path]] = {}
+    for path in sorted(folder.glob("summary-[0-9][0-9][0-9].json")):
+        reels.setdefault(json.loads(path.read_text())["follow"]["leader"], []).append(path)
+    return [reels[k] for k in sorted(reels)]
 
 
 def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, workers: int = 1) -> Manifest:
@@ -334,57 +371,22 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     evaluations = evaluate_agents(spec, domain, cache, log, world, workers)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
     scenario_reports = representativeness(spec, cache, log, world, workers)
-    for job, search in zip(jobs, inputs, strict=True):
-        shown = domain.world(job.scenario)
-        summary = out / "summaries" / f"{job.id}.json"
-        shutil.copyfile(clip_summary(cache.path("search", search), job.scheme.select, shown), summary)
-    render_clips(
-        [(job, out / "summaries" / f"{job.id}.json", out / "clips" / f"{job.id}.mp4") for job in jobs],
-        spec.render,
-        cache,
-        log,
-        workers,
-    )
-    clips = []
+    sources = {
+        job.id: job_summaries(job, cache.path("search", search), out, domain)
+        for job, search in zip(jobs, inputs, strict=True)
+    }
+    renders = []
     for job in jobs:
-        summary, clip, shown = (
-            out / "summaries" / f"{job.id}.json",
-            out / "clips" / f"{job.id}.mp4",
-            domain.world(job.scenario),
-        )
-        order = sorted(range(2), key=lambda k: job.numbers[k])
-        data = json.loads(summary.read_text())
-        agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
-        better = better_agent(job.pair, evaluations)
-        clip_audit = audit(VisibleClip.of_summary(data, agents, labels, shown), labels[agents.index(better)])
-        if clip_audit["shows"] != "better":
-            log(
-                f"warning: clip {job.id} is misleading: it shows the better robot {better} "
-                f"({labels[agents.index(better)]}) as {'no better' if clip_audit['shows'] == 'tie' else 'worse'}: "
-                f"{clip_audit['why']}"
-            )
-        clips.append(
-            ManifestClip(
-                id=job.id,
-                file=f"clips/{job.id}.mp4",
-                sha256=sha256_file(clip),
-                scheme=job.scheme.name,
-                scenario=job.scenario,
-                agents=agents,
-                labels=labels,
-                better=better,
-                summary=f"summaries/{job.id}.json",
-                audit=ClipAudit(**clip_audit),
-                poster=f"clips/{job.id}.poster.png",
-                sheet=f"clips/{job.id}.sheet.png",
-                parts=list(job.parts),
-                solver=job.scheme.solver,
-                reward=data.get("reward"),
-                outcomes=[data["outcomes"][k] for k in order],
-            )
-        )
+        if job.scheme.solver in REELS:
+            renders += [
+                (job, paths, out / "clips" / f"{job.id}.reel{k}.mp4") for k, paths in enumerate(sources[job.id])
+            ]
+        else:
+            renders.append((job, sources[job.id][0], out / "clips" / f"{job.id}.mp4"))
+    render_clips(renders, spec.render, cache, log, workers)
+    clips = [manifest_clip(job, sources[job.id], out, evaluations, domain.world(job.scenario), log) for job in jobs]
     (out / "study.toml").write_text(text, encoding="utf-8")
-    wanted = {path for c in clips for path in (c.file, c.summary, c.poster, c.sheet)} | {"study.toml"}
+    wanted = {path for c in clips for path in clip_files(c)} | {"study.toml"}
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
@@ -403,6 +405,104 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
     return manifest
+
+
+REELS = ("highlights", "highlights-div")  # the solvers whose clips are a reel per agent
+REEL_HOLD_END = 0.5  # seconds a reel's moment holds its last frame: the card between moments marks the cut
+
+
+def job_summaries(job: ClipJob, folder: Path, out: Path, domain: Domain) -> list[list[Path]]:
+    """The summaries a clip shows, copied into the bundle from its search's ``folder``: one list holding the clip's
+    summary, or (a pair of reels) one list of moments per agent in search order."""
+    if job.scheme.solver not in REELS:
+        summary = out / "summaries" / f"{job.id}.json"
+        shutil.copyfile(clip_summary(folder, job.scheme.select, domain.world(job.scenario)), summary)
+        return [[summary]]
+    reels = reel_summaries(folder)
+    if len(reels) != 2:
+        raise BuildError(f"{_describe(job)}: the search found moments of {len(reels)} of its two agents")
+    copied = []
+    for k, segments in enumerate(reels):
+        copied.append([out / "summaries" / f"{job.id}.reel{k}-{n}.json" for n in range(1, len(segments) + 1)])
+        for source, target in zip(segments, copied[-1], strict=True):
+            shutil.copyfile(source, target)
+    return copied
+
+
+def manifest_clip(
+    job: ClipJob, sources: list[list[Path]], out: Path, evaluations: dict[str, dict], shown: World, log
+) -> ManifestClip:
+    """A clip's manifest entry: agents and labels in on-screen order, ground truth, audit (a warning line when it
+    misleads), what it cost, and its file (or each agent's reel)."""
+    order = sorted(range(2), key=lambda k: job.numbers[k])
+    agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
+    better = better_agent(job.pair, evaluations)
+    reels = job.scheme.solver in REELS
+    data = json.loads(sources[0][0].read_text())
+    if reels:
+        segments = [[json.loads(path.read_text()) for path in sources[k]] for k in order]
+        visible: VisibleClip | VisibleReels = VisibleReels.of_summaries(segments, labels, shown)
+        files = [f"clips/{job.id}.reel{k}.mp4" for k in order]
+    else:
+        visible, files = VisibleClip.of_summary(data, agents, labels, shown), [f"clips/{job.id}.mp4"]
+    clip_audit = audit(visible, labels[agents.index(better)])
+    if clip_audit["shows"] != "better":
+        log(
+            f"warning: clip {job.id} is misleading: it shows the better robot {better} "
+            f"({labels[agents.index(better)]}) as {'no better' if clip_audit['shows'] == 'tie' else 'worse'}: "
+            f"{clip_audit['why']}"
+        )
+    spent = {
+        "sim_steps": int(data["solver"]["budget_used"]),
+        "clip_seconds": sum(clip_shape(out / name).ms for name in files) / 1000,
+    }
+    common: dict[str, Any] = {
+        "id": job.id,
+        "scheme": job.scheme.name,
+        "scenario": job.scenario,
+        "agents": agents,
+        "labels": labels,
+        "better": better,
+        "audit": ClipAudit(**clip_audit),
+        "parts": list(job.parts),
+        "solver": job.scheme.solver,
+        "spent": spent,
+    }
+    if reels:
+        return ManifestClip(
+            **common,
+            reels=[
+                ManifestReel(
+                    agent=job.pair[k],
+                    file=name,
+                    sha256=sha256_file(out / name),
+                    poster=name.removesuffix(".mp4") + ".poster.png",
+                    summaries=[str(path.relative_to(out)) for path in sources[k]],
+                )
+                for k, name in zip(order, files, strict=True)
+            ],
+        )
+    return ManifestClip(
+        **common,
+        file=files[0],
+        sha256=sha256_file(out / files[0]),
+        summary=f"summaries/{job.id}.json",
+        poster=f"clips/{job.id}.poster.png",
+        sheet=f"clips/{job.id}.sheet.png",
+        reward=data.get("reward"),
+        outcomes=[data["outcomes"][k] for k in order],
+    )
+
+
+def clip_files(clip: ManifestClip) -> list[str]:
+    """Every file of the bundle a clip needs: its video, poster, contact sheet and summary, or each reel's."""
+    if not clip.reels:
+        return [clip.file, clip.summary, clip.poster, clip.sheet]
+    return [
+        path
+        for reel in clip.reels
+        for path in (reel.file, reel.poster, reel.file.removesuffix(".mp4") + ".sheet.png", *reel.summaries)
+    ]
 
 
 def clip_summary(folder: Path, select: str, world: World) -> Path:

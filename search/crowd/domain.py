@@ -222,5 +222,6 @@ class CrowdDomain(Domain):
 
     def renderer_files(self, summary: Path) -> list[Path]:
         import search.clips.render as renderer
+        import search.clips.scene as scene
 
-        return [Path(renderer.__file__)]
+        return [Path(renderer.__file__), Path(scene.__file__)]

@@ -47,6 +47,8 @@ from app.visible import Words, World
 EVENTS = ("success", "collision", "timeout")
 GENERIC_WORDS = Words(
     clip_title="Clip of two agents side by side, each in its own copy of the same world",
+    reels_intro="Each agent is shown on its own, in moments from its own runs.",
+    reel_title="Clip of one agent on its own",
     example_caption="An example: two agents, each in its own copy of the same world, side by side.",
     legend_robots=(
         "Agents: each view shows one agent, named below the picture, such as Robot 7, with a colour and a shape"

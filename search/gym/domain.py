@@ -187,11 +187,12 @@ class GymDomain(Domain):
     def renderer_files(self, summary: Path) -> list[Path]:
         import inspect
 
+        import search.clips.scene as scene
         import search.gym.clips as renderer
         from app.formats import load_summary
 
         adapter = GymScenario.from_dict(load_summary(summary)["scenario"]).load_adapter()
-        return [Path(renderer.__file__), Path(inspect.getfile(type(adapter)))]
+        return [Path(renderer.__file__), Path(scene.__file__), Path(inspect.getfile(type(adapter)))]
 
     def world(self, scenario: str | None = None) -> World:
         return self.adapter(scenario).world()

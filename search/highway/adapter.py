@@ -40,6 +40,8 @@ AGENTS_DIR = Path(__file__).parent / "agents"
 AGENT_PREFIX = "highway-"
 WORDS = Words(
     clip_title="Clip of two self-driving cars, each on its own copy of the same highway",
+    reels_intro="Each car is shown on its own, in moments from its own drives.",
+    reel_title="Clip of one self-driving car on its own",
     example_caption="An example: two self-driving cars, each on its own copy of the same highway, in the same traffic.",
     legend_robots=(
         "Self-driving cars: each view follows one, drawn in its robot's colour; its name, such as Robot 7, is"

@@ -88,7 +88,9 @@ def top_k(found: list[Disagreement], k: int, overlap: int, half: int) -> list[Di
     """The ``k`` most important disagreements under the overlap limit (ties: the first found first); skipped ones
     fill up when fewer than ``k`` pass it."""
     ordered = sorted(found, key=lambda d: -d.importance)  # stable
-    chosen, skipped, seen = [], [], {}
+    chosen: list[Disagreement] = []
+    skipped: list[Disagreement] = []
+    seen: dict[int, set[int]] = {}
     for d in ordered:
         steps = d.shared(half)
         if len(seen.get(d.episode, set()) & steps) > overlap:

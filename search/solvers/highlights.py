@@ -10,8 +10,9 @@ agent's summary is a reel of the most important moments of its own episodes.
    discrete action; for Box actions the agent's own and each coordinate at either end of its range) is taken once
    and the agent's policy goes on for ``lookahead`` steps; the importance is the spread (max - min) of the agent's
    own discounted returns over the alternatives.
-3. Greedy selection: the most important states first, each kept if it lies at least ``gap`` steps from the states
-   already kept in its episode, until ``highlights`` are kept. Each shows ``context`` steps around its state.
+3. Greedy selection: the most important states first, each kept if it lies at least ``gap`` steps (and the
+   ``context``, so moments never overlap) from the states already kept in its episode, until ``highlights`` are
+   kept. Each shows ``context`` steps around its state.
 4. HIGHLIGHTS-DIV also skips a state that is closer than ``diversity`` to one already kept, in a true distance:
    the root mean square difference of the states' features (what the clip shows: positions and velocities of
    the agent and the others, or the agent's observation), each feature standardised over the agent's states.
@@ -45,7 +46,7 @@ class HighlightsConfig:
     episodes: int = 3  # episodes each agent plays
     highlights: int = 5  # moments in each agent's reel (k)
     context: int = 10  # steps each moment shows, its important state in the middle
-    gap: int = 10  # fewest steps between two moments' states in one episode
+    gap: int = 10  # fewest steps between two moments' states in one episode (never fewer than the context)
     importance: str = "auto"  # "max_min", "second_best" (action values), "rollouts"; "auto": max_min where it can
     lookahead: int = 5  # the stand-in's steps after each alternative action
     discount: float = 0.99  # of the stand-in's returns
@@ -193,9 +194,10 @@ def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
     scale[scale == 0] = 1.0
     standard = (features - features.mean(axis=0)) / scale
     kept: list[int] = []
+    gap = max(config.gap, config.context)
     for i in sorted(range(len(moments)), key=lambda i: -moments[i].importance):
         m = moments[i]
-        if any(moments[j].episode == m.episode and abs(moments[j].step - m.step) < config.gap for j in kept):
+        if any(moments[j].episode == m.episode and abs(moments[j].step - m.step) < gap for j in kept):
             continue
         if config.diversity and any(
             np.sqrt(np.mean((standard[i] - standard[j]) ** 2)) < config.diversity for j in kept

@@ -13,7 +13,7 @@ import json
 import os
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -314,7 +314,7 @@ def limit_threads() -> None:
         os.environ.setdefault(name, "1")
 
 
-def in_processes(tasks: dict, workers: int):
+def in_processes(tasks: dict, workers: int) -> Iterator[tuple[Any, Any]]:
     """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (in this one
     when one worker or one task), yielding (key, result) as each finishes."""
     if workers <= 1 or len(tasks) <= 1:

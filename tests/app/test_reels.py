@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import random
 import re
 import shutil
 import time
@@ -19,8 +20,10 @@ from app.analysis.export_csv import export_study
 from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, manifest_json
 from app.store.database import as_utc
 from app.store.models import Participant, Response
+from app.survey.assignment import conditions
 from app.survey.bundle import BundleError, check_study_against_bundle, load_bundle
 from app.survey.kinds import pilot_token
+from app.survey.plan import build_plan
 from app.survey.study import parse_study
 from tests.support.analysis import EXAMPLE, SCENARIOS, SCHEMES, add_reels
 from tests.support.survey import (
@@ -128,16 +131,31 @@ def test_the_bundle_check_reads_every_reels_file(bundle_dir, tmp_path):
         load_bundle(copy)
 
 
-def test_reels_are_refused_where_the_study_shows_no_reels(bundle_dir, tmp_path):
+def test_a_ranking_round_of_reels_watches_each_pair_and_lists_every_reel(bundle_dir, tmp_path):
     study = parse_study(study_text())
-    check_study_against_bundle(study, load_bundle(bundle_dir))  # reels made for the pairwise part only
     copy = shutil.copytree(bundle_dir, tmp_path / "bundle")
     manifest = json.loads((copy / "manifest.json").read_text())
     for clip in manifest["clips"]:
-        clip["parts"] = []  # every clip serves every part: the ranking part would show reels
+        if clip["id"].endswith("-reels"):
+            clip["parts"] = ["pairwise", "ranking"]  # the ranking part shows reels too
+        elif clip["parts"] == ["ranking"]:
+            clip["parts"] = ["pairwise"]
     (copy / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(BundleError, match=r"parts\[1\] would show clips of reels \('.*-reels'.*\) of scheme"):
-        check_study_against_bundle(study, load_bundle(copy))
+    bundle = load_bundle(copy)
+    check_study_against_bundle(study, bundle)
+    reels = {reel.sha256.lower(): clip for clip in bundle.clips.values() for reel in clip.reels}
+    rng = random.Random(0)
+    rounds = [
+        screen
+        for condition in conditions(study)
+        for screen in build_plan(study, bundle, condition, rng)
+        if screen.kind == "ranking"
+    ]
+    assert rounds and all(set(ranking.media_list) <= set(reels) for ranking in rounds)
+    for ranking in rounds:
+        assert len(ranking.media_list) == 2 * len(ranking.clips)  # two reels of each of the round's clips
+        page = ranking.page(study, bundle)
+        assert all(len(c["outcomes"]) == 1 and "moment" in c["outcomes"][0] for c in page["round_clips"])
 
 
 def to_reels(client, query: str = "") -> str:
@@ -198,3 +216,20 @@ def test_the_export_has_a_row_per_answer_about_a_reels_clip(make_client, tmp_pat
     assert all(row["correct"] == str(int(row["answer_agent"] == row["truth"])) for row in chosen)
     coupled = [row for row in rows if row["screen"] == "watch"]
     assert coupled and {row["clip_ms"] for row in coupled} == {"1000"}  # the ranking part's clips of both robots
+
+
+def test_reels_are_refused_where_one_video_is_shown(bundle_dir, tmp_path):
+    study = parse_study(study_text())
+    copy = shutil.copytree(bundle_dir, tmp_path / "bundle")
+    manifest = json.loads((copy / "manifest.json").read_text())
+    example = next(clip for clip in manifest["clips"] if clip["scenario"] == EXAMPLE[1])
+    reels = next(clip for clip in manifest["clips"] if clip.get("reels"))
+    ordered = [reel | {"agent": agent} for reel, agent in zip(reels["reels"], example["agents"], strict=True)]
+    manifest["clips"].remove(example)
+    manifest["clips"].append(
+        {key: example[key] for key in ("id", "scheme", "scenario", "agents", "labels", "better", "parts")}
+        | {"reels": ordered}
+    )
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(BundleError, match=r"example.* would show clips of reels"):
+        check_study_against_bundle(study, load_bundle(copy))
