@@ -299,7 +299,7 @@ def render_clips(
         inputs = {
             "summary": sha256_file(summaries[0]) if len(summaries) == 1 else [sha256_file(s) for s in summaries],
             "numbers": list(job.numbers),
-            "options": asdict(options),
+            "options": asdict(options if len(summaries) == 1 else moment_options(options)),
             "renderer": [sha256_file(path) for path in domain.renderer_files(summaries[0]) + reel_files(summaries)],
             "clip": out.name,
         }
@@ -321,6 +321,12 @@ def render_clips(
         log(f"render {name}: {frames}")
 
 
+def moment_options(options: RenderOptions) -> RenderOptions:
+    """How a reel's moments are drawn: they start at once and hold their end briefly (the cards between them mark
+    the cuts), so a question of reels plays about as long as a clip of the same simulated seconds."""
+    return replace(options, hold_start=0.0, hold_end=min(options.hold_end, REEL_HOLD_END))
+
+
 def reel_files(summaries: list[Path]) -> list[Path]:
     """The source of the joining of a reel's moments, where the clip is one."""
     import search.clips.reel as reel
@@ -329,16 +335,14 @@ def reel_files(summaries: list[Path]) -> list[Path]:
 
 
 def _render(domain: str, summaries: list[Path], out: Path, numbers: list[int], options: RenderOptions) -> str:
-    """Render one clip or reel (in a worker process: the domain is found by name); what it took, for the log. A
-    reel's moments start at once and hold their end briefly (the cards between them mark the cuts), so a question
-    of reels plays about as long as a clip of the same simulated seconds."""
+    """Render one clip or reel (in a worker process: the domain is found by name); what it took, for the log."""
     from search.clips.reel import render_reel
 
     world = domain_named(domain)
     if len(summaries) == 1:
         result = world.render(summaries[0], out, numbers, options)
     else:
-        moment = replace(options, hold_start=0.0, hold_end=min(options.hold_end, REEL_HOLD_END))
+        moment = moment_options(options)
         result = render_reel(summaries, out, lambda s, o: world.render(s, o, numbers, moment), options)
     return f"{result.frames} frames in {result.render_s:.1f} s"
 

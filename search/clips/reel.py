@@ -29,6 +29,7 @@ from search.clips.render import (
     RenderResult,
     _text_stamp,
     encoder_args,
+    h264_writer,
     side_paths,
 )
 
@@ -46,20 +47,7 @@ def card(text: str, width: int, height: int) -> Image.Image:
 
 def _write_still(image: Image.Image, frames: int, fps: int, out: Path, options: RenderOptions) -> None:
     """``frames`` frames of one image, encoded as the clips are."""
-    import imageio_ffmpeg
-
-    writer = imageio_ffmpeg.write_frames(
-        str(out),
-        image.size,
-        fps=fps,
-        codec="libx264",
-        pix_fmt_out="yuv420p",
-        quality=None,
-        macro_block_size=16,
-        output_params=encoder_args(options),
-        ffmpeg_log_level="error",
-    )
-    writer.send(None)
+    writer = h264_writer(out, image.size, fps, options)
     for _ in range(frames):
         writer.send(image.tobytes())
     writer.close()

@@ -730,11 +730,28 @@ def render(
     return encode(ClipRenderer(scene, numbers, options), out, started)
 
 
+def h264_writer(path: Path, size: tuple[int, int], fps: float, options: RenderOptions):
+    """A started imageio-ffmpeg writer of RGB frames of ``size`` into an H.264 clip every browser plays."""
+    import imageio_ffmpeg
+
+    writer = imageio_ffmpeg.write_frames(
+        str(path),
+        size,
+        fps=fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        quality=None,
+        macro_block_size=16,
+        output_params=encoder_args(options),
+        ffmpeg_log_level="error",
+    )
+    writer.send(None)
+    return writer
+
+
 def encode(renderer, out: str | os.PathLike, started: float) -> RenderResult:
     """Encode a renderer's frames (anything with ``options``, ``layout.width/height``, ``frames``, ``draw`` and
     the ``scene`` a contact sheet reads) as the clip, its poster and its contact sheet."""
-    import imageio_ffmpeg
-
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise ValueError(f"the clip must be an .mp4 file, got {out}")
@@ -742,18 +759,7 @@ def encode(renderer, out: str | os.PathLike, started: float) -> RenderResult:
     o, lay = renderer.options, renderer.layout
     frames = renderer.frames
     partial = out.with_name(f".{out.stem}.partial.mp4")
-    writer = imageio_ffmpeg.write_frames(
-        str(partial),
-        (lay.width, lay.height),
-        fps=o.fps,
-        codec="libx264",
-        pix_fmt_out="yuv420p",
-        quality=None,
-        macro_block_size=16,
-        output_params=encoder_args(o),
-        ffmpeg_log_level="error",
-    )
-    writer.send(None)
+    writer = h264_writer(partial, (lay.width, lay.height), o.fps, o)
     poster = None
     try:
         for n, frame in enumerate(frames):
