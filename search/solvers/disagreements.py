@@ -16,6 +16,7 @@ agent A, and what came of it?
    fewer than K remain.
 
 A disagreement needs room for its branches: one less than h/2 steps before the search's horizon is not sought.
+Where none is found, the clip is the first episode with each agent on its own for h steps (recorded as such).
 
 A clip shows h/2 steps of shared history, the moment of disagreement, then the two branches side by side: its
 summary replays the episode with every agent following A up to the fork (``follow``) and shows the ``window``
@@ -70,6 +71,7 @@ class Disagreement:
     step: int  # steps A had taken when B would have acted differently (the fork's state)
     branch: int  # steps each agent went on alone
     importance: float = 0.0
+    forked: bool = True  # False: none was found, and this is the first episode with each agent on its own
 
     def shared(self, half: int) -> set[int]:
         """The steps of A's trajectory its clip shows."""
@@ -160,6 +162,16 @@ def fork(
     return [d for d in forks if d.branch > 0]
 
 
+def unforked(group: Episodes, tracker: Tracker, config: DisagreementsConfig) -> Disagreement:
+    """Where the agents never disagree (or never with room to fork), the clip is still a clip of the pair: the
+    first episode with each agent on its own for h steps (``forked`` False)."""
+    problem = group.coupled.problem
+    problem.reset(1)
+    problem.override = None
+    length = play(problem, group.env[:1], tracker, lambda t, running: None, steps=config.horizon)
+    return Disagreement(group.first, 0, int(length[0]), forked=False)
+
+
 def importance_kind(problem, config: DisagreementsConfig) -> str:
     """The importance a search uses: ``last_state`` needs both agents' values."""
     has_values = all(problem.values(x, of=x) is not None for x in (0, 1))
@@ -188,14 +200,16 @@ def disagreements(
     for g, group in enumerate(groups):
         chosen_here = [(t, before, [row for row in rows if (g, t, row) in kept]) for t, before, rows in found[g]]
         forked += fork(group, [f for f in chosen_here if f[2]], tracker, config, shown)
-    chosen = top_k(forked, tracker.queue.k, config.overlap, half)
+    chosen = top_k(forked, tracker.queue.k, config.overlap, half) or [unforked(groups[0], tracker, config)]
     by_episode = {group.first + e: group for group in groups for e in range(len(group.env))}
     record = {
         "disagreements": len(every),
         "forked": len(forked),
         "importance": importance_kind(groups[0].coupled.problem, config),
         "chosen": [
-            {"episode": d.episode, "step": d.step, "branch": d.branch, "importance": d.importance} for d in chosen
+            {"episode": d.episode, "step": d.step, "branch": d.branch, "importance": d.importance}
+            for d in chosen
+            if d.forked
         ],
     }
     return [summarize(by_episode[d.episode], d) for d in chosen], record

@@ -154,15 +154,18 @@ def play_agent(group: Episodes, agent: int, tracker: Tracker, config: Highlights
     return kind, states, lengths
 
 
-def rollout_importance(group: Episodes, agent: int, states: list, tracker: Tracker, config: HighlightsConfig):
-    """The stand-in importance of the states (step, rows) that fit in the budget: {(row, step): importance}."""
+def rollout_importance(
+    group: Episodes, agent: int, states: list, tracker: Tracker, config: HighlightsConfig, budget: int
+):
+    """The stand-in importance of the states (step, rows) whose rollouts fit before the tracker reaches ``budget``
+    steps (at least one state's): {(row, step): importance}."""
     problem = group.coupled.problem
     every = [(i, row) for i, (t, running, *_rest) in enumerate(states) for row in np.flatnonzero(running)]
     if not every:
         return {}
     alternatives = len(problem.alternatives(states[0][5][:1]))
     cost = alternatives * config.lookahead
-    count = min(len(every), max(1, tracker.remaining // cost))
+    count = min(len(every), max(1, (budget - tracker.steps) // cost))
     chosen = [every[j] for j in np.linspace(0, len(every) - 1, count).round().astype(int)]
     parts, at, actions, env = [], [], [], []
     for i, row in chosen:
@@ -215,7 +218,7 @@ def agent_moments(groups: list[Episodes], agent: int, tracker: Tracker, config: 
     for group in groups:
         kind, states, lengths = play_agent(group, agent, tracker, config, budget)
         if kind == "rollouts":
-            scores = rollout_importance(group, agent, states, tracker, config)
+            scores = rollout_importance(group, agent, states, tracker, config, budget)
         else:
             scores = {
                 (int(row), t): float(q[row]) for t, running, _, q, _, _ in states for row in np.flatnonzero(running)

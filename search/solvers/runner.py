@@ -255,7 +255,9 @@ def _watching(
     groups = draw_episodes(lambda s: domain.coupled(agents, s, job.reward_settings), states, config.episodes, rng)
     shown = domain.shown
 
-    def summary(group: Episodes, episode: int, end: int, follow: Follow, window: tuple[int, int], note: dict):
+    def summary(
+        group: Episodes, episode: int, end: int, follow: Follow | None, window: tuple[int, int] | None, note: dict
+    ):
         actions = group.env[episode - group.first, :end]
         return group.coupled.summarize(actions, solver | note, follow=follow, window=window, horizon=end)
 
@@ -263,6 +265,8 @@ def _watching(
 
         def of_disagreement(group: Episodes, d: Disagreement) -> dict:
             end = d.step + d.branch
+            if not d.forked:
+                return summary(group, d.episode, end, None, None, {"episode": d.episode, "disagreement_step": None})
             window = (max(0, d.step - config.horizon // 2), end)
             note = {"episode": d.episode, "disagreement_step": d.step, "importance": d.importance}
             return summary(group, d.episode, end, Follow(0, d.step), window, note)
@@ -316,7 +320,8 @@ def limit_threads() -> None:
 
 def in_processes(tasks: dict, workers: int) -> Iterator[tuple[Any, Any]]:
     """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (in this one
-    when one worker or one task), yielding (key, result) as each finishes."""
+    when one worker or one task), yielding (key, result) as each finishes. A task that fails, or a caller that
+    stops reading, cancels the tasks not yet started."""
     if workers <= 1 or len(tasks) <= 1:
         for key, (function, arguments) in tasks.items():
             yield key, function(*arguments)
@@ -327,8 +332,12 @@ def in_processes(tasks: dict, workers: int) -> Iterator[tuple[Any, Any]]:
     context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
     with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=context, initializer=limit_threads) as pool:
         futures = {pool.submit(function, *arguments): key for key, (function, arguments) in tasks.items()}
-        for future in as_completed(futures):
-            yield futures[future], future.result()
+        try:
+            for future in as_completed(futures):
+                yield futures[future], future.result()
+        except BaseException:  # GeneratorExit too: nobody waits for the rest
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
 
 
 def _job_in_worker(job: SearchJob) -> dict[str, str]:

@@ -207,3 +207,26 @@ def test_highlights_reels_show_each_agent_alone_and_verify(agents, solver, impor
     if importance == "max_min":  # the chosen states are those of the largest hand-made spread: nearest the obstacle
         chosen = record["agent_0"]["chosen"]
         assert chosen and all(c["importance"] >= 1.0 for c in chosen)
+
+
+also_straight = Valued(straight)
+
+
+def test_agents_that_never_disagree_get_the_first_episode_each_on_its_own(tmp_path):
+    agents = ("tests.gym.corridor:straight", "tests.gym.test_summary_methods:also_straight")
+    job = SearchJob(
+        agents=agents,
+        scenario=scenario_file(tmp_path),
+        solver="disagreements",
+        budget=500,
+        reward_settings={"horizon": 40},
+        solver_settings={"horizon": 6},
+    )
+    files = run_search(job)
+    record = json.loads(files["run.json"])["method"]
+    assert record["disagreements"] == 0 and record["chosen"] == []
+    out = write_outputs(tmp_path / "out", files)
+    [path] = sorted(out.glob("summary-*.json"))
+    data = json.loads(path.read_text())
+    assert "follow" not in data and "window" not in data and len(data["steps"]) <= 6
+    assert data["solver"]["disagreement_step"] is None and verify(path) == []
