@@ -213,12 +213,14 @@ def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
 
 
 def agent_moments(groups: list[Episodes], agent: int, tracker: Tracker, config: HighlightsConfig, budget: int):
-    """Every scored state of the agent's episodes, and the importance used."""
-    moments, kind = [], ""
-    for group in groups:
-        kind, states, lengths = play_agent(group, agent, tracker, config, budget)
+    """Every scored state of the agent's episodes, and the importance used; the steps left until ``budget`` are
+    shared out evenly over the groups of episodes (starting states)."""
+    moments, kind, start = [], "", tracker.steps
+    for g, group in enumerate(groups):
+        share = start + (budget - start) * (g + 1) // len(groups)
+        kind, states, lengths = play_agent(group, agent, tracker, config, share)
         if kind == "rollouts":
-            scores = rollout_importance(group, agent, states, tracker, config, budget)
+            scores = rollout_importance(group, agent, states, tracker, config, share)
         else:
             scores = {
                 (int(row), t): float(q[row]) for t, running, _, q, _, _ in states for row in np.flatnonzero(running)
