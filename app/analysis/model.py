@@ -234,13 +234,26 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
         notes.append("two-way covariance not positive definite: the participant and clip parts were added")
         cov = bread @ (by_participant + by_clip) @ bread
     quantile = _t_quantile(df)
+    degenerate: list[str] = []
+
+    def variance(vector: Array, what: str = "") -> float:
+        """vector' V vector under the cluster-robust V, or the model-based one where the robust is degenerate: a
+        scheme whose answers are all alike (all right, all wrong) leaves its clusters no variation to measure, and
+        two such schemes' comparison gets a variance of zero."""
+        robust, model_based = float(vector @ cov @ vector), float(vector @ bread @ vector)
+        if robust > DEGENERATE * model_based:
+            return robust
+        if what:
+            degenerate.append(what)
+        return model_based
+
     gradients: dict[str, Array] = {}
     estimates: list[SchemeEstimate] = []
     for k, scheme in enumerate(present):
         rows = x[:, k] == 1
         accuracy = float(fitted[rows].mean())
         gradients[scheme] = (weight[rows, None] * x[rows]).mean(axis=0)
-        se = math.sqrt(float(gradients[scheme] @ cov @ gradients[scheme])) / (accuracy * (1 - accuracy))
+        se = math.sqrt(variance(gradients[scheme], scheme)) / (accuracy * (1 - accuracy))
         centre = _logit(accuracy)
         estimates.append(
             SchemeEstimate(
@@ -259,9 +272,9 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
             contrast = np.zeros(x.shape[1])
             contrast[j], contrast[i] = 1, -1
             log_or = float(contrast @ beta)
-            se_log_or = math.sqrt(float(contrast @ cov @ contrast))
+            se_log_or = math.sqrt(variance(contrast, f"{scheme} against {reference}"))
             gradient = gradients[scheme] - gradients[reference]
-            se_diff = math.sqrt(float(gradient @ cov @ gradient))
+            se_diff = math.sqrt(variance(gradient))
             difference = estimates[j].accuracy - estimates[i].accuracy
             contrasts.append(
                 Contrast(
@@ -276,7 +289,12 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
                     _t_p(log_or / se_log_or, df),
                 )
             )
-    scheme_test, scheme_p = _scheme_test(beta, cov, len(present), df)
+    scheme_test, scheme_p = _scheme_test(beta, bread if degenerate else cov, len(present), df)
+    if degenerate:
+        notes.append(
+            "cluster-robust variance degenerate (answers all alike) for "
+            f"{', '.join(degenerate)}: model-based standard errors there and in the F test"
+        )
     if len(present) < len(schemes):
         notes.append(f"schemes without answers left out: {', '.join(s for s in schemes if s not in present)}")
     return ModelResult(
@@ -291,6 +309,9 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
         scheme_test,
         scheme_p,
     )
+
+
+DEGENERATE = 1e-9  # a robust variance below this share of the model-based one is treated as zero
 
 
 def _scheme_test(beta: Array, cov: Array, k: int, df: int) -> tuple[str, float | None]:

@@ -151,3 +151,33 @@ def test_the_report_says_what_a_ranking_test_can_show(known_db, tmp_path):  # no
     ranking = data.model("ranking")
     assert ranking.estimable and html.count("A ranking part has one ranked set per scheme and scenario") == 1
     assert f"the spread of only {ranking.clips} sets" in html
+
+
+def test_schemes_whose_answers_are_all_alike_get_model_based_errors_not_a_crash():
+    """The methods study's ranking part, 40 bots: two schemes always right, one always wrong. Their clusters hold no
+    variation, so the cluster-robust variance of their comparison is zero (or a rounding error below it)."""
+    from app.analysis.model import Answers
+
+    rows = []
+    for p in range(40):
+        half = p % 2
+        rows += [
+            ("representative", "r", 1),
+            ("disagreements", "d", 1),
+            ("highlights", "h", int(p >= 4)),
+            ("adaptive", f"a{half}", 0),
+            ("nfirst", f"n{half}", int(p < 6)),
+        ]
+    participants = [f"bot-{p}" for p in range(40) for _ in range(5)]
+    answers = Answers(
+        participant=participants,
+        clip=[clip for _, clip, _ in rows],
+        scheme=[scheme for scheme, _, _ in rows],
+        scenario=["training"] * len(rows),
+        pair=[""] * len(rows),
+        correct=[correct for _, _, correct in rows],
+    )
+    fit = fit_accuracy(answers, ["adaptive", "nfirst", "representative", "disagreements", "highlights"], 1 / 6)
+    assert fit.estimable and fit.scheme_p is not None and 0 <= fit.scheme_p < 0.05
+    assert "disagreements against representative" in fit.note
+    assert all(np.isfinite(c.or_low) and np.isfinite(c.p_value) for c in fit.contrasts)
