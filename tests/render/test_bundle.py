@@ -311,7 +311,7 @@ def test_a_study_file_without_a_build_table_is_refused(tmp_path):
         load_build(study)
 
 
-@pytest.mark.parametrize("name", ["paper.toml", "demo.toml"])
+@pytest.mark.parametrize("name", ["paper.toml", "demo.toml", "methods.toml", "methods-highway.toml"])
 def test_shipped_study_files_build_and_serve(name):
     """Every search of the shipped study files is valid (settings, scenarios), and the clips they plan are what
     the server asks for: a manifest of them passes the server's start-up check, one label per robot in a round."""
