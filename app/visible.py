@@ -180,13 +180,16 @@ class VisibleClip:
     def _of_robots(
         cls, summary: Mapping[str, Any], order: Sequence[int], labels: Sequence[str], world: World | None
     ) -> VisibleClip:
-        """The clip of the summary's robots ``order`` (its indices), labelled ``labels``."""
+        """The clip of the summary's robots ``order`` (its indices), labelled ``labels``. A summary with a ``window``
+        is seen as its clip shows it: its clock starts at the window's first state, so times count from there."""
         steps = summary.get("steps") or [{"t": 1.0}]
+        first = int((summary.get("window") or [0])[0])
+        start_s = float(steps[first - 1]["t"]) if 0 < first <= len(steps) else 0.0
         return cls(
             labels=tuple(labels),
-            outcomes=tuple(summary["outcomes"][k] for k in order),
+            outcomes=tuple(_since(summary["outcomes"][k], start_s) for k in order),
             progress=tuple(_progress(summary, k) for k in order),
-            end_s=max(float(steps[-1]["t"]), 1e-6),
+            end_s=max(float(steps[-1]["t"]) - start_s, 1e-6),
             world=world or World(),
             to_goal=tuple(_to_goal(summary, k) for k in order),
         )
@@ -297,6 +300,13 @@ def _progress(summary: Mapping[str, Any], k: int) -> float:
     """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
     ends = _ends(summary, k)
     return progress_towards(*ends) if ends else 0.0
+
+
+def _since(outcome: Mapping[str, Any], start_s: float) -> Mapping[str, Any]:
+    """An outcome with its time counted from ``start_s`` (an event before it happened at the clip's start)."""
+    if not start_s or outcome.get("time") is None:
+        return outcome
+    return {**outcome, "time": max(0.0, float(outcome["time"]) - start_s)}
 
 
 def _to_goal(summary: Mapping[str, Any], k: int) -> float | None:

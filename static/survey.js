@@ -116,7 +116,8 @@
     const gated = box.hasAttribute("data-gated");
     const nextOnly = box.hasAttribute("data-next-only");  // a clip to watch, no questions: only Next unlocks
     const reel = box.hasAttribute("data-reel") ? parseInt(box.dataset.reel, 10) : null;  // its place among reels
-    const unlocks = nextOnly ? "The Next button unlocks when the clip ends."
+    const unlocks = nextOnly ? (reel !== null ? "The Next button unlocks when each robot's clip has ended."
+                                              : "The Next button unlocks when the clip ends.")
                   : reel !== null ? "You can answer when each robot's clip has ended." : "You can answer when the clip ends.";
     const width = parseFloat(video.getAttribute("width")), height = parseFloat(video.getAttribute("height"));
     if (width > 0 && height > 0) box.style.setProperty("--ratio", String(width / height));
@@ -214,14 +215,16 @@
       }
       button.textContent = "Replay clip";
       say(!gated ? "Clip finished. You can replay it."
-          : !allWatched() ? "Clip finished. Now play the other robot's clip: you can answer when it has ended."
+          : !allWatched() ? (nextOnly ? "Clip finished. Now play the other robot's clip: Next unlocks when it has ended."
+                                      : "Clip finished. Now play the other robot's clip: you can answer when it has ended.")
           : nextOnly ? "Clip finished. Press Next to go on, or replay the clip."
           : "Clip finished. You can now answer, or replay the clip.");
       if (gated && allWatched()) {
         unlock();
         if (reel !== null) {  // every reel's line says so, not only the last one's
           box.closest("[data-reels]").querySelectorAll("[data-status]").forEach(function (line) {
-            line.textContent = "Clip finished. You can now answer, or replay the clips.";
+            line.textContent = nextOnly ? "Both clips finished. Press Next to go on, or replay them."
+                                        : "Clip finished. You can now answer, or replay the clips.";
           });
         }
       }

@@ -126,6 +126,7 @@ def _ranking_screens(
         for k, clip in enumerate(clips)
     ]
     labels = [(agent, label) for clip in clips for agent, label in zip(clip.agents, clip.labels, strict=True)]
+    videos = list(dict.fromkeys(sha for clip in clips for sha in _videos(clip)))  # a robot's reel once, however paired
     screens.append(
         Ranking(
             kind="ranking",
@@ -134,8 +135,8 @@ def _ranking_screens(
             scheme=scheme,
             scenario=scenario,
             clips=[clip.id for clip in clips],
-            media_list=[sha.lower() for clip in clips for sha in _videos(clip)],
-            shapes=[_shape(bundle, sha) for clip in clips for sha in _videos(clip)],
+            media_list=[sha.lower() for sha in videos],
+            shapes=[_shape(bundle, sha) for sha in videos],
             robots=_robots(labels),
             true_order=_true_order(clips, part.agents),
             questions=list(part.questions),

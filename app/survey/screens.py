@@ -16,6 +16,7 @@ from typing import Annotated, Any, ClassVar, Literal, NamedTuple, TypeGuard
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
+from app.formats import ManifestReel
 from app.survey.bundle import Bundle
 from app.survey.clip_length import clip_shape
 from app.survey.study import FEEDBACK, CheckedAnswer, FieldReader, Question, Study, TextQuestion, check_option
@@ -277,6 +278,7 @@ class Ranking(_InPart):
                 clip_view(Clip(sha, shape)) | {"outcomes": _outcomes(bundle, sha)}
                 for sha, shape in zip(self.media_list, shapes, strict=True)
             ]
+            view["round_reels"] = any(reel.sha256.lower() in self.media_list for reel in _reels(bundle))
         return view
 
 
@@ -393,11 +395,15 @@ def page_view(screen: Screen, study: Study, bundle: Bundle) -> dict[str, Any]:
     return view | screen.page(study, bundle)
 
 
+def _reels(bundle: Bundle) -> list[ManifestReel]:
+    return [reel for clip in bundle.clips.values() for reel in clip.reels]
+
+
 def _outcomes(bundle: Bundle, sha: str) -> list[str]:
     """How each robot of a clip visibly ends, by its label in the words of the bundle's world (what the clip itself
     shows, from its summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
     clip = next((clip for clip in bundle.clips.values() if clip.sha256.lower() == sha), None)
-    reel = next((reel for c in bundle.clips.values() for reel in c.reels if reel.sha256.lower() == sha), None)
+    reel = next((reel for reel in _reels(bundle) if reel.sha256.lower() == sha), None)
     try:
         if reel is not None:  # one robot's reel: how it ended in each of its moments
             owner = next(c for c in bundle.clips.values() if reel in c.reels)

@@ -105,8 +105,12 @@ class Texts(Strict):
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
     watch_reels: Text = (  # above a pair of reels, each robot's clip on its own
-        "Watch each robot's clip to the end, one after the other. The questions unlock when both have finished; "
-        "you can replay them."
+        "Play both clips to the end, one after the other (the second is beside or below the first). The questions "
+        "unlock when both have finished; you can replay them."
+    )
+    watch_reels_only: Text = (  # above a ranking round's pair of reels, watched without questions
+        "Play both clips to the end, one after the other (the second is beside or below the first). The Next "
+        "button unlocks when both have finished; you can replay them."
     )
     example_caption: str = ""  # under the instructions' example clip; empty: the caption of the bundle's world
     robot_names: Text = (

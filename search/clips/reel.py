@@ -71,7 +71,8 @@ def render_reel(
     options: RenderOptions | None = None,
 ) -> RenderResult:
     """One H.264 clip of ``segments`` (summary files) in order, each rendered by ``render_segment(summary,
-    clip)`` (a domain's renderer with its robot numbers and options), with a card between two segments; the
+    clip)`` (a domain's renderer with its robot numbers and options), each announced by a card ("Moment 2 of 3")
+    where there are several; the
     poster is the first segment's, the contact sheet the segments' sheets stacked. ``options`` gives the cards'
     encoder settings (crf, preset); use the segments' own."""
     import imageio_ffmpeg
@@ -94,7 +95,7 @@ def render_reel(
         card_frames = round(CARD_SECONDS * fps)
         parts, frames, seconds = [], 0, 0.0
         for n, result in enumerate(results):
-            if n:
+            if len(results) > 1:  # each moment announced, the first too: it starts partway into a run
                 still = work / f"card-{n}.mp4"
                 _write_still(card(f"Moment {n + 1} of {len(results)}", width, height), card_frames, fps, still, options)
                 parts.append(still.name)

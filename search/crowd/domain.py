@@ -139,10 +139,10 @@ class CrowdDomain(Domain):
 
         return roll_out(self._policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
 
-    def shown(self, coupled: Coupled, row: int, steps: int) -> float:
+    def shown(self, coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
         from search.crowd.rollouts import shown
 
-        return shown(coupled.problem.sim, row)
+        return shown(coupled.problem.sim, row, since * coupled.problem.sim.config.dt)
 
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.crowd.summary import rebuild

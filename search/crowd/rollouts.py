@@ -78,17 +78,18 @@ def roll_out(
     )
 
 
-def shown(sim: CoupledSimulator, row: int) -> float:
-    """The visible contrast of a row's clip if it ended now: its summary's outcomes and final positions."""
+def shown(sim: CoupledSimulator, row: int, since_s: float = 0.0) -> float:
+    """The visible contrast of a row's clip if it ended now, shown from ``since_s`` simulated seconds on: its
+    summary's outcomes (times counted from there) and final positions."""
     state = sim.state
     return visible_contrast(
         _clip(
             sim.scenario,
             sim.gather(state.outcome)[row],
-            sim.gather(state.event_time)[row],
+            np.maximum(sim.gather(state.event_time)[row] - since_s, 0.0),
             sim.gather(state.min_clearance)[row],
             sim.gather(state.robot_pos)[row],
-            float(state.time[row]),
+            float(state.time[row]) - since_s,
         )
     )
 

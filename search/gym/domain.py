@@ -126,8 +126,8 @@ class GymDomain(Domain):
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
 
-    def shown(self, coupled: Coupled, row: int, steps: int) -> float:
-        return shown(coupled, row, steps)
+    def shown(self, coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
+        return shown(coupled, row, steps, since)
 
     def problem(self, agents: list[GymAgent], state: GymScenario, reward, adapter: Adapter) -> GymCoupledProblem:
         """The coupled problem a search steps (its summaries replay in the environment itself)."""
@@ -198,16 +198,20 @@ class GymDomain(Domain):
         return self.adapter(scenario).world()
 
 
-def shown(coupled: Coupled, row: int, steps: int) -> float:
-    """The visible contrast of a row of a Gymnasium problem that just ended: each agent's event and its time, as
-    `search.gym.summary.build_gym_summary` records them."""
+def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
+    """The visible contrast of a row of a Gymnasium problem that just ended, its clip shown from the state after
+    step ``since``: each agent's event and its time, as `search.gym.summary.build_gym_summary` records them."""
     from search.sim.world import OUTCOME_NAMES
     from search.solvers.representative import visible_contrast
 
     dt = coupled.problem.adapter.dt
     outcomes = tuple(
-        {"event": OUTCOME_NAMES[outcome], "time": float(step * dt) if step else None, "min_human_distance": None}
+        {
+            "event": OUTCOME_NAMES[outcome],
+            "time": float(max(step - since, 0) * dt) if step else None,
+            "min_human_distance": None,
+        }
         for outcome, step in coupled.problem.endings(row)
     )
-    end_s = max(steps * dt, 1e-6)
+    end_s = max((steps - since) * dt, 1e-6)
     return visible_contrast(VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world))

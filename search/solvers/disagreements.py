@@ -10,7 +10,7 @@ agent A, and what came of it?
    agent X's value, |(V_A(s_A) r + V_B(s_A)) - (V_A(s_B) r + V_B(s_B))| for the branches' end states s_A, s_B
    (``agent_ratio`` r; the original's best Q value is a state's value). For agents with no value (scripted, any
    callable) it is the value-free ``outcome`` score: how different the two agents visibly end up (the absolute
-   visible contrast of the fork's clip, `search.solvers.representative`).
+   visible contrast of the fork's clip as it shows it, from h/2 steps before the fork, `search.solvers.representative`).
 4. The top K go first, most important first, skipping one that shares more than ``overlap`` of A's steps with a
    disagreement already chosen in its episode (the original's ``similarity_limit``); skipped ones fill up when
    fewer than K remain.
@@ -134,7 +134,7 @@ def fork(
     found: list[tuple[int, Any, list]],
     tracker: Tracker,
     config: DisagreementsConfig,
-    shown: Callable[[Any, int, int], float],
+    shown: Callable[[Any, int, int, int], float],
 ) -> list[Disagreement]:
     """Each disagreement's two branches, h/2 steps each, all stepped together, and their importance."""
     problem, half = group.coupled.problem, config.horizon // 2
@@ -156,7 +156,9 @@ def fork(
         values = np.array([[problem.values(x, of=y) for y in (0, 1)] for x in (0, 1)])
         scores = last_state(values, config.agent_ratio)
     else:
-        scores = np.array([abs(shown(group.coupled, row, d.step + d.branch)) for row, d in enumerate(forks)])
+        scores = np.array(
+            [abs(shown(group.coupled, row, d.step + d.branch, max(0, d.step - half))) for row, d in enumerate(forks)]
+        )
     for d, score in zip(forks, scores, strict=True):
         d.importance = float(score)
     return [d for d in forks if d.branch > 0]
@@ -186,7 +188,7 @@ def disagreements(
     groups: list[Episodes],
     tracker: Tracker,
     config: DisagreementsConfig,
-    shown: Callable[[Any, int, int], float],
+    shown: Callable[[Any, int, int, int], float],
     summarize: Callable[[Episodes, Disagreement], dict],
 ) -> tuple[list[dict], dict]:
     """The top-K disagreements' summaries, most important first, and the record of the search.

@@ -137,10 +137,11 @@ class Domain(ABC):
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
 
-    def shown(self, coupled: Coupled, row: int, steps: int) -> float:
+    def shown(self, coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
         """The visible contrast (`search.solvers.representative.visible_contrast`) of the clip of row ``row`` of a
-        coupled problem that has taken ``steps`` steps, read from the problem as its summary would say it: how
-        the summary methods that fork (Agent Disagreements) score a fork without replaying it."""
+        coupled problem that has taken ``steps`` steps, shown from the state after step ``since`` on, read from
+        the problem as its summary would say it: how the summary methods that fork (Agent Disagreements) score a
+        fork without replaying it."""
         raise NotImplementedError(f"the {self.name} world cannot read a clip's contrast from its problem")
 
     @abstractmethod

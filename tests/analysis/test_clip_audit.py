@@ -186,3 +186,27 @@ def test_a_reel_needs_segments_that_say_whom_they_follow():
         VisibleReels.of_summaries([[summary(SUCCESS, CRASH)], [segment(0, SUCCESS, CRASH)]], ["A", "B"])
     with pytest.raises(ValueError, match="at least one segment"):
         VisibleReels.of_summaries([[], [segment(0, SUCCESS, CRASH)]], ["A", "B"])
+
+
+def test_a_windowed_clip_counts_its_times_from_the_window_as_its_clock_does():
+    """A disagreement or HIGHLIGHTS moment shows only its window and its clock starts there: the audit, the bots and
+    the ranking page's lines count from there too, so a page never says another time than its clip."""
+    from app.visible import VisibleClip
+
+    steps = [{"t": 0.25 * (i + 1), "robots": [[0.0, 0.0], [0.0, 0.0]]} for i in range(40)]
+    summary = {
+        "agents": [{"name": "a"}, {"name": "b"}],
+        "scenario": {"robot": {"start": [0.0, -4.0], "goal": [0.0, 4.0]}},
+        "steps": steps,
+        "outcomes": [
+            {"event": "success", "time": 7.5, "min_human_distance": 1.0},
+            {"event": "collision", "time": 2.0, "min_human_distance": -0.1},  # before the window: at its start
+        ],
+        "window": [20, 40],  # from the state at 5.0 s to the one at 10.0 s
+    }
+    clip = VisibleClip.of_summary(summary, ["a", "b"], ["Robot 1", "Robot 2"])
+    assert clip.end_s == 5.0
+    assert clip.describe("Robot 1").startswith("Robot 1 reached the goal after 2.5 seconds")
+    assert clip.outcomes[1]["time"] == 0.0
+    whole = VisibleClip.of_summary({k: v for k, v in summary.items() if k != "window"}, ["a", "b"], ["1", "2"])
+    assert whole.end_s == 10.0 and whole.outcomes[0]["time"] == 7.5

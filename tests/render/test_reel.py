@@ -65,9 +65,9 @@ def test_a_reel_of_three_segments_is_one_playable_clip_of_their_length_plus_the_
     singles = [crowd()(path, tmp_path / f"single-{n}.mp4") for n, path in enumerate(moments)]
     result = render_reel(moments, tmp_path / "reel" / "reel.mp4", crowd(), FAST)
 
-    cards = 2 * round(CARD_SECONDS * 24)
+    cards = 3 * round(CARD_SECONDS * 24)  # "Moment 1 of 3" before the first too
     assert result.frames == sum(s.frames for s in singles) + cards
-    assert result.seconds == pytest.approx(sum(s.seconds for s in singles) + 2 * CARD_SECONDS)
+    assert result.seconds == pytest.approx(sum(s.seconds for s in singles) + 3 * CARD_SECONDS)
     frames, seconds = imageio_ffmpeg.count_frames_and_secs(str(result.clip))
     assert frames == result.frames and seconds == pytest.approx(result.seconds, abs=0.05)
     info = probe(result.clip)
@@ -88,7 +88,7 @@ def test_a_reel_of_three_segments_is_one_playable_clip_of_their_length_plus_the_
     assert errors == ""  # decodes cleanly from end to end
 
     pictures = decoded(result.clip)
-    first_card = singles[0].frames + round(CARD_SECONDS * 24) // 2
+    first_card = round(CARD_SECONDS * 24) + singles[0].frames + round(CARD_SECONDS * 24) // 2
     card, moment = pictures[first_card], pictures[first_card + round(CARD_SECONDS * 24)]
     assert colour_mask(card, INK, tolerance=40).sum() > 500  # "Moment 2 of 3", large
     assert colour_mask(card, (255, 255, 255), tolerance=3).mean() > 0.9  # and nothing else
@@ -111,7 +111,7 @@ def test_segments_of_different_sizes_are_padded_and_re_encoded(tmp_path, summary
     assert singles[0].height < singles[1].height
     result = render_reel(moments, tmp_path / "reel.mp4", crowd(), FAST)
     assert (result.width, result.height) == (singles[1].width, singles[1].height)
-    assert result.frames == sum(s.frames for s in singles) + round(CARD_SECONDS * 24)
+    assert result.frames == sum(s.frames for s in singles) + 2 * round(CARD_SECONDS * 24)
     assert imageio_ffmpeg.count_frames_and_secs(str(result.clip))[0] == result.frames
     assert "24 fps" in probe(result.clip)
 
