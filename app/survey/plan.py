@@ -96,9 +96,15 @@ def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle:
     return fields | {"media": clip.sha256.lower(), **_shape(bundle, clip.sha256).model_dump(exclude_unset=True)}
 
 
-def _videos(clip: ManifestClip) -> list[str]:
-    """The sha256 of each video of a clip: its file, or each of its reels."""
-    return [reel.sha256 for reel in clip.reels] or [clip.sha256]
+def _round_videos(clips: list[ManifestClip]) -> list[str]:
+    """The sha256 of each video a ranking page lists: every clip's file (even where two clips share one), and a
+    robot's reel once, however often it is paired."""
+    videos: list[str] = []
+    for clip in clips:
+        if not clip.reels:
+            videos.append(clip.sha256)
+        videos += [reel.sha256 for reel in clip.reels if reel.sha256 not in videos]
+    return videos
 
 
 def _reel(bundle: Bundle, reel: ManifestReel, label: str) -> Reel:
@@ -126,7 +132,7 @@ def _ranking_screens(
         for k, clip in enumerate(clips)
     ]
     labels = [(agent, label) for clip in clips for agent, label in zip(clip.agents, clip.labels, strict=True)]
-    videos = list(dict.fromkeys(sha for clip in clips for sha in _videos(clip)))  # a robot's reel once, however paired
+    videos = _round_videos(clips)
     screens.append(
         Ranking(
             kind="ranking",
