@@ -139,7 +139,8 @@ class CrowdDomain(Domain):
 
         return roll_out(self._policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
 
-    def shown(self, coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
+    def shown(self, coupled: Coupled, row: int, steps: int, since: int, summary=None) -> float:
+        """Read from the simulator's final state (no replay)."""
         from search.crowd.rollouts import shown
 
         return shown(coupled.problem.sim, row, since * coupled.problem.sim.config.dt)

@@ -126,7 +126,8 @@ class GymDomain(Domain):
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
 
-    def shown(self, coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
+    def shown(self, coupled: Coupled, row: int, steps: int, since: int, summary=None) -> float:
+        """Read from the problem's record of each agent's ending (no replay)."""
         return shown(coupled, row, steps, since)
 
     def problem(self, agents: list[GymAgent], state: GymScenario, reward, adapter: Adapter) -> GymCoupledProblem:

@@ -134,7 +134,8 @@ def fork(
     found: list[tuple[int, Any, list]],
     tracker: Tracker,
     config: DisagreementsConfig,
-    shown: Callable[[Any, int, int, int], float],
+    shown: Callable[..., float],
+    summarize: Callable[[Episodes, Disagreement], dict],
 ) -> list[Disagreement]:
     """Each disagreement's two branches, h/2 steps each, all stepped together, and their importance."""
     problem, half = group.coupled.problem, config.horizon // 2
@@ -157,7 +158,12 @@ def fork(
         scores = last_state(values, config.agent_ratio)
     else:
         scores = np.array(
-            [abs(shown(group.coupled, row, d.step + d.branch, max(0, d.step - half))) for row, d in enumerate(forks)]
+            [
+                abs(
+                    shown(group.coupled, row, d.step + d.branch, max(0, d.step - half), lambda d=d: summarize(group, d))
+                )
+                for row, d in enumerate(forks)
+            ]
         )
     for d, score in zip(forks, scores, strict=True):
         d.importance = float(score)
@@ -188,11 +194,11 @@ def disagreements(
     groups: list[Episodes],
     tracker: Tracker,
     config: DisagreementsConfig,
-    shown: Callable[[Any, int, int, int], float],
+    shown: Callable[..., float],
     summarize: Callable[[Episodes, Disagreement], dict],
 ) -> tuple[list[dict], dict]:
     """The top-K disagreements' summaries, most important first, and the record of the search.
-    ``summarize(group, disagreement)`` builds a chosen one's summary."""
+    ``summarize(group, disagreement)`` builds a disagreement's summary; ``shown`` is `Domain.shown`."""
     half = config.horizon // 2
     found = [find(group, tracker, config, tracker.budget // 2) for group in groups]
     every = [(g, t, row) for g, rows_at in enumerate(found) for t, _, rows in rows_at for row in rows]
@@ -201,7 +207,7 @@ def disagreements(
     forked: list[Disagreement] = []
     for g, group in enumerate(groups):
         chosen_here = [(t, before, [row for row in rows if (g, t, row) in kept]) for t, before, rows in found[g]]
-        forked += fork(group, [f for f in chosen_here if f[2]], tracker, config, shown)
+        forked += fork(group, [f for f in chosen_here if f[2]], tracker, config, shown, summarize)
     chosen = top_k(forked, tracker.queue.k, config.overlap, half) or [unforked(groups[0], tracker, config)]
     by_episode = {group.first + e: group for group in groups for e in range(len(group.env))}
     record = {

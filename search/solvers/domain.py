@@ -137,12 +137,17 @@ class Domain(ABC):
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
 
-    def shown(self, coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
+    def shown(
+        self, coupled: Coupled, row: int, steps: int, since: int, summary: Callable[[], Mapping[str, Any]]
+    ) -> float:
         """The visible contrast (`search.solvers.representative.visible_contrast`) of the clip of row ``row`` of a
-        coupled problem that has taken ``steps`` steps, shown from the state after step ``since`` on, read from
-        the problem as its summary would say it: how the summary methods that fork (Agent Disagreements) score a
-        fork without replaying it."""
-        raise NotImplementedError(f"the {self.name} world cannot read a clip's contrast from its problem")
+        coupled problem that has taken ``steps`` steps, shown from the state after step ``since`` on: how the
+        summary methods that fork (Agent Disagreements) score a fork. ``summary()`` builds the row's summary.
+        Default: that summary's contrast (exact, at the cost of a replay); a domain that can read it from its
+        problem says so faster."""
+        from search.solvers.representative import summary_contrast
+
+        return summary_contrast(dict(summary()), coupled.world)
 
     @abstractmethod
     def rebuild(self, summary: Mapping[str, Any]) -> Any:

@@ -230,3 +230,42 @@ def test_agents_that_never_disagree_get_the_first_episode_each_on_its_own(tmp_pa
     data = json.loads(path.read_text())
     assert "follow" not in data and "window" not in data and len(data["steps"]) <= 6
     assert data["solver"]["disagreement_step"] is None and verify(path) == []
+
+
+def test_a_domain_without_a_fast_path_scores_forks_by_their_summaries_alike(tmp_path):
+    """`Domain.shown`'s default replays each fork as its summary; the Gymnasium domain reads the same contrast
+    from its problem. A world that brings no fast path of its own gets the same disagreements, only slower."""
+    import numpy as np
+
+    from search.gym.domain import GymDomain
+    from search.solvers.disagreements import DisagreementsConfig
+    from search.solvers.domain import Domain
+    from search.solvers.rollout import Tracker
+    from search.solvers.runner import _watching
+
+    class Replaying(GymDomain):
+        shown = Domain.shown
+
+    job = SearchJob(
+        agents=BOX,
+        scenario=scenario_file(tmp_path),
+        solver="disagreements",
+        budget=1_000,
+        top_k=3,
+        reward_settings={"horizon": 40},
+        solver_settings={"horizon": 6},
+    )
+    records = []
+    for domain in (GymDomain(), Replaying()):
+        solver = {"name": "disagreements"}
+        _, record = _watching(
+            job,
+            domain,
+            Tracker(job.budget, job.top_k),
+            np.random.default_rng(0),
+            DisagreementsConfig(horizon=6),
+            solver,
+        )
+        records.append(record)
+    assert records[0]["importance"] == "outcome" and records[0]["chosen"]
+    assert records[0] == records[1]
