@@ -36,11 +36,10 @@ from typing import Any
 import numpy as np
 
 from search.solvers.episodes import Episodes, continuing, play
-from search.solvers.follow import Follow
+from search.solvers.follow import ALWAYS, Follow
 from search.solvers.rollout import Tracker
 
 IMPORTANCE = ("auto", "last_state", "outcome")
-ALWAYS = np.iinfo(np.int64).max  # follow the leader on every step
 
 
 @dataclass(frozen=True)

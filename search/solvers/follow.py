@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+ALWAYS = np.iinfo(np.int64).max  # as Follow's steps: the leader on every step
+
 
 @dataclass(frozen=True)
 class Follow:

@@ -34,11 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from search.solvers.episodes import Episodes, continuing, play
-from search.solvers.follow import Follow
+from search.solvers.follow import ALWAYS, Follow
 from search.solvers.rollout import Tracker
 
 IMPORTANCE = ("auto", "max_min", "second_best", "rollouts")
-ALWAYS = np.iinfo(np.int64).max
 
 
 @dataclass(frozen=True)
