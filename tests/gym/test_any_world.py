@@ -1,6 +1,6 @@
 """A world Foil was never written for, through every command: the tiny track of tests/gym/test_gym_clips.py with
-only its adapter and TOML files, through eval, every solver (the representative one included), verify, render,
-bundle and the served survey, all by the command line as a researcher runs them."""
+only its adapter and TOML files, through eval, every solver (the representative one and the field's summary methods
+included), verify, render, bundle and the served survey, all by the command line as a researcher runs them."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ seed = 1
 estimated_minutes = 2
 
 [design]
-schemes = ["nfirst", "representative"]
+schemes = ["nfirst", "representative", "disagreements", "highlights"]
 scheme_factor = "within"
 scenarios = ["track.toml"]
 
@@ -83,9 +83,21 @@ budget = 400
 seed = 0
 settings = {{ states = 4, pushes = 2 }}
 
+[build.schemes.disagreements]
+solver = "disagreements"
+budget = 200
+seed = 0
+settings = {{ horizon = 4 }}
+
+[build.schemes.highlights]
+solver = "highlights-div"
+budget = 300
+seed = 0
+settings = {{ highlights = 1, context = 3, lookahead = 2 }}
+
 [[build.sets]]
 parts = ["pairwise"]
-schemes = ["nfirst"]
+schemes = ["nfirst", "disagreements", "highlights"]
 scenarios = ["track.toml"]
 agents = ["{FAST}", "{SLOW}"]
 
@@ -118,7 +130,9 @@ def test_eval_counts_each_ending_as_the_adapter_reads_it(world, capsys):
     assert main(["eval", FAST, "--episodes", "4"]) == 2 and "--scenario FILE" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("solver", ["mcts", "nfirst", "random", "cem", "representative"])
+@pytest.mark.parametrize(
+    "solver", ["mcts", "nfirst", "random", "cem", "representative", "disagreements", "highlights", "highlights-div"]
+)
 def test_every_solver_searches_and_every_summary_verifies(world, capsys, solver):
     scenario = "track-starts.toml" if solver == "representative" else "track.toml"
     args = ["--budget", "120", "--top-k", "2", "--out", "out", "--quiet", "--reward", "horizon=6"]
@@ -136,8 +150,11 @@ def test_a_study_renders_bundles_and_serves_in_the_worlds_own_words(world, capsy
     log = capsys.readouterr().out
     assert "representativeness track.toml" in log
     manifest = json.loads((world / "bundle" / "manifest.json").read_text())
-    assert manifest["world"]["domain"] == "gym" and len(manifest["clips"]) == 2
+    assert manifest["world"]["domain"] == "gym" and len(manifest["clips"]) == 4
     assert {c["scheme"]: c["audit"]["shows"] for c in manifest["clips"]}["representative"] == "better"
+    [reels] = [c for c in manifest["clips"] if c["scheme"] == "highlights"]
+    assert [reel["agent"] for reel in reels["reels"]] == reels["agents"]
+    assert all(c["spent"]["sim_steps"] > 0 for c in manifest["clips"])
     summary = world / "bundle" / manifest["clips"][0]["summary"]
     assert main(["render", str(summary), "--out", "again.mp4"]) == 0 and (world / "again.mp4").stat().st_size > 0
     database = f"sqlite:///{world / 'survey.sqlite3'}"
@@ -148,6 +165,7 @@ def test_a_study_renders_bundles_and_serves_in_the_worlds_own_words(world, capsy
     with TestClient(create_app(settings), follow_redirects=True) as client:
         seen = "\n".join(walk(client, start(client)))
     assert "Clip of two agents side by side" in seen and "FOIL" not in seen and "TRACK" in seen
+    assert "Each agent is shown on its own" in seen  # the reels' screen, in the world's words
     assert not re.search(r"person|people|crowd", seen, re.IGNORECASE)
 
 
