@@ -137,6 +137,22 @@ class GymScene:
         return self._at(self.captions[k], t, 1)
 
 
+def frame(env: Any) -> np.ndarray:
+    """A copy of the environment's RGB frame (an environment may reuse its buffer), or a clear error for one that
+    draws none."""
+    try:
+        image = env.render()
+    except NotImplementedError:
+        image = None
+    if image is None or np.asarray(image).ndim != 3:
+        raise ValueError(
+            f"{type(env.unwrapped).__name__} draws no RGB frame: a clip needs the adapter's make(render=True) to "
+            "give an environment whose render() returns an RGB array (render_mode='rgb_array'), or an adapter "
+            "renderer of its own (docs/gym.md)"
+        )
+    return np.array(image)
+
+
 def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymScene, Adapter]:
     """Replay a summary with rendering environments (views at most ``width`` px wide), capturing each agent's
     frames and captions until its episode ends; then keep its window."""
@@ -161,11 +177,11 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
         for k, instance in enumerate(p.rows[0]):
             env: Any = instance.env
             if not views[k]:  # just reset
-                frames_per_step = adapter.record(env, lambda env=env, k=k: views[k].append(np.array(env.render())))
+                frames_per_step = adapter.record(env, lambda env=env, k=k: views[k].append(frame(env)))
             elif instance.event_step not in (0, int(p.t[0])):  # ended earlier: its view stays where it ended
                 continue
             adapter.mark_agent(env, colours[k])
-            views[k].append(np.array(env.render()))  # a copy: an environment may reuse its buffer
+            views[k].append(frame(env))
             captions[k].append(adapter.caption(env))
         if int(p.t[0]) == parting_step:
             parting_points[:] = [adapter.crash_point(instance.env) for instance in p.rows[0]]

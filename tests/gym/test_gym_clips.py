@@ -247,3 +247,16 @@ def test_highway_cars_part_in_a_drivers_words(tmp_path):
     assert renderer.scene.parting == 2.0 and points[0] is not None and points[0] == points[1]
     renderer.draw(next(f for f in renderer.frames if f.video >= renderer.parting_video))
     assert "Here the two cars would drive differently" in renderer.texts
+
+
+def test_an_environment_that_draws_no_frame_gets_a_clear_error(tmp_path):
+    """The corridor of tests/gym/corridor.py has no render(): its clip is refused with what to give instead."""
+    from search.gym.clips import render_gym
+    from search.solvers.runner import SearchJob, run_search, write_outputs
+    from tests.gym.test_gym_problem import BOX, scenario_file
+
+    job = SearchJob(agents=BOX, scenario=scenario_file(tmp_path), solver="nfirst", budget=60, top_k=1)
+    out = write_outputs(tmp_path / "out", run_search(job))
+    with pytest.raises(ValueError, match=r"Corridor draws no RGB frame: .*render\(\) returns an RGB array"):
+        render_gym(out / "summary-001.json", tmp_path / "clip.mp4", [1, 2], None)
+    assert not (tmp_path / "clip.mp4").exists()
