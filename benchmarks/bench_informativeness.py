@@ -25,43 +25,35 @@ from dataclasses import replace
 from pathlib import Path
 
 from app.analysis.statistics import wilson_interval
-from app.visible import VisibleClip, VisibleReels, audit
 from search.bundle.build import (
-    REELS,
     Cache,
-    better_agent,
-    clip_summary,
+    clip_audit,
     evaluate_agents,
     plan_clips,
-    reel_summaries,
     search_job,
+    shown_summaries,
     study_domain,
     study_world,
 )
 from search.bundle.spec import load_build
-from search.clips.render import robot_label
 from search.solvers.runner import in_processes, run_search, write_outputs
 
 
 def judge(job, folder: Path, evaluations: dict, world) -> dict:
-    """What the clip of a search shows against the ground truth, as the bundle audits it."""
-    labels = [robot_label(k + 1) for k in range(2)]
-    better = labels[job.pair.index(better_agent(job.pair, evaluations))]
-    if job.scheme.solver in REELS:
-        reels = [[json.loads(p.read_text()) for p in reel] for reel in reel_summaries(folder)]
-        visible: VisibleClip | VisibleReels = VisibleReels.of_summaries(reels, labels, world)
-        seconds = sum(r["window"][1] - r["window"][0] for reel in reels for r in reel)
-        step = reels[0][0]["steps"][0]["t"]
-        spent = reels[0][0]["solver"]["budget_used"]
-        events = ["/".join(r["outcomes"][r["follow"]["leader"]]["event"] for r in reel) for reel in reels]
+    """What the clip of a search shows against the ground truth, as the bundle audits it, and what it cost."""
+    sources = shown_summaries(job, folder, world)
+    summaries = [[json.loads(path.read_text()) for path in paths] for paths in sources]
+    first = summaries[0][0]
+    if len(summaries) > 1:  # a pair of reels: each agent's moments
+        events = ["/".join(s["outcomes"][s["follow"]["leader"]]["event"] for s in reel) for reel in summaries]
     else:
-        summary = json.loads(clip_summary(folder, job.scheme.select, world).read_text())
-        visible = VisibleClip.of_summary(summary, list(job.pair), labels, world)
-        first, last = summary.get("window", (0, len(summary["steps"])))
-        seconds, step = last - first, summary["steps"][0]["t"]
-        spent = summary["solver"]["budget_used"]
-        events = [o["event"] for o in summary["outcomes"]]
-    return audit(visible, better) | {"events": events, "clip_s": seconds * step, "sim_steps": spent}
+        events = [o["event"] for o in first["outcomes"]]
+    shown = [s.get("window", (0, len(s["steps"]))) for reel in summaries for s in reel]
+    return clip_audit(job, sources, evaluations, world)[2] | {
+        "events": events,
+        "clip_s": sum(last - first_state for first_state, last in shown) * first["steps"][0]["t"],
+        "sim_steps": first["solver"]["budget_used"],
+    }
 
 
 def main() -> None:

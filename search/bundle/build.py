@@ -415,22 +415,48 @@ REELS = ("highlights", "highlights-div")  # the solvers whose clips are a reel p
 REEL_HOLD_END = 0.5  # seconds a reel's moment holds its last frame: the card between moments marks the cut
 
 
-def job_summaries(job: ClipJob, folder: Path, out: Path, domain: Domain) -> list[list[Path]]:
-    """The summaries a clip shows, copied into the bundle from its search's ``folder``: one list holding the clip's
-    summary, or (a pair of reels) one list of moments per agent in search order."""
+def shown_summaries(job: ClipJob, folder: Path, world: World) -> list[list[Path]]:
+    """The summaries of a search (in ``folder``) a clip shows: one list holding the clip's summary, or (a pair of
+    reels) one list of moments per agent in search order."""
     if job.scheme.solver not in REELS:
-        summary = out / "summaries" / f"{job.id}.json"
-        shutil.copyfile(clip_summary(folder, job.scheme.select, domain.world(job.scenario)), summary)
-        return [[summary]]
+        return [[clip_summary(folder, job.scheme.select, world)]]
     reels = reel_summaries(folder)
     if len(reels) != 2:
         raise BuildError(f"{_describe(job)}: the search found moments of {len(reels)} of its two agents")
-    copied = []
-    for k, segments in enumerate(reels):
-        copied.append([out / "summaries" / f"{job.id}.reel{k}-{n}.json" for n in range(1, len(segments) + 1)])
-        for source, target in zip(segments, copied[-1], strict=True):
+    return reels
+
+
+def job_summaries(job: ClipJob, folder: Path, out: Path, domain: Domain) -> list[list[Path]]:
+    """The summaries a clip shows (`shown_summaries`), copied into the bundle."""
+    found = shown_summaries(job, folder, domain.world(job.scenario))
+    if len(found) == 1:
+        copied = [[out / "summaries" / f"{job.id}.json"]]
+    else:
+        copied = [
+            [out / "summaries" / f"{job.id}.reel{k}-{n}.json" for n in range(1, len(s) + 1)]
+            for k, s in enumerate(found)
+        ]
+    for sources, targets in zip(found, copied, strict=True):
+        for source, target in zip(sources, targets, strict=True):
             shutil.copyfile(source, target)
     return copied
+
+
+def clip_audit(
+    job: ClipJob, sources: list[list[Path]], evaluations: dict[str, dict], shown: World
+) -> tuple[list[str], list[str], dict[str, str]]:
+    """A clip's agents and their labels in on-screen order, and what it visibly shows against the ground truth
+    (`app.visible.audit`; a pair of reels by each agent's moments)."""
+    order = sorted(range(2), key=lambda k: job.numbers[k])
+    agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
+    if len(sources) == 1:
+        visible: VisibleClip | VisibleReels = VisibleClip.of_summary(
+            json.loads(sources[0][0].read_text()), agents, labels, shown
+        )
+    else:
+        segments = [[json.loads(path.read_text()) for path in sources[k]] for k in order]
+        visible = VisibleReels.of_summaries(segments, labels, shown)
+    return agents, labels, audit(visible, labels[agents.index(better_agent(job.pair, evaluations))])
 
 
 def manifest_clip(
@@ -439,22 +465,16 @@ def manifest_clip(
     """A clip's manifest entry: agents and labels in on-screen order, ground truth, audit (a warning line when it
     misleads), what it cost, and its file (or each agent's reel)."""
     order = sorted(range(2), key=lambda k: job.numbers[k])
-    agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
+    agents, labels, shown_audit = clip_audit(job, sources, evaluations, shown)
     better = better_agent(job.pair, evaluations)
-    reels = job.scheme.solver in REELS
+    reels = len(sources) > 1
     data = json.loads(sources[0][0].read_text())
-    if reels:
-        segments = [[json.loads(path.read_text()) for path in sources[k]] for k in order]
-        visible: VisibleClip | VisibleReels = VisibleReels.of_summaries(segments, labels, shown)
-        files = [f"clips/{job.id}.reel{k}.mp4" for k in order]
-    else:
-        visible, files = VisibleClip.of_summary(data, agents, labels, shown), [f"clips/{job.id}.mp4"]
-    clip_audit = audit(visible, labels[agents.index(better)])
-    if clip_audit["shows"] != "better":
+    files = [f"clips/{job.id}.reel{k}.mp4" for k in order] if reels else [f"clips/{job.id}.mp4"]
+    if shown_audit["shows"] != "better":
         log(
             f"warning: clip {job.id} is misleading: it shows the better robot {better} "
-            f"({labels[agents.index(better)]}) as {'no better' if clip_audit['shows'] == 'tie' else 'worse'}: "
-            f"{clip_audit['why']}"
+            f"({labels[agents.index(better)]}) as {'no better' if shown_audit['shows'] == 'tie' else 'worse'}: "
+            f"{shown_audit['why']}"
         )
     spent = {
         "sim_steps": int(data["solver"]["budget_used"]),
@@ -467,7 +487,7 @@ def manifest_clip(
         "agents": agents,
         "labels": labels,
         "better": better,
-        "audit": ClipAudit(**clip_audit),
+        "audit": ClipAudit(**shown_audit),
         "parts": list(job.parts),
         "solver": job.scheme.solver,
         "spent": spent,
