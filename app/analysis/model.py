@@ -22,6 +22,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+MODEL_VERSION = 2  # raised whenever a change of this model can change a report's numbers (a preregistration records it)
+
 if TYPE_CHECKING:  # numpy is imported where it runs: the server imports this module at start-up
     import numpy as np
     from numpy.typing import NDArray
