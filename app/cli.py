@@ -137,8 +137,8 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         command.add_argument("--db", required=True, help="the survey's database URL, e.g. sqlite:///foil.sqlite3")
         command.add_argument(
             "--study",
-            help="the study file the survey was served with, or the id of a study "
-            "whose file the server stored in the database (default: the only one stored)",
+            help="the id of a study whose file the server stored in the database (default: the only one "
+            "stored), or a study file: compared with the stored one, and read only where none is stored",
         )
         command.add_argument("--out", required=True, help="output directory")
         _add_exclusion_options(command)

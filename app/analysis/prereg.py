@@ -1,28 +1,32 @@
 """`foil prereg`: the analysis fixed before the data. It writes prereg.md (for a registry such as OSF or
 AsPredicted) and prereg.json (for `foil report --prereg`, which lists every way the data differ from it), both
-naming the study file and the bundle's manifest by their SHA-256."""
+naming the study file and the bundle's manifest by the SHA-256 of their bytes (what `sha256sum` prints) and the
+versions of Foil and of the report's model."""
 
 from __future__ import annotations
 
-import hashlib
 import json
+from importlib.metadata import PackageNotFoundError, version
+from itertools import groupby
 from pathlib import Path
 from typing import Any
 
 from app.analysis.exclusions import REASONS, ExclusionRules
+from app.analysis.model import MODEL_VERSION
 from app.analysis.power import chance, tasks
+from app.analysis.source import sha256
 from app.survey.assignment import conditions
 from app.survey.study import Study, parse_study
 
-VERSION = 1
+VERSION = 2  # 2: Foil's and the model's versions; hashes of the files' bytes (1: of the text with LF line ends)
 
 
-def text_hash(text: str) -> str:
-    return "sha256:" + hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
-def file_hash(path: Path) -> str:
-    return "sha256:" + hashlib.sha256(path.read_bytes()).hexdigest()
+def foil_version() -> str | None:
+    """The installed Foil's version (None when run from a checkout that was never installed)."""
+    try:
+        return version("foil")
+    except PackageNotFoundError:
+        return None
 
 
 def _rules(rules: ExclusionRules) -> dict[str, Any]:
@@ -43,15 +47,17 @@ def _rules_text(fixed: dict[str, Any]) -> str:
     return f"{time}; pilots and bots analysed: {kinds}"
 
 
-def plan(study_text: str, study: Study, manifest: Path, participants: int, rules: ExclusionRules) -> dict[str, Any]:
+def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rules: ExclusionRules) -> dict[str, Any]:
     """What the preregistration fixes, as data."""
     design = study.design
     schemes = ", ".join(design.schemes)
     return {
         "version": VERSION,
+        "foil": foil_version(),
+        "model_version": MODEL_VERSION,
         "study": study.study.id,
-        "study_file": text_hash(study_text),
-        "bundle_manifest": file_hash(manifest),
+        "study_file": sha256(study_file),
+        "bundle_manifest": sha256(manifest.read_bytes()),
         "participants": participants,
         "exclusions": _rules(rules),
         "hypotheses": [
@@ -91,6 +97,7 @@ def markdown(fixed: dict[str, Any]) -> str:
         "",
         f"- Study file: {fixed['study_file']}",
         f"- Bundle manifest: {fixed['bundle_manifest']}",
+        f"- Foil {fixed['foil'] or '(version unknown)'}, the report's model version {fixed['model_version']}",
         f"- Planned participants (analysed, after exclusions): {fixed['participants']}",
         "",
         "## Hypotheses",
@@ -137,8 +144,8 @@ def run_prereg(*, study_path: str, bundle: str, out: str, participants: int, rul
         raise ValueError(f"no manifest.json in bundle {bundle}: give the bundle the study will be served from")
     if participants < 1:
         raise ValueError(f"--participants {participants}: give the planned number of participants (foil power)")
-    text = path.read_text(encoding="utf-8")
-    fixed = plan(text, parse_study(text, source=str(path)), manifest, participants, rules)
+    raw = path.read_bytes()
+    fixed = plan(raw, parse_study(raw.decode("utf-8"), source=str(path)), manifest, participants, rules)
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "prereg.json").write_text(json.dumps(fixed, indent=2) + "\n", encoding="utf-8")
@@ -148,16 +155,33 @@ def run_prereg(*, study_path: str, bundle: str, out: str, participants: int, rul
 
 
 def deviations(
-    fixed: dict[str, Any], study_text: str, manifest: Path | None, analysed: int, rules: ExclusionRules
+    fixed: dict[str, Any],
+    study_text: str,
+    manifest: Path | None,
+    analysed: int,
+    rules: ExclusionRules,
+    starts: list[dict[str, Any]] | None = None,
 ) -> list[str]:
-    """Every way the analysed data differ from the preregistration (empty: none)."""
+    """Every way the analysed data differ from the preregistration (empty: none). `study_text` is the study file
+    the server stored, `starts` what each server start served (`study_starts`), so an edit reverted before the
+    report is still listed."""
     found = []
-    if text_hash(study_text) != fixed["study_file"]:
-        found.append("the study file differs from the preregistered one (its SHA-256 differs)")
+    study_file = _preregistered_study(fixed, study_text)
+    if sha256(study_text.encode("utf-8")) != study_file:
+        found.append(
+            f"the study file differs from the preregistered one ({sha256(study_text.encode('utf-8'))}, "
+            f"preregistered {fixed['study_file']})"
+        )
     if manifest is None or not manifest.is_file():
         found.append("the bundle the study was served from is not known, so its manifest cannot be checked")
-    elif file_hash(manifest) != fixed["bundle_manifest"]:
-        found.append("the bundle's manifest.json differs from the preregistered one (its SHA-256 differs)")
+    elif sha256(manifest.read_bytes()) != fixed["bundle_manifest"]:
+        found.append(
+            f"the bundle's manifest.json differs from the preregistered one ({sha256(manifest.read_bytes())}, "
+            f"preregistered {fixed['bundle_manifest']})"
+        )
+    manifest_now = sha256(manifest.read_bytes()) if manifest is not None and manifest.is_file() else None
+    found += _served(starts or [], "study_file", study_file, "a study file", sha256(study_text.encode("utf-8")))
+    found += _served(starts or [], "bundle_manifest", fixed["bundle_manifest"], "a bundle manifest", manifest_now)
     if analysed < fixed["participants"]:
         found.append(f"{analysed} participants analysed, fewer than the {fixed['participants']} planned")
     elif analysed > fixed["participants"]:
@@ -166,4 +190,48 @@ def deviations(
         found.append(
             f"exclusions differ: {_rules_text({'exclusions': _rules(rules)})}; preregistered {_rules_text(fixed)}"
         )
+    for key, name, now in (("foil", "Foil", foil_version()), ("model_version", "the report's model", MODEL_VERSION)):
+        if fixed.get(key) is None:
+            found.append(
+                f"the preregistration does not record the version of {name}, so a change of it cannot be ruled "
+                f"out (this report: {now or 'unknown'})"
+            )
+        elif fixed[key] != now:
+            found.append(f"{name} is version {now or 'unknown'}, the preregistration fixed version {fixed[key]}")
     return found
+
+
+def _preregistered_study(fixed: dict[str, Any], study_text: str) -> str:
+    """The preregistered study file's hash, as a hash of bytes. Version 1 hashed the text with LF line ends:
+    where that matches, the stored text is the preregistered file and its bytes' hash stands for it."""
+    if fixed.get("version") == 1:
+        lines = study_text.replace("\r\n", "\n").replace("\r", "\n")
+        if sha256(lines.encode("utf-8")) == fixed["study_file"]:
+            return sha256(study_text.encode("utf-8"))
+    return str(fixed["study_file"])
+
+
+def _served(starts: list[dict[str, Any]], key: str, preregistered: str, what: str, checked: str | None) -> list[str]:
+    """Each run of server starts that served another file than the preregistered one, reverted ones too; the
+    latest run is left out where it served the file checked above (`checked`), which is reported already."""
+    found, last = [], 0
+    for served, group in groupby(starts, key=lambda start: start[key]):
+        run = list(group)
+        first, last = last + 1, last + len(run)
+        if served != preregistered and not (last == len(starts) and served == checked):
+            which = f"the {_nth(first)} start" if first == last else f"starts {first} to {last}"
+            later = ", later reverted" if starts[-1][key] == preregistered else ""
+            found.append(
+                f"the server was started {_times(len(starts))}; {which} ({run[0]['at']}) served {what} that "
+                f"differs from the preregistered one ({served or 'not readable'}){later}"
+            )
+    return found
+
+
+def _times(n: int) -> str:
+    return {1: "once", 2: "twice"}.get(n, f"{n} times")
+
+
+def _nth(n: int) -> str:
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"

@@ -592,6 +592,8 @@ def _preregistration(path: str) -> dict[str, Any]:
     """prereg.json as `foil prereg` wrote it, or a clear error."""
     import json
 
+    from app.analysis.prereg import VERSION
+
     file = Path(path)
     if file.is_dir():
         file = file / "prereg.json"
@@ -599,8 +601,11 @@ def _preregistration(path: str) -> dict[str, Any]:
         fixed: dict[str, Any] = json.loads(file.read_text(encoding="utf-8"))
     except (OSError, ValueError) as error:
         raise ValueError(f"--prereg {path}: not a prereg.json written by foil prereg ({error})") from None
-    if not isinstance(fixed, dict) or fixed.get("version") != 1:
-        raise ValueError(f"--prereg {path}: not a prereg.json written by foil prereg (no version 1)")
+    if not isinstance(fixed, dict) or fixed.get("version") not in range(1, VERSION + 1):
+        raise ValueError(
+            f"--prereg {path}: not a prereg.json written by foil prereg (version 1 to {VERSION}; "
+            f"a newer one needs a newer Foil)"
+        )
     return fixed
 
 
@@ -620,14 +625,17 @@ def run_report(
     fixed = _preregistration(prereg) if prereg else None
     db = analysis_database(database_url)
     try:
-        text, parsed = analysis_study_text(db, study)
-        data = tally_study(db, parsed, rules)
+        source = analysis_study_text(db, study)
+        data = tally_study(db, source.study, rules)
         bundle = bundle or served_bundle(db, data.study.study.id)
     finally:
         db.dispose()
     if fixed is not None:
         manifest = Path(bundle) / "manifest.json" if bundle else None
-        data = replace(data, prereg=deviations(fixed, text, manifest, data.exclusions.after, rules))
+        found = deviations(fixed, source.text, manifest, data.exclusions.after, rules, source.starts)
+        data = replace(data, prereg=[source.differs, *found] if source.differs else found)
+    elif source.differs:
+        print(f"warning: {source.differs}", file=sys.stderr)
     if bundle is not None and (Path(bundle) / "manifest.json").is_file():
         data = replace(data, audits=_audits(bundle))
     else:
@@ -651,6 +659,7 @@ def run_report(
         fit = data.model(task)
         print(f"{task} model: " + (f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.estimable else fit.note))
     if data.prereg:
-        print(f"{len(data.prereg)} deviations from the preregistration: " + "; ".join(data.prereg))
+        n = len(data.prereg)
+        print(f"{n} deviation{'s' * (n != 1)} from the preregistration: " + "; ".join(data.prereg))
     print(f"report: {Path(out) / 'report.html'}")
     return 0

@@ -4,7 +4,15 @@ analysis needs only the database. Apart from the answer table because the server
 
 from __future__ import annotations
 
+import hashlib
+import json
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.engine import make_url
@@ -33,12 +41,32 @@ def analysis_database(url: str) -> Database:
 
 STUDY_KEY = "study-file:"  # server_setting key prefix: the text of each study file the server was started with
 BUNDLE_KEY = "study-bundle:"  # and the folder of the bundle it served, for the report's per-clip audit
+START_KEY = "study-start:"  # and one row per start (JSON): what it served, by hash, and when; never overwritten
 
 
-def remember_study(db: Database, study_text: str, study: Study, bundle_root: Path | None = None) -> None:
-    """Keep the study file's text and the served bundle's folder in the database, so that `foil export` and
-    `foil report` need only the database. The server calls this at start-up; the latest start wins."""
-    kept = {STUDY_KEY + study.study.id: study_text}
+def sha256(data: bytes) -> str:
+    """A file's hash as prereg.json and the stored starts name it: of its raw bytes, so `sha256sum` agrees."""
+    return "sha256:" + hashlib.sha256(data).hexdigest()
+
+
+def remember_study(db: Database, study_file: bytes | str, study: Study, bundle_root: Path | None = None) -> None:
+    """Keep the study file (its bytes as read, or text) and the served bundle's folder in the database, so that
+    `foil export` and `foil report` need only the database; the latest start wins. Every start also adds a row of
+    its own with the hashes of the study file and the bundle's manifest, so that an edit made during collection
+    and reverted later is still seen by `foil report --prereg`."""
+    raw = study_file.encode("utf-8") if isinstance(study_file, str) else study_file
+    manifest = None if bundle_root is None else Path(bundle_root) / "manifest.json"
+    start = {
+        "study": study.study.id,
+        "at": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "study_file": sha256(raw),
+        "bundle_manifest": sha256(manifest.read_bytes()) if manifest is not None and manifest.is_file() else None,
+    }
+    with db.writing() as session:  # a key of its own (time, then random), so workers starting at once all add one
+        session.add(
+            ServerSetting(key=f"{START_KEY}{time.time_ns():020d}-{uuid.uuid4().hex[:8]}", value=json.dumps(start))
+        )
+    kept = {STUDY_KEY + study.study.id: raw.decode("utf-8")}
     if bundle_root is not None:
         kept[BUNDLE_KEY + study.study.id] = str(Path(bundle_root).resolve())
     try:
@@ -53,6 +81,16 @@ def remember_study(db: Database, study_text: str, study: Study, bundle_root: Pat
         pass
 
 
+def study_starts(db: Database, study_id: str) -> list[dict[str, Any]]:
+    """Every recorded server start of the study, oldest first (`remember_study`); none in older databases."""
+    with db.reading() as session:
+        values = session.scalars(
+            select(ServerSetting.value).where(ServerSetting.key.startswith(START_KEY)).order_by(ServerSetting.key)
+        ).all()
+    starts = [json.loads(value) for value in values]
+    return [start for start in starts if start.get("study") == study_id]
+
+
 def served_bundle(db: Database, study_id: str) -> str | None:
     """The folder of the bundle the server last served the study from (`remember_study`), if known."""
     with db.reading() as session:
@@ -60,29 +98,52 @@ def served_bundle(db: Database, study_id: str) -> str | None:
     return None if row is None else row.value
 
 
+@dataclass(frozen=True)
+class StudySource:
+    """The study a database's answers belong to, and where its text came from."""
+
+    text: str  # the study file's text: as the server stored it, else (older databases) the --study file's
+    study: Study
+    starts: list[dict[str, Any]] = field(default_factory=list)  # what each server start served (`study_starts`)
+    differs: str | None = None  # a --study file that differs from the stored text, said in words
+
+
 def analysis_study(db: Database, study: str | Path | None) -> Study:
     """The study definition for a database: a study file, or the id of a study whose file the server stored
-    (`remember_study`); without either, the only study stored."""
-    return analysis_study_text(db, study)[1]
+    (`remember_study`); without either, the only study stored. A file that differs from the stored one is
+    named on stderr."""
+    source = analysis_study_text(db, study)
+    if source.differs:
+        print(f"warning: {source.differs}", file=sys.stderr)
+    return source.study
 
 
-def analysis_study_text(db: Database, study: str | Path | None) -> tuple[str, Study]:
-    """`analysis_study` with the study file's text (`foil report` checks it against a preregistration)."""
-    if study is not None and Path(study).is_file():
-        text = Path(study).read_text(encoding="utf-8")
-        return text, parse_study(text, source=str(study))
+def analysis_study_text(db: Database, study: str | Path | None) -> StudySource:
+    """`analysis_study` with the study file's text (`foil report` checks it against a preregistration). The text
+    the server stored is the authority: a --study file is only compared with it, so an edited file cannot pass
+    for the one served; where the database holds none for the file's study (older databases) the file is used."""
     with db.reading() as session:
-        stored = dict(
-            session.execute(
-                select(ServerSetting.key, ServerSetting.value).where(ServerSetting.key.startswith(STUDY_KEY))
-            ).all()
+        stored = session.execute(
+            select(ServerSetting.key, ServerSetting.value).where(ServerSetting.key.startswith(STUDY_KEY))
+        ).all()
+    texts = {key.removeprefix(STUDY_KEY): text for key, text in stored}
+    if study is not None and Path(study).is_file():
+        raw = Path(study).read_bytes()
+        given = parse_study(raw.decode("utf-8"), source=str(study))
+        if given.study.id not in texts:
+            return StudySource(raw.decode("utf-8"), given)
+        kept = _stored(db, texts, given.study.id)
+        if kept.text.encode("utf-8") == raw:
+            return kept
+        return replace(
+            kept,
+            differs=f"the study file {study} ({sha256(raw)}) differs from the one the server stored for study "
+            f"{given.study.id!r} ({sha256(kept.text.encode('utf-8'))}); the stored one is analysed",
         )
-    texts = {key.removeprefix(STUDY_KEY): text for key, text in stored.items()}
     if study is None and len(texts) == 1:
         study = next(iter(texts))
     if study is not None and str(study) in texts:
-        text = texts[str(study)]
-        return text, parse_study(text, source=f"the study file stored in the database for {study!r}")
+        return _stored(db, texts, str(study))
     if study is not None:
         raise ValueError(
             f"no study file {study} and no study {str(study)!r} stored in the database "
@@ -92,3 +153,9 @@ def analysis_study_text(db: Database, study: str | Path | None) -> tuple[str, St
         "give the study: --study FILE (the study file the survey was served with) or --study ID of one "
         f"stored in the database (stored: {sorted(texts) or 'none'})"
     )
+
+
+def _stored(db: Database, texts: dict[str, str], study_id: str) -> StudySource:
+    text = texts[study_id]
+    study = parse_study(text, source=f"the study file stored in the database for {study_id!r}")
+    return StudySource(text, study, study_starts(db, study_id))

@@ -53,7 +53,7 @@ def create_app(settings: ServerSettings) -> FastAPI:
     check_study_against_bundle(study, bundle)
     db = Database(settings.database_url, synchronous=settings.sqlite_synchronous)
     check_migrated(db.engine)
-    remember_study(db, settings.study_path().read_text(encoding="utf-8"), study, bundle.root)  # for foil report
+    remember_study(db, settings.study_path().read_bytes(), study, bundle.root)  # for foil report (and --prereg)
 
     context = Context(
         settings=settings, study=study, bundle=bundle, conditions=conditions(study), db=db, templates=page_templates()
