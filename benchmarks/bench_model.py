@@ -1,89 +1,190 @@
-"""Is the report's model calibrated? Simulated studies in the demo's and the paper's designs (their conditions,
-parts, pairs and scenarios; one clip per scheme, scenario and pair), with participant and clip effects on the
-log-odds scale, fitted by the report's model (app/analysis/model.py) beside the pooled test the report used before
-(app/analysis/statistics.py, which counts answers as independent).
+"""Is the report's model calibrated? A battery of simulated studies, each fitted by the report's model
+(app/analysis/model.py), 500 with no scheme effect and 500 with one per row (by default):
 
-- no scheme effect (every scheme at the same accuracy): how often each test has p < 0.05;
-- an effect: how often the model's 95% intervals of the differences in accuracy between schemes cover the true
-  differences, and how often its test finds that the schemes differ (power).
+- designs written here, apart from `foil power`'s simulator: every participant answers every clip of every
+  scheme (in a random order), answers right with probability expit(scheme + participant effect + clip effect),
+  with participant and clip standard deviations, accuracies (over participants and clips), numbers of clips per
+  scheme (3 against 12, 1 against 12, 3 schemes with 3, 6 and 12), numbers of participants and dropout (half
+  the participants leave after 2 to 4 answers) varied row by row;
+- the shipped studies' own designs (demo, paper, methods; both parts), simulated by `foil power`'s simulator.
 
-    .venv/bin/python benchmarks/bench_model.py [--studies 500] [--participants 40]
+Per row: the share of null studies whose primary test (the schemes differ) has p < 0.05, with its Monte Carlo
+95% interval (Wilson); with three schemes or more, the share of null studies with any Holm-adjusted pairwise
+contrast below 0.05 (family-wise); the coverage of the 95% intervals of the differences between schemes (effect
+studies) and of each scheme's accuracy (null studies); the share of tests the model declares untestable; power.
+
+    .venv/bin/python benchmarks/bench_model.py [--studies 500] [--jobs 2] [--rows NAME,...]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from app.analysis.model import fit_accuracy  # noqa: E402
-from app.analysis.power import Assumptions, chance, layout, simulate, tasks  # noqa: E402
-from app.analysis.statistics import accuracy_difference  # noqa: E402
+from app.analysis.model import Answers, ModelResult, fit_accuracy  # noqa: E402
+from app.analysis.power import Assumptions, chance, layout, log_odds_for, simulate  # noqa: E402
+from app.analysis.statistics import wilson_interval  # noqa: E402
 from app.survey.study import load_study  # noqa: E402
 
-NULL = {"pairwise": 0.75, "ranking": 0.4}
-EFFECT = {"pairwise": (0.85, 0.7, 0.6), "ranking": (0.5, 0.3, 0.2)}
+
+@dataclass(frozen=True)
+class Row:
+    name: str
+    clips: tuple[int, ...] = (6, 6)  # per scheme
+    participants: int = 40
+    participant_sd: float = 1.0
+    clip_sd: float = 0.5
+    accuracy: float = 0.75  # every scheme's, under no effect
+    effect: tuple[float, ...] = (0.75, 0.9)  # per scheme, under an effect (the last repeated)
+    dropout: bool = False
+    study: str = ""  # a shipped study's design instead of the clips above
+    task: str = "pairwise"
+    extra: dict[str, float] = field(default_factory=dict)
 
 
-def pooled_p(answers) -> float | None:
-    counts: dict[str, list[int]] = {}
-    for scheme, correct in zip(answers.scheme, answers.correct, strict=True):
-        counts.setdefault(scheme, [0, 0])[1 - correct] += 1
-    return accuracy_difference({s: (c, i) for s, (c, i) in counts.items()}).p_value
+ROWS = [
+    Row("balanced, SD 0.5 / 0.3", participant_sd=0.5, clip_sd=0.3),
+    Row("balanced, SD 1.5 / 0.3", participant_sd=1.5, clip_sd=0.3),
+    Row("balanced, SD 0.5 / 1.0", participant_sd=0.5, clip_sd=1.0),
+    Row("balanced, SD 1.5 / 1.0", participant_sd=1.5, clip_sd=1.0),
+    Row("balanced, 12 participants", participants=12),
+    Row("balanced, 60 participants", participants=60),
+    Row("balanced, 240 participants", participants=240),
+    Row("balanced, 90% accuracy", accuracy=0.9, effect=(0.8, 0.95)),
+    Row("balanced, half drop out after 2-4", dropout=True),
+    Row("3 clips against 12", clips=(3, 12)),
+    Row("3 against 12, clip SD 1.0", clips=(3, 12), clip_sd=1.0),
+    Row("1 clip against 12", clips=(1, 12)),
+    Row("3 schemes, 3 / 6 / 12 clips", clips=(3, 6, 12), effect=(0.6, 0.75, 0.9)),
+    Row("demo, pairwise", study="demo", task="pairwise", effect=(0.85, 0.7, 0.6)),
+    Row("demo, ranking", study="demo", task="ranking", accuracy=0.4, effect=(0.5, 0.3, 0.2)),
+    Row("paper, pairwise", study="paper", task="pairwise", effect=(0.85, 0.7)),
+    Row("paper, ranking", study="paper", task="ranking", accuracy=0.4, effect=(0.5, 0.3)),
+    Row("methods, pairwise", study="methods", task="pairwise", effect=(0.6, 0.65, 0.9, 0.75, 0.75)),
+    Row("methods, ranking", study="methods", task="ranking", accuracy=0.4, effect=(0.2, 0.25, 0.6, 0.4, 0.4)),
+]
+
+
+def synthetic(row: Row, accuracies: list[float], rng) -> Answers:
+    """One study of a design written here: every participant answers every clip (shuffled order)."""
+    import numpy as np
+    from scipy import special
+
+    sd = math.hypot(row.participant_sd, row.clip_sd)
+    eta = [log_odds_for(a, sd) for a in accuracies]
+    clips = [(s, c) for s, n in enumerate(row.clips) for c in range(n)]
+    clip_effect = rng.normal(0, row.clip_sd, len(clips))
+    columns: dict[str, list] = {k: [] for k in ("participant", "clip", "scheme", "scenario", "pair", "correct")}
+    for p in range(row.participants):
+        person = rng.normal(0, row.participant_sd)
+        order = rng.permutation(len(clips))
+        if row.dropout and p % 2:
+            order = order[: rng.integers(2, 5)]
+        for k in order:
+            s, c = clips[k]
+            right = rng.random() < special.expit(eta[s] + person + clip_effect[k])
+            for name, value in zip(columns, (f"p{p}", f"s{s}c{c}", f"s{s}", "one", "", int(right)), strict=True):
+                columns[name].append(value)
+    return Answers(**columns)
+
+
+def studies_of(row: Row, effect: bool, count: int, seed: int) -> list[tuple[ModelResult, list[str], list[float]]]:
+    """`count` fitted studies of the row, with the schemes and their true accuracies."""
+    import numpy as np
+
+    rng = np.random.default_rng([seed, int(effect)])
+    if row.study:
+        study = load_study(REPO / "studies" / f"{row.study}.toml")
+        schemes = list(study.design.schemes)
+        truth = [row.effect[min(i, len(row.effect) - 1)] if effect else row.accuracy for i in range(len(schemes))]
+        plan = layout(study, row.task, row.participants)
+        assume = Assumptions(dict(zip(schemes, truth, strict=True)), row.participant_sd, row.clip_sd)
+        level = chance(study, row.task)
+        draws = (simulate(study, row.task, plan, assume, rng) for _ in range(count))
+    else:
+        schemes = [f"s{s}" for s in range(len(row.clips))]
+        truth = [row.effect[min(i, len(row.effect) - 1)] if effect else row.accuracy for i in range(len(schemes))]
+        level = 0.5
+        draws = (synthetic(row, truth, rng) for _ in range(count))
+    return [(fit_accuracy(answers, schemes, level), schemes, truth) for answers in draws]
+
+
+def measure(row: Row, count: int, seed: int) -> dict[str, float]:
+    started = time.perf_counter()
+    found: dict[str, float] = dict.fromkeys(
+        ("null", "tested", "familywise", "fw_tested", "covered", "intervals", "acc_covered", "acc_intervals",
+         "untestable", "contrasts", "power", "df"),
+        0.0,
+    )  # fmt: skip
+    for result, schemes, truth in studies_of(row, False, count, seed):
+        if result.scheme_p is not None:
+            found["tested"] += 1
+            found["null"] += result.scheme_p < 0.05
+            found["df"] += result.df
+        secondary = [c.p_holm for c in result.contrasts if c.p_holm is not None]
+        if len(schemes) > 2 and secondary:
+            found["fw_tested"] += 1
+            found["familywise"] += min(secondary) < 0.05
+        for e in result.schemes:
+            if e.low is not None and e.high is not None:
+                found["acc_intervals"] += 1
+                found["acc_covered"] += e.low <= truth[schemes.index(e.scheme)] <= e.high
+    for result, schemes, truth in studies_of(row, True, count, seed):
+        found["power"] += result.scheme_p is not None and result.scheme_p < 0.05
+        for c in result.contrasts:
+            found["contrasts"] += 1
+            if c.low is None or c.high is None:
+                found["untestable"] += 1
+                continue
+            difference = truth[schemes.index(c.scheme)] - truth[schemes.index(c.reference)]
+            found["intervals"] += 1
+            found["covered"] += c.low <= difference <= c.high
+    found["seconds"] = time.perf_counter() - started
+    return found
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--studies", type=int, default=500)
-    parser.add_argument("--participants", type=int, default=40)
-    parser.add_argument("--participant-sd", type=float, default=1.0)
-    parser.add_argument("--clip-sd", type=float, default=0.5)
+    parser.add_argument("--studies", type=int, default=500, help="null and effect studies per row, each")
+    parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rows", default="", help="row names separated by semicolons (default: all)")
     args = parser.parse_args()
-    import numpy as np
+    rows = [r for r in ROWS if not args.rows or r.name in args.rows.split(";")]
+    chunks = max(1, args.jobs * 2)
+    sizes = [args.studies // chunks + (i < args.studies % chunks) for i in range(chunks)]
+    print(f"{args.studies} null and {args.studies} effect studies per row (seed {args.seed})\n")
+    print(
+        "| design | participants | SD participant / clip | false positives (primary) [95%] | tested | "
+        "family-wise (Holm) | coverage, differences | coverage, accuracies | untestable contrasts | power | "
+        "mean df | s |"
+    )
+    print("|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for row in rows:
+            parts = list(pool.map(measure, [row] * chunks, sizes, [args.seed * 1000 + i for i in range(chunks)]))
+            total = {key: sum(p[key] for p in parts) for key in parts[0]}
+            tested = int(total["tested"])
+            low, high = wilson_interval(int(total["null"]), tested) or (math.nan, math.nan)
+            rate = total["null"] / tested if tested else math.nan
 
-    print(
-        f"{args.studies} simulated studies per row, {args.participants} participants, participant SD "
-        f"{args.participant_sd}, clip SD {args.clip_sd} (log odds)\n"
-    )
-    print(
-        "| design | part | clips | df | false positives, model | false positives, pooled | coverage, model "
-        "| power, model | ms/fit |"
-    )
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
-    for name in ("demo", "paper"):
-        study = load_study(REPO / "studies" / f"{name}.toml")
-        schemes = list(study.design.schemes)
-        for task in tasks(study):
-            rng = np.random.default_rng(args.seed)
-            plan = layout(study, task, args.participants)
-            null = Assumptions({s: NULL[task] for s in schemes}, args.participant_sd, args.clip_sd)
-            effect = Assumptions(dict(zip(schemes, EFFECT[task], strict=False)), args.participant_sd, args.clip_sd)
-            model_hits = pooled_hits = covered = intervals = detected = 0
-            df = 0
-            started = time.perf_counter()
-            for _ in range(args.studies):
-                answers = simulate(study, task, plan, null, rng)
-                result = fit_accuracy(answers, schemes, chance(study, task))
-                df = result.df
-                model_hits += result.scheme_p is not None and result.scheme_p < 0.05
-                pooled = pooled_p(answers)
-                pooled_hits += pooled is not None and pooled < 0.05
-                result = fit_accuracy(simulate(study, task, plan, effect, rng), schemes, chance(study, task))
-                detected += result.scheme_p is not None and result.scheme_p < 0.05
-                for c in result.contrasts:
-                    truth = effect.accuracy[c.scheme] - effect.accuracy[c.reference]
-                    covered += c.low <= truth <= c.high
-                    intervals += 1
-            ms = 1000 * (time.perf_counter() - started) / (2 * args.studies)
+            def share(a: str, b: str, t: dict[str, float] = total) -> str:
+                return f"{t[a] / t[b]:.3f}" if t[b] else "-"
+
             print(
-                f"| {name} | {task} | {plan.clips} | {df} | {model_hits / args.studies:.3f} | "
-                f"{pooled_hits / args.studies:.3f} | {covered / max(intervals, 1):.3f} | "
-                f"{detected / args.studies:.3f} | {ms:.0f} |",
+                f"| {row.name} | {row.participants} | {row.participant_sd} / {row.clip_sd} | "
+                f"{rate:.3f} [{low:.3f}, {high:.3f}] | {tested}/{args.studies} | {share('familywise', 'fw_tested')} | "
+                f"{share('covered', 'intervals')} | {share('acc_covered', 'acc_intervals')} | "
+                f"{share('untestable', 'contrasts')} | {total['power'] / args.studies:.3f} | "
+                f"{total['df'] / tested if tested else math.nan:.1f} | {total['seconds'] / args.jobs:.0f} |",
                 flush=True,
             )
 

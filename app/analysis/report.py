@@ -19,9 +19,9 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
-from app.analysis.answer_table import long_rows, participant_records
+from app.analysis.answer_table import ORDER_SEPARATOR, long_rows, participant_records
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.analysis.model import Answers, ModelResult, fit_accuracy
+from app.analysis.model import Answers, ModelResult, RatingResult, Ratings, fit_accuracy, fit_ratings
 from app.analysis.power import chance
 from app.analysis.prereg import deviations
 from app.analysis.source import analysis_database, analysis_study_text, served_bundle
@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 ALL = "all scenarios"
+ORDERINGS = "orderings"  # a ranking part's pairwise orderings (`ReportData.model`)
 TASKS = {
     "pairwise": "part one: pairwise (which robot is better)",
     "ranking": "part two: global ranking (all robots in the right order)",
@@ -81,8 +82,10 @@ class ReportData:
     per_clip: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> scheme, scenario, agents, Tally
     audits: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> the manifest's audit, when known
     answers: dict[str, Answers] = field(default_factory=dict)  # task -> its scored answers, for the model
+    rated: dict[str, Ratings] = field(default_factory=dict)  # scale question -> its ratings, for their model
     prereg: list[str] | None = None  # how the data differ from the preregistration (empty: they match), if given
     _models: dict[str, ModelResult] = field(default_factory=dict, repr=False)
+    _ratings: dict[str, RatingResult] = field(default_factory=dict, repr=False)
 
     @property
     def schemes(self) -> list[str]:
@@ -95,11 +98,24 @@ class ReportData:
         return [ALL] + [s for s in dict.fromkeys(named) if s in seen]
 
     def model(self, task: str) -> ModelResult:
-        """The report's model of the task's answers (app/analysis/model.py), fitted once."""
+        """The report's model of the task's answers (app/analysis/model.py), fitted once. A ranking part's model
+        is of its pairwise orderings: each ranking of k robots gives k(k-1)/2 of them, each right or wrong against
+        a chance of one half, so a ranking with one pair swapped counts as mostly right (the whole order's
+        accuracy stays in Table 1)."""
         if task not in self._models:
             empty = Answers((), (), (), (), (), ())
-            self._models[task] = fit_accuracy(self.answers.get(task, empty), self.schemes, chance(self.study, task))
+            found = self.answers.get(ORDERINGS if task == "ranking" else task, empty)
+            self._models[task] = fit_accuracy(found, self.schemes, self.model_chance(task))
         return self._models[task]
+
+    def model_chance(self, task: str) -> float:
+        return 0.5 if task == "ranking" else chance(self.study, task)
+
+    def rating_model(self, question: str, points: int) -> RatingResult:
+        if question not in self._ratings:
+            empty = Ratings((), (), (), ())
+            self._ratings[question] = fit_ratings(self.rated.get(question, empty), self.schemes, points)
+        return self._ratings[question]
 
     def tasks(self) -> list[str]:
         return [task for task in TASKS if any(part.kind == task for part in self.study.parts)]
@@ -136,7 +152,11 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
     unscored = 0
     per_clip: dict[str, dict[str, Any]] = {}
     columns: dict[str, dict[str, list[Any]]] = {
-        task: {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair", "correct")} for task in TASKS
+        task: {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair", "correct")}
+        for task in (*TASKS, ORDERINGS)
+    }
+    rated: dict[str, dict[str, list[Any]]] = {
+        name: {column: [] for column in ("participant", "clip", "scheme", "value")} for name in ratings
     }
     for record in participant_records(db, study.study.id):
         flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
@@ -181,8 +201,18 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
                     tally = accuracy[(task, scope, row["scheme"])]
                     tally.correct += row["correct"]
                     tally.incorrect += 1 - row["correct"]
+                if task == "ranking":
+                    for right in orderings(row["answer_agent"], row["truth"]):
+                        # the pair is no covariate: its k(k-1)/2 - 1 parameters would cost small studies their test
+                        for name, value in zip(columns[ORDERINGS], (row["participant"], clip, row["scheme"],
+                                               row["scenario"], "", right), strict=True):  # fmt: skip
+                            columns[ORDERINGS][name].append(value)
             elif kind == "scale" and row["scheme"] in ratings[row["question"]]:
                 ratings[row["question"]][row["scheme"]][row["value"]] += 1
+                clip = ";".join(sorted(str(row["clip"]).split(";")))
+                for name, value in zip(rated[row["question"]], (row["participant"], clip, row["scheme"], row["value"]),
+                                       strict=True):  # fmt: skip
+                    rated[row["question"]][name].append(value)
     return ReportData(
         study=study,
         exclusions=exclusions,
@@ -191,7 +221,16 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
         ratings=ratings,
         per_clip=dict(sorted(per_clip.items())),
         answers={task: Answers(**values) for task, values in columns.items()},
+        rated={name: Ratings(**values) for name, values in rated.items()},
     )
+
+
+def orderings(answer: str, truth: str) -> list[int]:
+    """A ranking's pairwise orderings: for each pair of agents, 1 when the answer puts them in the true order.
+    Three agents give three; a ranking with one neighbouring pair swapped gets two of three."""
+    given = answer.split(ORDER_SEPARATOR)
+    true = truth.split(ORDER_SEPARATOR)
+    return [int(given.index(better) < given.index(worse)) for i, better in enumerate(true) for worse in true[i + 1 :]]
 
 
 def _audits(bundle_dir: str) -> dict[str, dict[str, Any]]:
@@ -235,17 +274,19 @@ def table1_rows(data: ReportData) -> list[dict[str, Any]]:
 
 
 def model_rows(data: ReportData) -> list[dict[str, Any]]:
-    """Per part: what was fitted, on how many participants and clips, and the test that the schemes differ."""
+    """Per part: what was fitted, on how many participants and clips, and the primary test that the schemes
+    differ (a ranking part: of its pairwise orderings)."""
     rows = []
     for task in data.tasks():
         fit = data.model(task)
         rows.append(
             {
                 "task": task,
+                "answers": "pairwise orderings of each ranking" if task == "ranking" else "answers",
                 "model": fit.formula,
                 "participants": fit.participants,
                 "clips": fit.clips,
-                "df": fit.df if fit.estimable else "",
+                "df": _number(fit.df, 2) if fit.scheme_p is not None else "",
                 "test": fit.scheme_test if fit.estimable else "",
                 "p_value": _significant(fit.scheme_p),
                 "note": fit.note,
@@ -255,17 +296,22 @@ def model_rows(data: ReportData) -> list[dict[str, Any]]:
 
 
 def model_accuracy_rows(data: ReportData) -> list[dict[str, Any]]:
-    """Per part and scheme: the model's accuracy with its 95% interval, and the test against chance."""
+    """Per part and scheme: the model's accuracy with its 95% interval, and the test against chance (secondary:
+    Holm-adjusted over the part's schemes), or why there is none."""
     return [
         {
             "task": task,
             "scheme": e.scheme,
             "answers": e.n,
+            "clips": e.clips,
             "accuracy": _number(e.accuracy),
             "ci95_low": _number(e.low),
             "ci95_high": _number(e.high),
-            "chance": _number(chance(data.study, task)),
+            "chance": _number(data.model_chance(task)),
+            "df": _number(e.df, 2),
             "p_vs_chance": _significant(e.p_chance),
+            "p_holm": _significant(e.p_holm),
+            "note": e.note,
         }
         for task in data.tasks()
         for e in data.model(task).schemes
@@ -273,7 +319,8 @@ def model_accuracy_rows(data: ReportData) -> list[dict[str, Any]]:
 
 
 def model_contrast_rows(data: ReportData) -> list[dict[str, Any]]:
-    """Per part and pair of schemes: the difference in accuracy and the odds ratio, with 95% intervals."""
+    """Per part and pair of schemes: the difference in accuracy with its 95% interval and the p of the same test,
+    Holm-adjusted unless it is the part's primary test, and the odds ratio with its own interval."""
     return [
         {
             "task": task,
@@ -285,7 +332,12 @@ def model_contrast_rows(data: ReportData) -> list[dict[str, Any]]:
             "odds_ratio": _number(c.odds_ratio),
             "or_ci95_low": _number(c.or_low),
             "or_ci95_high": _number(c.or_high),
+            "test": c.test,
+            "df": _number(c.df, 2),
             "p_value": _significant(c.p_value),
+            "p_holm": _significant(c.p_holm),
+            "primary": int(c.primary),
+            "note": c.note,
         }
         for task in data.tasks()
         for c in data.model(task).contrasts
@@ -333,10 +385,48 @@ def rating_rows(data: ReportData) -> list[dict[str, Any]]:
 
 
 def rating_test_rows(data: ReportData) -> list[dict[str, Any]]:
+    """Per rating question: the model's test that the schemes' mean ratings differ, or why there is none."""
+    rows: list[dict[str, Any]] = []
+    for name, question in data.scale_questions():
+        fit = data.rating_model(name, question.points)
+        counts = {f"n_{scheme}": sum(data.ratings[name][scheme].values()) for scheme in data.schemes}
+        rows.append(
+            {
+                "question": name,
+                "test": fit.test if fit.estimable else fit.note,
+                "p_value": _significant(fit.p_value),
+                **counts,
+                "note": fit.note if fit.estimable else "",
+            }
+        )
+    return rows
+
+
+def rating_model_rows(data: ReportData) -> list[dict[str, Any]]:
+    """Per rating question: each scheme's mean with its 95% interval, then each pairwise difference with its
+    interval and p (Holm-adjusted over the question's pairs)."""
+    rows: list[dict[str, Any]] = []
+    for name, question in data.scale_questions():
+        fit = data.rating_model(name, question.points)
+        rows += [
+            {"question": name, "scheme": m.scheme, "reference": "", "answers": m.n, "estimate": _number(m.mean),
+             "ci95_low": _number(m.low), "ci95_high": _number(m.high), "p_value": "", "p_holm": "", "note": m.note}
+            for m in fit.means
+        ]  # fmt: skip
+        rows += [
+            {"question": name, "scheme": c.scheme, "reference": c.reference, "answers": "",
+             "estimate": _number(c.difference), "ci95_low": _number(c.low), "ci95_high": _number(c.high),
+             "p_value": _significant(c.p_value), "p_holm": _significant(c.p_holm), "note": c.note}
+            for c in fit.contrasts
+        ]  # fmt: skip
+    return rows
+
+
+def rank_test_rows(data: ReportData) -> list[dict[str, Any]]:
+    """The appendix's rank tests of the ratings, which count every rating as independent."""
     rows: list[dict[str, Any]] = []
     for name, _ in data.scale_questions():
         result = data.rating_test(name)
-        counts = {f"n_{scheme}": sum(data.ratings[name][scheme].values()) for scheme in data.schemes}
         rows.append(
             {
                 "question": name,
@@ -344,7 +434,6 @@ def rating_test_rows(data: ReportData) -> list[dict[str, Any]]:
                 "statistic": _number(result.statistic),
                 "p_value": _significant(result.p_value),
                 "rank_biserial": _number(result.effect),
-                **counts,
             }
         )
     return rows
@@ -558,6 +647,8 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
             "pooled_tests.csv": pooled_test_rows(data),
             "ratings.csv": rating_rows(data),
             "rating_tests.csv": rating_test_rows(data),
+            "rating_model.csv": rating_model_rows(data),
+            "rating_rank_tests.csv": rank_test_rows(data),
             "exclusions.csv": exclusion_rows(data),
             "per_clip.csv": per_clip_rows(data),
         }
@@ -573,13 +664,13 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
                 all_scopes=ALL,
                 figures=figures,
                 exclusion_rows=tables["exclusions.csv"],
-                rating_tests=tables["rating_tests.csv"],
+                rank_tests=tables["rating_rank_tests.csv"],
                 tables=list(tables) if out is not None else [],
                 files=out is not None,
                 likert=bool(labelled),
                 figures_left_out=bool(scales) and not drawn,
                 figures_extra=FIGURES_EXTRA,
-                chance={task: chance(data.study, task) for task in data.tasks()},
+                chance={task: data.model_chance(task) for task in data.tasks()},
                 prereg=data.prereg,
             )
         )
@@ -657,7 +748,8 @@ def run_report(
             )
     for task in data.tasks():
         fit = data.model(task)
-        print(f"{task} model: " + (f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.estimable else fit.note))
+        found = f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.scheme_p is not None else fit.scheme_test
+        print(f"{task} model: " + (found if fit.estimable else fit.note))
     if data.prereg:
         n = len(data.prereg)
         print(f"{n} deviation{'s' * (n != 1)} from the preregistration: " + "; ".join(data.prereg))

@@ -43,21 +43,23 @@ def test_the_model_recovers_a_scheme_effect_and_its_accuracy_is_the_raw_one():
     truth = {schemes[0]: 0.9, schemes[1]: 0.6}
     answers = simulate(study, "pairwise", layout(study, "pairwise", 80), Assumptions(truth), np.random.default_rng(3))
     fit = fit_accuracy(answers, schemes, chance(study, "pairwise"))
-    assert fit.estimable and fit.clips == 12 and fit.participants == 80 and fit.df == 12 - 1
+    # two schemes: the primary test is their one difference, on Satterthwaite degrees of freedom, which count the
+    # 6 clips a scheme has rather than the 12 of the part
+    assert fit.estimable and fit.clips == 12 and fit.participants == 80 and 2 < fit.df < 12 - 1
     for estimate in fit.schemes:
         raw = np.mean([c for s, c in zip(answers.scheme, answers.correct, strict=True) if s == estimate.scheme])
         assert estimate.accuracy == pytest.approx(raw, abs=0.01)  # Firth's penalty pulls only slightly to 50%
         assert estimate.low < estimate.accuracy < estimate.high
     (contrast,) = fit.contrasts
     assert contrast.low < truth[schemes[1]] - truth[schemes[0]] < contrast.high < 0
-    assert contrast.odds_ratio < 1 and fit.scheme_p < 0.05
+    assert contrast.odds_ratio < 1 and fit.scheme_p == contrast.p_value < 0.05 and contrast.primary
 
 
 def test_the_cr2_correction_in_the_parameters_space_equals_the_per_cluster_one():
-    """_meat computes (I - H_gg)^-1/2 in the parameters' space for all clusters at once; here it is taken of each
+    """_part applies (I - H_gg)^-1/2 in the parameters' space for all clusters at once; here it is taken of each
     cluster's full H_gg, with the pseudo-inverse where a cluster alone determines a parameter (the demo's
     representative scheme has one ranked set)."""
-    from app.analysis.model import _design, _fit, _meat
+    from app.analysis.model import _covariance, _design, _fit, _part
 
     study = load_study(STUDIES / "demo.toml")
     schemes = list(study.design.schemes)
@@ -78,7 +80,8 @@ def test_the_cr2_correction_in_the_parameters_space_equals_the_per_cluster_one()
                 scale = np.where(values > 1e-8, np.maximum(values, 1e-8) ** -0.5, 0.0)
                 score = xg.T @ vectors @ (scale * (vectors.T @ (residual[rows] / np.sqrt(weight[rows]))))
                 expected += np.outer(score, score)
-            assert _meat(x, residual, weight, bread, groups) == pytest.approx(expected, rel=1e-9, abs=1e-9)
+            found = _covariance([_part(1.0, groups, x, weight, bread)], x, residual)
+            assert found == pytest.approx(bread @ expected @ bread, rel=1e-9, abs=1e-9)
 
 
 def test_two_participants_get_no_test_from_the_model(survey_db, paper_study, bundle_dir, tmp_path):
@@ -153,9 +156,12 @@ def test_the_report_says_what_a_ranking_test_can_show(known_db, tmp_path):  # no
     assert f"the spread of only {ranking.clips} sets" in html
 
 
-def test_schemes_whose_answers_are_all_alike_get_model_based_errors_not_a_crash():
-    """The methods study's ranking part, 40 bots: two schemes always right, one always wrong. Their clusters hold no
-    variation, so the cluster-robust variance of their comparison is zero (or a rounding error below it)."""
+def test_schemes_with_one_clip_or_no_variation_are_named_untestable_not_tested():
+    """The methods study's ranking part, 40 bots: representative, disagreements and highlights have one ranked set
+    each, two schemes are always right and one always wrong. A scheme with one clip cannot show how its accuracy
+    depends on the clip, and schemes whose answers are all alike hold no variation: each such comparison says why
+    it is not tested (it was tested before, on errors that assume independence), and the primary test is of the
+    two schemes with two clips, saying which were left out."""
     from app.analysis.model import Answers
 
     rows = []
@@ -178,6 +184,12 @@ def test_schemes_whose_answers_are_all_alike_get_model_based_errors_not_a_crash(
         correct=[correct for _, _, correct in rows],
     )
     fit = fit_accuracy(answers, ["adaptive", "nfirst", "representative", "disagreements", "highlights"], 1 / 6)
-    assert fit.estimable and fit.scheme_p is not None and 0 <= fit.scheme_p < 0.05
-    assert "disagreements against representative" in fit.note
-    assert all(np.isfinite(c.or_low) and np.isfinite(c.p_value) for c in fit.contrasts)
+    assert fit.estimable
+    one_clip = {"representative", "disagreements", "highlights"}
+    for e in fit.schemes:
+        if e.scheme in one_clip:
+            assert e.p_chance is None and e.low is None and "has 1 clip" in e.note
+    for c in fit.contrasts:
+        if one_clip & {c.scheme, c.reference}:
+            assert c.p_value is None and c.low is None and c.or_low is None and "1 clip" in c.note
+    assert "representative, disagreements, highlights left out (fewer than two clips)" in fit.scheme_test
