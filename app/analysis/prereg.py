@@ -19,6 +19,7 @@ from app.survey.assignment import conditions
 from app.survey.study import Study, parse_study
 
 VERSION = 2  # 2: Foil's and the model's versions; hashes of the files' bytes (1: of the text with LF line ends)
+ANSWERS = {"pairwise": "pairwise answers", "ranking": "rankings' pairwise orderings"}
 
 
 def foil_version() -> str | None:
@@ -61,8 +62,10 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
         "participants": participants,
         "exclusions": _rules(rules),
         "hypotheses": [
-            f"{task}: the accuracy of the {task} answers differs between the schemes {schemes} "
-            f"(two-sided, alpha 0.05); each scheme's accuracy differs from chance ({chance(study, task):.3g})"
+            f"{task}: the accuracy of the {ANSWERS[task]} differs between the schemes {schemes} (the primary test, "
+            "two-sided, alpha 0.05, unadjusted); secondary, each Holm-adjusted as a family: each scheme's accuracy "
+            f"differs from chance ({0.5 if task == 'ranking' else chance(study, task):.3g}), and with three schemes "
+            "or more each pair of schemes differs"
             for task in tasks(study)
         ],
         "design": {
@@ -82,10 +85,12 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
         },
         "model": (
             "per part, logistic regression correct ~ scheme (+ pair + scenario where the part has more than one), "
-            "Firth-penalised, standard errors clustered by participant and by clip (two-way, CR2 small-sample "
-            "correction), t tests on min(participants, clips) - 1 degrees of freedom; the "
-            "schemes differ: Wald F test; R: glmer(correct ~ scheme + (1 | participant) + (1 | clip), "
-            "family = binomial) for the mixed model it stands in for"
+            "Firth-penalised, estimating population-averaged accuracies and odds ratios; cluster-robust standard "
+            "errors (CR2) by participant, by clip and by both, each test reading the largest of the three; t tests "
+            "on Satterthwaite degrees of freedom and, for the schemes together, the approximate Hotelling T² test "
+            "(HTZ), as R's clubSandwich computes them; a scheme with fewer than two clips, or a test with fewer than "
+            "2 degrees of freedom, is reported untestable (a contrast then by an exact permutation test of its clips "
+            "within scenarios, where it has at least 20 arrangements); a ranking part by its pairwise orderings"
         ),
     }
 

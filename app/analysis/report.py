@@ -748,8 +748,8 @@ def run_report(
             )
     for task in data.tasks():
         fit = data.model(task)
-        found = f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.scheme_p is not None else fit.scheme_test
-        print(f"{task} model: " + (found if fit.estimable else fit.note))
+        tested = f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.scheme_p is not None else fit.scheme_test
+        print(f"{task} model: " + (tested if fit.estimable else fit.note))
     if data.prereg:
         n = len(data.prereg)
         print(f"{n} deviation{'s' * (n != 1)} from the preregistration: " + "; ".join(data.prereg))
