@@ -154,6 +154,13 @@ def test_the_report_says_what_a_ranking_test_can_show(known_db, tmp_path):  # no
     ranking = data.model("ranking")
     assert ranking.estimable and html.count("A ranking part has one ranked set per scheme and scenario") == 1
     assert f"the spread of only {ranking.clips} sets" in html
+    # part two is modelled by its pairwise orderings (three per ranking of three), the whole order in Table 1
+    orderings = data.answers["orderings"]
+    assert len(orderings.correct) == 3 * sum(data.tally("ranking", "all scenarios", s).n for s in data.schemes)
+    assert sum(e.n for e in ranking.schemes) == len(orderings.correct) and "pairwise orderings" in html
+    assert "population-averaged" in html and "p Holm" in html and "Primary test" in html
+    ratings = html.split('id="ratings"')[1].split('id="appendix"')[0]
+    assert "Not tested" in ratings and "Kruskal" not in ratings and "Mann-Whitney" in html.split('id="appendix"')[1]
 
 
 def test_schemes_with_one_clip_or_no_variation_are_named_untestable_not_tested():
