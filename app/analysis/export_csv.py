@@ -1,5 +1,6 @@
 """`foil export`: long.csv (one row per answer), wide.csv (one row per participant), participants.csv and the
-codebook (codebook.md for people, codebook.json for code), written in one streaming pass over the database.
+codebook (codebook.md for people, codebook.json for code), written in one streaming pass over the database, and
+glmer.R, which fits the field's mixed model to long.csv in R.
 
 Every file is plain UTF-8 CSV with a header that pandas, R and spreadsheets read without options. Text that a
 spreadsheet would run as a formula is neutralised (see `neutralise`).
@@ -18,7 +19,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from app.analysis.answer_table import (
+    LIST_SEPARATOR,
     LONG_COLUMNS,
+    ORDER_SEPARATOR,
     PARTICIPANT_COLUMNS,
     Column,
     WideLayout,
@@ -168,14 +171,112 @@ def _question_codes(study: Study) -> dict[str, dict[str, Any]]:
 # How `foil report` models accuracy (app/analysis/model.py), so that an analyst can reproduce it from long.csv.
 MODEL_TEXT = (
     "foil report models each part's answers (long.csv rows with question_type choose or rank; correct is the "
-    "outcome) as a logistic regression correct ~ scheme, with the pair of agents and the scenario as fixed effects "
-    "where a part has more than one, fitted with Firth's penalty; its standard errors are clustered by participant "
-    "and by clip at once (a ranking's clip is its ranked clips together), with the CR2 small-sample correction, and "
-    "its t tests have min(participants, clips) minus 1 degrees of freedom. It stands in for "
-    "the mixed model with crossed random effects for participant and clip, in R: glmer(correct ~ scheme + "
-    "(1 | participant) + (1 | clip), family = binomial), and gives the same analysis with reliable p-values when a "
-    "study has few clips per scheme; docs/analysis.md explains it"
+    "outcome; a ranking part by its pairwise orderings: each ranking of k robots gives k(k-1)/2 pairs, right when "
+    "answer_agent puts them in the order of truth) as a logistic regression correct ~ scheme, with the pair of "
+    "agents and the scenario as fixed effects where a pairwise part has more than one, fitted with Firth's penalty; "
+    "its cluster-robust standard errors (CR2) are clustered by participant, by clip and by both (a ranking's clip "
+    "is its ranked clips together), each test reading the largest of the three, with t tests on Satterthwaite "
+    "degrees of freedom and the approximate Hotelling T-squared test for the schemes together, as R's clubSandwich "
+    "computes them. It stands in for the mixed model with crossed random effects for participant and clip, in R: "
+    "glmer(correct ~ scheme + (1 | participant) + (1 | clip), family = binomial), and gives population-averaged "
+    "estimates with reliable p-values when a study has few clips per scheme; docs/analysis.md explains it. glmer.R "
+    "in the export folder fits that mixed model (Rscript glmer.R)"
 )
+
+# glmer.R: the conditional mixed model per part in R, for analysts who want the field's usual model beside the
+# report's. @NAME@ placeholders, since R code is full of braces.
+GLMER_SCRIPT = r"""# glmer.R: the logistic mixed model of accuracy for study @STUDY@, written by foil export.
+#
+# Run it in the export folder: Rscript glmer.R  (needs R and the lme4 package: install.packages("lme4")).
+#
+# For each part (pairwise: the choose answers of long.csv; ranking: the rank answers, each ranking as its pairwise
+# orderings, as the report models them: k(k-1)/2 pairs of k robots, right when in the true order) it fits
+#   glmer(correct ~ scheme + (1 | participant) + (1 | clip), family = binomial)
+# to the participants the export's rules keep (excluded = 0 in participants.csv) and prints the fit's summary,
+# each scheme's accuracy for a typical participant on a typical clip, and the odds ratio of every pair of schemes,
+# with 95% Wald intervals. The first scheme of the study file is the reference level.
+#
+# These are conditional (subject-specific) odds ratios: the schemes compared for one participant on one clip.
+# Foil's report gives population-averaged ones (over all participants and clips), which are smaller in log terms:
+# averaging over participants' and clips' spread pulls a log odds ratio towards 0, by a factor of about
+# sqrt(1 + 0.35 * (participant variance + clip variance)) (Zeger, Liang and Albert 1988). Compare the two on the
+# same scale only. The report also adjusts for pair and scenario, which here the clips' effects take up, and a
+# Wald interval from a handful of clips per scheme is too narrow (docs/analysis.md, "The model").
+
+suppressPackageStartupMessages(library(lme4))
+
+schemes <- c(@SCHEMES@)
+long <- read.csv("long.csv", encoding = "UTF-8")
+people <- read.csv("participants.csv", encoding = "UTF-8")
+kept <- people$participant[people$excluded == 0]
+z <- qnorm(0.975)
+
+# 1 for each pair of agents that the answer puts in the true order (both best first, "@ORDER@"-separated)
+orderings <- function(answer, truth) {
+  given <- strsplit(answer, "@ORDER@", fixed = TRUE)[[1]]
+  true <- strsplit(truth, "@ORDER@", fixed = TRUE)[[1]]
+  pairs <- combn(length(true), 2)
+  as.integer(match(true[pairs[1, ]], given) < match(true[pairs[2, ]], given))
+}
+
+for (part in c("pairwise", "ranking")) {
+  type <- if (part == "pairwise") "choose" else "rank"
+  d <- long[long$question_type == type & !is.na(long$correct) & long$participant %in% kept, ]
+  if (nrow(d) == 0) next
+  # a ranking's clips are listed in the order shown: sorted, one ranked set is one clip
+  sets <- strsplit(d$clip, "@SEPARATOR@", fixed = TRUE)
+  d$clip <- vapply(sets, function(clips) paste(sort(clips), collapse = "@SEPARATOR@"), "")
+  if (part == "ranking") {
+    right <- lapply(seq_len(nrow(d)), function(i) orderings(d$answer_agent[i], d$truth[i]))
+    d <- d[rep(seq_len(nrow(d)), lengths(right)), ]
+    d$correct <- unlist(right)
+  }
+  d$scheme <- droplevels(factor(d$scheme, levels = schemes))
+  outcomes <- if (part == "ranking") "pairwise orderings" else "answers"
+  cat(sprintf("\n== %s part: %d %s, %d participants, %d clips\n", part, nrow(d), outcomes,
+              length(unique(d$participant)), length(unique(d$clip))))
+  if (nlevels(d$scheme) < 2) {
+    cat("fewer than two schemes answered: nothing to compare\n")
+    next
+  }
+  fit <- tryCatch(glmer(correct ~ scheme + (1 | participant) + (1 | clip), family = binomial, data = d),
+                  error = function(e) {
+                    cat("glmer failed:", conditionMessage(e), "\n")
+                    NULL
+                  })
+  if (is.null(fit)) next
+  print(summary(fit))
+  b <- fixef(fit)
+  v <- as.matrix(vcov(fit))
+  wald <- function(l) {
+    estimate <- sum(l * b)
+    se <- sqrt(drop(t(l) %*% v %*% l))
+    c(estimate, estimate - z * se, estimate + z * se)
+  }
+  names <- levels(d$scheme)
+  x <- model.matrix(~scheme, data.frame(scheme = factor(names, levels = names)))
+  cat("\nAccuracy for a typical participant and clip (random effects 0), 95% Wald interval:\n")
+  for (i in seq_along(names)) {
+    r <- plogis(wald(x[i, ]))
+    cat(sprintf("  %s: %.3f (%.3f to %.3f)\n", names[i], r[1], r[2], r[3]))
+  }
+  cat("\nConditional odds ratios, 95% Wald interval:\n")
+  for (i in seq_along(names)) for (j in seq_along(names)) if (i < j) {
+    r <- exp(wald(x[j, ] - x[i, ]))
+    cat(sprintf("  %s against %s: %.2f (%.2f to %.2f)\n", names[j], names[i], r[1], r[2], r[3]))
+  }
+}
+"""
+
+
+def glmer_script(study: Study) -> str:
+    """glmer.R for this study: its schemes in the study file's order, so the reference level is the report's."""
+    return (
+        GLMER_SCRIPT.replace("@STUDY@", study.study.id)
+        .replace("@SCHEMES@", ", ".join(json.dumps(s) for s in study.design.schemes))
+        .replace("@SEPARATOR@", LIST_SEPARATOR)
+        .replace("@ORDER@", ORDER_SEPARATOR)
+    )
 
 
 def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None) -> dict[str, Any]:
@@ -282,7 +383,7 @@ def codebook_markdown(book: dict[str, Any]) -> str:
 def export_study(
     db: Database, study: Study, out: str | Path, rules: ExclusionRules | None = None, batch: int = 500
 ) -> ExportResult:
-    """Write the three CSV files and the codebook into `out`, reading `batch` participants at a time."""
+    """Write the three CSV files, the codebook and glmer.R into `out`, reading `batch` participants at a time."""
     started = time.perf_counter()
     rules = rules or ExclusionRules()
     out = Path(out)
@@ -311,6 +412,7 @@ def export_study(
     book = codebook(study, layout, rules, median_s)
     (out / "codebook.json").write_text(json.dumps(book, indent=1) + "\n", encoding="utf-8")
     (out / "codebook.md").write_text(codebook_markdown(book), encoding="utf-8")
+    (out / "glmer.R").write_text(glmer_script(study), encoding="utf-8")
     return ExportResult(
         out=out,
         participants=tables["participants.csv"].rows,
@@ -329,6 +431,6 @@ def run_export(*, database_url: str, study: str | None, out: str, rules: Exclusi
         db.dispose()
     print(
         f"{result.participants} participants ({result.excluded} excluded by the rules), {result.answers} answer "
-        f"rows in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json in {result.out}"
+        f"rows in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json, glmer.R in {result.out}"
     )
     return 0

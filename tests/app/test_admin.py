@@ -117,7 +117,7 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
     with zipfile.ZipFile(io.BytesIO(archive.content)) as zipped:
         names = sorted(name.split("/")[1] for name in zipped.namelist())
         people = list(csv.DictReader(io.StringIO(zipped.read("paper-export/participants.csv").decode())))
-    assert names == ["codebook.json", "codebook.md", "long.csv", "participants.csv", "wide.csv"]
+    assert names == ["codebook.json", "codebook.md", "glmer.R", "long.csv", "participants.csv", "wide.csv"]
     assert [(p["participant"].removeprefix("'"), p["flagged_by_admin"], p["excluded"]) for p in people] == [
         (finished.code, "0", "0"),
         (started.code, "1", "1"),
