@@ -6,6 +6,11 @@ probability expit(scheme's log odds + participant effect + clip effect), the eff
 standard deviations on the log-odds scale, and each scheme's log odds set so that its accuracy over participants
 and clips is the one assumed. The report's model (app/analysis/model.py) is fitted to each simulated study, and
 power is the share of studies in which its test that the schemes differ has p < 0.05.
+
+The N for 80% and 90% power comes from all the simulated studies at once: a curve fitted to their rejections at every
+N (`fit_power_curve`), which rises monotonically however noisy the estimate at each N, with a parametric bootstrap
+interval (`crossings`). The first N whose own estimate reached the target, as this used to report, is as noisy as
+that one estimate and lies on the coarse grid.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ if TYPE_CHECKING:  # numpy is imported where it runs: the report (and so the ser
 
 ALPHA = 0.05
 TARGETS = (0.8, 0.9)
+STUDIES = 100  # simulated studies per N: the default of `foil power --studies` (app/cli.py)
 
 
 @dataclass(frozen=True)
@@ -140,6 +146,121 @@ def monte_carlo_error(value: float, studies: int) -> float:
     return (high - low) / 2
 
 
+@dataclass(frozen=True)
+class PowerCurve:
+    """Power against N: ceiling * expit(a + b log N), b >= 0. Without the ceiling (a logistic curve in log N) the
+    fit cannot level off as power does when the clips' spread, which more participants leave as it is, limits the
+    test: it then puts 80% too late and promises a 90% that never comes."""
+
+    a: float
+    b: float
+    ceiling: float
+
+    def power(self, n: float) -> float:
+        return self.ceiling / (1 + math.exp(min(700.0, -(self.a + self.b * math.log(n)))))
+
+    def participants_for(self, target: float) -> float:
+        """The N at which the curve reaches `target`: 0 if it starts above it, infinite if it never does."""
+        if self.ceiling <= target or self.b == 0:
+            return 0.0 if self.power(1) >= target else math.inf
+        log_n = (math.log(target / (self.ceiling - target)) - self.a) / self.b
+        return math.inf if log_n > 700 else math.exp(log_n)
+
+
+def fit_power_curve(
+    participants: list[int], rejections: list[int], studies: int, start: PowerCurve | None = None
+) -> PowerCurve:
+    """The maximum-likelihood curve for `rejections` out of `studies` simulated studies at each N (binomial counts),
+    each count given half a rejection and half a non-rejection more, so that none is 0% or 100% and the fit stays
+    finite when every study at some N rejects, or none does. Without `start`, two starts: rising to 100%, and
+    levelling off at the largest power seen."""
+    import numpy as np
+    from scipy import optimize
+
+    x = np.log(np.asarray(participants, dtype=float))
+    k = np.asarray(rejections, dtype=float) + 0.5
+    m = studies + 1.0
+
+    def deviance(theta: np.ndarray) -> tuple[float, np.ndarray]:
+        a, b, ceiling = theta
+        rising = 1 / (1 + np.exp(-(a + b * x)))
+        p = np.clip(ceiling * rising, 1e-12, 1 - 1e-12)
+        slope = k / p - (m - k) / (1 - p)  # of the log likelihood in p
+        along = slope * ceiling * rising * (1 - rising)
+        gradient = -np.array([along.sum(), along @ x, slope @ rising])
+        return -float(k @ np.log(p) + (m - k) @ np.log1p(-p)), gradient
+
+    if start is None:
+        slope, intercept = np.polyfit(x, np.log(k / (m - k)), 1)
+        highest = min(1.0, float(k.max() / m) + 0.02)
+        starts = [[intercept, max(slope, 0.1), 1.0], [intercept, max(slope, 0.1), highest]]
+    else:
+        starts = [[start.a, start.b, start.ceiling]]
+    bounds = [(None, None), (0.0, 50.0), (0.01, 1.0)]
+    fits = [optimize.minimize(deviance, s, jac=True, method="TNC", bounds=bounds) for s in starts]
+    return PowerCurve(*(float(v) for v in min(fits, key=lambda r: float(r.fun)).x))
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Where the fitted power reaches `target`, in whole participants, on the grid's span `first` to `last`."""
+
+    target: float
+    first: int
+    last: int
+    n: float  # the curve's N for the target: below `first` or above `last` (infinite: never) possible
+    low: float  # 95% interval (parametric bootstrap)
+    high: float
+    ceiling: float  # the power the curve levels off at
+    power_at_last: float
+
+
+def crossings(
+    participants: list[int], rejections: list[int], studies: int, seed: int = 0, replicates: int = 200
+) -> list[Crossing]:
+    """The N for each of TARGETS from the fitted curve, with a 95% parametric bootstrap interval: counts drawn from
+    the fitted curve's power at each N, the curve refitted to each draw, and the 2.5th and 97.5th percentiles of
+    their N (a draw that never reaches the target counts as infinite). It reflects the Monte Carlo error of the
+    simulated studies, not whether the curve's shape is right."""
+    import numpy as np
+
+    curve = fit_power_curve(participants, rejections, studies)
+    rng = np.random.default_rng(seed)
+    expected = [curve.power(n) for n in participants]
+    draws = [
+        fit_power_curve(participants, list(rng.binomial(studies, expected)), studies, curve) for _ in range(replicates)
+    ]
+    first, last = participants[0], participants[-1]
+    found = []
+    for target in TARGETS:
+        ns = np.array([draw.participants_for(target) for draw in draws])
+        low, high = np.quantile(ns, 0.025, method="lower"), np.quantile(ns, 0.975, method="higher")
+        found.append(
+            Crossing(target, first, last, curve.participants_for(target), low, high, curve.ceiling, curve.power(last))
+        )
+    return found
+
+
+def describe(found: Crossing, task: str) -> str:
+    """`80% power: at about N = 71 (95% interval 63-80)`, or why it is not reached and what would reach it."""
+    if found.n <= found.first:
+        return f"{found.target:.0%} power: at {found.first} participants or fewer, the smallest N tried"
+    if found.n <= found.last:
+        low = f"{found.first} or fewer" if found.low <= found.first else str(math.ceil(found.low))
+        high = f"more than {found.last}" if found.high > found.last else str(math.ceil(found.high))
+        between = " to " if " " in low + high else "-"
+        return f"{found.target:.0%} power: at about N = {math.ceil(found.n)} (95% interval {low}{between}{high})"
+    at_last = f"{math.floor(found.power_at_last * 100) / 100:.2f} at {found.last}"  # rounded down: not reached
+    text = f"{found.target:.0%} power: not reached within {found.last} participants (the fit gives {at_last}"
+    if found.ceiling > found.target:
+        return text + "); try a larger --max-participants"
+    clips = "ranked sets" if task == "ranking" else "clips per scheme"
+    return text + (
+        f" and levels off at {math.floor(found.ceiling * 100) / 100:.2f}): the clips' spread limits the test, so more "
+        f"participants may never reach it; more {clips} (scenarios) would"
+    )
+
+
 def participant_grid(study: Study, largest: int, points: int = 10) -> list[int]:
     """About `points` numbers of participants up to `largest`, each a whole number of rounds of the conditions
     (so every condition is filled equally)."""
@@ -185,15 +306,15 @@ def run_power(
     studies: int,
     seed: int,
 ) -> int:
-    """`foil power`: prints power against number of participants per part, and the smallest N reaching 80%
-    and 90%."""
+    """`foil power`: prints power against number of participants per part, and the N at which a monotone fit of
+    that curve reaches 80% and 90%."""
     from app.survey.study import load_study
 
     study = load_study(study_path)
     if participant_sd < 0 or clip_sd < 0:
         raise ValueError("--participant-sd and --clip-sd are standard deviations: give 0 or more")
     if studies < 10:
-        raise ValueError(f"--studies {studies} is too few to estimate power: give at least 10 (default 200)")
+        raise ValueError(f"--studies {studies} is too few to estimate power: give at least 10 (default {STUDIES})")
     given = {"pairwise": pairwise, "ranking": ranking}
     accuracies: dict[str, dict[str, float]] = {}
     if pilot is not None:
@@ -212,25 +333,24 @@ def run_power(
         raise ValueError(f"--max-participants {largest} is fewer than the study's {len(conditions(study))} conditions")
     print(
         f"{study.study.id}: {studies} simulated studies per number of participants; participant SD {participant_sd}, "
-        f"clip SD {clip_sd} (log odds); test: the report's model, schemes differ at p < {ALPHA}"
+        f"clip SD {clip_sd} (log odds); test: the report's model, schemes differ at p < {ALPHA}; N for "
+        + " and ".join(f"{t:.0%}" for t in TARGETS)
+        + " from a monotone curve fitted to all of them"
     )
     for task, accuracy in accuracies.items():
         assume = Assumptions(accuracy, participant_sd, clip_sd)
         print(f"\n{task}: accuracies " + ", ".join(f"{s} {a:.2f}" for s, a in accuracy.items()))
         print(f"{'participants':>12}  {'power':>6}  {'± (Monte Carlo, 95%)':>20}")
-        reached: dict[float, int] = {}
+        rejections = []
         for n in grid:
             value = power(simulated_fits(study, task, n, assume, studies, seed))
+            rejections.append(round(value * studies))
             print(f"{n:>12}  {value:>6.2f}  {monte_carlo_error(value, studies):>20.2f}", flush=True)
-            for target in TARGETS:
-                if value >= target:
-                    reached.setdefault(target, n)
-        for target in TARGETS:
-            found = reached.get(target)
-            print(
-                f"{target:.0%} power: "
-                + (f"{found} participants" if found else f"not reached with {grid[-1]} (try --max-participants)")
-            )
+        if len(grid) < 3:
+            print(f"too few numbers of participants for a curve: give a --max-participants of {3 * grid[-1]} or more")
+            continue
+        for found in crossings(grid, rejections, studies, seed):
+            print(describe(found, task))
     print(f"(simulation seed {seed})", file=sys.stderr)
     return 0
 
