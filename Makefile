@@ -10,7 +10,7 @@ BIN = $(VENV)/bin
 AXE = .cache/axe/node_modules/axe-core/axe.min.js
 DEMO_BUNDLE ?= bundles/demo
 
-.PHONY: demo demo-password test check lint lint-baseline install browser postgres
+.PHONY: demo demo-password test check lint lint-baseline install browser postgres r
 
 install: $(VENV)/.installed
 
@@ -24,6 +24,12 @@ browser: $(AXE)
 postgres:
 	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || command -v initdb >/dev/null || \
 		(apt-get update && apt-get install -y postgresql)
+
+# What the test of `foil export`'s glmer.R needs (and benchmarks/bench_clubsandwich.py): Debian's R with lme4 and
+# clubSandwich. The server never needs R.
+r:
+	@Rscript -e 'library(lme4); library(clubSandwich)' >/dev/null 2>&1 || \
+		(apt-get update && apt-get install -y --no-install-recommends r-base-core r-cran-lme4 r-cran-clubsandwich)
 
 $(VENV)/.installed: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -56,7 +62,7 @@ demo-password:
 		echo "(kept in $(DEMO_BUNDLE).admin-password; set FOIL_ADMIN_PASSWORD to choose your own)"; \
 	fi
 
-test: lint install browser postgres
+test: lint install browser postgres r
 	$(BIN)/python -m pytest -q
 
 # The fast loop while working: everything but the slow and the browser tests (they run in `make test`).

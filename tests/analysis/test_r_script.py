@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 import random
 import re
-import shutil
 import subprocess
 
 import pandas as pd
@@ -64,8 +63,8 @@ def test_the_script_reads_only_columns_the_export_has(exported):
     assert set(people.excluded) == {0, 1}  # the script's filter has both to tell apart
 
 
-@pytest.mark.skipif(shutil.which("Rscript") is None, reason="R is not installed")
 def test_the_script_fits_every_part_in_r(exported):
+    """R with lme4 comes with `make test` (the Makefile's `r` target)."""
     out, _ = exported
     run = subprocess.run(["Rscript", "glmer.R"], cwd=out, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
