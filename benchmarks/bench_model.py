@@ -6,7 +6,11 @@
   with participant and clip standard deviations, accuracies (over participants and clips), numbers of clips per
   scheme (3 against 12, 1 against 12, 3 schemes with 3, 6 and 12), numbers of participants and dropout (half
   the participants leave after 2 to 4 answers) varied row by row;
-- the shipped studies' own designs (demo, paper, methods; both parts), simulated by `foil power`'s simulator.
+- the shipped studies' own designs (demo, paper, methods; both parts): who answers which clip as `foil power`
+  lays it out; pairwise answers from `foil power`'s simulator; each ranking drawn here as a person would rank: each
+  robot's quality seen with noise (Thurstone), the clearer the larger the scheme's, participant's and clip's
+  discriminability exp(scheme + participant effect + clip effect), and analysed as the report does, by its
+  pairwise orderings (the accuracies of a ranking row are those of its orderings).
 
 Per row: the share of null studies whose primary test (the schemes differ) has p < 0.05, with its Monte Carlo
 95% interval (Wilson); with three schemes or more, the share of null studies with any Holm-adjusted pairwise
@@ -65,17 +69,16 @@ ROWS = [
     Row("1 clip against 12", clips=(1, 12)),
     Row("3 schemes, 3 / 6 / 12 clips", clips=(3, 6, 12), effect=(0.6, 0.75, 0.9)),
     Row("demo, pairwise", study="demo", task="pairwise", effect=(0.85, 0.7, 0.6)),
-    Row("demo, ranking", study="demo", task="ranking", accuracy=0.4, effect=(0.5, 0.3, 0.2)),
+    Row("demo, ranking", study="demo", task="ranking", effect=(0.85, 0.75, 0.65)),
     Row("paper, pairwise", study="paper", task="pairwise", effect=(0.85, 0.7)),
-    Row("paper, ranking", study="paper", task="ranking", accuracy=0.4, effect=(0.5, 0.3)),
+    Row("paper, ranking", study="paper", task="ranking", effect=(0.85, 0.7)),
     Row("methods, pairwise", study="methods", task="pairwise", effect=(0.6, 0.65, 0.9, 0.75, 0.75)),
-    Row("methods, ranking", study="methods", task="ranking", accuracy=0.4, effect=(0.2, 0.25, 0.6, 0.4, 0.4)),
+    Row("methods, ranking", study="methods", task="ranking", effect=(0.65, 0.7, 0.9, 0.8, 0.8)),
 ]
 
 
 def synthetic(row: Row, accuracies: list[float], rng) -> Answers:
     """One study of a design written here: every participant answers every clip (shuffled order)."""
-    import numpy as np
     from scipy import special
 
     sd = math.hypot(row.participant_sd, row.clip_sd)
@@ -96,6 +99,41 @@ def synthetic(row: Row, accuracies: list[float], rng) -> Answers:
     return Answers(**columns)
 
 
+def ordering_accuracy(eta: float, sd: float, agents: int) -> float:
+    """A Thurstone ranking's share of right pairwise orderings, over participants and clips: robots' true
+    qualities k - 1, ..., 0 times the discriminability exp(eta + effect), each seen with standard normal noise."""
+    import numpy as np
+    from scipy import stats
+
+    nodes, weights = np.polynomial.hermite_e.hermegauss(40)
+    gaps = [j - i for i in range(agents) for j in range(i + 1, agents)]
+    scale = np.exp(eta + sd * nodes)
+    return float(np.mean([stats.norm.cdf(g * scale / math.sqrt(2)) @ weights / weights.sum() for g in gaps]))
+
+
+def rankings(row: Row, study, plan, accuracies: list[float], rng) -> Answers:
+    """One study's rankings in the layout's design, as pairwise orderings (the report's ranking model)."""
+    import numpy as np
+    from scipy import optimize
+
+    agents = next(len(part.agents) for part in study.parts if part.kind == "ranking")
+    sd = math.hypot(row.participant_sd, row.clip_sd)
+    eta = [optimize.brentq(lambda e, a=a: ordering_accuracy(e, sd, agents) - a, -8.0, 8.0) for a in accuracies]
+    person = rng.normal(0, row.participant_sd, plan.participant_index.max() + 1)
+    clip = rng.normal(0, row.clip_sd, plan.clips)
+    columns: dict[str, list] = {k: [] for k in ("participant", "clip", "scheme", "scenario", "pair", "correct")}
+    for r in range(len(plan.participant_index)):
+        scale = np.exp(eta[plan.scheme_index[r]] + person[plan.participant_index[r]] + clip[plan.clip_index[r]])
+        seen = np.arange(agents)[::-1] * scale + rng.normal(0, 1, agents)
+        for i in range(agents):
+            for j in range(i + 1, agents):
+                values = (plan.answers.participant[r], plan.answers.clip[r], plan.answers.scheme[r],
+                          plan.answers.scenario[r], "", int(seen[i] > seen[j]))  # fmt: skip
+                for name, value in zip(columns, values, strict=True):
+                    columns[name].append(value)
+    return Answers(**columns)
+
+
 def studies_of(row: Row, effect: bool, count: int, seed: int) -> list[tuple[ModelResult, list[str], list[float]]]:
     """`count` fitted studies of the row, with the schemes and their true accuracies."""
     import numpy as np
@@ -107,8 +145,13 @@ def studies_of(row: Row, effect: bool, count: int, seed: int) -> list[tuple[Mode
         truth = [row.effect[min(i, len(row.effect) - 1)] if effect else row.accuracy for i in range(len(schemes))]
         plan = layout(study, row.task, row.participants)
         assume = Assumptions(dict(zip(schemes, truth, strict=True)), row.participant_sd, row.clip_sd)
-        level = chance(study, row.task)
-        draws = (simulate(study, row.task, plan, assume, rng) for _ in range(count))
+        level = chance(study, row.task) if row.task == "pairwise" else 0.5
+        draws = (
+            simulate(study, row.task, plan, assume, rng)
+            if row.task == "pairwise"
+            else rankings(row, study, plan, truth, rng)
+            for _ in range(count)
+        )
     else:
         schemes = [f"s{s}" for s in range(len(row.clips))]
         truth = [row.effect[min(i, len(row.effect) - 1)] if effect else row.accuracy for i in range(len(schemes))]

@@ -243,11 +243,13 @@ def _wishart_df(parts: list[_Part], x: Array, weight: Array, bread: Array, const
 @dataclass(frozen=True)
 class _Robust:
     """A fit's cluster-robust variances: two-way (V_participant + V_clip - V_answer, Cameron, Gelbach and Miller
-    2011) and each one-way. Each test reads the largest of the three for its contrast, with that one's degrees of
-    freedom. Why: the two-way sum is biased low where one clustering holds little variation (its answer-level
-    term, computed as if answers were independent, then outweighs the clustering it should cancel: 9-12% false
-    positives with participant SD 1.5 and clip SD 0-0.3), and a one-way variance misses the other clustering where
-    both hold some; the largest of them held 2-4% in those designs (benchmarks/bench_model.py)."""
+    2011) and clustered by clip alone. Each test reads the larger of the two for its contrast, with that one's
+    degrees of freedom. Why: each one-way CR2 correction assumes the other clustering away, so where participants
+    differ much and clips little the two-way sum is biased low (9-12% false positives with participant SD 1.5 and
+    clip SD 0-0.3), while the clip-clustered variance held 5%; where both clusterings hold variation the two-way
+    one is the larger. Participants alone are no candidate: chosen where a few clips' spread happened to look
+    small, they made designs with two clips per scheme reject a true null in 10-16% of studies
+    (benchmarks/bench_model.py)."""
 
     candidates: list[tuple[list[_Part], Array]]
     x: Array
@@ -255,7 +257,7 @@ class _Robust:
     bread: Array
 
     def _choose(self, constraints: Array) -> tuple[list[_Part], Array] | None:
-        """The candidate with the largest variance of the constraints (scaled by the model-based one), among those
+        """The candidate with the larger variance of the constraints (scaled by the model-based one), among those
         that are a variance at all for them; None where none holds any variation."""
         import numpy as np
 
@@ -292,14 +294,14 @@ class _Robust:
 def _robust(
     x: Array, weight: Array, residual: Array, bread: Array, participant: Sequence[str], clip: Sequence[str]
 ) -> _Robust:
-    """Clustered by participant, by clip, and by both at once (each cluster CR2-corrected)."""
+    """Clustered by participant and by clip at once, and by clip alone (each cluster CR2-corrected)."""
     import numpy as np
 
     by_participant, by_clip, by_answer = (
         _part(sign, np.unique(groups, return_inverse=True)[1].astype(np.intp), x, weight, bread)
         for sign, groups in ((1.0, participant), (1.0, clip), (-1.0, np.arange(len(x))))
     )
-    candidates = [[by_participant, by_clip, by_answer], [by_participant], [by_clip]]
+    candidates = [[by_participant, by_clip, by_answer], [by_clip]]
     return _Robust([(parts, _covariance(parts, x, residual)) for parts in candidates], x, weight, bread)
 
 
@@ -530,7 +532,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
     if len(present) == 2 and len(contrasts) == 1:
         (only,) = contrasts
         contrasts = [replace(only, primary=True)]
-        scheme_test = (only.test or only.note) + " (the primary test: the two schemes differ)"
+        scheme_test = f"{only.test} (the primary test: the two schemes differ)" if only.test else only.note
         scheme_p, scheme_df = only.p_value, only.df or 0.0
     else:
         secondary = [c.p_value for c in contrasts if c.p_value is not None]

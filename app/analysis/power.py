@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cache
 from typing import TYPE_CHECKING
@@ -119,17 +120,88 @@ def simulate(study: Study, task: str, plan: Layout, assume: Assumptions, rng: np
     return replace(plan.answers, correct=(rng.random(len(p)) < p).astype(int).tolist())
 
 
+MEASURES = {"pairwise": ("answers",), "ranking": ("orderings", "whole order")}  # what each part's power is of
+
+
+@cache
+def _ranking_noise(agents: int) -> np.ndarray:
+    """Common random numbers for `ranking_odds_for`: the same noise for every log odds tried keeps the whole-order
+    accuracy a smooth, monotone function of it."""
+    import numpy as np
+
+    return np.random.default_rng(0).normal(0.0, 1.0, (4000, agents))
+
+
+def whole_order_accuracy(eta: float, sd: float, agents: int) -> float:
+    """The share of rankings with every robot in the true order, over participants and clips, when a person ranks
+    as Thurstone's model says: robot i's quality (agents - 1 - i) times the discriminability exp(eta + effect),
+    seen with standard normal noise, the effect normal with standard deviation `sd`."""
+    import numpy as np
+
+    nodes, weights = np.polynomial.hermite_e.hermegauss(20)
+    seen = np.arange(agents)[::-1] * np.exp(eta + sd * nodes)[:, None, None] + _ranking_noise(agents)
+    right = np.all(np.diff(seen, axis=2) < 0, axis=2).mean(axis=1)
+    return float(right @ weights / weights.sum())
+
+
+@cache
+def ranking_odds_for(accuracy: float, sd: float, agents: int) -> float:
+    """The log odds (of discriminability) at which a ranking part's whole-order accuracy is `accuracy`; at or
+    below chance (1/k!), the lowest tried."""
+    from scipy import optimize
+
+    low, high = -8.0, 8.0
+    if accuracy <= whole_order_accuracy(low, sd, agents):
+        return low
+    return float(optimize.brentq(lambda eta: whole_order_accuracy(eta, sd, agents) - accuracy, low, high))
+
+
+def simulate_rankings(
+    study: Study, plan: Layout, assume: Assumptions, rng: np.random.Generator
+) -> tuple[Answers, Answers]:
+    """One simulated study's rankings (Thurstone's model, scheme accuracies of the whole order), as the whole-order
+    answers and as their pairwise orderings (the report's ranking model)."""
+    import numpy as np
+
+    agents = next(len(part.agents) for part in study.parts if part.kind == "ranking")
+    sd = math.hypot(assume.participant_sd, assume.clip_sd)
+    eta = np.array([ranking_odds_for(assume.accuracy[s], sd, agents) for s in study.design.schemes])
+    person = rng.normal(0.0, assume.participant_sd, plan.participant_index.max() + 1)
+    clip = rng.normal(0.0, assume.clip_sd, plan.clips)
+    scale = np.exp(eta[plan.scheme_index] + person[plan.participant_index] + clip[plan.clip_index])
+    seen = np.arange(agents)[::-1] * scale[:, None] + rng.normal(0.0, 1.0, (len(scale), agents))
+    pairs = [(i, j) for i in range(agents) for j in range(i + 1, agents)]
+    right = np.stack([seen[:, i] > seen[:, j] for i, j in pairs], axis=1)  # ranking x pair
+    whole = replace(plan.answers, correct=right.all(axis=1).astype(int).tolist())
+    a = plan.answers
+
+    def each(column: Sequence[str]) -> list[str]:
+        return list(np.repeat(np.asarray(column), len(pairs)).tolist())
+
+    orderings = Answers(each(a.participant), each(a.clip), each(a.scheme), each(a.scenario), [""] * right.size,
+                        right.astype(int).ravel().tolist())  # fmt: skip
+    return whole, orderings
+
+
 def simulated_fits(
     study: Study, task: str, participants: int, assume: Assumptions, studies: int, seed: int
-) -> list[ModelResult]:
+) -> dict[str, list[ModelResult]]:
+    """The report's model fitted to `studies` simulated studies, per measure of the part (MEASURES): a ranking part
+    both by its pairwise orderings (the report's test) and by whole orders."""
     import numpy as np
 
     rng = np.random.default_rng([seed, participants])
     plan = layout(study, task, participants)
     schemes = list(study.design.schemes)
-    return [
-        fit_accuracy(simulate(study, task, plan, assume, rng), schemes, chance(study, task)) for _ in range(studies)
-    ]
+    fits: dict[str, list[ModelResult]] = {measure: [] for measure in MEASURES[task]}
+    for _ in range(studies):
+        if task == "pairwise":
+            fits["answers"].append(fit_accuracy(simulate(study, task, plan, assume, rng), schemes, 0.5))
+            continue
+        whole, orderings = simulate_rankings(study, plan, assume, rng)
+        fits["orderings"].append(fit_accuracy(orderings, schemes, 0.5))
+        fits["whole order"].append(fit_accuracy(whole, schemes, chance(study, task)))
+    return fits
 
 
 def power(results: list[ModelResult]) -> float:
@@ -340,17 +412,35 @@ def run_power(
     for task, accuracy in accuracies.items():
         assume = Assumptions(accuracy, participant_sd, clip_sd)
         print(f"\n{task}: accuracies " + ", ".join(f"{s} {a:.2f}" for s, a in accuracy.items()))
-        print(f"{'participants':>12}  {'power':>6}  {'± (Monte Carlo, 95%)':>20}")
-        rejections = []
+        measures = MEASURES[task]
+        if task == "ranking":
+            print("(of the whole order; the report tests the rankings' pairwise orderings, shown first)")
+        header = "".join(f"  {'power, ' + m:>18}  {'± (Monte Carlo, 95%)':>20}" for m in measures)
+        print(f"{'participants':>12}{header}")
+        rejections: dict[str, list[int]] = {m: [] for m in measures}
+        untested: dict[str, str] = {}  # measure -> why the design never gets a test, if it never does
         for n in grid:
-            value = power(simulated_fits(study, task, n, assume, studies, seed))
-            rejections.append(round(value * studies))
-            print(f"{n:>12}  {value:>6.2f}  {monte_carlo_error(value, studies):>20.2f}", flush=True)
+            fits = simulated_fits(study, task, n, assume, studies, seed)
+            line = f"{n:>12}"
+            for measure in measures:
+                if all(r.scheme_p is None for r in fits[measure]) and (n == grid[0] or measure in untested):
+                    untested[measure] = fits[measure][0].scheme_test or fits[measure][0].note
+                else:
+                    untested.pop(measure, None)
+                value = power(fits[measure])
+                rejections[measure].append(round(value * studies))
+                line += f"  {value:>18.2f}  {monte_carlo_error(value, studies):>20.2f}"
+            print(line, flush=True)
         if len(grid) < 3:
             print(f"too few numbers of participants for a curve: give a --max-participants of {3 * grid[-1]} or more")
             continue
-        for found in crossings(grid, rejections, studies, seed):
-            print(describe(found, task))
+        for measure in measures:
+            prefix = "" if len(measures) == 1 else f"{measure}: "
+            if measure in untested:
+                print(f"{prefix}no power at any N: the report would not test this design ({untested[measure]})")
+                continue
+            for found in crossings(grid, rejections[measure], studies, seed):
+                print(prefix + describe(found, task))
     print(f"(simulation seed {seed})", file=sys.stderr)
     return 0
 
@@ -359,7 +449,7 @@ def pilot_accuracies(url: str, study: Study) -> dict[str, dict[str, float]]:
     """Each part's accuracy per scheme as the report's model estimates it from a pilot's database (pilots, the
     admin's preview link, counted beside real participants)."""
     from app.analysis.exclusions import ExclusionRules
-    from app.analysis.report import tally_study
+    from app.analysis.report import ALL, tally_study
     from app.analysis.source import analysis_database
 
     db = analysis_database(url)
@@ -371,6 +461,8 @@ def pilot_accuracies(url: str, study: Study) -> dict[str, dict[str, float]]:
     for task in data.tasks():
         result = data.model(task)
         found = {e.scheme: e.accuracy for e in result.schemes}
+        if task == "ranking":  # the model's is of the orderings; power takes the whole order's, as --ranking does
+            found = {s: data.tally(task, ALL, s).accuracy or 0.0 for s in found}
         if result.estimable and len(found) == len(study.design.schemes):
             accuracies[task] = {s: min(max(a, 0.01), 0.99) for s, a in found.items()}
         else:

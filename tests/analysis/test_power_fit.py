@@ -4,11 +4,14 @@ on hand-made binomial counts, and the command's error for too few studies naming
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from app.analysis.power import Crossing, PowerCurve, crossings, describe, fit_power_curve, run_power
+
+STUDIES = Path(__file__).resolve().parents[2] / "studies"
 
 GRID = list(range(12, 121, 12))
 
@@ -100,3 +103,28 @@ def test_the_interval_covers_the_truth_of_a_curve():
         for found in (crossings(GRID, list(rng.binomial(100, expected)), 100, replicates=100)[0] for _ in range(40))
     )
     assert covered >= 34
+
+
+def test_rankings_are_simulated_as_people_rank_and_powered_both_ways(capsys):
+    """A ranking part's power is shown both for the report's test (the rankings' pairwise orderings) and for the
+    whole order. Each simulated ranking gives three orderings, its whole order right exactly when all three are,
+    at the whole-order accuracy asked for; the paper's design (two ranked sets per scheme) is never tested, and
+    `foil power` says so instead of fitting a curve to zeros."""
+    from app.analysis.power import Assumptions, layout, ranking_odds_for, simulate_rankings, whole_order_accuracy
+    from app.survey.study import load_study
+
+    study = load_study(STUDIES / "paper.toml")
+    assert whole_order_accuracy(ranking_odds_for(0.5, 1.1, 3), 1.1, 3) == pytest.approx(0.5, abs=1e-3)
+    assert whole_order_accuracy(-8.0, 1.1, 3) == pytest.approx(1 / 6, abs=0.02)  # no discriminability: chance
+    plan = layout(study, "ranking", 400)
+    fixed = Assumptions({"adaptive": 0.6, "nfirst": 0.3}, participant_sd=0.0, clip_sd=0.0)  # every ranking alike
+    whole, orderings = simulate_rankings(study, plan, fixed, np.random.default_rng(1))
+    right = np.asarray(orderings.correct).reshape(-1, 3)
+    assert len(orderings.correct) == 3 * len(whole.correct) and (right.all(axis=1) == np.asarray(whole.correct)).all()
+    scheme = np.asarray(whole.scheme)
+    assert np.mean(np.asarray(whole.correct)[scheme == "adaptive"]) == pytest.approx(0.6, abs=0.05)
+    assert run_power(study_path=str(STUDIES / "paper.toml"), pairwise=None, ranking="adaptive=0.6,nfirst=0.3",
+                     pilot=None, participant_sd=1.0, clip_sd=0.5, largest=24, studies=10, seed=0) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "power, orderings" in out and "power, whole order" in out
+    assert "orderings: no power at any N: the report would not test this design" in out and "degrees of freedom" in out
