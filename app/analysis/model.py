@@ -9,13 +9,13 @@ log terms; `foil export` writes an R script that fits that model for readers who
 
 Why this estimator (docs/analysis.md, "The model"): a logistic mixed model with crossed random effects is the
 field's convention, but statsmodels' only such model rejects a true null in about half of simulated studies, and
-with a handful of clips per scheme a Wald test on any fit of it is too liberal. The two-way cluster-robust
-covariance (Cameron, Gelbach and Miller 2011) with the CR2 small-sample correction of each part (Bell and
-McCaffrey 2002), each test read against the small-sample reference distribution of that very test: a t test on
-Satterthwaite degrees of freedom (Bell and McCaffrey 2002; Pustejovsky and Tipton 2018, as R's clubSandwich
-computes them), extended here to the two-way sum, and for several contrasts at once the approximate Hotelling T²
-test (clubSandwich's HTZ; Tipton and Pustejovsky 2015). The degrees of freedom count the clips and participants
-that inform each contrast: a scheme with 3 clips against one with 12 gets about 3, not 14
+with a handful of clips per scheme a Wald test on any fit of it is too liberal. Cluster-robust covariances with the
+CR2 small-sample correction (Bell and McCaffrey 2002), two-way (Cameron, Gelbach and Miller 2011) or by clip,
+whichever is larger for the contrast (`_Robust`), each test read against the small-sample reference distribution of
+that very test: a t test on Satterthwaite degrees of freedom (Bell and McCaffrey 2002; Pustejovsky and Tipton 2018,
+as R's clubSandwich computes them), extended here to the two-way sum, and for several contrasts at once the
+approximate Hotelling T² test (clubSandwich's HTZ; Tipton and Pustejovsky 2015). The degrees of freedom count the
+clips and participants that inform each contrast: a scheme with 3 clips against one with 12 gets about 3, not 14
 (benchmarks/bench_model.py measures the error rates).
 
 A comparison the design cannot test is named as such with its reason, never tested on errors that assume
