@@ -88,6 +88,7 @@ class Contrast:
     test: str = ""  # the test that gave p_value, in words
     primary: bool = False  # the part's preregistered test (the schemes differ), read unadjusted
     note: str = ""
+    or_p_value: float | None = None  # the odds ratio's own t test, on the log-odds scale (its interval's test)
 
 
 @dataclass(frozen=True)
@@ -281,7 +282,10 @@ class _Robust:
         """The test's degrees of freedom, or None with why `what` cannot be tested."""
         chosen = self._choose(constraints)
         if chosen is None:
-            return None, f"not tested: the answers under {what} hold no variation (all alike) to measure"
+            return None, (
+                f"not tested: the answers under {what} show no spread (between their clips, participants or answers) "
+                "to measure its uncertainty by"
+            )
         df = _wishart_df(chosen[0], self.x, self.weight, self.bread, constraints)
         if df < MIN_DF:
             return None, (
@@ -512,7 +516,8 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
             se = math.sqrt(float(robust.variance(gradient[None, :])[0, 0])) / (1 - bounded**2)
             quantile = _t_quantile(df)
             or_df, _ = degrees(log_odds[None, :], what)
-            or_half = _t_quantile(or_df) * math.sqrt(float(robust.variance(log_odds[None, :])[0, 0])) if or_df else 0.0
+            or_se = math.sqrt(float(robust.variance(log_odds[None, :])[0, 0])) if or_df else 0.0
+            or_half = _t_quantile(or_df) * or_se if or_df else 0.0
             contrasts.append(
                 Contrast(
                     scheme,
@@ -526,6 +531,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
                     _t_p(math.atanh(bounded) / se, df),
                     df,
                     test=f"t test of the difference on {df:.1f} degrees of freedom (Satterthwaite)",
+                    or_p_value=_t_p(log_or / or_se, or_df) if or_df else None,
                 )
             )
     testable = [s for s in present if clips_of[s] >= 2]

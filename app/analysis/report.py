@@ -332,6 +332,7 @@ def model_contrast_rows(data: ReportData) -> list[dict[str, Any]]:
             "odds_ratio": _number(c.odds_ratio),
             "or_ci95_low": _number(c.or_low),
             "or_ci95_high": _number(c.or_high),
+            "or_p_value": _significant(c.or_p_value),
             "test": c.test,
             "df": _number(c.df, 2),
             "p_value": _significant(c.p_value),

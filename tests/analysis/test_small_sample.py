@@ -215,6 +215,8 @@ def test_each_interval_agrees_with_its_p_and_stays_in_range():
             if c.p_value is not None and c.low is not None and c.high is not None:
                 assert -1 < c.low <= c.difference <= c.high < 1
                 assert (c.p_value < 0.05) == (c.low > 0 or c.high < 0)
+            if c.or_p_value is not None and c.or_low is not None and c.or_high is not None:
+                assert (c.or_p_value < 0.05) == (c.or_low > 1 or c.or_high < 1)  # the odds ratio's own test
         for e in fit.schemes:
             if e.p_chance is not None and e.low is not None and e.high is not None:
                 assert 0 < e.low <= e.accuracy <= e.high < 1
