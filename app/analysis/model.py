@@ -157,6 +157,7 @@ class _Part:
 
     sign: float
     groups: NDArray[np.intp]  # answer -> cluster
+    alone: bool  # each answer its own cluster
     cross: Array  # cluster x k x k: X_g' W_g X_g
     adjust: Array  # cluster x k x k: B^1/2 f(C_g) B^1/2, so that B X_g' A_g e_g = adjust_g X_g' e_g (CR2)
 
@@ -170,14 +171,14 @@ def _part(sign: float, groups: NDArray[np.intp], x: Array, weight: Array, bread:
     import numpy as np
 
     k = x.shape[1]
-    members = (groups[:, None] == np.arange(int(groups.max()) + 1)).astype(float).T  # cluster x answer
-    cross = (members @ ((x * weight[:, None])[:, :, None] * x[:, None, :]).reshape(len(x), k * k)).reshape(-1, k, k)
+    cross = np.zeros((int(groups.max()) + 1, k, k))
+    np.add.at(cross, groups, (x * weight[:, None])[:, :, None] * x[:, None, :])
     values, vectors = np.linalg.eigh(bread)
     root = (vectors * np.sqrt(values)) @ vectors.T
     leverage, axes = np.linalg.eigh(root @ cross @ root)
     scale = np.where(1 - leverage > 1e-8, np.maximum(1 - leverage, 1e-8) ** -0.5, 0.0)
     adjust = root @ ((axes * scale[:, None, :]) @ axes.transpose(0, 2, 1)) @ root
-    return _Part(sign, groups, cross, adjust)
+    return _Part(sign, groups, len(cross) == len(x), cross, adjust)
 
 
 def _covariance(parts: list[_Part], x: Array, residual: Array) -> Array:
@@ -219,16 +220,21 @@ def _wishart_df(parts: list[_Part], x: Array, weight: Array, bread: Array, const
             "kl,tslk->st", bread, k_sum
         )
         overlap = np.zeros((q, q, q, q))
-        for (si, li, gi), (sj, lj, gj) in itertools.product(zip(signs, loads, groups, strict=True), repeat=2):
-            cells = np.unique(gi * (int(gj.max()) + 1) + gj, return_inverse=True)[1]
-            n = np.zeros((int(cells.max()) + 1, q, q))
-            np.add.at(n, cells, li[:, :, None] * lj[:, None, :])
+        for (si, li, pi), (sj, lj, pj) in itertools.product(zip(signs, loads, parts, strict=True), repeat=2):
+            n = li[:, :, None] * lj[:, None, :]  # each answer's own cell: where either part is the answers'
+            if not (pi.alone or pj.alone):
+                cells = (
+                    pi.groups if pi is pj else np.unique(pi.groups * len(pj.cross) + pj.groups, return_inverse=True)[1]
+                )
+                n = np.zeros((int(cells.max()) + 1, q, q))
+                np.add.at(n, cells, li[:, :, None] * lj[:, None, :])
             overlap += si * sj * np.einsum("cst,cuv->stuv", n, n)
         y = sum(
             s * np.einsum("is,iku->isuk", load, t[g]) for s, load, t, g in zip(signs, loads, ts, groups, strict=True)
         )
-        mixed = np.einsum("isuk,kl,itvl->stuv", y, bread, y)
-        second = np.einsum("kl,tvlm,mn,usnk->stuv", bread, k_sum, bread, k_sum)
+        mixed = np.einsum("isuk,itvk->stuv", y @ bread, y)
+        weighted = np.einsum("kl,tvlm->tvkm", bread, k_sum)  # B K^tv
+        second = np.einsum("tvkm,usmk->stuv", weighted, weighted)  # tr(B K^tv B K^us)
         return expected, overlap - mixed - mixed.transpose(2, 3, 0, 1) + second
 
     expected, _ = moments(constraints)
@@ -395,11 +401,12 @@ def permutation_p(answers: Answers, scheme: str, reference: str) -> tuple[float 
     return float(np.mean(np.asarray(found) >= observed - 1e-12)), how
 
 
-def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> ModelResult:
+def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float, primary_only: bool = False) -> ModelResult:
     """Per scheme: accuracy with its 95% interval and a test against `chance`; per pair of schemes: the
     difference in accuracy and the odds ratio with 95% intervals, both from one test; and the test that the
     schemes differ, the part's primary test (with two schemes, their one contrast). Tests against chance and,
     with three schemes or more, the pairwise contrasts are secondary: each family is Holm-adjusted.
+    `primary_only` (for `foil power`, which refits thousands of studies) leaves the secondary tests out.
 
     A scheme's accuracy is the mean of the fitted probabilities of its answers, which for this model is its raw
     accuracy (Table 1): what the model adds is an interval that counts participants and clips, not answers."""
@@ -462,7 +469,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
         rows = x[:, k] == 1
         accuracy = float(fitted[rows].mean())
         gradients[scheme] = (weight[rows, None] * x[rows]).mean(axis=0)
-        reason = few_clips([scheme])
+        reason = few_clips([scheme]) or ("not asked for" if primary_only else "")
         df, reason = (None, reason) if reason else degrees(gradients[scheme][None, :], scheme)
         if df is None:
             estimates.append(
@@ -489,7 +496,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float) -> Mod
 
     contrasts: list[Contrast] = []
     for i, reference in enumerate(present):
-        for j in range(i + 1, len(present)):
+        for j in range(i + 1, len(present) if len(present) == 2 or not primary_only else i + 1):
             scheme = present[j]
             log_odds = np.zeros(x.shape[1])
             log_odds[j], log_odds[i] = 1, -1

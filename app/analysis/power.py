@@ -196,11 +196,11 @@ def simulated_fits(
     fits: dict[str, list[ModelResult]] = {measure: [] for measure in MEASURES[task]}
     for _ in range(studies):
         if task == "pairwise":
-            fits["answers"].append(fit_accuracy(simulate(study, task, plan, assume, rng), schemes, 0.5))
+            fits["answers"].append(fit_accuracy(simulate(study, task, plan, assume, rng), schemes, 0.5, True))
             continue
         whole, orderings = simulate_rankings(study, plan, assume, rng)
-        fits["orderings"].append(fit_accuracy(orderings, schemes, 0.5))
-        fits["whole order"].append(fit_accuracy(whole, schemes, chance(study, task)))
+        fits["orderings"].append(fit_accuracy(orderings, schemes, 0.5, True))
+        fits["whole order"].append(fit_accuracy(whole, schemes, chance(study, task), True))
     return fits
 
 
