@@ -180,6 +180,21 @@ class ManifestClip(BaseModel):
         return data
 
 
+class ClosePair(BaseModel):
+    """Two agents the study's evaluation episodes could not tell apart, compared again on more test episodes, both
+    from the same starting states (search/bundle/truth.py); for researchers. Undecided: the clips' `better` is the
+    higher mean, within noise."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    agents: Annotated[list[str], Field(min_length=2, max_length=2)]
+    difference: float  # mean reward of agents[0] minus agents[1] over the paired episodes
+    ci95: Annotated[list[float], Field(min_length=2, max_length=2)]  # simultaneous over the planned looks
+    p: Annotated[float, Field(ge=0, le=1)]  # paired t-test, Bonferroni-adjusted over the planned looks
+    episodes: Annotated[int, Field(ge=2)]  # paired episodes of the last look
+    decided: bool  # the interval excludes 0
+
+
 class Manifest(BaseModel):
     model_config = ConfigDict(extra="ignore", frozen=True)
 
@@ -194,6 +209,7 @@ class Manifest(BaseModel):
     # per pair and fixed scenario: how representative it is of the task's distribution (researchers only)
     representativeness: list[dict[str, Any]] = []
     world: dict[str, Any] | None = None  # World.to_manifest() of the world the clips show; absent: the crowd
+    close_pairs: list[ClosePair] = []  # pairs the study's episodes left undecided; absent when there are none
 
     @field_validator("world")
     @classmethod
@@ -202,11 +218,14 @@ class Manifest(BaseModel):
         return world
 
     @model_serializer(mode="wrap")
-    def _crowd_leaves_world_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        """A crowd manifest leaves `world` out, so it reads byte for byte as it did before worlds had a key."""
+    def _leaves_empty_keys_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """A crowd manifest leaves `world` out, and one without close pairs `close_pairs`, so it reads byte for byte
+        as it did before they had a key."""
         data: dict[str, Any] = handler(self)
         if self.world is None:
             data.pop("world", None)
+        if not self.close_pairs:
+            data.pop("close_pairs", None)
         return data
 
     def shown_world(self) -> World:

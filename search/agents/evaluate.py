@@ -21,8 +21,12 @@ from search.sim.world import WorldConfig
 TEST_STREAM = 1
 
 
-def evaluate(policy: Policy, episodes: int = 500, seed: int = 0, config: WorldConfig | None = None) -> dict:
-    """The ``foil eval --json`` object for ``policy`` on ``episodes`` test episodes of ``config``'s world."""
+def evaluate(
+    policy: Policy, episodes: int = 500, seed: int = 0, config: WorldConfig | None = None, per_episode: bool = False
+) -> dict:
+    """The ``foil eval --json`` object for ``policy`` on ``episodes`` test episodes of ``config``'s world; with
+    ``per_episode``, each episode's reward too (``episode_rewards``: episode i starts from the seed's i-th drawn
+    state, the same for every agent, so a bundle can pair them)."""
     if episodes < 2:
         raise ValueError("evaluation needs at least 2 episodes (for a confidence interval)")
     config = config or WorldConfig()
@@ -38,7 +42,7 @@ def evaluate(policy: Policy, episodes: int = 500, seed: int = 0, config: WorldCo
     success = outcome == world.SUCCESS
     half_width = 1.96 * returns.std(ddof=1) / math.sqrt(episodes)
     mean = float(returns.mean())
-    return {
+    result = {
         "agent": getattr(policy, "name", type(policy).__name__),
         "episodes": episodes,
         "success_rate": float(success.mean()),
@@ -49,6 +53,7 @@ def evaluate(policy: Policy, episodes: int = 500, seed: int = 0, config: WorldCo
         "nav_time_mean": float(state.event_time[success, 0].mean()) if success.any() else None,
         "time_limit": float(config.time_limit),
     }
+    return result | ({"episode_rewards": returns.tolist()} if per_episode else {})
 
 
 def format_result(result: dict) -> str:

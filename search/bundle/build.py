@@ -1,8 +1,9 @@
 """`foil bundle STUDY.toml --out DIR`: everything a study serves, built from the study file's `[build]` table.
 
 The table names the agents, scenarios, schemes (a solver with its budget and seed) and sets of clips; each set
-says which survey parts its clips feed. The builder evaluates every agent (the ground truth `better`), runs one
-search per clip (or reuses a cached one whose inputs are unchanged), renders the best summary of each with a
+says which survey parts its clips feed. The builder evaluates every agent (the ground truth `better`; a pair the
+study's episodes cannot tell apart is compared on more paired episodes and named, `search.bundle.truth`), runs
+one search per clip (or reuses a cached one whose inputs are unchanged), renders the best summary of each with a
 seeded, recorded mapping of agents to robot numbers (no number names two agents anywhere in the bundle), audits
 each clip (does it visibly show the better robot as better? judged by the bots' observer, `app.visible`; a
 warning line per misleading clip), and writes manifest.json
@@ -34,6 +35,7 @@ from typing import Any
 from app.formats import (
     MANIFEST_FORMAT,
     ClipAudit,
+    ClosePair,
     Manifest,
     ManifestClip,
     ManifestReel,
@@ -43,6 +45,7 @@ from app.formats import (
 from app.survey.clip_length import clip_shape
 from app.visible import VisibleClip, VisibleReels, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
+from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
 from search.clips.render import RenderOptions, robot_label
 from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
 from search.solvers.runner import SearchJob, in_processes, run_search, solver_config_class, write_outputs
@@ -206,39 +209,94 @@ class Cache:
 def evaluate_agents(
     spec: BuildSpec, domain: Domain, cache: Cache, log, world: dict | None = None, workers: int = 1
 ) -> dict[str, dict]:
-    """Each agent's `foil eval --json` object (the manifest's ground truth) in the ``world`` settings, computed once
-    per input, ``workers`` at a time; in a world whose agents act in their scenario's world, in the first scenario
-    they are shown in."""
-    episodes, seed, world = spec.eval_episodes, spec.eval_seed, world or {}
+    """Each agent's `foil eval --json` object on the study's episodes (the manifest's ground truth) in the ``world``
+    settings, with its per-episode rewards where the world gives them (`Domain.evaluate_episodes`)."""
+    found = evaluate_runs(
+        spec, domain, cache, log, [(agent, spec.eval_episodes) for agent in spec.agents], world, workers
+    )
+    return {agent: found[agent, spec.eval_episodes] for agent in spec.agents}
+
+
+def evaluate_runs(
+    spec: BuildSpec, domain: Domain, cache: Cache, log, runs: list[tuple[str, int]], world: dict | None, workers: int
+) -> dict[tuple[str, int], dict]:
+    """Each (agent, episodes)'s evaluation at the study's eval seed, computed once per input, ``workers`` at a time;
+    in a world whose agents act in their scenario's world, in the first scenario they are shown in."""
+    seed, world = spec.eval_seed, world or {}
     todo, inputs_of = {}, {}
-    for agent in spec.agents:
+    for agent, episodes in runs:
         shown = [name for clip_set in spec.sets if agent in clip_set.agents for name in clip_set.scenarios]
         scenario = domain.eval_scenario(shown)
-        inputs = {"agent": agent_identity(agent, domain), "episodes": episodes, "seed": seed} | (
+        inputs = {"agent": agent_identity(agent, domain), "episodes": episodes, "seed": seed, "per_episode": True} | (
             {"world": world} if world else {}
         )
         if scenario is not None:
             inputs["scenario"] = domain.scenario_dict(scenario, world)
-        inputs_of[agent] = inputs
+        inputs_of[agent, episodes] = inputs
+        name = agent if episodes == spec.eval_episodes else f"{agent} on {episodes} episodes"
         if cache.valid("eval", inputs, "eval.json"):
-            log(f"eval {agent}: cached")
+            log(f"eval {name}: cached")
         else:
-            todo[agent] = (_evaluate, (domain.name, agent, episodes, seed, world, scenario))
-    for agent, (result, seconds) in in_processes(todo, workers):
-        folder = cache.store("eval", inputs_of[agent])
+            todo[agent, episodes] = (_evaluate, (domain.name, agent, episodes, seed, world, scenario))
+    for (agent, episodes), (result, seconds) in in_processes(todo, workers):
+        folder = cache.store("eval", inputs_of[agent, episodes])
         (folder / "eval.json").write_text(json.dumps(result, indent=1))
-        cache.seal("eval", inputs_of[agent])
-        log(f"eval {agent}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} ({seconds:.1f} s)")
+        cache.seal("eval", inputs_of[agent, episodes])
+        name = agent if episodes == spec.eval_episodes else f"{agent} on {episodes} episodes"
+        log(f"eval {name}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} ({seconds:.1f} s)")
     return {
-        agent: json.loads((cache.path("eval", inputs_of[agent]) / "eval.json").read_text()) for agent in spec.agents
+        run: json.loads((cache.path("eval", inputs) / "eval.json").read_text()) for run, inputs in inputs_of.items()
     }
 
 
 def _evaluate(domain: str, agent: str, episodes: int, seed: int, world: dict, scenario: str | None):
     """One agent's evaluation and the seconds it took (in a worker process: the domain is found by name)."""
     started = time.perf_counter()
-    result = domain_named(domain).evaluate(agent, episodes, seed, world, scenario) | {"agent": agent}
+    result = domain_named(domain).evaluate_episodes(agent, episodes, seed, world, scenario) | {"agent": agent}
     return result, time.perf_counter() - started
+
+
+def close_pairs(
+    spec: BuildSpec,
+    pairs: list[tuple[str, str]],
+    evaluations: dict[str, dict],
+    domain: Domain,
+    cache: Cache,
+    log,
+    world: dict | None = None,
+    workers: int = 1,
+) -> dict[tuple[str, str], PairedComparison]:
+    """The pairs shown together that the study's own episodes cannot tell apart, each compared on more paired
+    episodes until decided or at the cap (`search.bundle.truth`), with a line each (a warning for an undecided
+    one, naming agents only). Pairs decided on the study's episodes are left out: their truth is as before."""
+    if any("episode_rewards" not in evaluations[agent] for pair in pairs for agent in pair):
+        return {}  # a world without per-episode rewards: mean rewards alone
+
+    def rewards(wanted: set[tuple[str, int]]) -> dict[tuple[str, int], list[float]]:
+        more = sorted(run for run in wanted if run[1] != spec.eval_episodes)  # the first look's are in hand
+        found = evaluate_runs(spec, domain, cache, log, more, world, workers) if more else {}
+        found |= {(agent, n): evaluations[agent] for agent, n in wanted if n == spec.eval_episodes}
+        return {run: result["episode_rewards"] for run, result in found.items()}
+
+    compared = compare_pairs(pairs, spec.eval_episodes, rewards)
+    close = {pair: c for pair, c in compared.items() if c.episodes > spec.eval_episodes or not c.decided}
+    for comparison in close.values():
+        log(describe_close_pair(comparison))
+    return close
+
+
+def shown_pairs(jobs: list[ClipJob]) -> list[tuple[str, str]]:
+    """Every pair of agents some clip shows together, once, in the order of the first clip showing it."""
+    pairs: list[tuple[str, str]] = []
+    for job in jobs:
+        if job.pair not in pairs and job.pair[::-1] not in pairs:
+            pairs.append(job.pair)
+    return pairs
+
+
+def without_episodes(evaluation: dict) -> dict:
+    """An evaluation as `foil eval --json` prints it, for the manifest: without its per-episode rewards."""
+    return {key: value for key, value in evaluation.items() if key != "episode_rewards"}
 
 
 def _describe(job: ClipJob) -> str:
@@ -280,11 +338,18 @@ def run_searches(jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log,
         log(f"{_describe(job)}: {seconds:.1f} s")
 
 
-def better_agent(pair: tuple[str, str], evaluations: dict[str, dict]) -> str:
-    """The ground truth: the agent with the higher mean test reward (the paper ranks its agents by it)."""
-    first, second = (evaluations[a]["reward_mean"] for a in pair)
+def better_agent(
+    pair: tuple[str, str], evaluations: dict[str, dict], close: dict[tuple[str, str], PairedComparison] | None = None
+) -> str:
+    """The ground truth: the agent with the higher mean test reward (the paper ranks its agents by it); for a close
+    pair, over the most paired episodes it was evaluated on."""
+    comparison = (close or {}).get(pair) or (close or {}).get(pair[::-1])
+    if comparison is not None:  # the mean paired difference, first minus second
+        pair, (first, second) = comparison.agents, (comparison.difference, 0.0)
+    else:
+        first, second = (evaluations[a]["reward_mean"] for a in pair)
     if first == second:
-        raise BuildError(f"{pair[0]} and {pair[1]} have the same mean reward ({first}); no better agent to record")
+        raise BuildError(f"{pair[0]} and {pair[1]} have the same mean reward; no better agent to record")
     return pair[0] if first > second else pair[1]
 
 
@@ -373,6 +438,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     domain = study_domain(spec)
     evaluations = evaluate_agents(spec, domain, cache, log, world, workers)
+    close = close_pairs(spec, shown_pairs(jobs), evaluations, domain, cache, log, world, workers)
     run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
     scenario_reports = representativeness(spec, cache, log, world, workers)
     sources = {
@@ -388,23 +454,27 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         else:
             renders.append((job, sources[job.id][0], out / "clips" / f"{job.id}.mp4"))
     render_clips(renders, spec.render, cache, log, workers)
-    clips = [manifest_clip(job, sources[job.id], out, evaluations, domain.world(job.scenario), log) for job in jobs]
+    clips = [
+        manifest_clip(job, sources[job.id], out, evaluations, domain.world(job.scenario), log, close) for job in jobs
+    ]
     (out / "study.toml").write_text(text, encoding="utf-8")
     wanted = {path for c in clips for path in clip_files(c)} | {"study.toml"}
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
-    write_gallery(out, clips, evaluations, scenario_reports)
+    compared = [comparison.to_manifest() for comparison in close.values()]
+    write_gallery(out, clips, evaluations, scenario_reports, compared)
     study_shows = domain.world(spec.sets[0].scenarios[0])  # the crowd's words are the default: left out
     manifest = Manifest(
         format=MANIFEST_FORMAT,
         label_seed=spec.seed,
         clips=clips,
-        agents=evaluations,
+        agents={agent: without_episodes(evaluation) for agent, evaluation in evaluations.items()},
         sources={agent: domain.agent_source(agent, world or {}) for agent in spec.agents},
         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
         representativeness=scenario_reports,
         world=None if study_shows == World() else study_shows.to_manifest(),
+        close_pairs=[ClosePair.model_validate(pair) for pair in compared],
     )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
@@ -443,7 +513,11 @@ def job_summaries(job: ClipJob, folder: Path, out: Path, domain: Domain) -> list
 
 
 def clip_audit(
-    job: ClipJob, sources: list[list[Path]], evaluations: dict[str, dict], shown: World
+    job: ClipJob,
+    sources: list[list[Path]],
+    evaluations: dict[str, dict],
+    shown: World,
+    close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> tuple[list[str], list[str], dict[str, str]]:
     """A clip's agents and their labels in on-screen order, and what it visibly shows against the ground truth
     (`app.visible.audit`; a pair of reels by each agent's moments)."""
@@ -456,21 +530,34 @@ def clip_audit(
     else:
         segments = [[json.loads(path.read_text()) for path in sources[k]] for k in order]
         visible = VisibleReels.of_summaries(segments, labels, shown)
-    return agents, labels, audit(visible, labels[agents.index(better_agent(job.pair, evaluations))])
+    return agents, labels, audit(visible, labels[agents.index(better_agent(job.pair, evaluations, close))])
 
 
 def manifest_clip(
-    job: ClipJob, sources: list[list[Path]], out: Path, evaluations: dict[str, dict], shown: World, log
+    job: ClipJob,
+    sources: list[list[Path]],
+    out: Path,
+    evaluations: dict[str, dict],
+    shown: World,
+    log,
+    close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> ManifestClip:
     """A clip's manifest entry: agents and labels in on-screen order, ground truth, audit (a warning line when it
-    misleads), what it cost, and its file (or each agent's reel)."""
+    misleads; for a pair the evaluation cannot decide, one that names neither robot as better), what it cost, and
+    its file (or each agent's reel)."""
     order = sorted(range(2), key=lambda k: job.numbers[k])
-    agents, labels, shown_audit = clip_audit(job, sources, evaluations, shown)
-    better = better_agent(job.pair, evaluations)
+    agents, labels, shown_audit = clip_audit(job, sources, evaluations, shown, close)
+    better = better_agent(job.pair, evaluations, close)
     reels = len(sources) > 1
     data = json.loads(sources[0][0].read_text())
     files = [f"clips/{job.id}.reel{k}.mp4" for k in order] if reels else [f"clips/{job.id}.mp4"]
-    if shown_audit["shows"] != "better":
+    undecided = [c for c in (close or {}).values() if set(c.agents) == set(job.pair) and not c.decided]
+    if shown_audit["shows"] != "better" and undecided:
+        log(
+            f"warning: clip {job.id} is misleading against a ground truth that rests on a coin toss: "
+            f"{job.pair[0]} and {job.pair[1]} differ by less than the evaluation can decide"
+        )
+    elif shown_audit["shows"] != "better":
         log(
             f"warning: clip {job.id} is misleading: it shows the better robot {better} "
             f"({labels[agents.index(better)]}) as {'no better' if shown_audit['shows'] == 'tie' else 'worse'}: "
@@ -643,9 +730,14 @@ def describe_representativeness(report: dict) -> str:
 
 
 def write_gallery(
-    out: Path, clips: list[ManifestClip], evaluations: dict[str, dict], scenario_reports: list[dict]
+    out: Path,
+    clips: list[ManifestClip],
+    evaluations: dict[str, dict],
+    scenario_reports: list[dict],
+    close: list[dict] | None = None,
 ) -> None:
-    """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward."""
+    """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward, and
+    the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better robot for."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
     templates = Environment(
@@ -655,6 +747,12 @@ def write_gallery(
         keep_trailing_newline=True,
     )
     page = templates.get_template("gallery.html").render(
-        clips=clips, evaluations=evaluations, zip=zip, scenarios=scenario_reports, describe=describe_representativeness
+        clips=clips,
+        evaluations=evaluations,
+        zip=zip,
+        scenarios=scenario_reports,
+        describe=describe_representativeness,
+        close=close or [],
+        describe_close=lambda pair: describe_close_pair(PairedComparison.from_manifest(pair)),
     )
     (out / "index.html").write_text(page, encoding="utf-8")

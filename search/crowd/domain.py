@@ -150,14 +150,19 @@ class CrowdDomain(Domain):
 
         return rebuild(summary)
 
-    def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+    def evaluate(
+        self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None, per_episode: bool = False
+    ) -> dict:
         """In the world the agent brings (an imported checkpoint's), under the ``world`` settings given."""
         from search.agents.evaluate import evaluate
         from search.agents.policies import comparison_world, load_policy
         from search.sim.world import WorldConfig
 
         config = WorldConfig.from_dict(comparison_world([agent], world))
-        return evaluate(load_policy(agent), episodes=episodes, seed=seed, config=config)
+        return evaluate(load_policy(agent), episodes=episodes, seed=seed, config=config, per_episode=per_episode)
+
+    def evaluate_episodes(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+        return self.evaluate(agent, episodes, seed, world, scenario, per_episode=True)
 
     def describe_evaluation(self, result: dict) -> str:
         from search.agents.evaluate import format_result

@@ -149,16 +149,23 @@ class GymDomain(Domain):
         found = self.load(scenario)
         return load_adapter(found.adapter, found.settings)
 
-    def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+    def evaluate(
+        self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None, per_episode: bool = False
+    ) -> dict:
         adapter = self.adapter(scenario)
         adapter = type(adapter)(adapter.settings | world)
-        return self.evaluation(self.agent(agent, adapter), episodes, seed, adapter)
+        return self.evaluation(self.agent(agent, adapter), episodes, seed, adapter, per_episode)
 
-    def evaluation(self, agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> dict:
+    def evaluate_episodes(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+        return self.evaluate(agent, episodes, seed, world, scenario, per_episode=True)
+
+    def evaluation(
+        self, agent: GymAgent, episodes: int, seed: int, adapter: Adapter, per_episode: bool = False
+    ) -> dict:
         """The test episodes, one at a time in the adapter's environment."""
         from search.gym.evaluate import evaluate
 
-        return evaluate(agent, episodes, seed, adapter)
+        return evaluate(agent, episodes, seed, adapter, per_episode)
 
     def describe_evaluation(self, result: dict) -> str:
         from search.gym.evaluate import format_result

@@ -25,8 +25,9 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return (centre - half) / (1 + z * z / n), (centre + half) / (1 + z * z / n)
 
 
-def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> dict:
-    """The ``foil eval --json`` object of ``episodes`` test episodes, one at a time in the adapter's environment."""
+def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter, per_episode: bool = False) -> dict:
+    """The ``foil eval --json`` object of ``episodes`` test episodes, one at a time in the adapter's environment;
+    with ``per_episode``, each episode's reward too (``episode_rewards``)."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
     env = adapter.make()
@@ -41,7 +42,10 @@ def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> dic
         rewards.append(total)
         steps.append(taken)
     limit = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None
-    return episodes_result(agent.name, seed, events, rewards, steps, adapter.dt, limit * adapter.dt if limit else None)
+    result = episodes_result(
+        agent.name, seed, events, rewards, steps, adapter.dt, limit * adapter.dt if limit else None
+    )
+    return result | ({"episode_rewards": rewards} if per_episode else {})
 
 
 def episodes_result(

@@ -61,11 +61,11 @@ class HighwayDomain(GymDomain):
 
         validate_run(run_dir, every)
 
-    def evaluation(self, agent, episodes: int, seed: int, adapter: Adapter) -> dict:
+    def evaluation(self, agent, episodes: int, seed: int, adapter: Adapter, per_episode: bool = False) -> dict:
         """On the batched kernel: the same test episodes and result, many episodes at a time."""
         from search.highway.evaluate import evaluate
 
-        return evaluate(agent, episodes, seed, adapter)
+        return evaluate(agent, episodes, seed, adapter, per_episode=per_episode)
 
     def problem(self, agents, state, reward, adapter):
         """On the batched kernel where it covers the scenario (else highway-env, with a one-line notice)."""

@@ -13,11 +13,19 @@ from search.highway.batch import make_batch
 from search.highway.env import DURATION_S
 
 
-def evaluate(agent: GymAgent, episodes: int, seed: int = 0, adapter: Adapter | None = None, batch: int = 64) -> dict:
+def evaluate(
+    agent: GymAgent,
+    episodes: int,
+    seed: int = 0,
+    adapter: Adapter | None = None,
+    batch: int = 64,
+    per_episode: bool = False,
+) -> dict:
     """Rates, mean reward and their 95% intervals over ``episodes`` test episodes, ``batch`` of them stepped at
-    once on the highway kernel (search.highway.batch). The agent still acts on one observation at a time: its
-    network's results depend on the batch around an observation in the last bits, and one at a time they are
-    the ones a lone highway-env episode gets."""
+    once on the highway kernel (search.highway.batch); with ``per_episode``, each episode's reward too
+    (``episode_rewards``). The agent still acts on one observation at a time: its network's results depend on the
+    batch around an observation in the last bits, and one at a time they are the ones a lone highway-env episode
+    gets."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
     adapter = adapter or HighwayAdapter()
@@ -46,4 +54,5 @@ def evaluate(agent: GymAgent, episodes: int, seed: int = 0, adapter: Adapter | N
         rewards.extend(totals)
         lengths.extend(steps.tolist())
     duration = float(adapter.settings.get("duration", DURATION_S))
-    return episodes_result(agent.name, seed, events, rewards, lengths, adapter.dt, duration * adapter.dt)
+    result = episodes_result(agent.name, seed, events, rewards, lengths, adapter.dt, duration * adapter.dt)
+    return result | ({"episode_rewards": rewards} if per_episode else {})

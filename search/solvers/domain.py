@@ -159,6 +159,12 @@ class Domain(ABC):
         """The agent's ``foil eval --json`` object (success, collision, timeout rates, mean reward and its 95%
         interval), in ``scenario``'s world when given."""
 
+    def evaluate_episodes(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
+        """``evaluate``'s object with each episode's reward (``episode_rewards``; episode i starts alike for every
+        agent at one seed), so the bundle compares two agents episode by episode (search/bundle/truth.py). Default:
+        without them, and the bundle compares mean rewards alone."""
+        return self.evaluate(agent, episodes, seed, world, scenario)
+
     @abstractmethod
     def describe_evaluation(self, result: dict) -> str:
         """``foil eval``'s lines for a person (``--json`` prints the object itself)."""
