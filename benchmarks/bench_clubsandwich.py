@@ -27,8 +27,8 @@ sys.path.insert(0, str(REPO))
 
 import numpy as np  # noqa: E402
 
-from app.analysis.model import _covariance, _part, _Robust, _scheme_test, _wishart_df, fit_accuracy  # noqa: E402
-from benchmarks.bench_model import Row, synthetic  # noqa: E402
+from app.analysis.model import Answers, _covariance, _part, _Robust, _scheme_test, _wishart_df, fit_accuracy  # noqa: E402
+from app.analysis.power import log_odds_for  # noqa: E402
 from tests.analysis.test_small_sample import _maximum_likelihood, reference_data  # noqa: E402
 
 CLUBSANDWICH = """
@@ -85,14 +85,25 @@ def degrees_of_freedom(folder: Path) -> None:
         robust = _Robust([(parts, _covariance(parts, x, y - mu))], x, weight, bread)
         _, p, df = _scheme_test(beta, robust, ["a", "b", "c"], ["a", "b", "c"])
         print(f"| {clustering} | a = b = c (HTZ df) | {values[6]:.6f} | {df:.6f} | {df / values[6]:.6f} |")
-        print(f"| {clustering} | a = b = c (HTZ p) | {values[7]:.8f} | {p:.8f} | {p / values[7]:.6f} |")
+        print(f"| {clustering} | a = b = c (HTZ p) | {values[7]:.8f} | {p or 0:.8f} | {(p or 0) / values[7]:.6f} |")
+
+
+def crossed_study(participant_sd: float, clip_sd: float, rng: np.random.Generator) -> Answers:
+    """40 participants answer all 12 clips, 6 of a scheme at 70% and 6 at 85% (over participants and clips)."""
+    eta = [log_odds_for(a, float(np.hypot(participant_sd, clip_sd))) for a in (0.7, 0.85)]
+    clip = rng.normal(0, clip_sd, 12)
+    people = list(enumerate(rng.normal(0, participant_sd, 40)))
+    right = [int(rng.random() < 1 / (1 + np.exp(-(eta[c // 6] + u + clip[c])))) for _, u in people for c in range(12)]
+    participant = [f"p{p}" for p, _ in people for _ in range(12)]
+    clips = [f"c{c}" for _ in people for c in range(12)]
+    schemes = [f"s{c // 6}" for _ in people for c in range(12)]
+    return Answers(participant, clips, schemes, ["one"] * len(right), [""] * len(right), right)
 
 
 def log_odds_ratios(folder: Path, studies: int) -> None:
     print("\n| participant SD | clip SD | Foil's log OR (population-averaged) | glmer's (conditional) | ratio |")
     print("|---:|---:|---:|---:|---:|")
     for participant_sd, clip_sd in ((0.5, 0.3), (1.0, 0.5), (1.5, 0.3), (1.5, 1.0)):
-        row = Row("", participant_sd=participant_sd, clip_sd=clip_sd)
         rng = np.random.default_rng(1)
         path = folder / "studies.csv"
         ours = []
@@ -100,12 +111,14 @@ def log_odds_ratios(folder: Path, studies: int) -> None:
             writer = csv.writer(handle)
             writer.writerow(["study", "participant", "clip", "scheme", "correct"])
             for study in range(studies):
-                answers = synthetic(row, [0.7, 0.85], rng)
+                answers = crossed_study(participant_sd, clip_sd, rng)
                 fit = fit_accuracy(answers, ["s0", "s1"], 0.5)
                 ours.append(np.log(fit.contrasts[0].odds_ratio))
                 writer.writerows(
                     (study, p, c, s, k)
-                    for p, c, s, k in zip(answers.participant, answers.clip, answers.scheme, answers.correct, strict=True)
+                    for p, c, s, k in zip(
+                        answers.participant, answers.clip, answers.scheme, answers.correct, strict=True
+                    )
                 )
         theirs = [float(v) for v in rscript(GLMER, path).split()]
         print(
