@@ -96,13 +96,36 @@ def load_summary(path: str | Path) -> Summary:
     return cast(Summary, data)  # checked as far as the server needs: a dict of this format
 
 
+class ClipVote(CheckedDict):
+    """The representative solver's vote behind a clip: how many of the starting states it rolled out showed each
+    agent as better (in the order of the clip's `agents`), how many neither, and the exact two-sided sign test of
+    those with a majority. An undecided (weak) vote may have chosen a clip of either agent as the better one."""
+
+    states: Annotated[int, Field(ge=0)]
+    won: list[int]
+    no_majority: Annotated[int, Field(ge=0)]
+    sign_test_p: Annotated[float, Field(ge=0, le=1)]
+    decided: bool  # sign_test_p below the solver's alpha over its looks (docs/search.md)
+
+
 class ClipAudit(BaseModel):
-    """What the clip visibly shows against the ground truth (`app.visible.audit`), for researchers only."""
+    """What the clip visibly shows against the ground truth (`app.visible.audit`), for researchers only; for a
+    representative clip, the vote that chose it (absent for other clips and in manifests written before it)."""
 
     model_config = ConfigDict(extra="ignore", frozen=True)
 
     shows: Literal["better", "worse", "tie"]
     why: str
+    vote: ClipVote | None = None
+
+    @model_serializer(mode="wrap")
+    def _leaves_no_vote_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """An audit without a vote leaves `vote` out, so a manifest written before it reads and writes byte for
+        byte as it did."""
+        data: dict[str, Any] = handler(self)
+        if self.vote is None:
+            data.pop("vote", None)
+        return data
 
 
 class ManifestReel(BaseModel):

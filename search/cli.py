@@ -105,8 +105,12 @@ def _search(args: argparse.Namespace) -> int:
         solver=args.solver,
         **_search_job_settings(args, args.solver, agents, args.scenario),
     )
-    out = write_outputs(args.out, run_search(job, progress=not args.quiet))
+    files = run_search(job, progress=not args.quiet)
+    out = write_outputs(args.out, files)
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
+    warning = json.loads(files["run.json"]).get("vote", {}).get("warning")
+    if warning:
+        print(f"warning: {out}: {warning}")
     return 0
 
 
@@ -122,6 +126,9 @@ def _search_all(args: argparse.Namespace) -> int:
         jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address, progress=not args.quiet
     )
     print(f"{args.out}: {len(jobs)} searches in {study['wall_s']:.1f} s; study.json lists them")
+    for record in study["jobs"]:
+        if "warning" in record:
+            print(f"warning: {Path(args.out) / record['dir']}: {record['warning']}")
     return 0
 
 

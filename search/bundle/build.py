@@ -35,6 +35,7 @@ from typing import Any
 from app.formats import (
     MANIFEST_FORMAT,
     ClipAudit,
+    ClipVote,
     ClosePair,
     Manifest,
     ManifestClip,
@@ -563,6 +564,9 @@ def manifest_clip(
             f"({labels[agents.index(better)]}) as {'no better' if shown_audit['shows'] == 'tie' else 'worse'}: "
             f"{shown_audit['why']}"
         )
+    vote = clip_vote(data, order)
+    for line in vote_warnings(agents, None if undecided else better, vote):
+        log(f"warning: clip {job.id} ({job.scheme.name}, {job.pair[0]} vs {job.pair[1]}): {line}")
     spent = {
         "sim_steps": int(data["solver"]["budget_used"]),
         "clip_seconds": sum(clip_shape(out / name).ms for name in files) / 1000,
@@ -574,7 +578,7 @@ def manifest_clip(
         "agents": agents,
         "labels": labels,
         "better": better,
-        "audit": ClipAudit(**shown_audit),
+        "audit": ClipAudit(**shown_audit, vote=vote),
         "parts": list(job.parts),
         "solver": job.scheme.solver,
         "spent": spent,
@@ -603,6 +607,38 @@ def manifest_clip(
         reward=data.get("reward"),
         outcomes=[data["outcomes"][k] for k in order],
     )
+
+
+def clip_vote(summary: dict, order: list[int]) -> ClipVote | None:
+    """The representative solver's vote as a clip's summary records it, each agent's count in on-screen order
+    (``order``: search positions on screen); None for other clips."""
+    vote = summary["solver"].get("vote")
+    if vote is None:
+        return None
+    won = [vote["for_first"], vote["for_second"]]
+    return ClipVote(
+        states=vote["states"],
+        won=[won[k] for k in order],
+        no_majority=vote["no_majority"],
+        sign_test_p=vote["sign_test_p"],
+        decided=vote["decided"],
+    )
+
+
+def vote_warnings(agents: list[str], better: str | None, vote: ClipVote | None) -> list[str]:
+    """What a clip's vote warns of, naming agents (never their labels): a weak vote, and a vote for the agent the
+    ground truth ranks worse (``better`` None: no truth to hold it to)."""
+    from search.solvers.representative import describe_vote
+
+    if vote is None:
+        return []
+    line = describe_vote(agents, vote["won"], vote["no_majority"], vote["sign_test_p"])
+    found = [] if vote["decided"] else [f"weak vote: {line}; the clip may show either agent as the better one"]
+    first, second = vote["won"]
+    voted = None if first == second else agents[0] if first > second else agents[1]
+    if better is not None and voted is not None and voted != better:
+        found.append(f"vote against the ground truth: it favours {voted}, but {better} is better ({line})")
+    return found
 
 
 def clip_files(clip: ManifestClip) -> list[str]:
@@ -634,6 +670,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
     vote; pairs measured ``workers`` at a time. ``world`` is the study's comparison world (``study_world``),
     beneath each scenario's and the distribution's own settings."""
+    from search.solvers.representative import strength
     from search.solvers.reward import RewardConfig
 
     settings = spec.representativeness
@@ -676,6 +713,8 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
             report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
                 key: value for key, value in one.items() if key != "scenario"
             }
+            vote = report["distribution_vote"]  # a report cached before votes had their sign test gets it here
+            report["distribution_vote"] = vote | strength(vote["for_first"], vote["for_second"])
             reports.append(report)
             log(describe_representativeness(report))
     return reports
@@ -704,29 +743,41 @@ def _representativeness(domain_name: str, pair, fixed: list, distribution: str, 
 
 
 def describe_representativeness(report: dict) -> str:
-    """One line on a fixed scenario against the distribution, a warning when their majorities disagree."""
+    """One line on a fixed scenario against the distribution, a warning when their majorities disagree; a weak
+    distribution vote (its sign test not below alpha) is called weak, since it cannot say which agent most states
+    show as better."""
+    from search.solvers.representative import strength
+
     first, second = report["agents"]
     vote = report["distribution_vote"]
     voted = {1: first, -1: second, 0: "neither"}[vote["direction"]]
+    tested = strength(vote["for_first"], vote["for_second"])  # one look, at the default alpha
+    p = tested["sign_test_p"]
     line = (
         f"{report['scenario']}, {first} vs {second}: {first} looks better in {report['first_looks_better']:.0%} "
         f"of {report['rollouts']} nominal rollouts, {second} in {report['second_looks_better']:.0%}; "
         f"{report['distribution']}'s {vote['states']} states vote {voted} ({vote['for_first']} for {first}, "
-        f"{vote['for_second']} for {second})"
+        f"{vote['for_second']} for {second}), sign test p {'< 0.001' if p < 0.001 else f'= {p:.2g}'}"
     )
     if report["percentile"] is not None:
         line += f"; percentile {report['percentile']:.0f} of its states"
+    weak = (
+        ""
+        if tested["decided"]
+        else f"; a weak vote (p not below {tested['alpha']}): too few or too evenly split states to say which agent "
+        f"most starting states show as better"
+    )
     if report["disagrees"] and report["majority"] == 0:
         return (
             f"warning: unrepresentative scenario {line}: its clips tend to show no difference where most "
-            f"starting states show one"
+            f"starting states show one{weak}"
         )
     if report["disagrees"]:
         return (
             f"warning: unrepresentative scenario {line}: its clips tend to show the other robot as better than "
-            f"most starting states do"
+            f"most starting states do{weak}"
         )
-    return f"representativeness {line}"
+    return f"representativeness {line}{weak}"
 
 
 def write_gallery(
@@ -740,6 +791,8 @@ def write_gallery(
     the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better robot for."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
+    from search.solvers.representative import describe_vote
+
     templates = Environment(
         loader=FileSystemLoader(Path(__file__).parent),
         autoescape=True,
@@ -752,6 +805,8 @@ def write_gallery(
         zip=zip,
         scenarios=scenario_reports,
         describe=describe_representativeness,
+        describe_vote=describe_vote,
+        vote_warnings=vote_warnings,
         close=close or [],
         describe_close=lambda pair: describe_close_pair(PairedComparison.from_manifest(pair)),
     )

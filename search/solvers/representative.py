@@ -7,13 +7,17 @@ truth (no evaluation result and no agent's identity is read).
    summary's clip does.
 3. Score each clip's visible contrast with the viewer's rule (`app.visible.Observer`, no perception noise): the
    first agent's visible score minus the second's, none (0) under the observer's tie margin.
-4. Each state votes by the sign of its majority; the direction is the sign of the summed votes.
+4. Each state votes by the sign of its majority; the direction is the sign of the summed votes. States are rolled
+   out a batch at a time until the vote is decided (`sign_test`, Bonferroni over its planned looks), the budget
+   fits no further state at the most steps one can take, or every drawn state has voted: the budget is never
+   overspent.
 5. Candidates are the rollouts that agree with the direction, from states that voted that way, largest contrast
    first. The clip is the first candidate whose exact replay (batch size 1, as `foil verify` replays it) is still a
    non-tie in that direction; the top-K are the first K such.
 
 A tied vote is reported and falls back to the largest contrast in either direction; so does a vote none of whose
-candidates survives its replay.
+candidates survives its replay. A vote that ends undecided is reported as weak: its clip may show either agent as
+the better one.
 
 Why: a divergence search leans towards rare states where the worse agent looks better; the paper's fixed study
 scenarios can be the least representative states there are. Voting over the task's distribution shows the
@@ -23,7 +27,7 @@ contrast that most states show (docs/search.md, "The representative solver").
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,17 +43,21 @@ RollOut = Callable[[list, int, np.random.Generator, Tracker], "Rollouts"]
 Shown = Callable[[Any, int, int], float]
 
 OBSERVER = Observer()
+ALPHA = 0.05  # a vote is decided when its sign test's p is below this, over its looks (`strength`)
 
 
 @dataclass(frozen=True)
 class RepresentativeConfig:
-    states: int = 64  # starting states drawn from the distribution (M)
+    states: int = 64  # starting states drawn from the distribution (M): the most that vote
     pushes: int = 32  # rollouts per state under uniform pushes (R), besides the one without pushes
     batch_states: int = 8  # states rolled out together
+    alpha: float = ALPHA  # the vote is decided (no more states rolled out) once its sign test's p < alpha / looks
 
     def __post_init__(self):
         if self.states < 1 or self.pushes < 0 or self.batch_states < 1:
             raise ValueError("invalid representative setting: states and batch_states must be >= 1, pushes >= 0")
+        if not 0 < self.alpha < 1:
+            raise ValueError("invalid representative setting: alpha must lie between 0 and 1")
 
 
 @dataclass
@@ -69,6 +77,25 @@ class Rollouts:
         )
 
 
+def sign_test(wins: int, losses: int) -> float:
+    """The exact two-sided sign test's p: the chance of a split at least as uneven as ``wins`` to ``losses`` were
+    each state as likely to vote either way. States without a majority are left out, as the test leaves out ties
+    (none left: 1). Exact in integers, so the same counts always give the same p."""
+    n, fewer = wins + losses, min(wins, losses)
+    if n == 0:
+        return 1.0
+    return min(1.0, 2 * sum(math.comb(n, k) for k in range(fewer + 1)) / 2**n)
+
+
+def strength(for_first: int, for_second: int, alpha: float = ALPHA, looks: int = 1) -> dict:
+    """A vote's sign test and whether it is decided, as its record says them: p below ``alpha / looks``. Looking
+    again until a vote decides would make a split between equally good agents look decided more often than
+    ``alpha`` (about 0.11 at 0.05 with 8 looks), so each of the ``looks`` that could have stopped it is tested at
+    the Bonferroni level."""
+    p = sign_test(for_first, for_second)
+    return {"sign_test_p": p, "alpha": alpha, "looks": looks, "decided": p < alpha / looks}
+
+
 @dataclass(frozen=True)
 class Vote:
     """How the states voted: +1 when the first agent looks better, -1 when the second does, 0 for no majority."""
@@ -80,20 +107,26 @@ class Vote:
     def margin(self) -> int:
         return int(abs(self.state_votes.sum()))
 
-    def record(self, rollouts: Rollouts) -> dict:
-        """What run.json says of the vote."""
+    @property
+    def p(self) -> float:
+        """The sign test of the states with a majority (`sign_test`)."""
+        return sign_test(int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum()))
+
+    def record(self, rollouts: Rollouts, alpha: float = ALPHA, looks: int = 1) -> dict:
+        """What run.json says of the vote, with its strength (`strength`)."""
         signs = np.sign(rollouts.contrast)
+        for_first, for_second = int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum())
         return {
             "states": len(self.state_votes),
             "rollouts": len(signs),
-            "for_first": int((self.state_votes > 0).sum()),
-            "for_second": int((self.state_votes < 0).sum()),
+            "for_first": for_first,
+            "for_second": for_second,
             "no_majority": int((self.state_votes == 0).sum()),
             "direction": self.direction,
             "margin": self.margin,
             "tied": self.direction == 0,
             "agreeing_share": float((signs == self.direction).mean()) if self.direction else None,
-        }
+        } | strength(for_first, for_second, alpha, looks)
 
 
 def vote(rollouts: Rollouts, states: int) -> Vote:
@@ -149,26 +182,29 @@ def roll_out_states(
     config: RepresentativeConfig,
     rng: np.random.Generator,
     tracker: Tracker,
-) -> tuple[Rollouts, int]:
-    """``roll_out`` over the scenarios in order, a batch of states at a time, while the budget lasts: a batch is cut
-    to the states that fit in what is left at the steps a state has cost so far (the first batch always runs);
-    the rollouts and how many states they cover."""
-    parts, done_states = [], 0
+    state_cost: int,
+    enough: Callable[[Rollouts, int], bool] | None = None,
+) -> tuple[Rollouts, int, str]:
+    """``roll_out`` over the scenarios in order, a batch of states at a time: each batch only as many states as
+    fit in what is left of the budget at ``state_cost``, the most steps one state's rollouts can take, so the
+    budget is never overspent (the steps a state took so far are no bound: the next may take more). Stops early
+    once ``enough(rollouts, states)``. The rollouts, how many states they cover, and why it stopped ("decided",
+    "budget": no further state fits, "states": every state has been rolled out)."""
+    parts: list[Rollouts] = []
+    done_states, stopped = 0, "states"
     while done_states < len(scenarios):
-        per_state = tracker.steps / done_states if done_states else None
-        count = (
-            config.batch_states
-            if per_state is None
-            else min(config.batch_states, math.floor(tracker.remaining / per_state))
-        )
-        count = min(count, len(scenarios) - done_states)
+        count = min(config.batch_states, len(scenarios) - done_states, tracker.remaining // state_cost)
         if count < 1:
+            stopped = "budget"
             break
         part = roll_out(scenarios[done_states : done_states + count], config.pushes, rng, tracker)
         part.state += done_states
         parts.append(part)
         done_states += count
-    return Rollouts.join(parts), done_states
+        if enough is not None and enough(Rollouts.join(parts), done_states):
+            stopped = "decided"
+            break
+    return Rollouts.join(parts), done_states, stopped
 
 
 def representativeness(
@@ -182,8 +218,8 @@ def representativeness(
     how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
     pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
     of rollouts that agree with the vote (0: none of the drawn states agrees less)."""
-    tracker = Tracker(2**62, 1)
-    rollouts, states = roll_out_states(roll_out, drawn, config, rng, tracker)
+    tracker = Tracker(2**62, 1)  # no budget: every drawn state votes, whatever it costs
+    rollouts, states, _ = roll_out_states(roll_out, drawn, config, rng, tracker, state_cost=1)
     result = vote(rollouts, states)
     signs = np.sign(rollouts.contrast)
     agreement = np.array([(signs[rollouts.state == s] == result.direction).mean() for s in range(states)])
@@ -199,12 +235,40 @@ def representativeness(
                 "second_looks_better": float((own < 0).mean()),
                 "no_difference": float((own == 0).mean()),
                 "majority": int(np.sign(own.sum())),
-                "distribution_vote": result.record(rollouts),
+                "distribution_vote": result.record(rollouts, config.alpha),
                 "percentile": None if share is None else float(100 * (agreement < share).mean()),
                 "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction),
             }
         )
     return reports
+
+
+def describe_vote(agents: Sequence[str], won: Sequence[int], no_majority: int, p: float) -> str:
+    """A vote in words, by agent name: how many starting states showed each agent as better, and its sign test."""
+    states = sum(won) + no_majority
+    return (
+        f"of {states} starting state{'' if states == 1 else 's'}, {won[0]} showed {agents[0]} as better, "
+        f"{won[1]} {agents[1]} and {no_majority} neither (sign test p {'< 0.001' if p < 0.001 else f'= {p:.2g}'})"
+    )
+
+
+def weak_vote(record: dict, agents: Sequence[str]) -> str | None:
+    """The warning for a vote that ended undecided (None for a decided one): its clips may show either agent as the
+    better one."""
+    if record["decided"]:
+        return None
+    why = {
+        "budget": "the budget fits no further state",
+        "states": f"all {record.get('drawn', record['states'])} drawn states voted (raise states)",
+    }.get(record.get("stopped", ""), "")
+    level = f"{record['alpha']} / {record['looks']} looks" if record["looks"] > 1 else f"{record['alpha']}"
+    vote_line = describe_vote(
+        agents, [record["for_first"], record["for_second"]], record["no_majority"], record["sign_test_p"]
+    )
+    return (
+        f"weak vote: {vote_line}, not below {level}{'; ' + why if why else ''}: its clips may show either "
+        f"agent as the one that usually looks better"
+    )
 
 
 def largest_contrast(summaries: list[dict], world: World) -> int:
@@ -222,11 +286,29 @@ def representative(
     rng: np.random.Generator,
     config: RepresentativeConfig,
     replay: Callable[[object, np.ndarray], tuple[float, object]],
+    horizon: int,
 ) -> tuple[list, dict]:
-    """Roll out the drawn ``scenarios`` a batch of states at a time while the budget lasts, vote, and choose the
-    top-K clips. ``replay(scenario, actions)`` gives an exact replay's contrast and the replay (a summary).
-    Returns the chosen replays in order and the record of the vote for run.json."""
-    rollouts, done_states = roll_out_states(roll_out, scenarios, config, rng, tracker)
+    """Roll out the drawn ``scenarios`` a batch of states at a time until the vote is decided or the budget fits no
+    further state (each rollout takes at most ``horizon`` steps), vote, and choose the top-K clips. The vote is
+    looked at after each full batch of the states the budget surely fits, the last look where it stops, each at
+    ``alpha / looks`` (`strength`): the looks are planned before any state is drawn, so the test holds however
+    the states vote. ``replay(scenario, actions)`` gives an exact replay's contrast and
+    the replay (a summary), not counted against the budget, as no solver counts its summaries' replays. Returns
+    the chosen replays in order and the record of the vote for run.json."""
+    state_cost = (config.pushes + 1) * horizon
+    if state_cost > tracker.budget:
+        raise ValueError(
+            f"a budget of {tracker.budget} steps fits no starting state: one state's rollouts take up to "
+            f"{state_cost} steps ((pushes + 1) x horizon); raise --budget or lower pushes"
+        )
+    # the looks: after each full batch of the states the budget surely fits (at most M), the last where it stops
+    looks = math.ceil(min(len(scenarios), tracker.remaining // state_cost) / config.batch_states)
+
+    def decided(found: Rollouts, states: int) -> bool:
+        early = states % config.batch_states == 0 and states < looks * config.batch_states
+        return early and vote(found, states).p < config.alpha / looks
+
+    rollouts, done_states, stopped = roll_out_states(roll_out, scenarios, config, rng, tracker, state_cost, decided)
     result = vote(rollouts, done_states)
     order, how = candidates(rollouts, result), "voted direction"
     chosen = choose(
@@ -245,7 +327,8 @@ def representative(
     if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
         how = "no visible contrast anywhere: the first state without pushes"
         chosen = [(0, replay(scenarios[0], rollouts.actions[0])[1])]
-    record = result.record(rollouts) | {
+    record = result.record(rollouts, config.alpha, looks) | {
+        "stopped": stopped,
         "drawn": len(scenarios),
         "candidates": len(order),
         "selection": how,

@@ -29,7 +29,7 @@ from search.solvers.episodes import Episodes, draw_episodes
 from search.solvers.follow import Follow
 from search.solvers.highlights import HighlightsConfig, HighlightsDivConfig, Moment, highlights
 from search.solvers.mcts import MCTSConfig, mcts
-from search.solvers.representative import RepresentativeConfig, representative, summary_contrast
+from search.solvers.representative import RepresentativeConfig, representative, summary_contrast, weak_vote
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 
@@ -230,12 +230,20 @@ def _representative(
         summary = coupled.summarize(actions, solver)
         return summary_contrast(summary, coupled.world), summary
 
-    summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay)
+    horizon = RewardConfig.from_dict(job.reward_settings).horizon
+    summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon)
+    warning = weak_vote(vote, agents)
+    if warning:
+        vote["warning"] = warning
+    strength = {
+        key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "sign_test_p", "decided")
+    }
     for summary, chosen in zip(summaries, vote["chosen"], strict=True):
         summary["solver"] = summary["solver"] | {
             "budget_used": tracker.steps,
             "state": chosen["state"],
             "search_contrast": chosen["contrast"],
+            "vote": strength,
         }
     return summaries, vote
 
@@ -386,6 +394,7 @@ def run_all(
                 "wall_s": record["wall_s"],
                 "sim_steps": record["sim_steps"],
             }
+            | ({"warning": record["vote"]["warning"]} if "warning" in record.get("vote", {}) else {})
         )
     study = {
         "format": "foil.study-search/1",

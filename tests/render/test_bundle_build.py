@@ -125,8 +125,10 @@ def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(b
     for clip in manifest["clips"]:
         summary = json.loads((out / clip["summary"]).read_text())
         better_label = clip["labels"][clip["agents"].index(clip["better"])]
-        assert clip["audit"] == audit(VisibleClip.of_summary(summary, clip["agents"], clip["labels"]), better_label)
-    warnings = [line for line in log if line.startswith("warning: clip ")]
+        shown = {key: value for key, value in clip["audit"].items() if key != "vote"}
+        assert shown == audit(VisibleClip.of_summary(summary, clip["agents"], clip["labels"]), better_label)
+        assert ("vote" in clip["audit"]) == (clip["solver"] == "representative")  # the vote that chose the clip
+    warnings = [line for line in log if line.startswith("warning: clip ") and " is misleading" in line]
     assert len(warnings) == len(misleading) and gallery.count('<figure class="misleading">') == len(misleading)
     assert all(any(clip["id"] in line for line in warnings) for clip in misleading)
     assert f"{len(misleading)} of {len(manifest['clips'])} clips are misleading" in gallery
@@ -218,6 +220,10 @@ def test_the_representative_clip_and_the_representativeness_of_the_fixed_scenari
     assert clip["scenario"] == "training" and clip["solver"] == "representative"
     summary = json.loads((out / clip["summary"]).read_text())
     assert summary["scenario"]["name"].startswith("training#") and verify(out / clip["summary"]) == []
+    vote = clip["audit"]["vote"]  # three states never decide a vote (p >= 1/4): a warning in the log and gallery
+    assert vote["states"] <= 3 and not vote["decided"] and len(vote["won"]) == 2
+    assert any(line.startswith(f"warning: clip {clip['id']} ") and "weak vote" in line for line in log)
+    assert "WARNING: weak vote" in (out / "index.html").read_text()
     [report] = manifest["representativeness"]
     assert report["agents"] == ["goal", "orca"] and report["scenario"] == "paper-bl-tr"
     assert report["rollouts"] == 4 and report["distribution_vote"]["states"] == 3

@@ -1,0 +1,211 @@
+"""A representative vote that knows its strength: the sign test, drawing states until the vote is decided or the
+budget fits no further state (never past it), the same result for the same seed, and the warnings of a weak vote in
+the search's output, its run record, a bundle clip's audit and the representativeness line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from app.formats import ClipAudit
+from search.bundle.build import describe_representativeness, vote_warnings
+from search.cli import main
+from search.solvers.representative import (
+    RepresentativeConfig,
+    Rollouts,
+    representative,
+    sign_test,
+    weak_vote,
+)
+from search.solvers.rollout import Tracker
+
+HORIZON = 10
+
+
+def roll_out(states: list[int], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+    """Made-up rollouts: a state's ``lean`` (+1, -1, 0) is the sign of all of its contrasts (0: no agent looks
+    better); each rollout takes 1 to HORIZON steps, the most when the lean is 2 (then it counts as +1)."""
+    rows = pushes + 1
+    contrast, state, actions = [], [], []
+    for index, lean in enumerate(states):
+        steps = np.full(rows, HORIZON) if lean == 2 else rng.integers(1, HORIZON + 1, rows)
+        tracker.count(int(steps.sum()))
+        contrast += list(np.sign(lean) * (0.5 + rng.uniform(0, 1, rows)))
+        state += [index] * rows
+        actions += [np.zeros((int(n), 1, 2)) for n in steps]
+    return Rollouts(np.array(state), actions, np.array(contrast))
+
+
+def replay(lean, actions) -> tuple[float, dict]:
+    return float(np.sign(lean)), {"lean": int(lean), "steps": len(actions)}
+
+
+def search(leans: list[int], budget: int = 10**6, seed: int = 0, **settings) -> tuple[list, dict, Tracker]:
+    tracker = Tracker(budget, 1)
+    config = RepresentativeConfig(states=len(leans), **({"pushes": 3, "batch_states": 2} | settings))
+    chosen, record = representative(roll_out, leans, tracker, np.random.default_rng(seed), config, replay, HORIZON)
+    return chosen, record, tracker
+
+
+def test_the_sign_test_is_exact_and_two_sided():
+    assert sign_test(3, 4) == sign_test(4, 3) == 1.0  # the close pair's vote: no evidence either way
+    assert sign_test(0, 7) == 2 / 2**7 and sign_test(6, 0) == 2 / 2**6
+    assert sign_test(5, 1) == 2 * (1 + 6) / 2**6 and sign_test(0, 0) == 1.0
+
+
+def test_a_decisive_vote_stops_drawing_once_decided_and_does_not_warn():
+    _, record, _ = search([1] * 40)  # 40 states in batches of 2: 20 looks, each at 0.05 / 20
+    assert record["states"] == 10 and record["stopped"] == "decided"  # 10 to 0: p = 1/512, the first below 0.0025
+    assert record["decided"] and record["sign_test_p"] == 1 / 512 and record["looks"] == 20 and record["drawn"] == 40
+    assert weak_vote(record, ["a", "b"]) is None
+
+
+def test_the_solver_keeps_drawing_until_the_vote_is_decided():
+    leans = [1, -1, 0, 0, 1, -1, 0, 1] + [1] * 30
+    _, record, _ = search(leans, batch_states=4)
+    wins, losses = np.cumsum(np.array(leans) > 0), np.cumsum(np.array(leans) < 0)
+    level = 0.05 / 10  # 38 states in batches of 4: 10 looks
+    first = next(n for n in range(4, len(leans) + 1, 4) if sign_test(wins[n - 1], losses[n - 1]) < level)
+    assert record["states"] == first > 8 and record["stopped"] == "decided" and record["looks"] == 10
+    assert (record["for_first"], record["for_second"]) == (wins[first - 1], losses[first - 1])
+
+
+def test_agents_that_tie_on_most_states_give_a_weak_vote_that_warns():
+    leans = [0, 0, 1, 0, -1, 0, 0, 1] * 4  # most states tie, the rest split 8 to 4: every drawn state votes
+    chosen, record, _ = search(leans)
+    assert record["stopped"] == "states" and record["states"] == 32 and not record["decided"]
+    assert (record["for_first"], record["for_second"], record["no_majority"]) == (8, 4, 20)
+    warning = weak_vote(record, ["lo", "hi"])
+    assert warning.startswith("weak vote: of 32 starting states, 8 showed lo as better, 4 hi and 20 neither (sign test")
+    assert "not below 0.05 / 16 looks" in warning
+    assert "all 32 drawn states voted" in warning and chosen  # a weak vote still chooses its clip
+
+
+def test_a_budget_that_surely_fits_few_states_plans_few_looks():
+    """At most 40 steps a state, 200 surely fit 5: looks after 2 and 4 states and where it stops, each at 0.05 / 3
+    (short rollouts then fit more states, in batches the budget still fits)."""
+    _, record, tracker = search([1] * 40, budget=200)
+    assert record["looks"] == 3 and record["stopped"] == "budget" and record["states"] > 5
+    assert record["decided"] and record["sign_test_p"] < 0.05 / 3 and tracker.steps <= 200
+
+
+@pytest.mark.parametrize("lean", [1, 2])  # rollouts of 1 to HORIZON steps, or all of HORIZON (the most)
+def test_the_budget_is_never_overspent(lean):
+    leans = [lean] * 80
+    per_state = 4 * HORIZON  # (pushes + 1) x horizon
+    for budget in range(per_state, 20 * per_state, 37):
+        _, record, tracker = search(leans, budget=budget, alpha=1e-30)  # so strict only the budget stops it
+        assert tracker.steps <= budget and record["stopped"] == "budget"
+        assert tracker.remaining < per_state  # it stopped only when no further state could fit
+    with pytest.raises(ValueError, match="fits no starting state"):
+        search(leans, budget=per_state - 1)
+
+
+def test_the_same_seed_gives_the_same_vote_and_clips():
+    leans = [1, 0, -1, 1, 1, 0, 1, -1, 1, 1, 0, 1] * 3
+    first, second = search(leans, budget=900, seed=4), search(leans, budget=900, seed=4)
+    assert first[0] == second[0] and first[1] == second[1] and first[2].steps == second[2].steps
+    assert search(leans, budget=900, seed=5)[1] != first[1]  # the seed matters
+
+
+def test_a_clip_audit_records_its_vote_only_where_there_is_one():
+    plain = ClipAudit(shows="better", why="...")
+    assert plain.model_dump() == {"shows": "better", "why": "..."}  # manifests without votes read as before
+    vote = {"states": 8, "won": [3, 4], "no_majority": 1, "sign_test_p": 1.0, "decided": False}
+    assert ClipAudit(shows="worse", why="...", vote=vote).model_dump()["vote"] == vote
+
+
+def test_a_weak_vote_and_a_vote_against_the_ground_truth_warn_in_the_bundle_naming_agents():
+    weak = {"states": 8, "won": [3, 4], "no_majority": 1, "sign_test_p": 1.0, "decided": False}
+    [line] = vote_warnings(["hi", "med"], "med", weak)
+    assert line.startswith(
+        "weak vote: of 8 starting states, 3 showed hi as better, 4 med and 1 neither (sign test p = 1)"
+    )
+    assert [line.split(":")[0] for line in vote_warnings(["hi", "med"], "hi", weak)] == [
+        "weak vote",
+        "vote against the ground truth",
+    ]
+    decided_wrong = {"states": 9, "won": [0, 8], "no_majority": 1, "sign_test_p": 2 / 2**8, "decided": True}
+    [line] = vote_warnings(["hi", "med"], "hi", decided_wrong)
+    assert line.startswith("vote against the ground truth: it favours med, but hi is better")
+    assert "Robot" not in line
+    assert vote_warnings(["hi", "med"], "med", decided_wrong) == []  # decided, and for the better agent
+    assert vote_warnings(["hi", "med"], None, decided_wrong) == []  # no ground truth to hold it to
+    assert vote_warnings(["hi", "med"], "hi", None) == []  # not a representative clip
+
+
+def test_the_representativeness_line_reports_its_sign_test_and_calls_a_weak_vote_weak():
+    report = {
+        "agents": ["lo", "hi"],
+        "scenario": "paper-bl-tr",
+        "distribution": "training",
+        "rollouts": 9,
+        "first_looks_better": 0.6,
+        "second_looks_better": 0.2,
+        "no_difference": 0.2,
+        "majority": 1,
+        "percentile": 40.0,
+        "disagrees": False,
+        "distribution_vote": {"direction": 1, "states": 16, "for_first": 5, "for_second": 3},
+    }
+    line = describe_representativeness(report)
+    assert line.startswith("representativeness paper-bl-tr") and "(5 for lo, 3 for hi), sign test p = 0.73" in line
+    assert line.endswith(
+        "a weak vote (p not below 0.05): too few or too evenly split states to say which agent most "
+        "starting states show as better"
+    )
+    report["distribution_vote"] |= {"for_first": 12, "for_second": 2}
+    line = describe_representativeness(report)
+    assert "(12 for lo, 2 for hi), sign test p = 0.013;" in line and "weak" not in line
+
+
+def tiny_search(out, budget: str) -> int:
+    return main(
+        [
+            "search",
+            "--agents",
+            "goal,orca",
+            "--scenario",
+            "training",
+            "--solver",
+            "representative",
+            "--budget",
+            budget,
+            "--top-k",
+            "1",
+            "--set",
+            "states=4",
+            "--set",
+            "pushes=5",
+            "--reward",
+            "horizon=60",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
+
+
+def test_a_search_of_four_states_warns_of_its_weak_vote_and_repeats_itself(tmp_path, capsys):
+    """Four states never decide (p >= 1/8); (pushes + 1) x horizon = 360 steps a state at most, so 1,500 fit them
+    all and 300 none."""
+    assert tiny_search(tmp_path / "a", "1500") == 0
+    printed = capsys.readouterr().out
+    run = json.loads((tmp_path / "a" / "run.json").read_text())
+    vote = run["vote"]
+    assert vote["states"] == 4 and vote["stopped"] == "states" and not vote["decided"] and run["sim_steps"] <= 1440
+    assert f"warning: {tmp_path / 'a'}: {vote['warning']}" in printed and vote["warning"].startswith(
+        "weak vote: of 4 starting states"
+    )
+    summary = json.loads((tmp_path / "a" / "summary-001.json").read_text())
+    assert summary["solver"]["vote"] == {
+        key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "sign_test_p", "decided")
+    }
+    assert tiny_search(tmp_path / "b", "1500") == 0
+    again = json.loads((tmp_path / "b" / "run.json").read_text())
+    assert again["vote"] == vote and again["sim_steps"] == run["sim_steps"]
+    assert (tmp_path / "b" / "summary-001.json").read_text() == (tmp_path / "a" / "summary-001.json").read_text()
+    assert tiny_search(tmp_path / "c", "300") != 0
+    assert "fits no starting state" in capsys.readouterr().err
