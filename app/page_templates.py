@@ -50,6 +50,12 @@ def _number(value: float | None) -> str:
     return "–" if value is None else f"{value:.3g}"
 
 
+def _sentence(text: str) -> str:
+    """A note as a sentence: its first letter upper case and the rest as written (Jinja's `capitalize` would lower
+    the case of every other letter, names and units included)."""
+    return text[:1].upper() + text[1:]
+
+
 def _moment(value: datetime | None) -> str:
     """A stored time in ISO 8601 with its time zone, to the minute."""
     if value is None:
@@ -62,6 +68,12 @@ def page_templates() -> Environment:
     """Compiled once per process: no check for changed files on every page."""
     env = Environment(loader=FileSystemLoader(TEMPLATES_DIR), autoescape=True, auto_reload=False)
     env.filters.update(
-        paragraphs=_paragraphs, strong=_strong, percent=_percent, p=_p_value, num=_number, moment=_moment
+        paragraphs=_paragraphs,
+        strong=_strong,
+        percent=_percent,
+        p=_p_value,
+        num=_number,
+        moment=_moment,
+        sentence=_sentence,
     )
     return env
