@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from app.analysis.model import Answers, _covariance, _part, _Robust, _scheme_test, _wishart_df, fit_accuracy  # noqa: E402
 from app.analysis.power import log_odds_for  # noqa: E402
-from tests.analysis.test_small_sample import _maximum_likelihood, reference_data  # noqa: E402
+from tests.analysis.test_small_sample import reference_data, reference_fit  # noqa: E402
 
 CLUBSANDWICH = """
 suppressMessages(library(clubSandwich))
@@ -68,12 +68,7 @@ def degrees_of_freedom(folder: Path) -> None:
         writer.writerow(data)
         writer.writerows(zip(*data.values(), strict=True))
     found = {line.split()[0]: [float(v) for v in line.split()[1:]] for line in rscript(CLUBSANDWICH, path).splitlines()}
-    scheme = np.asarray(data["scheme"])
-    x = np.column_stack([(scheme == s).astype(float) for s in "abc"])
-    y = np.asarray(data["correct"], dtype=float)
-    beta, mu = _maximum_likelihood(x, y)
-    weight = mu * (1 - mu)
-    bread = np.linalg.inv((x * weight[:, None]).T @ x)
+    _, x, y, beta, mu, weight, bread = reference_fit()
     constraints = [*np.eye(3), np.array([-1.0, 1, 0]), np.array([-1.0, 0, 1]), np.array([0, -1.0, 1])]
     names = ["a", "b", "c", "b - a", "c - a", "c - b"]
     print("| clustering | test | clubSandwich df | Foil df | ratio |\n|---|---|---:|---:|---:|")

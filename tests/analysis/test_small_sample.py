@@ -70,14 +70,20 @@ def _maximum_likelihood(x, y):
     return beta, mu
 
 
-def test_degrees_of_freedom_and_hotelling_equal_clubsandwich():
+def reference_fit():
+    """`reference_data()` fitted as R's glm(correct ~ 0 + scheme, binomial): data, design, answers, estimate,
+    fitted probabilities, weights and bread."""
     data = reference_data()
     scheme = np.asarray(data["scheme"])
     x = np.column_stack([(scheme == s).astype(float) for s in "abc"])
     y = np.asarray(data["correct"], dtype=float)
     beta, mu = _maximum_likelihood(x, y)
     weight = mu * (1 - mu)
-    bread = np.linalg.inv((x * weight[:, None]).T @ x)
+    return data, x, y, beta, mu, weight, np.linalg.inv((x * weight[:, None]).T @ x)
+
+
+def test_degrees_of_freedom_and_hotelling_equal_clubsandwich():
+    data, x, y, beta, mu, weight, bread = reference_fit()
     pairs = np.array([[-1.0, 1, 0], [-1, 0, 1], [0, -1, 1]])
     for clustering, expected in CLUBSANDWICH.items():
         parts = [_part(1.0, np.unique(data[clustering], return_inverse=True)[1], x, weight, bread)]
