@@ -82,6 +82,8 @@ def _power(args: argparse.Namespace) -> int:
         largest=args.max_participants,
         studies=args.studies,
         seed=args.seed,
+        bundle=args.bundle,
+        shown_right=args.shown_right,
     )
 
 
@@ -181,6 +183,15 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     power.add_argument("--pairwise", help="expected pairwise accuracy per scheme, e.g. adaptive=0.85,nfirst=0.7")
     power.add_argument("--ranking", help="expected ranking accuracy per scheme, e.g. adaptive=0.5,nfirst=0.3")
     power.add_argument("--pilot", help="a pilot's database URL: the accuracies the report's model estimates from it")
+    power.add_argument(
+        "--bundle", help="the study's bundle: pairwise accuracies expected from its audit, undecided pairs and votes"
+    )
+    power.add_argument(
+        "--shown-right",
+        type=float,
+        default=0.85,
+        help="with --bundle: share of right answers to a clip that visibly shows the better agent (default 0.85)",
+    )
     power.add_argument("--participant-sd", type=float, default=1.0, help="participants' SD in log odds (default 1)")
     power.add_argument("--clip-sd", type=float, default=0.5, help="clips' SD in log odds (default 0.5)")
     power.add_argument("--max-participants", type=int, default=120, help="largest N tried (default 120)")

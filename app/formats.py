@@ -251,6 +251,28 @@ class Manifest(BaseModel):
             data.pop("close_pairs", None)
         return data
 
+    def questions_at_risk(self) -> list[dict[str, Any]]:
+        """Per survey part and scheme (in the clips' order): its clips, and how many of them rest on a pair the
+        evaluation could not decide (the ground truth a coin toss), on a weak representative vote, or visibly show
+        the worse agent as better (the audit). A researcher reads it before recruiting anyone."""
+        undecided = {frozenset(pair.agents) for pair in self.close_pairs if not pair.decided}
+        rows: dict[tuple[str, str], dict[str, Any]] = {}
+        for clip in self.clips:
+            pairs = {frozenset((a, b)) for i, a in enumerate(clip.agents) for b in clip.agents[i + 1 :]}
+            vote = clip.audit.vote if clip.audit is not None else None
+            for part in clip.parts:
+                if part == "example":
+                    continue
+                row = rows.setdefault(
+                    (part, clip.scheme),
+                    {"part": part, "scheme": clip.scheme, "clips": 0, "undecided": 0, "weak_vote": 0, "misleading": 0},
+                )
+                row["clips"] += 1
+                row["undecided"] += bool(pairs & undecided)
+                row["weak_vote"] += vote is not None and not vote["decided"]
+                row["misleading"] += clip.audit is not None and clip.audit.shows != "better"
+        return list(rows.values())
+
     def shown_world(self) -> World:
         return World.from_manifest(self.world)
 

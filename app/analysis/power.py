@@ -377,6 +377,8 @@ def run_power(
     largest: int,
     studies: int,
     seed: int,
+    bundle: str | None = None,
+    shown_right: float = 0.85,
 ) -> int:
     """`foil power`: prints power against number of participants per part, and the N at which a monotone fit of
     that curve reaches 80% and 90%."""
@@ -391,14 +393,20 @@ def run_power(
     accuracies: dict[str, dict[str, float]] = {}
     if pilot is not None:
         accuracies = pilot_accuracies(pilot, study)
+    if bundle is not None:
+        accuracies |= bundle_accuracies(bundle, study, shown_right)
+        print(
+            f"pairwise accuracies expected from the bundle's audit: a clip that shows the better agent answered right "
+            f"by {shown_right:.0%}, a tie or an undecided pair by 50%, a misleading clip by {1 - shown_right:.0%}"
+        )
     for task in tasks(study):
         if given[task]:
             accuracies[task] = parse_accuracies(given[task] or "", study, f"--{task}")
     if not accuracies:
         schemes = ",".join(f"{s}=0.8" for s in study.design.schemes)
         raise ValueError(
-            f"give the accuracies you expect per scheme (--{tasks(study)[0]} {schemes}) or a pilot's database "
-            "(--pilot sqlite:///pilot.sqlite3)"
+            f"give the accuracies you expect per scheme (--{tasks(study)[0]} {schemes}), a pilot's database "
+            "(--pilot sqlite:///pilot.sqlite3) or the study's bundle (--bundle bundles/NAME)"
         )
     grid = participant_grid(study, largest)
     if not grid:
@@ -443,6 +451,35 @@ def run_power(
                 print(prefix + describe(found, task))
     print(f"(simulation seed {seed})", file=sys.stderr)
     return 0
+
+
+def bundle_accuracies(bundle: str, study: Study, shown_right: float) -> dict[str, dict[str, float]]:
+    """The pairwise part's expected accuracy per scheme from the bundle, before anyone is recruited: each clip is
+    answered right by `shown_right` of participants where its audit says it visibly shows the better agent, by
+    half where it shows a tie or rests on a pair the evaluation could not decide (a coin toss), and by
+    1 - `shown_right` where it shows the worse one as better; a scheme's accuracy is the mean over its clips."""
+    from pathlib import Path
+
+    from app.formats import Manifest
+
+    path = Path(bundle) / "manifest.json"
+    if not path.is_file():
+        raise ValueError(f"--bundle {bundle}: no manifest.json there; give the folder foil bundle wrote")
+    if not 0.5 <= shown_right < 1:
+        raise ValueError(f"--shown-right {shown_right}: give the share of right answers to a clear clip, 0.5 to 1")
+    manifest = Manifest.model_validate_json(path.read_text(encoding="utf-8"))
+    undecided = {frozenset(pair.agents) for pair in manifest.close_pairs if not pair.decided}
+    expected: dict[str, list[float]] = {}
+    for clip in manifest.clips:
+        if "pairwise" not in clip.parts or clip.audit is None:
+            continue
+        shows = "tie" if frozenset(clip.agents) in undecided else clip.audit.shows
+        right = {"better": shown_right, "tie": 0.5, "worse": 1 - shown_right}[shows]
+        expected.setdefault(clip.scheme, []).append(right)
+    missing = [s for s in study.design.schemes if s not in expected]
+    if missing:
+        raise ValueError(f"--bundle {bundle}: no audited pairwise clip of {', '.join(missing)}: is it this study's?")
+    return {"pairwise": {s: min(max(sum(v) / len(v), 0.01), 0.99) for s, v in expected.items()}}
 
 
 def pilot_accuracies(url: str, study: Study) -> dict[str, dict[str, float]]:

@@ -478,6 +478,8 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
         close_pairs=[ClosePair.model_validate(pair) for pair in compared],
     )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
+    for line in describe_questions_at_risk(manifest):
+        log(line)
     log(f"bundle {out}: {len(clips)} clips; manifest.json, index.html")
     return manifest
 
@@ -607,6 +609,20 @@ def manifest_clip(
         reward=data.get("reward"),
         outcomes=[data["outcomes"][k] for k in order],
     )
+
+
+def describe_questions_at_risk(manifest: Manifest) -> list[str]:
+    """Per part and scheme, how many questions rest on an undecided ground truth, a weak vote or a misleading
+    clip: one line each, a warning where any does (`foil power --bundle` turns the same into expected power)."""
+    lines = []
+    for row in manifest.questions_at_risk():
+        risky = row["undecided"] + row["weak_vote"] + row["misleading"]
+        lines.append(
+            f"{'warning: ' if risky else ''}{row['part']} part, scheme {row['scheme']}: {row['clips']} clips; "
+            f"{row['undecided']} on a pair the evaluation could not decide, {row['weak_vote']} on a weak vote, "
+            f"{row['misleading']} visibly showing the worse agent as better or tied"
+        )
+    return lines
 
 
 def clip_vote(summary: dict, order: list[int]) -> ClipVote | None:

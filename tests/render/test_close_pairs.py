@@ -199,6 +199,18 @@ def test_an_undecided_pair_is_flagged_in_the_manifest_the_output_and_the_gallery
     assert not any("better" in line for line in about)
     assert manifest["agents"][CAREFUL_A]["episodes"] == 4 and "episode_rewards" not in manifest["agents"][CAREFUL_A]
 
+    # before anyone is recruited: the build says how many questions rest on the coin toss, and foil power expects
+    # half the answers to that clip to be right (a clip that shows the better runner: 85%)
+    assert "warning: pairwise part, scheme nfirst: 2 clips; 1 on a pair the evaluation could not decide" in "\n".join(
+        log
+    )
+    from app.analysis.power import bundle_accuracies
+    from app.survey.study import load_study
+
+    shown = 0.85 if next(c for c in manifest["clips"] if FAST in c["agents"])["audit"]["shows"] == "better" else 0.5
+    expected = bundle_accuracies("bundle", load_study("study.toml"), 0.85)
+    assert expected == {"pairwise": {"nfirst": pytest.approx((0.5 + shown) / 2)}}
+
     gallery = (tmp_path / "bundle" / "index.html").read_text()
     assert "<h2>Close pairs</h2>" in gallery and f"{CAREFUL_A} and {CAREFUL_B} differ by less than" in gallery
     figure = next(f for f in gallery.split("<figure")[1:] if clip["id"] in f)
