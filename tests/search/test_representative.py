@@ -52,35 +52,14 @@ def test_no_agreeing_candidate_leaves_an_empty_list_for_the_fallback():
     assert candidates(found, Vote(np.array([1, 1]), 1)) == [3, 4]
 
 
-def representative_search(out, seed="0", budget="4000"):
+def representative_search(out, seed="0", budget="4000", states="6", top_k="2", batch_states: str | None = "3"):
+    """A small representative search of goal against orca from the training distribution, by the command line."""
+    batch = ["--set", f"batch_states={batch_states}"] if batch_states else []
     return main(
-        [
-            "search",
-            "--agents",
-            "goal,orca",
-            "--scenario",
-            "training",
-            "--solver",
-            "representative",
-            "--seed",
-            seed,
-            "--budget",
-            budget,
-            "--top-k",
-            "2",
-            "--set",
-            "states=6",
-            "--set",
-            "pushes=5",
-            "--set",
-            "batch_states=3",
-            "--reward",
-            "horizon=60",
-            "--out",
-            str(out),
-            "--quiet",
-        ]
-    )
+        ["search", "--agents", "goal,orca", "--scenario", "training", "--solver", "representative", "--seed", seed,
+         "--budget", budget, "--top-k", top_k, "--set", f"states={states}", "--set", "pushes=5", *batch,
+         "--reward", "horizon=60", "--out", str(out), "--quiet"]
+    )  # fmt: skip
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ import pytest
 
 from app.formats import ClipAudit
 from search.bundle.build import describe_representativeness, vote_warnings
-from search.cli import main
 from search.solvers.representative import (
     RepresentativeConfig,
     Rollouts,
@@ -20,6 +19,7 @@ from search.solvers.representative import (
     weak_vote,
 )
 from search.solvers.rollout import Tracker
+from tests.search.test_representative import representative_search
 
 HORIZON = 10
 
@@ -162,30 +162,7 @@ def test_the_representativeness_line_reports_its_sign_test_and_calls_a_weak_vote
 
 
 def tiny_search(out, budget: str) -> int:
-    return main(
-        [
-            "search",
-            "--agents",
-            "goal,orca",
-            "--scenario",
-            "training",
-            "--solver",
-            "representative",
-            "--budget",
-            budget,
-            "--top-k",
-            "1",
-            "--set",
-            "states=4",
-            "--set",
-            "pushes=5",
-            "--reward",
-            "horizon=60",
-            "--out",
-            str(out),
-            "--quiet",
-        ]
-    )
+    return representative_search(out, budget=budget, states="4", top_k="1", batch_states=None)
 
 
 def test_a_search_of_four_states_warns_of_its_weak_vote_and_repeats_itself(tmp_path, capsys):
