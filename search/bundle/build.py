@@ -546,7 +546,7 @@ def manifest_clip(
     close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> ManifestClip:
     """A clip's manifest entry: agents and labels in on-screen order, ground truth, audit (a warning line when it
-    misleads; for a pair the evaluation cannot decide, one that names neither robot as better), what it cost, and
+    misleads; for a pair the evaluation cannot decide, one that names neither agent as better), what it cost, and
     its file (or each agent's reel)."""
     order = sorted(range(2), key=lambda k: job.numbers[k])
     agents, labels, shown_audit = clip_audit(job, sources, evaluations, shown, close)
@@ -804,7 +804,7 @@ def write_gallery(
     close: list[dict] | None = None,
 ) -> None:
     """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward, and
-    the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better robot for."""
+    the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better agent for."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
     from search.solvers.representative import describe_vote
