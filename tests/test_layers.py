@@ -6,7 +6,7 @@ from pathlib import Path
 import search
 from tests.support.imports import import_circles, package_modules, upward_imports
 
-LAYERS = ("sim", "agents", "solvers", "clips", "crowd", "gym", "highway", "bundle", "cli")
+LAYERS = ("core", "sim", "agents", "solvers", "clips", "crowd", "gym", "highway", "bundle", "cli")
 ROOT = Path(search.__file__).parent
 
 

@@ -1,0 +1,1 @@
+"""The world-free core every world builds on."""
