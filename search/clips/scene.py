@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.formats import SUMMARY_FORMAT, load_summary
+from search.core.outcomes import OUTCOME_NAMES
 from search.sim.scenarios import Scenario
-from search.sim.world import OUTCOME_NAMES
 
 
 @dataclass(frozen=True)

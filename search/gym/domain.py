@@ -209,7 +209,7 @@ class GymDomain(Domain):
 def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
     """The visible contrast of a row of a Gymnasium problem that just ended, its clip shown from the state after
     step ``since``: each agent's event and its time, as `search.gym.summary.build_gym_summary` records them."""
-    from search.sim.world import OUTCOME_NAMES
+    from search.core.outcomes import OUTCOME_NAMES
     from search.solvers.representative import visible_contrast
 
     dt = coupled.problem.adapter.dt

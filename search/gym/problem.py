@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from search.core.outcomes import OUTCOME_NAMES, RUNNING
 from search.gym.adapter import EVENTS, Adapter, load_adapter
 from search.gym.agents import GymAgent
-from search.sim.world import OUTCOME_NAMES, RUNNING
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 

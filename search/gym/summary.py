@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 
 from app.formats import SUMMARY_FORMAT
+from search.core.outcomes import OUTCOME_NAMES
 from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
-from search.sim.world import OUTCOME_NAMES
 from search.solvers.follow import Follow, recorded
 from search.solvers.reward import TERMS, RewardConfig, sequential_sum
 

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from search.core.outcomes import OUTCOME_NAMES, RUNNING
 from search.gym.agents import GymAgent
 from search.gym.problem import EVENTS, GymCoupledProblem, GymScenario
 from search.highway.adapter import HighwayAdapter
 from search.highway.kernel import HighwayKernel, HighwayState, adapter_spec, notice
-from search.sim.world import OUTCOME_NAMES, RUNNING
 from search.solvers.reward import RewardConfig
 
 

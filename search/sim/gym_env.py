@@ -15,10 +15,11 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike
 
+from search.core.outcomes import OUTCOME_NAMES
 from search.sim import world
 from search.sim.observation import ROBOT_NODE_SIZE, observe
 from search.sim.scenarios import Scenario, sample_training_states
-from search.sim.world import OUTCOME_NAMES, WorldConfig, WorldState
+from search.sim.world import WorldConfig, WorldState
 
 
 class CrowdNavEnv(gym.Env):

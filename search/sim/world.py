@@ -27,12 +27,10 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from search.core.outcomes import COLLISION, RUNNING, SUCCESS, TIMEOUT
 from search.sim.orca import crowd_velocities, orca_velocities
 from search.sim.settings import ConfigTable
 from search.sim.social_force import social_force_velocities
-
-RUNNING, SUCCESS, COLLISION, TIMEOUT = 0, 1, 2, 3
-OUTCOME_NAMES = ("running", "success", "collision", "timeout")
 
 UNICYCLE_MOTIONS = ("straight", "arc")
 ROBOT_STARTS = ("square", "circle")
@@ -373,7 +371,7 @@ def new_state(
         robot_goal=np.array(robot_goal, dtype=np.float64),
         time=np.zeros(w),
         done=np.zeros((w, r), dtype=bool),
-        outcome=np.zeros((w, r), dtype=np.int8),
+        outcome=np.full((w, r), RUNNING, dtype=np.int8),
         event_time=np.full((w, r), np.nan),
         path_length=np.zeros((w, r)),
         min_clearance=np.full((w, r), np.inf),
@@ -875,6 +873,6 @@ def _move_and_judge(
                 min_clearance[w, r] = min(min_clearance[w, r], clearance)
             finished = collision or success or timeout
             if finished:
-                outcome[w, r] = 2 if collision else 1 if success else 3
+                outcome[w, r] = COLLISION if collision else SUCCESS if success else TIMEOUT
                 event_time[w, r] = now
                 done[w, r] = True

@@ -32,8 +32,8 @@ from importlib import import_module
 import numba
 import numpy as np
 
+from search.core.outcomes import COLLISION, SUCCESS
 from search.sim.settings import ConfigTable
-from search.sim.world import COLLISION, SUCCESS
 from search.solvers.prior import PRIOR_KINDS, ActionPrior
 
 TERMS = ("action_divergence", "goal", "horizon", "plausibility")

@@ -74,9 +74,9 @@ def test_shipped_agents_load_by_name_and_act(name):
 def test_the_better_shipped_agents_reach_the_goal_in_the_clips_horizon(scenario):
     """med and hi drive into the goal within the clips' 25 s on every shipped scenario when nobody disturbs the
     crowd (the agents before the relative goal circled it and timed out)."""
+    from search.core.outcomes import SUCCESS
     from search.sim.coupled import replay
     from search.sim.scenarios import load_scenario
-    from search.sim.world import SUCCESS
 
     trajectory = replay([load_policy("med"), load_policy("hi")], load_scenario(scenario), np.zeros((100, 10, 2)))
     assert trajectory.outcome.tolist() == [SUCCESS, SUCCESS]

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from search.sim.world import COLLISION, RUNNING, SUCCESS
+from search.core.outcomes import COLLISION, RUNNING, SUCCESS
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig, pairwise_divergence
 

@@ -5,9 +5,10 @@ import pickle
 import numpy as np
 import pytest
 
+from search.core.outcomes import COLLISION, RUNNING, SUCCESS, TIMEOUT
 from search.sim import world
 from search.sim.scenarios import load_scenario, sample_training_states
-from search.sim.world import COLLISION, RUNNING, SUCCESS, TIMEOUT, WorldConfig, WorldState, new_state
+from search.sim.world import WorldConfig, WorldState, new_state
 
 
 def one_robot_world(config, robot, goal, humans=(), human_goals=None):
