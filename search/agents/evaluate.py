@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from search.core.outcomes import COLLISION, SUCCESS, TIMEOUT
 from search.sim import world
 from search.sim.observation import Policy, observe
 from search.sim.scenarios import sample_training_states
@@ -39,15 +40,15 @@ def evaluate(
         action = np.where(observation.done[:, None], 0.0, action)
         returns += world.step(state, config, action[:, None, :])[:, 0]
     outcome = state.outcome[:, 0]
-    success = outcome == world.SUCCESS
+    success = outcome == SUCCESS
     half_width = 1.96 * returns.std(ddof=1) / math.sqrt(episodes)
     mean = float(returns.mean())
     result = {
         "agent": getattr(policy, "name", type(policy).__name__),
         "episodes": episodes,
         "success_rate": float(success.mean()),
-        "collision_rate": float((outcome == world.COLLISION).mean()),
-        "timeout_rate": float((outcome == world.TIMEOUT).mean()),
+        "collision_rate": float((outcome == COLLISION).mean()),
+        "timeout_rate": float((outcome == TIMEOUT).mean()),
         "reward_mean": mean,
         "reward_ci95": [float(mean - half_width), float(mean + half_width)],
         "nav_time_mean": float(state.event_time[success, 0].mean()) if success.any() else None,

@@ -31,6 +31,7 @@ from torch import Tensor
 
 from app.toml_errors import load_toml
 from search.agents.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
+from search.core.outcomes import SUCCESS
 from search.sim import world
 from search.sim.observation import ROBOT_NODE_SIZE, observe
 from search.sim.scenarios import sample_training_states
@@ -350,7 +351,7 @@ def train(
                 if finished.size:
                     for i in finished:
                         recent_returns.append(float(episode_return[i]))
-                        recent_success.append(float(state.outcome[i, 0] == world.SUCCESS))
+                        recent_success.append(float(state.outcome[i, 0] == SUCCESS))
                     episodes += finished.size
                     episode_return[finished] = 0.0
                     state.assign(finished, sample_training_states(wc, rng, finished.size))

@@ -52,7 +52,7 @@ class CoupledStep:
     rewards: np.ndarray  # (B, N) each robot's navigation reward
     done: np.ndarray  # (B, N) bool
     newly_done: np.ndarray  # (B, N) bool: finished on this step
-    outcome: np.ndarray  # (B, N) int8, see world.OUTCOME_NAMES
+    outcome: np.ndarray  # (B, N) int8, see search.core.outcomes
     time: np.ndarray  # (B,)
 
 
