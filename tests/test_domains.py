@@ -9,14 +9,7 @@ from tests.support.imports import imported, package_modules
 
 ROOT = Path(search.__file__).parent
 WORLDS = ("search.crowd", "search.gym", "search.highway", "search.sim", "search.agents")
-# shared by every world: the one check of setting keys and values, and the event codes every domain reports in
-SHARED = ("search.sim.settings",)
-EVENT_CODES = {f"search.sim.world.{name}" for name in ("OUTCOME_NAMES", "RUNNING", "SUCCESS", "COLLISION", "TIMEOUT")}
 CALLERS = ("search.solvers.", "search.bundle.", "search.cli.")
-
-
-def _shared(name: str) -> bool:
-    return name.startswith(SHARED) or name in EVENT_CODES or name == "search.sim.world"
 
 
 def test_the_domain_interface_is_the_only_way_into_a_world():
@@ -25,7 +18,7 @@ def test_the_domain_interface_is_the_only_way_into_a_world():
         for module, path in package_modules(ROOT).items()
         if f"{module}.".startswith(CALLERS)
         for name in imported(path, "search", top_level_only=False)
-        if name.startswith(WORLDS) and not _shared(name)
+        if name.startswith(WORLDS)
     ]
     assert found == []
 

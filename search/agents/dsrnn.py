@@ -30,8 +30,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from search.core.settings import ConfigTable
 from search.sim.observation import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
-from search.sim.settings import ConfigTable
 
 CHECKPOINT_FORMAT = "foil.dsrnn/2"
 OBSERVATION_LAYOUT = {"robot_node": list(ROBOT_NODE_FIELDS)}

@@ -27,7 +27,7 @@ from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, parse_study
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
 from search.clips.render import ROBOT_STYLES, RenderOptions
-from search.sim.settings import check_keys, check_values
+from search.core.settings import check_keys, check_values
 from search.solvers.baselines import CEMConfig, SamplingConfig
 from search.solvers.disagreements import DisagreementsConfig
 from search.solvers.domain import Domain, domain_for

@@ -61,7 +61,7 @@ class CrowdDomain(Domain):
         return parse_settings(WorldConfig, items, "world")
 
     def check_world(self, settings: dict, what: str) -> dict:
-        from search.sim.settings import check_values
+        from search.core.settings import check_values
         from search.sim.world import WorldConfig
 
         return check_values(WorldConfig, settings, what)

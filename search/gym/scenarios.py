@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from app.toml_errors import load_toml
+from search.core.settings import check_keys
 from search.gym.problem import GymScenario
-from search.sim.settings import check_keys
 
 SCENARIO_KEYS = {"name", "adapter", "seed", "settings", "description"}
 DISTRIBUTION_KEYS = {"name", "adapter", "distribution", "settings", "description"}

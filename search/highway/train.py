@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from app.toml_errors import load_toml
-from search.sim.settings import check_keys
+from search.core.settings import check_keys
 
 
 @dataclass(frozen=True)

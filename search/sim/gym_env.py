@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike
 
-from search.core.outcomes import OUTCOME_NAMES
+from search.core.outcomes import COLLISION, OUTCOME_NAMES, SUCCESS, TIMEOUT
 from search.sim import world
 from search.sim.observation import ROBOT_NODE_SIZE, observe
 from search.sim.scenarios import Scenario, sample_training_states
@@ -78,7 +78,7 @@ class CrowdNavEnv(gym.Env):
         robot_action = np.asarray(action, dtype=np.float64).reshape(1, 1, 2)
         reward = float(world.step(self.state, self.config, robot_action, env_action)[0, 0])
         outcome = int(self.state.outcome[0, 0])
-        terminated = outcome in (world.SUCCESS, world.COLLISION)
-        truncated = outcome == world.TIMEOUT
+        terminated = outcome in (SUCCESS, COLLISION)
+        truncated = outcome == TIMEOUT
         info = {"outcome": OUTCOME_NAMES[outcome], "time": float(self.state.time[0])}
         return self._observation(self.state), reward, terminated, truncated, info

@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from search.core.outcomes import COLLISION, SUCCESS
-from search.sim.settings import ConfigTable
+from search.core.settings import ConfigTable
 from search.solvers.prior import PRIOR_KINDS, ActionPrior
 
 TERMS = ("action_divergence", "goal", "horizon", "plausibility")

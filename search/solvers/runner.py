@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from app.formats import summary_json
-from search.sim.settings import check_keys, field_types
+from search.core.settings import check_keys, field_types
 from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
 from search.solvers.disagreements import Disagreement, DisagreementsConfig, disagreements
 from search.solvers.domain import Domain, domain_for

@@ -1,4 +1,4 @@
-"""Every reader of settings on the offline side refuses a misspelt key the same way (search.sim.settings.check_keys):
+"""Every reader of settings on the offline side refuses a misspelt key the same way (search.core.settings.check_keys):
 the key, what it is a setting of, and the keys it could have been."""
 
 from __future__ import annotations
