@@ -33,8 +33,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from app.analysis.design import chance  # noqa: E402
 from app.analysis.model import Answers, ModelResult, fit_accuracy  # noqa: E402
-from app.analysis.power import Assumptions, chance, layout, log_odds_for, simulate  # noqa: E402
+from app.analysis.power import Assumptions, layout, log_odds_for, simulate  # noqa: E402
 from app.analysis.statistics import wilson_interval  # noqa: E402
 from app.survey.study import load_study  # noqa: E402
 

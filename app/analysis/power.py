@@ -20,14 +20,20 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cache
-from typing import TYPE_CHECKING
+from pathlib import Path
 
+import numpy as np
+from scipy import optimize, special
+
+from app.analysis.design import chance, tasks
+from app.analysis.exclusions import ExclusionRules
 from app.analysis.model import Answers, ModelResult, fit_accuracy
+from app.analysis.report import ALL, tally_study
+from app.analysis.source import analysis_database
+from app.analysis.statistics import wilson_interval
+from app.formats import Manifest
 from app.survey.assignment import conditions
-from app.survey.study import Study
-
-if TYPE_CHECKING:  # numpy is imported where it runs: the report (and so the server) imports this module
-    import numpy as np
+from app.survey.study import Study, load_study
 
 ALPHA = 0.05
 TARGETS = (0.8, 0.9)
@@ -45,23 +51,9 @@ class Layout:
     clips: int
 
 
-def chance(study: Study, task: str) -> float:
-    """The accuracy of guessing: one of two robots, or one of the k! orders of a ranking part's k agents."""
-    if task == "pairwise":
-        return 0.5
-    agents = next(len(part.agents) for part in study.parts if part.kind == "ranking")
-    return 1 / math.factorial(agents)
-
-
-def tasks(study: Study) -> list[str]:
-    return [task for task in ("pairwise", "ranking") if any(part.kind == task for part in study.parts)]
-
-
 def layout(study: Study, task: str, participants: int) -> Layout:
     """The answers of `participants` participants in the study's design, conditions assigned in turn as the
     balanced assignment does. A ranking's clip is its block: the scheme's clips of the scenario it ranks."""
-    import numpy as np
-
     columns: dict[str, list[str]] = {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair")}
     design = conditions(study)
     for k in range(participants):
@@ -91,9 +83,6 @@ def layout(study: Study, task: str, participants: int) -> Layout:
 @cache
 def log_odds_for(accuracy: float, sd: float) -> float:
     """The log odds whose expit, averaged over a normal effect of standard deviation `sd`, is `accuracy`."""
-    import numpy as np
-    from scipy import optimize, special
-
     nodes, weights = np.polynomial.hermite_e.hermegauss(40)
     weights = weights / weights.sum()
     return float(optimize.brentq(lambda eta: float(special.expit(eta + sd * nodes) @ weights) - accuracy, -30.0, 30.0))
@@ -108,9 +97,6 @@ class Assumptions:
 
 def simulate(study: Study, task: str, plan: Layout, assume: Assumptions, rng: np.random.Generator) -> Answers:
     """One simulated study's answers in the layout's design."""
-    import numpy as np
-    from scipy import special
-
     schemes = list(study.design.schemes)
     sd = math.hypot(assume.participant_sd, assume.clip_sd)
     eta = np.array([log_odds_for(assume.accuracy[s], sd) for s in schemes])
@@ -127,8 +113,6 @@ MEASURES = {"pairwise": ("answers",), "ranking": ("orderings", "whole order")}  
 def _ranking_noise(agents: int) -> np.ndarray:
     """Common random numbers for `ranking_odds_for`: the same noise for every log odds tried keeps the whole-order
     accuracy a smooth, monotone function of it."""
-    import numpy as np
-
     return np.random.default_rng(0).normal(0.0, 1.0, (4000, agents))
 
 
@@ -136,8 +120,6 @@ def whole_order_accuracy(eta: float, sd: float, agents: int) -> float:
     """The share of rankings with every robot in the true order, over participants and clips, when a person ranks
     as Thurstone's model says: robot i's quality (agents - 1 - i) times the discriminability exp(eta + effect),
     seen with standard normal noise, the effect normal with standard deviation `sd`."""
-    import numpy as np
-
     nodes, weights = np.polynomial.hermite_e.hermegauss(20)
     seen = np.arange(agents)[::-1] * np.exp(eta + sd * nodes)[:, None, None] + _ranking_noise(agents)
     right = np.all(np.diff(seen, axis=2) < 0, axis=2).mean(axis=1)
@@ -148,8 +130,6 @@ def whole_order_accuracy(eta: float, sd: float, agents: int) -> float:
 def ranking_odds_for(accuracy: float, sd: float, agents: int) -> float:
     """The log odds (of discriminability) at which a ranking part's whole-order accuracy is `accuracy`; at or
     below chance (1/k!), the lowest tried."""
-    from scipy import optimize
-
     low, high = -8.0, 8.0
     if accuracy <= whole_order_accuracy(low, sd, agents):
         return low
@@ -161,8 +141,6 @@ def simulate_rankings(
 ) -> tuple[Answers, Answers]:
     """One simulated study's rankings (Thurstone's model, scheme accuracies of the whole order), as the whole-order
     answers and as their pairwise orderings (the report's ranking model)."""
-    import numpy as np
-
     agents = next(len(part.agents) for part in study.parts if part.kind == "ranking")
     sd = math.hypot(assume.participant_sd, assume.clip_sd)
     eta = np.array([ranking_odds_for(assume.accuracy[s], sd, agents) for s in study.design.schemes])
@@ -188,8 +166,6 @@ def simulated_fits(
 ) -> dict[str, list[ModelResult]]:
     """The report's model fitted to `studies` simulated studies, per measure of the part (MEASURES): a ranking part
     both by its pairwise orderings (the report's test) and by whole orders."""
-    import numpy as np
-
     rng = np.random.default_rng([seed, participants])
     plan = layout(study, task, participants)
     schemes = list(study.design.schemes)
@@ -212,8 +188,6 @@ def power(results: list[ModelResult]) -> float:
 def monte_carlo_error(value: float, studies: int) -> float:
     """Half the width of the 95% interval of a power estimated from `studies` simulated studies: the noise that
     can make power dip from one N to the next. Wilson's, so that 0% and 100% get one too."""
-    from app.analysis.statistics import wilson_interval
-
     low, high = wilson_interval(round(value * studies), studies) or (0.0, 1.0)
     return (high - low) / 2
 
@@ -246,9 +220,6 @@ def fit_power_curve(
     each count given half a rejection and half a non-rejection more, so that none is 0% or 100% and the fit stays
     finite when every study at some N rejects, or none does. Without `start`, two starts: rising to 100%, and
     levelling off at the largest power seen."""
-    import numpy as np
-    from scipy import optimize
-
     x = np.log(np.asarray(participants, dtype=float))
     k = np.asarray(rejections, dtype=float) + 0.5
     m = studies + 1.0
@@ -294,8 +265,6 @@ def crossings(
     the fitted curve's power at each N, the curve refitted to each draw, and the 2.5th and 97.5th percentiles of
     their N (a draw that never reaches the target counts as infinite). It reflects the Monte Carlo error of the
     simulated studies, not whether the curve's shape is right."""
-    import numpy as np
-
     curve = fit_power_curve(participants, rejections, studies)
     rng = np.random.default_rng(seed)
     expected = [curve.power(n) for n in participants]
@@ -382,8 +351,6 @@ def run_power(
 ) -> int:
     """`foil power`: prints power against number of participants per part, and the N at which a monotone fit of
     that curve reaches 80% and 90%."""
-    from app.survey.study import load_study
-
     study = load_study(study_path)
     if participant_sd < 0 or clip_sd < 0:
         raise ValueError("--participant-sd and --clip-sd are standard deviations: give 0 or more")
@@ -458,10 +425,6 @@ def bundle_accuracies(bundle: str, study: Study, shown_right: float) -> dict[str
     answered right by `shown_right` of participants where its audit says it visibly shows the better agent, by
     half where it shows a tie or rests on a pair the evaluation could not decide (a coin toss), and by
     1 - `shown_right` where it shows the worse one as better; a scheme's accuracy is the mean over its clips."""
-    from pathlib import Path
-
-    from app.formats import Manifest
-
     path = Path(bundle) / "manifest.json"
     if not path.is_file():
         raise ValueError(f"--bundle {bundle}: no manifest.json there; give the folder foil bundle wrote")
@@ -485,10 +448,6 @@ def bundle_accuracies(bundle: str, study: Study, shown_right: float) -> dict[str
 def pilot_accuracies(url: str, study: Study) -> dict[str, dict[str, float]]:
     """Each part's accuracy per scheme as the report's model estimates it from a pilot's database (pilots, the
     admin's preview link, counted beside real participants)."""
-    from app.analysis.exclusions import ExclusionRules
-    from app.analysis.report import ALL, tally_study
-    from app.analysis.source import analysis_database
-
     db = analysis_database(url)
     try:
         data = tally_study(db, study, ExclusionRules(include_kinds=("pilot",)))

@@ -11,9 +11,9 @@ from itertools import groupby
 from pathlib import Path
 from typing import Any
 
+from app.analysis.design import chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules
 from app.analysis.model import MODEL_VERSION
-from app.analysis.power import chance, tasks
 from app.analysis.source import sha256
 from app.survey.assignment import conditions
 from app.survey.study import Study, parse_study

@@ -20,9 +20,9 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from app.analysis.answer_table import ORDER_SEPARATOR, long_rows, participant_records
+from app.analysis.design import chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
 from app.analysis.model import Answers, ModelResult, RatingResult, Ratings, fit_accuracy, fit_ratings
-from app.analysis.power import chance
 from app.analysis.prereg import deviations
 from app.analysis.source import analysis_database, analysis_study_text, served_bundle
 from app.analysis.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
@@ -118,7 +118,7 @@ class ReportData:
         return self._ratings[question]
 
     def tasks(self) -> list[str]:
-        return [task for task in TASKS if any(part.kind == task for part in self.study.parts)]
+        return tasks(self.study)
 
     def accuracy_test(self, task: str, scope: str) -> TestResult:
         return accuracy_difference(

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.analysis.design import chance
 from app.analysis.model import fit_accuracy
-from app.analysis.power import Assumptions, chance, layout, parse_accuracies, simulate
+from app.analysis.power import Assumptions, layout, parse_accuracies, simulate
 from app.analysis.report import render_report, tally_study
 from app.analysis.statistics import accuracy_difference
 from app.survey.study import load_study
