@@ -1,6 +1,6 @@
 """The survey server's wings import only downwards: the shared files at the package's root, then storage, the
-study, the analysis, the web side and the command line. No module imports itself back through others, and the
-root stays small enough to read at a glance."""
+study, the analysis, the web side and the command line. No module imports itself back through others, not even
+through an import deferred to a function, and the root stays small enough to read at a glance."""
 
 from pathlib import Path
 
@@ -29,3 +29,14 @@ def test_imports_point_down_the_wings():
 
 def test_no_import_circles():
     assert import_circles(ROOT) == []
+
+
+def test_a_circle_closed_inside_a_function_is_a_circle(tmp_path):
+    """A function-level import only delays the circle to the first call: the check must see it, as it did not
+    when the analysis's power, preregistration and report imported each other that way."""
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "low.py").write_text("def pilot():\n    from pkg.high import tally\n\n    return tally()\n")
+    (package / "high.py").write_text("from pkg.low import pilot\n\n\ndef tally():\n    return pilot\n")
+    assert import_circles(package) == ["pkg.high -> pkg.low -> pkg.high"]

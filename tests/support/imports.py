@@ -12,12 +12,13 @@ def package_modules(root: Path) -> dict[str, Path]:
     }
 
 
-def imported(path: Path, package: str, top_level_only: bool) -> set[str]:
-    """The names from `package` that a module imports (`from a.b import c` counts as `a.b` and `a.b.c`)."""
+def imported(path: Path, package: str) -> set[str]:
+    """The names from `package` that a module imports anywhere in it, inside functions and `if TYPE_CHECKING:` too
+    (`from a.b import c` counts as `a.b` and `a.b.c`): an import deferred to a function still ties the modules
+    together, only later."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    nodes = tree.body if top_level_only else ast.walk(tree)
     found = set()
-    for node in nodes:
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
@@ -30,7 +31,7 @@ def upward_imports(root: Path, layer_of) -> list[str]:
     upward = []
     for module, path in package_modules(root).items():
         own = layer_of(module)
-        for name in imported(path, root.name, top_level_only=False):
+        for name in imported(path, root.name):
             layer = layer_of(name)
             if own is not None and layer is not None and layer > own:
                 upward.append(f"{module} imports {name}")
@@ -38,12 +39,9 @@ def upward_imports(root: Path, layer_of) -> list[str]:
 
 
 def import_circles(root: Path) -> list[str]:
-    """Circles among the modules' top-level imports, each as `a -> b -> a`."""
+    """Circles among the modules' imports, those inside functions included, each as `a -> b -> a`."""
     modules = package_modules(root)
-    graph = {
-        m: {i for i in imported(p, root.name, top_level_only=True) if i in modules and i != m}
-        for m, p in modules.items()
-    }
+    graph = {m: {i for i in imported(p, root.name) if i in modules and i != m} for m, p in modules.items()}
     state: dict[str, int] = {}
     circles = []
 
