@@ -43,8 +43,8 @@ def horizon_scene(seed: int = 0) -> Scene:
     return Scene(
         agents=("goal", "orca"),
         times=np.concatenate([[0.0], trajectory.time]),
-        robots=np.concatenate([start[None], trajectory.robot_pos]),
-        humans=np.concatenate([humans[None], trajectory.human_pos])[:, None],
+        robots=np.concatenate([start[None], trajectory.agent_pos]),
+        humans=np.concatenate([humans[None], trajectory.other_pos])[:, None],
         starts=start,
         goals=np.tile(np.asarray(scenario.robot_goal, dtype=float), (2, 1)),
         outcomes=tuple(

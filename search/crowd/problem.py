@@ -42,13 +42,13 @@ class CoupledProblem:
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sim = self.sim
-        robot_actions, agent_rewards, newly_done = sim.advance(actions)
+        agent_actions, agent_rewards, newly_done = sim.advance(actions)
         self.agent_rewards = sim.gather(agent_rewards)
         state, batch = sim.state, sim.batch
         t = np.rint(state.time[:batch] / sim.config.dt).astype(np.int64)
         goal, end = self.reward.events(newly_done, sim.gather(state.outcome), sim.gather(state.done).all(axis=1), t)
         reward = self.reward.step(
-            robot_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal, end
+            agent_actions, sim.gather(state.robot_pos), state.human_pos[:batch], actions, goal, end
         )
         return reward, goal | end
 

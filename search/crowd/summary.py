@@ -92,8 +92,8 @@ def build_summary(
             {
                 "t": float(trajectory.time[i]),
                 "humans": _humans(trajectory.crowds[i]),
-                "robots": _pairs(trajectory.robot_pos[i]),
-                "robot_actions": _pairs(trajectory.robot_actions[i]),
+                "robots": _pairs(trajectory.agent_pos[i]),
+                "robot_actions": _pairs(trajectory.agent_actions[i]),
             }
             for i in range(len(trajectory.time))
         ],

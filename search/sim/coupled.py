@@ -44,10 +44,10 @@ class Snapshot:
 class CoupledStep:
     """What one coupled step exposes to rewards and recorders; agent axis second: (B, N, ...)."""
 
-    robot_actions: np.ndarray  # (B, N, 2) the actions the policies chose (zero once finished)
-    robot_pos: np.ndarray  # (B, N, 2) after the move
-    robot_vel: np.ndarray  # (B, N, 2)
-    human_pos: np.ndarray  # (B, n, 2) the crowd after the move (agent 0's world when robots are visible)
+    agent_actions: np.ndarray  # (B, N, 2) the actions the policies chose (zero once finished)
+    agent_pos: np.ndarray  # (B, N, 2) the robots after the move
+    agent_vel: np.ndarray  # (B, N, 2)
+    other_pos: np.ndarray  # (B, n, 2) the crowd after the move (agent 0's world when robots are visible)
     crowds: np.ndarray  # (B, C, n, 2) every crowd: C = 1 when shared, one per agent (C = N) when robots are visible
     rewards: np.ndarray  # (B, N) each robot's navigation reward
     done: np.ndarray  # (B, N) bool
@@ -111,10 +111,10 @@ class CoupledSimulator:
         actions, reward, newly_done = self.advance(env_action)
         done = self.gather(self.state.done)
         return CoupledStep(
-            robot_actions=actions,
-            robot_pos=self.gather(self.state.robot_pos).copy(),
-            robot_vel=self.gather(self.state.robot_vel).copy(),
-            human_pos=self.state.human_pos[: self.batch].copy(),
+            agent_actions=actions,
+            agent_pos=self.gather(self.state.robot_pos).copy(),
+            agent_vel=self.gather(self.state.robot_vel).copy(),
+            other_pos=self.state.human_pos[: self.batch].copy(),
             crowds=self.crowds(),
             rewards=self.gather(reward),
             done=done.copy(),
@@ -202,9 +202,9 @@ class Trajectory:
     """One coupled scenario, step by step: what a summary records and a replay must reproduce."""
 
     env_actions: np.ndarray  # (T, n, 2)
-    robot_actions: np.ndarray  # (T, N, 2)
-    robot_pos: np.ndarray  # (T, N, 2)
-    human_pos: np.ndarray  # (T, n, 2) the shared crowd (agent 0's when robots are visible)
+    agent_actions: np.ndarray  # (T, N, 2)
+    agent_pos: np.ndarray  # (T, N, 2) the robots
+    other_pos: np.ndarray  # (T, n, 2) the shared crowd (agent 0's when robots are visible)
     crowds: np.ndarray  # (T, C, n, 2) every crowd, see CoupledStep
     rewards: np.ndarray  # (T, N)
     outcome: np.ndarray  # (N,) int8
@@ -215,7 +215,7 @@ class Trajectory:
 
     def head(self, steps: int) -> Trajectory:
         """The first ``steps`` steps (the per-robot totals stay those of the whole run; events carry their time)."""
-        per_step = ("env_actions", "robot_actions", "robot_pos", "human_pos", "crowds", "rewards", "time")
+        per_step = ("env_actions", "agent_actions", "agent_pos", "other_pos", "crowds", "rewards", "time")
         return replace(self, **{name: getattr(self, name)[:steps] for name in per_step})
 
 
@@ -264,9 +264,9 @@ def replay(
     state = sim.state
     return Trajectory(
         env_actions=used,
-        robot_actions=np.stack([s.robot_actions[0] for s in steps]),
-        robot_pos=np.stack([s.robot_pos[0] for s in steps]),
-        human_pos=np.stack([s.human_pos[0] for s in steps]),
+        agent_actions=np.stack([s.agent_actions[0] for s in steps]),
+        agent_pos=np.stack([s.agent_pos[0] for s in steps]),
+        other_pos=np.stack([s.other_pos[0] for s in steps]),
         crowds=np.stack([s.crowds[0] for s in steps]),
         rewards=np.stack([s.rewards[0] for s in steps]),
         outcome=sim.gather(state.outcome)[0].copy(),

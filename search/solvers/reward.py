@@ -5,11 +5,11 @@ Per step (step t = 1, 2, ... counts steps from the scenario's initial state):
 - a **goal** step (some agent reached its goal on this step; with ``collision_is_goal`` a collision counts too)
   ends the trajectory with ``goal_bonus + alpha * d_s``, d_s the divergence of the agents' positions;
 - an **end** step without a goal ends it with ``horizon_offset + beta * h``, h a heuristic (default: d_s again):
-  t reached the horizon T, or the agents' episodes ended as ``finish`` says. With ``finish = "all"`` a robot
-  that finished stands still and the trajectory goes on until every robot has finished; with ``finish =
-  "first"`` (the paper's Algorithm 1, CrowdNav's ``done``) it ends as soon as any robot's episode ends, so a
-  collision ends it too, without the goal's reward unless ``collision_is_goal``; with ``goal_needs_contrast``
-  a step on which every robot has reached its goal is no goal step (nothing tells the robots apart there);
+  t reached the horizon T, or the agents' episodes ended as ``finish`` says. With ``finish = "all"`` an agent
+  that finished waits and the trajectory goes on until every agent has finished; with ``finish = "first"``
+  (the paper's Algorithm 1, CrowdNav's ``done``) it ends as soon as any agent's episode ends, so a collision
+  ends it too, without the goal's reward unless ``collision_is_goal``; with ``goal_needs_contrast`` a step on
+  which every agent has reached its goal is no goal step (nothing tells the agents apart there);
 - any other step gives the action divergence d_a of the agents' actions;
 - every step adds ``plausibility * log p(a_env)`` under the environment action prior (0 by default).
 
@@ -54,8 +54,8 @@ class RewardConfig(ConfigTable):
     horizon_offset: float = 0.0
     heuristic: str = "state_divergence"  # a name in HEURISTICS or module:attribute
     collision_is_goal: bool = False
-    finish: str = "all"  # the trajectory ends when "all" robots have finished, or when the "first" one has
-    goal_needs_contrast: bool = False  # no goal term when every robot reaches its goal (they arrive together)
+    finish: str = "all"  # the trajectory ends when "all" agents have finished, or when the "first" one has
+    goal_needs_contrast: bool = False  # no goal term when every agent reaches its goal (they arrive together)
     plausibility: float = 0.0
     prior: str = "uniform"  # environment action prior: "uniform" or "gaussian"
     prior_sigma: float = 0.1
@@ -67,8 +67,8 @@ class RewardConfig(ConfigTable):
             (self.combine in ("mean", "min"), "combine must be 'mean' or 'min'"),
             (
                 self.finish in ("all", "first"),
-                "finish must be 'all' (a finished robot stands still until every "
-                "robot has finished) or 'first' (the first finish ends it)",
+                "finish must be 'all' (a finished agent waits until every "
+                "agent has finished) or 'first' (the first finish ends it)",
             ),
             (self.prior in PRIOR_KINDS, f"prior must be one of {PRIOR_KINDS}"),
         ]
@@ -89,17 +89,17 @@ def pairwise_divergence(values: np.ndarray, norm: str, combine: str) -> np.ndarr
     return out
 
 
-def state_divergence(robot_pos: np.ndarray, human_pos: np.ndarray, config: RewardConfig) -> np.ndarray:
-    """The default horizon heuristic: how far apart the robots ended up."""
-    return pairwise_divergence(robot_pos, config.norm, config.combine)
+def state_divergence(agent_pos: np.ndarray, other_pos: np.ndarray, config: RewardConfig) -> np.ndarray:
+    """The default horizon heuristic: how far apart the agents ended up."""
+    return pairwise_divergence(agent_pos, config.norm, config.combine)
 
 
 HEURISTICS = {"state_divergence": state_divergence}
 
 
 def heuristic_function(spec: str):
-    """A heuristic ``h(robot_pos (..., N, 2), human_pos (..., n, 2), config) -> (...)`` by name or
-    ``module:attribute``."""
+    """A heuristic ``h(agent_pos (..., N, 2), other_pos (..., n, 2), config) -> (...)`` by name or
+    ``module:attribute``: ``other_pos`` holds the world's other movers."""
     if spec in HEURISTICS:
         return HEURISTICS[spec]
     if ":" in spec:
@@ -129,17 +129,18 @@ class DivergenceReward:
         end = ~goal & ((t >= self.config.horizon) | finished)
         return goal, end
 
-    def divergence(self, robot_actions, robot_pos, human_pos, goal, end) -> np.ndarray:
-        """Each step's divergence term (B,), from agent arrays (B, N, 2), humans (B, n, 2) and the step's events
-        (B,): the goal term on a goal step, the end term on an end step, the action divergence otherwise."""
+    def divergence(self, agent_actions, agent_pos, other_pos, goal, end) -> np.ndarray:
+        """Each step's divergence term (B,), from agent arrays (B, N, 2), the other movers (B, n, 2) and the
+        step's events (B,): the goal term on a goal step, the end term on an end step, the action divergence
+        otherwise."""
         c = self.config
         heuristic = _STATE_DIVERGENCE
         if self.heuristic is not state_divergence and end.any():
-            heuristic = np.asarray(self.heuristic(robot_pos, human_pos, c), dtype=np.float64)
+            heuristic = np.asarray(self.heuristic(agent_pos, other_pos, c), dtype=np.float64)
         reward = np.empty(len(goal))
         _step(
-            robot_actions,
-            robot_pos,
+            agent_actions,
+            agent_pos,
             goal,
             end,
             heuristic,
@@ -153,11 +154,11 @@ class DivergenceReward:
         )
         return reward
 
-    def step_terms(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> dict[str, np.ndarray]:
-        """Each reward term of one step (B,), from agent arrays (B, N, 2), humans (B, n, 2), the environment
-        action (B, n, 2) and the step's events (B,)."""
+    def step_terms(self, agent_actions, agent_pos, other_pos, env_action, goal, end) -> dict[str, np.ndarray]:
+        """Each reward term of one step (B,), from agent arrays (B, N, 2), the other movers (B, n, 2), the
+        environment action (B, n, 2) and the step's events (B,)."""
         c = self.config
-        divergence = self.divergence(robot_actions, robot_pos, human_pos, goal, end)
+        divergence = self.divergence(agent_actions, agent_pos, other_pos, goal, end)
         return {
             "action_divergence": np.where(~goal & ~end, divergence, 0.0),
             "goal": np.where(goal, divergence, 0.0),
@@ -167,11 +168,11 @@ class DivergenceReward:
             else np.zeros(goal.shape),
         }
 
-    def step(self, robot_actions, robot_pos, human_pos, env_action, goal, end) -> np.ndarray:
+    def step(self, agent_actions, agent_pos, other_pos, env_action, goal, end) -> np.ndarray:
         """One step's reward (B,): the sum of its terms, of which only the divergence term and the plausibility
         term can be nonzero (a step is a goal, an end or neither)."""
         c = self.config
-        reward = self.divergence(robot_actions, robot_pos, human_pos, goal, end)
+        reward = self.divergence(agent_actions, agent_pos, other_pos, goal, end)
         return reward + c.plausibility * self.prior.log_prob(env_action) if c.plausibility else reward
 
     def trajectory(self, trajectory, dt: float) -> tuple[float, dict[str, float], np.ndarray]:
@@ -187,7 +188,7 @@ class DivergenceReward:
         all_done = np.all(event_step[None, :] <= t[:, None], axis=1)
         goal, end = self.events(newly_done, outcome, all_done, t)
         terms = self.step_terms(
-            trajectory.robot_actions, trajectory.robot_pos, trajectory.human_pos, trajectory.env_actions, goal, end
+            trajectory.agent_actions, trajectory.agent_pos, trajectory.other_pos, trajectory.env_actions, goal, end
         )
         per_step = terms["action_divergence"] + terms["goal"] + terms["horizon"] + terms["plausibility"]
         return sequential_sum(per_step), {k: sequential_sum(v) for k, v in terms.items()}, goal | end
@@ -233,19 +234,19 @@ def _divergences(values, squared, minimum, out):
 
 @numba.njit(cache=True)
 def _step(
-    robot_actions, robot_pos, goal, end, heuristic, squared, minimum, goal_bonus, alpha, horizon_offset, beta, reward
+    agent_actions, agent_pos, goal, end, heuristic, squared, minimum, goal_bonus, alpha, horizon_offset, beta, reward
 ):
     """Each row's divergence term into ``reward`` (B,): ``goal_bonus + alpha * d_s`` on a goal step,
     ``horizon_offset + beta * h`` on an end step (h: ``heuristic[b]``, or d_s where ``heuristic`` is empty), the
     action divergence d_a otherwise."""
     for b in range(reward.shape[0]):
         if goal[b]:
-            reward[b] = goal_bonus + alpha * _divergence(robot_pos, b, squared, minimum)
+            reward[b] = goal_bonus + alpha * _divergence(agent_pos, b, squared, minimum)
         elif end[b]:
-            h = heuristic[b] if heuristic.size else _divergence(robot_pos, b, squared, minimum)
+            h = heuristic[b] if heuristic.size else _divergence(agent_pos, b, squared, minimum)
             reward[b] = horizon_offset + beta * h
         else:
-            reward[b] = _divergence(robot_actions, b, squared, minimum)
+            reward[b] = _divergence(agent_actions, b, squared, minimum)
 
 
 def sequential_sum(values: np.ndarray) -> float:

@@ -156,9 +156,9 @@ def test_snapshot_and_restore_in_the_coupled_simulator():
     for _ in range(4):
         sim.step(zero)
     snapshot = sim.snapshot()
-    first = [sim.step(zero).robot_actions for _ in range(5)]
+    first = [sim.step(zero).agent_actions for _ in range(5)]
     sim.restore(snapshot)
-    second = [sim.step(zero).robot_actions for _ in range(5)]
+    second = [sim.step(zero).agent_actions for _ in range(5)]
     np.testing.assert_array_equal(np.array(first), np.array(second))
     assert not np.allclose(first[-1][:, 0], first[-1][:, 1])  # two different networks really act differently
 

@@ -126,9 +126,9 @@ def test_bad_reward_settings_say_what_is_wrong(settings, message):
         RewardConfig.from_dict({"alpah": 1.0})
 
 
-def far_humans(robot_pos, human_pos, config):
+def far_humans(agent_pos, other_pos, config):
     """A heuristic other than the default one: mean distance of the humans from the first robot."""
-    return np.linalg.norm(human_pos - robot_pos[..., :1, :], axis=-1).mean(axis=-1)
+    return np.linalg.norm(other_pos - agent_pos[..., :1, :], axis=-1).mean(axis=-1)
 
 
 def numpy_divergence(values, norm, combine):
@@ -144,12 +144,12 @@ def numpy_divergence(values, norm, combine):
     return sum(pairs[..., k] for k in range(pairs.shape[-1])) / pairs.shape[-1]
 
 
-def numpy_step_terms(config, heuristic, prior, robot_actions, robot_pos, human_pos, env_action, goal, end):
+def numpy_step_terms(config, heuristic, prior, agent_actions, agent_pos, other_pos, env_action, goal, end):
     """The reward terms of a step with numpy arrays: the reference the compiled reward must match bit for bit."""
     c = config
-    d_a = numpy_divergence(robot_actions, c.norm, c.combine)
-    d_s = numpy_divergence(robot_pos, c.norm, c.combine)
-    h = d_s if heuristic is None else heuristic(robot_pos, human_pos, c)
+    d_a = numpy_divergence(agent_actions, c.norm, c.combine)
+    d_s = numpy_divergence(agent_pos, c.norm, c.combine)
+    h = d_s if heuristic is None else heuristic(agent_pos, other_pos, c)
     return {
         "action_divergence": np.where(~goal & ~end, d_a, 0.0),
         "goal": np.where(goal, c.goal_bonus + c.alpha * d_s, 0.0),

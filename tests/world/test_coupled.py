@@ -34,7 +34,7 @@ def test_invisible_robots_do_not_change_the_crowd():
     runs = []
     for names in (("goal", "orca"), ("social_force", "goal")):
         sim = make(names)
-        runs.append(np.stack([sim.step(a).human_pos for a in actions]))
+        runs.append(np.stack([sim.step(a).other_pos for a in actions]))
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
@@ -59,8 +59,8 @@ def test_snapshot_and_restore_equal_a_straight_run():
     branched.restore(snap)
     for a, expected in zip(actions[15:], record[15:], strict=True):
         got = branched.step(a)
-        np.testing.assert_array_equal(got.robot_pos, expected.robot_pos)
-        np.testing.assert_array_equal(got.human_pos, expected.human_pos)
+        np.testing.assert_array_equal(got.agent_pos, expected.agent_pos)
+        np.testing.assert_array_equal(got.other_pos, expected.other_pos)
         np.testing.assert_array_equal(got.rewards, expected.rewards)
     assert branched.state.equals(straight.state)
 
@@ -80,7 +80,7 @@ def test_one_node_branched_into_a_batch_matches_single_runs():
             single.step(a)
         for t, a in enumerate(futures):
             step = single.step(a[[b]])
-            np.testing.assert_array_equal(step.robot_pos[0], batched[t].robot_pos[b])
+            np.testing.assert_array_equal(step.agent_pos[0], batched[t].agent_pos[b])
 
 
 def test_replay_reproduces_a_trajectory_bit_for_bit():
@@ -95,11 +95,11 @@ def test_replay_reproduces_a_trajectory_bit_for_bit():
             break
     again = replay(policies, scenario, actions)
     assert len(again.time) == len(recorded)
-    np.testing.assert_array_equal(again.robot_pos, np.stack([s.robot_pos[0] for s in recorded]))
-    np.testing.assert_array_equal(again.human_pos, np.stack([s.human_pos[0] for s in recorded]))
-    np.testing.assert_array_equal(again.robot_actions, np.stack([s.robot_actions[0] for s in recorded]))
+    np.testing.assert_array_equal(again.agent_pos, np.stack([s.agent_pos[0] for s in recorded]))
+    np.testing.assert_array_equal(again.other_pos, np.stack([s.other_pos[0] for s in recorded]))
+    np.testing.assert_array_equal(again.agent_actions, np.stack([s.agent_actions[0] for s in recorded]))
     third = replay(policies, scenario, actions.reshape(len(actions), -1))
-    np.testing.assert_array_equal(third.robot_pos, again.robot_pos)
+    np.testing.assert_array_equal(third.agent_pos, again.agent_pos)
 
 
 def test_finished_robots_stop_and_report_outcomes():
@@ -107,7 +107,7 @@ def test_finished_robots_stop_and_report_outcomes():
     finished_earlier = np.zeros((1, 2), dtype=bool)
     for a in env_actions(200):
         step = sim.step(a)
-        assert np.all(step.robot_actions[finished_earlier] == 0)  # finished robots get no action
+        assert np.all(step.agent_actions[finished_earlier] == 0)  # finished robots get no action
         finished_earlier = step.done
         if sim.all_done[0]:
             break
@@ -129,12 +129,12 @@ def test_crowds_are_shared_or_one_per_agent():
     shared = make()
     step = shared.step(env_actions(1)[0])
     assert step.crowds.shape == (1, 1, 10, 2)
-    np.testing.assert_array_equal(step.crowds[:, 0], step.human_pos)
+    np.testing.assert_array_equal(step.crowds[:, 0], step.other_pos)
     visible = make(config=WorldConfig(robot_visible=True, human_v_pref=1.0))
     for action in env_actions(20):
         step = visible.step(action)
     assert step.crowds.shape == (1, 2, 10, 2)
-    np.testing.assert_array_equal(step.crowds[:, 0], step.human_pos)
+    np.testing.assert_array_equal(step.crowds[:, 0], step.other_pos)
     assert not np.allclose(step.crowds[:, 0], step.crowds[:, 1])
 
 
@@ -162,7 +162,7 @@ def test_assign_overwrites_some_rows_with_a_snapshot_and_leaves_the_others(visib
         assert all(np.array_equal(a[k], b[k]) for k in a)
     for a in env_actions(10, batch=6, seed=3):  # the assigned rows go on as the source's (torch's numbers may
         got, expected = target.step(a), source.step(a[rows])  # differ in the last bits between batch sizes)
-        np.testing.assert_allclose(got.robot_pos[rows], expected.robot_pos, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(got.agent_pos[rows], expected.agent_pos, rtol=0, atol=1e-5)
         np.testing.assert_allclose(got.crowds[rows], expected.crowds, rtol=0, atol=1e-5)
     with pytest.raises(ValueError, match="rows to overwrite"):
         target.assign([0, 1], source.snapshot([0]))
@@ -184,7 +184,7 @@ def test_the_crowd_helper_thread_changes_nothing(monkeypatch, config):
             monkeypatch.setattr(coupled, "_crowd_worker", lambda: None)
         sim = make(batch=6, config=config)
         steps = [sim.step(a) for a in env_actions(30, batch=6, seed=3)]
-        runs.append((np.stack([s.crowds for s in steps]), np.stack([s.robot_pos for s in steps]), sim.state.done))
+        runs.append((np.stack([s.crowds for s in steps]), np.stack([s.agent_pos for s in steps]), sim.state.done))
     for with_helper, in_line in zip(*runs, strict=True):
         assert np.array_equal(with_helper, in_line)
 
