@@ -21,20 +21,20 @@ OFFLINE_MODULES = ("numpy", "numba", "torch", "gymnasium", "tqdm", "imageio_ffmp
 
 
 def _train(args: argparse.Namespace) -> int:
-    from search.solvers.domain import domain_of_training
+    from search.solvers.domain import trainer_for
 
-    print(f"last checkpoint: {domain_of_training(Path(args.config)).train(Path(args.config), Path(args.out))}")
+    print(f"last checkpoint: {trainer_for(Path(args.config)).train(Path(args.config), Path(args.out))}")
     return 0
 
 
 def _release(args: argparse.Namespace) -> int:
-    from search.solvers.domain import domain_of_training
+    from search.solvers.domain import trainer_for
 
-    domain = domain_of_training(args.run_dir)
+    trainer = trainer_for(args.run_dir)
     if args.validate_only:
-        domain.validate_run(args.run_dir, args.episodes, args.every)
+        trainer.validate_run(args.run_dir, args.episodes, args.every)
     else:
-        print(json.dumps(domain.release(args.run_dir, args.out, args.episodes, args.every, args.jobs), indent=1))
+        print(json.dumps(trainer.release(args.run_dir, args.out, args.episodes, args.every, args.jobs), indent=1))
     return 0
 
 
@@ -46,12 +46,12 @@ def _eval(args: argparse.Namespace) -> int:
     if args.time_limit is not None:
         if not (math.isfinite(args.time_limit) and args.time_limit > 0):
             raise ValueError(f"--time-limit must be a positive, finite number of seconds, got {args.time_limit}")
-        if domain.time_limit_setting is None:
+        if domain.episode_seconds_setting is None:
             raise ValueError(
-                f"--time-limit sets the crowd world's episode length; in the {domain.name} world an episode ends "
-                "when its environment says so (give one of its own settings with --world instead)"
+                f"--time-limit sets an episode's length in a world with a setting for it; in the {domain.name} world "
+                "an episode ends when its environment says so (give one of its own settings with --world instead)"
             )
-        world[domain.time_limit_setting] = args.time_limit
+        world[domain.episode_seconds_setting] = args.time_limit
     result = domain.evaluate(args.agent, args.episodes, args.seed, world, args.scenario) | {"agent": args.agent}
     print(json.dumps(result) if args.json else domain.describe_evaluation(result))
     return 0

@@ -1,15 +1,23 @@
 """Every world is reached through its domain (`search.solvers.domain`): the solvers, the bundle builder and the
-command line import no world's own modules, so a world can be added without editing them."""
+command line import no world's own modules, so a world can be added without editing them; and a world is found by
+the names it ships, a file's ``world`` key and what each world claims, never by the order worlds were installed."""
 
 from pathlib import Path
 
+import pytest
+
 import search
-from search.solvers.domain import BUILTIN, domain_for, domain_named, domains
+from search.cli import main
+from search.core.world import Trainer
+from search.solvers.domain import domain_for, domain_named, domain_of_summary, domains, trainer_for
 from tests.support.imports import imported, package_modules
 
 ROOT = Path(search.__file__).parent
 WORLDS = ("search.crowd", "search.gym", "search.highway", "search.sim", "search.agents")
 CALLERS = ("search.solvers.", "search.bundle.", "search.cli.")
+TRACK = 'adapter = "tests.gym.test_gym_clips:TrackAdapter"\nseed = 3\n'
+HIGHWAY = 'adapter = "search.highway.adapter:HighwayAdapter"\nseed = 3\n'
+ROBOT = "[robot]\nstart = [-5.0, -5.0]\ngoal = [5.0, 5.0]\n"
 
 
 def test_the_domain_interface_is_the_only_way_into_a_world():
@@ -17,12 +25,56 @@ def test_the_domain_interface_is_the_only_way_into_a_world():
         f"{module} imports {name}"
         for module, path in package_modules(ROOT).items()
         if f"{module}.".startswith(CALLERS)
-        for name in imported(path, "search", top_level_only=False)
+        for name in imported(path, "search")
         if name.startswith(WORLDS)
     ]
     assert found == []
 
 
-def test_every_builtin_domain_is_installed_by_name_and_claims_its_own():
-    assert [type(d).__name__ for d in domains()][: len(BUILTIN)] == [spec.partition(":")[2] for spec in BUILTIN]
+def test_foils_own_worlds_are_installed_as_entry_points_and_found_by_what_they_ship():
+    assert {"crowd", "gym", "highway"} <= {d.name for d in domains()}
     assert domain_named("highway") is domain_for(["highway-lo"]) and domain_for(["lo"]) is domain_named("crowd")
+    assert domain_for(["goal", "orca"], "paper-bl-tr").name == domain_for([], "training").name == "crowd"
+    assert domain_for(["highway-lo"], "highway-traffic").name == "highway"
+    with pytest.raises(ValueError, match="no installed world takes nobody"):
+        domain_for(["nobody"])  # a plain name no world ships is not taken for the crowd's
+
+
+def test_the_world_key_picks_the_world_and_an_ambiguous_file_names_the_key(tmp_path):
+    both = tmp_path / "both.toml"
+    both.write_text(HIGHWAY + ROBOT)  # a crowd scenario's [robot] and the highway's adapter: either world reads it
+    with pytest.raises(ValueError, match='add world = "crowd" or world = "highway" to the scenario file'):
+        domain_for([], str(both))
+    both.write_text('world = "gym"\n' + HIGHWAY)
+    assert domain_for([], str(both)).name == "gym"  # the highway's environment as any Gymnasium environment
+    both.write_text(TRACK + ROBOT)  # the Gymnasium world takes any adapter's file, as others may: the crowd owns it
+    assert domain_for([], str(both)).name == "crowd"
+    robot = tmp_path / "robot.toml"
+    robot.write_text('world = "crowd"\n' + ROBOT)
+    assert domain_for(["goal", "orca"], str(robot)).name == "crowd"
+    assert domain_named("crowd").state(str(robot), {}).robot_start == (-5.0, -5.0)  # the key is no world setting
+    both.write_text('world = "gym"\n' + TRACK + ROBOT)
+    with pytest.raises(ValueError, match=r"cannot mix worlds: hi \(crowd\), scenario .*both.toml \(gym\)"):
+        domain_for(["hi"], str(both))
+
+
+def test_a_summary_goes_to_the_world_that_owns_it():
+    highway = {"scenario": {"domain": "gym", "adapter": "search.highway.adapter:HighwayAdapter"}}
+    assert domain_of_summary(highway).name == "highway"
+    assert domain_of_summary({"scenario": {"domain": "gym", "adapter": "a.b:C"}}).name == "gym"
+    assert domain_of_summary({"scenario": {"robot": {}}}).name == "crowd"
+
+
+def test_training_finds_its_world_by_content_or_key_and_a_world_without_a_trainer_says_so(tmp_path, capsys):
+    config = tmp_path / "train.toml"
+    config.write_text("total_steps = 64\n[world]\nhuman_num = 2\n")
+    assert trainer_for(config) is domain_named("crowd")
+    config.write_text('domain = "highway"\ntotal_steps = 64\n')
+    assert trainer_for(config) is domain_named("highway")
+    config.write_text('world = "gym"\n')
+    assert not isinstance(domain_named("gym"), Trainer)
+    assert main(["train", "--config", str(config), "--out", str(tmp_path / "run")]) == 2
+    assert "the gym world has no trainer of its own" in capsys.readouterr().err
+    config.write_text("learning_speed = 3\n")
+    assert main(["train", "--config", str(config), "--out", str(tmp_path / "run")]) == 2
+    assert "no installed world trains from" in capsys.readouterr().err

@@ -143,7 +143,10 @@ def load_train_config(path: str | Path) -> TrainConfig:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no training config at {str(path)!r}")
-    return TrainConfig.from_dict(load_toml(path.read_text(), str(path)))
+    data = load_toml(path.read_text(), str(path))
+    if data.get("world") == "crowd":  # names the config's world (search.solvers.domain), not its [world] settings
+        del data["world"]
+    return TrainConfig.from_dict(data)
 
 
 def _without_length(config: dict | None) -> dict | None:

@@ -129,7 +129,7 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
     """The search behind a clip, with its scheme's settings; ``world`` is the study's comparison world
     (``study_world``), under the scenario file's and the scheme's world settings."""
     scheme, domain = job.scheme, domain_for(job.pair, job.scenario)
-    world = under(world, domain.own_world(job.scenario) if world else {})
+    world = under(world, domain.scenario_settings(job.scenario) if world else {})
     return SearchJob(
         agents=job.pair,
         scenario=job.scenario,
@@ -146,7 +146,7 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
 def study_world(spec: BuildSpec) -> dict:
     """The world settings a study compares its agents in: those its imported checkpoints were trained in (a
     CrowdNav_DSRNN model's config), for every agent, in the evaluation and in every search alike."""
-    return study_domain(spec).study_world(spec.agents)
+    return study_domain(spec).agents_settings(spec.agents)
 
 
 def under(world: dict | None, own: dict) -> dict:
@@ -703,8 +703,8 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
         if distribution is None:
             continue  # a world with no distribution of starting states, and none named in the study
         names = list(dict.fromkeys(names))
-        fixed = [domain.state(name, under(world, domain.own_world(name))) for name in names]
-        drawn_world = under(world, domain.own_world(distribution))
+        fixed = [domain.state(name, under(world, domain.scenario_settings(name))) for name in names]
+        drawn_world = under(world, domain.scenario_settings(distribution))
         inputs = {
             "agents": [agent_identity(a, domain) for a in pair],
             "scenarios": [s.to_dict() for s in fixed],

@@ -1,5 +1,6 @@
 """The crowd world as a domain: DS-RNN and scripted robots among ORCA or social-force humans (search/sim,
-search/agents), its scenarios and the ``training`` distribution, its summaries, batched rollouts and clips."""
+search/agents), its scenarios and the ``training`` distribution, its summaries, batched rollouts and clips, and
+its trainer."""
 
 from __future__ import annotations
 
@@ -10,13 +11,28 @@ from typing import Any
 
 import numpy as np
 
+from search.core.world import Claim, Shipped, Trainer, is_module_attribute
 from search.solvers.domain import Coupled, Domain
 
+CHECKPOINT_SUFFIXES = (".pt", ".pth", ".ts")  # PyTorch checkpoints and TorchScript files
 
-class CrowdDomain(Domain):
+
+def _toml(path: Path) -> dict:
+    """A TOML file's table, or an empty one for anything else (its loader says what is wrong with a bad file)."""
+    import tomllib
+
+    if path.suffix != ".toml" or not path.is_file():
+        return {}
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return {}
+
+
+class CrowdDomain(Domain, Trainer):
     name = "crowd"
     default_distribution = "training"
-    time_limit_setting = "time_limit"
+    episode_seconds_setting = "time_limit"
 
     def __init__(self) -> None:
         self._loaded: dict[tuple[str, int], Any] = {}
@@ -35,21 +51,30 @@ class CrowdDomain(Domain):
                 self._loaded[key(spec)] = load_policy(spec)
         return [self._loaded[key(spec)] for spec in agents]
 
-    def claims_agent(self, spec: str) -> bool | None:
-        if spec.endswith(".zip"):
-            return False
-        if ":" in spec and not spec.endswith(".pt"):
-            return None  # module:attribute: a policy object of any world
-        return True
-
-    def claims_scenario(self, name: str) -> bool:
+    def shipped(self) -> Shipped:
+        """The shipped and scripted agents, and the shipped scenarios and distribution (``training``)."""
+        from search.agents.policies import SCRIPTED, SHIPPED_AGENTS
         from search.sim.scenarios import shipped_scenarios
 
-        return name in shipped_scenarios() or Path(name).suffix == ".toml"
+        return Shipped(frozenset(SCRIPTED) | frozenset(SHIPPED_AGENTS) | frozenset(shipped_scenarios()))
 
-    def claims_summary(self, summary: Mapping[str, Any]) -> bool:
+    def takes_agent(self, spec: str) -> Claim | None:
+        """A checkpoint or TorchScript file; ``module:attribute`` read as a crowd policy where nothing else names
+        a world."""
+        if Path(spec).suffix in CHECKPOINT_SUFFIXES:
+            return Claim.OWN
+        return Claim.OWN if is_module_attribute(spec) else None
+
+    def takes_scenario(self, name: str) -> Claim | None:
+        """A TOML file with a ``[robot]`` table (a scenario) or a ``[distribution]`` kind (a distribution)."""
+        data = _toml(Path(name))
+        distribution = data.get("distribution")
+        own = "robot" in data or isinstance(distribution, dict) and "kind" in distribution
+        return Claim.OWN if own else None
+
+    def takes_summary(self, summary: Mapping[str, Any]) -> Claim | None:
         scenario = summary.get("scenario")
-        return isinstance(scenario, dict) and "robot" in scenario
+        return Claim.OWN if isinstance(scenario, dict) and "robot" in scenario else None
 
     def describe_agents(self) -> str:
         return "crowd agents (lo, med, hi, scripted policies, checkpoints) go on crowd scenarios"
@@ -66,20 +91,21 @@ class CrowdDomain(Domain):
 
         return check_values(WorldConfig, settings, what)
 
-    def study_world(self, agents: Sequence[str]) -> dict:
+    def agents_settings(self, agents: Sequence[str]) -> dict:
+        """The world an imported CrowdNav_DSRNN checkpoint was trained in (its config)."""
         from search.agents.policies import comparison_world
 
-        return comparison_world([a for a in agents if self.claims_agent(a)], {})
+        return comparison_world(list(agents), {})
 
-    def own_world(self, scenario: str) -> dict:
+    def scenario_settings(self, scenario: str) -> dict:
         from search.sim.scenarios import load_scenario_or_distribution
 
         return dict(load_scenario_or_distribution(scenario).world)
 
-    def comparison_world(self, agents: Sequence[str], world: dict, scenario: str) -> dict:
+    def search_settings(self, agents: Sequence[str], settings: dict, scenario: str) -> dict:
         from search.agents.policies import comparison_world
 
-        return comparison_world(list(agents), world, self.own_world(scenario))
+        return comparison_world(list(agents), settings, self.scenario_settings(scenario))
 
     def is_distribution(self, name: str) -> bool:
         from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
@@ -202,8 +228,16 @@ class CrowdDomain(Domain):
                 }
         return source | {"world": WorldConfig.from_dict(world).to_dict()}
 
-    def claims_training(self, path: Path) -> bool:
-        return True
+    def takes_training(self, path: Path) -> Claim | None:
+        """A run folder with the trainer's progress.csv, or a TOML config of `TrainConfig` fields."""
+        from dataclasses import fields
+
+        from search.agents.train import TrainConfig
+
+        if path.is_dir():
+            return Claim.OWN if (path / "progress.csv").is_file() and any(path.glob("checkpoints/*.pt")) else None
+        data = _toml(path)
+        return Claim.OWN if data and set(data) <= {f.name for f in fields(TrainConfig)} else None
 
     def train(self, config: Path, out: Path) -> Path:
         from search.agents.train import load_train_config, train

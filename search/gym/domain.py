@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from app.visible import VisibleClip, World
+from search.core.world import Claim, is_module_attribute
 from search.gym.adapter import Adapter, load_adapter
 from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
@@ -25,17 +26,19 @@ class GymDomain(Domain):
     def __init__(self) -> None:
         self._agents: dict[tuple[str, str], GymAgent] = {}
 
-    def claims_agent(self, spec: str) -> bool | None:
+    def takes_agent(self, spec: str) -> Claim | None:
+        """A Stable-Baselines3 file; ``module:attribute`` too, as other worlds take it."""
         if spec.endswith(".zip"):
-            return True
-        return None if ":" in spec and not spec.endswith(".pt") else False
+            return Claim.OWN
+        return Claim.ALSO if is_module_attribute(spec) else None
 
-    def claims_scenario(self, name: str) -> bool:
-        return gym_file(name) is not None
+    def takes_scenario(self, name: str) -> Claim | None:
+        """A file that names an adapter: any Gymnasium environment's, unless a world of its own owns it."""
+        return Claim.ALSO if gym_file(name) is not None else None
 
-    def claims_summary(self, summary: Mapping[str, Any]) -> bool:
+    def takes_summary(self, summary: Mapping[str, Any]) -> Claim | None:
         scenario = summary.get("scenario")
-        return isinstance(scenario, dict) and scenario.get("domain") == "gym"
+        return Claim.ALSO if isinstance(scenario, dict) and scenario.get("domain") == "gym" else None
 
     def describe_agents(self) -> str:
         return (

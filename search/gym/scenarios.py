@@ -25,8 +25,9 @@ from app.toml_errors import load_toml
 from search.core.settings import check_keys
 from search.gym.problem import GymScenario
 
-SCENARIO_KEYS = {"name", "adapter", "seed", "settings", "description"}
-DISTRIBUTION_KEYS = {"name", "adapter", "distribution", "settings", "description"}
+# world = "<name>" names the world a file is for, where its adapter alone leaves it open (search.solvers.domain)
+SCENARIO_KEYS = {"name", "world", "adapter", "seed", "settings", "description"}
+DISTRIBUTION_KEYS = {"name", "world", "adapter", "distribution", "settings", "description"}
 
 
 @dataclass(frozen=True)

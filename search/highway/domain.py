@@ -8,43 +8,54 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from search.core.world import Claim, Shipped, Trainer
 from search.gym.adapter import Adapter
 from search.gym.domain import GymDomain
 from search.gym.problem import GymScenario
-from search.gym.scenarios import GymDistribution
+from search.gym.scenarios import GymDistribution, gym_file
 from search.highway.adapter import AGENT_PREFIX, HighwayAdapter
 from search.highway.scenarios import ADAPTER, DISTRIBUTIONS, SCENARIOS, load_highway_scenario
 
 
-class HighwayDomain(GymDomain):
+class HighwayDomain(GymDomain, Trainer):
     name = "highway"
     default_distribution = "highway-traffic"
 
-    def claims_agent(self, spec: str) -> bool | None:
-        return spec.startswith(AGENT_PREFIX)
+    def shipped(self) -> Shipped:
+        """Every name with the highway's prefix: its agents, scenarios and distribution (an unknown one is refused
+        with the list of those it ships)."""
+        return Shipped(prefixes=(AGENT_PREFIX,))
 
-    def claims_scenario(self, name: str) -> bool:
-        return name in SCENARIOS or name in DISTRIBUTIONS or name.startswith(AGENT_PREFIX)
+    def takes_agent(self, spec: str) -> Claim | None:
+        """Any Gymnasium agent, as the Gymnasium world takes it."""
+        return Claim.ALSO if super().takes_agent(spec) else None
 
-    def claims_summary(self, summary: Mapping[str, Any]) -> bool:
-        return super().claims_summary(summary) and summary["scenario"].get("adapter") == ADAPTER
+    def takes_scenario(self, name: str) -> Claim | None:
+        """A file that names the highway's adapter."""
+        found = gym_file(name)
+        return Claim.OWN if found is not None and found["adapter"] == ADAPTER else None
+
+    def takes_summary(self, summary: Mapping[str, Any]) -> Claim | None:
+        own = super().takes_summary(summary) and summary["scenario"].get("adapter") == ADAPTER
+        return Claim.OWN if own else None
 
     def describe_agents(self) -> str:
         shipped = ", ".join(sorted(SCENARIOS) + sorted(DISTRIBUTIONS))
         return f"highway agents (highway-lo, highway-med, highway-hi, .zip files) go on highway scenarios ({shipped})"
 
     def load(self, name: str) -> GymScenario | GymDistribution:
-        return load_highway_scenario(name) if self.claims_scenario(name) else super().load(name)
+        return load_highway_scenario(name) if name in self.shipped() else super().load(name)
 
     def adapter(self, scenario: str | None) -> Adapter:
         """The scenario's adapter; the highway's own default world when no scenario is given."""
         return HighwayAdapter() if scenario is None else super().adapter(scenario)
 
-    def claims_training(self, path: Path) -> bool:
+    def takes_training(self, path: Path) -> Claim | None:
+        """A config or run marked ``domain = "highway"``."""
         from search.highway.release import is_highway_run
         from search.highway.train import is_highway_config
 
-        return is_highway_run(path) if path.is_dir() else is_highway_config(path)
+        return Claim.OWN if (is_highway_run(path) if path.is_dir() else is_highway_config(path)) else None
 
     def train(self, config: Path, out: Path) -> Path:
         from search.highway.train import load_config, train

@@ -2,10 +2,10 @@
 
     foil train --config search/highway/train.toml --out runs/highway
 
-The config file marks its domain with ``domain = "highway"``; its other keys are ``TrainConfig`` fields. The run
-directory gets ``config.json``, SB3's ``progress.csv`` and a checkpoint every ``save_every`` environment steps
-(``checkpoints/model_<steps>_steps.zip``, the initial policy included), from which ``foil release`` picks
-highway-lo, highway-med and highway-hi.
+The config file names its world with ``world = "highway"`` (or ``domain = "highway"``); its other keys are
+``TrainConfig`` fields. The run directory gets ``config.json``, SB3's ``progress.csv`` and a checkpoint every
+``save_every`` environment steps (``checkpoints/model_<steps>_steps.zip``, the initial policy included), from which
+``foil release`` picks highway-lo, highway-med and highway-hi.
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ def is_highway_config(path: str | Path) -> bool:
 def load_config(path: str | Path) -> TrainConfig:
     data = load_toml(Path(path).read_text(), str(path))
     data.pop("domain", None)
+    data.pop("world", None)  # world = "highway" names the config's world as domain = "highway" does
     try:
         check_keys(data, (f.name for f in fields(TrainConfig)), "highway training setting")
     except ValueError as error:

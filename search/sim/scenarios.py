@@ -17,7 +17,9 @@ A scenario file looks like::
     [world]                  # optional WorldConfig settings (e.g. time_limit, human_v_pref)
     time_limit = 25.0
 
-The number of humans in the file sets ``human_num``.
+The number of humans in the file sets ``human_num``. A file without settings may name its world instead, with
+``world = "crowd"`` in place of the ``[world]`` table (the crowd claims files with a ``[robot]`` table or a
+``[distribution]`` kind anyway).
 """
 
 from __future__ import annotations
@@ -124,7 +126,7 @@ class Scenario:
             p = point(human["position"], f"human {i} position")
             positions.append(p)
             goals.append(point(human["goal"], f"human {i} goal") if "goal" in human else (-p[0], -p[1]))
-        world = data.get("world", {})
+        world = _settings(data)
         if not isinstance(world, dict):
             fail("[world] must be a table of world settings")
         scenario = cls(
@@ -198,7 +200,7 @@ class ScenarioDistribution:
         kind = table.get("kind") if isinstance(table, dict) else None
         if kind not in DISTRIBUTION_KINDS or set(table) != {"kind"}:
             raise ValueError(f"{source}: [distribution] takes one key, kind, one of {list(DISTRIBUTION_KINDS)}")
-        world = data.get("world", {})
+        world = _settings(data)
         if not isinstance(world, dict):
             raise ValueError(f"{source}: [world] must be a table of world settings")
         distribution = cls(
@@ -212,6 +214,12 @@ class ScenarioDistribution:
         except (ValueError, TypeError) as error:
             raise ValueError(f"{source}: [world]: {error}") from None
         return distribution
+
+
+def _settings(data: dict[str, Any]) -> object:
+    """A file's ``[world]`` settings; ``world = "crowd"`` names the file's world instead (search.solvers.domain)."""
+    world = data.get("world", {})
+    return {} if world == "crowd" else world
 
 
 def shipped_scenarios() -> list[str]:

@@ -117,7 +117,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     authoritative reward."""
     started = time.perf_counter()
     domain = domain_for(job.agents, job.scenario)
-    job = replace(job, world_settings=domain.comparison_world(job.agents, job.world_settings, job.scenario))
+    job = replace(job, world_settings=domain.search_settings(job.agents, job.world_settings, job.scenario))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     if job.solver == "representative" or job.solver in WATCHING:
         own = _representative if job.solver == "representative" else _watching
