@@ -21,9 +21,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from search.agents.policies import load_policy  # noqa: E402
-from search.clips.render import ClipRenderer, RenderOptions, render  # noqa: E402
-from search.clips.scene import Scene  # noqa: E402
+from search.clips.render import RenderOptions  # noqa: E402
 from search.core.outcomes import OUTCOME_NAMES  # noqa: E402
+from search.crowd.render import CrowdClipRenderer, render  # noqa: E402
+from search.crowd.scene import Scene  # noqa: E402
 from search.sim.coupled import replay  # noqa: E402
 from search.sim.scenarios import load_scenario  # noqa: E402
 
@@ -67,7 +68,7 @@ def cpu_seconds() -> float:
 def main() -> None:
     scene = horizon_scene()
     options = RenderOptions()
-    renderer = ClipRenderer(scene, options=options)
+    renderer = CrowdClipRenderer(scene, options=options)
     frames = renderer.frames
     draw_times = []
     for _ in range(REPEATS):

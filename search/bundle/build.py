@@ -47,7 +47,7 @@ from app.survey.clip_length import clip_shape
 from app.visible import VisibleClip, VisibleReels, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
-from search.clips.render import RenderOptions, robot_label
+from search.clips.render import RenderOptions, agent_label
 from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
 from search.solvers.runner import SearchJob, in_processes, run_search, solver_config_class, write_outputs
 from search.solvers.summary import verify
@@ -525,7 +525,7 @@ def clip_audit(
     """A clip's agents and their labels in on-screen order, and what it visibly shows against the ground truth
     (`app.visible.audit`; a pair of reels by each agent's moments)."""
     order = sorted(range(2), key=lambda k: job.numbers[k])
-    agents, labels = [job.pair[k] for k in order], [robot_label(job.numbers[k]) for k in order]
+    agents, labels = [job.pair[k] for k in order], [agent_label("Robot", job.numbers[k]) for k in order]
     if len(sources) == 1:
         visible: VisibleClip | VisibleReels = VisibleClip.of_summary(
             json.loads(sources[0][0].read_text()), agents, labels, shown

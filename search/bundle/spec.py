@@ -26,7 +26,7 @@ from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
 from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, parse_study
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
-from search.clips.render import ROBOT_STYLES, RenderOptions
+from search.clips.render import AGENT_STYLES, RenderOptions
 from search.core.settings import check_keys, check_values
 from search.solvers.baselines import CEMConfig, SamplingConfig
 from search.solvers.disagreements import DisagreementsConfig
@@ -212,9 +212,9 @@ def _set_problems(build: BuildTable) -> list[Problem]:
                 )
                 break
             seen[key] = i
-        if "ranking" in clip_set.parts and len(clip_set.all_agents()) > len(ROBOT_STYLES):
+        if "ranking" in clip_set.parts and len(clip_set.all_agents()) > len(AGENT_STYLES):
             message = (
-                f"a ranking shows at most {len(ROBOT_STYLES)} robots (one colour and shape each), got "
+                f"a ranking shows at most {len(AGENT_STYLES)} robots (one colour and shape each), got "
                 f"{len(clip_set.all_agents())}"
             )
             problems.append((("build", "sets", i, "agents"), message))

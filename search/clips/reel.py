@@ -27,10 +27,10 @@ from search.clips.render import (
     PHONE_WIDTH,
     RenderOptions,
     RenderResult,
-    _text_stamp,
     encoder_args,
     h264_writer,
     side_paths,
+    text_stamp,
 )
 
 CARD_SECONDS = 0.5  # of video each card between two segments shows
@@ -40,7 +40,7 @@ def card(text: str, width: int, height: int) -> Image.Image:
     """A separator card: ``text`` large and centred on the clips' background."""
     image = Image.new("RGB", (width, height), BACKGROUND)
     size = 2 * int(np.ceil(MIN_PHONE_TEXT * width / PHONE_WIDTH))
-    stamp, (x0, y0) = _text_stamp(text, size, INK, "mm", True)
+    stamp, (x0, y0) = text_stamp(text, size, INK, "mm", True)
     image.paste(stamp, (round(width / 2 + x0), round(height / 2 + y0)), stamp)
     return image
 
@@ -71,7 +71,7 @@ def render_reel(
     options: RenderOptions | None = None,
 ) -> RenderResult:
     """One H.264 clip of ``segments`` (summary files) in order, each rendered by ``render_segment(summary,
-    clip)`` (a domain's renderer with its robot numbers and options), each announced by a card ("Moment 2 of 3")
+    clip)`` (a domain's renderer with its agent numbers and options), each announced by a card ("Moment 2 of 3")
     where there are several; the
     poster is the first segment's, the contact sheet the segments' sheets stacked. ``options`` gives the cards'
     encoder settings (crf, preset); use the segments' own."""

@@ -256,12 +256,14 @@ class CrowdDomain(Domain, Trainer):
         validate_run(run_dir, episodes, every)
 
     def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
-        from search.clips.render import render_file
+        from search.crowd.render import render_file
 
         return render_file(summary, out, numbers, options)
 
     def renderer_files(self, summary: Path) -> list[Path]:
-        import search.clips.render as renderer
-        import search.clips.scene as scene
+        import search.clips.render as toolkit
+        import search.clips.windows as windows
+        import search.crowd.render as renderer
+        import search.crowd.scene as scene
 
-        return [Path(renderer.__file__), Path(scene.__file__)]
+        return [Path(renderer.__file__), Path(scene.__file__), Path(toolkit.__file__), Path(windows.__file__)]

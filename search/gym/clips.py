@@ -34,21 +34,21 @@ from search.clips.render import (
     MIN_PHONE_TEXT,
     MUTED,
     PHONE_WIDTH,
+    AgentSprites,
     ClipRenderer,
     Frame,
     RenderOptions,
     RenderResult,
-    Sprites,
-    _paint_burst,
-    _paste,
-    _round16,
-    _sprite,
+    agent_label,
+    agent_numbers,
+    agent_style,
     encode,
-    robot_label,
-    robot_numbers,
-    robot_style,
+    paint_burst,
+    paste,
+    round16,
+    sprite,
 )
-from search.clips.scene import follow_of, window_of
+from search.clips.windows import follow_of, window_of
 from search.gym.adapter import Adapter, import_attribute, load_adapter
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
@@ -59,6 +59,7 @@ from search.solvers.reward import RewardConfig
 SCREEN = (16, 10)  # the screen shape a clip is fitted into when choosing how to arrange its views
 BURST_SECONDS = 1.5  # of video a crash's burst shows before the small mark replaces it
 PARTING_CAPTION = "Here the {count} agents would act differently"  # unless the adapter has a parting_caption
+LABEL = "Robot"  # the word a participant sees before an agent's number, as the study's pages call it
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,7 @@ class GymLayout:
         view = round(panel * view_shape[0] / view_shape[1])  # the environment's own aspect
         band = round(text * (1.9 if columns == 1 else 3.9))  # one status line under a full-width view, else two
         total = round(text * 2.0) + math.ceil(agents / columns) * (view + band)
-        return cls(columns, panel, view, round(text * 2.0), band, width, _round16(total), text)
+        return cls(columns, panel, view, round(text * 2.0), band, width, round16(total), text)
 
     def shown(self) -> float:
         """A view's width, as a fraction of the screen's, when the clip is fitted into a SCREEN-shaped display."""
@@ -166,7 +167,7 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
     problem = GymCoupledProblem(
         agents, scenario, RewardConfig.from_dict(summary["reward_parameters"]), adapter, render=True
     )
-    colours = [robot_style(n)[0] for n in numbers]
+    colours = [agent_style(n)[0] for n in numbers]
     views: list[list[np.ndarray]] = [[] for _ in agents]
     captions: list[list[str]] = [[] for _ in agents]
     parting_points: list[tuple[float, float] | None] = [None] * len(agents)
@@ -224,29 +225,27 @@ def _part(items: list, first: int, last: int) -> list:
 
 
 class GymClipRenderer(ClipRenderer):
-    """Foil's timeline, clock and status panel around the environment's views (the crowd renderer's schedule,
-    header and tags reused)."""
+    """Foil's timeline, clock and status panel (the clip toolkit's) around the environment's views."""
 
-    # the crowd renderer's timeline and drawing need only what these have in common with its own scene and layout
-    scene: GymScene  # type: ignore[assignment]
-    layout: GymLayout  # type: ignore[assignment]
+    scene: GymScene
+    layout: GymLayout
 
     def __init__(self, summary: dict, numbers: list[int] | None = None, options: RenderOptions | None = None):
         agents = len(summary["agents"])
         self.options = options or RenderOptions()
-        self.numbers = robot_numbers(numbers, agents)
+        self.numbers = agent_numbers(numbers, agents)
         self.scene, self.adapter = load_gym_scene(summary, self.numbers, self.options.width or 960)
         shown = self.scene.shown if self.scene.shown is not None else range(agents)
         self.order = sorted(shown, key=lambda k: self.numbers[k])
         self.layout = GymLayout.make(len(self.order), self.scene.views[0][0].shape[:2], self.options)
         text = self.layout.text
-        self.sprites = Sprites(self.numbers, 0, 1.0, text * 0.6, text)
-        self.crash_mark = _sprite(text * 0.45, 1.0, _paint_burst)  # what stays of a crash once its burst is over
+        self.sprites = AgentSprites(self.numbers, text * 0.6, text)
+        self.crash_mark = sprite(text * 0.45, 1.0, paint_burst)  # what stays of a crash once its burst is over
         self.digits = 0 if float(self.adapter.dt).is_integer() else 1  # of an event's time
         self.texts: set[str] = set()
         self._views: dict[int, tuple[int, Image.Image]] = {}  # per agent, its last scaled view
-        self.frames, self.event_starts = self._schedule()
-        self.parting_video = self._parting_video()
+        self.frames, self.event_starts = self.schedule()
+        self.parting_video = self.parting_second()
 
     def draw(self, frame: Frame) -> Image.Image:
         lay, t = self.layout, frame.time
@@ -261,15 +260,15 @@ class GymClipRenderer(ClipRenderer):
             point = self.scene.crash_points[k]
             if happened and event == "collision" and point is not None:
                 sprite = self.sprites.crash if self._bursting(when, frame) else self.crash_mark
-                _paste(image, sprite, (x0 + point[0] * lay.panel, y0 + point[1] * lay.view_height))
+                paste(image, sprite, (x0 + point[0] * lay.panel, y0 + point[1] * lay.view_height))
             at = self.scene.parting_points[k]
-            if at is not None and self._parting_shown(frame):
-                self._draw_ring(image, (x0 + at[0] * lay.panel, y0 + at[1] * lay.view_height), lay.text * 1.1)
+            if at is not None and self.parting_shown(frame):
+                self.draw_ring(image, (x0 + at[0] * lay.panel, y0 + at[1] * lay.view_height), lay.text * 1.1)
             shown = event if happened or t >= self.scene.end_time else ""
             self._draw_status(image, k, (x0, y0 + lay.view_height), shown, when, t)
-        self._draw_header(image, t)
-        if self._parting_shown(frame):
-            self._draw_parting_caption(image, getattr(self.adapter, "parting_caption", PARTING_CAPTION))
+        self.draw_header(image, t)
+        if self.parting_shown(frame):
+            self.draw_parting_caption(image, getattr(self.adapter, "parting_caption", PARTING_CAPTION))
         return image
 
     def _view(self, k: int, t: float) -> Image.Image:
@@ -286,7 +285,7 @@ class GymClipRenderer(ClipRenderer):
     def _bursting(self, when: float, frame: Frame) -> bool:
         """Whether a crash at ``when`` still shows its burst: for BURST_SECONDS of video from its pause (in a still,
         as long after it in simulated time)."""
-        since = self._since(when, frame)
+        since = self.since(when, frame)
         return (since if math.isfinite(since) else frame.time - when) < BURST_SECONDS
 
     def _draw_status(self, image: Image.Image, k: int, corner: tuple[int, int], event: str, when: float, t: float):
@@ -295,19 +294,21 @@ class GymClipRenderer(ClipRenderer):
         lay = self.layout
         x0, y = corner[0], corner[1] + lay.text * 0.95
         icon = self.sprites.icons[self.numbers[k]]
-        _paste(image, icon, (x0 + lay.text * 0.6 + icon[1], y))
-        label = self._text(image, (x0 + lay.text * 2.4, y), robot_label(self.numbers[k]), lay.text, INK, "lm", True)
+        paste(image, icon, (x0 + lay.text * 0.6 + icon[1], y))
+        label = self.draw_text(
+            image, (x0 + lay.text * 2.4, y), agent_label(LABEL, self.numbers[k]), lay.text, INK, "lm", True
+        )
         caption = self.scene.caption(k, t)
         if caption:
-            self._text(image, (x0 + lay.panel - lay.text * 0.6, y), caption, lay.text, INK, "rm")
+            self.draw_text(image, (x0 + lay.panel - lay.text * 0.6, y), caption, lay.text, INK, "rm")
         status = self.adapter.status_words[event or "running"]
         if event in ("success", "collision"):
             status += f" · {when:.{self.digits}f} s"
         xy = (label[2] + lay.text * 0.8, y) if lay.columns == 1 else (x0 + lay.text * 2.4, y + lay.text * 1.5)
         if event == "collision":
-            self._tag(image, xy, status, lay.text, "lm")
+            self.draw_tag(image, xy, status, lay.text, "lm")
         else:
-            self._text(image, xy, status, lay.text, INK if event else MUTED, "lm")
+            self.draw_text(image, xy, status, lay.text, INK if event else MUTED, "lm")
 
 
 def render_gym(

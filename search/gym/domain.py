@@ -198,12 +198,14 @@ class GymDomain(Domain):
     def renderer_files(self, summary: Path) -> list[Path]:
         import inspect
 
-        import search.clips.scene as scene
+        import search.clips.render as toolkit
+        import search.clips.windows as windows
         import search.gym.clips as renderer
         from app.formats import load_summary
 
         adapter = GymScenario.from_dict(load_summary(summary)["scenario"]).load_adapter()
-        return [Path(renderer.__file__), Path(scene.__file__), Path(inspect.getfile(type(adapter)))]
+        files = [renderer.__file__, toolkit.__file__, windows.__file__, inspect.getfile(type(adapter))]
+        return [Path(file) for file in files]
 
     def world(self, scenario: str | None = None) -> World:
         return self.adapter(scenario).world()

@@ -140,8 +140,9 @@ def test_a_page_says_the_time_its_clip_says(time, shown):
 def test_a_robot_that_stops_beside_its_goal_says_how_close_it_got():
     """A robot whose marker sits on the goal's rings at the end has not reached the goal (the world judges its
     centre within its radius of the goal): clip and page both say how far it still was."""
-    from search.clips.render import ClipRenderer, Frame
-    from search.clips.scene import scene_from_summary
+    from search.clips.render import Frame
+    from search.crowd.render import CrowdClipRenderer
+    from search.crowd.scene import scene_from_summary
     from search.sim.scenarios import load_scenario
     from tests.support.summaries import summary_from_simulation
 
@@ -151,7 +152,7 @@ def test_a_robot_that_stops_beside_its_goal_says_how_close_it_got():
     data["steps"][-1]["robots"][0] = [goal[0] + 0.4, goal[1]]
     clip = VisibleClip.of_summary(data, [agent["name"] for agent in data["agents"]], ["A", "B"])
     assert clip.describe("A") == "A was still on its way when the clip ended, 0.4 m from the goal."
-    renderer = ClipRenderer(scene_from_summary(data))
+    renderer = CrowdClipRenderer(scene_from_summary(data))
     renderer.draw(Frame(renderer.scene.end_time))
     assert "still on its way · 0.4 m to goal" in renderer.texts
 

@@ -201,14 +201,14 @@ def test_the_answers_list_the_robots_in_the_order_of_the_clips_legend(server, ne
 def test_the_robots_of_a_clip_and_of_a_round_have_clearly_different_colours(server, new_context):
     """The key's colours are the clips' own (search/clips/render.py) and far apart (CIE76 distance over 50): not
     Robot 13 in sky blue beside Robot 15 in blue."""
-    from search.clips.render import robot_style
+    from search.clips.render import agent_style
 
     def look(page, labels):
         colours = page.evaluate(
             "[...document.querySelectorAll('.robot-key .marker')].map(m => getComputedStyle(m).backgroundColor)"
         )
         rgb = [tuple(float(v) for v in colour[colour.index("(") + 1 : -1].split(",")) for colour in colours]
-        assert sorted(rgb) == sorted(robot_style(int(label.split()[-1]))[0] for label in labels)
+        assert sorted(rgb) == sorted(agent_style(int(label.split()[-1]))[0] for label in labels)
         for i, a in enumerate(rgb):
             for b in rgb[i + 1 :]:
                 assert sum((x - y) ** 2 for x, y in zip(lab(a), lab(b), strict=True)) ** 0.5 > 50, labels

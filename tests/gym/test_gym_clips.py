@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from search.clips.render import CRASH, PARTING_SECONDS, RenderOptions, robot_style
+from search.clips.render import CRASH, PARTING_SECONDS, RenderOptions, agent_style
 from search.gym.adapter import Adapter
 from search.gym.clips import GymClipRenderer, render_gym
 from search.solvers.runner import SearchJob, run_search, write_outputs
@@ -131,7 +131,7 @@ def test_views_keep_the_environments_shape_side_by_side_in_robot_number_order(su
         expected = Image.fromarray(renderer.scene.views[k][-1]).resize((lay.panel, lay.view_height), Image.LANCZOS)
         assert np.abs(view.astype(int) - np.asarray(expected)).mean() < 30  # its frame (a crash mark aside)
         band = image[y0 + lay.view_height : y0 + lay.view_height + lay.band, x0 : x0 + lay.panel]
-        colour = np.array(robot_style(number)[0])
+        colour = np.array(agent_style(number)[0])
         assert (np.abs(band.astype(int) - colour).sum(axis=2) < 30).sum() > 20  # its icon
     crash = renderer.event_starts[summary["outcomes"][0]["time"]]
     at_crash = next(frame for frame in renderer.frames if frame.video >= crash)
@@ -198,8 +198,8 @@ def test_a_leader_followed_throughout_is_shown_alone(summary_file):
     assert renderer.order == [1] and renderer.layout.columns == 1 and renderer.layout.panel == 480
     for frame in (renderer.frames[0], renderer.frames[-1]):
         image = renderer.draw(frame)
-        assert colour_mask(image, robot_style(3)[0], tolerance=20).sum() == 0
-        assert colour_mask(image, robot_style(1)[0], tolerance=3).sum() > 20
+        assert colour_mask(image, agent_style(3)[0], tolerance=20).sum() == 0
+        assert colour_mask(image, agent_style(1)[0], tolerance=3).sum() > 20
     assert "Robot 1" in renderer.texts and "Robot 3" not in renderer.texts
 
 

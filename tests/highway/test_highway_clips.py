@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from search.clips.render import ROBOT_COLOURS, RenderOptions, robot_style
+from search.clips.render import AGENT_COLOURS, RenderOptions, agent_style
 from search.gym.clips import GymClipRenderer, render_gym
 from search.highway.adapter import EGO_AT, TRAFFIC
 from search.solvers.runner import SearchJob, run_search, write_outputs
@@ -53,12 +53,12 @@ def test_each_view_is_highway_envs_road_with_the_ego_in_its_colour_grey_traffic_
         x0, y0 = lay.origin(slot)
         view = image[y0 : y0 + lay.view_height, x0 : x0 + lay.panel].astype(int)
         assert view.std() > 10  # a drawn road, not a blank surface
-        own = np.array(robot_style(renderer.numbers[k])[0])
+        own = np.array(agent_style(renderer.numbers[k])[0])
         ego = near(view, own)
         rows, columns = np.nonzero(ego)
         assert ego.sum() > 20 and abs(columns.mean() / lay.panel - EGO_AT) < 0.05
         assert near(view, TRAFFIC).sum() > 200  # the traffic, in grey
-        assert not any(near(view, colour).any() for colour in ROBOT_COLOURS if tuple(colour) != tuple(own))
+        assert not any(near(view, colour).any() for colour in AGENT_COLOURS if tuple(colour) != tuple(own))
     assert {"Robot 1", "Robot 6"} <= renderer.texts and any(t.startswith("Time") for t in renderer.texts)
     assert any(re.fullmatch(r"-?\d+ km/h", t) for t in renderer.texts)  # each car's speed
     end = np.asarray(renderer.draw(renderer.frames[-1]))

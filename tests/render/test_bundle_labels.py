@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from search.bundle.build import build_bundle
-from search.clips.render import robot_style
+from search.clips.render import agent_style
 
 pytestmark = pytest.mark.slow
 
@@ -129,5 +129,5 @@ def test_each_clip_draws_its_labels_in_their_colours(served):
             Image.open(bundle.root / clip.file.replace(".mp4", ".poster.png")).convert("RGB"), dtype=np.int16
         )
         for label in clip.labels:
-            colour = robot_style(int(label.split()[-1]))[0]
+            colour = agent_style(int(label.split()[-1]))[0]
             assert (np.abs(poster - np.array(colour)).max(axis=-1) <= 3).sum() > 30, (clip.id, label)

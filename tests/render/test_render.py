@@ -13,23 +13,21 @@ import numpy as np
 import pytest
 
 from search.clips.render import (
+    AGENT_COLOURS,
+    AGENT_SHAPES,
+    AGENT_STYLES,
     CRASH,
-    HUMAN_FILL,
     INK,
-    ROBOT_COLOURS,
-    ROBOT_SHAPES,
-    ROBOT_STYLES,
     SUCCESS,
-    ClipRenderer,
+    AgentSprites,
     Frame,
     RenderOptions,
-    Sprites,
+    agent_style,
     number_ink,
-    render,
-    render_file,
-    robot_style,
 )
-from search.clips.scene import SummaryError, load_scene, scene_from_summary
+from search.clips.windows import SummaryError
+from search.crowd.render import HUMAN_FILL, CrowdClipRenderer, render, render_file
+from search.crowd.scene import load_scene, scene_from_summary
 from search.sim.scenarios import load_scenario
 from tests.support.live_server import REPO
 from tests.support.summaries import summary_from_simulation, visible
@@ -52,7 +50,7 @@ def blob_centre(mask: np.ndarray, around, radius: float):
 
 
 def test_layout_maps_the_arena_with_y_up_and_sizes_in_multiples_of_16(shared_summary):
-    renderer = ClipRenderer(scene_from_summary(shared_summary))
+    renderer = CrowdClipRenderer(scene_from_summary(shared_summary))
     lay = renderer.layout
     assert lay.width % 16 == 0 and lay.height % 16 == 0
     bottom_left = lay.to_pixel(0, lay.origin)
@@ -63,14 +61,14 @@ def test_layout_maps_the_arena_with_y_up_and_sizes_in_multiples_of_16(shared_sum
 
 @pytest.mark.parametrize("width", [None, 640, 1280])
 def test_legend_text_stays_readable_on_a_360_px_phone(shared_summary, width):
-    lay = ClipRenderer(scene_from_summary(shared_summary), options=RenderOptions(width=width)).layout
+    lay = CrowdClipRenderer(scene_from_summary(shared_summary), options=RenderOptions(width=width)).layout
     assert lay.text * 360 / lay.width >= 13
     assert lay.header + lay.panel + lay.legend == lay.height  # the legend lies below the arena, not on it
 
 
 def test_every_human_is_drawn_where_the_summary_puts_it(shared_summary):
     scene = scene_from_summary(shared_summary)
-    renderer = ClipRenderer(scene)
+    renderer = CrowdClipRenderer(scene)
     r_px = scene.human_radius * renderer.layout.scale
     for step in (0, 10, 30):
         t = shared_summary["steps"][step]["t"]
@@ -91,7 +89,7 @@ def test_every_human_is_drawn_where_the_summary_puts_it(shared_summary):
 
 def test_positions_between_steps_are_interpolated(shared_summary):
     scene = scene_from_summary(shared_summary)
-    renderer = ClipRenderer(scene)
+    renderer = CrowdClipRenderer(scene)
     t0, t1 = scene.times[5], scene.times[6]
     _, robots, humans = renderer._state((t0 + t1) / 2)
     lay = renderer.layout
@@ -102,7 +100,7 @@ def test_positions_between_steps_are_interpolated(shared_summary):
 def test_timeline_is_smooth_holds_both_ends_and_pauses_on_events(shared_summary):
     options = RenderOptions(fps=24, speed=1.0, hold_start=1.0, hold_end=1.5, event_hold=0.5)
     scene = scene_from_summary(shared_summary)
-    frames = ClipRenderer(scene, options=options).frames
+    frames = CrowdClipRenderer(scene, options=options).frames
     times = np.array([f.time for f in frames])
     assert np.all(times[:24] == 0) and times[24] == 0
     assert np.all(times[-36:] == scene.end_time)
@@ -110,7 +108,7 @@ def test_timeline_is_smooth_holds_both_ends_and_pauses_on_events(shared_summary)
     assert np.max(np.diff(times)) <= options.speed / options.fps + 1e-9
     for event_time in scene.event_times():
         assert np.sum(np.isclose(times, event_time)) >= 12
-    faster = ClipRenderer(scene, options=RenderOptions(speed=2.0, hold_start=0, hold_end=0, event_hold=0))
+    faster = CrowdClipRenderer(scene, options=RenderOptions(speed=2.0, hold_start=0, hold_end=0, event_hold=0))
     assert len(faster.frames) < len(frames) / 2
 
 
@@ -118,7 +116,7 @@ def test_labels_never_reveal_agent_names(tmp_path, shared_summary):
     summary = broken(shared_summary, lambda s: s["agents"][0].update(source="checkpoints/SECRET-SOURCE.pt"))
     secrets = [a["name"] for a in summary["agents"]] + ["SECRET-SOURCE"]
     scene = scene_from_summary(summary)
-    renderer = ClipRenderer(scene, numbers=[2, 1], options=FAST)
+    renderer = CrowdClipRenderer(scene, numbers=[2, 1], options=FAST)
     for frame in renderer.frames:
         renderer.draw(frame)
     drawn = " ".join(sorted(renderer.texts))
@@ -134,21 +132,21 @@ def test_labels_never_reveal_agent_names(tmp_path, shared_summary):
 
 def test_robot_numbers_pick_colour_and_order(shared_summary):
     scene = scene_from_summary(shared_summary)
-    swapped = ClipRenderer(scene, numbers=[2, 1])
+    swapped = CrowdClipRenderer(scene, numbers=[2, 1])
     assert swapped.order == [1, 0]  # legend and panels list Robot 1 first: the summary's second agent
     image = swapped.draw(Frame(5.0))
-    blue = colour_mask(image, ROBOT_STYLES[0][0], tolerance=3)
+    blue = colour_mask(image, AGENT_STYLES[0][0], tolerance=3)
     _, robots, _ = swapped._state(5.0)
     found = blob_centre(blue, robots[1], 0.3 * swapped.layout.scale)
     assert found is not None  # Robot 1's colour is drawn at the summary's second robot
-    with pytest.raises(ValueError, match="one robot number"):
-        ClipRenderer(scene, numbers=[1, 1])
+    with pytest.raises(ValueError, match="one agent number"):
+        CrowdClipRenderer(scene, numbers=[1, 1])
     with pytest.raises(ValueError, match="its own colour and shape"):
-        ClipRenderer(scene, numbers=[3, 3 + len(ROBOT_STYLES)])  # another name, but the same look
-    high = ClipRenderer(scene, numbers=[40, 41])  # any number is drawn, in its own colour and shape
+        CrowdClipRenderer(scene, numbers=[3, 3 + len(AGENT_STYLES)])  # another name, but the same look
+    high = CrowdClipRenderer(scene, numbers=[40, 41])  # any number is drawn, in its own colour and shape
     image = high.draw(Frame(0.0))
     assert {"Robot 40", "Robot 41"} <= high.texts
-    assert colour_mask(image, robot_style(41)[0], tolerance=3).sum() > 50
+    assert colour_mask(image, agent_style(41)[0], tolerance=3).sum() > 50
 
 
 def linear(colour) -> np.ndarray:
@@ -173,23 +171,23 @@ def lab(colour) -> np.ndarray:
 def test_every_robot_style_is_distinct():
     """A robot's look (colour and shape) is its own: every style differs from every other, any round's robots
     (consecutive numbers) differ in colour and in shape, and each number is legible on its colour."""
-    assert len(set(ROBOT_STYLES)) == len(ROBOT_STYLES) == len(ROBOT_COLOURS) * len(ROBOT_SHAPES)
-    for first in range(1, len(ROBOT_STYLES) + 1):
-        block = [robot_style(n) for n in range(first, first + len(ROBOT_SHAPES))]
+    assert len(set(AGENT_STYLES)) == len(AGENT_STYLES) == len(AGENT_COLOURS) * len(AGENT_SHAPES)
+    for first in range(1, len(AGENT_STYLES) + 1):
+        block = [agent_style(n) for n in range(first, first + len(AGENT_SHAPES))]
         assert len({colour for colour, _ in block}) == len({shape for _, shape in block}) == len(block)
-    for i, a in enumerate(ROBOT_COLOURS):
+    for i, a in enumerate(AGENT_COLOURS):
         assert contrast(number_ink(a), a) >= 4.0
         assert np.linalg.norm(lab(a) - lab(CRASH)) > 20  # never the collision's yellow
-        for b in ROBOT_COLOURS[i + 1 :]:
+        for b in AGENT_COLOURS[i + 1 :]:
             assert np.linalg.norm(lab(a) - lab(b)) > 20, (a, b)  # CIE76 distance: clearly different colours
     # silhouettes: each shape's marker (with its white rim) overlaps any other by at most 5/6 of their union
-    numbers = list(range(1, len(ROBOT_SHAPES) + 1))
-    sprites = Sprites(numbers, 0, 30.0, 30.0, 13)
-    masks = {n: np.asarray(sprites.robot(n)[0])[..., 3] > 128 for n in numbers}
+    numbers = list(range(1, len(AGENT_SHAPES) + 1))
+    sprites = AgentSprites(numbers, 30.0, 13)
+    masks = {n: np.asarray(sprites.markers[n][0])[..., 3] > 128 for n in numbers}
     for a in numbers:
         for b in numbers[a:]:
             overlap = (masks[a] & masks[b]).sum() / (masks[a] | masks[b]).sum()
-            assert overlap < 0.85, (robot_style(a)[1], robot_style(b)[1], overlap)
+            assert overlap < 0.85, (agent_style(a)[1], agent_style(b)[1], overlap)
 
 
 def test_the_robots_of_a_clip_and_of_a_ranking_round_have_clearly_different_colours():
@@ -206,8 +204,8 @@ def test_the_robots_of_a_clip_and_of_a_ranking_round_have_clearly_different_colo
             rounds.setdefault((job.scheme.name, job.scenario), set()).update(job.numbers)
         for numbers in [set(job.numbers) for job in jobs] + list(rounds.values()):
             assert max(numbers) - min(numbers) < 3, numbers  # a block of at most three consecutive numbers
-    for first in range(1, len(ROBOT_STYLES) + 1):
-        colours = [robot_style(n)[0] for n in range(first, first + 3)]
+    for first in range(1, len(AGENT_STYLES) + 1):
+        colours = [agent_style(n)[0] for n in range(first, first + 3)]
         for i, a in enumerate(colours):
             for b in colours[i + 1 :]:
                 assert np.linalg.norm(lab(a) - lab(b)) > 50, (first, a, b)
@@ -236,13 +234,13 @@ def test_people_and_robots_stay_readable_on_a_360_px_phone(robot_visible, width)
     scene = scene_from_summary(
         summary_from_simulation(["goal", "orca"], visible(scenario) if robot_visible else scenario)
     )
-    renderer = ClipRenderer(scene, numbers=[7, 12], options=RenderOptions(width=width))
+    renderer = CrowdClipRenderer(scene, numbers=[7, 12], options=RenderOptions(width=width))
     phone = 360 / renderer.layout.width
     assert renderer.layout.marker(scene.human_radius) >= scene.human_radius * renderer.layout.scale
     for sprite in renderer.sprites.humans:
         assert number_height(sprite, INK, 0.7) * phone >= 10
-    assert number_height(renderer.sprites.robot(7), number_ink(robot_style(7)[0]), 0.4) * phone >= 9
-    assert number_height(renderer.sprites.robot(12), number_ink(robot_style(12)[0]), 0.4) * phone >= 8
+    assert number_height(renderer.sprites.markers[7], number_ink(agent_style(7)[0]), 0.4) * phone >= 9
+    assert number_height(renderer.sprites.markers[12], number_ink(agent_style(12)[0]), 0.4) * phone >= 8
 
 
 def test_collision_is_marked_where_and_when_it_happens(shared_summary):
@@ -251,7 +249,7 @@ def test_collision_is_marked_where_and_when_it_happens(shared_summary):
     assert crashed, "the fixture's scripted robot is expected to collide"
     k = crashed[0]
     when = scene.outcomes[k][1]
-    renderer = ClipRenderer(scene)
+    renderer = CrowdClipRenderer(scene)
     start = renderer.event_starts[when]
     before = colour_mask(renderer.draw(Frame(when - 0.5)), CRASH)
     after = colour_mask(renderer.draw(Frame(when, start)), CRASH)
@@ -273,7 +271,7 @@ def test_arrival_and_timeout_are_marked(shared_summary):
     scene = scene_from_summary(shared_summary)
     k = [k for k, (event, _) in enumerate(scene.outcomes) if event == "success"][0]
     when = scene.outcomes[k][1]
-    renderer = ClipRenderer(scene)
+    renderer = CrowdClipRenderer(scene)
     _, robots, _ = renderer._state(when)
     near = 1.5 * renderer.layout.scale
     assert blob_centre(colour_mask(renderer.draw(Frame(when - 0.25)), SUCCESS), robots[k], near) is None
@@ -281,7 +279,7 @@ def test_arrival_and_timeout_are_marked(shared_summary):
     assert f"reached goal · {when:.1f} s" in renderer.texts
 
     short = dataclasses.replace(load_scenario("paper-bl-tr"), world={"time_limit": 5.0})
-    timed_out = ClipRenderer(scene_from_summary(summary_from_simulation(["orca", "social_force"], short)))
+    timed_out = CrowdClipRenderer(scene_from_summary(summary_from_simulation(["orca", "social_force"], short)))
     assert {event for event, _ in timed_out.scene.outcomes} == {"timeout"}
     for frame in timed_out.frames:
         timed_out.draw(frame)
@@ -292,7 +290,7 @@ def test_each_robot_has_its_own_panel_when_robots_are_visible():
     summary = summary_from_simulation(["goal", "orca"], visible(load_scenario("paper-bl-tr")))
     scene = scene_from_summary(summary)
     assert scene.n_panels == 2
-    renderer = ClipRenderer(scene, numbers=[2, 1])
+    renderer = CrowdClipRenderer(scene, numbers=[2, 1])
     assert renderer.layout.width % 16 == 0 and renderer.layout.height % 16 == 0
     image = renderer.draw(Frame(scene.end_time))
     mask = colour_mask(image, HUMAN_FILL)
@@ -428,13 +426,13 @@ def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
     macros = (
         Environment(loader=FileSystemLoader(root / "templates"), autoescape=True).get_template("_macros.html").module
     )
-    for number in range(1, 2 * len(ROBOT_STYLES) + 1):
+    for number in range(1, 2 * len(AGENT_STYLES) + 1):
         marker = str(macros.robot_marker(f"Robot {number}"))
         colour, shape = re.fullmatch(
             r'<span class="marker robot-colour-(\d+) robot-([a-z-]+)" aria-hidden="true">'
             r"</span>",
             marker.strip(),
         ).groups()
-        assert (colours[int(colour)], shape) == robot_style(number)
+        assert (colours[int(colour)], shape) == agent_style(number)
         assert shape in shapes
     assert "robot-x" in str(macros.robot_marker("Robot A"))

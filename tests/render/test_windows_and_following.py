@@ -14,15 +14,13 @@ from PIL import Image
 from search.clips.render import (
     INK,
     PARTING_SECONDS,
-    ClipRenderer,
     Frame,
     RenderOptions,
-    _mix,
+    agent_style,
     contact_sheet,
-    render_file,
-    robot_style,
 )
-from search.clips.scene import scene_from_summary
+from search.crowd.render import CrowdClipRenderer, faded, render_file
+from search.crowd.scene import scene_from_summary
 from search.sim.scenarios import load_scenario
 from tests.render.test_render import colour_mask
 from tests.support.summaries import summary_from_simulation, visible
@@ -51,7 +49,7 @@ def test_a_window_shows_only_its_states_with_the_clock_from_zero(tmp_path, share
     assert result.frames == 5 * 24 + 1 == imageio_ffmpeg.count_frames_and_secs(str(result.clip))[0]
     assert result.seconds == result.frames / 24
 
-    renderer = ClipRenderer(scene, options=PLAIN)
+    renderer = CrowdClipRenderer(scene, options=PLAIN)
     with Image.open(result.poster) as poster:  # the window's first state
         assert np.array_equal(np.asarray(poster.convert("RGB")), np.asarray(renderer.draw(renderer.frames[0])))
     renderer.draw(renderer.frames[-1])
@@ -63,9 +61,9 @@ def test_a_window_shows_only_its_states_with_the_clock_from_zero(tmp_path, share
 def test_trails_start_at_the_window(shared_summary):
     """Robot 2's path before the window (its first 4 s) leaves no trail in the window's first frame, where the
     whole clip's frame of the same state has one: trail colours in the arena away from the robots' markers."""
-    full = ClipRenderer(scene_from_summary(shared_summary), options=PLAIN)
-    windowed = ClipRenderer(scene_from_summary(variant(shared_summary, window=[16, 36])), options=PLAIN)
-    shades = [_mix(robot_style(2)[0], k / 8) for k in range(2, 9)]
+    full = CrowdClipRenderer(scene_from_summary(shared_summary), options=PLAIN)
+    windowed = CrowdClipRenderer(scene_from_summary(variant(shared_summary, window=[16, 36])), options=PLAIN)
+    shades = [faded(agent_style(2)[0], k / 8) for k in range(2, 9)]
     lay = full.layout
     rows, cols = np.mgrid[: lay.height, : lay.width]
     away = (rows > lay.header) & (rows < lay.header + lay.panel)
@@ -83,16 +81,16 @@ def test_a_leader_followed_throughout_is_drawn_alone(shared_summary):
     """follow.steps = every step: only the leader's robot, with the number given for it, in the arena and the
     legend; the other robot's colour appears nowhere."""
     summary = variant(shared_summary, follow={"leader": 1, "steps": len(shared_summary["steps"])})
-    renderer = ClipRenderer(scene_from_summary(summary), numbers=[2, 1])
-    both = ClipRenderer(scene_from_summary(shared_summary), numbers=[2, 1])
+    renderer = CrowdClipRenderer(scene_from_summary(summary), numbers=[2, 1])
+    both = CrowdClipRenderer(scene_from_summary(shared_summary), numbers=[2, 1])
     assert renderer.numbers == [1] and renderer.scene.n_agents == 1
     assert renderer.scene.outcomes == (both.scene.outcomes[1],)
     assert renderer.layout.height < both.layout.height  # a legend of one line
     for t in (0.0, 5.0, renderer.scene.end_time):
         image = renderer.draw(Frame(t))
-        assert colour_mask(image, robot_style(2)[0], tolerance=20).sum() == 0
-        assert colour_mask(image, robot_style(1)[0], tolerance=3).sum() > 100
-        assert colour_mask(both.draw(Frame(t)), robot_style(2)[0], tolerance=20).sum() > 100
+        assert colour_mask(image, agent_style(2)[0], tolerance=20).sum() == 0
+        assert colour_mask(image, agent_style(1)[0], tolerance=3).sum() > 100
+        assert colour_mask(both.draw(Frame(t)), agent_style(2)[0], tolerance=20).sum() > 100
     assert "Robot 1" in renderer.texts and "Robot 2" not in renderer.texts
 
 
@@ -102,16 +100,16 @@ def test_a_leader_alone_with_visible_robots_is_one_arena_of_its_own_crowd():
     alone = scene_from_summary(variant(summary, follow={"leader": 0, "steps": len(summary["steps"])}))
     assert (full.n_panels, alone.n_panels) == (2, 1)
     np.testing.assert_array_equal(alone.humans[:, 0], full.humans[:, 0])
-    assert ClipRenderer(alone).layout.panels == 1
+    assert CrowdClipRenderer(alone).layout.panels == 1
 
 
 def test_the_moment_the_robots_part_is_captioned_for_about_a_second(shared_summary):
     """follow = {leader 1, steps 12} in window [4, 40]: the moment is s_12, 2.0 s into the window. The header
     carries the caption exactly in the frames within half a second of video of it, and a ring marks the leader's
     place then; elsewhere the clip looks as it would without the moment."""
-    plain = ClipRenderer(scene_from_summary(variant(shared_summary, window=[4, 40])), numbers=[2, 1])
+    plain = CrowdClipRenderer(scene_from_summary(variant(shared_summary, window=[4, 40])), numbers=[2, 1])
     summary = variant(shared_summary, window=[4, 40], follow={"leader": 1, "steps": 12})
-    renderer = ClipRenderer(scene_from_summary(summary), numbers=[2, 1])
+    renderer = CrowdClipRenderer(scene_from_summary(summary), numbers=[2, 1])
     scene = renderer.scene
     assert scene.parting == 2.0 and scene.leader == 1
     assert renderer.stack[-1] == 1  # the leader is drawn last, on top of the robot that moves with it
@@ -134,7 +132,7 @@ def test_the_moment_the_robots_part_is_captioned_for_about_a_second(shared_summa
     inked = [(colour_mask(r.draw(moment), INK, tolerance=10) & near).sum() for r in (renderer, plain)]
     assert inked[0] > inked[1] + 2 * ring  # a ring around the leader
 
-    sheet_only = ClipRenderer(scene, numbers=[2, 1])
+    sheet_only = CrowdClipRenderer(scene, numbers=[2, 1])
     contact_sheet(sheet_only)
     assert "Here the two robots would act differently" in sheet_only.texts  # the moment is one of its stills
 

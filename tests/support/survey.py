@@ -299,7 +299,7 @@ def planned_bundle(jobs: list, root: Path):
     """A bundle with one manifest entry per clip `foil bundle` plans (`search.bundle.build.plan_clips`), the first
     agent of each pair the better: what the server's start-up check is given, without searching or rendering."""
     from app.survey.bundle import Bundle
-    from search.clips.render import robot_label
+    from search.crowd.render import robot_label
 
     clips = {
         job.id: ManifestClip(

@@ -1,13 +1,9 @@
-"""What a clip shows, read from a summary.json (`app.formats`): positions over time, starts, goals, outcomes.
+"""What a crowd clip shows, read from a summary.json (`app.formats`): robots and humans over time, starts, goals,
+outcomes.
 
-The renderer needs only this much of a summary, checked here with errors that say which part of the file is
-wrong, so a bad or truncated summary fails before any frame is drawn.
-
-A summary may say which part a clip shows and whether the agents followed a leader (the summaries of Agent
-Disagreements and HIGHLIGHTS, docs/clips.md): ``window = [first, last]`` keeps the states s_first..s_last (s_0 is
-the initial state, s_i the one after step i) with the clock restarted at s_first, and ``follow = {leader, steps}``
-either leaves the leader alone (it was followed throughout: the others are where it is) or marks the moment the
-agents part (s_steps, when it lies in the window).
+The crowd's renderer needs only this much of a summary, checked here with errors that say which part of the file
+is wrong, so a bad or truncated summary fails before any frame is drawn. A summary's ``window`` and ``follow``
+(`search.clips.windows`) pick the states shown and the agents drawn.
 """
 
 from __future__ import annotations
@@ -15,10 +11,12 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from app.formats import SUMMARY_FORMAT, load_summary
+from search.clips.windows import SummaryError, follow_of, window_of
 from search.core.outcomes import OUTCOME_NAMES
 from search.sim.scenarios import Scenario
 
@@ -68,10 +66,6 @@ class Scene:
         centre = (low + high) / 2
         half = max(float(np.max(high - low)), minimum) / 2
         return centre - half, centre + half
-
-
-class SummaryError(ValueError):
-    """A summary file that cannot be shown; the message names the file and the part that is wrong."""
 
 
 def _points(value, shape_tail: tuple[int, ...], where: str) -> np.ndarray:
@@ -203,45 +197,6 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
     )
 
 
-def window_of(summary: dict, states: int, source: str = "summary") -> tuple[int, int]:
-    """A summary's ``window`` as (first, last) state indices (``states`` states after the initial one); the whole
-    clip without one."""
-    value = summary.get("window")
-    if value is None:
-        return 0, states
-    if (
-        isinstance(value, list)
-        and len(value) == 2
-        and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
-        and 0 <= value[0] < value[1] <= states
-    ):
-        return value[0], value[1]
-    raise SummaryError(
-        f"{source}: window must be [first, last] with 0 <= first < last <= {states} (the states a clip shows), "
-        f"got {value!r}"
-    )
-
-
-def follow_of(summary: dict, agents: int, source: str = "summary") -> tuple[int, int] | None:
-    """A summary's ``follow`` as (leader, steps): every agent took the leader's action on steps 1..steps."""
-    value = summary.get("follow")
-    if value is None:
-        return None
-    leader, steps = (value.get("leader"), value.get("steps")) if isinstance(value, dict) else (None, None)
-    if (
-        isinstance(leader, int)
-        and isinstance(steps, int)
-        and not isinstance(leader, bool)
-        and not isinstance(steps, bool)
-        and 0 <= leader < agents
-        and steps >= 0
-    ):
-        return leader, steps
-    raise SummaryError(
-        f"{source}: follow must be {{leader, steps}} with a leader from 0 to {agents - 1} and steps >= 0, got {value!r}"
-    )
-
-
 def load_scene(path: str | os.PathLike) -> Scene:
     """The scene of a summary file."""
-    return scene_from_summary(load_summary(path), source=str(path))
+    return scene_from_summary(dict(load_summary(Path(path))), source=str(path))
