@@ -1,3 +1,2 @@
-"""The clips layer: a summary read back as a scene (where every agent and person is at every step) and the
-renderer that draws it as an H.264 clip with a poster and a contact sheet. It reads summaries; it never runs a
-search."""
+"""The clips layer: the toolkit every world's renderer draws and encodes its clips with (an H.264 clip, a poster
+and a contact sheet), and reels of several clips. It reads summaries; it never runs a search."""

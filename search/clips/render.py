@@ -1,8 +1,7 @@
 """The clip toolkit every world's renderer draws with: agents' colours, shapes and numbers, a top-down arena's
 layout, anti-aliased sprites, the status panel, the clip's timeline (holds, pauses at events, the moment agents
-part), and the encoder (H.264, poster, contact sheet). It names no world: a world's renderer (the crowd's
-search/crowd/render.py, a Gymnasium world's search/gym/clips.py) brings what its clips show and the words it
-labels its agents with.
+part), and the encoder (H.264, poster, contact sheet). It names no world: each world's own renderer, in its
+folder, brings what its clips show and the word it labels its agents with.
 
 A clip must be readable at a glance on a laptop or a 360-px-wide phone: each agent has a strong colour, its own
 shape and its number (colour-blind viewers get shape and number); markers and text keep a minimum size on a
