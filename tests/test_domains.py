@@ -58,6 +58,12 @@ def test_the_world_key_picks_the_world_and_an_ambiguous_file_names_the_key(tmp_p
         domain_for(["hi"], str(both))
 
 
+def test_a_study_names_its_world():
+    assert domain_for(["pkg.mod:policy", "pkg.mod:other"], None, "gym").name == "gym"  # not the crowd's reading
+    with pytest.raises(ValueError, match=r"cannot mix worlds: hi \(crowd\), the study's world \(gym\)"):
+        domain_for(["hi"], None, "gym")
+
+
 def test_a_summary_goes_to_the_world_that_owns_it():
     highway = {"scenario": {"domain": "gym", "adapter": "search.highway.adapter:HighwayAdapter"}}
     assert domain_of_summary(highway).name == "highway"

@@ -116,7 +116,7 @@ def _key(inputs: dict) -> str:
 def study_domain(spec: BuildSpec) -> Domain:
     """The one world of a study, from its agents and a scenario (an agent given as module:attribute may act in
     any world)."""
-    return domain_for(spec.agents, spec.sets[0].scenarios[0])
+    return domain_for(spec.agents, spec.sets[0].scenarios[0], spec.world)
 
 
 def agent_identity(agent: str, domain: Domain) -> dict:
@@ -125,10 +125,11 @@ def agent_identity(agent: str, domain: Domain) -> dict:
     return {"agent": agent, "sha256": sha256_file(path)} if path is not None and path.is_file() else {"agent": agent}
 
 
-def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
+def search_job(job: ClipJob, world: dict | None = None, named: str | None = None) -> SearchJob:
     """The search behind a clip, with its scheme's settings; ``world`` is the study's comparison world
-    (``study_world``), under the scenario file's and the scheme's world settings."""
-    scheme, domain = job.scheme, domain_for(job.pair, job.scenario)
+    (``study_world``), under the scenario file's and the scheme's world settings; ``named`` the world the study
+    names, if it does."""
+    scheme, domain = job.scheme, domain_for(job.pair, job.scenario, named)
     world = under(world, domain.scenario_settings(job.scenario) if world else {})
     return SearchJob(
         agents=job.pair,
@@ -140,6 +141,7 @@ def search_job(job: ClipJob, world: dict | None = None) -> SearchJob:
         solver_settings=asdict(scheme.solver_config),
         reward_settings=scheme.reward.to_dict(),
         world_settings=world | scheme.world,
+        world=named,
     )
 
 
@@ -165,7 +167,7 @@ def search_inputs(search: SearchJob) -> dict:
     input."""
     from search.solvers.reward import RewardConfig
 
-    domain = domain_for(search.agents, search.scenario)
+    domain = domain_for(search.agents, search.scenario, search.world)
     return {
         "agents": [agent_identity(a, domain) for a in search.agents],
         "scenario": domain.scenario_dict(search.scenario, search.world_settings),
@@ -428,7 +430,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     jobs = plan_clips(spec)
     try:  # bad settings or scenarios fail here, before any work
         world = study_world(spec)
-        searches = [search_job(job, world) for job in jobs]
+        searches = [search_job(job, world, spec.world) for job in jobs]
         inputs = [search_inputs(search) for search in searches]
     except (ValueError, FileNotFoundError) as error:
         raise BuildError(f"{study}: [build]: {error}") from None
@@ -694,11 +696,11 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
     for clip_set in spec.sets:
         if {"pairwise", "ranking"} & set(clip_set.parts):
             for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
-                if not domain_for(pair, name).is_distribution(name):
+                if not domain_for(pair, name, spec.world).is_distribution(name):
                     scenarios_of.setdefault(pair, []).append(name)
     measured, todo = {}, {}
     for pair, names in scenarios_of.items():
-        domain = domain_for(pair, names[0])
+        domain = domain_for(pair, names[0], spec.world)
         distribution = settings.distribution or domain.default_distribution
         if distribution is None:
             continue  # a world with no distribution of starting states, and none named in the study

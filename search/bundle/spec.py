@@ -139,6 +139,7 @@ class BuildTable(Strict):
     render: ScalarTable = {}  # RenderOptions fields
     schemes: Annotated[dict[str, SchemeTable], Field(min_length=1)]
     sets: Annotated[list[SetTable], Field(min_length=1)]
+    world: Text | None = None  # the world's name, where its agents and scenarios leave it open
 
 
 @dataclass(frozen=True)
@@ -183,6 +184,7 @@ class BuildSpec:
     schemes: dict[str, Scheme]
     sets: tuple[ClipSet, ...]
     representativeness: Representativeness = Representativeness()
+    world: str | None = None  # the world the study names (world = "..."), else found by its agents and scenarios
 
     @property
     def agents(self) -> list[str]:
@@ -229,7 +231,7 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
     for i, clip_set in enumerate(build.sets):
         for j, scenario in enumerate(clip_set.scenarios):
             try:
-                domain = domain_for(clip_set.all_agents(), scenario)
+                domain = domain_for(clip_set.all_agents(), scenario, build.world)
                 domain.scenario_dict(scenario, {})
                 distribution = domain.is_distribution(scenario)
             except (ValueError, FileNotFoundError) as error:
@@ -251,7 +253,7 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
     at = ("build", "representativeness", "distribution")
     if distribution_name is not None and domain is not None:
         try:
-            if not domain_for([], distribution_name).is_distribution(distribution_name):
+            if not domain_for([], distribution_name, build.world).is_distribution(distribution_name):
                 problems.append(
                     (
                         at,
@@ -270,7 +272,7 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
     domain: Domain | None
     try:
         agents = [a for clip_set in build.sets for a in clip_set.all_agents()]
-        domain = domain_for(agents, build.sets[0].scenarios[0] if build.sets[0].scenarios else None)
+        domain = domain_for(agents, build.sets[0].scenarios[0] if build.sets[0].scenarios else None, build.world)
     except ValueError as error:
         problems.append((("build", "sets"), str(error)))
         domain = None
@@ -410,6 +412,7 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
             for s in build.sets
         ),
         representativeness=build.representativeness,
+        world=build.world,
     )
 
 

@@ -60,6 +60,7 @@ class SearchJob:
     solver_settings: dict = field(default_factory=dict)
     reward_settings: dict = field(default_factory=dict)
     world_settings: dict = field(default_factory=dict)
+    world: str | None = None  # the world's name where a study names it (world = "..."), else found by the agents
 
     def __post_init__(self):
         if len(self.agents) < 2:
@@ -116,7 +117,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     (best first) and ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that
     authoritative reward."""
     started = time.perf_counter()
-    domain = domain_for(job.agents, job.scenario)
+    domain = domain_for(job.agents, job.scenario, job.world)
     job = replace(job, world_settings=domain.search_settings(job.agents, job.world_settings, job.scenario))
     reward_config = RewardConfig.from_dict(job.reward_settings)
     if job.solver == "representative" or job.solver in WATCHING:

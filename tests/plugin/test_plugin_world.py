@@ -58,6 +58,7 @@ text = "Which is better?"
 
 [build]
 seed = 1
+world = "line"
 
 [build.eval]
 episodes = 4
