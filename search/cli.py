@@ -14,6 +14,7 @@ from pathlib import Path
 from app.cli import COMMANDS as SERVER_COMMANDS
 from app.cli import add_commands as add_server_commands
 from app.cli import comma_separated
+from search.solvers.solver import DEFAULT_SOLVER
 
 # What the `search` extra adds to a server-only install (pyproject.toml), by import name: every offline command
 # needs it.
@@ -83,13 +84,16 @@ def _bundle(args: argparse.Namespace) -> int:
 def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str], scenario: str) -> dict:
     from search.solvers.domain import domain_for
     from search.solvers.reward import RewardConfig
-    from search.solvers.runner import parse_settings, solver_config_class
+    from search.solvers.runner import parse_settings
+    from search.solvers.solver import solver_named
 
+    config_class = solver_named(solver).config_class
     return {
         "budget": args.budget,
         "seed": args.seed,
         "top_k": args.top_k,
-        "solver_settings": parse_settings(solver_config_class(solver), args.set, "solver"),
+        # without --set, every solver of a study takes its own defaults
+        "solver_config": config_class(**parse_settings(config_class, args.set, "solver")) if args.set else None,
         "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
         "world_settings": domain_for(agents, scenario).parse_world(args.world),
     }
@@ -256,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     search.add_argument(
         "--solver",
-        default="mcts",
+        default=DEFAULT_SOLVER,
         help="mcts (default), nfirst, random, cem, representative (votes over states drawn from --scenario which "
         "agent looks better; docs/search.md), or the field's summary methods disagreements, highlights and "
         "highlights-div (docs/methods.md)",
@@ -267,7 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     _search_arguments(search_all)
     search_all.add_argument("--agents", required=True, help="agents, comma-separated; every pair is searched")
     search_all.add_argument("--scenarios", required=True, help="scenario names or TOML files, comma-separated")
-    search_all.add_argument("--solvers", default="mcts", help="solvers, comma-separated (default mcts)")
+    search_all.add_argument(
+        "--solvers", default=DEFAULT_SOLVER, help=f"solvers, comma-separated (default {DEFAULT_SOLVER})"
+    )
     search_all.add_argument("--joint", action="store_true", help="search all agents together, not pair by pair")
     search_all.add_argument("--jobs", type=int, help="parallel searches (default: one per core)")
     search_all.add_argument(

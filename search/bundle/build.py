@@ -49,7 +49,8 @@ from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
 from search.clips.render import RenderOptions, agent_label
 from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
-from search.solvers.runner import SearchJob, in_processes, run_search, solver_config_class, write_outputs
+from search.solvers.runner import SearchJob, in_processes, run_search, write_outputs
+from search.solvers.solver import solver_named
 from search.solvers.summary import verify
 
 
@@ -101,9 +102,10 @@ def plan_clips(spec: BuildSpec) -> list[ClipJob]:
 
 def _draws(scheme: Scheme, parts: tuple[str, ...]) -> list[tuple[tuple[str, ...], str, Scheme]]:
     """The clips of a set's pair under a scheme, as (parts fed, suffix of the clip's name, scheme): one for all the
-    set's parts. The representative solver draws its starting states at random, so a set feeding both parts gets
-    a draw of its own (seed + 1) for the ranking, whose round would otherwise replay part one's clips."""
-    if scheme.solver != "representative" or not {"pairwise", "ranking"} <= set(parts):
+    set's parts. A solver that starts only from a distribution (the representative solver) draws its starting
+    states at random, so a set feeding both parts gets a draw of its own (seed + 1) for the ranking, whose round
+    would otherwise replay part one's clips."""
+    if solver_named(scheme.solver).starts != "distribution" or not {"pairwise", "ranking"} <= set(parts):
         return [(parts, "", scheme)]
     ranking = replace(scheme, seed=scheme.seed + 1)
     return [(tuple(part for part in parts if part != "ranking"), "", scheme), (("ranking",), "/ranking", ranking)]
@@ -138,7 +140,7 @@ def search_job(job: ClipJob, world: dict | None = None, named: str | None = None
         budget=scheme.budget,
         seed=scheme.seed,
         top_k=scheme.top_k,
-        solver_settings=asdict(scheme.solver_config),
+        solver_config=scheme.solver_config,
         reward_settings=scheme.reward.to_dict(),
         world_settings=world | scheme.world,
         world=named,
@@ -172,7 +174,7 @@ def search_inputs(search: SearchJob) -> dict:
         "agents": [agent_identity(a, domain) for a in search.agents],
         "scenario": domain.scenario_dict(search.scenario, search.world_settings),
         "solver": search.solver,
-        "solver_settings": asdict(solver_config_class(search.solver)(**search.solver_settings)),
+        "solver_settings": asdict(search.solver_config),
         "reward": RewardConfig(**search.reward_settings).to_dict(),
         "budget": search.budget,
         "seed": search.seed,
@@ -450,7 +452,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     }
     renders = []
     for job in jobs:
-        if job.scheme.solver in REELS:
+        if solver_named(job.scheme.solver).reels:
             renders += [
                 (job, paths, out / "clips" / f"{job.id}.reel{k}.mp4") for k, paths in enumerate(sources[job.id])
             ]
@@ -486,14 +488,13 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     return manifest
 
 
-REELS = ("highlights", "highlights-div")  # the solvers whose clips are a reel per agent
 REEL_HOLD_END = 0.5  # seconds a reel's moment holds its last frame: the card between moments marks the cut
 
 
 def shown_summaries(job: ClipJob, folder: Path, world: World) -> list[list[Path]]:
     """The summaries of a search (in ``folder``) a clip shows: one list holding the clip's summary, or (a pair of
     reels) one list of moments per agent in search order."""
-    if job.scheme.solver not in REELS:
+    if not solver_named(job.scheme.solver).reels:
         return [[clip_summary(folder, job.scheme.select, world)]]
     reels = reel_summaries(folder)
     if len(reels) != 2:

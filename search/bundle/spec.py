@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import itertools
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
@@ -28,14 +28,9 @@ from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, pa
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
 from search.clips.render import AGENT_STYLES, RenderOptions
 from search.core.settings import check_keys, check_values
-from search.solvers.baselines import CEMConfig, SamplingConfig
-from search.solvers.disagreements import DisagreementsConfig
 from search.solvers.domain import Domain, domain_for
-from search.solvers.highlights import HighlightsConfig
-from search.solvers.mcts import MCTSConfig
-from search.solvers.representative import RepresentativeConfig
 from search.solvers.reward import RewardConfig
-from search.solvers.runner import WATCHING, solver_config_class
+from search.solvers.solver import Solver, solver_named, solvers
 
 DOCS = "docs/clips.md"
 
@@ -45,7 +40,6 @@ class BuildError(TomlFileError):
 
 
 Scalar = bool | int | float | str
-SolverConfig = MCTSConfig | SamplingConfig | CEMConfig | RepresentativeConfig | DisagreementsConfig | HighlightsConfig
 
 
 def _scalars(value: object) -> object:
@@ -71,7 +65,7 @@ class SchemeTable(Strict):
     """How one scheme's clips are found: a solver of `foil search` with its simulator-step budget, seed and top-K,
     and its solver, reward and world settings (checked against their fields when parsed)."""
 
-    solver: Text  # mcts, nfirst, random, cem, representative, disagreements, highlights, highlights-div
+    solver: Text  # a registered solver's name (search.solvers.solver)
     budget: Positive | None = None  # simulator steps; [build.budget] steps when not given
     seed: Whole
     top_k: Positive = 1
@@ -154,7 +148,7 @@ class Scheme:
     seed: int
     top_k: int
     select: str  # the clip is the search's best summary by "reward", or its largest visible "contrast"
-    solver_config: SolverConfig
+    solver_config: Any  # an instance of its solver's config_class
     reward: RewardConfig
     world: dict[str, Scalar]
 
@@ -237,8 +231,9 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
             except (ValueError, FileNotFoundError) as error:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
                 continue
-            solvers = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
-            if any(s not in WATCHING and (s == "representative") != distribution for s in solvers):
+            known = solvers()
+            names = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
+            if any(not known[s].takes(distribution) for s in names if s in known):
                 problems.append(
                     (
                         ("build", "sets", i, "scenarios", j),
@@ -281,13 +276,16 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
         at = ("build", "schemes", name)
         found = len(problems)
         try:
-            solver: type | None = solver_config_class(table.solver)
+            solver: Solver | None = solver_named(table.solver)
         except ValueError as error:
             problems.append(((*at, "solver"), str(error)))
             solver = None
         checked: dict[str, dict[str, Scalar]] = {}
         for key, check in (
-            ("settings", lambda values, solver=solver: check_values(solver, values, "solver") if solver else values),
+            (
+                "settings",
+                lambda values, solver=solver: check_values(solver.config_class, values, "solver") if solver else values,
+            ),
             ("reward", lambda values: check_values(RewardConfig, values, "reward")),
             ("world", lambda values: domain.check_world(values, "world") if domain else values),
         ):
@@ -300,7 +298,8 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
         if len(problems) > found or solver is None:
             continue
         try:
-            solver_config, reward = solver(**checked["settings"]), RewardConfig.from_dict(checked["reward"])
+            solver_config = solver.config_class(**checked["settings"])
+            reward = RewardConfig.from_dict(checked["reward"])
         except (TypeError, ValueError) as error:
             problems.append((at, str(error)))
             continue
@@ -318,7 +317,7 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
         if build.budget.clip_seconds is not None and domain is not None:
             steps = round(build.budget.clip_seconds / domain.step_seconds(build.sets[0].scenarios[0], {}))
             try:
-                solver_config, reward = held_to_clip(table.solver, solver_config, reward, steps, checked)
+                solver_config, reward = solver.held_to_clip(solver_config, reward, steps, checked)
             except ValueError as error:
                 problems.append((at, str(error)))
                 continue
@@ -334,29 +333,6 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
             world=checked["world"],
         )
     return schemes
-
-
-def held_to_clip(solver: str, config, reward: RewardConfig, steps: int, given: dict) -> tuple:
-    """A scheme's solver settings and reward with its clips held to ``steps`` steps of video per question: a
-    searched clip's horizon (it plays on to it), a disagreement's h, and each HIGHLIGHTS reel half of it (two
-    reels per question). A setting the study gave otherwise is refused."""
-
-    def held(table: str, key: str, value: int):
-        if key in given[table] and given[table][key] != value:
-            raise ValueError(f"[build.budget] clip_seconds makes {key} {value} steps here; leave {table}.{key} out")
-        return value
-
-    if solver == "disagreements":
-        return replace(config, horizon=held("settings", "horizon", steps)), reward
-    if solver in WATCHING:
-        context = steps // 2 // config.highlights
-        if context < 2:
-            raise ValueError(
-                f"{steps} steps of clip leave less than two steps for each of {config.highlights} highlights in "
-                "each reel: give fewer highlights or more clip_seconds"
-            )
-        return replace(config, context=held("settings", "context", context)), reward
-    return config, reward.with_horizon(held("reward", "horizon", steps))
 
 
 def _render_options(build: BuildTable, problems: list[Problem]) -> RenderOptions:

@@ -15,6 +15,7 @@ import numpy as np
 
 from search.solvers.problem import Problem
 from search.solvers.rollout import Tracker, fresh, rollout
+from search.solvers.solver import ProblemSearch, register
 
 
 @dataclass(frozen=True)
@@ -87,3 +88,8 @@ def cem(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: CE
         w = config.smoothing
         mean = (1 - w) * mean + w * elite.mean(axis=0)
         std = np.maximum((1 - w) * std + w * elite.std(axis=0), config.min_std * bound)
+
+
+register(ProblemSearch("nfirst", SamplingConfig, n_first))
+register(ProblemSearch("random", SamplingConfig, random_search))
+register(ProblemSearch("cem", CEMConfig, cem))

@@ -30,14 +30,18 @@ disagreements than forks the budget pays for, an evenly spaced share of them is 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from search.solvers.episodes import Episodes, continuing, play
 from search.solvers.follow import ALWAYS, Follow
+from search.solvers.problem import ActionGap, Follows, StateValues
+from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
+from search.solvers.solver import Comparison, held, register
+from search.solvers.watching import Summarize, Watching
 
 IMPORTANCE = ("auto", "last_state", "outcome")
 
@@ -220,3 +224,36 @@ def disagreements(
         ],
     }
     return [summarize(by_episode[d.episode], d) for d in chosen], record
+
+
+class AgentDisagreements(Watching):
+    name = "disagreements"
+    config_class = DisagreementsConfig
+    needs = (Follows, ActionGap, StateValues)
+
+    def held_to_clip(
+        self, config: DisagreementsConfig, reward: RewardConfig, steps: int, given: dict
+    ) -> tuple[DisagreementsConfig, RewardConfig]:
+        """A disagreement's clip shows its h steps."""
+        return replace(config, horizon=held(given, "settings", "horizon", steps)), reward
+
+    def watch(
+        self,
+        groups: list[Episodes],
+        tracker: Tracker,
+        config: DisagreementsConfig,
+        summary: Summarize,
+        comparison: Comparison,
+    ) -> tuple[list[dict], dict]:
+        def of_disagreement(group: Episodes, d: Disagreement) -> dict:
+            end = d.step + d.branch
+            if not d.forked:
+                return summary(group, d.episode, end, None, None, {"episode": d.episode, "disagreement_step": None})
+            window = (max(0, d.step - config.horizon // 2), end)
+            note = {"episode": d.episode, "disagreement_step": d.step, "importance": d.importance}
+            return summary(group, d.episode, end, Follow(0, d.step), window, note)
+
+        return disagreements(groups, tracker, config, comparison.domain.shown, of_disagreement)
+
+
+register(AgentDisagreements())

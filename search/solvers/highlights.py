@@ -29,13 +29,17 @@ measured and only those can be chosen.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from search.solvers.episodes import Episodes, continuing, play
 from search.solvers.follow import ALWAYS, Follow
+from search.solvers.problem import ActionValues, Alternatives, Features, Follows, provides
+from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
+from search.solvers.solver import Comparison, held, register
+from search.solvers.watching import Summarize, Watching
 
 IMPORTANCE = ("auto", "max_min", "second_best", "rollouts")
 
@@ -119,7 +123,7 @@ class Forced:
 
 
 def importance_kind(problem, agent: int, config: HighlightsConfig) -> str:
-    has_q = getattr(problem, "action_values", None) is not None and problem.action_values(agent) is not None
+    has_q = provides(problem, ActionValues) and problem.action_values(agent) is not None
     if config.importance in ("max_min", "second_best") and not has_q:
         raise ValueError(f"{config.importance} importance needs the agent's action values; it has none")
     if config.importance == "auto":
@@ -252,3 +256,48 @@ def highlights(
             "chosen": [{"episode": m.episode, "step": m.step, "importance": m.importance} for m in kept],
         }
     return summaries, record
+
+
+class Highlights(Watching):
+    name = "highlights"
+    config_class: type = HighlightsConfig
+    reels = True
+    needs = (Follows, Features, Alternatives)
+
+    def held_to_clip(
+        self, config: HighlightsConfig, reward: RewardConfig, steps: int, given: dict
+    ) -> tuple[HighlightsConfig, RewardConfig]:
+        """Each reel is half of a question's clip (two reels per question), shared by its highlights."""
+        context = steps // 2 // config.highlights
+        if context < 2:
+            raise ValueError(
+                f"{steps} steps of clip leave less than two steps for each of {config.highlights} highlights in "
+                "each reel: give fewer highlights or more clip_seconds"
+            )
+        return replace(config, context=held(given, "settings", "context", context)), reward
+
+    def watch(
+        self,
+        groups: list[Episodes],
+        tracker: Tracker,
+        config: HighlightsConfig,
+        summary: Summarize,
+        comparison: Comparison,
+    ) -> tuple[list[dict], dict]:
+        agents = comparison.agents
+
+        def of_moment(group: Episodes, agent: int, m: Moment) -> dict:
+            first, end = m.window(config.context)
+            note = {"reel": agents[agent], "episode": m.episode, "state_step": m.step, "importance": m.importance}
+            return summary(group, m.episode, end, Follow(agent, end), (first, end), note)
+
+        return highlights(groups, tracker, config, of_moment)
+
+
+class HighlightsDiv(Highlights):
+    name = "highlights-div"
+    config_class = HighlightsDivConfig
+
+
+register(Highlights())
+register(HighlightsDiv())

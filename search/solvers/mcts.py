@@ -30,12 +30,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numba
 import numpy as np
 
-from search.solvers.problem import Problem
+from search.solvers.problem import Assign, Problem, provides
 from search.solvers.rollout import Tracker
+from search.solvers.solver import ProblemSearch, register
 
 
 @dataclass(frozen=True)
@@ -440,9 +442,10 @@ class Rollouts:
         if saved is not None:
             problem.restore(saved)
         reused = min(len(snapshots), ended.size)
-        if reused and hasattr(problem, "assign"):
+        if reused and provides(problem, Assign):
+            assign = cast(Assign, problem).assign
             for i, snapshot in zip(places[:reused], snapshots, strict=False):
-                problem.assign([i], snapshot)
+                assign([i], snapshot)
         elif reused:  # a problem without assign: rebuild the batch row by row
             new_rows = dict(zip(places[:reused], snapshots, strict=False))
             problem.restore(problem.concat([new_rows[i] if i in new_rows else problem.snapshot([i]) for i in range(n)]))
@@ -479,3 +482,6 @@ def mcts(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: M
     search = MCTS(problem, tracker, rng, config or MCTSConfig())
     search.run()
     return search
+
+
+register(ProblemSearch("mcts", MCTSConfig, mcts))

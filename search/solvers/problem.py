@@ -1,11 +1,14 @@
 """What a solver searches: a batched, branchable, deterministic environment with a reward.
 
 Solvers see only this protocol, so the same MCTS runs on the coupled crowd simulator
-(`search.crowd.problem`) and on small synthetic problems with a known optimum (the tests use one).
+(`search.crowd.problem`) and on small synthetic problems with a known optimum (the tests use one). The summary
+methods of the literature need more of a problem: each capability they use is a small protocol below, which a
+solver declares (`search.solvers.solver.Solver.needs`) and `require` checks once, when the solver starts.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -37,6 +40,77 @@ class Problem(Protocol):
     def concat(self, snapshots: list) -> Any:
         """One snapshot holding the rows of several, in order."""
 
+
+class Assign(Protocol):
+    """Rows overwritten in place. Optional: MCTS rebuilds the batch with snapshot/concat/restore where a problem
+    lacks it (more slowly)."""
+
     def assign(self, index, snapshot) -> None:
-        """Overwrite rows ``index`` with a snapshot's rows (as many); the other rows go on untouched. Optional:
-        MCTS rebuilds the batch with snapshot/concat/restore where a problem lacks it (more slowly)."""
+        """Overwrite rows ``index`` with a snapshot's rows (as many); the other rows go on untouched."""
+
+
+class Follows(Protocol):
+    """Agents that follow a leader (`search.solvers.follow`): ``override(proposed, taken)`` turns each agent's own
+    choice into the actions executed (None: each its own), and ``proposed`` is each agent's own choice on the last
+    step, (B, ...) per agent."""
+
+    override: Callable | None
+
+    @property
+    def proposed(self) -> list[np.ndarray]: ...
+
+
+class ActionGap(Protocol):
+    """How far apart two agents' actions are: what makes a disagreement."""
+
+    def action_gap(self, a: np.ndarray, b: np.ndarray) -> np.ndarray: ...
+
+
+class StateValues(Protocol):
+    """Each agent's value of a state, where it has one: what scores a disagreement by its last state."""
+
+    def values(self, agent: int, of: int | None = None) -> np.ndarray | None: ...
+
+
+class ActionValues(Protocol):
+    """Each agent's value of each action, where it has them: what scores a HIGHLIGHTS moment. Optional: without
+    them HIGHLIGHTS measures importance by rollouts of the `Alternatives`."""
+
+    def action_values(self, agent: int) -> np.ndarray | None: ...
+
+
+class Alternatives(Protocol):
+    """The actions an agent might have taken instead of its own: what HIGHLIGHTS' rollouts try. The rollouts read
+    each agent's own reward on the last step from ``agent_rewards`` (B, agents), which a problem may first set on
+    its first step, so it is no member here: no check before that step could see it."""
+
+    def alternatives(self, action: np.ndarray) -> list[np.ndarray]: ...
+
+
+class Features(Protocol):
+    """(B, F) what a clip shows of each row: what HIGHLIGHTS-DIV tells states apart by."""
+
+    def features(self) -> np.ndarray: ...
+
+
+def members(capability: type) -> list[str]:
+    """The names a capability declares: its attributes, properties and methods."""
+    declared = {*getattr(capability, "__annotations__", {}), *vars(capability)}
+    return sorted(name for name in declared if not name.startswith("_"))
+
+
+def provides(problem: object, capability: type) -> bool:
+    """Whether the problem has every member of the capability (as it stands now: a member may be an instance's)."""
+    return all(hasattr(problem, name) for name in members(capability))
+
+
+def require(problem: object, capabilities: tuple[type, ...], solver: str) -> None:
+    """Refuse a problem that lacks a capability the solver needs, naming both."""
+    for capability in capabilities:
+        missing = [name for name in members(capability) if not hasattr(problem, name)]
+        if missing:
+            raise ValueError(
+                f"the {solver} solver needs a problem with {capability.__name__} "
+                f"(search.solvers.problem.{capability.__name__}); {type(problem).__name__} has no "
+                f"{' and no '.join(missing)}: give it {' and '.join(missing)}, or use another solver"
+            )

@@ -34,7 +34,9 @@ from typing import Any
 import numpy as np
 
 from app.visible import Observer, VisibleClip, World
+from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
+from search.solvers.solver import Comparison, OwnSummaries, register
 
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
@@ -373,3 +375,55 @@ def roll_out_problem(
             contrast = np.array([summary_contrast(found.summarize(a, {}), found.world) for a in actions])
         parts.append(Rollouts(np.full(rows, index), actions, contrast))
     return Rollouts.join(parts)
+
+
+class Representative(OwnSummaries):
+    """The representative solver: it draws its own starting states and records its vote under ``vote``."""
+
+    name = "representative"
+    config_class = RepresentativeConfig
+    starts = "distribution"
+    record_key = "vote"
+
+    def choose(
+        self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: RepresentativeConfig
+    ) -> tuple[list[dict], dict]:
+        """The summaries (in its order: the chosen clip first) and the record of its vote. Each summary's scenario
+        is the starting state it was drawn as; its solver entry says which state and what contrast the search
+        saw."""
+        domain, scenario, reward_settings = comparison.domain, comparison.scenario, comparison.reward_settings
+        if not domain.is_distribution(scenario):
+            raise ValueError(
+                f"the representative solver draws starting states from a distribution (such as "
+                f"'training'); {scenario!r} is one fixed scenario"
+            )
+        agents = comparison.pair(self.name, "solver votes which of two agents looks better")
+        scenarios = domain.draw_states(scenario, comparison.world_settings, rng, config.states)
+
+        def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
+            return domain.roll_out(agents, states, reward_settings, pushes, rng, tracker)
+
+        def replay(scenario, actions) -> tuple[float, dict]:
+            coupled = domain.coupled(agents, scenario, reward_settings)
+            summary = coupled.summarize(actions, comparison.entry)
+            return summary_contrast(summary, coupled.world), summary
+
+        horizon = RewardConfig.from_dict(reward_settings).horizon
+        summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon)
+        warning = weak_vote(vote, agents)
+        if warning:
+            vote["warning"] = warning
+        strength = {
+            key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "sign_test_p", "decided")
+        }
+        for summary, chosen in zip(summaries, vote["chosen"], strict=True):
+            summary["solver"] = summary["solver"] | {
+                "budget_used": tracker.steps,
+                "state": chosen["state"],
+                "search_contrast": chosen["contrast"],
+                "vote": strength,
+            }
+        return summaries, vote
+
+
+register(Representative())

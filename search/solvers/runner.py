@@ -13,7 +13,7 @@ import json
 import os
 import re
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -22,42 +22,24 @@ import numpy as np
 
 from app.formats import summary_json
 from search.core.settings import check_keys, field_types
-from search.solvers.baselines import CEMConfig, SamplingConfig, cem, n_first, random_search
-from search.solvers.disagreements import Disagreement, DisagreementsConfig, disagreements
-from search.solvers.domain import Domain, domain_for
-from search.solvers.episodes import Episodes, draw_episodes
-from search.solvers.follow import Follow
-from search.solvers.highlights import HighlightsConfig, HighlightsDivConfig, Moment, highlights
-from search.solvers.mcts import MCTSConfig, mcts
-from search.solvers.representative import RepresentativeConfig, representative, summary_contrast, weak_vote
+from search.solvers.domain import domain_for
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-
-SOLVERS: dict[str, tuple[Callable[..., Any], type]] = {
-    "mcts": (mcts, MCTSConfig),
-    "nfirst": (n_first, SamplingConfig),
-    "random": (random_search, SamplingConfig),
-    "cem": (cem, CEMConfig),
-    "representative": (representative, RepresentativeConfig),  # draws its own states: see _representative
-    # the field's summary methods: they play episodes and choose their own summaries (see _watching)
-    "disagreements": (disagreements, DisagreementsConfig),
-    "highlights": (highlights, HighlightsConfig),
-    "highlights-div": (highlights, HighlightsDivConfig),
-}
-WATCHING = ("disagreements", "highlights", "highlights-div")
+from search.solvers.solver import DEFAULT_SOLVER, Comparison, OwnSummaries, ProblemSearch, solver_named
 
 
 @dataclass(frozen=True)
 class SearchJob:
-    """One search: agents compared in one coupled simulator on one scenario. Settings override defaults."""
+    """One search: agents compared in one coupled simulator on one scenario. Settings override defaults; the
+    solver's config is its solver's ``config_class`` (None: its defaults)."""
 
     agents: tuple[str, ...]
     scenario: str
-    solver: str = "mcts"
+    solver: str = DEFAULT_SOLVER
     budget: int = 20_000
     seed: int = 0
     top_k: int = 30
-    solver_settings: dict = field(default_factory=dict)
+    solver_config: Any = None
     reward_settings: dict = field(default_factory=dict)
     world_settings: dict = field(default_factory=dict)
     world: str | None = None  # the world's name where a study names it (world = "..."), else found by the agents
@@ -65,19 +47,20 @@ class SearchJob:
     def __post_init__(self):
         if len(self.agents) < 2:
             raise ValueError("a search compares at least two agents: give --agents A,B[,C...]")
-        solver_config_class(self.solver)
+        config_class = solver_named(self.solver).config_class
+        if self.solver_config is None:
+            object.__setattr__(self, "solver_config", config_class())
+        elif type(self.solver_config) is not config_class:
+            raise ValueError(
+                f"the {self.solver} solver takes a {config_class.__name__}, not a "
+                f"{type(self.solver_config).__name__}: give its settings as {config_class.__name__}(...)"
+            )
         if self.budget < 1 or self.top_k < 1:
             raise ValueError("--budget and --top-k must be at least 1")
 
     @property
     def label(self) -> str:
         return f"{'-vs-'.join(map(_slug, self.agents))}/{_slug(self.scenario)}"
-
-
-def solver_config_class(name: str):
-    if name not in SOLVERS:
-        raise ValueError(f"unknown solver {name!r}: use one of {sorted(SOLVERS)}")
-    return SOLVERS[name][1]
 
 
 def _slug(name: str) -> str:
@@ -114,65 +97,41 @@ def parse_settings(cls, items: list[str], what: str) -> dict:
 
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search in its agents' world and return its output files, name -> text: ``summary-001.json``, ...
-    (best first) and ``run.json``. Kept trajectories are replayed at batch size 1 and ranked by that
-    authoritative reward."""
+    (best first, or in the order of a solver that chooses its own) and ``run.json``. Kept trajectories are
+    replayed at batch size 1 and ranked by that authoritative reward."""
     started = time.perf_counter()
+    solver = solver_named(job.solver)
     domain = domain_for(job.agents, job.scenario, job.world)
     job = replace(job, world_settings=domain.search_settings(job.agents, job.world_settings, job.scenario))
     reward_config = RewardConfig.from_dict(job.reward_settings)
-    if job.solver == "representative" or job.solver in WATCHING:
-        own = _representative if job.solver == "representative" else _watching
-        return search_files(
-            job,
-            None,
-            job.scenario,
-            reward_config,
-            started,
-            progress,
-            None,
-            choose=lambda tracker, rng, config, solver: own(job, domain, tracker, rng, config, solver),
-        )
-    coupled = domain.coupled(job.agents, domain.state(job.scenario, job.world_settings), job.reward_settings)
-    return search_files(
-        job, coupled.problem, coupled.scenario_name, reward_config, started, progress, coupled.summarize
-    )
-
-
-def search_files(
-    job: SearchJob,
-    problem,
-    scenario_name: str,
-    reward_config: RewardConfig,
-    started: float,
-    progress: bool,
-    summarize,
-    choose=None,
-) -> dict[str, str]:
-    """Search ``problem`` with the job's solver and write its files; ``summarize(env_actions, solver)`` builds the
-    summary of a kept trajectory (any domain's). ``choose(tracker, rng, solver_config, solver)`` (the solvers that
-    choose their own summaries) replaces both: it gives the summaries in its own order and a record for run.json
-    (``vote`` for the representative solver, ``method`` for the others)."""
-    solve, config_class = SOLVERS[job.solver]
-    solver_config = config_class(**job.solver_settings)
+    entry = {"name": job.solver, "parameters": asdict(job.solver_config), "seed": job.seed, "budget": job.budget}
     tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
     rng = np.random.default_rng(job.seed)
-    solver = {"name": job.solver, "parameters": asdict(solver_config), "seed": job.seed, "budget": job.budget}
-    voted = None
+    chosen: tuple[str, list, dict] | None = None  # a solver's own: its record's key, summaries and record
     try:
-        if choose is not None:
-            summaries, voted = choose(tracker, rng, solver_config, solver)
+        if isinstance(solver, ProblemSearch):
+            coupled = domain.coupled(job.agents, domain.state(job.scenario, job.world_settings), job.reward_settings)
+            scenario_name = coupled.scenario_name
+            solver.run(coupled.problem, tracker, rng, job.solver_config)
+        elif isinstance(solver, OwnSummaries):
+            scenario_name = job.scenario
+            comparison = Comparison(job.agents, job.scenario, domain, job.world_settings, job.reward_settings, entry)
+            chosen = (solver.record_key, *solver.choose(comparison, tracker, rng, job.solver_config))
         else:
-            solve(problem, tracker, rng, solver_config)
+            raise TypeError(f"solver {job.solver!r} is a {type(solver).__name__}: a ProblemSearch or OwnSummaries runs")
     finally:
         tracker.close()
     search_time = time.perf_counter() - started
-    solver["budget_used"] = tracker.steps
-    if voted is None:
+    entry["budget_used"] = tracker.steps
+    summaries: list[Any]  # each checked as a Summary when written
+    if chosen is None:
         summaries = [
-            summarize(found.actions, solver | {"search_reward": found.reward, "found_at_step": found.sim_steps})
+            coupled.summarize(found.actions, entry | {"search_reward": found.reward, "found_at_step": found.sim_steps})
             for found in tracker.queue.ranked()
         ]
         summaries.sort(key=lambda s: -s["reward"])  # stable: ties keep the search's order
+    else:
+        summaries = chosen[1]
     files = {}
     for rank, summary in enumerate(summaries, start=1):
         summary["solver"]["rank"] = rank
@@ -181,7 +140,7 @@ def search_files(
         "format": "foil.run/1",
         "agents": list(job.agents),
         "scenario": scenario_name,
-        "solver": solver,
+        "solver": entry,
         "reward_parameters": reward_config.to_dict(),
         "top_k": job.top_k,
         "trajectories": tracker.trajectories,
@@ -196,105 +155,10 @@ def search_files(
             for name, s in zip(files, summaries, strict=True)
         ],
     }
-    if voted is not None:
-        record["vote" if job.solver == "representative" else "method"] = voted
+    if chosen is not None:
+        record[chosen[0]] = chosen[2]
     files["run.json"] = json.dumps(record, indent=1) + "\n"
     return files
-
-
-def _representative(
-    job: SearchJob,
-    domain: Domain,
-    tracker: Tracker,
-    rng: np.random.Generator,
-    config: RepresentativeConfig,
-    solver: dict,
-) -> tuple[list, dict]:
-    """The representative solver's summaries (in its order: the chosen clip first) and the record of its vote.
-    Each summary's scenario is the starting state it was drawn as; its solver entry says which state and what
-    contrast the search saw."""
-    if not domain.is_distribution(job.scenario):
-        raise ValueError(
-            f"the representative solver draws starting states from a distribution (such as "
-            f"'training'); {job.scenario!r} is one fixed scenario"
-        )
-    if len(job.agents) != 2:
-        raise ValueError(f"the representative solver votes which of two agents looks better; got {len(job.agents)}")
-    scenarios = domain.draw_states(job.scenario, job.world_settings, rng, config.states)
-    agents = list(job.agents)
-
-    def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
-        return domain.roll_out(agents, states, job.reward_settings, pushes, rng, tracker)
-
-    def replay(scenario, actions) -> tuple[float, dict]:
-        coupled = domain.coupled(agents, scenario, job.reward_settings)
-        summary = coupled.summarize(actions, solver)
-        return summary_contrast(summary, coupled.world), summary
-
-    horizon = RewardConfig.from_dict(job.reward_settings).horizon
-    summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon)
-    warning = weak_vote(vote, agents)
-    if warning:
-        vote["warning"] = warning
-    strength = {
-        key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "sign_test_p", "decided")
-    }
-    for summary, chosen in zip(summaries, vote["chosen"], strict=True):
-        summary["solver"] = summary["solver"] | {
-            "budget_used": tracker.steps,
-            "state": chosen["state"],
-            "search_contrast": chosen["contrast"],
-            "vote": strength,
-        }
-    return summaries, vote
-
-
-def _watching(
-    job: SearchJob, domain: Domain, tracker: Tracker, rng: np.random.Generator, config, solver: dict
-) -> tuple[list, dict]:
-    """The summaries of a method that watches the agents play (Agent Disagreements, HIGHLIGHTS, HIGHLIGHTS-DIV),
-    from the job's scenario, or from states drawn from it when it is a distribution."""
-    if len(job.agents) != 2:
-        raise ValueError(f"the {job.solver} method compares two agents; got {len(job.agents)}")
-    if domain.is_distribution(job.scenario):
-        states = domain.draw_states(job.scenario, job.world_settings, rng, config.episodes)
-    else:
-        states = [domain.state(job.scenario, job.world_settings)]
-    agents = list(job.agents)
-    groups = draw_episodes(lambda s: domain.coupled(agents, s, job.reward_settings), states, config.episodes, rng)
-    shown = domain.shown
-
-    def summary(
-        group: Episodes, episode: int, end: int, follow: Follow | None, window: tuple[int, int] | None, note: dict
-    ):
-        actions = group.env[episode - group.first, :end]
-        return group.coupled.summarize(actions, solver | note, follow=follow, window=window, horizon=end)
-
-    if job.solver == "disagreements":
-
-        def of_disagreement(group: Episodes, d: Disagreement) -> dict:
-            end = d.step + d.branch
-            if not d.forked:
-                return summary(group, d.episode, end, None, None, {"episode": d.episode, "disagreement_step": None})
-            window = (max(0, d.step - config.horizon // 2), end)
-            note = {"episode": d.episode, "disagreement_step": d.step, "importance": d.importance}
-            return summary(group, d.episode, end, Follow(0, d.step), window, note)
-
-        return _spent(disagreements(groups, tracker, config, shown, of_disagreement), tracker)
-
-    def of_moment(group: Episodes, agent: int, m: Moment) -> dict:
-        first, end = m.window(config.context)
-        note = {"reel": agents[agent], "episode": m.episode, "state_step": m.step, "importance": m.importance}
-        return summary(group, m.episode, end, Follow(agent, end), (first, end), note)
-
-    return _spent(highlights(groups, tracker, config, of_moment), tracker)
-
-
-def _spent(chosen: tuple[list, dict], tracker: Tracker) -> tuple[list, dict]:
-    """The summaries with the steps the whole search took, as every solver's summaries say."""
-    for summary in chosen[0]:
-        summary["solver"]["budget_used"] = tracker.steps
-    return chosen
 
 
 def write_outputs(out: str | Path, files: dict[str, str]) -> Path:

@@ -16,6 +16,7 @@ from PIL import Image
 from search.clips.render import CRASH, PARTING_SECONDS, RenderOptions, agent_style
 from search.gym.adapter import Adapter
 from search.gym.clips import GymClipRenderer, render_gym
+from search.solvers.baselines import SamplingConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from tests.render.test_render import colour_mask, probe, top_level_boxes
 
@@ -98,7 +99,7 @@ def summary_file(tmp_path_factory):
         solver="random",
         budget=2,
         top_k=1,
-        solver_settings={"batch": 1},
+        solver_config=SamplingConfig(batch=1),
     )
     out = write_outputs(folder, run_search(job))
     return out / "summary-001.json"
@@ -238,7 +239,7 @@ def test_highway_cars_part_in_a_drivers_words(tmp_path):
         solver="random",
         budget=20,
         top_k=1,
-        solver_settings={"batch": 1},
+        solver_config=SamplingConfig(batch=1),
     )
     summary = json.loads((write_outputs(tmp_path, run_search(job)) / "summary-001.json").read_text())
     assert summary["outcomes"][1]["event"] == "success"

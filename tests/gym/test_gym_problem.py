@@ -12,7 +12,8 @@ from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario, GymSnapshot
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
-from search.solvers.runner import SOLVERS, WATCHING, SearchJob, run_search, write_outputs
+from search.solvers.runner import SearchJob, run_search, write_outputs
+from search.solvers.solver import ProblemSearch, solvers
 from search.solvers.summary import verify
 
 ADAPTER = "tests.gym.corridor:CorridorAdapter"
@@ -124,11 +125,12 @@ def test_events_map_to_success_collision_and_timeout():
     assert np.array_equal(p.rows[0][0].env.walker, where)  # a finished agent stands still
 
 
-@pytest.mark.parametrize("solver", sorted(set(SOLVERS) - {"representative", *WATCHING}))  # searches of a problem
+@pytest.mark.parametrize("solver", sorted(name for name, s in solvers().items() if isinstance(s, ProblemSearch)))
 def test_every_solver_searches_the_gym_problem(solver):
     p = problem(horizon=40)
     tracker = Tracker(300, 5)
-    SOLVERS[solver][0](p, tracker, np.random.default_rng(0), SOLVERS[solver][1]())
+    search = solvers()[solver]
+    search.run(p, tracker, np.random.default_rng(0), search.config_class())
     assert tracker.trajectories > 0 and tracker.curve  # nfirst stops after its N trajectories
     assert len(tracker.queue.ranked()) == min(5, tracker.trajectories)
 

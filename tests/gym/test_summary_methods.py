@@ -15,6 +15,7 @@ from search.solvers.follow import Follow
 from search.solvers.highlights import HighlightsConfig, Moment, q_importance, select
 from search.solvers.rollout import Tracker
 from search.solvers.runner import SearchJob, run_search, write_outputs
+from search.solvers.solver import solver_named
 from search.solvers.summary import verify
 from tests.gym.corridor import dodging, straight
 from tests.gym.test_gym_problem import BOX, DISCRETE, scenario_file
@@ -137,7 +138,7 @@ def test_disagreement_clips_fork_where_they_disagree_and_verify(agents, tmp_path
         budget=2_000,
         top_k=3,
         reward_settings={"horizon": 40},
-        solver_settings={"horizon": 6},
+        solver_config=DisagreementsConfig(horizon=6),
     )
     files = run_search(job)
     assert _same_but_times(files, run_search(job))
@@ -186,7 +187,7 @@ def test_highlights_reels_show_each_agent_alone_and_verify(agents, solver, impor
         solver=solver,
         budget=4_000,
         reward_settings={"horizon": 40},
-        solver_settings={"highlights": 2, "context": 6, "gap": 6, "lookahead": 3},
+        solver_config=solver_named(solver).config_class(highlights=2, context=6, gap=6, lookahead=3),
     )
     files = run_search(job)
     assert _same_but_times(files, run_search(job))
@@ -220,7 +221,7 @@ def test_agents_that_never_disagree_get_the_first_episode_each_on_its_own(tmp_pa
         solver="disagreements",
         budget=500,
         reward_settings={"horizon": 40},
-        solver_settings={"horizon": 6},
+        solver_config=DisagreementsConfig(horizon=6),
     )
     files = run_search(job)
     record = json.loads(files["run.json"])["method"]
@@ -238,33 +239,21 @@ def test_a_domain_without_a_fast_path_scores_forks_by_their_summaries_alike(tmp_
     import numpy as np
 
     from search.gym.domain import GymDomain
-    from search.solvers.disagreements import DisagreementsConfig
     from search.solvers.domain import Domain
     from search.solvers.rollout import Tracker
-    from search.solvers.runner import _watching
+    from search.solvers.solver import Comparison, OwnSummaries
 
     class Replaying(GymDomain):
         shown = Domain.shown
 
-    job = SearchJob(
-        agents=BOX,
-        scenario=scenario_file(tmp_path),
-        solver="disagreements",
-        budget=1_000,
-        top_k=3,
-        reward_settings={"horizon": 40},
-        solver_settings={"horizon": 6},
-    )
+    scenario = scenario_file(tmp_path)
+    method = solver_named("disagreements")
+    assert isinstance(method, OwnSummaries)
     records = []
     for domain in (GymDomain(), Replaying()):
-        solver = {"name": "disagreements"}
-        _, record = _watching(
-            job,
-            domain,
-            Tracker(job.budget, job.top_k),
-            np.random.default_rng(0),
-            DisagreementsConfig(horizon=6),
-            solver,
+        comparison = Comparison(BOX, scenario, domain, {}, {"horizon": 40}, {"name": "disagreements"})
+        _, record = method.choose(
+            comparison, Tracker(1_000, 3), np.random.default_rng(0), DisagreementsConfig(horizon=6)
         )
         records.append(record)
     assert records[0]["importance"] == "outcome" and records[0]["chosen"]

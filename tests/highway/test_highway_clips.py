@@ -13,6 +13,7 @@ from PIL import Image
 from search.clips.render import AGENT_COLOURS, RenderOptions, agent_style
 from search.gym.clips import GymClipRenderer, render_gym
 from search.highway.adapter import EGO_AT, TRAFFIC
+from search.solvers.baselines import SamplingConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from tests.render.test_render import probe, top_level_boxes
 
@@ -22,7 +23,12 @@ DRIVERS = ("tests.highway.drivers:cruise", "tests.highway.drivers:cautious")
 @pytest.fixture(scope="module")
 def summary_file(tmp_path_factory):
     job = SearchJob(
-        agents=DRIVERS, scenario="highway-dense", solver="random", budget=20, top_k=1, solver_settings={"batch": 1}
+        agents=DRIVERS,
+        scenario="highway-dense",
+        solver="random",
+        budget=20,
+        top_k=1,
+        solver_config=SamplingConfig(batch=1),
     )
     out = write_outputs(tmp_path_factory.mktemp("search"), run_search(job))
     return out / "summary-001.json"

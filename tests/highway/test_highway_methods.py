@@ -7,6 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from search.solvers.disagreements import DisagreementsConfig
+from search.solvers.highlights import HighlightsDivConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from search.solvers.summary import verify
 
@@ -20,7 +22,7 @@ def test_a_kernel_disagreement_is_one_in_highway_env_too(tmp_path):
         solver="disagreements",
         budget=400,
         top_k=2,
-        solver_settings={"horizon": 6},
+        solver_config=DisagreementsConfig(horizon=6),
     )
     out = write_outputs(tmp_path, run_search(job))
     for path in sorted(out.glob("summary-*.json")):
@@ -39,7 +41,7 @@ def test_highlights_reels_of_highway_cars_verify(tmp_path):
         scenario="highway-dense",
         solver="highlights-div",
         budget=600,
-        solver_settings={"highlights": 1, "context": 4, "lookahead": 2},
+        solver_config=HighlightsDivConfig(highlights=1, context=4, lookahead=2),
     )
     out = write_outputs(tmp_path, run_search(job))
     leaders = []

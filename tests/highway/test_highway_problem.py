@@ -11,6 +11,7 @@ from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
 from search.highway.adapter import LANE_THRESHOLD, PERTURBED, SPEED_RANGE, HighwayAdapter
 from search.highway.scenarios import SCENARIOS, load_highway_scenario
+from search.solvers.baselines import SamplingConfig
 from search.solvers.reward import RewardConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from search.solvers.summary import verify
@@ -89,7 +90,7 @@ def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, disc
         solver="random",
         budget=40,
         top_k=2,
-        solver_settings={"batch": 2},
+        solver_config=SamplingConfig(batch=2),
         world_settings={"discrete": True} if discrete else {},
     )
     files = run_search(job)

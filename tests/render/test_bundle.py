@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import asdict
 from pathlib import Path
 
 import pytest
@@ -236,8 +235,8 @@ def test_scheme_settings_reach_the_search_as_the_fields_types():
     assert job.scheme.solver_config == MCTSConfig(exploration=100.0, mode="receding")
     assert job.scheme.reward == RewardConfig(alpha=2.0)
     search = search_job(job)
-    assert search.solver_settings == asdict(MCTSConfig(exploration=100.0, mode="receding"))
-    assert type(search.solver_settings["exploration"]) is float and type(search.reward_settings["alpha"]) is float
+    assert search.solver_config == MCTSConfig(exploration=100.0, mode="receding")
+    assert type(search.solver_config.exploration) is float and type(search.reward_settings["alpha"]) is float
     assert search.reward_settings == RewardConfig(alpha=2.0).to_dict()
     assert search.world_settings == {"robot_visible": True}
     assert (search.agents, search.scenario, search.budget, search.seed) == (job.pair, job.scenario, 300, 1)

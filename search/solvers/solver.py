@@ -1,0 +1,136 @@
+"""The solvers of `foil search` behind one interface, found by name in one registry, so the runner, the study
+file's parsing and the bundle builder ask a solver what it is instead of comparing names.
+
+A solver runs in one of two ways: a `ProblemSearch` searches the coupled problem of one fixed scenario (MCTS,
+N-first, random, cross-entropy) and its kept trajectories become the summaries, best first; an `OwnSummaries`
+solver chooses its own summaries (the representative solver, the summary methods that watch agents play) and
+writes a record of how under its own key of run.json. A new solver is one module that defines it and calls
+`register`; Foil's own are the modules in ``BUILTIN``, imported when the registry is first read.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib import import_module
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from search.solvers.problem import Problem
+    from search.solvers.reward import RewardConfig
+    from search.solvers.rollout import Tracker
+
+DEFAULT_SOLVER = "mcts"
+BUILTIN = (
+    "search.solvers.mcts",
+    "search.solvers.baselines",
+    "search.solvers.representative",
+    "search.solvers.disagreements",
+    "search.solvers.highlights",
+)
+Starts = Literal["fixed", "distribution", "either"]  # the scenarios a solver starts from
+
+
+class Solver(ABC):
+    """What the runner, the study file and the bundle builder need to know of a solver."""
+
+    name: str
+    config_class: type  # its settings, one frozen dataclass from the study file (or --set) to the search
+    starts: Starts = "fixed"  # a fixed scenario, a distribution of starting states it draws from, or either
+    reels: bool = False  # its clips are a reel of moments per agent, not one clip of the pair
+    needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.solvers.problem)
+
+    def takes(self, distribution: bool) -> bool:
+        """Whether it starts from a scenario of this kind (a distribution of starting states, or a fixed one)."""
+        return self.starts == "either" or (self.starts == "distribution") == distribution
+
+    def held_to_clip(self, config: Any, reward: RewardConfig, steps: int, given: dict) -> tuple[Any, RewardConfig]:
+        """Its settings and reward with each clip held to ``steps`` steps of video per question (a study's
+        clip_seconds); ``given`` holds the settings the study gave ("settings", "reward"), refused where they say
+        otherwise. By default a searched clip plays on to the reward's horizon."""
+        return config, reward.with_horizon(held(given, "reward", "horizon", steps))
+
+
+def held(given: dict, table: str, key: str, value: int) -> int:
+    """``value`` for the setting ``table.key`` that a clip length fixes, refusing a study that gave another."""
+    if key in given[table] and given[table][key] != value:
+        raise ValueError(f"[build.budget] clip_seconds makes {key} {value} steps here; leave {table}.{key} out")
+    return value
+
+
+@dataclass(frozen=True)
+class ProblemSearch(Solver):
+    """A search of the coupled problem of one fixed scenario: ``search(problem, tracker, rng, config)`` spends the
+    tracker's budget and the tracker keeps the best trajectories."""
+
+    name: str
+    config_class: type
+    search: Callable[[Problem, Tracker, np.random.Generator, Any], object]
+    needs: tuple[type, ...] = ()
+
+    def run(self, problem: Problem, tracker: Tracker, rng: np.random.Generator, config: Any) -> None:
+        from search.solvers.problem import require
+
+        require(problem, self.needs, self.name)
+        self.search(problem, tracker, rng, config)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What a solver that chooses its own summaries starts from: the agents in their world (``domain``, a
+    `search.solvers.domain.Domain`, which imports the solvers, so none of them imports it), the scenario, the
+    settings, and the solver entry every summary carries."""
+
+    agents: tuple[str, ...]
+    scenario: str
+    domain: Any
+    world_settings: dict
+    reward_settings: dict
+    entry: dict = field(default_factory=dict)
+
+    def pair(self, solver: str, what: str) -> list[str]:
+        """The two agents compared, refusing any other number."""
+        if len(self.agents) != 2:
+            raise ValueError(f"the {solver} {what}; got {len(self.agents)}")
+        return list(self.agents)
+
+
+class OwnSummaries(Solver):
+    """A solver that chooses its own summaries, in its own order, and records how under ``record_key`` in
+    run.json."""
+
+    record_key: str
+
+    @abstractmethod
+    def choose(
+        self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: Any
+    ) -> tuple[list[dict], dict]:
+        """The summaries, shown first first, and the record of how they were chosen."""
+
+
+SOLVERS: dict[str, Solver] = {}  # by name; read it through `solvers`, which imports Foil's own first
+
+
+def register(solver: Solver) -> Solver:
+    """Add a solver to the registry under its name."""
+    if SOLVERS.get(solver.name, solver) is not solver:
+        raise ValueError(f"a solver named {solver.name!r} is registered already: give the new one another name")
+    SOLVERS[solver.name] = solver
+    return solver
+
+
+def solvers() -> dict[str, Solver]:
+    """Every registered solver by name, Foil's own included."""
+    for module in BUILTIN:
+        import_module(module)
+    return SOLVERS
+
+
+def solver_named(name: str) -> Solver:
+    found = solvers()
+    if name not in found:
+        raise ValueError(f"unknown solver {name!r}: use one of {sorted(found)}")
+    return found[name]

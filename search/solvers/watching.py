@@ -1,0 +1,60 @@
+"""The summary methods of the literature that watch two agents play (Agent Disagreements, HIGHLIGHTS,
+HIGHLIGHTS-DIV): what they share as solvers. Each plays episodes from the job's scenario, or from states drawn
+from it when it is a distribution, chooses its own summaries and records how under ``method`` in run.json."""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from search.solvers.episodes import Episodes, draw_episodes
+from search.solvers.follow import Follow
+from search.solvers.problem import Follows, require
+from search.solvers.rollout import Tracker
+from search.solvers.solver import Comparison, OwnSummaries
+
+# A moment's summary: (its episodes, the episode, the steps it plays, whom the agents follow, the steps shown, what
+# its solver entry adds).
+Summarize = Callable[[Episodes, int, int, Follow | None, tuple[int, int] | None, dict], dict]
+
+
+class Watching(OwnSummaries):
+    starts = "either"
+    record_key = "method"
+    needs: tuple[type, ...] = (Follows,)
+
+    def choose(
+        self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: Any
+    ) -> tuple[list[dict], dict]:
+        """The summaries the method chooses from the episodes it watches, each with the steps the whole search
+        took, as every solver's summaries say."""
+        agents = comparison.pair(self.name, "method compares two agents")
+        domain, scenario, world = comparison.domain, comparison.scenario, comparison.world_settings
+        if domain.is_distribution(scenario):
+            states = domain.draw_states(scenario, world, rng, config.episodes)
+        else:
+            states = [domain.state(scenario, world)]
+        groups = draw_episodes(
+            lambda s: domain.coupled(agents, s, comparison.reward_settings), states, config.episodes, rng
+        )
+        require(groups[0].coupled.problem, self.needs, self.name)
+
+        def summary(
+            group: Episodes, episode: int, end: int, follow: Follow | None, window: tuple[int, int] | None, note: dict
+        ) -> dict:
+            actions = group.env[episode - group.first, :end]
+            return group.coupled.summarize(actions, comparison.entry | note, follow=follow, window=window, horizon=end)
+
+        summaries, record = self.watch(groups, tracker, config, summary, comparison)
+        for chosen in summaries:
+            chosen["solver"]["budget_used"] = tracker.steps
+        return summaries, record
+
+    @abstractmethod
+    def watch(
+        self, groups: list[Episodes], tracker: Tracker, config: Any, summary: Summarize, comparison: Comparison
+    ) -> tuple[list[dict], dict]:
+        """The method's summaries of the watched episodes (each built by ``summary``) and its record."""
