@@ -3,9 +3,10 @@
 Both sides read and write them through this module only; it imports nothing heavy, so the server (which never
 imports the offline side) and the bundle builder share it. docs/formats.md describes every key.
 
-- summary.json (``foil.summary/1``): one kept trajectory of a search, with everything needed to replay it
-  exactly and to draw it. Written by ``search.solvers.summary``, read by ``foil verify``, the renderer, the
-  bundle's audit and the bots.
+- summary.json (``foil.summary/2``): one kept trajectory of a search, with everything needed to replay it
+  exactly and to draw it. Written by each world's summary builder, read by ``foil verify``, the renderer, the
+  bundle's audit, the server and the bots, always through ``load_summary`` or ``summary_of``, which read a
+  ``foil.summary/1`` file (the crowd's words for the same keys) as the ``foil.summary/2`` it names.
 - manifest.json (``foil.bundle/1``): a bundle's clips, each with its agents, on-screen labels, ground truth,
   audit and checksum (or, for a summary method that shows each agent on its own, one reel per agent), and the world
   they show (``app.visible.World``). Written by ``foil bundle``, read by the server and the bots.
@@ -16,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypedDict, cast
+from typing import Annotated, Any, Literal, NotRequired, TypedDict, cast
 
 from pydantic import (
     BaseModel,
@@ -31,7 +32,11 @@ from typing_extensions import TypedDict as CheckedDict  # the one pydantic valid
 
 from app.visible import World
 
-SUMMARY_FORMAT = "foil.summary/1"
+SUMMARY_FORMAT = "foil.summary/2"
+# foil.summary/1 named a step's keys and the closest distance in the crowd's words: read as the /2 keys they were
+SUMMARY_V1 = "foil.summary/1"
+V1_STEP_KEYS = {"humans": "other_positions", "robots": "agent_positions", "robot_actions": "agent_actions"}
+V1_OUTCOME_KEYS = {"min_human_distance": "min_other_distance"}
 MANIFEST_FORMAT = "foil.bundle/1"
 
 
@@ -51,16 +56,17 @@ class SummaryAgent(TypedDict):
 
 class SummaryStep(TypedDict):
     t: float  # simulated seconds after the step
-    humans: list[Any]  # [[x, y], ...] per human; with visible robots, one such list per agent's crowd
-    robots: list[list[float]]  # [x, y] per agent
-    robot_actions: list[list[float]]  # the velocity each agent chose on this step
+    # the world's other movers, [[x, y], ...]; where each agent has its own world, one such list per agent
+    other_positions: list[Any]
+    agent_positions: list[list[float]]  # [x, y] per agent
+    agent_actions: list[list[float]]  # the action each agent chose on this step
 
 
 class SummaryOutcome(TypedDict):
     event: Literal["running", "success", "collision", "timeout"]
     time: float | None  # when the event happened (null while running)
     path_length: float
-    min_human_distance: float | None  # surface to surface; negative after a collision
+    min_other_distance: float | None  # to the closest other mover, surface to surface (negative after a collision)
 
 
 class Summary(TypedDict):
@@ -74,6 +80,8 @@ class Summary(TypedDict):
     outcomes: list[SummaryOutcome]  # one per agent
     reward: float
     reward_terms: dict[str, Any]
+    follow: NotRequired[dict[str, int]]  # {leader, steps}: every agent executed the leader's action on steps 1..steps
+    window: NotRequired[list[int]]  # [first, last]: the states the clip shows
 
 
 def summary_json(summary: Summary) -> str:
@@ -82,7 +90,7 @@ def summary_json(summary: Summary) -> str:
 
 
 def load_summary(path: str | Path) -> Summary:
-    """A summary.json, or an error that names the file and what is wrong with it."""
+    """A summary.json of either version as a current one, or an error that names the file and what is wrong."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -90,10 +98,34 @@ def load_summary(path: str | Path) -> Summary:
         raise FileNotFoundError(f"no summary file {str(path)!r}") from None
     except json.JSONDecodeError as error:
         raise ValueError(f"{path}: not valid JSON: {error}") from None
-    if not isinstance(data, dict) or data.get("format") != SUMMARY_FORMAT:
+    return summary_of(data, str(path))
+
+
+def summary_of(data: Any, source: str = "summary") -> Summary:
+    """A parsed summary of either version as a current one (a ``foil.summary/1`` one with its keys renamed, in
+    their places), or an error naming ``source``: every summary is read through here, so no reader knows of /1."""
+    if not isinstance(data, dict) or data.get("format") not in (SUMMARY_FORMAT, SUMMARY_V1):
         found = data.get("format") if isinstance(data, dict) else type(data).__name__
-        raise ValueError(f"{path}: not a summary (format {found!r}, expected {SUMMARY_FORMAT!r})")
+        raise ValueError(
+            f"{source}: not a summary (format {found!r}, expected {SUMMARY_FORMAT!r} or {SUMMARY_V1!r}); "
+            "write it with `foil search`"
+        )
+    if data["format"] == SUMMARY_V1:
+        data = _upgraded(data, source)
     return cast(Summary, data)  # checked as far as the server needs: a dict of this format
+
+
+def _upgraded(data: dict[str, Any], source: str) -> dict[str, Any]:
+    """A ``foil.summary/1`` summary as the ``foil.summary/2`` one it stands for: the same values under the /2 keys,
+    each key where the /1 key was, so it writes as the file a current search would have written."""
+    upgraded = dict(data, format=SUMMARY_FORMAT)
+    for key, names in (("steps", V1_STEP_KEYS), ("outcomes", V1_OUTCOME_KEYS)):
+        if key in data:
+            entries = data[key]
+            if not isinstance(entries, list) or not all(isinstance(entry, dict) for entry in entries):
+                raise ValueError(f"{source}: {key} must be a list of objects")
+            upgraded[key] = [{names.get(name, name): value for name, value in entry.items()} for entry in entries]
+    return upgraded
 
 
 class ClipVote(CheckedDict):

@@ -131,7 +131,7 @@ class Observer:
             score = 1.0
         else:  # judged by how far it got
             score = progress
-        closest = outcome.get("min_human_distance")
+        closest = outcome.get("min_other_distance")
         if closest is not None:
             score -= self.closeness_weight * max(0.0, self.comfort_m - float(closest))
         return score
@@ -213,7 +213,7 @@ class VisibleClip:
         to_goal = self.to_goal[self.labels.index(label)] if self.to_goal else None
         if event not in ("success", "collision", "timeout") and to_goal is not None:
             text += f", {one_decimal(to_goal)} m from the goal"
-        closest = outcome.get("min_human_distance")
+        closest = outcome.get("min_other_distance")
         if closest is not None and event != "collision" and float(closest) < 0.5:
             text += f" and {words.close_call}"
         return text + "."
@@ -291,7 +291,7 @@ def _ends(summary: Mapping[str, Any], k: int) -> tuple[Sequence[float], Sequence
     """Robot k's start, goal and place at the end of the clip (None when the summary lacks them)."""
     try:
         robot = summary["scenario"]["robot"]
-        return robot["start"], robot["goal"], summary["steps"][-1]["robots"][k]
+        return robot["start"], robot["goal"], summary["steps"][-1]["agent_positions"][k]
     except (KeyError, IndexError, TypeError):
         return None
 

@@ -9,14 +9,13 @@ a screen sets last, its `progress` line and its `position` in the plan, come las
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Annotated, Any, ClassVar, Literal, NamedTuple, TypeGuard
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
-from app.formats import ManifestReel
+from app.formats import ManifestReel, load_summary
 from app.survey.bundle import Bundle
 from app.survey.clip_length import clip_shape
 from app.survey.study import FEEDBACK, CheckedAnswer, FieldReader, Question, Study, TextQuestion, check_option
@@ -408,11 +407,11 @@ def _outcomes(bundle: Bundle, sha: str) -> list[str]:
         if reel is not None:  # one robot's reel: how it ended in each of its moments
             owner = next(c for c in bundle.clips.values() if reel in c.reels)
             label = owner.labels[owner.agents.index(reel.agent)]
-            segments = [json.loads((bundle.root / path).read_text(encoding="utf-8")) for path in reel.summaries]
+            segments = [load_summary(bundle.root / path) for path in reel.summaries]
             return [VisibleReels.of_summaries([segments], [label], bundle.world).describe(label)]
         if clip is None or not clip.summary:
             return []
-        summary = json.loads((bundle.root / clip.summary).read_text(encoding="utf-8"))
+        summary = load_summary(bundle.root / clip.summary)
         shown = VisibleClip.of_summary(summary, clip.agents, clip.labels, bundle.world)
     except (OSError, ValueError, KeyError, IndexError, TypeError):
         return []

@@ -40,6 +40,7 @@ from app.formats import (
     Manifest,
     ManifestClip,
     ManifestReel,
+    load_summary,
     manifest_json,
     sha256_file,
 )
@@ -365,7 +366,7 @@ def render_clips(
     renderer already made the file there. One summary is a clip; several are one agent's reel of moments."""
     todo, inputs_of = {}, {}
     for job, summaries, out in clips:
-        domain = domain_of_summary(json.loads(summaries[0].read_text()))
+        domain = domain_of_summary(load_summary(summaries[0]))
         inputs = {
             "summary": sha256_file(summaries[0]) if len(summaries) == 1 else [sha256_file(s) for s in summaries],
             "numbers": list(job.numbers),
@@ -421,7 +422,7 @@ def reel_summaries(folder: Path) -> list[list[Path]]:
     """A HIGHLIGHTS search's summaries as one reel per agent (in the search's agent order), moments in order."""
     reels: dict[int, list[Path]] = {}
     for path in sorted(folder.glob("summary-[0-9][0-9][0-9].json")):
-        reels.setdefault(json.loads(path.read_text())["follow"]["leader"], []).append(path)
+        reels.setdefault(load_summary(path)["follow"]["leader"], []).append(path)
     return [reels[k] for k in sorted(reels)]
 
 
@@ -530,11 +531,9 @@ def clip_audit(
     order = sorted(range(2), key=lambda k: job.numbers[k])
     agents, labels = [job.pair[k] for k in order], [agent_label("Robot", job.numbers[k]) for k in order]
     if len(sources) == 1:
-        visible: VisibleClip | VisibleReels = VisibleClip.of_summary(
-            json.loads(sources[0][0].read_text()), agents, labels, shown
-        )
+        visible: VisibleClip | VisibleReels = VisibleClip.of_summary(load_summary(sources[0][0]), agents, labels, shown)
     else:
-        segments = [[json.loads(path.read_text()) for path in sources[k]] for k in order]
+        segments = [[load_summary(path) for path in sources[k]] for k in order]
         visible = VisibleReels.of_summaries(segments, labels, shown)
     return agents, labels, audit(visible, labels[agents.index(better_agent(job.pair, evaluations, close))])
 
@@ -555,7 +554,7 @@ def manifest_clip(
     agents, labels, shown_audit = clip_audit(job, sources, evaluations, shown, close)
     better = better_agent(job.pair, evaluations, close)
     reels = len(sources) > 1
-    data = json.loads(sources[0][0].read_text())
+    data: dict[str, Any] = dict(load_summary(sources[0][0]))
     files = [f"clips/{job.id}.reel{k}.mp4" for k in order] if reels else [f"clips/{job.id}.mp4"]
     undecided = [c for c in (close or {}).values() if set(c.agents) == set(job.pair) and not c.decided]
     if shown_audit["shows"] != "better" and undecided:
@@ -680,7 +679,7 @@ def clip_summary(folder: Path, select: str, world: World) -> Path:
     if select == "reward":
         return first
     paths = sorted(folder.glob("summary-[0-9][0-9][0-9].json"))
-    return paths[largest_contrast([json.loads(p.read_text()) for p in paths], world)]
+    return paths[largest_contrast([dict(load_summary(p)) for p in paths], world)]
 
 
 def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None, workers: int = 1) -> list[dict]:

@@ -100,7 +100,7 @@ def _clip(scenario: Scenario, outcome, event_time, min_clearance, robot_pos, end
         {
             "event": OUTCOME_NAMES[int(o)],
             "time": float(e) if math.isfinite(e) else None,
-            "min_human_distance": float(c) if math.isfinite(c) else None,
+            "min_other_distance": float(c) if math.isfinite(c) else None,
         }
         for o, e, c in zip(outcome, event_time, min_clearance, strict=True)
     )

@@ -113,8 +113,8 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
     humans = [np.tile(np.asarray(scenario.human_positions, dtype=np.float64).reshape(n, 2), (panels, 1, 1))]
     for i, step in enumerate(steps):
         where = f"steps[{i}]"
-        if not isinstance(step, dict) or not {"t", "humans", "robots"} <= set(step):
-            fail(f"{where} must be an object with t, humans and robots")
+        if not isinstance(step, dict) or not {"t", "other_positions", "agent_positions"} <= set(step):
+            fail(f"{where} must be an object with t, other_positions and agent_positions")
         t = step["t"]
         if not isinstance(t, int | float) or isinstance(t, bool) or not math.isfinite(t):
             fail(f"{where}.t must be a number, got {t!r}")
@@ -123,25 +123,27 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
         elif t <= times[-1]:
             fail(f"{where}.t = {t} does not come after {times[-1]}; steps must be in time order")
         try:
-            robot = _points(step["robots"], (2,), f"{where}.robots")
-            crowd = _points(step["humans"], (2,), f"{where}.humans") if n else np.zeros((panels, 0, 2))
+            robot = _points(step["agent_positions"], (2,), f"{where}.agent_positions")
+            crowd = (
+                _points(step["other_positions"], (2,), f"{where}.other_positions") if n else np.zeros((panels, 0, 2))
+            )
         except SummaryError as error:
             fail(str(error))
         if robot.shape != (n_agents, 2):
             fail(
-                f"{where}.robots has {robot.shape[0] if robot.ndim == 2 else '?'} positions, expected one per "
+                f"{where}.agent_positions has {robot.shape[0] if robot.ndim == 2 else '?'} positions, expected one per "
                 f"agent ({n_agents})"
             )
         if crowd.shape == (n, 2) and panels == 1:
             crowd = crowd[None]
         elif crowd.shape == (n, 2):
             fail(
-                f"{where}.humans holds one crowd, but the robots are visible (robot_visible = true), so each of the "
-                f"{panels} agents has its own crowd: the summary must record one crowd per agent"
+                f"{where}.other_positions holds one crowd, but the robots are visible (robot_visible = true), so "
+                f"each of the {panels} agents has its own crowd: the summary must record one crowd per agent"
             )
         if crowd.shape != (panels, n, 2):
             per = f"{n} humans" + (f" for each of the {panels} agents' crowds" if panels > 1 else "")
-            fail(f"{where}.humans has shape {crowd.shape}, expected {per}")
+            fail(f"{where}.other_positions has shape {crowd.shape}, expected {per}")
         times.append(float(t))
         robots.append(robot)
         humans.append(crowd)

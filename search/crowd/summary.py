@@ -4,8 +4,9 @@ A summary is built from a replay of its environment actions at batch size 1, nev
 numbers (neural policies may differ in the last bits between batch sizes). ``rebuild`` builds it again from the
 file's own inputs, which ``foil verify`` compares with the file exactly.
 
-``steps`` holds the state after each step (the initial state is ``scenario``); ``min_human_distance`` is the
-smallest surface-to-surface distance between the robot and any human (negative after a collision).
+``steps`` holds the state after each step (the initial state is ``scenario``): the humans as ``other_positions``,
+the robots as ``agent_positions``; ``min_other_distance`` is the smallest surface-to-surface distance between the
+robot and any human (negative after a collision).
 """
 
 from __future__ import annotations
@@ -91,9 +92,9 @@ def build_summary(
         "steps": [
             {
                 "t": float(trajectory.time[i]),
-                "humans": _humans(trajectory.crowds[i]),
-                "robots": _pairs(trajectory.agent_pos[i]),
-                "robot_actions": _pairs(trajectory.agent_actions[i]),
+                "other_positions": _humans(trajectory.crowds[i]),
+                "agent_positions": _pairs(trajectory.agent_pos[i]),
+                "agent_actions": _pairs(trajectory.agent_actions[i]),
             }
             for i in range(len(trajectory.time))
         ],
@@ -102,7 +103,7 @@ def build_summary(
                 "event": OUTCOME_NAMES[int(trajectory.outcome[k])],
                 "time": _number(trajectory.event_time[k]),
                 "path_length": float(trajectory.path_length[k]),
-                "min_human_distance": _number(trajectory.min_clearance[k]),
+                "min_other_distance": _number(trajectory.min_clearance[k]),
             }
             for k in range(len(agents))
         ],

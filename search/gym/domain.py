@@ -222,7 +222,7 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
         {
             "event": OUTCOME_NAMES[outcome],
             "time": float(max(step - since, 0) * dt) if step else None,
-            "min_human_distance": None,
+            "min_other_distance": None,
         }
         for outcome, step in coupled.problem.endings(row)
     )

@@ -1,10 +1,10 @@
 """Summaries in a Gymnasium domain, and rebuilding them for `foil verify`.
 
-A summary (``foil.summary/1``, as in the crowd world) is built from a replay of its environment actions at batch
-size 1; its scenario holds the adapter, its settings and the seed, so ``verify`` needs nothing else. Per step it
-records each agent's ``position`` (as ``robots``), its action (``robot_actions``) and what else the adapter shows
-of its instance's world (``humans``: one list per agent). ``min_human_distance`` is null: a generic environment
-has no people to measure against.
+A summary (``foil.summary/2``, as in every world) is built from a replay of its environment actions at batch size
+1; its scenario holds the adapter, its settings and the seed, so ``verify`` needs nothing else. Per step it
+records each agent's ``position`` (as ``agent_positions``), its action (``agent_actions``) and what else the
+adapter shows of its instance's world (``other_positions``: one list per agent). ``min_other_distance`` is null:
+a generic environment has no other movers to measure against.
 """
 
 from __future__ import annotations
@@ -56,9 +56,9 @@ def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -
         steps.append(
             {
                 "t": float((i + 1) * problem.adapter.dt),
-                "humans": [_floats(problem.adapter.others(instance.env)) for instance in row],
-                "robots": [_floats(problem.adapter.position(instance.env)) for instance in row],
-                "robot_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]],
+                "other_positions": [_floats(problem.adapter.others(instance.env)) for instance in row],
+                "agent_positions": [_floats(problem.adapter.position(instance.env)) for instance in row],
+                "agent_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]],
             }
         )
         if on_state is not None:
@@ -104,7 +104,7 @@ def build_gym_summary(
                 "event": OUTCOME_NAMES[instance.outcome],
                 "time": float(instance.event_step * dt) if instance.event_step else None,
                 "path_length": instance.path_length,
-                "min_human_distance": None,
+                "min_other_distance": None,
             }
             for instance in problem.rows[0]
         ],

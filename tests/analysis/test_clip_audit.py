@@ -14,15 +14,15 @@ def summary(*outcomes: dict, ends: tuple[tuple[float, float], ...] = ((0.0, 0.0)
     return {
         "agents": [{"name": "lo"}, {"name": "hi"}],
         "scenario": {"robot": {"start": [-5.0, -5.0], "goal": [5.0, 5.0]}},
-        "steps": [{"t": t, "robots": [list(end) for end in ends]}],
+        "steps": [{"t": t, "agent_positions": [list(end) for end in ends]}],
         "outcomes": list(outcomes),
     }
 
 
-SUCCESS = {"event": "success", "time": 14.0, "min_human_distance": 0.9}
-LATE = {"event": "success", "time": 24.0, "min_human_distance": 0.9}
-CRASH = {"event": "collision", "time": 3.5, "min_human_distance": -0.05}
-RUNNING = {"event": "running", "time": None, "min_human_distance": 0.8}
+SUCCESS = {"event": "success", "time": 14.0, "min_other_distance": 0.9}
+LATE = {"event": "success", "time": 24.0, "min_other_distance": 0.9}
+CRASH = {"event": "collision", "time": 3.5, "min_other_distance": -0.05}
+RUNNING = {"event": "running", "time": None, "min_other_distance": 0.8}
 
 
 @pytest.mark.parametrize(
@@ -63,7 +63,7 @@ def test_the_audit_says_what_the_clip_says_of_a_robot_still_moving_at_its_end():
     why = audit(clip, "Robot 2")["why"]
     assert "Robot 1 was still on its way when the clip ended, 7.1 m from the goal." in why and "in time" not in why
     assert status_text("running", 25.0, 7.07) == "still on its way · 7.1 m to goal"
-    timed_out = {"event": "timeout", "time": 50.0, "min_human_distance": 0.8}
+    timed_out = {"event": "timeout", "time": 50.0, "min_other_distance": 0.8}
     clip = VisibleClip.of_summary(summary(timed_out, LATE, ends=((0, 0), (5, 5))), ["lo", "hi"], ["A", "B"])
     assert "A ran out of time before reaching the goal" in audit(clip, "B")["why"]
     assert status_text("timeout", 50.0).startswith("out of time")
@@ -131,7 +131,7 @@ def test_a_page_says_the_time_its_clip_says(time, shown):
     """Not rounded another way: a clip showing "7.5 s" is not summarised "after 8 seconds"."""
     from search.clips.render import status_text
 
-    arrived = {"event": "success", "time": time, "min_human_distance": 0.9}
+    arrived = {"event": "success", "time": time, "min_other_distance": 0.9}
     clip = VisibleClip.of_summary(summary(arrived, LATE, ends=((5, 5), (5, 5))), ["lo", "hi"], ["A", "B"])
     assert clip.describe("A") == f"A reached the goal after {shown} seconds."
     assert status_text("success", time) == f"reached goal · {shown} s"
@@ -148,8 +148,8 @@ def test_a_robot_that_stops_beside_its_goal_says_how_close_it_got():
 
     data = summary_from_simulation(["goal", "orca"], load_scenario("paper-bl-tr"))
     goal = data["scenario"]["robot"]["goal"]
-    data["outcomes"][0] = {"event": "running", "time": None, "min_human_distance": 0.9}
-    data["steps"][-1]["robots"][0] = [goal[0] + 0.4, goal[1]]
+    data["outcomes"][0] = {"event": "running", "time": None, "min_other_distance": 0.9}
+    data["steps"][-1]["agent_positions"][0] = [goal[0] + 0.4, goal[1]]
     clip = VisibleClip.of_summary(data, [agent["name"] for agent in data["agents"]], ["A", "B"])
     assert clip.describe("A") == "A was still on its way when the clip ended, 0.4 m from the goal."
     renderer = CrowdClipRenderer(scene_from_summary(data))
@@ -194,14 +194,14 @@ def test_a_windowed_clip_counts_its_times_from_the_window_as_its_clock_does():
     the ranking page's lines count from there too, so a page never says another time than its clip."""
     from app.visible import VisibleClip
 
-    steps = [{"t": 0.25 * (i + 1), "robots": [[0.0, 0.0], [0.0, 0.0]]} for i in range(40)]
+    steps = [{"t": 0.25 * (i + 1), "agent_positions": [[0.0, 0.0], [0.0, 0.0]]} for i in range(40)]
     summary = {
         "agents": [{"name": "a"}, {"name": "b"}],
         "scenario": {"robot": {"start": [0.0, -4.0], "goal": [0.0, 4.0]}},
         "steps": steps,
         "outcomes": [
-            {"event": "success", "time": 7.5, "min_human_distance": 1.0},
-            {"event": "collision", "time": 2.0, "min_human_distance": -0.1},  # before the window: at its start
+            {"event": "success", "time": 7.5, "min_other_distance": 1.0},
+            {"event": "collision", "time": 2.0, "min_other_distance": -0.1},  # before the window: at its start
         ],
         "window": [20, 40],  # from the state at 5.0 s to the one at 10.0 s
     }

@@ -226,9 +226,9 @@ def test_observer_judges_visible_outcomes():
         end_s=20.0,
         progress=(0.0, 0.0, 0.5),
         outcomes=(
-            {"event": "success", "time": 10.0, "min_human_distance": 1.0},
+            {"event": "success", "time": 10.0, "min_other_distance": 1.0},
             {"event": "collision", "time": 3.0},
-            {"event": "timeout", "time": 20.0, "min_human_distance": 0.3},
+            {"event": "timeout", "time": 20.0, "min_other_distance": 0.3},
         ),
     )
     scores = clip.scores(observer)

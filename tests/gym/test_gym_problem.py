@@ -151,7 +151,7 @@ def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents):
     data = json.loads(summaries[0].read_text())
     assert data["scenario"]["domain"] == "gym" and len(data["steps"]) == len(data["env_actions"])
     assert {o["event"] for o in data["outcomes"]} <= {"success", "collision", "timeout"}
-    data["steps"][-1]["robots"][0][0] += 1e-9
+    data["steps"][-1]["agent_positions"][0][0] += 1e-9
     summaries[0].write_text(json.dumps(data))
     assert verify(summaries[0])[0].startswith(".steps[")
 

@@ -152,7 +152,7 @@ def test_disagreement_clips_fork_where_they_disagree_and_verify(agents, tmp_path
         data = json.loads(path.read_text())
         fork_at, (first, last) = data["follow"]["steps"], data["window"]
         assert data["follow"]["leader"] == 0 and first == max(0, fork_at - 3) and last == len(data["steps"])
-        robots = [step["robots"] for step in data["steps"]]
+        robots = [step["agent_positions"] for step in data["steps"]]
         assert all(r[0] == r[1] for r in robots[:fork_at])  # one shared history up to the fork
     importances = [c["importance"] for c in record["chosen"]]
     assert importances == sorted(importances, reverse=True)
@@ -200,7 +200,8 @@ def test_highlights_reels_show_each_agent_alone_and_verify(agents, solver, impor
         data = json.loads(path.read_text())
         leader = data["follow"]["leader"]
         assert data["follow"]["steps"] == len(data["steps"]) and data["solver"]["reel"] == agents[leader]
-        assert all(step["robots"][0] == step["robots"][1] for step in data["steps"])  # the reel's agent alone
+        # the reel's agent alone
+        assert all(step["agent_positions"][0] == step["agent_positions"][1] for step in data["steps"])
         first, last = data["window"]
         assert last - first <= 6
         reels.setdefault(leader, []).append(data["solver"]["state_step"])

@@ -29,7 +29,7 @@ def test_a_kernel_disagreement_is_one_in_highway_env_too(tmp_path):
         assert verify(path) == []  # rebuilt in highway-env
         data = json.loads(path.read_text())
         fork = data["follow"]["steps"]
-        actions = [np.array(step["robot_actions"]) for step in data["steps"]]
+        actions = [np.array(step["agent_actions"]) for step in data["steps"]]
         assert all(np.array_equal(a[0], a[1]) for a in actions[:fork])  # one car's actions for both, up to it
         # where the kernel saw them part (an action gap above 0.25; the actions lie in [-1, 1]), highway-env does too
         assert np.linalg.norm(actions[fork][0] - actions[fork][1]) > 0.25

@@ -100,7 +100,7 @@ def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, disc
         assert verify(path) == []
         summary = json.loads(path.read_text())
         for k, outcome in enumerate(summary["outcomes"]):  # the path driven, from the positions it went through
-            xs = [step["robots"][k][0] for step in summary["steps"]]
+            xs = [step["agent_positions"][k][0] for step in summary["steps"]]
             assert outcome["path_length"] >= xs[-1] - xs[0] > 0
 
 

@@ -93,7 +93,7 @@ def test_manifest_matches_files_and_checksums(built):
             assert agent_of.setdefault(label, agent) == agent  # no label names two agents in the bundle
         assert clip["better"] in clip["agents"]
         summary = json.loads((out / clip["summary"]).read_text())
-        assert summary["format"] == "foil.summary/1"
+        assert summary["format"] == "foil.summary/2"
         assert sorted(a["name"] for a in summary["agents"]) == sorted(clip["agents"])
         for key in ("poster", "sheet"):
             assert (out / clip[key]).is_file()
@@ -176,13 +176,14 @@ def test_a_cached_search_that_no_longer_reproduces_is_run_again(built):
     # a search of this study's first build: other tests add entries for changed studies to the same cache later
     cached = min((out / "cache" / "search").glob("*/summary-001.json"), key=lambda path: path.stat().st_mtime_ns)
     summary = json.loads(cached.read_text())
-    summary["steps"][3]["robots"][0][0] += 0.5  # as if the simulator had changed since
+    summary["steps"][3]["agent_positions"][0][0] += 0.5  # as if the simulator had changed since
     cached.write_text(json.dumps(summary))
     log = []
     build_bundle(study, out, log=log.append)
     again = [line for line in log if "no longer re-simulates exactly" in line]
-    assert len(again) == 1 and "steps[3].robots[0][0]" in again[0]
-    assert json.loads(cached.read_text())["steps"][3]["robots"][0][0] != summary["steps"][3]["robots"][0][0]
+    assert len(again) == 1 and "steps[3].agent_positions[0][0]" in again[0]
+    cached_step = json.loads(cached.read_text())["steps"][3]
+    assert cached_step["agent_positions"][0][0] != summary["steps"][3]["agent_positions"][0][0]
 
 
 def test_outcome_selection_shows_the_top_k_summary_with_the_largest_visible_contrast(built):

@@ -74,8 +74,8 @@ def test_every_human_is_drawn_where_the_summary_puts_it(shared_summary):
         t = shared_summary["steps"][step]["t"]
         image = renderer.draw(Frame(t))
         mask = colour_mask(image, HUMAN_FILL)
-        humans = np.array(shared_summary["steps"][step]["humans"])
-        robots = np.array(shared_summary["steps"][step]["robots"])
+        humans = np.array(shared_summary["steps"][step]["other_positions"])
+        robots = np.array(shared_summary["steps"][step]["agent_positions"])
         for h, xy in enumerate(humans):
             others = np.concatenate([np.delete(humans, h, axis=0), robots])
             if np.min(np.hypot(*(others - xy).T)) < 3 * scene.human_radius:
@@ -295,12 +295,12 @@ def test_each_robot_has_its_own_panel_when_robots_are_visible():
     image = renderer.draw(Frame(scene.end_time))
     mask = colour_mask(image, HUMAN_FILL)
     step = summary["steps"][-1]
-    crowds = np.array(step["humans"])
+    crowds = np.array(step["other_positions"])
     assert not np.allclose(crowds[0], crowds[1])  # each robot pushed its own crowd differently
     for agent in range(2):
         panel = renderer.panel_of[agent]
         assert panel == 1 - agent  # Robot 1 (the second agent) on the left
-        others = np.concatenate([crowds[agent], np.array(step["robots"])[agent][None]])
+        others = np.concatenate([crowds[agent], np.array(step["agent_positions"])[agent][None]])
         gaps = [np.sort(np.hypot(*(others - xy).T))[1] for xy in crowds[agent]]
         loneliest = crowds[agent][int(np.argmax(gaps))]  # a human nothing else overlaps
         expected = renderer.layout.to_pixel(panel, loneliest)
@@ -366,9 +366,15 @@ BAD = [
     (lambda s: s.update(format="foil.summary/0"), "format is 'foil.summary/0'"),
     (lambda s: s.pop("steps"), r"missing key\(s\) \['steps'\]"),
     (lambda s: s.update(steps=[]), "steps must be a non-empty list"),
-    (lambda s: s["steps"][3].update(robots=[[0, 0]]), r"steps\[3\].robots has 1 positions, expected one per agent"),
-    (lambda s: s["steps"][2]["humans"].pop(), r"steps\[2\].humans has shape"),
-    (lambda s: s["steps"][1]["humans"][0].__setitem__(0, float("nan")), r"steps\[1\].humans contains NaN"),
+    (
+        lambda s: s["steps"][3].update(agent_positions=[[0, 0]]),
+        r"steps\[3\].agent_positions has 1 positions, expected one per agent",
+    ),
+    (lambda s: s["steps"][2]["other_positions"].pop(), r"steps\[2\].other_positions has shape"),
+    (
+        lambda s: s["steps"][1]["other_positions"][0].__setitem__(0, float("nan")),
+        r"steps\[1\].other_positions contains NaN",
+    ),
     (lambda s: s["steps"][4].update(t=0.5), r"steps\[4\].t = 0.5 does not come after"),
     (lambda s: s["outcomes"][1].update(event="exploded"), r"outcomes\[1\].event must be one of"),
     (lambda s: s["outcomes"].pop(), "one entry per agent"),
@@ -383,7 +389,7 @@ BAD = [
     (lambda s: s.update(follow={"leader": 0}), "follow must be"),
     (
         lambda s: s["scenario"]["world"].update(robot_visible=True),
-        r"steps\[0\].humans holds one crowd, but the robots "
+        r"steps\[0\].other_positions holds one crowd, but the robots "
         "are visible",
     ),
 ]

@@ -45,11 +45,11 @@ def test_search_writes_ranked_summaries_and_a_run_record(searched):
     rewards = [s["reward"] for s in summaries]
     assert rewards == sorted(rewards, reverse=True)
     first = summaries[0]
-    assert first["format"] == "foil.summary/1"
+    assert first["format"] == "foil.summary/2"
     assert [a["name"] for a in first["agents"]] == ["goal", "orca"]
     assert len(first["env_actions"]) <= len(first["steps"]) <= 30  # a coda may follow the searched steps
     assert all(len(a) == 20 for a in first["env_actions"])
-    assert set(first["steps"][0]) == {"t", "humans", "robots", "robot_actions"}
+    assert set(first["steps"][0]) == {"t", "other_positions", "agent_positions", "agent_actions"}
     assert {o["event"] for o in first["outcomes"]} <= {"success", "collision", "timeout", "running"}
     assert first["reward"] == pytest.approx(sum(first["reward_terms"].values()))
     assert first["scenario"]["world"]["human_num"] == 10  # the full world config, not just the file's settings
@@ -64,11 +64,11 @@ def test_verify_passes_on_fresh_output_and_fails_on_a_tampered_file(searched, tm
     assert main(["verify", *(str(p) for p in sorted(searched.glob("summary-*.json")))]) == 0
     assert "reproduced exactly" in capsys.readouterr().out
     data = json.loads((searched / "summary-002.json").read_text())
-    data["steps"][5]["robots"][1][0] += 1e-12
+    data["steps"][5]["agent_positions"][1][0] += 1e-12
     tampered = tmp_path / "tampered.json"
     tampered.write_text(json.dumps(data))
     assert main(["verify", str(tampered)]) == 1
-    assert "steps[5].robots[1][0]" in capsys.readouterr().out
+    assert "steps[5].agent_positions[1][0]" in capsys.readouterr().out
     data = json.loads((searched / "summary-001.json").read_text())
     data["env_actions"][0][3] = -data["env_actions"][0][3]
     tampered.write_text(json.dumps(data))
@@ -94,7 +94,7 @@ def test_every_solver_writes_verifiable_summaries(tmp_path, solver):
 def test_joint_search_of_three_agents(tmp_path):
     assert search(tmp_path, agents="goal,orca,social_force", solver="random") == 0
     summary = json.loads((tmp_path / "summary-001.json").read_text())
-    assert len(summary["agents"]) == 3 and len(summary["steps"][0]["robots"]) == 3
+    assert len(summary["agents"]) == 3 and len(summary["steps"][0]["agent_positions"]) == 3
     assert main(["verify", str(tmp_path / "summary-001.json")]) == 0
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import imageio_ffmpeg
 
-from app.formats import Manifest, ManifestClip, ManifestReel, manifest_json, sha256_file
+from app.formats import SUMMARY_FORMAT, Manifest, ManifestClip, ManifestReel, manifest_json, sha256_file
 from app.store.database import Database
 from app.store.models import Participant, Response
 from app.survey.assignment import conditions
@@ -27,9 +27,9 @@ SCENARIOS = [SECRET_NAMES["paper-bl-tr"], SECRET_NAMES["paper-tl-br"]]
 EXAMPLE = (SECRET_NAMES["nfirst"], SECRET_NAMES["paper-code"], (SECRET_NAMES["lo"], SECRET_NAMES["hi"]))
 # What each agent visibly does in the clips: the best one reaches the goal soonest, the worst one collides.
 SHOWN = {
-    SECRET_NAMES["hi"]: {"event": "success", "time": 9.0, "min_human_distance": 0.6},
-    SECRET_NAMES["med"]: {"event": "success", "time": 16.0, "min_human_distance": 0.4},
-    SECRET_NAMES["lo"]: {"event": "collision", "time": 6.0, "min_human_distance": 0.0},
+    SECRET_NAMES["hi"]: {"event": "success", "time": 9.0, "min_other_distance": 0.6},
+    SECRET_NAMES["med"]: {"event": "success", "time": 16.0, "min_other_distance": 0.4},
+    SECRET_NAMES["lo"]: {"event": "collision", "time": 6.0, "min_other_distance": 0.0},
 }
 # One clip where the worse robot looks better (its search found a scenario where `lo` does well): an observer
 # who judges what it sees gets it wrong, one who read the ground truth would not.
@@ -37,26 +37,26 @@ MISLEADING = f"{SECRET_NAMES['nfirst']}-{SCENARIOS[0]}-{SECRET_NAMES['lo']}-{SEC
 
 
 def summary_for(agents: list[str], misleading: bool) -> dict:
-    """A small foil.summary/1 of two robots (in `agents` order) walking from (-4, -4) to (4, 4)."""
+    """A small summary.json of two robots (in `agents` order) walking from (-4, -4) to (4, 4)."""
     outcomes = [dict(SHOWN[agent]) for agent in agents]
     if misleading:
         outcomes = [
-            {"event": "timeout", "time": 20.0, "min_human_distance": 0.5}
+            {"event": "timeout", "time": 20.0, "min_other_distance": 0.5}
             if agent == SECRET_NAMES["hi"]
-            else {"event": "success", "time": 8.0, "min_human_distance": 0.9}
+            else {"event": "success", "time": 8.0, "min_other_distance": 0.9}
             for agent in agents
         ]
     steps = [
         {
             "t": round(0.25 * (k + 1), 2),
-            "humans": [[0.0, 1.0]],
-            "robots": [[-4 + 0.3 * k, -4 + 0.3 * k]] * 2,
-            "robot_actions": [[0.3, 0.3]] * 2,
+            "other_positions": [[0.0, 1.0]],
+            "agent_positions": [[-4 + 0.3 * k, -4 + 0.3 * k]] * 2,
+            "agent_actions": [[0.3, 0.3]] * 2,
         }
         for k in range(80)
     ]
     return {
-        "format": "foil.summary/1",
+        "format": SUMMARY_FORMAT,
         "agents": [{"name": a, "source": a} for a in agents],
         "scenario": {"robot": {"start": [-4.0, -4.0], "goal": [4.0, 4.0]}},
         "steps": steps,

@@ -16,7 +16,7 @@ from search.solvers.reward import RewardConfig
 def summary_from_simulation(
     agents: list[str], scenario: Scenario, seed: int = 0, names: list[str] | None = None
 ) -> dict:
-    """The foil.summary/1 object `foil search` would write for scripted robots under seeded random environment
+    """The summary.json object `foil search` would write for scripted robots under seeded random environment
     actions, cut where the trajectory ends; with visible robots it records every agent's crowd."""
     scenario = frozen_scenario(scenario, {})
     config, reward = scenario.config(), RewardConfig()

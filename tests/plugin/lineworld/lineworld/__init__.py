@@ -137,7 +137,7 @@ def summarize(agents: Sequence[str], state: LineState, reward: RewardConfig, act
     for action in np.asarray(actions, dtype=float).reshape(-1, 1):
         gained, done = problem.step(action[None])
         total += float(gained[0])
-        steps.append({"t": float(problem.t[0] * DT), "robots": [[float(x), 0.0] for x in problem.x[0]]})
+        steps.append({"t": float(problem.t[0] * DT), "agent_positions": [[float(x), 0.0] for x in problem.x[0]]})
         if done[0]:
             break
     return {
@@ -149,7 +149,7 @@ def summarize(agents: Sequence[str], state: LineState, reward: RewardConfig, act
         "env_actions": [[float(a)] for a in np.asarray(actions, dtype=float).reshape(-1)[: len(steps)]],
         "steps": steps,
         "outcomes": [
-            {"event": OUTCOME_NAMES[code], "time": float(at * DT) if at else None, "min_human_distance": None}
+            {"event": OUTCOME_NAMES[code], "time": float(at * DT) if at else None, "min_other_distance": None}
             for code, at in zip(problem.outcome[0], problem.event_step[0], strict=True)
         ],
         "reward": total,
@@ -161,7 +161,7 @@ def render_clip(summary: Mapping[str, Any], out: Path, numbers: list[int], optio
     """One line per cart, drawn with PIL and encoded by Foil's H.264 writer, with a poster and a contact sheet."""
     started, goal = time.perf_counter(), float(summary["scenario"]["line"]["goal"])
     width, row = max(160, (options.width or 480) // 16 * 16), 48
-    places = [[0.0] * len(numbers)] + [[p[0] for p in s["robots"]] for s in summary["steps"]]
+    places = [[0.0] * len(numbers)] + [[p[0] for p in s["agent_positions"]] for s in summary["steps"]]
     frames = []
     for i, xs in enumerate(places):
         image = Image.new("RGB", (width, row * len(numbers)), (245, 245, 240))
