@@ -29,6 +29,7 @@ class Words:
     `others_marker` leaves that line or marker out. The outcome phrases follow a robot's label ("Robot 2 ...");
     `success` and `collision` may say ``{seconds}``, the seconds the clip shows it took (one decimal, as the clip)."""
 
+    agent: str = "Robot"  # the word before an agent's number, on its clips and the pages: "Robot 2"
     clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
     # a pair of reels (each robot on its own, in moments of its own runs): the line above them and each reel's
     # accessible name, which the page follows with the robot's label

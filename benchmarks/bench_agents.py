@@ -20,11 +20,11 @@ from datetime import date
 import numpy as np
 import torch
 
-from search.agents.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, observation_tensors
-from search.agents.train import TrainConfig, train
-from search.sim.observation import observe
-from search.sim.scenarios import sample_training_states
-from search.sim.world import WorldConfig
+from search.crowd.agents.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, observation_tensors
+from search.crowd.agents.train import TrainConfig, train
+from search.crowd.sim.observation import observe
+from search.crowd.sim.scenarios import sample_training_states
+from search.crowd.sim.world import WorldConfig
 
 CROWDNAV_ENV_STEPS = 922  # CrowdNav_DSRNN's logged training speed: 12 processes and a GPU
 SHIPPED = NetworkConfig(edge_hidden=64, node_hidden=64, embed=32, attention=32, mlp_hidden=64)

@@ -18,9 +18,9 @@ import time
 from datetime import date
 from pathlib import Path
 
-from search.agents.evaluate import evaluate
-from search.agents.policies import comparison_world, load_policy
-from search.sim.world import WorldConfig
+from search.crowd.agents.evaluate import evaluate
+from search.crowd.agents.policies import comparison_world, load_policy
+from search.crowd.sim.world import WorldConfig
 
 PUBLISHED = {"success_rate": 0.90, "collision_rate": 0.10, "timeout_rate": 0.00, "nav_time_mean": 10.06}
 PUBLISHED_WALL_S = 102.0  # the published log's first to last line, original code, its own machine

@@ -20,13 +20,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from search.agents.policies import load_policy  # noqa: E402
 from search.clips.render import RenderOptions  # noqa: E402
 from search.core.outcomes import OUTCOME_NAMES  # noqa: E402
+from search.crowd.agents.policies import load_policy  # noqa: E402
 from search.crowd.render import CrowdClipRenderer, render  # noqa: E402
 from search.crowd.scene import Scene  # noqa: E402
-from search.sim.coupled import replay  # noqa: E402
-from search.sim.scenarios import load_scenario  # noqa: E402
+from search.crowd.sim.coupled import replay  # noqa: E402
+from search.crowd.sim.scenarios import load_scenario  # noqa: E402
 
 STEPS = 100  # 25 s at dt = 0.25 s
 REPEATS = 3

@@ -33,10 +33,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from search.agents.policies import load_policy  # noqa: E402
+from search.crowd.agents.policies import load_policy  # noqa: E402
 from search.crowd.problem import CoupledProblem  # noqa: E402
-from search.sim.coupled import CoupledSimulator  # noqa: E402
-from search.sim.scenarios import load_scenario  # noqa: E402
+from search.crowd.sim.coupled import CoupledSimulator  # noqa: E402
+from search.crowd.sim.scenarios import load_scenario  # noqa: E402
 from search.solvers.baselines import cem, n_first, random_search  # noqa: E402
 from search.solvers.mcts import MCTSConfig, mcts  # noqa: E402
 from search.solvers.rollout import Tracker  # noqa: E402
@@ -67,7 +67,7 @@ def dsrnn_pair(names: str):
         return [load_policy(name) for name in names.split(",")]
     import torch
 
-    from search.agents.dsrnn import DSRNN, DSRNNPolicy
+    from search.crowd.agents.dsrnn import DSRNN, DSRNNPolicy
 
     policies = []
     for seed in (1, 2):

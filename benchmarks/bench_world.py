@@ -17,9 +17,9 @@ from datetime import date
 import numpy as np
 import pyrvo
 
-from search.sim import world
-from search.sim.scenarios import sample_training_states
-from search.sim.world import WorldConfig
+from search.crowd.sim import world
+from search.crowd.sim.scenarios import sample_training_states
+from search.crowd.sim.world import WorldConfig
 
 
 def rate(step_once, worlds_per_call: int, seconds: float) -> float:

@@ -147,17 +147,27 @@ def _verify(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _worlds(args: argparse.Namespace) -> int:
+    from search.core.world import Trainer
+    from search.solvers.domain import domains
+
+    for domain in domains():
+        trains = "; foil train and foil release make its agents" if isinstance(domain, Trainer) else ""
+        print(f"{domain.name}: {domain.describe_agents()}{trains}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="foil",
-        description="Contrasting behaviour summaries of robot policies, and the user study that tests them.",
+        description="Contrasting behaviour summaries of agent policies, and the user study that tests them.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     train = sub.add_parser(
         "train",
-        help="train a DS-RNN robot with PPO (resumes a run found in --out); a config "
-        'with domain = "highway" trains a highway agent with Stable-Baselines3',
+        help="train a world's own agents from a config file (resumes a run found in --out); foil worlds says "
+        "which worlds have a trainer",
     )
     train.add_argument("--config", required=True, help="TOML file of training settings (see docs/agents.md)")
     train.add_argument("--out", required=True, help="run directory: progress.csv and checkpoints/")
@@ -178,17 +188,22 @@ def build_parser() -> argparse.ArgumentParser:
     release.add_argument("--every", type=int, default=2, help="validate every N-th checkpoint (default 2)")
     release.add_argument("--validate-only", action="store_true", help="print the validation curve, ship nothing")
     release.add_argument(
-        "--jobs", type=int, default=1, help="highway runs: test the three agents in this many processes (default 1)"
+        "--jobs",
+        type=int,
+        default=1,
+        help="test the chosen agents in this many processes, where the world can (default 1)",
     )
     release.set_defaults(handler=_release)
+
+    worlds = sub.add_parser("worlds", help="the installed worlds, the agents and scenarios each ships")
+    worlds.set_defaults(handler=_worlds)
 
     evaluate = sub.add_parser("eval", help="success, collision and timeout rates and mean reward of an agent")
     evaluate.add_argument(
         "agent",
         metavar="AGENT",
-        help="lo, med, hi, a scripted policy, a checkpoint (Foil's or "
-        "CrowdNav_DSRNN's) or TorchScript file, or module:attribute; or a highway agent: "
-        "highway-lo, highway-med, highway-hi or a Stable-Baselines3 .zip (docs/highway.md)",
+        help="an agent a world ships (foil worlds lists them), an agent file a world loads (a checkpoint, a "
+        "TorchScript or Stable-Baselines3 file) or module:attribute (each world's page in docs/)",
     )
     evaluate.add_argument("--episodes", type=int, default=500, help="test episodes (default 500)")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the test episodes")
@@ -196,23 +211,20 @@ def build_parser() -> argparse.ArgumentParser:
         "--time-limit",
         type=float,
         metavar="SECONDS",
-        help="seconds an episode may last (default: the training time limit, 50); 25 judges "
-        "agents at the horizon of the paper's clips",
+        help="seconds an episode may last, in a world with such a setting (default: the world's own; docs/agents.md)",
     )
     evaluate.add_argument(
         "--world",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="world setting over the agent's (an imported CrowdNav_DSRNN agent brings the world of "
-        "its config; others the paper's), e.g. human_num=5",
+        help="a world setting over the one the agent brings (each world's page in docs/ lists its settings)",
     )
     evaluate.add_argument(
         "--scenario",
         metavar="NAME|FILE",
-        help="the world to evaluate in: a scenario or distribution file naming a Gymnasium environment's "
-        "adapter (its settings; episodes are seeded by --seed), or a domain's scenario such as highway-dense "
-        "(default: the agent's own test episodes)",
+        help="the world to evaluate in: a shipped scenario (foil worlds lists them) or a scenario or "
+        "distribution file (episodes are seeded by --seed; default: the agent's own test episodes)",
     )
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
     evaluate.set_defaults(handler=_eval)
@@ -228,7 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--fps", type=int, default=24, help="frames per second, at least 20 (default 24)")
     render.add_argument("--width", type=int, help="width in px (default 720, or 960 side by side)")
     render.add_argument("--crf", type=int, default=23, help="H.264 constant rate factor (default 23)")
-    render.add_argument("--numbers", help="robot number shown for each summary agent, e.g. 2,1 (default 1,2)")
+    render.add_argument("--numbers", help="the number shown for each summary agent, e.g. 2,1 (default 1,2)")
     render.set_defaults(handler=_render)
 
     bundle = sub.add_parser("bundle", help="evaluate, search, render and write manifest.json for a study's clips")
@@ -254,9 +266,8 @@ def build_parser() -> argparse.ArgumentParser:
     search.add_argument(
         "--scenario",
         required=True,
-        help="shipped scenario name (crowd or highway-...) or TOML "
-        "file, the world inferred from it and the agents; for the representative solver a "
-        "distribution of starting states (training: the crowd agents' own)",
+        help="a shipped scenario's name (foil worlds lists them) or a TOML file, the world found from it and "
+        "the agents; for the representative solver a distribution of starting states",
     )
     search.add_argument(
         "--solver",

@@ -13,7 +13,7 @@ from search.solvers.domain import domain_for, domain_named, domain_of_summary, d
 from tests.support.imports import imported, package_modules
 
 ROOT = Path(search.__file__).parent
-WORLDS = ("search.crowd", "search.gym", "search.highway", "search.sim", "search.agents")
+WORLDS = ("search.crowd", "search.gym", "search.highway")
 CALLERS = ("search.solvers.", "search.bundle.", "search.cli.")
 TRACK = 'adapter = "tests.gym.test_gym_clips:TrackAdapter"\nseed = 3\n'
 HIGHWAY = 'adapter = "search.highway.adapter:HighwayAdapter"\nseed = 3\n'

@@ -529,7 +529,7 @@ def clip_audit(
     """A clip's agents and their labels in on-screen order, and what it visibly shows against the ground truth
     (`app.visible.audit`; a pair of reels by each agent's moments)."""
     order = sorted(range(2), key=lambda k: job.numbers[k])
-    agents, labels = [job.pair[k] for k in order], [agent_label("Robot", job.numbers[k]) for k in order]
+    agents, labels = [job.pair[k] for k in order], [agent_label(shown.words.agent, job.numbers[k]) for k in order]
     if len(sources) == 1:
         visible: VisibleClip | VisibleReels = VisibleClip.of_summary(load_summary(sources[0][0]), agents, labels, shown)
     else:
@@ -564,9 +564,10 @@ def manifest_clip(
         )
     elif shown_audit["shows"] != "better":
         log(
-            f"warning: clip {job.id} is misleading: it shows the better robot {better} "
-            f"({labels[agents.index(better)]}) as {'no better' if shown_audit['shows'] == 'tie' else 'worse'}: "
-            f"{shown_audit['why']}"
+            f"warning: clip {job.id} ({job.scheme.name}, {job.pair[0]} vs {job.pair[1]}) is misleading: it shows "
+            f"the better agent as {'no better' if shown_audit['shows'] == 'tie' else 'worse'} (the gallery and "
+            "manifest.json say which and why; this log names no labelled agent as better, so a researcher may "
+            "still pilot the study blind)"
         )
     vote = clip_vote(data, order)
     for line in vote_warnings(agents, None if undecided else better, vote):
@@ -792,7 +793,7 @@ def describe_representativeness(report: dict) -> str:
         )
     if report["disagrees"]:
         return (
-            f"warning: unrepresentative scenario {line}: its clips tend to show the other robot as better than "
+            f"warning: unrepresentative scenario {line}: its clips tend to show the other agent as better than "
             f"most starting states do{weak}"
         )
     return f"representativeness {line}{weak}"

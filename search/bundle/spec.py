@@ -91,7 +91,7 @@ class SetTable(Strict):
         if self.agents is None and "ranking" in self.parts:
             raise ValueError(
                 "a set that feeds a ranking part lists its agents (agents = [...]), so each agent "
-                "keeps one robot number in all its clips"
+                "keeps one agent number in all its clips"
             )
         return self
 
@@ -210,7 +210,7 @@ def _set_problems(build: BuildTable) -> list[Problem]:
             seen[key] = i
         if "ranking" in clip_set.parts and len(clip_set.all_agents()) > len(AGENT_STYLES):
             message = (
-                f"a ranking shows at most {len(AGENT_STYLES)} robots (one colour and shape each), got "
+                f"a ranking shows at most {len(AGENT_STYLES)} agents (one colour and shape each), got "
                 f"{len(clip_set.all_agents())}"
             )
             problems.append((("build", "sets", i, "agents"), message))

@@ -1,5 +1,5 @@
-"""The crowd world as a domain: DS-RNN and scripted robots among ORCA or social-force humans (search/sim,
-search/agents), its scenarios and the ``training`` distribution, its summaries, batched rollouts and clips, and
+"""The crowd world as a domain: DS-RNN and scripted robots among ORCA or social-force humans (search/crowd/sim,
+search/crowd/agents), its scenarios and the ``training`` distribution, its summaries, batched rollouts and clips, and
 its trainer."""
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ class CrowdDomain(Domain, Trainer):
     def _policies(self, agents: Sequence[str]) -> list:
         """The agents' policies, each loaded once while its file is unchanged (a representative search asks for
         them once per batch of states and once per replay)."""
-        from search.agents.policies import load_policy
+        from search.crowd.agents.policies import load_policy
 
         def key(spec: str) -> tuple[str, int]:
             path = Path(spec)
@@ -53,8 +53,8 @@ class CrowdDomain(Domain, Trainer):
 
     def shipped(self) -> Shipped:
         """The shipped and scripted agents, and the shipped scenarios and distribution (``training``)."""
-        from search.agents.policies import SCRIPTED, SHIPPED_AGENTS
-        from search.sim.scenarios import shipped_scenarios
+        from search.crowd.agents.policies import SCRIPTED, SHIPPED_AGENTS
+        from search.crowd.sim.scenarios import shipped_scenarios
 
         return Shipped(frozenset(SCRIPTED) | frozenset(SHIPPED_AGENTS) | frozenset(shipped_scenarios()))
 
@@ -80,43 +80,43 @@ class CrowdDomain(Domain, Trainer):
         return "crowd agents (lo, med, hi, scripted policies, checkpoints) go on crowd scenarios"
 
     def parse_world(self, items: list[str]) -> dict:
-        from search.sim.world import WorldConfig
+        from search.crowd.sim.world import WorldConfig
         from search.solvers.runner import parse_settings
 
         return parse_settings(WorldConfig, items, "world")
 
     def check_world(self, settings: dict, what: str) -> dict:
         from search.core.settings import check_values
-        from search.sim.world import WorldConfig
+        from search.crowd.sim.world import WorldConfig
 
         return check_values(WorldConfig, settings, what)
 
     def agents_settings(self, agents: Sequence[str]) -> dict:
         """The world an imported CrowdNav_DSRNN checkpoint was trained in (its config)."""
-        from search.agents.policies import comparison_world
+        from search.crowd.agents.policies import comparison_world
 
         return comparison_world(list(agents), {})
 
     def scenario_settings(self, scenario: str) -> dict:
-        from search.sim.scenarios import load_scenario_or_distribution
+        from search.crowd.sim.scenarios import load_scenario_or_distribution
 
         return dict(load_scenario_or_distribution(scenario).world)
 
     def search_settings(self, agents: Sequence[str], settings: dict, scenario: str) -> dict:
-        from search.agents.policies import comparison_world
+        from search.crowd.agents.policies import comparison_world
 
         return comparison_world(list(agents), settings, self.scenario_settings(scenario))
 
     def is_distribution(self, name: str) -> bool:
-        from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
+        from search.crowd.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
 
         return isinstance(load_scenario_or_distribution(name), ScenarioDistribution)
 
     def scenario_dict(self, name: str, world: dict) -> dict:
         from dataclasses import asdict
 
+        from search.crowd.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
         from search.crowd.summary import frozen_scenario
-        from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
 
         scenario = load_scenario_or_distribution(name)
         if isinstance(scenario, ScenarioDistribution):
@@ -124,19 +124,19 @@ class CrowdDomain(Domain, Trainer):
         return frozen_scenario(scenario, world).to_dict()
 
     def step_seconds(self, name: str, world: dict) -> float:
-        from search.sim.world import WorldConfig
+        from search.crowd.sim.world import WorldConfig
 
         return float(self.scenario_dict(name, world).get("world", {}).get("dt", WorldConfig().dt))
 
     def state(self, name: str, world: dict) -> Any:
+        from search.crowd.sim.scenarios import load_scenario
         from search.crowd.summary import frozen_scenario
-        from search.sim.scenarios import load_scenario
 
         return frozen_scenario(load_scenario(name), world)
 
     def draw_states(self, name: str, world: dict, rng: np.random.Generator, count: int) -> list:
+        from search.crowd.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
         from search.crowd.summary import frozen_scenario
-        from search.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
 
         loaded = load_scenario_or_distribution(name)
         if not isinstance(loaded, ScenarioDistribution):
@@ -180,9 +180,9 @@ class CrowdDomain(Domain, Trainer):
         self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None, per_episode: bool = False
     ) -> dict:
         """In the world the agent brings (an imported checkpoint's), under the ``world`` settings given."""
-        from search.agents.evaluate import evaluate
-        from search.agents.policies import comparison_world, load_policy
-        from search.sim.world import WorldConfig
+        from search.crowd.agents.evaluate import evaluate
+        from search.crowd.agents.policies import comparison_world, load_policy
+        from search.crowd.sim.world import WorldConfig
 
         config = WorldConfig.from_dict(comparison_world([agent], world))
         return evaluate(load_policy(agent), episodes=episodes, seed=seed, config=config, per_episode=per_episode)
@@ -191,12 +191,12 @@ class CrowdDomain(Domain, Trainer):
         return self.evaluate(agent, episodes, seed, world, scenario, per_episode=True)
 
     def describe_evaluation(self, result: dict) -> str:
-        from search.agents.evaluate import format_result
+        from search.crowd.agents.evaluate import format_result
 
         return format_result(result)
 
     def agent_file(self, agent: str) -> Path | None:
-        from search.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
+        from search.crowd.agents.policies import AGENTS_DIR, SCRIPTED, SHIPPED_AGENTS
 
         if agent in SCRIPTED:
             return None
@@ -206,9 +206,9 @@ class CrowdDomain(Domain, Trainer):
         """Its kind, its checkpoint file and checksum, a CrowdNav_DSRNN model's config and trained world, and the
         full world of its evaluation."""
         from app.formats import sha256_file
-        from search.agents.crowdnav import config_path, is_crowdnav_file
-        from search.agents.policies import SCRIPTED, SHIPPED_AGENTS, trained_world
-        from search.sim.world import WorldConfig
+        from search.crowd.agents.crowdnav import config_path, is_crowdnav_file
+        from search.crowd.agents.policies import SCRIPTED, SHIPPED_AGENTS, trained_world
+        from search.crowd.sim.world import WorldConfig
 
         source: dict[str, Any] = {
             "kind": "scripted" if agent in SCRIPTED else "shipped" if agent in SHIPPED_AGENTS else "python"
@@ -232,7 +232,7 @@ class CrowdDomain(Domain, Trainer):
         """A run folder with the trainer's progress.csv, or a TOML config of `TrainConfig` fields."""
         from dataclasses import fields
 
-        from search.agents.train import TrainConfig
+        from search.crowd.agents.train import TrainConfig
 
         if path.is_dir():
             return Claim.OWN if (path / "progress.csv").is_file() and any(path.glob("checkpoints/*.pt")) else None
@@ -240,18 +240,18 @@ class CrowdDomain(Domain, Trainer):
         return Claim.OWN if data and set(data) <= {f.name for f in fields(TrainConfig)} else None
 
     def train(self, config: Path, out: Path) -> Path:
-        from search.agents.train import load_train_config, train
+        from search.crowd.agents.train import load_train_config, train
 
         return train(load_train_config(config), out)
 
     def release(self, run_dir: Path, out: Path | None, episodes: int, every: int, jobs: int) -> dict:
-        from search.agents.policies import AGENTS_DIR
-        from search.agents.release import release
+        from search.crowd.agents.policies import AGENTS_DIR
+        from search.crowd.agents.release import release
 
         return release(run_dir, out or AGENTS_DIR, episodes, every)
 
     def validate_run(self, run_dir: Path, episodes: int, every: int) -> None:
-        from search.agents.release import validate_run
+        from search.crowd.agents.release import validate_run
 
         validate_run(run_dir, episodes, every)
 

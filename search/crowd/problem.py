@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from search.sim.coupled import CoupledSimulator, Snapshot
-from search.sim.observation import Policy
-from search.sim.scenarios import Scenario
-from search.sim.world import WorldConfig, WorldState
+from search.crowd.sim.coupled import CoupledSimulator, Snapshot
+from search.crowd.sim.observation import Policy
+from search.crowd.sim.scenarios import Scenario
+from search.crowd.sim.world import WorldConfig, WorldState
 from search.solvers.highlights import box_alternatives
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig

@@ -11,9 +11,9 @@ import numpy as np
 from app.visible import VisibleClip, progress_towards
 from search.core.outcomes import OUTCOME_NAMES
 from search.crowd.problem import concat_snapshots
-from search.sim.coupled import CoupledSimulator
-from search.sim.observation import Policy
-from search.sim.scenarios import Scenario
+from search.crowd.sim.coupled import CoupledSimulator
+from search.crowd.sim.observation import Policy
+from search.crowd.sim.scenarios import Scenario
 from search.solvers.prior import ActionPrior
 from search.solvers.representative import Rollouts, visible_contrast
 from search.solvers.reward import DivergenceReward, RewardConfig

@@ -18,7 +18,7 @@ import numpy as np
 from app.formats import SUMMARY_FORMAT, load_summary
 from search.clips.windows import SummaryError, follow_of, window_of
 from search.core.outcomes import OUTCOME_NAMES
-from search.sim.scenarios import Scenario
+from search.crowd.sim.scenarios import Scenario
 
 
 @dataclass(frozen=True)

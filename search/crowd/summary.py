@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from app.formats import SUMMARY_FORMAT
-from search.agents.policies import SCRIPTED, load_policy
 from search.core.outcomes import OUTCOME_NAMES
-from search.sim.coupled import replay
-from search.sim.scenarios import Scenario
+from search.crowd.agents.policies import SCRIPTED, load_policy
+from search.crowd.sim.coupled import replay
+from search.crowd.sim.scenarios import Scenario
 from search.solvers.follow import Follow, recorded
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig

@@ -59,7 +59,6 @@ from search.solvers.reward import RewardConfig
 SCREEN = (16, 10)  # the screen shape a clip is fitted into when choosing how to arrange its views
 BURST_SECONDS = 1.5  # of video a crash's burst shows before the small mark replaces it
 PARTING_CAPTION = "Here the {count} agents would act differently"  # unless the adapter has a parting_caption
-LABEL = "Robot"  # the word a participant sees before an agent's number, as the study's pages call it
 
 
 @dataclass(frozen=True)
@@ -296,7 +295,13 @@ class GymClipRenderer(ClipRenderer):
         icon = self.sprites.icons[self.numbers[k]]
         paste(image, icon, (x0 + lay.text * 0.6 + icon[1], y))
         label = self.draw_text(
-            image, (x0 + lay.text * 2.4, y), agent_label(LABEL, self.numbers[k]), lay.text, INK, "lm", True
+            image,
+            (x0 + lay.text * 2.4, y),
+            agent_label(self.adapter.words.agent, self.numbers[k]),
+            lay.text,
+            INK,
+            "lm",
+            True,
         )
         caption = self.scene.caption(k, t)
         if caption:

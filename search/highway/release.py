@@ -17,7 +17,7 @@ import re
 import shutil
 from pathlib import Path
 
-from search.agents.release import ReleaseError, write_rows
+from search.core.release import ReleaseError, write_rows
 from search.gym.agents import GymAgent, load_sb3
 from search.highway.adapter import AGENTS_DIR, HighwayAdapter
 from search.highway.evaluate import evaluate

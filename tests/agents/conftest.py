@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from search.agents.dsrnn import DSRNN
+from search.crowd.agents.dsrnn import DSRNN
 from tests.support.agents import make_net
 
 

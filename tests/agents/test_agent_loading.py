@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from search.agents.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
-from search.agents.policies import SHIPPED_AGENTS, load_policy
-from search.sim.observation import ROBOT_NODE_FIELDS
+from search.crowd.agents.dsrnn import DSRNNPolicy, NetworkConfig, export_torchscript, read_checkpoint, save_checkpoint
+from search.crowd.agents.policies import SHIPPED_AGENTS, load_policy
+from search.crowd.sim.observation import ROBOT_NODE_FIELDS
 from tests.support.agents import make_net, random_observation
 
 
@@ -32,7 +32,7 @@ def test_checkpoint_and_torchscript_files_load_the_same_agent(tmp_path):
 
 def test_module_attribute_loads_your_own_policy(tmp_path, monkeypatch):
     (tmp_path / "my_robot.py").write_text(
-        "from search.agents.policies import GoalPolicy\n"
+        "from search.crowd.agents.policies import GoalPolicy\n"
         "class Cautious(GoalPolicy):\n"
         "    name = 'cautious'\n"
         "    def act(self, observation, state):\n"
@@ -51,9 +51,9 @@ def test_module_attribute_loads_your_own_policy(tmp_path, monkeypatch):
 def test_shipped_agents_load_by_name_and_act(name):
     """A shipped name loads its network, whose first move in a shipped scenario heads for the goal (the world
     clips its speed), the same move every time, in crowds as large as trained on or smaller."""
-    from search.agents.policies import AGENTS_DIR
-    from search.sim.observation import observe
-    from search.sim.scenarios import load_scenario
+    from search.crowd.agents.policies import AGENTS_DIR
+    from search.crowd.sim.observation import observe
+    from search.crowd.sim.scenarios import load_scenario
 
     policy = load_policy(name)
     assert policy.name == name
@@ -75,8 +75,8 @@ def test_the_better_shipped_agents_reach_the_goal_in_the_clips_horizon(scenario)
     """med and hi drive into the goal within the clips' 25 s on every shipped scenario when nobody disturbs the
     crowd (the agents before the relative goal circled it and timed out)."""
     from search.core.outcomes import SUCCESS
-    from search.sim.coupled import replay
-    from search.sim.scenarios import load_scenario
+    from search.crowd.sim.coupled import replay
+    from search.crowd.sim.scenarios import load_scenario
 
     trajectory = replay([load_policy("med"), load_policy("hi")], load_scenario(scenario), np.zeros((100, 10, 2)))
     assert trajectory.outcome.tolist() == [SUCCESS, SUCCESS]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from search.agents.dsrnn import observation_tensors
+from search.crowd.agents.dsrnn import observation_tensors
 from search.solvers.domain import domain_for
 
 

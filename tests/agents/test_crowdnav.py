@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import torch
 
-from search.agents.crowdnav import CrowdNavPolicy, read_config
-from search.agents.policies import comparison_world, load_policy, trained_world
 from search.cli import main
-from search.sim.observation import Observation
-from search.sim.world import WorldConfig
+from search.crowd.agents.crowdnav import CrowdNavPolicy, read_config
+from search.crowd.agents.policies import comparison_world, load_policy, trained_world
+from search.crowd.sim.observation import Observation
+from search.crowd.sim.world import WorldConfig
 from tests.support.crowdnav import CONFIG, HUMANS, SIZES, config_text, random_state_dict, write_model
 
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from search.agents.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
-from search.sim.coupled import CoupledSimulator
-from search.sim.observation import ROBOT_NODE_SIZE
-from search.sim.scenarios import Scenario
+from search.crowd.agents.dsrnn import DSRNN, DSRNNPolicy, export_torchscript, load_torchscript
+from search.crowd.sim.coupled import CoupledSimulator
+from search.crowd.sim.observation import ROBOT_NODE_SIZE
+from search.crowd.sim.scenarios import Scenario
 from tests.support.agents import SMALL, make_net, random_observation
 
 

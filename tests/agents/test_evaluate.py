@@ -6,12 +6,12 @@ import json
 
 import numpy as np
 
-from search.agents.evaluate import TEST_STREAM, evaluate
-from search.agents.policies import load_policy
-from search.agents.train import TRAIN_STREAM
 from search.cli import main
-from search.sim.scenarios import sample_training_states
-from search.sim.world import WorldConfig
+from search.crowd.agents.evaluate import TEST_STREAM, evaluate
+from search.crowd.agents.policies import load_policy
+from search.crowd.agents.train import TRAIN_STREAM
+from search.crowd.sim.scenarios import sample_training_states
+from search.crowd.sim.world import WorldConfig
 
 KEYS = [
     "agent",

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from search.agents.release import ReleaseError, choose, separated
+from search.core.release import ReleaseError
+from search.crowd.agents.release import choose, separated
 
 
 def row(i: int, success: float, reward: float, timeout: float = 0.0, half_width: float = 0.8) -> dict:

@@ -7,10 +7,10 @@ import csv
 import pytest
 import torch
 
-from search.agents.dsrnn import DSRNN, DSRNNPolicy, load_checkpoint_policy, read_checkpoint
-from search.agents.evaluate import evaluate
-from search.agents.train import PROGRESS_COLUMNS, TrainConfig, load_train_config, train
-from search.sim.world import WorldConfig
+from search.crowd.agents.dsrnn import DSRNN, DSRNNPolicy, load_checkpoint_policy, read_checkpoint
+from search.crowd.agents.evaluate import evaluate
+from search.crowd.agents.train import PROGRESS_COLUMNS, TrainConfig, load_train_config, train
+from search.crowd.sim.world import WorldConfig
 
 pytestmark = pytest.mark.slow  # PPO updates
 

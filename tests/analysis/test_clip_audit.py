@@ -143,7 +143,7 @@ def test_a_robot_that_stops_beside_its_goal_says_how_close_it_got():
     from search.clips.render import Frame
     from search.crowd.render import CrowdClipRenderer
     from search.crowd.scene import scene_from_summary
-    from search.sim.scenarios import load_scenario
+    from search.crowd.sim.scenarios import load_scenario
     from tests.support.summaries import summary_from_simulation
 
     data = summary_from_simulation(["goal", "orca"], load_scenario("paper-bl-tr"))

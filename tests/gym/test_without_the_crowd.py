@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-CROWD = ("search.sim", "search.crowd", "search.agents")
+CROWD = ("search.crowd", "search.crowd.sim", "search.crowd.agents")
 WORLD_FREE = ("search.gym.problem", "search.gym.summary", "search.highway.coupled", "search.solvers.reward")
 
 

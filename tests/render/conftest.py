@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from search.sim.scenarios import load_scenario
+from search.crowd.sim.scenarios import load_scenario
 from tests.support.summaries import summary_from_simulation
 
 

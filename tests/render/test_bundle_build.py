@@ -116,7 +116,8 @@ def test_manifest_matches_files_and_checksums(built):
 
 def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(built):
     """The manifest's audit is the observer's verdict on the clip's own summary; the gallery marks each misleading
-    clip and the build prints one warning line for each."""
+    clip and the build prints one warning line for each, naming no on-screen label (the log would otherwise tell a
+    researcher who pilots the study which labelled agent is better)."""
     from app.visible import VisibleClip, audit
 
     out, manifest, log, _ = built
@@ -131,6 +132,8 @@ def test_every_clip_is_audited_and_misleading_ones_are_marked_and_warned_about(b
     warnings = [line for line in log if line.startswith("warning: clip ") and " is misleading" in line]
     assert len(warnings) == len(misleading) and gallery.count('<figure class="misleading">') == len(misleading)
     assert all(any(clip["id"] in line for line in warnings) for clip in misleading)
+    assert misleading
+    assert not any(label in line for line in log for clip in manifest["clips"] for label in clip["labels"])
     assert f"{len(misleading)} of {len(manifest['clips'])} clips are misleading" in gallery
 
 

@@ -28,7 +28,7 @@ from search.clips.render import (
 from search.clips.windows import SummaryError
 from search.crowd.render import HUMAN_FILL, CrowdClipRenderer, render, render_file
 from search.crowd.scene import load_scene, scene_from_summary
-from search.sim.scenarios import load_scenario
+from search.crowd.sim.scenarios import load_scenario
 from tests.support.live_server import REPO
 from tests.support.summaries import summary_from_simulation, visible
 

@@ -13,7 +13,7 @@ import pytest
 from app.formats import SUMMARY_FORMAT, load_summary, summary_json, summary_of
 from app.visible import VisibleClip
 from search.cli import main
-from search.sim.scenarios import load_scenario
+from search.crowd.sim.scenarios import load_scenario
 from tests.support.summaries import summary_from_simulation
 
 

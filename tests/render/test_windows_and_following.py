@@ -21,7 +21,7 @@ from search.clips.render import (
 )
 from search.crowd.render import CrowdClipRenderer, faded, render_file
 from search.crowd.scene import scene_from_summary
-from search.sim.scenarios import load_scenario
+from search.crowd.sim.scenarios import load_scenario
 from tests.render.test_render import colour_mask
 from tests.support.summaries import summary_from_simulation, visible
 

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from search.agents.policies import load_policy
+from search.crowd.agents.policies import load_policy
 from search.crowd.problem import CoupledProblem
-from search.sim.coupled import replay
-from search.sim.scenarios import load_scenario
+from search.crowd.sim.coupled import replay
+from search.crowd.sim.scenarios import load_scenario
 from search.solvers.baselines import random_search
 from search.solvers.mcts import CHILD, DEPTH, PARENT, STATE, TERMINAL, VISITS, MCTSConfig, Tree, mcts
 from search.solvers.reward import RewardConfig

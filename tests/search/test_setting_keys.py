@@ -7,12 +7,12 @@ import re
 
 import pytest
 
-from search.agents.train import load_train_config
 from search.bundle.spec import BuildError, parse_build
 from search.clips.render import RenderOptions
+from search.crowd.agents.train import load_train_config
+from search.crowd.sim.scenarios import load_scenario
+from search.crowd.sim.world import WorldConfig
 from search.highway.train import load_config as load_highway_config
-from search.sim.scenarios import load_scenario
-from search.sim.world import WorldConfig
 from search.solvers.mcts import MCTSConfig
 from search.solvers.reward import RewardConfig
 from search.solvers.runner import parse_settings

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from search.agents.dsrnn import DSRNN, NetworkConfig
-from search.sim.observation import ROBOT_NODE_SIZE, Observation
+from search.crowd.agents.dsrnn import DSRNN, NetworkConfig
+from search.crowd.sim.observation import ROBOT_NODE_SIZE, Observation
 
 SMALL = NetworkConfig(max_humans=6, edge_hidden=16, node_hidden=12, embed=8, attention=8, mlp_hidden=16)
 

@@ -6,10 +6,10 @@ import dataclasses
 
 import numpy as np
 
-from search.agents.policies import load_policy
+from search.crowd.agents.policies import load_policy
+from search.crowd.sim.coupled import replay
+from search.crowd.sim.scenarios import Scenario
 from search.crowd.summary import build_summary, frozen_scenario
-from search.sim.coupled import replay
-from search.sim.scenarios import Scenario
 from search.solvers.reward import RewardConfig
 
 

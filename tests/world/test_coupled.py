@@ -5,10 +5,10 @@ import os
 import numpy as np
 import pytest
 
-from search.agents.policies import load_policy
-from search.sim.coupled import CoupledSimulator, replay
-from search.sim.scenarios import load_scenario
-from search.sim.world import WorldConfig
+from search.crowd.agents.policies import load_policy
+from search.crowd.sim.coupled import CoupledSimulator, replay
+from search.crowd.sim.scenarios import load_scenario
+from search.crowd.sim.world import WorldConfig
 
 
 def make(names=("goal", "orca"), scenario="paper-bl-tr", batch=1, config=None):
@@ -175,7 +175,7 @@ def test_assign_overwrites_some_rows_with_a_snapshot_and_leaves_the_others(visib
 )
 def test_the_crowd_helper_thread_changes_nothing(monkeypatch, config):
     """Crowds computed on the helper thread while the policies act equal crowds computed in line, bit for bit."""
-    from search.sim import coupled
+    from search.crowd.sim import coupled
 
     assert coupled._crowd_worker() is not None or len(os.sched_getaffinity(0)) == 1
     runs = []
@@ -215,7 +215,7 @@ def test_a_forked_child_gets_its_own_crowd_helper():
 
 @pytest.mark.parametrize("visible", [False, True])
 def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
-    from search.sim.observation import observe
+    from search.crowd.sim.observation import observe
 
     sim = CoupledSimulator(
         [load_policy("goal"), load_policy("orca")],
@@ -261,7 +261,7 @@ def test_observations_are_each_agents_view_of_the_state_bit_for_bit(visible):
 
 def test_the_robot_node_carries_the_goal_relative_to_the_robot():
     """Field by field, by name; a robot on its goal has distance 0 and no direction (not NaN)."""
-    from search.sim.observation import ROBOT_NODE_FIELDS, observe
+    from search.crowd.sim.observation import ROBOT_NODE_FIELDS, observe
 
     scenario = load_scenario("paper-bl-tr")
     config = scenario.config()

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from search.agents.policies import load_policy
-from search.sim import world
-from search.sim.coupled import CoupledSimulator, replay
-from search.sim.observation import observe
-from search.sim.orca import orca_velocities
-from search.sim.scenarios import Scenario, sample_training_states
-from search.sim.world import WorldConfig, new_state
+from search.crowd.agents.policies import load_policy
+from search.crowd.sim import world
+from search.crowd.sim.coupled import CoupledSimulator, replay
+from search.crowd.sim.observation import observe
+from search.crowd.sim.orca import orca_velocities
+from search.crowd.sim.scenarios import Scenario, sample_training_states
+from search.crowd.sim.world import WorldConfig, new_state
 
 CROWDNAV = WorldConfig(
     human_num=5,
@@ -201,7 +201,7 @@ def test_replays_with_every_setting_on_are_bit_identical_and_snapshots_carry_the
     first = replay(policies, scenario, actions[:, 0], config=CROWDNAV, stop_when_done=False)
     second = replay(policies, scenario, actions[:, 0], config=CROWDNAV, stop_when_done=False)
     np.testing.assert_array_equal(first.crowds, second.crowds)
-    np.testing.assert_array_equal(first.robot_pos, second.robot_pos)
+    np.testing.assert_array_equal(first.agent_pos, second.agent_pos)
     sim = CoupledSimulator(policies, scenario, CROWDNAV)
     for action in actions[:20]:
         sim.step(action)
@@ -211,8 +211,8 @@ def test_replays_with_every_setting_on_are_bit_identical_and_snapshots_carry_the
     sim.restore(snapshot)
     for k, action in enumerate(actions[20:], start=20):
         step = sim.step(action)
-        np.testing.assert_array_equal(step.human_pos[0], first.human_pos[k])
-        np.testing.assert_array_equal(step.robot_pos[0], first.robot_pos[k])
+        np.testing.assert_array_equal(step.other_pos[0], first.other_pos[k])
+        np.testing.assert_array_equal(step.agent_pos[0], first.agent_pos[k])
     goals_changed = not np.array_equal(sim.state.human_goal[0], -np.array(scenario.human_positions))
     assert goals_changed
     # one node branched into a batch gives each branch its own run's numbers

@@ -4,7 +4,7 @@ import numpy as np
 import pyrvo
 import pytest
 
-from search.sim.orca import orca_step, orca_velocities
+from search.crowd.sim.orca import orca_step, orca_velocities
 
 
 def rvo2_velocities(pos, vel, pref, radii, speeds, neighbor_dist=10.0, max_neighbors=10, horizon=5.0, dt=0.25):

@@ -7,8 +7,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from search.cli import main
-from search.sim.gym_env import CrowdNavEnv
-from search.sim.scenarios import (
+from search.crowd.sim.as_gymnasium import CrowdNavEnv
+from search.crowd.sim.scenarios import (
     Scenario,
     ScenarioDistribution,
     load_scenario,
@@ -16,7 +16,7 @@ from search.sim.scenarios import (
     sample_training_states,
     shipped_scenarios,
 )
-from search.sim.world import WorldConfig
+from search.crowd.sim.world import WorldConfig
 
 
 def test_shipped_scenarios_load_with_ten_humans():

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from search.core.outcomes import COLLISION, RUNNING, SUCCESS, TIMEOUT
-from search.sim import world
-from search.sim.scenarios import load_scenario, sample_training_states
-from search.sim.world import WorldConfig, WorldState, new_state
+from search.crowd.sim import world
+from search.crowd.sim.scenarios import load_scenario, sample_training_states
+from search.crowd.sim.world import WorldConfig, WorldState, new_state
 
 
 def one_robot_world(config, robot, goal, humans=(), human_goals=None):
@@ -92,8 +92,8 @@ def test_velocity_mode_adds_the_action_after_orca():
 
 
 def test_observation_mode_leaves_the_crowd_alone():
-    from search.agents.policies import load_policy
-    from search.sim.coupled import CoupledSimulator
+    from search.crowd.agents.policies import load_policy
+    from search.crowd.sim.coupled import CoupledSimulator
 
     scenario = load_scenario("paper-bl-tr")
     config = WorldConfig(env_action_mode="observation")
@@ -103,7 +103,7 @@ def test_observation_mode_leaves_the_crowd_alone():
     np.testing.assert_allclose(seen, noise)
     first = sims[0].step(noise)
     second = sims[1].step(np.zeros((1, 10, 2)))
-    np.testing.assert_array_equal(first.human_pos, second.human_pos)
+    np.testing.assert_array_equal(first.other_pos, second.other_pos)
 
 
 @pytest.mark.parametrize(

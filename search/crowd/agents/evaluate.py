@@ -14,10 +14,10 @@ import math
 import numpy as np
 
 from search.core.outcomes import COLLISION, SUCCESS, TIMEOUT
-from search.sim import world
-from search.sim.observation import Policy, observe
-from search.sim.scenarios import sample_training_states
-from search.sim.world import WorldConfig
+from search.crowd.sim import world
+from search.crowd.sim.observation import Policy, observe
+from search.crowd.sim.scenarios import sample_training_states
+from search.crowd.sim.world import WorldConfig
 
 TEST_STREAM = 1
 

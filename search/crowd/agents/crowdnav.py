@@ -26,8 +26,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from search.sim.observation import Observation, PolicyState
-from search.sim.world import WorldConfig
+from search.crowd.sim.observation import Observation, PolicyState
+from search.crowd.sim.world import WorldConfig
 
 UNSEEN_POSITION = (15.0, 15.0)  # CrowdNav's belief about a human not yet seen in an episode
 HOLONOMIC_THETA = math.pi / 2  # a holonomic CrowdNav robot keeps the heading it starts with

@@ -12,7 +12,7 @@ from typing import Protocol
 import numba
 import numpy as np
 
-from search.sim.world import WorldConfig, WorldState, in_view
+from search.crowd.sim.world import WorldConfig, WorldState, in_view
 
 PolicyState = dict[str, np.ndarray]
 

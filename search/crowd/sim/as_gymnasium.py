@@ -16,10 +16,10 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike
 
 from search.core.outcomes import COLLISION, OUTCOME_NAMES, SUCCESS, TIMEOUT
-from search.sim import world
-from search.sim.observation import ROBOT_NODE_SIZE, observe
-from search.sim.scenarios import Scenario, sample_training_states
-from search.sim.world import WorldConfig, WorldState
+from search.crowd.sim import world
+from search.crowd.sim.observation import ROBOT_NODE_SIZE, observe
+from search.crowd.sim.scenarios import Scenario, sample_training_states
+from search.crowd.sim.world import WorldConfig, WorldState
 
 
 class CrowdNavEnv(gym.Env):

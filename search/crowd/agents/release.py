@@ -17,10 +17,11 @@ import csv
 import math
 from pathlib import Path
 
-from search.agents.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, read_checkpoint, save_checkpoint
-from search.agents.evaluate import evaluate
-from search.agents.train import checkpoints
-from search.sim.world import WorldConfig
+from search.core.release import ReleaseError, write_rows
+from search.crowd.agents.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, read_checkpoint, save_checkpoint
+from search.crowd.agents.evaluate import evaluate
+from search.crowd.agents.train import checkpoints
+from search.crowd.sim.world import WorldConfig
 
 HORIZON_S = 25.0  # the clips' horizon: 100 steps of 0.25 s
 HI_MIN_SUCCESS, HI_MAX_TIMEOUT = 0.95, 0.03
@@ -37,11 +38,7 @@ COLUMNS = (
     "collision_rate",
     "timeout_rate",
 )
-REPRODUCE = "foil train --config search/agents/train.toml --out runs/agents\nfoil release runs/agents"
-
-
-class ReleaseError(ValueError):
-    """A run from which the three agents cannot be chosen; the message says why and what to do."""
+REPRODUCE = "foil train --config search/crowd/agents/train.toml --out runs/agents\nfoil release runs/agents"
 
 
 def policy_from(data: dict, name: str) -> DSRNNPolicy:
@@ -82,14 +79,6 @@ def validate_run(run_dir: Path, episodes: int, every: int, log=print) -> list[di
         rows.append(done[path.name])
     write_rows(cache, COLUMNS, rows)
     return rows
-
-
-def write_rows(path: Path, columns: tuple[str, ...], rows: list[dict]) -> None:
-    """A validation table as CSV, so a later release reuses the snapshots already validated."""
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, columns)
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 def success_interval(row: dict) -> tuple[float, float]:

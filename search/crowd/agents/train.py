@@ -30,13 +30,13 @@ import torch
 from torch import Tensor
 
 from app.toml_errors import load_toml
-from search.agents.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
 from search.core.outcomes import SUCCESS
 from search.core.settings import check_keys
-from search.sim import world
-from search.sim.observation import ROBOT_NODE_SIZE, observe
-from search.sim.scenarios import sample_training_states
-from search.sim.world import WorldConfig, WorldState
+from search.crowd.agents.dsrnn import DSRNN, NetworkConfig, observation_tensors, read_checkpoint, save_checkpoint
+from search.crowd.sim import world
+from search.crowd.sim.observation import ROBOT_NODE_SIZE, observe
+from search.crowd.sim.scenarios import sample_training_states
+from search.crowd.sim.world import WorldConfig, WorldState
 
 TRAIN_STREAM = 0  # first word of every training seed sequence; evaluation uses another, so seeds never overlap
 PROGRESS_COLUMNS = (

@@ -31,7 +31,7 @@ import torch
 from torch import Tensor, nn
 
 from search.core.settings import ConfigTable
-from search.sim.observation import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
+from search.crowd.sim.observation import ROBOT_NODE_FIELDS, ROBOT_NODE_SIZE, Observation, PolicyState
 
 CHECKPOINT_FORMAT = "foil.dsrnn/2"
 OBSERVATION_LAYOUT = {"robot_node": list(ROBOT_NODE_FIELDS)}
@@ -486,8 +486,8 @@ def load_torchscript(path: str | Path, name: str) -> TorchPolicy:
 
 def load_checkpoint_policy(path: str | Path, name: str | None = None):
     """A policy from a Foil checkpoint, a TorchScript file or a CrowdNav_DSRNN checkpoint (recognised by its
-    parameter names; see ``search.agents.crowdnav``)."""
-    from search.agents.crowdnav import is_crowdnav_state_dict, load_crowdnav
+    parameter names; see ``search.crowd.agents.crowdnav``)."""
+    from search.crowd.agents.crowdnav import is_crowdnav_state_dict, load_crowdnav
 
     path = Path(path)
     if not path.is_file():

@@ -1,5 +1,5 @@
 """The agent registry (`load_policy`: scripted robots and the shipped or trained DS-RNN checkpoints) and the
-scripted robots. The policy interface itself lives in `search.sim.observation`."""
+scripted robots. The policy interface itself lives in `search.crowd.sim.observation`."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from search.sim.observation import Observation, Policy, PolicyState
-from search.sim.orca import orca_velocities
-from search.sim.social_force import social_force_velocities
+from search.crowd.sim.observation import Observation, Policy, PolicyState
+from search.crowd.sim.orca import orca_velocities
+from search.crowd.sim.social_force import social_force_velocities
 
 
 def _toward_goal(observation: Observation, v_pref: np.ndarray) -> np.ndarray:
@@ -101,7 +101,7 @@ def load_policy(spec: str) -> Policy:
     if spec in SCRIPTED:
         return SCRIPTED[spec]()
     if spec in SHIPPED_AGENTS or (Path(spec).suffix or "/" in spec) and (":" not in spec or Path(spec).is_file()):
-        from search.agents.dsrnn import load_checkpoint_policy  # torch only when a network is asked for
+        from search.crowd.agents.dsrnn import load_checkpoint_policy  # torch only when a network is asked for
 
         return load_checkpoint_policy(AGENTS_DIR / f"{spec}.pt" if spec in SHIPPED_AGENTS else spec, name=spec)
     if ":" in spec:
@@ -141,7 +141,7 @@ def trained_world(spec: str) -> dict:
     config; none for every other agent."""
     if spec in SCRIPTED or spec in SHIPPED_AGENTS or not Path(spec).suffix or not Path(spec).is_file():
         return {}
-    from search.agents.crowdnav import is_crowdnav_file, read_crowdnav_config
+    from search.crowd.agents.crowdnav import is_crowdnav_file, read_crowdnav_config
 
     return dict(read_crowdnav_config(spec).world) if is_crowdnav_file(spec) else {}
 

@@ -21,10 +21,10 @@ from typing import cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from search.sim import world
-from search.sim.observation import Observation, Policy, PolicyState, observe_agents
-from search.sim.scenarios import Scenario
-from search.sim.world import WorldConfig, WorldState
+from search.crowd.sim import world
+from search.crowd.sim.observation import Observation, Policy, PolicyState, observe_agents
+from search.crowd.sim.scenarios import Scenario
+from search.crowd.sim.world import WorldConfig, WorldState
 
 # what turns the agents' proposed actions (one (B, 2) array per agent) into those executed, given each row's steps
 # taken so far: `search.solvers.follow.Follow`

@@ -29,8 +29,8 @@ from numpy.typing import ArrayLike
 
 from search.core.outcomes import COLLISION, RUNNING, SUCCESS, TIMEOUT
 from search.core.settings import ConfigTable
-from search.sim.orca import crowd_velocities, orca_velocities
-from search.sim.social_force import social_force_velocities
+from search.crowd.sim.orca import crowd_velocities, orca_velocities
+from search.crowd.sim.social_force import social_force_velocities
 
 UNICYCLE_MOTIONS = ("straight", "arc")
 ROBOT_STARTS = ("square", "circle")

@@ -33,7 +33,7 @@ import numpy as np
 
 from app.toml_errors import load_toml
 from search.core.settings import check_keys
-from search.sim.world import HUMAN_RADIUS_RANGE, HUMAN_V_PREF_RANGE, WorldConfig, WorldState, new_state
+from search.crowd.sim.world import HUMAN_RADIUS_RANGE, HUMAN_V_PREF_RANGE, WorldConfig, WorldState, new_state
 
 SHIPPED_DIR = Path(__file__).parent / "scenarios"
 

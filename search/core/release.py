@@ -1,0 +1,19 @@
+"""What every world's ``foil release`` shares: the error for a run its agents cannot be chosen from, and the
+validation table a later release reuses."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+
+class ReleaseError(ValueError):
+    """A run from which a world's shipped agents cannot be chosen; the message says why and what to do."""
+
+
+def write_rows(path: Path, columns: tuple[str, ...], rows: list[dict[str, object]]) -> None:
+    """A validation table as CSV, so a later release reuses the snapshots already validated."""
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, columns)
+        writer.writeheader()
+        writer.writerows(rows)
