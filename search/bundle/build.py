@@ -566,8 +566,7 @@ def manifest_clip(
         log(
             f"warning: clip {job.id} ({job.scheme.name}, {job.pair[0]} vs {job.pair[1]}) is misleading: it shows "
             f"the better agent as {'no better' if shown_audit['shows'] == 'tie' else 'worse'} (the gallery and "
-            "manifest.json say which and why; this log names no labelled agent as better, so a researcher may "
-            "still pilot the study blind)"
+            "manifest.json say which and why: the log keeps the labels blind for a pilot)"
         )
     vote = clip_vote(data, order)
     for line in vote_warnings(agents, None if undecided else better, vote):
