@@ -8,7 +8,7 @@ from pathlib import Path
 import search
 from tests.support.imports import import_circles, imported, package_modules, upward_imports
 
-LAYERS = ("core", "solvers", "clips", "worlds", "bundle", "cli")
+LAYERS = ("core", "solvers", "clips", "worlds", "api", "bundle", "cli")
 WORLDS = {"crowd": (), "gym": (), "highway": ("gym",)}  # each world and the parent worlds it may import
 ROOT = Path(search.__file__).parent
 

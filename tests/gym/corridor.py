@@ -11,7 +11,7 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 
-from search.gym.adapter import Adapter
+from search.api import Adapter
 
 GOAL = np.array([5.0, 0.0])
 MOVES = np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from search.api import Adapter
 from search.clips.render import CRASH, PARTING_SECONDS, RenderOptions, agent_style
-from search.gym.adapter import Adapter
 from search.gym.clips import GymClipRenderer, render_gym
 from search.solvers.baselines import SamplingConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs

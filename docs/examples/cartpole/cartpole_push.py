@@ -11,8 +11,7 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 
-from app.visible import Words
-from search.gym.adapter import Adapter
+from search.api import Adapter, Words
 
 GUST = 0.08  # rad/s of angular velocity a full gust adds to the pole in one step
 

@@ -17,14 +17,27 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw
 
-from app.formats import SUMMARY_FORMAT
-from app.visible import Words, World
-from search.clips.render import RenderResult, h264_writer, side_paths
-from search.core.outcomes import COLLISION, OUTCOME_NAMES, RUNNING, SUCCESS, TIMEOUT
-from search.core.world import Claim, Shipped
-from search.solvers.domain import Coupled, Domain
-from search.solvers.prior import ActionPrior
-from search.solvers.reward import RewardConfig
+from search.api import (
+    COLLISION,
+    OUTCOME_NAMES,
+    RUNNING,
+    SUCCESS,
+    SUMMARY_FORMAT,
+    TIMEOUT,
+    ActionPrior,
+    Claim,
+    Coupled,
+    Domain,
+    Problem,
+    RenderOptions,
+    RenderResult,
+    RewardConfig,
+    Shipped,
+    Words,
+    World,
+    h264_writer,
+    side_paths,
+)
 
 AGENTS = {"line-hasty": 1.0, "line-careful": 0.5}  # each cart's own speed, metres per step
 SCENARIOS = {"line-short": {"goal": 3.0, "limit": 6}, "line-long": {"goal": 5.0, "limit": 10}}
@@ -79,8 +92,8 @@ def load_state(name: str, settings: Mapping[str, Any]) -> LineState:
     return LineState(Path(name).stem, float(values["goal"]), int(values["limit"]))
 
 
-class LineProblem:
-    """The carts side by side in one batch of rows, one gust per row and step."""
+class LineProblem(Problem):
+    """The carts side by side in one batch of rows, one gust per row and step: the protocol every solver steps."""
 
     action_shape = (1,)
 
@@ -157,7 +170,7 @@ def summarize(agents: Sequence[str], state: LineState, reward: RewardConfig, act
     }
 
 
-def render_clip(summary: Mapping[str, Any], out: Path, numbers: list[int], options: Any) -> RenderResult:
+def render_clip(summary: Mapping[str, Any], out: Path, numbers: list[int], options: RenderOptions) -> RenderResult:
     """One line per cart, drawn with PIL and encoded by Foil's H.264 writer, with a poster and a contact sheet."""
     started, goal = time.perf_counter(), float(summary["scenario"]["line"]["goal"])
     width, row = max(160, (options.width or 480) // 16 * 16), 48
@@ -286,7 +299,7 @@ class LineDomain(Domain):
         config = RewardConfig.from_dict(summary["reward_parameters"])
         return summarize(agents, state, config, summary["env_actions"], summary["solver"])
 
-    def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> RenderResult:
+    def render(self, summary: Path, out: Path, numbers: list[int], options: RenderOptions) -> RenderResult:
         return render_clip(json.loads(Path(summary).read_text()), Path(out), numbers, options)
 
     def renderer_files(self, summary: Path) -> list[Path]:

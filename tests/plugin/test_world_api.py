@@ -1,0 +1,31 @@
+"""`search.api` is the one import a world's author needs: every name it lists resolves, each is one that the code
+showing how to write a world or an adapter uses (so it gathers no more than they need), and the plugin world
+imports nothing else of Foil's, so its code does not follow Foil's internal layout."""
+
+from pathlib import Path
+
+import search.api
+from tests.support.imports import imported
+
+ROOT = Path(__file__).parents[2]
+LINEWORLD = Path(__file__).parent / "lineworld" / "lineworld" / "__init__.py"
+ADAPTERS = (
+    ROOT / "tests" / "gym" / "corridor.py",
+    ROOT / "tests" / "gym" / "test_gym_clips.py",
+    ROOT / "docs" / "examples" / "cartpole" / "cartpole_push.py",
+)
+
+
+def test_every_listed_name_resolves_and_every_public_name_is_listed():
+    assert [name for name in search.api.__all__ if not hasattr(search.api, name)] == []
+    assert {name for name in vars(search.api) if not name.startswith("_")} == set(search.api.__all__)
+
+
+def test_every_name_is_used_by_a_world_or_an_adapter():
+    used = set().union(*(imported(path, "search") for path in (LINEWORLD, *ADAPTERS)))
+    assert [name for name in search.api.__all__ if f"search.api.{name}" not in used] == []
+
+
+def test_the_plugin_world_imports_nothing_of_foils_but_the_api():
+    foil = imported(LINEWORLD, "search") | imported(LINEWORLD, "app")
+    assert sorted(name for name in foil if name.split(".")[:2] != ["search", "api"]) == []
