@@ -19,7 +19,113 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 SCORE_SUCCESS, SCORE_COLLISION = 2.0, -1.0
-RULES = ("goal", "survival")
+RULES = ("goal", "survival", "score")
+SUMS = ("final", "mean", "band")  # how a visible score is summed over a clip (`Score`)
+BETTER = ("higher", "lower")
+SCORE_MARGIN = 1e-9  # visible scores' sums are rounded as the screen shows them: any difference is seen
+
+
+@dataclass(frozen=True)
+class Score:
+    """A quantity each view shows on screen as it changes (a distance travelled, the error from a set point, a
+    game's score), and how a viewer sums it over a clip: "final" (its value when the clip ends), "mean" (its mean
+    over the clip's steps) or "band" (the seconds it spent within ``band``, [low, high]). ``better`` says which
+    way the summed value is better. A viewer reads it at ``digits`` decimals (seconds in a band at one): two
+    agents whose sums read the same are a tie. ``span`` is a difference of the sum that looks as plain as reaching
+    a goal at once versus at the clip's end (1 on the observer's scale); a band's sum is seen as the share of the
+    clip spent in it, so it needs none.
+
+    Examples: locomotion ``Score("distance", "m", "higher", "final", span=5.0)``; a set point
+    ``Score("error", "", "higher", "band", band=(-0.1, 0.1), digits=2)``; a game ``Score("score", "", "higher",
+    "final", digits=0, span=10.0)``."""
+
+    name: str
+    unit: str = ""
+    better: str = "higher"
+    summed: str = "final"
+    band: tuple[float, float] | None = None
+    digits: int = 1
+    span: float | None = None
+
+    def __post_init__(self) -> None:
+        where = f"visible score {self.name!r}"
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"a visible score needs a name to show on screen, such as 'distance', not {self.name!r}")
+        if self.better not in BETTER:
+            raise ValueError(f"{where}: better must be 'higher' or 'lower', not {self.better!r}")
+        if self.summed not in SUMS:
+            raise ValueError(f"{where}: summed must be one of {', '.join(map(repr, SUMS))}, not {self.summed!r}")
+        if not isinstance(self.digits, int) or isinstance(self.digits, bool) or not 0 <= self.digits <= 6:
+            raise ValueError(f"{where}: digits must be a whole number of decimals from 0 to 6, not {self.digits!r}")
+        if self.summed == "band":
+            if self.band is None or len(self.band) != 2 or not float(self.band[0]) <= float(self.band[1]):
+                raise ValueError(f"{where}: summed 'band' needs band=(low, high) with low <= high, not {self.band!r}")
+            if self.span is not None:
+                raise ValueError(f"{where}: a band's sum is seen as a share of the clip: leave span unset")
+        else:
+            if self.band is not None:
+                raise ValueError(f"{where}: band is for summed 'band' only, not {self.summed!r}")
+            if self.span is None or not float(self.span) > 0:
+                raise ValueError(
+                    f"{where}: summed {self.summed!r} needs span > 0, the difference of its sum that looks as plain "
+                    f"as reaching a goal at once versus at the clip's end; got {self.span!r}"
+                )
+
+    def to_manifest(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["band"] = None if self.band is None else [float(v) for v in self.band]
+        return data
+
+    @classmethod
+    def from_manifest(cls, data: Any) -> Score:
+        if not isinstance(data, Mapping):
+            raise ValueError(f"world.score must be an object with name, unit, better, summed, ..., not {data!r}")
+        _known("world.score", data, tuple(f.name for f in fields(Score)))
+        band = data.get("band")
+        return cls(**{**data, "band": None if band is None else tuple(band)})
+
+    def of(self, values: Sequence[float], dt: float) -> float:
+        """The clip's sum of the values of the states it shows after its first (one a step, ``dt`` seconds apart),
+        as a viewer reads it: rounded to what the screen shows."""
+        if not values:
+            raise ValueError(f"visible score {self.name!r}: a clip shows at least one step of it")
+        if self.summed == "final":
+            value = float(values[-1])
+        elif self.summed == "mean":
+            value = statistics.fmean(float(v) for v in values)
+        else:
+            assert self.band is not None
+            value = dt * sum(1 for v in values if self.band[0] <= float(v) <= self.band[1])
+        return round(value, 1 if self.summed == "band" else self.digits)
+
+    def seen(self, summed: float, end_s: float) -> float:
+        """A clip's sum on the observer's scale (larger is better): over ``span``, or a band's share of the clip."""
+        scale = end_s if self.summed == "band" else float(self.span or 1.0)
+        return (1.0 if self.better == "higher" else -1.0) * summed / max(scale, 1e-9)
+
+    def value_text(self, value: float) -> str:
+        """A value as the clip writes it: ``error 0.04``, ``distance 12.3 m``."""
+        return f"{self.name} {value:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
+
+    def caption(self, now: float, since_first: Sequence[float], dt: float) -> str:
+        """What a view shows under it at a state: the value ``now``, and for a mean or a band what the clip has
+        summed so far over ``since_first`` (the values of the states after its first)."""
+        if self.summed == "final":
+            return self.value_text(now)
+        summed = self.of(since_first, dt) if since_first else (now if self.summed == "mean" else 0.0)
+        if self.summed == "mean":
+            return f"{self.value_text(now)} · mean {summed:.{self.digits}f}"
+        return f"{self.value_text(now)} · {one_decimal(summed)} s in band"
+
+    def describe(self, summed: float) -> str:
+        """A clip's sum in words, after an agent's label."""
+        if self.summed == "final":
+            return f"ended with {self.value_text(summed)}"
+        if self.summed == "mean":
+            return f"had a mean {self.value_text(summed)}"
+        assert self.band is not None
+        low, high = (f"{v:.{self.digits}f}" for v in self.band)
+        return f"kept {self.name} within {low} to {high} for {one_decimal(summed)} seconds"
 
 
 @dataclass(frozen=True)
@@ -58,6 +164,18 @@ class Words:
     timeout: str = "ran out of time before reaching the goal"
     running: str = "was still on its way when the clip ended"
     close_call: str = "came close to people"
+    # the instructions' paragraph on how agents are named, the line above a ranking round's clips and the notice
+    # at each new round: a study file's [texts] robot_names, names_in_round and new_round say otherwise
+    names: str = (
+        "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
+        "for two different robots in this study, and in a ranking round each name is one robot in "
+        "all of the round's clips. Each new round brings robots with new names."
+    )
+    names_in_round: str = "In this round each name, colour and shape is one robot in all three clips."
+    new_round: str = (
+        "A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
+        "from this round's clips."
+    )
 
 
 @dataclass(frozen=True)
@@ -68,9 +186,20 @@ class World:
     domain: str = "crowd"
     rule: str = "goal"
     words: Words = Words()
+    score: Score | None = None  # what each view shows of how its agent is doing (`Score`); None: nothing
+
+    def __post_init__(self) -> None:
+        if self.rule == "score" and self.score is None:
+            raise ValueError(
+                f"world {self.domain!r} is judged by the rule 'score' but declares no visible score: declare one "
+                "(app.visible.Score: its name, unit, which way is better, how a clip sums it) or use 'goal' or "
+                "'survival'"
+            )
 
     def to_manifest(self) -> dict[str, Any]:
-        return {"domain": self.domain, "rule": self.rule, "words": asdict(self.words)}
+        """The manifest's `world` object; a world without a score writes no `score` key."""
+        shown = {"domain": self.domain, "rule": self.rule, "words": asdict(self.words)}
+        return shown if self.score is None else shown | {"score": self.score.to_manifest()}
 
     @classmethod
     def from_manifest(cls, data: Mapping[str, Any] | None) -> World:
@@ -79,8 +208,8 @@ class World:
         if data is None:
             return cls()
         if not isinstance(data, Mapping):
-            raise ValueError(f"world must be an object with domain, rule and words, not {data!r}")
-        _known("world", data, ("domain", "rule", "words"))
+            raise ValueError(f"world must be an object with domain, rule, words and score, not {data!r}")
+        _known("world", data, ("domain", "rule", "words", "score"))
         domain, rule, words = data.get("domain", "crowd"), data.get("rule", "goal"), data.get("words", {})
         if not isinstance(domain, str) or not domain:
             raise ValueError(f"world.domain must be a world's name, not {domain!r}")
@@ -96,7 +225,8 @@ class World:
                 text.format(seconds=0)
             except (KeyError, IndexError, ValueError) as error:
                 raise ValueError(f"world.words.{name}: {text!r} may name only {{seconds}} ({error})") from None
-        return cls(domain=domain, rule=rule, words=Words(**words))
+        score = None if data.get("score") is None else Score.from_manifest(data["score"])
+        return cls(domain=domain, rule=rule, words=Words(**words), score=score)
 
 
 def _known(where: str, data: Mapping[str, Any], keys: tuple[str, ...]) -> None:
@@ -112,7 +242,9 @@ class Observer:
     the clip beats crashing, and crashing later is better. Coming closer than `comfort_m` to a person counts
     against a robot that did not collide. `noise` is the standard deviation of
     the perception noise, in the same units (reaching the goal at once versus at the end of the clip is 1).
-    Scores closer than `tie_margin` look the same (two robots both still on their way, a few metres apart)."""
+    Scores closer than `tie_margin` look the same (two robots both still on their way, a few metres apart). A
+    world's visible score (`Score`) judges its clips by the "score" rule, and breaks such ties in the others: there
+    two agents look the same only where their sums read the same (`VisibleClip.margin`)."""
 
     noise: float = 0.5
     comfort_m: float = 0.5
@@ -120,8 +252,10 @@ class Observer:
     tie_margin: float = 0.25
 
     def visible_score(self, outcome: Mapping[str, Any], end_s: float, progress: float, rule: str = "goal") -> float:
-        if rule not in RULES:
-            raise ValueError(f"a clip is judged by one of the rules {', '.join(map(repr, RULES))}, not {rule!r}")
+        """An agent's score by its outcome under the rule "goal" or "survival" (a "score" world's clips are judged
+        by their `Score` instead, `VisibleClip.scores`)."""
+        if rule not in ("goal", "survival"):
+            raise ValueError(f"an outcome is judged by the rule 'goal' or 'survival', not {rule!r}")
         event = outcome.get("event")
         lasted = min(1.0, float(outcome.get("time") or end_s) / end_s)  # share of the clip until the event
         if event == "collision":
@@ -157,6 +291,7 @@ class VisibleClip:
     end_s: float
     to_goal: tuple[float | None, ...] = ()  # metres from the goal at the end, where known
     world: World = World()
+    summed: tuple[float, ...] = ()  # per label its visible score summed over the clip (`Score.of`), where shown
 
     @classmethod
     def of_summary(
@@ -193,16 +328,53 @@ class VisibleClip:
             end_s=max(float(steps[-1]["t"]) - start_s, 1e-6),
             world=world or World(),
             to_goal=tuple(_to_goal(summary, k) for k in order),
+            summed=_summed(summary, order, first, world or World()),
         )
 
     def scores(self, observer: Observer) -> dict[str, float]:
-        return {
+        return self._judged(observer)[0]
+
+    def margin(self, observer: Observer) -> float:
+        """How far apart two labels' scores must be to look different: the observer's tie margin, or where the
+        visible score judges the clip, any difference at all (sums that read the same are equal)."""
+        return SCORE_MARGIN if self._judged(observer)[1] else observer.tie_margin
+
+    def _judged(self, observer: Observer) -> tuple[dict[str, float], bool]:
+        """Each label's score, and whether its visible score judged it: in a "score" world always; in the others
+        where the outcomes tie (within the tie margin), each then scores their mean plus its visible score."""
+        score = self.world.score
+        if score is not None and len(self.summed) != len(self.labels):
+            raise ValueError(
+                f"a clip of world {self.world.domain!r} is judged by its visible score {score.name!r}, but its "
+                "summary records none per step (steps[i].scores): build it again with this version's foil search"
+            )
+        if self.world.rule == "score":
+            assert score is not None
+            return {label: score.seen(s, self.end_s) for label, s in zip(self.labels, self.summed, strict=True)}, True
+        shown = {
             label: observer.visible_score(outcome, self.end_s, progress, self.world.rule)
             for label, outcome, progress in zip(self.labels, self.outcomes, self.progress, strict=True)
         }
+        if score is None or len(shown) < 2 or max(shown.values()) - min(shown.values()) >= observer.tie_margin:
+            return shown, False
+        middle = statistics.fmean(shown.values())
+        return {
+            label: middle + score.seen(s, self.end_s) for label, s in zip(self.labels, self.summed, strict=True)
+        }, True
 
     def describe(self, label: str) -> str:
-        """How the robot labelled ``label`` visibly ended, as one sentence in the world's words."""
+        """How the robot labelled ``label`` visibly ended, as one sentence in the world's words: by its visible
+        score in a "score" world, its outcome then the score where a world shows both."""
+        score = self.world.score
+        if score is None or len(self.summed) != len(self.labels):
+            return self._ending(label)
+        summed = score.describe(self.summed[self.labels.index(label)])
+        if self.world.rule == "score":
+            return f"{label} {summed}."
+        return f"{self._ending(label).removesuffix('.')}; it {summed}."
+
+    def _ending(self, label: str) -> str:
+        """How the robot labelled ``label`` visibly ended by its outcome."""
         outcome = self.outcomes[self.labels.index(label)]
         event = outcome.get("event")
         words = self.world.words
@@ -259,6 +431,11 @@ class VisibleReels:
             for label, reel in zip(self.labels, self.reels, strict=True)
         }
 
+    def margin(self, observer: Observer) -> float:
+        """As `VisibleClip.margin`: a reel's segment shows one agent, so only a "score" world's reels are judged by
+        their visible score."""
+        return SCORE_MARGIN if self.world.rule == "score" else observer.tie_margin
+
     def describe(self, label: str) -> str:
         """How the robot labelled ``label`` ended in each moment of its reel, as one sentence in the world's words."""
         reel = self.reels[self.labels.index(label)]
@@ -279,7 +456,7 @@ def audit(clip: Visible, better: str, observer: Observer | None = None) -> dict[
         raise ValueError(f"an audit compares two robots, one of them {better!r}; the clip has {list(scores)}")
     other = next(label for label in clip.labels if label != better)
     difference = scores[better] - scores[other]
-    shows = "tie" if abs(difference) < observer.tie_margin else "better" if difference > 0 else "worse"
+    shows = "tie" if abs(difference) < clip.margin(observer) else "better" if difference > 0 else "worse"
     return {"shows": shows, "why": f"{clip.describe(better)} {clip.describe(other)}"}
 
 
@@ -308,6 +485,18 @@ def _since(outcome: Mapping[str, Any], start_s: float) -> Mapping[str, Any]:
     if not start_s or outcome.get("time") is None:
         return outcome
     return {**outcome, "time": max(0.0, float(outcome["time"]) - start_s)}
+
+
+def _summed(summary: Mapping[str, Any], order: Sequence[int], first: int, world: World) -> tuple[float, ...]:
+    """Each robot's visible score summed over the states its clip shows after its first (none where the world
+    shows no score or the summary records none)."""
+    steps = summary.get("steps") or []
+    shown = steps[first:]
+    if world.score is None or not shown or any("scores" not in step for step in shown):
+        return ()
+    start_s = float(steps[first - 1]["t"]) if first > 0 else 0.0
+    dt = (float(shown[-1]["t"]) - start_s) / len(shown)
+    return tuple(world.score.of([float(step["scores"][k]) for step in shown], dt) for k in order)
 
 
 def _to_goal(summary: Mapping[str, Any], k: int) -> float | None:

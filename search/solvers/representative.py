@@ -6,7 +6,8 @@ truth (no evaluation result and no agent's identity is read).
    under the search's end rules; each rollout's clip plays on without pushes after that end (its coda), as a
    summary's clip does.
 3. Score each clip's visible contrast with the viewer's rule (`app.visible.Observer`, no perception noise): the
-   first agent's visible score minus the second's, none (0) under the observer's tie margin.
+   first agent's visible score minus the second's, none (0) under the observer's tie margin (by a world's visible
+   score: where the two sums read the same on screen).
 4. Each state votes by the sign of its majority; the direction is the sign of the summed votes. States are rolled
    out a batch at a time until the vote is decided (`sign_test`, Bonferroni over its planned looks), the budget
    fits no further state at the most steps one can take, or every drawn state has voted: the budget is never
@@ -172,10 +173,11 @@ def summary_contrast(summary: dict, world: World) -> float:
 
 
 def visible_contrast(clip: VisibleClip) -> float:
-    """First agent's visible score minus the second's as the viewer sees the clip; 0 under the tie margin."""
+    """First agent's visible score minus the second's as the viewer sees the clip; 0 under the clip's tie margin
+    (`VisibleClip.margin`: by a visible score, sums that read the same)."""
     first, second = clip.scores(OBSERVER).values()
     difference = first - second
-    return difference if abs(difference) >= OBSERVER.tie_margin else 0.0
+    return difference if abs(difference) >= clip.margin(OBSERVER) else 0.0
 
 
 def roll_out_states(

@@ -107,7 +107,7 @@ def test_a_world_goes_through_the_manifest_unchanged():
     "data, message",
     [
         ({"domain": "highway", "rules": "survival"}, "world has unknown key.*'rules'"),
-        ({"rule": "longest"}, "world.rule must be one of 'goal', 'survival', not 'longest'"),
+        ({"rule": "longest"}, "world.rule must be one of 'goal', 'survival', 'score', not 'longest'"),
         ({"domain": ""}, "world.domain must be a world's name"),
         ({"words": {"crash": "crashed"}}, "world.words has unknown key.*'crash'"),
         ({"words": {"collision": "crashed after {time} seconds"}}, "world.words.collision: .* may name only {seconds}"),
