@@ -213,7 +213,8 @@ class GymDomain(Domain):
 
 def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
     """The visible contrast of a row of a Gymnasium problem that just ended, its clip shown from the state after
-    step ``since``: each agent's event and its time, as `search.gym.summary.build_gym_summary` records them."""
+    step ``since``: each agent's event and its time, and its visible score's sum where the world shows one, as
+    `search.gym.summary.build_gym_summary` records them."""
     from search.core.outcomes import OUTCOME_NAMES
     from search.solvers.representative import visible_contrast
 
@@ -227,4 +228,7 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
         for outcome, step in coupled.problem.endings(row)
     )
     end_s = max((steps - since) * dt, 1e-6)
-    return visible_contrast(VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world))
+    score, instances = coupled.world.score, coupled.problem.rows[row]
+    summed = () if score is None else tuple(score.of(i.measured[since:steps], dt) for i in instances)
+    clip = VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world, summed=summed)
+    return visible_contrast(clip)
