@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,7 +32,8 @@ class GymAgent:
 
     def act(self, observations: np.ndarray) -> np.ndarray:
         if hasattr(self.policy, "predict"):
-            return np.asarray(self.policy.predict(observations, deterministic=True)[0])
+            with self._observed(observations):
+                return np.asarray(self.policy.predict(observations, deterministic=True)[0])
         act = getattr(self.policy, "act", self.policy)
         return np.asarray(act(observations))
 
@@ -62,7 +65,25 @@ class GymAgent:
         return None if own is None else np.asarray(own(observations), dtype=np.float64).reshape(-1)
 
     def _tensor(self, observations: np.ndarray):
-        return self.policy.policy.obs_to_tensor(np.asarray(observations))[0]
+        with self._observed(observations):
+            return self.policy.policy.obs_to_tensor(np.asarray(observations))[0]
+
+    @contextmanager
+    def _observed(self, observations: np.ndarray) -> Iterator[None]:
+        """Where the policy refuses the observations and their shape is not the one it was trained on, an error
+        that names the likely cause: the environment ``make()`` builds lacks the wrappers it was trained with."""
+        try:
+            yield
+        except ValueError as error:
+            expected = getattr(getattr(self.policy, "observation_space", None), "shape", None)
+            found = np.asarray(observations).shape[1:]
+            if expected is None or tuple(expected) == found:
+                raise
+            raise ValueError(
+                f"agent {self.name!r} was trained on observations of shape {tuple(expected)}, but the environment "
+                f"gives {found}: the adapter's make() likely lacks the observation wrappers the agent was trained "
+                f"with (wrap the environment there as in training; docs/gym.md, 'Agents'). {error}"
+            ) from None
 
 
 def _sb3_family(policy) -> str | None:

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from search.core.outcomes import OUTCOME_NAMES, RUNNING
+from search.gym.adapter import EVENTS
 from search.gym.agents import GymAgent
-from search.gym.problem import EVENTS, GymCoupledProblem, GymScenario
+from search.gym.problem import GymCoupledProblem, GymScenario
 from search.highway.adapter import HighwayAdapter
 from search.highway.kernel import HighwayKernel, HighwayState, adapter_spec, notice
 from search.solvers.reward import RewardConfig
