@@ -281,6 +281,29 @@ def text_stamp(text: str, size: int, fill, anchor: str, bold: bool) -> tuple[Ima
     return stamp, (x0, y0)
 
 
+def text_width(text: str, size: int, bold: bool = False) -> int:
+    """Pixels wide ``text`` is drawn (the width of its stamp)."""
+    return text_stamp(text, size, (0, 0, 0), "lm", bold)[0].width
+
+
+FIT_SHRINK = 0.75  # the smallest share of its size a fitted text is drawn at, so it stays readable on a phone
+
+
+def fit_text(text: str, size: int, room: float, bold: bool = False) -> tuple[str, int]:
+    """``text`` and the font size that fit it into ``room`` px: its own ``size`` where it fits, else a smaller one
+    down to FIT_SHRINK of it, then shortened with an ellipsis ("" where not even one letter fits), so that a status
+    or caption never runs past its view's edge or over a label."""
+    smallest = max(1, math.ceil(size * FIT_SHRINK))
+    for fitted in range(size, smallest - 1, -1):
+        if text_width(text, fitted, bold) <= room:
+            return text, fitted
+    for end in range(len(text) - 1, 0, -1):
+        shortened = text[:end].rstrip() + "…"
+        if text_width(shortened, smallest, bold) <= room:
+            return shortened, smallest
+    return "", smallest
+
+
 def agent_marker(number: int, radius: float, scale: float) -> Sprite:
     """Agent ``number``'s marker: its shape in its colour with a white halo and its number on it."""
     colour, shape = agent_style(number)

@@ -37,6 +37,7 @@ from search.clips.render import (
     agent_style,
     centered_text,
     encode,
+    fit_text,
     paste,
     sprite,
     status_text,
@@ -278,19 +279,22 @@ class CrowdClipRenderer(ClipRenderer):
                 status_xy, anchor = (x0 + lay.text * 1.8, y + row), "lm"
             icon = self.sprites.icons[number]
             paste(image, icon, (x0 + icon[1], y))
-            self.draw_text(image, (x0 + lay.text * 1.8, y), robot_label(number), lay.text, INK, "lm", bold=True)
+            label = self.draw_text(image, (x0 + lay.text * 1.8, y), robot_label(number), lay.text, INK, "lm", True)
             event, when = self._event(k, t) or ("", t)
             if not event and t >= self.scene.end_time:
                 event = "running"
             to_goal = math.dist(self.scene.robots[-1, k], self.scene.goals[k])
             status = status_text(event, when, to_goal) if event else STATUS_RUNNING
-            if event == "collision":
-                self.draw_tag(image, status_xy, status, lay.text, anchor)
-                continue
-            box = self.draw_text(image, status_xy, status, lay.text, INK if event else MUTED, anchor)
             badge = self.sprites.small_badges.get(event)
+            gap = lay.text * 0.4 + badge[1] if badge else 0.0
+            # side by side, the status fits its panel's margins; alone, what its name and badge leave of the line
+            room = lay.panel - lay.text * 3.0 if anchor == "lm" else status_xy[0] - label[2] - lay.text * 0.8 - 2 * gap
+            status, size = fit_text(status, lay.text, room, event == "collision")
+            if event == "collision":
+                self.draw_tag(image, status_xy, status, size, anchor)
+                continue
+            box = self.draw_text(image, status_xy, status, size, INK if event else MUTED, anchor)
             if badge:
-                gap = lay.text * 0.4 + badge[1]
                 centre = (box[0] - gap, y) if anchor == "rm" else (x0 + badge[1], status_xy[1])
                 paste(image, badge, centre)
 
