@@ -108,14 +108,15 @@ class Score:
         return f"{self.name} {value:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
 
     def caption(self, now: float, since_first: Sequence[float], dt: float) -> str:
-        """What a view shows under it at a state: the value ``now``, and for a mean or a band what the clip has
-        summed so far over ``since_first`` (the values of the states after its first)."""
+        """What a view shows under it at a state, short enough for the line beside its label: the value ``now``,
+        or for a mean or a band what the clip has summed so far over ``since_first`` (the values of the states
+        after its first)."""
         if self.summed == "final":
             return self.value_text(now)
         summed = self.of(since_first, dt) if since_first else (now if self.summed == "mean" else 0.0)
         if self.summed == "mean":
-            return f"{self.value_text(now)} · mean {summed:.{self.digits}f}"
-        return f"{self.value_text(now)} · {one_decimal(summed)} s in band"
+            return f"mean {self.value_text(summed)}"
+        return f"{one_decimal(summed)} s in band"
 
     def describe(self, summed: float) -> str:
         """A clip's sum in words, after an agent's label."""

@@ -120,5 +120,5 @@ def test_only_a_world_of_its_own_is_written_into_a_manifest(crowd_bundle):
 
 def test_a_world_the_server_cannot_speak_of_stops_it_at_start_up(crowd_bundle, tmp_path):
     bundle = with_world(crowd_bundle, tmp_path / "odd", {"domain": "highway", "rule": "fastest"})
-    with pytest.raises(BundleError, match="world.rule must be one of 'goal', 'survival', not 'fastest'"):
+    with pytest.raises(BundleError, match="world.rule must be one of 'goal', 'survival', 'score', not 'fastest'"):
         load_bundle(bundle)
