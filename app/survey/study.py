@@ -113,16 +113,10 @@ class Texts(Strict):
         "button unlocks when both have finished; you can replay them."
     )
     example_caption: str = ""  # under the instructions' example clip; empty: the caption of the bundle's world
-    robot_names: Text = (
-        "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
-        "for two different robots in this study, and in a ranking round each name is one robot in "
-        "all of the round's clips. Each new round brings robots with new names."
-    )
-    names_in_round: Text = "In this round each name, colour and shape is one robot in all three clips."
-    new_round: Text = (
-        "A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
-        "from this round's clips."
-    )
+    # empty: the words of the bundle's world (app.visible.Words names, names_in_round, new_round)
+    robot_names: str = ""  # on the instructions page: how agents are named
+    names_in_round: str = ""  # above a ranking round's clips
+    new_round: str = ""  # at the start of every ranking round after the first
 
 
 class Completion(Strict):

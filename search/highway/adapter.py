@@ -66,6 +66,16 @@ WORDS = Words(
     timeout="was still driving when the drive ended",
     running="was still driving when the clip ended",
     close_call="",
+    names=(
+        "Every self-driving car is called a robot and has a name (such as Robot 7) and a colour of its own. A name"
+        " never stands for two different cars in this study, and in a ranking round each name is one car in all of"
+        " the round's clips. Each new round brings cars with new names."
+    ),
+    names_in_round="In this round each name and colour is one car in all three clips.",
+    new_round=(
+        "A new round begins. Its cars have names you have not seen in the earlier rounds: judge them from this"
+        " round's clips."
+    ),
 )
 VIEW_METRES = 64.0  # of road along a view: about 45 m ahead of the ego and 19 m behind
 EGO_AT = 0.3  # where along the view the ego stays (highway-env's centering_position)
