@@ -52,6 +52,7 @@ def _report(args: argparse.Namespace) -> int:
         rules=_exclusion_rules(args),
         bundle=args.bundle,
         prereg=args.prereg,
+        include_excluded=args.include_excluded,
     )
 
 
@@ -154,6 +155,12 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
             command.add_argument(
                 "--prereg",
                 help="prereg.json from foil prereg: the report says whether the data match it, listing every deviation",
+            )
+            command.add_argument(
+                "--include-excluded",
+                action="store_true",
+                help="analyse every participant, whichever exclusion rule leaves them out (a quick look at a pilot, "
+                "or at bots that answer sooner than a clip plays); the report says so at its top",
             )
         command.set_defaults(handler=handler)
 

@@ -64,10 +64,42 @@ class Tally:
 
 @dataclass
 class Exclusions:
+    """Participants in the database (`before`), analysed (`after`) and met by each rule; `flagged`: those any rule
+    excludes, analysed anyway when `included` (`foil report --include-excluded`, a quick look at a pilot)."""
+
     before: int = 0
     after: int = 0
     per_reason: Counter[str] = field(default_factory=Counter)
     rule: str = ""
+    flagged: int = 0
+    included: bool = False
+
+    def reasons(self) -> str:
+        """How many each rule met, as "pilot_or_bot: 3, skipped_viewing: 3"."""
+        return ", ".join(f"{reason}: {self.per_reason[reason]}" for reason in REASONS if self.per_reason[reason])
+
+    def notice(self) -> str:
+        """What a reader must know before the numbers: that excluded participants are in them, or that every
+        participant was excluded and how to see their answers anyway; empty otherwise."""
+        if self.included and self.flagged:
+            return (
+                f"This report includes {self.flagged} of {self.before} participant{'s' * (self.before != 1)} whom "
+                f"the exclusion rules leave out ({self.reasons()}), because it was asked for with "
+                "--include-excluded: a quick look, not a result."
+            )
+        if self.before and not self.after:
+            kinds = (
+                "; --include pilot,bot applies the other rules to pilots and bots"
+                if self.per_reason["pilot_or_bot"]
+                else ""
+            )
+            return (
+                f"All {self.before} participant{'s' * (self.before != 1)} were excluded ({self.reasons()}), so "
+                "nothing is analysed. To look at their answers anyway (a pilot, or bots that answer sooner than a "
+                "clip plays), run foil report with --include-excluded: the report then analyses every participant "
+                f"and says so at its top{kinds}."
+            )
+        return ""
 
 
 @dataclass
@@ -138,11 +170,14 @@ class ReportData:
         return [(name, q) for name, q in self.study.questions.items() if isinstance(q, ScaleQuestion) and name in asked]
 
 
-def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None) -> ReportData:
+def tally_study(
+    db: Database, study: Study, rules: ExclusionRules | None = None, include_excluded: bool = False
+) -> ReportData:
+    """The report's counts; ``include_excluded`` analyses every participant, whichever rule excludes them."""
     rules = rules or ExclusionRules()
     median_s = median_duration_s(db, study.study.id, rules.kinds)
     threshold = rules.threshold_s(median_s)
-    exclusions = Exclusions(rule=rules.describe(median_s))
+    exclusions = Exclusions(rule=rules.describe(median_s), included=include_excluded)
     accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)
     ratings: dict[str, dict[str, Counter[int]]] = {
         name: {scheme: Counter() for scheme in study.design.schemes}
@@ -163,7 +198,9 @@ def tally_study(db: Database, study: Study, rules: ExclusionRules | None = None)
         exclusions.before += 1
         exclusions.per_reason.update(reason for reason in REASONS if flags[reason])
         if flags["excluded"]:
-            continue
+            exclusions.flagged += 1
+            if not include_excluded:
+                continue
         exclusions.after += 1
         for row in long_rows(study, record):
             kind = row.get("question_type")
@@ -450,7 +487,8 @@ def exclusion_rows(data: ReportData) -> list[dict[str, Any]]:
         }
         for reason, text in REASONS.items()
     ]
-    rows.append({"rule": "analysed (no rule applies)", "participants": e.after})
+    analysed = "analysed (every participant: --include-excluded)" if e.included else "analysed (no rule applies)"
+    rows.append({"rule": analysed, "participants": e.after})
     return rows
 
 
@@ -709,22 +747,26 @@ def run_report(
     rules: ExclusionRules,
     bundle: str | None = None,
     prereg: str | None = None,
+    include_excluded: bool = False,
 ) -> int:
     """`foil report`: prints Table 1 in short and where the report went. The per-clip table shows each clip's
-    audit from the manifest of ``bundle``, by default the bundle the server last served the study from."""
+    audit from the manifest of ``bundle``, by default the bundle the server last served the study from;
+    ``include_excluded`` analyses every participant, and the report and what it prints say so."""
     if bundle and not (Path(bundle) / "manifest.json").is_file():
         raise ValueError(f"no manifest.json in bundle {bundle}: give the bundle the study was served from")
     fixed = _preregistration(prereg) if prereg else None
     db = analysis_database(database_url)
     try:
         source = analysis_study_text(db, study)
-        data = tally_study(db, source.study, rules)
+        data = tally_study(db, source.study, rules, include_excluded)
         bundle = bundle or served_bundle(db, data.study.study.id)
     finally:
         db.dispose()
     if fixed is not None:
         manifest = Path(bundle) / "manifest.json" if bundle else None
         found = deviations(fixed, source.text, manifest, data.exclusions.after, rules, source.starts)
+        if include_excluded:
+            found.append("excluded participants are analysed (--include-excluded)")
         data = replace(data, prereg=[source.differs, *found] if source.differs else found)
     elif source.differs:
         print(f"warning: {source.differs}", file=sys.stderr)
@@ -741,6 +783,8 @@ def run_report(
         print(f"warning: the report has no figures: they need matplotlib: {FIGURES_EXTRA}", file=sys.stderr)
     e = data.exclusions
     print(f"{e.before} participant{'s' * (e.before != 1)}, {e.after} analysed after exclusions")
+    if e.notice():
+        print(e.notice())
     for row in table1_rows(data):
         if row["scope"] == ALL:
             print(
