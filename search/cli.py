@@ -82,20 +82,27 @@ def _bundle(args: argparse.Namespace) -> int:
 
 
 def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str], scenario: str) -> dict:
+    """A search job's settings from the command line: the solver's lengths of time in seconds by default, each
+    converted by the scenario's step length (``--set horizon_steps=N`` gives steps)."""
+    from search.core.settings import in_steps
     from search.solvers.domain import domain_for
     from search.solvers.reward import RewardConfig
     from search.solvers.runner import parse_settings
     from search.solvers.solver import solver_named
 
     config_class = solver_named(solver).config_class
+    domain = domain_for(agents, scenario)
+    world = domain.parse_world(args.world)
+    given = parse_settings(config_class, args.set, "solver")
     return {
         "budget": args.budget,
         "seed": args.seed,
         "top_k": args.top_k,
-        # without --set, every solver of a study takes its own defaults
-        "solver_config": config_class(**parse_settings(config_class, args.set, "solver")) if args.set else None,
+        "solver_config": config_class(
+            **in_steps(config_class, given, domain.step_seconds(scenario, world), defaults=True)
+        ),
         "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
-        "world_settings": domain_for(agents, scenario).parse_world(args.world),
+        "world_settings": world,
     }
 
 
@@ -124,8 +131,13 @@ def _search_all(args: argparse.Namespace) -> int:
     solvers, agents, scenarios = (comma_separated(a) for a in (args.solvers, args.agents, args.scenarios))
     if len(solvers) > 1 and args.set:
         raise ValueError("--set applies to one solver: give a single --solvers with it")
-    settings = _search_job_settings(args, solvers[0], agents, scenarios[0])
-    jobs = study_jobs(agents, scenarios, solvers, joint=args.joint, **settings)
+    jobs = [
+        job
+        for solver in solvers
+        for job in study_jobs(
+            agents, scenarios, [solver], joint=args.joint, **_search_job_settings(args, solver, agents, scenarios[0])
+        )
+    ]
     study = run_all(
         jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address, progress=not args.quiet
     )
@@ -312,7 +324,8 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="solver setting, e.g. exploration=10 or mode=receding (see docs/search.md)",
+        help="solver setting, e.g. exploration=10 or mode=receding; a length of time in seconds, e.g. horizon=2.5, "
+        "or in steps, e.g. horizon_steps=10 (see docs/search.md)",
     )
     parser.add_argument(
         "--reward",

@@ -27,7 +27,7 @@ from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, parse_study
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
 from search.clips.render import AGENT_STYLES, RenderOptions
-from search.core.settings import check_keys, check_values
+from search.core.settings import check_keys, check_values, in_steps
 from search.solvers.domain import Domain, domain_for
 from search.solvers.reward import RewardConfig
 from search.solvers.solver import Solver, solver_named, solvers
@@ -297,8 +297,13 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
                     problems.append(((*at, key, setting), str(error)))
         if len(problems) > found or solver is None:
             continue
+        step_seconds = domain.step_seconds(build.sets[0].scenarios[0], {}) if domain is not None else None
         try:
-            solver_config = solver.config_class(**checked["settings"])
+            defaults = {}
+            if step_seconds is not None:  # its lengths of time in steps (search.core.settings)
+                defaults = in_steps(solver.config_class, {}, step_seconds, defaults=True)
+                checked["settings"] = in_steps(solver.config_class, checked["settings"], step_seconds)
+            solver_config = solver.config_class(**(defaults | checked["settings"]))
             reward = RewardConfig.from_dict(checked["reward"])
         except (TypeError, ValueError) as error:
             problems.append((at, str(error)))
@@ -314,8 +319,8 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
                 )
             )
             continue
-        if build.budget.clip_seconds is not None and domain is not None:
-            steps = round(build.budget.clip_seconds / domain.step_seconds(build.sets[0].scenarios[0], {}))
+        if build.budget.clip_seconds is not None and step_seconds is not None:
+            steps = round(build.budget.clip_seconds / step_seconds)
             try:
                 solver_config, reward = solver.held_to_clip(solver_config, reward, steps, checked)
             except ValueError as error:

@@ -1,5 +1,6 @@
 """Settings tables (world, reward, network, solver, training): frozen dataclasses read from and written to plain
-dicts, as study, training and summary files hold them, and the one check of their keys that every reader uses."""
+dicts, as study, training and summary files hold them, the one check of their keys that every reader uses, and
+the lengths of time a study or the command line gives in seconds where a dataclass holds steps."""
 
 from __future__ import annotations
 
@@ -17,14 +18,51 @@ def check_keys(given: Iterable[str], known: Iterable[str], what: str) -> None:
         raise ValueError(f"unknown {what}(s) {unknown}; known {what}s: {sorted(known)}")
 
 
+STEPS = "_steps"  # the suffix that gives a length of time in steps: horizon_steps = 10
+
+
+def durations(cls: type) -> dict[str, float]:
+    """The fields of dataclass ``cls`` that are lengths of time, each with its default in seconds (its field's
+    ``seconds`` metadata): the dataclass holds them in steps, a study file or the command line gives them in
+    seconds, or in steps as NAME_steps."""
+    return {f.name: f.metadata["seconds"] for f in fields(cls) if "seconds" in f.metadata}
+
+
 def field_types(cls: type) -> dict[str, type]:
-    """The type of each field of dataclass ``cls``, as its default's type."""
-    return {f.name: type(f.default) for f in fields(cls)}
+    """The type each setting of dataclass ``cls`` is given in: its default's type, and for a length of time
+    (`durations`) seconds as a float or NAME_steps as a whole number."""
+    types = {f.name: type(f.default) for f in fields(cls)}
+    for name in durations(cls):
+        types |= {name: float, name + STEPS: int}
+    return types
+
+
+def in_steps(cls: type, given: dict[str, Any], step_seconds: float, defaults: bool = False) -> dict[str, Any]:
+    """Settings of dataclass ``cls`` as given (`field_types`) with each length of time in steps under its field's
+    name: seconds divided by the world's ``step_seconds`` and rounded, NAME_steps as they are; with ``defaults``,
+    each length not given too, from its default in seconds. The other settings pass through."""
+    settings = dict(given)
+    for name, default in durations(cls).items():
+        steps_name = name + STEPS
+        if name in settings and steps_name in settings:
+            raise ValueError(f"give {name} in seconds or {steps_name} in steps, not both")
+        if steps_name in settings:
+            settings[name] = settings.pop(steps_name)
+        elif name in settings or defaults:
+            seconds = settings.get(name, default)
+            settings[name] = round(seconds / step_seconds)
+            if settings[name] < 1:
+                raise ValueError(
+                    f"{name} = {seconds} s is less than one step of {step_seconds:g} s in this world: give more "
+                    f"seconds, or {steps_name} in steps"
+                )
+    return settings
 
 
 def check_values(cls: type, values: dict[str, Any], what: str) -> dict[str, Any]:
     """Settings for dataclass ``cls`` given as typed values (a study file's table), each checked against its
-    field's type; a whole number is taken where a float is expected, as ``foil search --set key=10`` takes it."""
+    field's type (`field_types`); a whole number is taken where a float is expected, as ``foil search --set
+    key=10`` takes it."""
     types = field_types(cls)
     check_keys(values, types, f"{what} setting")
     settings = {}

@@ -56,7 +56,7 @@ def _sample_batches(
     """Prior-sampled trajectories, ``batch`` at a time, until the budget (or ``stop_after`` trajectories) runs out."""
     started = 0
     while not tracker.exhausted and (stop_after is None or started < stop_after):
-        count = tracker.affordable(batch if stop_after is None else min(batch, stop_after - started))
+        count = tracker.affordable(batch if stop_after is None else min(batch, stop_after - started), problem.horizon)
         started += count
         actions, lengths, returns = fresh(problem, count)
         rollout(problem, tracker, actions, lengths, returns, lambda rows, depth: problem.prior.sample(rng, rows.size))
@@ -78,7 +78,7 @@ def cem(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: CE
     std = np.full(shape, config.initial_std * bound)
     n_elite = max(1, int(config.population * config.elite_fraction))
     while not tracker.exhausted:
-        count = tracker.affordable(config.population)  # the last generation may be cut short by the budget
+        count = tracker.affordable(config.population, problem.horizon)  # the last generation may be cut short
         population = np.clip(mean + std * rng.standard_normal((count, *shape)), -bound, bound)
         actions, lengths, returns = fresh(problem, count)
         rollout(problem, tracker, actions, lengths, returns, lambda rows, depth, p=population: p[rows, depth])

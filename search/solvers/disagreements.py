@@ -30,7 +30,7 @@ disagreements than forks the budget pays for, an evenly spaced share of them is 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -49,7 +49,8 @@ IMPORTANCE = ("auto", "last_state", "outcome")
 @dataclass(frozen=True)
 class DisagreementsConfig:
     episodes: int = 3  # episodes agent A plays
-    horizon: int = 10  # h: steps a clip shows, h/2 before the disagreement and h/2 after
+    # h: steps a clip shows, h/2 before the disagreement and h/2 after; given in seconds (search.core.settings)
+    horizon: int = field(default=10, metadata={"seconds": 2.5})
     overlap: int = 3  # steps of A's trajectory a chosen disagreement may share with another of its episode
     threshold: float = 0.25  # continuous actions: the smallest action gap that counts as a disagreement
     importance: str = "auto"  # "last_state" (values), "outcome" (visible contrast), "auto": values where both have one
@@ -117,7 +118,7 @@ def find(group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget:
     found: list[tuple[int, Any, list]] = []
     running = np.ones(len(group.env), dtype=bool)
     for t in range(group.env.shape[1] - config.horizon // 2 + 1):  # a fork needs room for its branches
-        if tracker.steps >= budget:
+        if tracker.steps + running.sum() > budget:
             break
         before = problem.snapshot()
         _, terminal = problem.step(group.env[:, t])

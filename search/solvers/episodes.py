@@ -60,14 +60,15 @@ def play(
 ) -> np.ndarray:
     """Step the problem's rows under ``env`` (B, horizon, ...) from the step each row has taken so far (``taken``
     (B,), all equal here: zero after a reset) until every row has ended or ``steps`` steps are taken or the budget
-    is spent. ``on_step(t, running)`` sees the problem after each step t (1-based) with the rows still running
-    before it. Returns each row's length (steps until its trajectory ended, or where it stopped)."""
+    no longer pays for a step of every row still running. ``on_step(t, running)`` sees the problem after each step
+    t (1-based) with the rows still running before it. Returns each row's length (steps until its trajectory
+    ended, or where it stopped)."""
     rows = env.shape[0]
     lengths = np.zeros(rows, dtype=np.int64)
     running = np.ones(rows, dtype=bool)
     limit = env.shape[1] if steps is None else min(steps, env.shape[1])
     for t in range(limit):
-        if tracker.exhausted:
+        if running.sum() > tracker.remaining:
             break
         _, terminal = problem.step(env[:, t])
         tracker.count(int(running.sum()))

@@ -29,7 +29,7 @@ measured and only those can be chosen.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,8 +48,10 @@ IMPORTANCE = ("auto", "max_min", "second_best", "rollouts")
 class HighlightsConfig:
     episodes: int = 3  # episodes each agent plays
     highlights: int = 5  # moments in each agent's reel (k)
-    context: int = 10  # steps each moment shows, its important state in the middle
-    gap: int = 10  # fewest steps between two moments' states in one episode (never fewer than the context)
+    # steps each moment shows, its important state in the middle; given in seconds (search.core.settings)
+    context: int = field(default=10, metadata={"seconds": 2.5})
+    # fewest steps between two moments' states in one episode (never fewer than the context); given in seconds
+    gap: int = field(default=10, metadata={"seconds": 2.5})
     importance: str = "auto"  # "max_min", "second_best" (action values), "rollouts"; "auto": max_min where it can
     lookahead: int = 5  # the stand-in's steps after each alternative action
     discount: float = 0.99  # of the stand-in's returns
@@ -142,7 +144,7 @@ def play_agent(group: Episodes, agent: int, tracker: Tracker, config: Highlights
     lengths = np.zeros(len(group.env), dtype=np.int64)
     running = np.ones(len(group.env), dtype=bool)
     for t in range(group.env.shape[1]):
-        if tracker.steps >= budget:
+        if tracker.steps + running.sum() > budget:
             break
         features = problem.features()
         q = None if kind == "rollouts" else q_importance(problem.action_values(agent), kind)

@@ -9,6 +9,8 @@ runs it (the AST toolbox's ``MCTSdpw``), with two changes that make it fast:
   ``rollout_depth`` cuts it), its value is backed up at once and the next iteration is selected into its row,
   so the batch stays full until the budget runs out. Each selection counts its visits at once, so the next one
   sees them and widening stays exact; actions still in flight have no value yet and their siblings go first.
+  The budget is a bound: where it no longer pays for a step of every row in flight, the first rows step and the
+  others' iterations stop unfinished.
 
 Widening: a state node visited n times gets a new action, sampled from the environment action prior, while it has
 fewer than ``k * n**alpha`` actions; otherwise UCT picks ``argmax Q + c * sqrt(ln n / n_a)`` among the actions
@@ -357,6 +359,9 @@ class Rollouts:
         search, tree = self.search, self.search.tree
         self._fill(np.zeros(0, dtype=np.int64))
         while self.n:
+            self._fit_budget()
+            if not self.n:
+                break
             terminal, ended = self._step()
             if not ended.any():
                 continue
@@ -371,6 +376,16 @@ class Rollouts:
                 search.rollout_ends += int(self.lengths[i])
             search.maybe_commit()
             self._fill(ended)
+
+    def _fit_budget(self) -> None:
+        """Keep only the rows the budget still pays a step for (the first ones): the others' iterations stop
+        unfinished, with no backup, so the budget bounds the search's steps."""
+        remaining = self.search.tracker.remaining
+        if self.n > remaining:
+            keep = np.arange(remaining)
+            self._compact(keep)
+            if keep.size:
+                self.search.problem.restore(self.search.problem.snapshot(keep))
 
     def _step(self) -> tuple[np.ndarray, np.ndarray]:
         """One batched step of every row; new tree nodes at the end of their edge. Returns (terminal, ended)."""
@@ -426,7 +441,7 @@ class Rollouts:
         places = ended.tolist() + list(range(n, self.actions.shape[0]))  # ended rows first, then unused ones
         saved = problem.snapshot() if n and search.config.branch == "replay" else None
         snapshots = []
-        while len(snapshots) < len(places) and spare > 0 and search.open:
+        while len(snapshots) < len(places) and spare > 0 and search.open and self._replay_fits():
             i = places[len(snapshots)]
             self.path_lengths[i], edge = search.select(self.paths[i])
             state = tree.links[edge, STATE]
@@ -458,6 +473,12 @@ class Rollouts:
             self._compact(keep)
             if keep.size:
                 problem.restore(problem.snapshot(keep))
+
+    def _replay_fits(self) -> bool:
+        """Whether the budget pays for a new iteration's replay from reset (``branch="replay"``; at most a
+        horizon of steps): a snapshot costs nothing."""
+        search = self.search
+        return search.config.branch == "snapshot" or search.tracker.remaining > search.problem.horizon
 
     def _compact(self, keep: np.ndarray) -> None:
         """Keep rows ``keep`` (in order) as rows 0, 1, ..."""

@@ -1,4 +1,8 @@
-"""What every solver shares: the step budget, the top-K queue, the best-so-far curve, and batched rollouts."""
+"""What every solver shares: the step budget, the top-K queue, the best-so-far curve, and batched rollouts.
+
+The budget is a bound on the simulator steps a search takes (each row of a batch stepped once is one step): no
+solver steps a row the budget no longer pays for. The replays that turn kept trajectories into summaries are not
+searching and are not counted."""
 
 from __future__ import annotations
 
@@ -41,13 +45,13 @@ class Tracker:
     def remaining(self) -> int:
         return max(self.budget - self.steps, 0)
 
-    def affordable(self, count: int) -> int:
-        """How many of ``count`` new trajectories fit in the remaining budget at their mean cost so far (at least
-        one), so a batched solver overshoots its budget by little."""
+    def affordable(self, count: int, longest: int) -> int:
+        """How many of ``count`` new trajectories fit in the remaining budget (at least one): at their mean cost so
+        far, or before any has finished at ``longest``, the most steps one can take. Few of a batch's trajectories
+        are then cut short where the budget ends."""
         if not self.trajectories:
-            return count
-        cost = self.steps / self.trajectories
-        return max(1, min(count, math.ceil(self.remaining / cost)))
+            return max(1, min(count, self.remaining // longest))
+        return max(1, min(count, math.ceil(self.remaining / (self.steps / self.trajectories))))
 
     def count(self, steps: int) -> None:
         self.steps += int(steps)
@@ -89,13 +93,19 @@ def rollout(
     them so far) and ``returns`` (B,) its reward so far; both are extended in place. ``choose(rows, depth)``
     gives the next actions of the rows still running (their original indices and current lengths). Finished
     trajectories go to the tracker. ``on_step(taken, rows, terminal)`` sees the batch after each step, before
-    ended rows are dropped (MCTS snapshots its new tree nodes there). Returns which rows ended; the others were
-    cut by ``max_steps``.
+    ended rows are dropped (MCTS snapshots its new tree nodes there). The budget is a bound: a step takes only the
+    rows the budget still pays for, and the others stop unfinished. Returns which rows ended; the others were cut by
+    ``max_steps`` or the budget.
     """
     rows = np.arange(problem.batch)
     ended = np.zeros(problem.batch, dtype=bool)
     taken = 0
     while rows.size and (max_steps is None or taken < max_steps):
+        if rows.size > tracker.remaining:
+            rows = rows[: tracker.remaining]
+            if not rows.size:
+                break
+            problem.restore(problem.snapshot(np.arange(rows.size)))
         step_actions = choose(rows, lengths[rows])
         reward, terminal = problem.step(step_actions)
         tracker.count(rows.size)
