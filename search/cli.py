@@ -119,6 +119,11 @@ def _search(args: argparse.Namespace) -> int:
     files = run_search(job, progress=not args.quiet)
     out = write_outputs(args.out, files)
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
+    if not any(name.startswith("summary-") for name in files):
+        print(
+            f"warning: {out}: no trajectory ended within the budget of {job.budget} steps: raise --budget (or, for "
+            "a solver with a batch setting, lower it)"
+        )
     warning = json.loads(files["run.json"]).get("vote", {}).get("warning")
     if warning:
         print(f"warning: {out}: {warning}")
@@ -332,7 +337,7 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="reward setting, e.g. norm=squared, alpha=2, horizon=100",
+        help="reward setting, e.g. norm=squared, alpha=2, horizon=100 (steps: the searched clip's length)",
     )
     parser.add_argument(
         "--world",

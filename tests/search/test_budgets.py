@@ -58,3 +58,12 @@ def test_a_search_that_spends_its_budget_stops_on_it_in_the_crowd(solver):
         agents=("lo", "hi"), scenario="paper-bl-tr", solver=solver, budget=777, top_k=2, reward_settings={"horizon": 20}
     )
     assert json.loads(run_search(job)["run.json"])["sim_steps"] == 777
+
+
+def test_a_budget_too_small_for_any_trajectory_says_so(track, capsys, monkeypatch):
+    from search.cli import main
+
+    monkeypatch.chdir(track)
+    args = ["--scenario", "track.toml", "--budget", "19", "--reward", "horizon=6", "--out", "out", "--quiet"]
+    assert main(["search", "--agents", f"{FAST},{SLOW}", *args]) == 0  # MCTS: 64 iterations in flight, 19 steps
+    assert "no trajectory ended within the budget of 19 steps: raise --budget" in capsys.readouterr().out

@@ -173,7 +173,7 @@ def test_first_finish_ends_every_trajectory_at_the_first_robots_end(tmp_path):
     a collision earns no goal term; the clip plays on without pushes (its coda) until the other robot's episode
     ends too or the horizon is reached, and replay reproduces every summary, coda included, exactly."""
     assert (
-        search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "3000", "--top-k", "5") == 0
+        search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "6000", "--top-k", "5") == 0
     )
     ends, codas = set(), 0
     for path in sorted(tmp_path.glob("summary-*.json")):
