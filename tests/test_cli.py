@@ -24,6 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 COMMANDS = [
     "train",
     "release",
+    "worlds",
     "eval",
     "serve",
     "export",
@@ -40,6 +41,7 @@ COMMANDS = [
 OFFLINE_RUNS = {
     "train": ["--config", "train.toml", "--out", "run"],
     "release": ["run"],
+    "worlds": [],
     "eval": ["lo", "--episodes", "2"],
     "render": ["summary.json", "--out", "clip.mp4"],
     "bundle": ["study.toml", "--out", "bundle"],

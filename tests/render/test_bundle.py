@@ -175,7 +175,7 @@ def test_robot_numbers_are_seeded_and_vary_with_the_seed():
         (
             'agents = ["goal", "orca", "social_force"]',
             f"agents = {[f'a{i}' for i in range(43)]}",
-            r"line 22, build\.sets\[0\]\.agents: a ranking shows at most 42 robots",
+            r"line 22, build\.sets\[0\]\.agents: a ranking shows at most 42 agents",
         ),
     ],
 )
@@ -390,7 +390,7 @@ def test_paper_build_reproduces_the_papers_clip_set():
             -1,
             True,
             "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
-            "its clips tend to show the other robot as better than most starting states do",
+            "its clips tend to show the other agent as better than most starting states do",
         ),
         (
             0,
