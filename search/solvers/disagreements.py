@@ -20,8 +20,8 @@ Where none is found, the clip is the first episode with each agent on its own fo
 
 A clip shows h/2 steps of shared history, the moment of disagreement, then the two branches side by side: its
 summary replays the episode with every agent following A up to the fork (``follow``) and shows the ``window``
-from h/2 steps before it to the branches' end. The defaults are the published ones (h = 10, 3 episodes,
-overlap 3); the published summary has K = 5 (``--top-k 5``).
+from h/2 steps before it to the branches' end. The defaults are the published ones (h = 10 steps, given as 2.5 s:
+10 of the crowd's 0.25 s steps; 3 episodes, overlap 3); the published summary has K = 5 (``--top-k 5``).
 
 Budget: finding disagreements may use up to half the simulator steps; the forks use the rest. Where there are more
 disagreements than forks the budget pays for, an evenly spaced share of them is forked.

