@@ -7,7 +7,9 @@ Two kinds of code use it. An adapter brings a Gymnasium environment into Foil (d
 `ActionPrior` over environment actions and the divergence reward's settings, `RewardConfig`), reports their
 endings as the outcome codes, writes `SUMMARY_FORMAT` summaries through `Coupled`, draws its clips with the
 toolkit's H.264 writer (`RenderOptions` in, `RenderResult` out, poster and sheet at `side_paths`) and says what a
-clip visibly shows in which words (`World`).
+clip visibly shows in which words (`World`). A summary method of its own, in a module registered under the
+``foil.solvers`` entry point, is a `ProblemSearch` (a search of the coupled problem that spends a `Tracker`'s
+budget, playing rows from their start with `fresh` and `rollout`) passed to `register`.
 
 The names stay where they are defined; this module only gathers them, so a world's imports do not follow Foil's
 internal layout. Foil's own worlds (search/crowd, search/gym, search/highway) sit below it and import those
@@ -23,6 +25,8 @@ from search.solvers.domain import Coupled, Domain
 from search.solvers.prior import ActionPrior
 from search.solvers.problem import Problem
 from search.solvers.reward import RewardConfig
+from search.solvers.rollout import Tracker, fresh, rollout
+from search.solvers.solver import ProblemSearch, register
 
 __all__ = [
     "COLLISION",
@@ -37,12 +41,17 @@ __all__ = [
     "Coupled",
     "Domain",
     "Problem",
+    "ProblemSearch",
     "RenderOptions",
     "RenderResult",
     "RewardConfig",
     "Shipped",
+    "Tracker",
     "Words",
     "World",
+    "fresh",
     "h264_writer",
+    "register",
+    "rollout",
     "side_paths",
 ]

@@ -5,7 +5,8 @@ A solver runs in one of two ways: a `ProblemSearch` searches the coupled problem
 N-first, random, cross-entropy) and its kept trajectories become the summaries, best first; an `OwnSummaries`
 solver chooses its own summaries (the representative solver, the summary methods that watch agents play) and
 writes a record of how under its own key of run.json. A new solver is one module that defines it and calls
-`register`; Foil's own are the modules in ``BUILTIN``, imported when the registry is first read.
+`register`, named under the ``foil.solvers`` entry point group (name = "module"): Foil's own are registered there
+in its pyproject.toml as a package's are in its own, and every one is imported when the registry is first read.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import import_module
+from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
@@ -24,13 +25,7 @@ if TYPE_CHECKING:
     from search.solvers.rollout import Tracker
 
 DEFAULT_SOLVER = "mcts"
-BUILTIN = (
-    "search.solvers.mcts",
-    "search.solvers.baselines",
-    "search.solvers.representative",
-    "search.solvers.disagreements",
-    "search.solvers.highlights",
-)
+ENTRY_POINTS = "foil.solvers"
 Starts = Literal["fixed", "distribution", "either"]  # the scenarios a solver starts from
 
 
@@ -123,9 +118,10 @@ def register(solver: Solver) -> Solver:
 
 
 def solvers() -> dict[str, Solver]:
-    """Every registered solver by name, Foil's own included."""
-    for module in BUILTIN:
-        import_module(module)
+    """Every registered solver by name: those of every installed ``foil.solvers`` entry point (Foil's own among
+    them) and any registered since."""
+    for entry in entry_points(group=ENTRY_POINTS):
+        entry.load()
     return SOLVERS
 
 

@@ -1,7 +1,8 @@
 """A world from a package of its own (tests/plugin/lineworld: carts on a line in gusts of wind, no Gymnasium
-environment), installed by pip into a folder of its own and found through its ``foil.domains`` entry point alone,
-taken through every command as a researcher runs them: eval, search with two solvers, verify, render, bundle and
-the served survey, in the world's own words."""
+environment, with a summary method of its own), installed by pip into a folder of its own and found through its
+``foil.domains`` and ``foil.solvers`` entry points alone, taken through every command as a researcher runs them:
+eval, search with Foil's solvers and its own, verify, render, bundle and the served survey, in the world's own
+words."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
+import search.solvers.solver as solver_registry
 from app.store.database import migrate
 from app.web.main import create_app
 from app.web.settings import ServerSettings
@@ -95,12 +97,16 @@ def site(tmp_path_factory) -> Path:
 
 @pytest.fixture
 def world(site, tmp_path, monkeypatch):
-    """A researcher's folder with the plugin on the path; the installed worlds are read afresh on both sides."""
+    """A researcher's folder with the plugin on the path; the installed worlds are read afresh on both sides, and
+    the plugin's modules and the solvers they register are gone afterwards, as in a process without it."""
+    monkeypatch.setattr(solver_registry, "SOLVERS", dict(solver_registry.solvers()))
     monkeypatch.syspath_prepend(str(site))
     monkeypatch.chdir(tmp_path)
     domains.cache_clear()
     yield tmp_path
     domains.cache_clear()
+    for name in [name for name in sys.modules if name.split(".")[0] == "lineworld"]:
+        del sys.modules[name]
 
 
 def test_the_plugin_is_found_by_its_names_its_files_and_its_key(world):
@@ -129,7 +135,7 @@ def test_eval_and_train(world, capsys):
     assert "the line world has no trainer of its own" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("solver", ["mcts", "nfirst"])
+@pytest.mark.parametrize("solver", ["mcts", "nfirst", "line-sweep"])  # Foil's own and the plugin's
 def test_search_verify_and_render(world, capsys, solver):
     args = ["--budget", "120", "--top-k", "2", "--out", "out", "--quiet", "--solver", solver]
     assert main(["search", "--agents", PAIR, "--scenario", "line-short", *args]) == 0
