@@ -6,6 +6,10 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+# The columns every world's validation table starts with: the snapshot, its training steps and its reward's mean
+# with the 95% interval over the validation episodes; a world adds the rates it chooses by.
+VALIDATION_COLUMNS = ("checkpoint", "env_steps", "episodes", "reward_mean", "reward_low", "reward_high")
+
 
 class ReleaseError(ValueError):
     """A run from which a world's shipped agents cannot be chosen; the message says why and what to do."""

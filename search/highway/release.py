@@ -17,24 +17,14 @@ import re
 import shutil
 from pathlib import Path
 
-from search.core.release import ReleaseError, write_rows
+from search.core.release import VALIDATION_COLUMNS, ReleaseError, write_rows
 from search.gym.agents import GymAgent, load_sb3
 from search.highway.adapter import AGENTS_DIR, HighwayAdapter
 from search.highway.evaluate import evaluate
 
 VALIDATION_EPISODES = 30
 VALIDATION_SEED, TEST_SEED = 1, 0
-COLUMNS = (
-    "checkpoint",
-    "env_steps",
-    "episodes",
-    "reward_mean",
-    "reward_low",
-    "reward_high",
-    "collision_rate",
-    "collision_low",
-    "collision_high",
-)
+COLUMNS = (*VALIDATION_COLUMNS, "collision_rate", "collision_low", "collision_high")
 REPRODUCE = (
     "foil train --config search/highway/train.toml --out runs/highway\n"
     "foil release runs/highway --out search/highway/agents --every 1 --jobs 3"

@@ -17,7 +17,7 @@ import csv
 import math
 from pathlib import Path
 
-from search.core.release import ReleaseError, write_rows
+from search.core.release import VALIDATION_COLUMNS, ReleaseError, write_rows
 from search.crowd.agents.dsrnn import DSRNN, DSRNNPolicy, NetworkConfig, read_checkpoint, save_checkpoint
 from search.crowd.agents.evaluate import evaluate
 from search.crowd.agents.train import checkpoints
@@ -27,17 +27,7 @@ HORIZON_S = 25.0  # the clips' horizon: 100 steps of 0.25 s
 HI_MIN_SUCCESS, HI_MAX_TIMEOUT = 0.95, 0.03
 PAPER_REWARDS = {"lo": 10.0, "med": 16.5, "hi": 21.5}  # the paper's agents' mean episode rewards
 VALIDATION_SEED, TEST_SEED = 1, 0
-COLUMNS = (
-    "checkpoint",
-    "env_steps",
-    "episodes",
-    "reward_mean",
-    "reward_low",
-    "reward_high",
-    "success_rate",
-    "collision_rate",
-    "timeout_rate",
-)
+COLUMNS = (*VALIDATION_COLUMNS, "success_rate", "collision_rate", "timeout_rate")
 REPRODUCE = "foil train --config search/crowd/agents/train.toml --out runs/agents\nfoil release runs/agents"
 
 
@@ -70,7 +60,7 @@ def validate_run(run_dir: Path, episodes: int, every: int, log=print) -> list[di
                 "reward_mean": round(result["reward_mean"], 4),
                 "reward_low": round(result["reward_ci95"][0], 4),
                 "reward_high": round(result["reward_ci95"][1], 4),
-                **{k: round(result[k], 4) for k in COLUMNS[6:]},
+                **{k: round(result[k], 4) for k in COLUMNS[len(VALIDATION_COLUMNS) :]},
             }
             log(
                 f"{path.name}: {int(data['env_steps']):>9,} steps  reward {result['reward_mean']:6.2f}  "
