@@ -60,6 +60,10 @@ class SummaryStep(TypedDict):
     other_positions: list[Any]
     agent_positions: list[list[float]]  # [x, y] per agent
     agent_actions: list[list[float]]  # the action each agent chose on this step
+    scores: NotRequired[list[float]]  # each agent's visible score after the step, where its world shows one
+    # where each agent has its own world and other_positions shows none of it: per agent, the sha256 of its world's
+    # observation and state after the step (a Gymnasium adapter without others), so verify sees the whole world
+    world_digests: NotRequired[list[str]]
 
 
 class SummaryOutcome(TypedDict):

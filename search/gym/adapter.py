@@ -19,12 +19,13 @@ episode's end reads as Foil's events. Copy this template and fill it in (docs/gy
         def position(self, env):
             return env.unwrapped.agent_xy                   # where the agent is, as a vector
 
-        def outcome(self, terminated, truncated, info):     # optional: the default reads info["crashed"]
+        def outcome(self, terminated, truncated, info, reward, env):  # optional: the default reads info["crashed"]
             ...
 
-``snapshot_env``/``restore_env`` may be overridden with a faster state get/set where the environment has one; by
-default a snapshot is a deep copy of the environment (wrappers, the unwrapped environment and its random
-generator).
+``snapshot_env``/``restore_env`` may be overridden with a faster state get/set where the environment has one, and
+must be where it cannot be deep-copied; by default a snapshot is a deep copy of the environment (wrappers, the
+unwrapped environment and its random generator). ``others`` (optional) lists what else of the world a summary
+records; without it a summary records a digest of each instance's observation and state (`search.gym.world_state`).
 
 Clips need nothing more: the generic renderer draws the environment's own ``render()`` frames. Optional hooks
 (``view_settings``, ``record``, ``mark_agent``, ``crash_point``, ``caption``, ``status_words``, at the class's end)
@@ -34,24 +35,26 @@ say what it cannot know; ``renderer`` names a renderer of the adapter's own.
 from __future__ import annotations
 
 import copy
+import inspect
 import os
 import sys
 from abc import ABC, abstractmethod
 from importlib import import_module
-from typing import ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from app.visible import Words, World
+from app.visible import Score, Words, World
 
 EVENTS = ("success", "collision", "timeout")
 GENERIC_WORDS = Words(
+    agent="Agent",
     clip_title="Clip of two agents side by side, each in its own copy of the same world",
     reels_intro="Each agent is shown on its own, in moments from its own runs.",
     reel_title="Clip of one agent on its own",
     example_caption="An example: two agents, each in its own copy of the same world, side by side.",
     legend_robots=(
-        "Agents: each view shows one agent, named below the picture, such as Robot 7, with a colour and a shape"
+        "Agents: each view shows one agent, named below the picture, such as Agent 7, with a colour and a shape"
         " of its own."
     ),
     others_marker="",
@@ -69,6 +72,16 @@ GENERIC_WORDS = Words(
     timeout="ran out of time",
     running="was still going when the clip ended",
     close_call="",
+    names=(
+        "Every agent has a name (such as Agent 7), colour and shape of its own. A name never stands for two"
+        " different agents in this study, and in a ranking round each name is one agent in all of the round's"
+        " clips. Each new round brings agents with new names."
+    ),
+    names_in_round="In this round each name, colour and shape is one agent in all three clips.",
+    new_round=(
+        "A new round begins. Its agents have names you have not seen in the earlier rounds: judge them from this"
+        " round's clips."
+    ),
 )
 
 
@@ -78,13 +91,16 @@ class Adapter(ABC):
     ``rule`` and ``words`` are what a clip visibly shows and how participants read it (`app.visible.World`):
     "goal" where an agent should reach something (sooner is better), "survival" where it should last (a car
     that crashes later did better); the words name the agents' outcomes on the survey's pages, in the clip audit
-    and the report."""
+    and the report. ``score`` (an `app.visible.Score`, with ``measure``) is a quantity each view shows as it
+    changes: "score" judges a world of reward alone by it (no goal, no crash), and in the others it breaks ties.
+    Foil never guesses one: only an adapter that declares it has one."""
 
     env_action_shape: tuple[int, ...] = ()
     dt: float = 1.0
     domain: str = "gym"
     rule: str = "goal"
     words: Words = GENERIC_WORDS
+    score: Score | None = None  # the visible score each view shows, read by ``measure`` after each step
 
     def __init__(self, settings: dict | None = None):
         self.settings = dict(settings or {})
@@ -102,20 +118,35 @@ class Adapter(ABC):
     def position(self, env) -> np.ndarray:
         """Where the agent is, as a float vector: the state divergence compares these between agents."""
 
-    def outcome(self, terminated: bool, truncated: bool, info: dict) -> str:
+    def outcome(self, terminated: bool, truncated: bool, info: dict, reward: float = 0.0, env: Any = None) -> str:
         """Foil's event for an episode that ended: ``success``, ``collision`` (a crash or any failure) or
-        ``timeout``. Default: a crash (``info["crashed"]``) or any other termination is a collision unless
-        ``info["is_success"]`` says it reached its goal; a truncation is a timeout."""
+        ``timeout``, from the last step's flags, ``info``, ``reward`` and the environment after it (a world whose
+        ``info`` is empty may read success from the reward). Default: a crash (``info["crashed"]``) or any other
+        termination is a collision unless ``info["is_success"]`` says it reached its goal; a truncation is a
+        timeout. An override with the older signature ``(terminated, truncated, info)`` still works."""
         if terminated:
             return "success" if info.get("is_success") and not info.get("crashed") else "collision"
         return "timeout"
 
     def world(self) -> World:
-        return World(domain=self.domain, rule=self.rule, words=self.words)
+        return World(domain=self.domain, rule=self.rule, words=self.words, score=self.score)
+
+    def measure(self, env) -> float:
+        """The visible score's value in ``env`` after a step (and after the reset), where ``score`` declares one:
+        what the view shows, such as the distance travelled or the error from a set point."""
+        raise NotImplementedError(f"{type(self).__name__} declares a visible score but no measure(env) to read it")
 
     def snapshot_env(self, env):
         """A copy of ``env`` that later steps of ``env`` cannot change."""
-        return copy.deepcopy(env)
+        try:
+            return copy.deepcopy(env)
+        except (TypeError, copy.Error, RecursionError) as error:
+            raise ValueError(
+                f"{type(self).__name__}: Foil cannot deep-copy the environment ({type(error).__name__}: {error}); it "
+                "copies it to branch searches and replay summaries. Define snapshot_env(env) and restore_env(saved) "
+                "on the adapter with the environment's own state get/set (docs/gym.md, 'Environments that cannot be "
+                "copied')"
+            ) from None
 
     def restore_env(self, saved):
         """An environment in the saved state; ``saved`` itself must stay usable for further restores."""
@@ -130,7 +161,9 @@ class Adapter(ABC):
         return None
 
     def others(self, env) -> list:
-        """What else a clip or a summary shows of the world, as [[x, y], ...] (default: nothing)."""
+        """What else a clip or a summary shows of the world, as [[x, y], ...] (default: nothing). An adapter that
+        defines it has its summaries record it each step in place of a digest of the world's state, so it should
+        show whatever an environment action changes."""
         return []
 
     # Clips (search/gym/clips.py): what the generic renderer cannot know. Every hook has a default, so an adapter
@@ -170,6 +203,35 @@ class Adapter(ABC):
         return ""
 
 
+class Ending(Protocol):
+    def __call__(self, terminated: bool, truncated: bool, info: dict, reward: float, env: Any) -> str: ...
+
+
+def ending(adapter: Adapter) -> Ending:
+    """The adapter's ``outcome`` as a call with the step's reward and environment, checked once: an override with
+    the older ``(terminated, truncated, info)`` is called without them; the event must be one of ``EVENTS``."""
+    parameters = inspect.signature(adapter.outcome).parameters.values()
+    positional = [p for p in parameters if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    takes_all = len(positional) >= 5 or any(p.kind is p.VAR_POSITIONAL for p in parameters)
+    if not takes_all and len(positional) != 3:
+        raise ValueError(
+            f"{type(adapter).__name__}.outcome takes {len(positional)} arguments: define it as "
+            "outcome(self, terminated, truncated, info, reward, env)"
+        )
+
+    def read(terminated: bool, truncated: bool, info: dict, reward: float, env: Any) -> str:
+        event = (
+            adapter.outcome(terminated, truncated, info, reward, env)
+            if takes_all
+            else adapter.outcome(terminated, truncated, info)
+        )
+        if event not in EVENTS:
+            raise ValueError(f"adapter outcome {event!r}: use one of {EVENTS}")
+        return event
+
+    return read
+
+
 def load_adapter(spec: str, settings: dict | None = None) -> Adapter:
     """An adapter from ``module:Class`` and its settings."""
     if ":" not in spec:
@@ -181,6 +243,12 @@ def load_adapter(spec: str, settings: dict | None = None) -> Adapter:
     shape = tuple(adapter.env_action_shape)
     if not shape or int(np.prod(shape)) < 1:
         raise ValueError(f"adapter {spec!r} defines no environment action: set env_action_shape, e.g. (2,)")
+    if adapter.score is not None and type(adapter).measure is Adapter.measure:
+        raise ValueError(
+            f"adapter {spec!r} declares the visible score {adapter.score.name!r} but not how to read it: define "
+            "measure(self, env) -> float (docs/gym.md, 'A visible score')"
+        )
+    adapter.world()  # a rule without what it judges by is refused here, before any search
     return adapter
 
 

@@ -43,10 +43,12 @@ from search.clips.render import (
     agent_numbers,
     agent_style,
     encode,
+    fit_text,
     paint_burst,
     paste,
     round16,
     sprite,
+    text_width,
 )
 from search.clips.windows import follow_of, window_of
 from search.gym.adapter import Adapter, import_attribute, load_adapter
@@ -169,6 +171,7 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
     colours = [agent_style(n)[0] for n in numbers]
     views: list[list[np.ndarray]] = [[] for _ in agents]
     captions: list[list[str]] = [[] for _ in agents]
+    measured: list[list[float]] = [[] for _ in agents]  # each state's visible score, where the adapter has one
     parting_points: list[tuple[float, float] | None] = [None] * len(agents)
     frames_per_step = 1
 
@@ -183,6 +186,8 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
             adapter.mark_agent(env, colours[k])
             views[k].append(frame(env))
             captions[k].append(adapter.caption(env))
+            if adapter.score is not None:
+                measured[k].append(float(adapter.measure(env)))
         if int(p.t[0]) == parting_step:
             parting_points[:] = [adapter.crash_point(instance.env) for instance in p.rows[0]]
 
@@ -199,9 +204,12 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
     if summary.get("window") is not None:  # its states, the clock from its first; an outcome after it is running
         views = [_part(frames, first * frames_per_step, last * frames_per_step) for frames in views]
         captions = [_part(texts, first, last) for texts in captions]
+        measured = [_part(values, first, last) for values in measured]
         outcomes = [
             ("running", math.inf) if e == "running" or w > t1 + 1e-6 else (e, max(w - t0, 0.0)) for e, w in outcomes
         ]
+    if adapter.score is not None:
+        captions = [scored(adapter, texts, values) for texts, values in zip(captions, measured, strict=True)]
     shown = (follow[0],) if follow is not None and follow[1] >= steps else None  # followed throughout: alone
     scene = GymScene(
         views,
@@ -216,6 +224,14 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
         parting_points=parting_points,
     )
     return scene, adapter
+
+
+def scored(adapter: Adapter, captions: list[str], measured: list[float]) -> list[str]:
+    """Each state's caption with the visible score after it (`app.visible.Score.caption`): its value, and for a mean
+    or a band what the clip summed so far; a view that stopped keeps its last caption, as its last frame."""
+    assert adapter.score is not None
+    texts = [adapter.score.caption(now, measured[1 : i + 1], adapter.dt) for i, now in enumerate(measured)]
+    return [" · ".join(filter(None, (caption, text))) for caption, text in zip(captions, texts, strict=True)]
 
 
 def _part(items: list, first: int, last: int) -> list:
@@ -289,9 +305,11 @@ class GymClipRenderer(ClipRenderer):
 
     def _draw_status(self, image: Image.Image, k: int, corner: tuple[int, int], event: str, when: float, t: float):
         """Under a view: the robot's icon and label, its caption at the right, and how it is doing (beside the
-        label under a full-width view, else on a second line)."""
+        label under a full-width view, else on a second line). The status fits between its start and the view's
+        right margin, the caption in what the label and the status leave of its line (`fit_text`)."""
         lay = self.layout
         x0, y = corner[0], corner[1] + lay.text * 0.95
+        right, gap = x0 + lay.panel - lay.text * 0.6, lay.text * 0.8
         icon = self.sprites.icons[self.numbers[k]]
         paste(image, icon, (x0 + lay.text * 0.6 + icon[1], y))
         label = self.draw_text(
@@ -303,17 +321,25 @@ class GymClipRenderer(ClipRenderer):
             "lm",
             True,
         )
-        caption = self.scene.caption(k, t)
-        if caption:
-            self.draw_text(image, (x0 + lay.panel - lay.text * 0.6, y), caption, lay.text, INK, "rm")
         status = self.adapter.status_words[event or "running"]
         if event in ("success", "collision"):
             status += f" · {when:.{self.digits}f} s"
-        xy = (label[2] + lay.text * 0.8, y) if lay.columns == 1 else (x0 + lay.text * 2.4, y + lay.text * 1.5)
-        if event == "collision":
-            self.draw_tag(image, xy, status, lay.text, "lm")
+        xy = (label[2] + gap, y) if lay.columns == 1 else (x0 + lay.text * 2.4, y + lay.text * 1.5)
+        tagged, caption = event == "collision", self.scene.caption(k, t)
+        pad = lay.text * 0.25 if tagged else 0.0  # of a tag's box beyond its text
+        room = right - xy[0] - pad
+        if lay.columns == 1 and caption:  # the status and the caption share the line: each keeps half of it
+            room = max(room / 2, room - text_width(caption, lay.text) - gap)
+        status, size = fit_text(status, lay.text, room, tagged)
+        if caption:
+            after = xy[0] + text_width(status, size, tagged) + pad if lay.columns == 1 else label[2]
+            caption, caption_size = fit_text(caption, lay.text, right - after - gap)
+            if caption:
+                self.draw_text(image, (right, y), caption, caption_size, INK, "rm")
+        if tagged:
+            self.draw_tag(image, xy, status, size, "lm")
         else:
-            self.draw_text(image, xy, status, lay.text, INK if event else MUTED, "lm")
+            self.draw_text(image, xy, status, size, INK if event else MUTED, "lm")
 
 
 def render_gym(

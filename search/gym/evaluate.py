@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from search.gym.adapter import EVENTS, Adapter
+from search.gym.adapter import EVENTS, Adapter, ending
 from search.gym.agents import GymAgent
 
 EPISODE_BASE = 1_000_000
@@ -30,7 +30,7 @@ def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter, per_ep
     with ``per_episode``, each episode's reward too (``episode_rewards``)."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
-    env = adapter.make()
+    env, outcome = adapter.make(), ending(adapter)
     events, rewards, steps = [], [], []
     for i in range(episodes):
         observation, _ = env.reset(seed=EPISODE_BASE * (seed + 1) + i)
@@ -38,7 +38,7 @@ def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter, per_ep
         while not done:
             observation, reward, terminated, truncated, info = env.step(agent.act(np.asarray(observation)[None])[0])
             total, taken, done = total + float(reward), taken + 1, bool(terminated or truncated)
-        events.append(adapter.outcome(bool(terminated), bool(truncated), info))
+        events.append(outcome(bool(terminated), bool(truncated), info, float(reward), env))
         rewards.append(total)
         steps.append(taken)
     limit = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None

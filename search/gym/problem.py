@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from search.core.outcomes import OUTCOME_NAMES, RUNNING
-from search.gym.adapter import EVENTS, Adapter, load_adapter
+from search.gym.adapter import Adapter, ending, load_adapter
 from search.gym.agents import GymAgent
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
@@ -81,6 +81,7 @@ class Instance:
     outcome: int = RUNNING
     event_step: int = 0  # the step its episode ended on (0 while running)
     path_length: float = 0.0
+    measured: list[float] = field(default_factory=list)  # the visible score after each step, where one is declared
 
 
 @dataclass
@@ -161,6 +162,7 @@ class GymCoupledProblem:
             raise ValueError("a comparison needs at least two agents")
         self.agents, self.scenario = agents, scenario
         self.adapter = adapter or scenario.load_adapter()
+        self.ending = ending(self.adapter)
         self.reward_config = reward or RewardConfig()
         if self.reward_config.heuristic != "state_divergence":
             raise ValueError(
@@ -193,14 +195,18 @@ class GymCoupledProblem:
     def _save(self, row: list[Instance]) -> list[Instance]:
         """A row as saved instances (``env`` holds the adapter's snapshot of the environment)."""
         return [
-            Instance(self.adapter.snapshot_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
+            Instance(
+                self.adapter.snapshot_env(i.env), i.observation, i.outcome, i.event_step, i.path_length, [*i.measured]
+            )
             for i in row
         ]
 
     def _load(self, row: list[Instance]) -> list[Instance]:
         """Live instances from a saved row, which stays usable."""
         return [
-            Instance(self.adapter.restore_env(i.env), i.observation, i.outcome, i.event_step, i.path_length)
+            Instance(
+                self.adapter.restore_env(i.env), i.observation, i.outcome, i.event_step, i.path_length, [*i.measured]
+            )
             for i in row
         ]
 
@@ -230,15 +236,15 @@ class GymCoupledProblem:
                     after = np.array(self.adapter.position(instance.env), dtype=np.float64)
                     instance.path_length += float(np.linalg.norm(after - before))
                     if terminated or truncated:
-                        event = self.adapter.outcome(bool(terminated), bool(truncated), info)
-                        if event not in EVENTS:
-                            raise ValueError(f"adapter outcome {event!r}: use one of {EVENTS}")
+                        event = self.ending(bool(terminated), bool(truncated), info, float(reward), instance.env)
                         instance.outcome, instance.event_step = OUTCOME_NAMES.index(event), int(self.t[b])
                         newly_done[b, k] = True
                     row_scaled.append(self.divergence.scaled(agent_actions[k][b]))
                 else:
                     row_scaled.append(self.divergence.finished())
                 row_positions.append(np.array(self.adapter.position(instance.env), dtype=np.float64))
+                if self.adapter.score is not None:  # a finished instance stands still: its score is read as shown
+                    instance.measured.append(float(self.adapter.measure(instance.env)))
                 outcome[b, k] = instance.outcome
             scaled.append(row_scaled)
             positions.append(row_positions)

@@ -3,8 +3,11 @@
 A summary (``foil.summary/2``, as in every world) is built from a replay of its environment actions at batch size
 1; its scenario holds the adapter, its settings and the seed, so ``verify`` needs nothing else. Per step it
 records each agent's ``position`` (as ``agent_positions``), its action (``agent_actions``) and what else the
-adapter shows of its instance's world (``other_positions``: one list per agent). ``min_other_distance`` is null:
-a generic environment has no other movers to measure against.
+adapter shows of its instance's world (``other_positions``: one list per agent); where the adapter shows nothing
+else (no ``others``), a digest of each instance's observation and state instead (``world_digests``,
+`search.gym.world_state`), so ``verify`` sees every change of the world. ``min_other_distance`` is null: a generic
+environment has no other movers to measure against. Where the adapter declares a visible score, each step also
+records each agent's value of it (``scores``), which the clip shows and its viewers judge by (`app.visible.Score`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from app.formats import SUMMARY_FORMAT
 from search.core.outcomes import OUTCOME_NAMES
 from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
+from search.gym.world_state import describes_others, world_digest
 from search.solvers.follow import Follow, recorded
 from search.solvers.reward import TERMS, RewardConfig, sequential_sum
 
@@ -26,9 +30,10 @@ def _floats(value) -> list:
     return np.asarray(value, dtype=np.float64).tolist()
 
 
-def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -> dict:
+def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None, digests: bool = False) -> dict:
     """Step a batch-1 problem through ``env_actions``; per step the record a summary holds, and the reward terms.
-    ``on_state(problem)`` sees the problem after the reset and after each step (the clips render it there)."""
+    ``on_state(problem)`` sees the problem after the reset and after each step (the clips render it there); with
+    ``digests`` each step records each instance's ``world_digests`` too (a clip's rendering replay needs none)."""
     problem.reset(1)
     if on_state is not None:
         on_state(problem)
@@ -61,6 +66,10 @@ def replay(problem: GymCoupledProblem, env_actions: np.ndarray, on_state=None) -
                 "agent_actions": [_floats(np.asarray(a).reshape(-1)) for a in problem.last_agent_actions[0]],
             }
         )
+        if problem.adapter.score is not None:
+            steps[-1]["scores"] = [instance.measured[-1] for instance in row]
+        if digests:
+            steps[-1]["world_digests"] = [world_digest(problem.adapter, each.env, each.observation) for each in row]
         if on_state is not None:
             on_state(problem)
         if terminal[0]:
@@ -89,7 +98,7 @@ def build_gym_summary(
     (`search.solvers.follow`); ``window`` is the part a clip shows."""
     problem = GymCoupledProblem(agents, scenario, reward_config)
     problem.override = follow
-    record = replay(problem, env_actions)
+    record = replay(problem, env_actions, digests=not describes_others(problem.adapter))
     dt = problem.adapter.dt
     summary = {
         "format": SUMMARY_FORMAT,

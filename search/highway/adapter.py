@@ -26,6 +26,7 @@ part, the header says so in a driver's words.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -118,7 +119,7 @@ class HighwayAdapter(Adapter):
         ego = env.unwrapped.vehicle
         return [np.asarray(v.position, dtype=np.float64).tolist() for v in env.unwrapped.road.vehicles if v is not ego]
 
-    def outcome(self, terminated: bool, truncated: bool, info: dict) -> str:
+    def outcome(self, terminated: bool, truncated: bool, info: dict, reward: float = 0.0, env: Any = None) -> str:
         """A crash, or leaving the road, is a collision; lasting the whole drive is a success (there is no goal
         to reach on a highway: getting through the traffic is it)."""
         if terminated:

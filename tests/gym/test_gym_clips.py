@@ -97,7 +97,7 @@ def summary_file(tmp_path_factory):
         agents=("tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"),
         scenario=str(folder / "track.toml"),
         solver="random",
-        budget=2,
+        budget=12,
         top_k=1,
         solver_config=SamplingConfig(batch=1),
     )
@@ -125,7 +125,7 @@ def test_views_keep_the_environments_shape_side_by_side_in_robot_number_order(su
     lay = renderer.layout
     assert lay.columns == 2 and abs(lay.view_height / lay.panel - 80 / 120) < 1 / lay.panel  # never squeezed
     image = np.asarray(renderer.draw(renderer.frames[-1]))
-    for slot, (k, number) in enumerate([(1, 1), (0, 3)]):  # Robot 1 (the slow agent) first
+    for slot, (k, number) in enumerate([(1, 1), (0, 3)]):  # Agent 1 (the slow agent) first
         assert renderer.order[slot] == k
         x0, y0 = lay.origin(slot)
         view = image[y0 : y0 + lay.view_height, x0 : x0 + lay.panel]
@@ -145,7 +145,7 @@ def test_views_keep_the_environments_shape_side_by_side_in_robot_number_order(su
     ]
     assert yellow[1] < yellow[0] / 4  # the burst gives way to a small mark
     words = TrackAdapter.status_words
-    assert {"Robot 1", "Robot 3", words["timeout"]} <= renderer.texts
+    assert {"Agent 1", "Agent 3", words["timeout"]} <= renderer.texts
     assert any(text.startswith(words["collision"]) for text in renderer.texts)
     assert not any("fast" in text or "slow" in text for text in renderer.texts)  # never the real names
 
@@ -194,14 +194,14 @@ def test_a_window_shows_its_states_with_the_clock_from_zero(tmp_path, summary_fi
 
 
 def test_a_leader_followed_throughout_is_shown_alone(summary_file):
-    """Every agent took the slow agent's actions on every step: one full-width view, the slow agent's (Robot 1)."""
+    """Every agent took the slow agent's actions on every step: one full-width view, the slow agent's (Agent 1)."""
     renderer = GymClipRenderer(with_keys(summary_file, follow={"leader": 1, "steps": 6}), [3, 1], RenderOptions(**FAST))
     assert renderer.order == [1] and renderer.layout.columns == 1 and renderer.layout.panel == 480
     for frame in (renderer.frames[0], renderer.frames[-1]):
         image = renderer.draw(frame)
         assert colour_mask(image, agent_style(3)[0], tolerance=20).sum() == 0
         assert colour_mask(image, agent_style(1)[0], tolerance=3).sum() > 20
-    assert "Robot 1" in renderer.texts and "Robot 3" not in renderer.texts
+    assert "Agent 1" in renderer.texts and "Agent 3" not in renderer.texts
 
 
 class PartingAdapter(TrackAdapter):
@@ -237,7 +237,7 @@ def test_highway_cars_part_in_a_drivers_words(tmp_path):
         agents=("tests.highway.drivers:cruise", "tests.highway.drivers:cautious"),
         scenario="highway-dense",
         solver="random",
-        budget=20,
+        budget=400,
         top_k=1,
         solver_config=SamplingConfig(batch=1),
     )

@@ -73,7 +73,7 @@ def test_steps_and_snapshots_as_the_highway_env_problem(agents, discrete):
 def test_a_search_finds_the_same_scenarios(agents):
     scenario, found = SCENARIOS["highway-light"], []
     for problem in (GymCoupledProblem(agents, scenario), coupled_problem(agents, scenario, RewardConfig())):
-        tracker = Tracker(8, 2)
+        tracker = Tracker(2 * problem.horizon, 2)  # two whole trajectories, one per row
         mcts(problem, tracker, np.random.default_rng(0), MCTSConfig(batch=2))
         found.append([(f.reward, f.actions.tobytes()) for f in tracker.queue.ranked()])
     assert isinstance(problem, KernelCoupledProblem)
