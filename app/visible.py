@@ -104,19 +104,19 @@ class Score:
         return (1.0 if self.better == "higher" else -1.0) * summed / max(scale, 1e-9)
 
     def value_text(self, value: float) -> str:
-        """A value as the clip writes it: ``error 0.04``, ``distance 12.3 m``."""
+        """A value as the pages write it: ``error 0.04``, ``distance 12.3 m``."""
         return f"{self.name} {value:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
 
     def caption(self, now: float, since_first: Sequence[float], dt: float) -> str:
-        """What a view shows under it at a state, short enough for the line beside its label: the value ``now``,
-        or for a mean or a band what the clip has summed so far over ``since_first`` (the values of the states
-        after its first)."""
-        if self.summed == "final":
-            return self.value_text(now)
-        summed = self.of(since_first, dt) if since_first else (now if self.summed == "mean" else 0.0)
-        if self.summed == "mean":
-            return f"mean {self.value_text(summed)}"
-        return f"{one_decimal(summed)} s in band"
+        """What a view shows under it at a state, number first so a line too short for the name still shows it
+        (`search.clips.render.fit_text` cuts the end): the value ``now`` (``12.3 m distance``), or for a mean or a
+        band what the clip has summed so far over ``since_first``, the values of the states after its first
+        (``0.35 rad mean angle error``, ``1.2 s in band``)."""
+        if self.summed == "band":
+            return f"{one_decimal(self.of(since_first, dt) if since_first else 0.0)} s in band"
+        summed = self.of(since_first, dt) if since_first and self.summed == "mean" else now
+        number = f"{summed:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
+        return f"{number} {'mean ' if self.summed == 'mean' else ''}{self.name}"
 
     def describe(self, summed: float) -> str:
         """A clip's sum in words, after an agent's label."""

@@ -7,16 +7,17 @@ Two kinds of code use it. An adapter brings a Gymnasium environment into Foil (d
 `ActionPrior` over environment actions and the divergence reward's settings, `RewardConfig`), reports their
 endings as the outcome codes, writes `SUMMARY_FORMAT` summaries through `Coupled`, draws its clips with the
 toolkit's H.264 writer (`RenderOptions` in, `RenderResult` out, poster and sheet at `side_paths`) and says what a
-clip visibly shows in which words (`World`). A summary method of its own, in a module registered under the
-``foil.solvers`` entry point, is a `ProblemSearch` (a search of the coupled problem that spends a `Tracker`'s
-budget, playing rows from their start with `fresh` and `rollout`) passed to `register`.
+clip visibly shows in which words (`World`), with a `Score` where a clip is judged by a number it shows. A summary
+method of its own, in a module registered under the ``foil.solvers`` entry point, is a `ProblemSearch` (a search
+of the coupled problem that spends a `Tracker`'s budget, playing rows from their start with `fresh` and
+`rollout`) passed to `register`.
 
 The names stay where they are defined; this module only gathers them, so a world's imports do not follow Foil's
 internal layout. Foil's own worlds (search/crowd, search/gym, search/highway) sit below it and import those
 modules directly (tests/test_layers.py)."""
 
 from app.formats import SUMMARY_FORMAT
-from app.visible import Words, World
+from app.visible import Score, Words, World
 from search.clips.render import RenderOptions, RenderResult, h264_writer, side_paths
 from search.core.outcomes import COLLISION, OUTCOME_NAMES, RUNNING, SUCCESS, TIMEOUT
 from search.core.world import Claim, Shipped
@@ -45,6 +46,7 @@ __all__ = [
     "RenderOptions",
     "RenderResult",
     "RewardConfig",
+    "Score",
     "Shipped",
     "Tracker",
     "Words",

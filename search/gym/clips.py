@@ -304,9 +304,9 @@ class GymClipRenderer(ClipRenderer):
         return (since if math.isfinite(since) else frame.time - when) < BURST_SECONDS
 
     def _draw_status(self, image: Image.Image, k: int, corner: tuple[int, int], event: str, when: float, t: float):
-        """Under a view: the robot's icon and label, its caption at the right, and how it is doing (beside the
-        label under a full-width view, else on a second line). The status fits between its start and the view's
-        right margin, the caption in what the label and the status leave of its line (`fit_text`)."""
+        """Under a view: the agent's icon and label, then how it is doing (beside the label under a full-width view,
+        else on a second line), and its caption at the right of whichever line leaves it more room. The status fits
+        between its start and the view's right margin, the caption in what is left of its line (`fit_text`)."""
         lay = self.layout
         x0, y = corner[0], corner[1] + lay.text * 0.95
         right, gap = x0 + lay.panel - lay.text * 0.6, lay.text * 0.8
@@ -331,11 +331,12 @@ class GymClipRenderer(ClipRenderer):
         if lay.columns == 1 and caption:  # the status and the caption share the line: each keeps half of it
             room = max(room / 2, room - text_width(caption, lay.text) - gap)
         status, size = fit_text(status, lay.text, room, tagged)
-        if caption:
-            after = xy[0] + text_width(status, size, tagged) + pad if lay.columns == 1 else label[2]
+        if caption:  # after the status, or under a view of a column after the label where that leaves more room
+            lines = [(xy[0] + text_width(status, size, tagged) + pad, xy[1])]
+            after, line = min(lines + ([(label[2], y)] if lay.columns > 1 else []))
             caption, caption_size = fit_text(caption, lay.text, right - after - gap)
             if caption:
-                self.draw_text(image, (right, y), caption, caption_size, INK, "rm")
+                self.draw_text(image, (right, line), caption, caption_size, INK, "rm")
         if tagged:
             self.draw_tag(image, xy, status, size, "lm")
         else:

@@ -19,10 +19,10 @@ from PIL import Image
 from app.analysis.bots import Bot, ClipIndex
 from app.store.database import migrate
 from app.survey.kinds import pilot_token
-from app.visible import Observer, Score, VisibleClip, World, audit
+from app.visible import Observer, VisibleClip, World, audit
 from app.web.main import create_app
 from app.web.settings import ServerSettings
-from search.api import Adapter
+from search.api import Adapter, Score
 from search.cli import main
 from search.clips.render import RenderOptions, fit_text, text_width
 from search.gym.clips import GymClipRenderer
@@ -265,7 +265,7 @@ def test_a_score_reads_as_a_viewer_reads_it():
     assert audit(VisibleClip(("A", "B"), ({}, {}), (0.0, 0.0), 5.0, world=world, summed=(0.2, 0.2)), "A")["shows"] == (
         "tie"  # sums that read the same on screen
     )
-    assert error.caption(0.44, [0.1, 0.3], 0.25) == "mean error 0.2"
+    assert error.caption(0.44, [0.1, 0.3], 0.25) == "0.2 mean error"
     assert HOLD.caption(0.3, [0.0, 0.1, 0.3], 0.5) == "1.0 s in band"
     assert World.from_manifest(world.to_manifest()) == world
     assert "score" not in World(domain="gym", rule="goal").to_manifest()

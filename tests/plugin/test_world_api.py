@@ -12,6 +12,7 @@ LINEWORLD = tuple((Path(__file__).parent / "lineworld" / "lineworld").glob("*.py
 ADAPTERS = (
     ROOT / "tests" / "gym" / "corridor.py",
     ROOT / "tests" / "gym" / "test_gym_clips.py",
+    ROOT / "tests" / "gym" / "test_visible_score.py",
     ROOT / "docs" / "examples" / "cartpole" / "cartpole_push.py",
 )
 
