@@ -228,7 +228,7 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
         for outcome, step in coupled.problem.endings(row)
     )
     end_s = max((steps - since) * dt, 1e-6)
-    score, instances = coupled.world.score, coupled.problem.rows[row]
-    summed = () if score is None else tuple(score.of(i.measured[since:steps], dt) for i in instances)
+    score = coupled.world.score
+    summed = () if score is None else tuple(score.of(i.measured[since:steps], dt) for i in coupled.problem.rows[row])
     clip = VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world, summed=summed)
     return visible_contrast(clip)

@@ -44,7 +44,7 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     from app.web.main import create_app
     from app.web.settings import ServerSettings
 
-    text = STUDY.read_text().replace("budget = 600", "budget = 4").replace("episodes = 100", "episodes = 3")
+    text = STUDY.read_text().replace("budget = 600", "budget = 40").replace("episodes = 100", "episodes = 3")
     text = text.replace("budget = 5_000", "budget = 200").replace("states = 64", "states = 2")
     text = text.replace(
         "[build.eval]",
