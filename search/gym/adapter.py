@@ -39,6 +39,7 @@ import inspect
 import os
 import sys
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from importlib import import_module
 from typing import Any, ClassVar, Protocol
 
@@ -101,6 +102,9 @@ class Adapter(ABC):
     rule: str = "goal"
     words: Words = GENERIC_WORDS
     score: Score | None = None  # the visible score each view shows, read by ``measure`` after each step
+    # where ``score`` declares one, ``measure(self, env) -> float`` reads its value in ``env`` after the reset and
+    # each step (what the view shows: the distance travelled, the error from a set point); checked at load
+    measure: Callable[[Any], float]
 
     def __init__(self, settings: dict | None = None):
         self.settings = dict(settings or {})
@@ -130,11 +134,6 @@ class Adapter(ABC):
 
     def world(self) -> World:
         return World(domain=self.domain, rule=self.rule, words=self.words, score=self.score)
-
-    def measure(self, env) -> float:
-        """The visible score's value in ``env`` after a step (and after the reset), where ``score`` declares one:
-        what the view shows, such as the distance travelled or the error from a set point."""
-        raise NotImplementedError(f"{type(self).__name__} declares a visible score but no measure(env) to read it")
 
     def snapshot_env(self, env):
         """A copy of ``env`` that later steps of ``env`` cannot change."""
@@ -243,7 +242,7 @@ def load_adapter(spec: str, settings: dict | None = None) -> Adapter:
     shape = tuple(adapter.env_action_shape)
     if not shape or int(np.prod(shape)) < 1:
         raise ValueError(f"adapter {spec!r} defines no environment action: set env_action_shape, e.g. (2,)")
-    if adapter.score is not None and type(adapter).measure is Adapter.measure:
+    if adapter.score is not None and not callable(getattr(adapter, "measure", None)):
         raise ValueError(
             f"adapter {spec!r} declares the visible score {adapter.score.name!r} but not how to read it: define "
             "measure(self, env) -> float (docs/gym.md, 'A visible score')"
