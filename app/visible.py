@@ -137,6 +137,7 @@ class Words:
     `success` and `collision` may say ``{seconds}``, the seconds the clip shows it took (one decimal, as the clip)."""
 
     agent: str = "Robot"  # the word before an agent's number, on its clips and the pages: "Robot 2"
+    agents: str = "robots"  # the agents in running text: "Choose one of the robots"
     clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
     # a pair of reels (each robot on its own, in moments of its own runs): the line above them and each reel's
     # accessible name, which the page follows with the robot's label

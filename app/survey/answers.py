@@ -147,7 +147,7 @@ def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
         out.errors["video"] = (
             "Please watch the clip to the end before going on."
             if clips == 1
-            else "Please watch each robot's clip to the end before going on."
+            else "Please watch each clip to the end before going on."
         )
     out.video_events = events or []
     client_ms = _one(form, "time_on_page_ms") or ""
@@ -170,7 +170,7 @@ def viewing_problem(screen: Screen, started_at: datetime, now: datetime) -> str 
     if len(screen.clips_to_watch()) == 1:
         plays, watch = f"The clip plays for {clip_ms / 1000:.0f} seconds", "play the clip from the start to the end"
     else:
-        plays, watch = f"The robots' clips play for {clip_ms / 1000:.0f} seconds together", "play each robot's clip"
+        plays, watch = f"The clips play for {clip_ms / 1000:.0f} seconds together", "play each clip"
     return (
         f"{plays}, but this page has been open for only {open_ms / 1000:.0f} seconds, so it cannot have been "
         f"watched to the end at normal speed. Nothing was saved. Please {watch} from the start to the end, then "

@@ -157,7 +157,7 @@ class ChooseQuestion(Strict):
     def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
         value = read(name)
         if value not in labels:
-            return None, "Choose one of the robots." if not value else "That robot is not in this clip."
+            return None, "Choose one of the names shown." if not value else "That name is not in this clip."
         return value, None
 
 
@@ -225,11 +225,11 @@ class RankQuestion(Strict):
         """The robots best first, from the fields `name-1` (the best place) to `name-N`."""
         ranking = [read(f"{name}-{place}") for place in range(1, len(labels) + 1)]
         if any(not value for value in ranking):
-            return None, "Put a robot in every place of the ranking."
+            return None, "Put a name in every place of the ranking."
         if any(value not in labels for value in ranking):
-            return None, "The ranking names a robot that is not in this study."
+            return None, "The ranking has a name that is not in this study."
         if len(set(ranking)) != len(ranking):
-            return None, "Each robot can take only one place: the ranking has a robot twice."
+            return None, "Each name can take only one place: the ranking has a name twice."
         return [value for value in ranking if value is not None], None
 
 

@@ -38,8 +38,8 @@ def assert_rejected(client, data: dict, message: str) -> None:
 @pytest.mark.parametrize(
     "field, value, message",
     [
-        ("better", None, "Choose one of the robots."),
-        ("better", "Robot 9", "That robot is not in this clip."),
+        ("better", None, "Choose one of the names shown."),
+        ("better", "Robot 9", "That name is not in this clip."),
         ("justification", None, "Please write an answer."),
         ("justification", "   \n ", "Please write an answer."),
         ("justification", "x" * 2001, "Please keep this under 2000 characters"),
@@ -64,8 +64,8 @@ def test_every_invalid_pairwise_answer_is_rejected_and_nothing_saved(make_client
 @pytest.mark.parametrize(
     "change, message",
     [
-        ({"ranking-2": None}, "Put a robot in every place"),
-        ({"ranking-2": "same-as-1"}, "has a robot twice"),
+        ({"ranking-2": None}, "Put a name in every place"),
+        ({"ranking-2": "same-as-1"}, "has a name twice"),
         ({"ranking-3": "Robot 7"}, "not in this study"),
     ],
 )

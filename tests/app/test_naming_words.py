@@ -22,15 +22,17 @@ def crowd_bundle(tmp_path_factory) -> Path:
     return write_bot_bundle(tmp_path_factory.mktemp("naming-clips"), tmp_path_factory.mktemp("naming-crowd"))
 
 
-def page_texts(client) -> list[str]:
-    """Each page of a participant's walk through the study as its text, tags left out."""
-    pages = walk(client, start(client, "?workerId=W1&assignmentId=A1&hitId=H1"))
+def page_texts(client, pages: list[str] | None = None) -> list[str]:
+    """Each page of a participant's walk through the study (or of ``pages``) as its text, tags left out."""
+    pages = pages or walk(client, start(client, "?workerId=W1&assignmentId=A1&hitId=H1"))
     return [html.unescape(re.sub(r"<[^>]+>", " ", page)) for page in pages]
 
 
 def test_a_gym_world_names_its_agents_in_its_own_words(make_client, crowd_bundle, tmp_path):
     bundle = with_world(crowd_bundle, tmp_path / "gym", World(domain="gym", words=GENERIC_WORDS).to_manifest())
-    texts = page_texts(make_client(bundle_dir=bundle))
+    client = make_client(bundle_dir=bundle)
+    pages = walk(client, start(client, "?workerId=W1&assignmentId=A1&hitId=H1"))
+    texts = page_texts(client, pages)
     shown = "\n".join(texts)
     for paragraph in (GENERIC_WORDS.names, GENERIC_WORDS.names_in_round, GENERIC_WORDS.new_round):
         assert paragraph in shown
@@ -38,6 +40,10 @@ def test_a_gym_world_names_its_agents_in_its_own_words(make_client, crowd_bundle
     for paragraph in (crowd.names, crowd.names_in_round, crowd.new_round):
         assert paragraph not in shown
     assert GENERIC_WORDS.names in next(text for text in texts if "How to read a clip" in text)
+    # the pages' own words (the study file's questions and the bundle's labels are this crowd bundle's)
+    assert "Choose one agent for each place. Each agent takes exactly one place." in shown
+    assert 'aria-label="Agents in the clip"' in "\n".join(pages)
+    assert "robot for each place" not in shown and "Robots in the clip" not in "\n".join(pages)
 
 
 def test_a_crowd_bundle_keeps_its_naming_paragraphs(make_client, crowd_bundle):
