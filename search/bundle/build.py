@@ -778,7 +778,10 @@ def describe_representativeness(report: dict) -> str:
         f"{vote['for_second']} for {second}), sign test p {'< 0.001' if p < 0.001 else f'= {p:.2g}'}"
     )
     if report["percentile"] is not None:
-        line += f"; percentile {report['percentile']:.0f} of its states"
+        line += (
+            f"; it agrees with that vote more often than {report['percentile']:.0f}% of the distribution's states do "
+            f"(percentile {report['percentile']:.0f}; low: an unusual scenario for this pair)"
+        )
     weak = (
         ""
         if tested["decided"]

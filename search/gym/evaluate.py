@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from app.visible import Score
 from search.gym.adapter import EVENTS, Adapter, ending
 from search.gym.agents import GymAgent
 
@@ -31,20 +32,24 @@ def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter, per_ep
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
     env, outcome = adapter.make(), ending(adapter)
-    events, rewards, steps = [], [], []
+    events, rewards, steps, scores = [], [], [], []
     for i in range(episodes):
         observation, _ = env.reset(seed=EPISODE_BASE * (seed + 1) + i)
-        total, taken, done = 0.0, 0, False
+        total, taken, done, measured = 0.0, 0, False, []
         while not done:
             observation, reward, terminated, truncated, info = env.step(agent.act(np.asarray(observation)[None])[0])
             total, taken, done = total + float(reward), taken + 1, bool(terminated or truncated)
+            if adapter.score is not None:
+                measured.append(float(adapter.measure(env)))
         events.append(outcome(bool(terminated), bool(truncated), info, float(reward), env))
         rewards.append(total)
         steps.append(taken)
+        if adapter.score is not None:
+            scores.append(adapter.score.of(measured, adapter.dt))
     limit = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None
     result = episodes_result(
         agent.name, seed, events, rewards, steps, adapter.dt, limit * adapter.dt if limit else None
-    )
+    ) | scores_result(adapter.score, scores)
     return result | ({"episode_rewards": rewards} if per_episode else {})
 
 
@@ -75,6 +80,17 @@ def episodes_result(
     }
 
 
+def scores_result(score: Score | None, scores: list[float]) -> dict:
+    """The visible score of test episodes (each one summed as a clip of the whole episode would show it): its
+    mean with a 95% interval, under ``score``; nothing where the world declares no visible score."""
+    if score is None:
+        return {}
+    values = np.asarray(scores, dtype=np.float64)
+    half = 1.96 * values.std(ddof=1) / math.sqrt(len(values))
+    mean = float(values.mean())
+    return {"score": score.to_manifest() | {"mean": mean, "ci95": [mean - half, mean + half]}}
+
+
 def format_result(result: dict) -> str:
     rates = ", ".join(
         f"{event} rate {result[f'{event}_rate']:.3f} ({result[f'{event}_ci95'][0]:.3f} to "
@@ -82,7 +98,20 @@ def format_result(result: dict) -> str:
         for event in EVENTS
     )
     low, high = result["reward_ci95"]
-    return (
+    text = (
         f"{result['agent']}: {result['episodes']} episodes (seed {result['seed']}), {rates}, mean reward "
         f"{result['reward_mean']:.2f} ({low:.2f} to {high:.2f}), mean length {result['length_mean']:.1f} s"
     )
+    if "score" in result:
+        shown = result["score"]
+        score = Score.from_manifest({k: v for k, v in shown.items() if k not in ("mean", "ci95")})
+        if score.summed == "band":
+            mean, low, high = (f"{v:.1f} s" for v in (shown["mean"], *shown["ci95"]))
+            text += f", visible score: {mean} of {score.name} within its band ({low} to {high})"
+        else:
+            mean, low, high = (
+                score.value_text(v).removeprefix(f"{score.name} ") for v in (shown["mean"], *shown["ci95"])
+            )
+            how = "at the end" if score.summed == "final" else "mean over the episode"
+            text += f", visible score: {score.name} {how} {mean} ({low} to {high})"
+    return text

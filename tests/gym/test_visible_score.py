@@ -190,6 +190,18 @@ def test_a_world_of_reward_alone_is_judged_by_its_visible_score(world):
     assert verdict["why"].startswith("Agent 1 kept offset within -0.20 to 0.20 for ")
 
 
+def test_eval_reports_each_agents_visible_score(world, capsys):
+    for agent in (STEADY, IDLE):
+        assert main(["eval", agent, "--scenario", "drift-starts.toml", "--episodes", "4", "--json"]) == 0
+    steady_result, idle_result = (json.loads(line) for line in capsys.readouterr().out.splitlines())
+    assert steady_result["score"]["name"] == "offset" and steady_result["score"]["summed"] == "band"
+    assert steady_result["score"]["mean"] > 4.0 > idle_result["score"]["mean"]  # seconds of 5 within the band
+    low, high = steady_result["score"]["ci95"]
+    assert low <= steady_result["score"]["mean"] <= high
+    assert main(["eval", STEADY, "--scenario", "drift-starts.toml", "--episodes", "4"]) == 0
+    assert " s of offset within its band (" in capsys.readouterr().out
+
+
 def test_without_the_score_every_clip_is_a_tie_as_before(world):
     vote, summaries = representative(world, "unscored")
     assert vote["for_first"] == vote["for_second"] == 0

@@ -385,7 +385,7 @@ def test_paper_build_reproduces_the_papers_clip_set():
 @pytest.mark.parametrize(
     "majority, disagrees, start, end",
     [
-        (1, False, "representativeness paper-bl-tr, lo vs hi:", "percentile 40 of its states"),
+        (1, False, "representativeness paper-bl-tr, lo vs hi:", "(percentile 40; low: an unusual scenario for this pair)"),
         (
             -1,
             True,
@@ -422,3 +422,4 @@ def test_the_representativeness_line_warns_when_the_scenario_disagrees_with_the_
     assert line.startswith(start) and line.endswith(end)
     assert "lo looks better in 10% of 33 nominal rollouts, hi in 70%" in line
     assert "training's 64 states vote lo (50 for lo, 4 for hi)" in line
+    assert "agrees with that vote more often than 40% of the distribution's states do" in line
