@@ -74,14 +74,14 @@ def duration_s(participant: Participant | Row[Any]) -> float | None:
     return (as_utc(completed_at) - as_utc(participant.created_at)).total_seconds()
 
 
-def median_duration_s(db: Database, study_id: str, kinds: tuple[str, ...] = ("real",)) -> float | None:
-    """Median completion time of the study's completed participants of these kinds (pilots and bots would drag
-    the "too fast" threshold down), one float each in memory."""
+def median_duration_s(db: Database, study_id: str) -> float | None:
+    """Median completion time of the study's completed real participants (pilots and bots, analysed or not,
+    would drag the "too fast" threshold down), one float each in memory."""
     query = select(Participant.created_at, Participant.completed_at).where(
         Participant.study == study_id,
         Participant.status == "completed",
         Participant.completed_at.is_not(None),
-        Participant.kind.in_(kinds),
+        Participant.kind == "real",
     )
     with db.reading() as session:
         durations = [

@@ -389,7 +389,7 @@ def export_study(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     layout = WideLayout(study)
-    median_s = median_duration_s(db, study.study.id, rules.kinds)
+    median_s = median_duration_s(db, study.study.id)  # real participants' pace, whoever is analysed
     threshold = rules.threshold_s(median_s)
     columns = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
     tables = {
@@ -430,7 +430,7 @@ def run_export(*, database_url: str, study: str | None, out: str, rules: Exclusi
     finally:
         db.dispose()
     print(
-        f"{result.participants} participants ({result.excluded} excluded by the rules), {result.answers} answer "
-        f"rows in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json, glmer.R in {result.out}"
+        f"{result.participants} participant{'' if result.participants == 1 else 's'} ({result.excluded} excluded by "
+        f"the rules), {result.answers} answer row{'' if result.answers == 1 else 's'} in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json, glmer.R in {result.out}"
     )
     return 0

@@ -175,7 +175,7 @@ def tally_study(
 ) -> ReportData:
     """The report's counts; ``include_excluded`` analyses every participant, whichever rule excludes them."""
     rules = rules or ExclusionRules()
-    median_s = median_duration_s(db, study.study.id, rules.kinds)
+    median_s = median_duration_s(db, study.study.id)  # real participants' pace, whoever is analysed
     threshold = rules.threshold_s(median_s)
     exclusions = Exclusions(rule=rules.describe(median_s), included=include_excluded)
     accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)

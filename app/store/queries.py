@@ -131,10 +131,13 @@ def counts_by_condition_and_status(session: Session, study: str) -> Counter[tupl
 
 
 def completion_times(session: Session, study: str) -> list[tuple[datetime, datetime]]:
-    """(created, completed) of every participant of `study` who completed it."""
+    """(created, completed) of every real participant of `study` who completed it (pilots and bots left out)."""
     rows = session.execute(
         select(Participant.created_at, Participant.completed_at).where(
-            Participant.study == study, Participant.status == "completed", Participant.completed_at.is_not(None)
+            Participant.study == study,
+            Participant.status == "completed",
+            Participant.completed_at.is_not(None),
+            Participant.kind == "real",
         )
     )
     return [(created, completed) for created, completed in rows if completed is not None]

@@ -163,10 +163,10 @@ def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
         )
         == 0
     )
-    assert json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]["analysed_kinds"] == [
-        "real",
-        "bot",
-    ]
+    with_bots = json.loads((tmp_path / "with-bots" / "codebook.json").read_text())["exclusion_rules"]
+    assert with_bots["analysed_kinds"] == ["real", "bot"]
+    # the too-fast threshold is the real participants' pace (none here), never the bots' own
+    assert with_bots["median_duration_s"] is None and with_bots["too_fast_threshold_s"] is None
     # with the bundle, each clip's accuracy stands beside its audit; a folder without a manifest is refused
     audited = tmp_path / "audited-bundle"
     shutil.copytree(bundle_dir, audited)

@@ -11,6 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.store.models import Participant
+from app.survey.kinds import pilot_token
 from app.web.settings import ServerSettings
 from tests.support.survey import FormReader, answer_for, finish, log_in, start, stored
 
@@ -54,6 +55,20 @@ def finished_and_halfway(client) -> tuple[TestClient, str]:
     return halfway, halfway.post("/study", data=answer_for(page)).text
 
 
+def test_the_median_duration_leaves_bots_out_and_a_participant_page_says_its_kind(make_client):
+    client = make_client(BALANCED)
+    token = pilot_token(client.app.state.context.db, "paper")
+    bot = TestClient(client.app)
+    finish(bot, start(bot, f"?PROLIFIC_PID=bot3&STUDY_ID=s&SESSION_ID=c&pilot={token}&bot=1"))
+    log_in(client)
+    overview = client.get("/admin").text
+    assert "Median duration of the 0 real participants who completed (pilots and bots left out)" in overview
+    assert "none completed yet" in overview
+    (row,) = stored(client, Participant)
+    detail = client.get(f"/admin/participants/{row.code}").text
+    assert row.kind == "bot" and "<dt>Kind</dt><dd>bot (left out of the analysis unless included)</dd>" in detail
+
+
 def test_progress_median_participant_view_exclusion_and_csv(make_client):
     client = make_client(BALANCED)
     halfway, page = finished_and_halfway(client)
@@ -62,7 +77,8 @@ def test_progress_median_participant_view_exclusion_and_csv(make_client):
 
     log_in(client)
     overview = client.get("/admin").text
-    assert "Median duration of the 1 completed" in overview and "2 participants." in overview
+    assert "Median duration of the 1 real participant who completed (pilots and bots left out)" in overview
+    assert "2 participants." in overview
     moment = r"<td>\d{4}-\d\d-\d\dT\d\d:\d\d\+00:00</td>"  # ISO 8601 with the time zone
     assert len(re.findall(moment, overview)) == 4  # each participant's start and last activity
     assert "done1" in overview and "half2" in overview
