@@ -419,6 +419,20 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float, primar
         return ModelResult(False, "not fitted: no answers")
     y = np.asarray(answers.correct, dtype=float)
     notes: list[str] = []
+
+    def too_few(parameters: int, formula: str) -> ModelResult:
+        return ModelResult(
+            False,
+            f"not tested: {participants} participant{'s' * (participants != 1)} and {clips} clip"
+            f"{'s' * (clips != 1)} are too few clusters for {parameters} parameters; the intervals need more "
+            "participants (or clips) than that",
+            formula,
+            participants,
+            clips,
+        )
+
+    if min(participants, clips) <= len(present):  # too few even for the schemes alone: no fit can help
+        return too_few(len(present), "correct ~ scheme")
     covariates = tuple(c for c in ("pair", "scenario") if len(set(getattr(answers, c))) > 1)
     x = _design(answers, present, covariates)
     fit = _fit(y, x)
@@ -438,15 +452,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float, primar
             "a clustered interval is too narrow there; read Table 1's Wilson interval for it"
         )
     if min(participants, clips) <= x.shape[1]:
-        return ModelResult(
-            False,
-            f"not tested: {participants} participant{'s' * (participants != 1)} and {clips} clip"
-            f"{'s' * (clips != 1)} are too few clusters for {x.shape[1]} parameters; the intervals need more "
-            "participants (or clips) than that",
-            formula,
-            participants,
-            clips,
-        )
+        return too_few(x.shape[1], formula)
     beta, fitted = fit
     weight = fitted * (1 - fitted)
     residual = y - fitted

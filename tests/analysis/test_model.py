@@ -201,3 +201,21 @@ def test_schemes_with_one_clip_or_no_variation_are_named_untestable_not_tested()
         if one_clip & {c.scheme, c.reference}:
             assert c.p_value is None and c.low is None and c.or_low is None and "1 clip" in c.note
     assert "representative, disagreements, highlights left out (fewer than two clips)" in fit.scheme_test
+
+
+def test_one_participant_is_too_few_clusters_whether_or_not_a_fit_converges():
+    """One participant ranking one set per scheme, every ordering right: the fit does not converge, but the
+    reason nothing is tested is the one participant (and one clip per scheme), and the note says so."""
+    from app.analysis.model import Answers
+
+    schemes = ["adaptive", "nfirst", "representative"]
+    answers = Answers(
+        participant=["p1"] * 3,
+        clip=[f"{scheme}-1" for scheme in schemes],
+        scheme=schemes,
+        scenario=["dense"] * 3,
+        pair=[""] * 3,
+        correct=[1, 1, 1],
+    )
+    fit = fit_accuracy(answers, schemes, 0.5)
+    assert not fit.estimable and fit.note.startswith("not tested: 1 participant and 3 clips are too few clusters")
