@@ -144,7 +144,7 @@ class Words:
     reels_intro: str = "Each robot is shown on its own, in moments from its own runs through a crowd."
     reel_title: str = "Clip of one robot on its own in a crowd"
     example_caption: str = (  # under the instructions' example clip, unless the study file says otherwise
-        "An example: two robots, each with its own colour, shape and name, walk through a crowd to the same goal."
+        "An example: two robots, each with its own colour, shape and name, move through a crowd to the same goal."
     )
     legend_robots: str = (
         "Robots: each has a colour, a shape (disc, square, diamond, triangle, upside-down triangle or plus) and a"

@@ -92,7 +92,7 @@ def test_a_crowd_bundle_reads_as_before(make_client, crowd_bundle):
         "with the time, or <strong>on its way</strong> (<strong>still on its way</strong> when the clip ends, with how "
         "far it stopped from its goal).</li>" in shown
     )
-    assert "Clip of two robots in a crowd" in shown and "walk through a crowd to the same goal." in shown
+    assert "Clip of two robots in a crowd" in shown and "move through a crowd to the same goal." in shown
     assert re.search(r"Robot \d bumped into a person\.", shown)
     assert re.search(r"Robot \d reached the goal after 9.0 seconds\.", shown)
 
