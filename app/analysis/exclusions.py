@@ -12,7 +12,7 @@ from sqlalchemy import Row, select
 
 from app.store.database import Database, as_utc
 from app.store.models import Participant, Response
-from app.survey.answers import VIEW_TOLERANCE_MS, full_view_at  # the server's own check, applied again
+from app.survey.answers import VIEW_TOLERANCE_MS, clips_played, full_view_at  # the server's own check, applied again
 from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip, watching_ms
 
 REASONS = {
@@ -93,8 +93,8 @@ def median_duration_s(db: Database, study_id: str) -> float | None:
 def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | Attention) -> dict[str, Any]:
     """How a clip screen was watched, from its response and the plan's screen: the clip's length (a pair of reels:
     theirs together), time on screen (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden;
-    `skipped` when the screen was answered sooner than the clip plays (by the server's clock), or with playback
-    faster than normal before the clip (every reel) first ended."""
+    `skipped` when the screen was answered sooner than the clip plays (by the server's clock), with playback
+    faster than normal before the clip (every reel) first ended, or with a clip (a reel) never played."""
     events = response.video_events or []
     clip_ms = watching_ms(screen)
     hidden_ms, hidden_at = 0, None
@@ -104,10 +104,12 @@ def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | A
         elif event["type"] in ("visible", "reload") and hidden_at is not None:
             hidden_ms += max(0, event["t"] - hidden_at) if event["type"] == "visible" else 0
             hidden_at = None
-    first_end = full_view_at(events, len(screen.clips_to_watch()))
+    clips = len(screen.clips_to_watch())
+    first_end = full_view_at(events, clips)
     before_end = events if first_end is None else events[:first_end]
     sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
-    skipped = bool(shows_clip(screen) and (sped or (clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)))
+    too_soon = bool(clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)
+    skipped = bool(shows_clip(screen) and (sped or too_soon or clips_played(events, clips) < clips))
     return {
         "clip_ms": clip_ms,
         "seeks": sum(e["type"] == "seek" for e in events),

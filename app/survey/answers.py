@@ -117,15 +117,27 @@ def _video_events(raw: str | None) -> list[dict[str, Any]] | None:
 
 def full_view_at(events: list[dict[str, Any]], clips: int) -> int | None:
     """The index of the event by which the record shows every clip of the screen played to its end: its one clip
-    (any `ended`), or each of its reels (an `ended` of every `reel`); None when it shows none such."""
+    (a `play`, then an `ended`), or each of its reels (a `play`, then an `ended`, of every `reel`); None when it
+    shows none such. An `ended` without a `play` before it is no viewing: a page cannot end a clip it never
+    started."""
+    played: set[int | None] = set()
     ended: set[int | None] = set()
     wanted = {None} if clips == 1 else set(range(clips))
     for at, event in enumerate(events):
-        if event["type"] == "ended":
-            ended.add(None if clips == 1 else event.get("reel"))
+        clip = None if clips == 1 else event.get("reel")
+        if event["type"] == "play":
+            played.add(clip)
+        elif event["type"] == "ended" and clip in played:
+            ended.add(clip)
             if wanted <= ended:
                 return at
     return None
+
+
+def clips_played(events: list[dict[str, Any]], clips: int) -> int:
+    """How many of the screen's clips (its one clip, or its reels) the record shows played at least once."""
+    reels = {e.get("reel") for e in events if e["type"] == "play"}
+    return min(len(reels), 1) if clips == 1 else len(reels & set(range(clips)))
 
 
 def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:

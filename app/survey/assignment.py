@@ -3,7 +3,9 @@
 Balance comes from permuted blocks over a counter that lives in the database: each participant who consents
 claims the next arrival slot (unique per study, so two processes can never claim the same one) and the slot's place
 in its block, shuffled with a generator seeded by the study seed and the block number, names the condition.
-Every complete block of arrivals therefore holds each condition exactly once.
+Every complete block of arrivals therefore holds each condition exactly once. Arrivals, not completions: a slot
+is never released, so a participant who leaves keeps theirs and completions per condition can differ by the
+abandoned slots (the admin overview counts them per condition).
 """
 
 from __future__ import annotations

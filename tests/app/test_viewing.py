@@ -231,3 +231,36 @@ def test_a_concurrent_resubmit_with_other_answers_gets_the_kept_notice_on_postgr
     winner = next(n for n in (0, 1) if answers[n]["better"] == saved[0].answers["better"])
     assert "first answers" not in replies[winner].text
     assert "first answers" in replies[1 - winner].text and answers[winner]["better"] in replies[1 - winner].text
+
+
+def test_a_record_of_clips_that_ended_without_playing_is_no_viewing(make_client):
+    """A page's record that says the clip ended but never that it played: the server refuses it as unwatched
+    (the study requires full views), and the same record under a study that does not is flagged as skipped."""
+    from app.analysis.exclusions import viewing_problems
+    from app.survey.answers import clips_played, full_view_at
+
+    assert full_view_at([{"type": "ended", "t": 0}], 1) is None
+    assert full_view_at([{"type": "play", "t": 0}, {"type": "ended", "t": 9}], 1) == 1
+    reels = [
+        {"type": "play", "t": 0, "reel": 0},
+        {"type": "ended", "t": 9, "reel": 0},
+        {"type": "ended", "t": 9, "reel": 1},
+    ]
+    assert full_view_at(reels, 2) is None and clips_played(reels, 2) == 1
+
+    client = make_client(ANONYMOUS)
+    token = pilot_token(client.app.state.context.db, "paper")
+    page = to_first_clip(client, f"?pilot={token}")
+    ended_only = answer_for(page) | {"video_events": json.dumps([{"type": "ended", "t": 3100}])}
+    refused = client.post("/study", data=ended_only)
+    assert refused.status_code == 422 and "watch the clip to the end" in refused.text
+
+    lenient = make_client(ANONYMOUS | {"require_full_view": "false"})
+    page = to_first_clip(lenient, f"?pilot={pilot_token(lenient.app.state.context.db, 'paper')}")
+    assert (
+        lenient.post("/study", data=answer_for(page) | {"video_events": ended_only["video_events"]}).status_code == 200
+    )
+    with lenient.app.state.context.db.reading() as session:
+        response = session.scalar(select(Response).where(Response.step == 1))
+    plan = parse_plan(stored(lenient, Participant)[0].plan)
+    assert response.plays == 0 and viewing_problems(response, plan[1])["skipped"]
