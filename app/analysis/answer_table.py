@@ -169,7 +169,11 @@ LONG_COLUMNS = [
     Column("rate_changes", "Int64", "playback rate changes (undone by the page on a first viewing)"),
     Column("hidden_ms", "Int64", "time the tab was hidden while the screen was open (browser clock, ms)"),
     Column("reloads", "Int64", "reloads of the screen (the events before them were kept)"),
-    Column("skipped_viewing", "Int64", "1 when answered sooner than the clip plays or sped up before its end"),
+    Column(
+        "skipped_viewing",
+        "Int64",
+        "1 when answered sooner than the clip plays, sped up before its end, or never played",
+    ),
     Column("viewport", "string", "the browser window's size when the screen was sent, WIDTHxHEIGHT in CSS px"),
     Column("submitted_at", "datetime", "when the screen was submitted (UTC)"),
 ]
@@ -315,7 +319,11 @@ PARTICIPANT_COLUMNS = [
     Column("failed_attention", "Int64", "1 when at least one attention check was failed"),
     Column("too_fast", "Int64", "1 when completed faster than the threshold (see `exclusion_rules`)"),
     Column("flagged_by_admin", "Int64", "1 when flagged for exclusion on the admin pages"),
-    Column("skipped_viewing", "Int64", "1 when any clip was answered sooner than it plays or sped up before its end"),
+    Column(
+        "skipped_viewing",
+        "Int64",
+        "1 when any clip was answered sooner than it plays, sped up before its end, or never played",
+    ),
     Column("excluded", "Int64", "1 when any exclusion rule applies: the report leaves the participant out"),
     Column("user_agent", "string", "the browser's User-Agent at consent"),
 ]

@@ -21,7 +21,7 @@ REASONS = {
     "failed_attention": "failed at least one attention check",
     "too_fast": "completed faster than the time threshold",
     "flagged_by_admin": "flagged for exclusion on the admin pages",
-    "skipped_viewing": "answered a clip sooner than it plays, or sped it up before it first ended",
+    "skipped_viewing": "answered a clip sooner than it plays, sped it up before it first ended, or never played it",
 }
 
 

@@ -431,6 +431,7 @@ def run_export(*, database_url: str, study: str | None, out: str, rules: Exclusi
         db.dispose()
     print(
         f"{result.participants} participant{'' if result.participants == 1 else 's'} ({result.excluded} excluded by "
-        f"the rules), {result.answers} answer row{'' if result.answers == 1 else 's'} in {result.seconds:.1f} s: {', '.join(FILES)}, codebook.md, codebook.json, glmer.R in {result.out}"
+        f"the rules), {result.answers} answer row{'' if result.answers == 1 else 's'} in {result.seconds:.1f} s: "
+        f"{', '.join(FILES)}, codebook.md, codebook.json, glmer.R in {result.out}"
     )
     return 0

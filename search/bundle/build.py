@@ -780,7 +780,7 @@ def describe_representativeness(report: dict) -> str:
     if report["percentile"] is not None:
         line += (
             f"; it agrees with that vote more often than {report['percentile']:.0f}% of the distribution's states do "
-            f"(percentile {report['percentile']:.0f}; low: an unusual scenario for this pair)"
+            f"(percentile {report['percentile']:.0f}; low: an unusual scenario for a pair)"
         )
     weak = (
         ""

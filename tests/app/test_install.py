@@ -163,5 +163,6 @@ def test_the_wheel_lists_every_package():
     mapped = {"app.templates": "templates", "app.static": "static"}  # the package-dir table
     for data in listed - packages:  # folders of data alone, each one real
         top = next((name for name in mapped if data == name or data.startswith(name + ".")), None)
-        folder = REPO / mapped[top] / Path(*data.removeprefix(top).split(".")[1:]) if top else REPO / Path(*data.split("."))
+        parts = data.removeprefix(top).split(".")[1:] if top else data.split(".")
+        folder = (REPO / mapped[top] if top else REPO) / Path(*parts)
         assert folder.is_dir() and not (folder / "__init__.py").exists(), data

@@ -385,7 +385,12 @@ def test_paper_build_reproduces_the_papers_clip_set():
 @pytest.mark.parametrize(
     "majority, disagrees, start, end",
     [
-        (1, False, "representativeness paper-bl-tr, lo vs hi:", "(percentile 40; low: an unusual scenario for this pair)"),
+        (
+            1,
+            False,
+            "representativeness paper-bl-tr, lo vs hi:",
+            "(percentile 40; low: an unusual scenario for a pair)",
+        ),
         (
             -1,
             True,
