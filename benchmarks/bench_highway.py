@@ -81,8 +81,8 @@ def disagreement_branching(agents, scenario, budget: int) -> float:
 
 
 def _drive(rng: np.random.Generator, batch: int) -> tuple[np.ndarray, np.ndarray]:
-    """Random ego actions (steering small enough to stay on the road a while) and uniform environment actions."""
-    ego = (rng.uniform(-1, 1, (batch, 2)) * [0.5, 0.05]).astype(np.float32)
+    """Random ego meta-actions (the world's) and uniform environment actions."""
+    ego = rng.integers(0, 5, batch)
     return ego, rng.uniform(-1, 1, (batch, PERTURBED, 2))
 
 
@@ -108,7 +108,7 @@ def kernel_speed(scenario, batch: int, seconds: float) -> float:
     kernel = make_batch(batch, scenario.settings)
     rng, seed = np.random.default_rng(0), batch
     kernel.reset(list(range(batch)))
-    kernel.step(np.zeros((batch, 2), np.float32))  # compiled (numba caches it on disk)
+    kernel.step(np.ones(batch, np.int64))  # compiled (numba caches it on disk)
     steps, started = 0, time.process_time()
     while time.process_time() - started < seconds:
         ego, pushes = _drive(rng, batch)

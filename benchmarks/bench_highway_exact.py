@@ -26,9 +26,9 @@ from search.highway.scenarios import SCENARIOS  # noqa: E402
 
 DENSE, LIGHT, FOUR = (SCENARIOS[name].settings for name in ("highway-dense", "highway-light", "highway-four-lanes"))
 RUNS = [  # (ego driver, settings, environment action)
-    ("random", DENSE, "none"),
-    ("random", FOUR, "extreme"),
-    ("random meta-actions", {"discrete": True, **LIGHT}, "uniform"),
+    ("random continuous", {"discrete": False, **DENSE}, "none"),
+    ("random continuous", {"discrete": False, **FOUR}, "extreme"),
+    ("random meta-actions", LIGHT, "uniform"),
     ("highway-lo", DENSE, "uniform"),
     ("highway-med", LIGHT, "uniform"),
     ("highway-hi", FOUR, "uniform"),

@@ -229,6 +229,6 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
     )
     end_s = max((steps - since) * dt, 1e-6)
     score = coupled.world.score
-    summed = () if score is None else tuple(score.of(i.measured[since:steps], dt) for i in coupled.problem.rows[row])
+    summed = () if score is None else tuple(score.of(m[since:steps], dt) for m in coupled.problem.measured(row))
     clip = VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world, summed=summed)
     return visible_contrast(clip)

@@ -266,6 +266,10 @@ class GymCoupledProblem:
         """Each agent's outcome (an index into OUTCOME_NAMES) and the step its episode ended on (0: running)."""
         return [(i.outcome, i.event_step) for i in self.rows[row]]
 
+    def measured(self, row: int) -> list[list[float]]:
+        """Each agent's visible score after each step so far (empty where the world declares none)."""
+        return [i.measured for i in self.rows[row]]
+
     def _divergence(self, goal: bool, end: bool, scaled: list, positions: list) -> float:
         c = self.reward_config
         if goal:

@@ -17,10 +17,10 @@ range, and the dead zone makes a commanded lane change a deliberate choice of th
 under the uniform prior) rather than constant weaving. The ego vehicle is never touched.
 
 Clips (the generic renderer, search/gym/clips.py, through this adapter's hooks): a view follows the ego along the
-road and keeps the whole road across it, so it is no taller than the road; the ego wears its robot's colour and
-all other traffic one grey that no robot colour is near; the caption is the ego's speed; every simulation step
-(5 per simulated second) is captured through highway-env's video-recording hook; where cars that followed one
-part, the header says so in a driver's words.
+road and keeps the whole road across it, so it is no taller than the road; the ego wears its car's colour and
+all other traffic one grey that no car's colour is near; the caption is the ego's mean speed so far (the visible
+score); every simulation step (5 per simulated second) is captured through highway-env's video-recording hook;
+where cars that followed one part, the header says so in a driver's words.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from app.visible import Words
+from app.visible import Score, Words
 from search.gym.adapter import Adapter
 from search.highway.env import CONFIG, make_env
 
@@ -40,18 +40,20 @@ LANE_THRESHOLD = 0.8
 AGENTS_DIR = Path(__file__).parent / "agents"
 AGENT_PREFIX = "highway-"
 WORDS = Words(
+    agent="Car",
+    agents="cars",
     clip_title="Clip of two self-driving cars, each on its own copy of the same highway",
     reels_intro="Each car is shown on its own, in moments from its own drives.",
     reel_title="Clip of one self-driving car on its own",
     example_caption="An example: two self-driving cars, each on its own copy of the same highway, in the same traffic.",
     legend_robots=(
-        "Self-driving cars: each view follows one, drawn in its robot's colour; its name, such as Robot 7, is"
+        "Self-driving cars: each view follows one, drawn in a colour of its own; its name, such as Car 7, is"
         " listed below the picture."
     ),
     others_marker="",
     legend_others=(
-        "Traffic: the other cars, in grey, start alike in both views and get the same wishes for speed and lane;"
-        " they react to the car in front of them."
+        "Traffic: the other cars, in grey, start alike in both views and want the same speeds and lanes in both"
+        " views; they react to the cars around them."
     ),
     legend_trails="",
     legend_crash=(
@@ -59,8 +61,8 @@ WORDS = Words(
         " picture then says **CRASHED**."
     ),
     legend_status=(
-        "Below the picture each car's line shows its speed and says **drove through** once it has lasted the"
-        " whole drive, or **CRASHED**, with the time."
+        "Below the picture each car's line shows its **mean speed** so far and says **drove through** once it has"
+        " lasted the whole drive, or **CRASHED**, with the time."
     ),
     success="drove through the traffic without crashing",
     collision="crashed after {seconds} seconds",
@@ -68,7 +70,7 @@ WORDS = Words(
     running="was still driving when the clip ended",
     close_call="",
     names=(
-        "Every self-driving car is called a robot and has a name (such as Robot 7) and a colour of its own. A name"
+        "Every self-driving car has a name (such as Car 7) and a colour of its own. A name"
         " never stands for two different cars in this study, and in a ranking round each name is one car in all of"
         " the round's clips. Each new round brings cars with new names."
     ),
@@ -85,17 +87,29 @@ LANE_WIDTH = 4.0  # highway-env's
 TRAFFIC = (200, 200, 200)  # light grey: apart from the road's dark grey, the lane marks' white and every robot
 
 
+def kmh(speed):
+    """A speed in m/s (a number or an array) in km/h, as each view's caption and the visible score read it."""
+    return 3.6 * speed
+
+
 class HighwayAdapter(Adapter):
     """highway-env's highway with the other drivers' intentions as the environment action. Settings: any
-    highway-env config keys over Foil's (search.highway.env), and ``discrete`` for the meta-action agents."""
+    highway-env config keys over Foil's (search.highway.env), and ``discrete = false`` for continuous control."""
 
     env_action_shape = (PERTURBED, 2)
     dt = 1.0  # one decision per simulated second
     domain, rule, words = "highway", "survival", WORDS  # a car should last the drive: crashing later is better
+    # and between two that last alike, the faster is better, as the study's instructions say: each view shows its
+    # car's mean speed so far, and a clip is judged by it where the outcomes tie
+    score = Score("speed", "km/h", "higher", "mean", digits=0, span=20.0)
+
+    def measure(self, env) -> float:
+        """The ego's speed in km/h: never below 72 under the meta-actions, which cannot stop or reverse."""
+        return float(kmh(env.unwrapped.vehicle.speed))
 
     def make(self, render: bool = False):
         settings = dict(self.settings)
-        discrete = bool(settings.pop("discrete", False))
+        discrete = bool(settings.pop("discrete", True))
         return make_env(discrete=discrete, render=render, config=settings)
 
     def apply(self, env, action: np.ndarray) -> None:
@@ -175,9 +189,6 @@ class HighwayAdapter(Adapter):
         surface, ego = viewer.sim_surface, env.unwrapped.vehicle
         _, y = surface.pos2pix(*ego.position)
         return EGO_AT, y / surface.get_height()
-
-    def caption(self, env) -> str:
-        return f"{3.6 * env.unwrapped.vehicle.speed:.0f} km/h"
 
 
 class _RoadCamera:

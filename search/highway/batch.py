@@ -41,6 +41,11 @@ class EnvBatch:
         observations, rewards, terminated, truncated = zip(*results, strict=True)
         return np.stack(observations), np.array(rewards), np.array(terminated), np.array(truncated)
 
+    def ego(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ego's speed (m/s) and lane index in environments ``rows``."""
+        egos = [self.envs[b].unwrapped.vehicle for b in rows]
+        return np.array([v.speed for v in egos]), np.array([v.lane_index[2] for v in egos])
+
     def snapshot(self) -> list:
         return [self.adapter.snapshot_env(env) for env in self.envs]
 
@@ -50,6 +55,10 @@ class EnvBatch:
 
 class KernelBatch(HighwayKernel):
     """The kernel with the batch interface's snapshots."""
+
+    def ego(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ego's speed (m/s) and lane index in environments ``rows``."""
+        return self.state.speed[rows, 0].copy(), self.state.lane[rows, 0].copy()
 
     def snapshot(self) -> HighwayState:
         return self.state.copy()

@@ -18,7 +18,7 @@ from search.core.outcomes import OUTCOME_NAMES, RUNNING
 from search.gym.adapter import EVENTS
 from search.gym.agents import GymAgent
 from search.gym.problem import GymCoupledProblem, GymScenario
-from search.highway.adapter import HighwayAdapter
+from search.highway.adapter import HighwayAdapter, kmh
 from search.highway.kernel import HighwayKernel, HighwayState, adapter_spec, notice
 from search.solvers.reward import RewardConfig
 
@@ -33,6 +33,8 @@ class KernelSnapshot:
     event_step: np.ndarray  # (B, N)
     path_length: np.ndarray  # (B, N)
     steps: np.ndarray  # (B,)
+    measured: np.ndarray  # (B, N, steps the episode can last): the visible score (km/h) after each step
+
 
     @property
     def batch(self) -> int:
@@ -64,6 +66,7 @@ class KernelCoupledProblem(GymCoupledProblem):
             np.zeros((1, n), np.int64),
             np.zeros((1, n)),
             np.zeros(1, np.int64),
+            np.zeros((1, n, int(np.ceil(spec.duration / self.adapter.dt)))),
         )
         self._rows = self._start
 
@@ -103,6 +106,10 @@ class KernelCoupledProblem(GymCoupledProblem):
                     raise ValueError(f"adapter outcome {event!r}: use one of {EVENTS}")
                 rows.outcome[b, k], rows.event_step[b, k] = OUTCOME_NAMES.index(event), int(self.t[b])
                 newly_done[b, k] = True
+        # every instance's visible score after the step, as the adapter's measure reads it (a finished one stands)
+        # (a row stepped on past its episodes' end stands still: its last column holds what every later step reads)
+        at = np.minimum(self.t, rows.measured.shape[2]) - 1
+        rows.measured[np.arange(self.batch), :, at] = kmh(state.speed[:, 0]).reshape(self.batch, n)
         positions = np.stack([state.x[:, 0], state.y[:, 0]], axis=1).reshape(self.batch, n, 2)
         scaled = [
             [
@@ -116,6 +123,11 @@ class KernelCoupledProblem(GymCoupledProblem):
     def endings(self, row: int) -> list[tuple[int, int]]:
         return list(zip(self._rows.outcome[row].tolist(), self._rows.event_step[row].tolist(), strict=True))
 
+    def measured(self, row: int) -> list[list[float]]:
+        steps, kept = int(self._rows.steps[row]), self._rows.measured.shape[2]
+        values = self._rows.measured[row, :, :steps]
+        return [[*agent, *[agent[-1]] * (steps - kept)] for agent in values.tolist()]
+
     def snapshot_of(self, snapshot: KernelSnapshot, index) -> KernelSnapshot:
         """Rows ``index`` of a snapshot (indices may repeat)."""
         index = np.asarray(index, dtype=np.int64).reshape(-1)
@@ -128,6 +140,7 @@ class KernelCoupledProblem(GymCoupledProblem):
             snapshot.event_step[index].copy(),
             snapshot.path_length[index].copy(),
             snapshot.steps[index].copy(),
+            snapshot.measured[index].copy(),
         )
 
     def snapshot(self, index=None) -> KernelSnapshot:  # type: ignore[override]
@@ -142,7 +155,7 @@ class KernelCoupledProblem(GymCoupledProblem):
         index = np.asarray(index, dtype=np.int64).reshape(-1)
         n, rows = len(self.agents), self._rows
         self.kernel.state.assign((index[:, None] * n + np.arange(n)).reshape(-1), snapshot.state)
-        for name in ("observations", "outcome", "event_step", "path_length", "steps"):
+        for name in ("observations", "outcome", "event_step", "path_length", "steps", "measured"):
             getattr(rows, name)[index] = getattr(snapshot, name)
         self.t = rows.steps
 
@@ -152,7 +165,7 @@ class KernelCoupledProblem(GymCoupledProblem):
             {name: np.concatenate([s.arrays[name] for s in states]) for name in states[0].arrays},
             np.concatenate([s.time for s in states]),
         )
-        fields = ("observations", "outcome", "event_step", "path_length", "steps")
+        fields = ("observations", "outcome", "event_step", "path_length", "steps", "measured")
         return KernelSnapshot(merged, *(np.concatenate([getattr(s, name) for s in snapshots]) for name in fields))
 
 

@@ -1,5 +1,6 @@
 """`foil eval` of a highway agent on the batched kernel: the test episodes of `search.gym.evaluate` (the same
-seeds, the same result), ``batch`` of them stepped at once, each exactly as highway-env plays it."""
+seeds, the same result), ``batch`` of them stepped at once, each exactly as highway-env plays it; and how the
+agent drives: its visible score (mean speed) and lane changes per drive."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import numpy as np
 
 from search.gym.adapter import Adapter
 from search.gym.agents import GymAgent
-from search.gym.evaluate import EPISODE_BASE, episodes_result
-from search.highway.adapter import HighwayAdapter
+from search.gym.evaluate import EPISODE_BASE, episodes_result, scores_result
+from search.highway.adapter import HighwayAdapter, kmh
 from search.highway.batch import make_batch
 from search.highway.env import DURATION_S
 
@@ -21,11 +22,11 @@ def evaluate(
     batch: int = 64,
     per_episode: bool = False,
 ) -> dict:
-    """Rates, mean reward and their 95% intervals over ``episodes`` test episodes, ``batch`` of them stepped at
-    once on the highway kernel (search.highway.batch); with ``per_episode``, each episode's reward too
-    (``episode_rewards``). The agent still acts on one observation at a time: its network's results depend on the
-    batch around an observation in the last bits, and one at a time they are the ones a lone highway-env episode
-    gets."""
+    """Rates, mean reward, mean speed and their 95% intervals, and mean lane changes, over ``episodes`` test
+    episodes, ``batch`` of them stepped at once on the highway kernel (search.highway.batch); with
+    ``per_episode``, each episode's reward too (``episode_rewards``). The agent still acts on one observation at
+    a time: its network's results depend on the batch around an observation in the last bits, and one at a time
+    they are the ones a lone highway-env episode gets."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
     adapter = adapter or HighwayAdapter()
@@ -34,16 +35,24 @@ def evaluate(
     events: list[str] = []
     rewards: list[float] = []
     lengths: list[int] = []
+    speeds: list[list[float]] = [[] for _ in seeds]  # km/h after each step, as the clips' visible score reads it
+    changes = np.zeros(len(seeds), np.int64)
     for start in range(0, episodes, envs.batch):
         chunk = seeds[start : start + envs.batch]
         rows = np.arange(len(chunk))
         observations = envs.reset(chunk, rows)
         totals, steps = [0.0] * len(chunk), np.zeros(len(chunk), np.int64)
         running, crashed, cut = np.ones(len(chunk), bool), np.zeros(len(chunk), bool), np.zeros(len(chunk), bool)
+        lanes = envs.ego(rows)[1]
         while running.any():
             live = rows[running]
             actions = np.stack([agent.act(observations[b][None])[0] for b in live])
             observations[live], reward, terminated, truncated = envs.step(actions, live)
+            speed, lane = envs.ego(live)
+            for b, v in zip(live, speed, strict=True):
+                speeds[start + b].append(float(kmh(v)))
+            changes[start + live] += lane != lanes[live]
+            lanes[live] = lane
             for b, r in zip(live, reward, strict=True):
                 totals[b] = totals[b] + float(r)
             steps[live] += 1
@@ -55,4 +64,7 @@ def evaluate(
         lengths.extend(steps.tolist())
     duration = float(adapter.settings.get("duration", DURATION_S))
     result = episodes_result(agent.name, seed, events, rewards, lengths, adapter.dt, duration * adapter.dt)
+    score = HighwayAdapter.score
+    result |= scores_result(score, [score.of(values, adapter.dt) for values in speeds])
+    result["lane_changes_mean"] = float(changes.mean())
     return result | ({"episode_rewards": rewards} if per_episode else {})

@@ -97,10 +97,11 @@ def compare(
     rng_seed: int = 0,
 ) -> Comparison:
     """Run one episode per seed in highway-env and in the kernel side by side. ``settings``: the adapter's
-    (``discrete`` for meta-actions, highway-env config keys); ``env_action``: "none", "uniform" (the searches'
-    prior) or "extreme" (every entry +-1: every commanded lane change that can happen, speeds at their bounds)."""
+    (``discrete = False`` for continuous control, highway-env config keys); ``env_action``: "none", "uniform" (the
+    searches' prior) or "extreme" (every entry +-1: every commanded lane change that can happen, speeds at their
+    bounds)."""
     adapter = HighwayAdapter(settings)
-    discrete = bool(adapter.settings.get("discrete", False))
+    discrete = bool(adapter.settings.get("discrete", True))
     envs = [adapter.make() for _ in seeds]
     spec = spec_of(envs[0])
     if isinstance(spec, str):

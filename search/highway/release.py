@@ -22,7 +22,7 @@ from search.gym.agents import GymAgent, load_sb3
 from search.highway.adapter import AGENTS_DIR, HighwayAdapter
 from search.highway.evaluate import evaluate
 
-VALIDATION_EPISODES = 30
+VALIDATION_EPISODES = 100  # DQN's snapshots differ by less than 30 episodes can tell
 VALIDATION_SEED, TEST_SEED = 1, 0
 COLUMNS = (*VALIDATION_COLUMNS, "collision_rate", "collision_low", "collision_high")
 REPRODUCE = (
@@ -128,18 +128,28 @@ def model_card(name: str, row: dict, test: dict, config: dict, minutes: float) -
     }[name]
     low, high = test["collision_ci95"]
     r_low, r_high = test["reward_ci95"]
+    speed = test["score"]
+    s_low, s_high = speed["ci95"]
     return f"""# Agent `highway-{name}`
 
-A highway driving policy (Stable-Baselines3 PPO, MLP 64x64) for highway-env's `highway-fast-v0` with continuous \
-acceleration and steering (Foil's world: search/highway/env.py): the snapshot of one training run after \
-**{int(row["env_steps"]):,} environment steps** ({minutes:.0f} minutes of training on a shared 2-core CPU). It is \
+A highway driving policy (Stable-Baselines3 DQN, MLP {config["hidden"]}x{config["hidden"]}) for highway-env's \
+`highway-fast-v0` with its discrete meta-actions (change lane, keep going, faster, slower between 72, 90 and 108 \
+km/h; a car cannot stop or reverse: Foil's world, search/highway/env.py): the snapshot of one training run after \
+**{int(row["env_steps"]):,} environment steps** ({f"{minutes:.0f} minutes" if minutes >= 2 else f"{60 * minutes:.0f} seconds"} of training on a \
+shared 2-core CPU). It is \
 {why}. Validation: {row["episodes"]} episodes of evaluation seed {VALIDATION_SEED}; reward \
 {float(row["reward_mean"]):.2f}, collision rate {float(row["collision_rate"]):.3f}.
 
-Training: PPO with {config["num_envs"]} environments x {config["num_steps"]} steps per update, batch \
-{config["batch_size"]}, {config["epochs"]} epochs, learning rate {config["learning_rate"]}, gamma {config["gamma"]}, \
-initial log standard deviation {config["log_std_init"]}, seed {config["seed"]}; highway-env's own reward \
-(speed, right lane, no collision; 0 to 1 per second).
+**How it drives** in the test episodes below: {_drives(test)} Its mean speed is {speed["mean"]:.1f} km/h \
+({s_low:.1f} to {s_high:.1f}; the other cars start at 83 to 90 km/h); it changes lanes \
+{test["lane_changes_mean"]:.1f} times a drive; it crashes in {test["collision_rate"]:.0%} of its drives.
+
+Training: DQN as highway-env's own example trains it: {config["total_steps"]:,} environment steps, replay buffer \
+{config["buffer_size"]:,}, learning from step {config["learning_starts"]}, batch {config["batch_size"]}, learning \
+rate {config["learning_rate"]}, gamma {config["gamma"]}, target network updated every \
+{config["target_update_interval"]} steps, exploration decaying over the first {config["exploration_fraction"]:.0%} \
+of training, seed {config["seed"]}; highway-env's own reward (speed between 72 and 108 km/h, right lane, no \
+collision; 0 to 1 per second).
 
 ## Test evaluation
 
@@ -157,6 +167,14 @@ validation; deterministic action; an episode ends with a crash, leaving the road
 {REPRODUCE}
 ```
 """
+
+
+def _drives(test: dict) -> str:
+    """One sentence a driver would say of the test drives."""
+    crashes, speed = test["collision_rate"], test["score"]["mean"]
+    safety = "rarely crashes" if crashes < 0.1 else "crashes often" if crashes > 0.3 else "crashes now and then"
+    pace = "keeps up with the traffic" if speed >= 80 else "drives slower than most of the traffic"
+    return f"it {safety} and {pace}."
 
 
 def _test(name: str, path: Path, episodes: int) -> dict:

@@ -1,11 +1,14 @@
-"""Training the highway agents with Stable-Baselines3 PPO (continuous acceleration and steering).
+"""Training the highway agents with Stable-Baselines3 DQN on highway-env's meta-actions, as highway-env's own
+example trains its highway agent (``scripts/sb3_highway_dqn.py``: the same network and settings) and as the field's
+highway agents are built.
 
     foil train --config search/highway/train.toml --out runs/highway
 
 The config file names its world with ``world = "highway"`` (or ``domain = "highway"``); its other keys are
 ``TrainConfig`` fields. The run directory gets ``config.json``, SB3's ``progress.csv`` and a checkpoint every
-``save_every`` environment steps (``checkpoints/model_<steps>_steps.zip``, the initial policy included), from which
-``foil release`` picks highway-lo, highway-med and highway-hi.
+``save_every`` environment steps (``checkpoints/model_<steps>_steps.zip``), from which ``foil release`` picks
+highway-lo, highway-med and highway-hi. The untrained network is not saved: it picks one fixed meta-action
+whatever it sees, which is no driver at all.
 """
 
 from __future__ import annotations
@@ -22,22 +25,26 @@ from search.core.settings import check_keys
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """PPO's settings for the highway run (SB3's defaults where not named; a small MLP policy)."""
+    """DQN's settings for the highway run: highway-env's example's (SB3's defaults where not named)."""
 
-    seed: int = 0
-    total_steps: int = 40_960
-    num_envs: int = 8
-    num_steps: int = 128  # per environment and update
-    batch_size: int = 64
-    epochs: int = 10
+    seed: int = 1
+    total_steps: int = 60_000
+    hidden: int = 256  # two hidden layers of this width
     learning_rate: float = 5e-4
+    buffer_size: int = 15_000
+    learning_starts: int = 200
+    batch_size: int = 32
     gamma: float = 0.8  # highway-env's reward is dense; a short horizon learns faster
-    log_std_init: float = -1.0  # initial action noise 0.37: wide random steering leaves the road within seconds
-    save_every: int = 4096  # environment steps between checkpoints
+    target_update_interval: int = 50
+    exploration_fraction: float = 0.7
+    save_every: int = 1000  # environment steps between checkpoints
 
     def __post_init__(self):
-        if min(self.total_steps, self.num_envs, self.num_steps, self.batch_size, self.save_every) < 1:
+        sizes = (self.total_steps, self.hidden, self.buffer_size, self.batch_size, self.target_update_interval)
+        if min(*sizes, self.save_every) < 1 or self.learning_starts < 0:
             raise ValueError("highway training settings must be positive")
+        if not 0 < self.exploration_fraction <= 1:
+            raise ValueError(f"exploration_fraction must be in (0, 1], not {self.exploration_fraction}")
 
 
 def is_highway_config(path: str | Path) -> bool:
@@ -60,9 +67,9 @@ def load_config(path: str | Path) -> TrainConfig:
 
 
 def train(config: TrainConfig, out: str | Path) -> Path:
-    """Run PPO and save checkpoints; returns the last one."""
+    """Run DQN and save checkpoints; returns the last one."""
     import torch
-    from stable_baselines3 import PPO
+    from stable_baselines3 import DQN
     from stable_baselines3.common.callbacks import CheckpointCallback
     from stable_baselines3.common.logger import configure
 
@@ -72,26 +79,28 @@ def train(config: TrainConfig, out: str | Path) -> Path:
     out = Path(out)
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps({"domain": "highway", **asdict(config)}, indent=1) + "\n")
-    envs = KernelVecEnv(config.num_envs)  # the episodes make_vec_env over highway-env would step, faster
+    envs = KernelVecEnv(1)  # the episodes highway-env would play, faster
     envs.seed(config.seed)
-    model = PPO(
+    model = DQN(
         "MlpPolicy",
         envs,
+        policy_kwargs={"net_arch": [config.hidden, config.hidden]},
         learning_rate=config.learning_rate,
-        n_steps=config.num_steps,
+        buffer_size=config.buffer_size,
+        learning_starts=config.learning_starts,
         batch_size=config.batch_size,
-        n_epochs=config.epochs,
         gamma=config.gamma,
+        train_freq=1,
+        gradient_steps=1,
+        target_update_interval=config.target_update_interval,
+        exploration_fraction=config.exploration_fraction,
         seed=config.seed,
-        policy_kwargs={"log_std_init": config.log_std_init},
         device="cpu",
         verbose=0,
     )
     model.set_logger(configure(str(out), ["csv"]))
-    model.save(out / "checkpoints" / "model_0_steps")
-    every = max(1, config.save_every // config.num_envs)
     started = time.perf_counter()
-    model.learn(config.total_steps, callback=CheckpointCallback(every, str(out / "checkpoints"), "model"))
+    model.learn(config.total_steps, callback=CheckpointCallback(config.save_every, str(out / "checkpoints"), "model"))
     last = out / "checkpoints" / f"model_{model.num_timesteps}_steps.zip"
     model.save(last)
     (out / "training_seconds.txt").write_text(f"{time.perf_counter() - started:.1f}\n")

@@ -234,7 +234,7 @@ def test_highway_cars_part_in_a_drivers_words(tmp_path):
     """A highway search's summary with its cars following the cautious driver (who lasts the drive) for 3 s:
     both egos are at one place at that moment, and the caption speaks of cars."""
     job = SearchJob(
-        agents=("tests.highway.drivers:cruise", "tests.highway.drivers:cautious"),
+        agents=("tests.highway.drivers:idle", "tests.highway.drivers:slower"),
         scenario="highway-dense",
         solver="random",
         budget=400,

@@ -4,12 +4,12 @@ import numpy as np
 
 
 def cruise(observations):
-    """Keeps its speed and lane."""
+    """Continuous control: keeps its speed and lane."""
     return np.zeros((len(observations), 2))
 
 
 def cautious(observations):
-    """Eases off the accelerator and holds its lane."""
+    """Continuous control: eases off the accelerator and holds its lane."""
     return np.tile([-0.3, 0.0], (len(observations), 1))
 
 
@@ -21,3 +21,8 @@ def idle(observations):
 def faster(observations):
     """Meta-action FASTER."""
     return np.full(len(observations), 3, dtype=np.int64)
+
+
+def slower(observations):
+    """Meta-action SLOWER: down to the slowest target speed, 72 km/h, and holds its lane."""
+    return np.full(len(observations), 4, dtype=np.int64)

@@ -16,7 +16,8 @@ from search.solvers.reward import RewardConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from search.solvers.summary import verify
 
-DRIVERS = ("tests.highway.drivers:cruise", "tests.highway.drivers:cautious")
+DRIVERS = ("tests.highway.drivers:idle", "tests.highway.drivers:slower")
+CONTINUOUS = ("tests.highway.drivers:cruise", "tests.highway.drivers:cautious")
 
 
 def problem(scenario: GymScenario, agents=DRIVERS) -> GymCoupledProblem:
@@ -81,7 +82,7 @@ def test_environment_action_moves_other_drivers_within_bounds_and_never_the_ego(
 
 
 @pytest.mark.parametrize(
-    "agents,discrete", [(DRIVERS, False), (("tests.highway.drivers:idle", "tests.highway.drivers:faster"), True)]
+    "agents,discrete", [(CONTINUOUS, False), (("tests.highway.drivers:idle", "tests.highway.drivers:faster"), True)]
 )
 def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, discrete):
     job = SearchJob(
@@ -91,7 +92,7 @@ def test_search_is_deterministic_and_verify_reproduces_it(tmp_path, agents, disc
         budget=40,
         top_k=2,
         solver_config=SamplingConfig(batch=2),
-        world_settings={"discrete": True} if discrete else {},
+        world_settings={"discrete": discrete},
     )
     files = run_search(job)
     again = run_search(job)

@@ -23,7 +23,7 @@ def _drivers(*names):
 
 @pytest.fixture(scope="module")
 def agents():
-    return _drivers("cruise", "cautious")
+    return _drivers("idle", "slower")
 
 
 def _same(reference: GymCoupledProblem, kernel: KernelCoupledProblem) -> None:
@@ -39,14 +39,14 @@ def _same(reference: GymCoupledProblem, kernel: KernelCoupledProblem) -> None:
             row_index = b * len(row) + k
             position = [kernel.kernel.state.x[row_index, 0], kernel.kernel.state.y[row_index, 0]]
             assert np.array_equal(reference.adapter.position(instance.env), position)
+        assert reference.measured(b) == kernel.measured(b)  # the visible score, step by step
 
 
 @pytest.mark.parametrize("discrete", [False, True], ids=["continuous", "meta-actions"])
 def test_steps_and_snapshots_as_the_highway_env_problem(agents, discrete):
     scenario = SCENARIOS["highway-dense"]
-    if discrete:
-        scenario = replace(scenario, settings=scenario.settings | {"discrete": True})
-        agents = _drivers("idle", "faster")
+    scenario = replace(scenario, settings=scenario.settings | {"discrete": discrete})
+    agents = _drivers("idle", "faster") if discrete else _drivers("cruise", "cautious")
     reference, kernel = GymCoupledProblem(agents, scenario), KernelCoupledProblem(agents, scenario)
     rng = np.random.default_rng(0)
     for problem in (reference, kernel):
