@@ -35,7 +35,6 @@ class KernelSnapshot:
     steps: np.ndarray  # (B,)
     measured: np.ndarray  # (B, N, steps the episode can last): the visible score (km/h) after each step
 
-
     @property
     def batch(self) -> int:
         return len(self.steps)

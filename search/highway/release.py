@@ -135,8 +135,7 @@ def model_card(name: str, row: dict, test: dict, config: dict, minutes: float) -
 A highway driving policy (Stable-Baselines3 DQN, MLP {config["hidden"]}x{config["hidden"]}) for highway-env's \
 `highway-fast-v0` with its discrete meta-actions (change lane, keep going, faster, slower between 72, 90 and 108 \
 km/h; a car cannot stop or reverse: Foil's world, search/highway/env.py): the snapshot of one training run after \
-**{int(row["env_steps"]):,} environment steps** ({f"{minutes:.0f} minutes" if minutes >= 2 else f"{60 * minutes:.0f} seconds"} of training on a \
-shared 2-core CPU). It is \
+**{int(row["env_steps"]):,} environment steps** ({_took(minutes)} of training on a shared 2-core CPU). It is \
 {why}. Validation: {row["episodes"]} episodes of evaluation seed {VALIDATION_SEED}; reward \
 {float(row["reward_mean"]):.2f}, collision rate {float(row["collision_rate"]):.3f}.
 
@@ -167,6 +166,10 @@ validation; deterministic action; an episode ends with a crash, leaving the road
 {REPRODUCE}
 ```
 """
+
+
+def _took(minutes: float) -> str:
+    return f"{minutes:.0f} minutes" if minutes >= 2 else f"{60 * minutes:.0f} seconds"
 
 
 def _drives(test: dict) -> str:
