@@ -438,6 +438,12 @@ class VisibleReels:
         their visible score."""
         return SCORE_MARGIN if self.world.rule == "score" else observer.tie_margin
 
+    def moments(self, label: str) -> list[str]:
+        """How the robot labelled ``label`` ended in each moment of its reel, one sentence a moment, each clock
+        started with its moment as the reel's is: ``Moment 2 of 3: Robot 4 reached the goal after 3.2 seconds.``"""
+        reel = self.reels[self.labels.index(label)]
+        return [f"Moment {i} of {len(reel)}: {segment.describe(label)}" for i, segment in enumerate(reel, 1)]
+
     def describe(self, label: str) -> str:
         """How the robot labelled ``label`` ended in each moment of its reel, as one sentence in the world's words."""
         reel = self.reels[self.labels.index(label)]

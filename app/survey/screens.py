@@ -404,11 +404,11 @@ def _outcomes(bundle: Bundle, sha: str) -> list[str]:
     clip = next((clip for clip in bundle.clips.values() if clip.sha256.lower() == sha), None)
     reel = next((reel for reel in _reels(bundle) if reel.sha256.lower() == sha), None)
     try:
-        if reel is not None:  # one robot's reel: how it ended in each of its moments
+        if reel is not None:  # one robot's reel: how it ended in each of its moments, a line each
             owner = next(c for c in bundle.clips.values() if reel in c.reels)
             label = owner.labels[owner.agents.index(reel.agent)]
             segments = [load_summary(bundle.root / path) for path in reel.summaries]
-            return [VisibleReels.of_summaries([segments], [label], bundle.world).describe(label)]
+            return VisibleReels.of_summaries([segments], [label], bundle.world).moments(label)
         if clip is None or not clip.summary:
             return []
         summary = load_summary(bundle.root / clip.summary)

@@ -393,8 +393,8 @@ def render_clips(
 
 
 def moment_options(options: RenderOptions) -> RenderOptions:
-    """How a reel's moments are drawn: they start at once and hold their end briefly (the cards between them mark
-    the cuts), so a question of reels plays about as long as a clip of the same simulated seconds."""
+    """How a reel's moments are drawn: they start at once (the card before each marks the cut) and hold their end
+    as a clip does, so an arrival or a crash on a moment's last step stays on screen long enough to read."""
     return replace(options, hold_start=0.0, hold_end=min(options.hold_end, REEL_HOLD_END))
 
 
@@ -489,7 +489,7 @@ def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, wo
     return manifest
 
 
-REEL_HOLD_END = 0.5  # seconds a reel's moment holds its last frame: the card between moments marks the cut
+REEL_HOLD_END = 1.5  # seconds a reel's moment holds its last frame, as a clip's end: a crash at its end reads
 
 
 def shown_summaries(job: ClipJob, folder: Path, world: World) -> list[list[Path]]:

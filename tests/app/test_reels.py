@@ -159,7 +159,11 @@ def test_a_ranking_round_of_reels_watches_each_pair_and_lists_every_reel(bundle_
         assert len(ranking.media_list) == len(ranking.robots)  # each robot's reel once, however often paired
         page = ranking.page(study, bundle)
         assert page["round_reels"]
-        assert all(len(c["outcomes"]) == 1 and "moment" in c["outcomes"][0] for c in page["round_clips"])
+        for clip in page["round_clips"]:  # one line a moment, each saying which
+            moments = len(clip["outcomes"])
+            assert moments > 1 and [line.split(":")[0] for line in clip["outcomes"]] == [
+                f"Moment {i} of {moments}" for i in range(1, moments + 1)
+            ]
 
 
 def to_reels(client, query: str = "") -> str:
@@ -191,10 +195,10 @@ def test_a_reels_screen_is_answered_only_after_every_reel_ended_and_both_reels_t
     client = make_client(ANONYMOUS)
     page = to_reels(client)
     one_reel = client.post("/study", data=answer_for(page) | {"video_events": watched_reels([0])})
-    assert one_reel.status_code == 422 and "Please watch each robot&#39;s clip to the end" in one_reel.text
+    assert one_reel.status_code == 422 and "Please watch each clip to the end" in one_reel.text
     # Both reels ended, by the page's record, at once: longer than either reel, shorter than the two together.
     too_soon = client.post("/study", data=answer_for(page))
-    assert too_soon.status_code == 422 and "The robots&#39; clips play for 2 seconds together" in too_soon.text
+    assert too_soon.status_code == 422 and "The clips play for 2 seconds together" in too_soon.text
     assert FormReader(too_soon.text).disabled_answers and [r.step for r in stored(client, Response)] == [0]
 
     shown_at = as_utc(stored(client, Participant)[0].step_started_at)
