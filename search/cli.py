@@ -101,7 +101,9 @@ def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str
         "solver_config": config_class(
             **in_steps(config_class, given, domain.step_seconds(scenario, world), defaults=True)
         ),
-        "reward_settings": parse_settings(RewardConfig, args.reward, "reward"),
+        "reward_settings": in_steps(
+            RewardConfig, parse_settings(RewardConfig, args.reward, "reward"), domain.step_seconds(scenario, world)
+        ),
         "world_settings": world,
     }
 
@@ -337,7 +339,8 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="reward setting, e.g. norm=squared, alpha=2, horizon=100 (steps: the searched clip's length)",
+        help="reward setting, e.g. norm=squared, alpha=2, horizon=25 (seconds: the searched clip's length; "
+        "horizon_steps=100 gives steps)",
     )
     parser.add_argument(
         "--world",

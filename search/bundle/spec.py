@@ -303,6 +303,7 @@ def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
             if step_seconds is not None:  # its lengths of time in steps (search.core.settings)
                 defaults = in_steps(solver.config_class, {}, step_seconds, defaults=True)
                 checked["settings"] = in_steps(solver.config_class, checked["settings"], step_seconds)
+                checked["reward"] = in_steps(RewardConfig, checked["reward"], step_seconds)
             solver_config = solver.config_class(**(defaults | checked["settings"]))
             reward = RewardConfig.from_dict(checked["reward"])
         except (TypeError, ValueError) as error:

@@ -26,7 +26,7 @@ steps. The tests hold the formula written with numpy arrays, as the reference th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from importlib import import_module
 
 import numba
@@ -45,7 +45,9 @@ class RewardConfig(ConfigTable):
 
     what = "reward"
 
-    horizon: int = 100
+    # the searched clip's length in steps; a study file or the command line gives it in seconds (horizon = 25.0),
+    # or in steps (horizon_steps = 100), as every length of time (search.core.settings)
+    horizon: int = field(default=100, metadata={"seconds": 25.0})
     norm: str = "plain"  # "plain" ||x|| (paper code) or "squared" ||x||^2 (paper text)
     combine: str = "mean"  # how pairwise divergences of N > 2 agents combine: "mean" or "min"
     alpha: float = 1.0

@@ -135,7 +135,7 @@ def test_eval_counts_each_ending_as_the_adapter_reads_it(world, capsys):
 )
 def test_every_solver_searches_and_every_summary_verifies(world, capsys, solver):
     scenario = "track-starts.toml" if solver == "representative" else "track.toml"
-    args = ["--budget", "120", "--top-k", "2", "--out", "out", "--quiet", "--reward", "horizon=6"]
+    args = ["--budget", "120", "--top-k", "2", "--out", "out", "--quiet", "--reward", "horizon_steps=6"]
     if solver == "representative":  # (pushes + 1) x horizon steps a state at most: 120 fit 6 of 3 rollouts each
         args += ["--set", "pushes=2"]
     assert main(["search", "--agents", f"{FAST},{SLOW}", "--scenario", scenario, "--solver", solver, *args]) == 0

@@ -41,7 +41,7 @@ def test_the_cartpole_walk_runs_as_the_docs_say(tmp_path, monkeypatch, capsys):
 
     assert main(["eval", "cartpole_push:steady", "--scenario", "cartpole.toml", "--episodes", "3", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["success_rate"] == 1.0  # keeps the pole up for CartPole's 500 steps
-    common = ["--agents", AGENTS, "--reward", "horizon=200", "--quiet", "--top-k", "1"]
+    common = ["--agents", AGENTS, "--reward", "horizon_steps=200", "--quiet", "--top-k", "1"]
     assert main(["search", *common, "--scenario", "cartpole.toml", "--budget", "300", "--out", "out"]) == 0
     rep = ["--solver", "representative", "--set", "states=3", "--set", "pushes=2"]
     assert (

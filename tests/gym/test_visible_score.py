@@ -150,7 +150,7 @@ solver = "representative"
 budget = 400
 seed = 0
 settings = {{ states = 4, pushes = 2 }}
-reward = {{ horizon = 20 }}
+reward = {{ horizon_steps = 20 }}
 
 [[build.sets]]
 parts = ["pairwise"]
@@ -171,7 +171,7 @@ def world(tmp_path, monkeypatch):
 
 
 def representative(world, scenario: str) -> tuple[dict, list]:
-    args = ["--budget", "400", "--top-k", "2", "--out", scenario, "--quiet", "--reward", "horizon=20"]
+    args = ["--budget", "400", "--top-k", "2", "--out", scenario, "--quiet", "--reward", "horizon_steps=20"]
     args += ["--solver", "representative", "--set", "states=4", "--set", "pushes=2"]
     assert main(["search", "--agents", f"{STEADY},{IDLE}", "--scenario", f"{scenario}-starts.toml", *args]) == 0
     summaries = sorted((world / scenario).glob("summary-*.json"))

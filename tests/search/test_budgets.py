@@ -64,6 +64,6 @@ def test_a_budget_too_small_for_any_trajectory_says_so(track, capsys, monkeypatc
     from search.cli import main
 
     monkeypatch.chdir(track)
-    args = ["--scenario", "track.toml", "--budget", "5", "--reward", "horizon=6", "--out", "out", "--quiet"]
+    args = ["--scenario", "track.toml", "--budget", "5", "--reward", "horizon_steps=6", "--out", "out", "--quiet"]
     assert main(["search", "--agents", f"{FAST},{SLOW}", *args]) == 0  # MCTS: the track's episodes last 6 steps
     assert "no trajectory ended within the budget of 5 steps: raise --budget" in capsys.readouterr().out

@@ -8,7 +8,7 @@ from search.cli import main
 from search.solvers.baselines import CEMConfig
 from search.solvers.runner import SearchJob, parse_settings, run_all, run_search, study_jobs
 
-SMALL = ["--budget", "600", "--top-k", "3", "--reward", "horizon=30", "--quiet"]
+SMALL = ["--budget", "600", "--top-k", "3", "--reward", "horizon_steps=30", "--quiet"]
 
 
 def search(out, *extra, agents="goal,orca", solver="mcts", seed="0"):
@@ -172,9 +172,8 @@ def test_first_finish_ends_every_trajectory_at_the_first_robots_end(tmp_path):
     """With --reward finish=first a summary's searched steps end on the step the first robot collides or arrives,
     a collision earns no goal term; the clip plays on without pushes (its coda) until the other robot's episode
     ends too or the horizon is reached, and replay reproduces every summary, coda included, exactly."""
-    assert (
-        search(tmp_path, "--reward", "finish=first", "--reward", "horizon=60", "--budget", "6000", "--top-k", "5") == 0
-    )
+    reward = ["--reward", "finish=first", "--reward", "horizon_steps=60"]
+    assert search(tmp_path, *reward, "--budget", "6000", "--top-k", "5") == 0
     ends, codas = set(), 0
     for path in sorted(tmp_path.glob("summary-*.json")):
         summary = json.loads(path.read_text())

@@ -58,7 +58,7 @@ def representative_search(out, seed="0", budget="4000", states="6", top_k="2", b
     return main(
         ["search", "--agents", "goal,orca", "--scenario", "training", "--solver", "representative", "--seed", seed,
          "--budget", budget, "--top-k", top_k, "--set", f"states={states}", "--set", "pushes=5", *batch,
-         "--reward", "horizon=60", "--out", str(out), "--quiet"]
+         "--reward", "horizon_steps=60", "--out", str(out), "--quiet"]
     )  # fmt: skip
 
 

@@ -38,7 +38,7 @@ def test_seconds_become_steps_by_the_worlds_step_length():
 
 def search(solver: str, *settings: str) -> dict:
     """The solver's parameters as run.json records them, after `foil search` on the track."""
-    args = ["--budget", "200", "--top-k", "1", "--reward", "horizon=6", "--out", "out", "--quiet", *settings]
+    args = ["--budget", "200", "--top-k", "1", "--reward", "horizon_steps=6", "--out", "out", "--quiet", *settings]
     assert main(["search", "--agents", f"{FAST},{SLOW}", "--scenario", "track.toml", "--solver", solver, *args]) == 0
     with open("out/run.json") as file:
         return json.load(file)["solver"]["parameters"]
@@ -50,6 +50,21 @@ def test_the_command_line_takes_seconds_and_steps_where_asked(track):
     assert search("disagreements", "--set", "horizon_steps=3")["horizon"] == 3
     found = search("highlights", "--set", "context=1.5", "--set", "gap_steps=4", "--set", "lookahead=2")
     assert (found["context"], found["gap"], found["lookahead"]) == (3, 4, 2)  # lookahead is a number of steps
+
+
+def test_the_reward_horizon_is_seconds_on_the_command_line_and_in_a_study(track):
+    def horizon(*reward: str) -> int:
+        args = ["--budget", "200", "--top-k", "1", "--solver", "nfirst", "--out", "out", "--quiet", *reward]
+        assert main(["search", "--agents", f"{FAST},{SLOW}", "--scenario", "track.toml", *args]) == 0
+        with open("out/run.json") as file:
+            return json.load(file)["reward_parameters"]["horizon"]
+
+    assert horizon("--reward", "horizon=3") == 6 and horizon("--reward", "horizon_steps=3") == 3  # 0.5 s a step
+    assert horizon() == 100  # the default, in steps
+    scheme = build("track.toml", [FAST, SLOW], "", "nfirst").replace(
+        "seed = 0\n", "seed = 0\nreward = {{ horizon = 4 }}\n"
+    )
+    assert parse_build(scheme.replace("{{", "{").replace("}}", "}")).schemes["method"].reward.horizon == 8
 
 
 def test_the_command_line_refuses_steps_of_what_is_no_length_of_time(track, capsys):

@@ -78,4 +78,4 @@ def test_the_build_table_refuses_each_unknown_setting_at_its_line():
     assert solver.startswith("study.toml, line 10, build.schemes.a.settings.explorashun: ")
     _refused(solver, "explorashun", "solver setting", list(MCTSConfig.__dataclass_fields__))
     assert reward.startswith("study.toml, line 12, build.schemes.a.reward.horizn: ")
-    _refused(reward, "horizn", "reward setting", list(RewardConfig.__dataclass_fields__))
+    _refused(reward, "horizn", "reward setting", [*RewardConfig.__dataclass_fields__, "horizon_steps"])
