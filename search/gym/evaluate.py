@@ -105,13 +105,12 @@ def format_result(result: dict) -> str:
     if "score" in result:
         shown = result["score"]
         score = Score.from_manifest({k: v for k, v in shown.items() if k not in ("mean", "ci95")})
+        digits = 1 if score.summed == "band" else score.digits  # a band's sum is seconds, at one decimal
+        mean, low, high = (f"{v:.{digits}f}" for v in (shown["mean"], *shown["ci95"]))
         if score.summed == "band":
-            mean, low, high = (f"{v:.1f} s" for v in (shown["mean"], *shown["ci95"]))
-            text += f", visible score: {mean} of {score.name} within its band ({low} to {high})"
+            text += f", visible score: {mean} s of {score.name} within its band ({low} to {high} s)"
         else:
-            mean, low, high = (
-                score.value_text(v).removeprefix(f"{score.name} ") for v in (shown["mean"], *shown["ci95"])
-            )
+            unit = f" {score.unit}" if score.unit else ""
             how = "at the end" if score.summed == "final" else "mean over the episode"
-            text += f", visible score: {score.name} {how} {mean} ({low} to {high})"
+            text += f", visible score: {score.name} {how} {mean}{unit} ({low} to {high}{unit})"
     return text
