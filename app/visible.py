@@ -137,7 +137,7 @@ class Words:
     `success` and `collision` may say ``{seconds}``, the seconds the clip shows it took (one decimal, as the clip)."""
 
     agent: str = "Robot"  # the word before an agent's number, on its clips and the pages: "Robot 2"
-    agents: str = "robots"  # the agents in running text: "Choose one of the robots"
+    agents: str = ""  # the agents in running text ("the cars"); empty: the agent's word and an s ("robots")
     clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
     # a pair of reels (each robot on its own, in moments of its own runs): the line above them and each reel's
     # accessible name, which the page follows with the robot's label
@@ -178,6 +178,11 @@ class Words:
         "A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
         "from this round's clips."
     )
+
+
+    def many(self) -> str:
+        """The agents in running text: `agents`, or the agent's word in lower case with an s."""
+        return self.agents or self.agent.lower() + "s"
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,6 @@ from app.visible import Score, Words, World
 EVENTS = ("success", "collision", "timeout")
 GENERIC_WORDS = Words(
     agent="Agent",
-    agents="agents",
     clip_title="Clip of two agents side by side, each in its own copy of the same world",
     reels_intro="Each agent is shown on its own, in moments from its own runs.",
     reel_title="Clip of one agent on its own",

@@ -41,7 +41,6 @@ AGENTS_DIR = Path(__file__).parent / "agents"
 AGENT_PREFIX = "highway-"
 WORDS = Words(
     agent="Car",
-    agents="cars",
     clip_title="Clip of two self-driving cars, each on its own copy of the same highway",
     reels_intro="Each car is shown on its own, in moments from its own drives.",
     reel_title="Clip of one self-driving car on its own",
