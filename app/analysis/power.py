@@ -293,6 +293,11 @@ def describe(found: Crossing, task: str) -> str:
         return f"{found.target:.0%} power: at about N = {math.ceil(found.n)} (95% interval {low}{between}{high})"
     at_last = f"{math.floor(found.power_at_last * 100) / 100:.2f} at {found.last}"  # rounded down: not reached
     text = f"{found.target:.0%} power: not reached within {found.last} participants (the fit gives {at_last}"
+    if found.ceiling > found.target and task == "ranking":  # the sets' spread, not the participants, limits it
+        return text + (
+            "); a larger --max-participants may reach it, but a ranking test is limited by its few ranked sets: more "
+            "ranked sets (scenarios) help more than more participants"
+        )
     if found.ceiling > found.target:
         return text + "); try a larger --max-participants"
     clips = "ranked sets" if task == "ranking" else "clips per scheme"

@@ -59,6 +59,8 @@ def test_a_curve_that_never_reaches_80_percent_says_so_and_what_would():
     rising = PowerCurve(math.log(0.5 / 0.5) - 2.0 * math.log(120), 2.0, 1.0)  # 50% at 120
     text = describe(crossings(GRID, counts(rising, 100), 100)[0], "pairwise")
     assert text.startswith("80% power: not reached within 120 participants") and "--max-participants" in text
+    ranking = describe(crossings(GRID, counts(rising, 100), 100)[0], "ranking")  # still rising: sets come first
+    assert "more ranked sets (scenarios) help more than more participants" in ranking
     flat = [10, 25, 33, 38, 40, 41, 43, 42, 43, 44]
     for task, more in (("ranking", "more ranked sets (scenarios)"), ("pairwise", "more clips per scheme")):
         text = describe(crossings(GRID, flat, 100)[0], task)
