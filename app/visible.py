@@ -179,7 +179,6 @@ class Words:
         "from this round's clips."
     )
 
-
     def many(self) -> str:
         """The agents in running text: `agents`, or the agent's word in lower case with an s."""
         return self.agents or self.agent.lower() + "s"

@@ -271,11 +271,17 @@ def orderings(answer: str, truth: str) -> list[int]:
 
 
 def _audits(bundle_dir: str) -> dict[str, dict[str, Any]]:
-    """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest."""
+    """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest, with which
+    label on screen is which agent (``labels``: "Robot 2 = hi, Robot 5 = lo"), since its words name labels."""
     from app.formats import Manifest
 
     manifest = Manifest.model_validate_json((Path(bundle_dir) / "manifest.json").read_text(encoding="utf-8"))
-    return {clip.id: clip.audit.model_dump() for clip in manifest.clips if clip.audit is not None}
+    return {
+        clip.id: clip.audit.model_dump()
+        | {"labels": ", ".join(f"{label} = {agent}" for agent, label in zip(clip.agents, clip.labels, strict=True))}
+        for clip in manifest.clips
+        if clip.audit is not None
+    }
 
 
 # Tables ------------------------------------------------------------------------------------------------------
@@ -509,6 +515,7 @@ def per_clip_rows(data: ReportData) -> list[dict[str, Any]]:
                 "accuracy": _number(tally.accuracy),
                 "audit_shows": audit.get("shows", ""),
                 "audit_why": audit.get("why", ""),
+                "audit_labels": audit.get("labels", ""),
             }
         )
     return rows

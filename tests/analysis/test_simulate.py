@@ -3,6 +3,7 @@ what they answered."""
 
 from __future__ import annotations
 
+import csv
 import json
 import shutil
 import threading
@@ -192,6 +193,11 @@ def test_cli_simulate_export_report(live_server, bundle_dir, tmp_path, capsys):
         == 0
     )
     assert "Robot 9 bumped into a person early." in (tmp_path / "audited" / "report.html").read_text()
+    first = manifest["clips"][0]  # the audit's labels, each named with its agent
+    labels = ", ".join(f"{label} = {agent}" for agent, label in zip(first["agents"], first["labels"], strict=True))
+    with (tmp_path / "audited" / "per_clip.csv").open() as handle:
+        rows = {row["clip"]: row for row in csv.DictReader(handle)}
+    assert rows[first["id"]]["audit_labels"] == labels and " = " in labels
     for bad in (
         ["--include", "robots"],
         ["--bundle", str(tmp_path / "nowhere")],
