@@ -100,10 +100,17 @@ class Walker:
         """Play the clip to its end: the answers stay disabled until then."""
         next_button = self.page.locator("fieldset[data-answers] button[type=submit]")
         assert next_button.is_disabled(), "the answers were open before the clip was watched"
+        text_box = "fieldset[data-answers] textarea"
+        locked = None
+        if self.page.locator(text_box).count():  # a locked text box looks locked, not like one to type in
+            locked = self.page.eval_on_selector(text_box, "e => getComputedStyle(e).backgroundColor")
+            assert locked != "rgb(255, 255, 255)", locked
         self.page.wait_for_function("() => document.querySelector('video').readyState >= 2")
         self.page.click("[data-play]")
         self.page.wait_for_function("() => document.querySelector('video').ended", timeout=20_000)
         assert next_button.is_enabled()
+        if locked is not None:
+            assert self.page.eval_on_selector(text_box, "e => getComputedStyle(e).backgroundColor") != locked
         played = self.page.evaluate(
             "(() => { const v = document.querySelector('video'); return [v.currentTime, v.duration]; })()"
         )
