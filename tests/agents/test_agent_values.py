@@ -1,5 +1,5 @@
 """Agents' own values of a state, which Agent Disagreements' last_state importance reads: a DS-RNN's value head
-(the critic training uses), and a Stable-Baselines3 PPO agent's critic (highway)."""
+(the critic training uses), and a Stable-Baselines3 DQN agent's action values (highway)."""
 
 from __future__ import annotations
 
@@ -31,10 +31,10 @@ def test_a_dsrnn_value_is_its_critic_of_the_state_after_its_memory():
     assert all(np.array_equal(sim.policy_states[0][k], state[k]) for k in state)  # the memory is left as it was
 
 
-def test_a_highway_ppo_agent_has_a_critic_value_and_no_action_values():
+def test_a_highway_dqn_agent_has_action_values_and_its_value_is_the_best():
     domain = domain_for(["highway-lo", "highway-hi"], "highway-dense")
     problem = domain.coupled(["highway-lo", "highway-hi"], domain.state("highway-dense", {}), {}).problem
     problem.reset(3)
-    values = problem.values(1)
-    assert values.shape == (3,) and np.all(np.isfinite(values))
-    assert problem.action_values(1) is None  # continuous actions: HIGHLIGHTS uses its simulator stand-in
+    values, action_values = problem.values(1), problem.action_values(1)
+    assert action_values.shape == (3, 5) and np.all(np.isfinite(action_values))  # one Q a meta-action
+    assert np.array_equal(values, action_values.max(axis=1))

@@ -76,7 +76,7 @@ def answer_unwatched(page) -> None:
     """A pilot's answer to the screen shown, without playing its clip (the server does not hold pilots to it)."""
     page.evaluate("""() => {
         document.querySelector('fieldset[data-answers]').disabled = false;
-        document.querySelector('[data-events]').value = JSON.stringify([{type: 'ended', t: 1}]);
+        document.querySelector('[data-events]').value = JSON.stringify([{type: 'play', t: 0}, {type: 'ended', t: 1}]);
         for (const name of ['better', 'difficulty', 'attention']) {
             const first = document.querySelector(`input[name=${name}]`); if (first) first.checked = true; }
         const text = document.querySelector('textarea'); if (text) text.value = 'a reason';

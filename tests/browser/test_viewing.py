@@ -153,7 +153,8 @@ def test_ranking_page_shows_the_rounds_clips_and_a_duplicate_robot_at_once(long_
             break
         page.evaluate("""() => {
             document.querySelector('fieldset[data-answers]').disabled = false;
-            document.querySelector('[data-events]').value = JSON.stringify([{type: 'ended', t: 1}]);
+            const played = [{type: 'play', t: 0}, {type: 'ended', t: 1}];
+            document.querySelector('[data-events]').value = JSON.stringify(played);
             for (const name of ['better', 'difficulty']) {
                 const first = document.querySelector(`input[name=${name}]`); if (first) first.checked = true; }
             const text = document.querySelector('textarea'); if (text) text.value = 'a reason';

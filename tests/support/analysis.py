@@ -19,8 +19,8 @@ from app.survey.assignment import conditions
 from app.survey.bundle import load_bundle
 from app.survey.clip_length import clip_shape
 from app.survey.plan import build_plan
-from app.survey.screens import dump_plan
-from tests.support.survey import AGENT_RANK, SECRET_NAMES, make_clip, write_bundle
+from app.survey.screens import dump_plan, parse_plan
+from tests.support.survey import AGENT_RANK, SECRET_NAMES, WATCHED, make_clip, watched_reels, write_bundle
 
 SCHEMES = [SECRET_NAMES["adaptive"], SECRET_NAMES["nfirst"]]
 SCENARIOS = [SECRET_NAMES["paper-bl-tr"], SECRET_NAMES["paper-tl-br"]]
@@ -185,8 +185,10 @@ def add_participant(
         session.add(participant)
         session.flush()
         participant.plan = dump_plan(build_plan(study, bundle, conditions(study)[condition], random.Random(seed)))
-        for step, screen in enumerate(participant.plan):
+        for step, (screen, typed) in enumerate(zip(participant.plan, parse_plan(participant.plan), strict=True)):
             answers = answer(screen)
+            clips = len(typed.clips_to_watch())  # what a browser records: each clip played to its end
+            events = [] if not clips else json.loads(WATCHED if clips == 1 else watched_reels(list(range(clips))))
             if screen["kind"] == "attention" and answers["attention"] != screen["expected"]:
                 participant.attention_failures += 1
             session.add(
@@ -195,8 +197,8 @@ def add_participant(
                     step=step,
                     kind=screen["kind"],
                     answers=answers,
-                    video_events=[],
-                    plays=1 if "media" in screen else 0,
+                    video_events=events,
+                    plays=sum(event["type"] == "play" for event in events),
                     client_ms=1000 + step,
                     server_ms=900 + step,
                     submitted_at=start + timedelta(seconds=10 * step),
