@@ -13,6 +13,7 @@ trades the last commits before an operating-system crash for fewer disk flushes 
 
 from __future__ import annotations
 
+import logging
 import sqlite3
 import threading
 from collections.abc import Iterator
@@ -108,8 +109,15 @@ def alembic_config(url: str) -> Config:
 
 
 def migrate(url: str, revision: str = "head") -> None:
-    """Bring the database to `revision` (creating it if needed)."""
-    command.upgrade(alembic_config(url), revision)
+    """Bring the database to `revision` (creating it if needed). Alembic's line per migration is left out of the
+    log: on a new database they would bury the server's address and admin password under a page of history."""
+    alembic_log = logging.getLogger("alembic")
+    level = alembic_log.level
+    alembic_log.setLevel(logging.WARNING)
+    try:
+        command.upgrade(alembic_config(url), revision)
+    finally:
+        alembic_log.setLevel(level)
 
 
 def check_migrated(engine: Engine) -> None:
