@@ -15,9 +15,7 @@ from search.crowd.render import CrowdClipRenderer, robot_label
 from search.crowd.scene import scene_from_summary
 from search.crowd.sim.scenarios import load_scenario
 from search.gym.clips import GymClipRenderer
-from search.solvers.baselines import SamplingConfig
-from search.solvers.runner import SearchJob, run_search, write_outputs
-from tests.gym.test_gym_clips import Track, TrackAdapter
+from tests.gym.test_gym_clips import Track, TrackAdapter, summary_file  # noqa: F401  (the fixture)
 from tests.support.summaries import summary_from_simulation, visible
 
 WIDTHS = [None, 320, 360, 480, 720, 960, 1280]
@@ -76,29 +74,13 @@ class WideLongWordsAdapter(LongWordsAdapter):
         return WideTrack(render_mode="rgb_array" if render else None)
 
 
-@pytest.fixture(scope="module")
-def summary_file(tmp_path_factory):
-    """A clip of the track whose fast agent crashes into the wall and whose slow one runs out of time."""
-    folder = tmp_path_factory.mktemp("search")
-    (folder / "track.toml").write_text('adapter = "tests.gym.test_gym_clips:TrackAdapter"\nseed = 3\n')
-    job = SearchJob(
-        agents=("tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"),
-        scenario=str(folder / "track.toml"),
-        solver="random",
-        budget=12,
-        top_k=1,
-        solver_config=SamplingConfig(batch=1),
-    )
-    return write_outputs(folder, run_search(job)) / "summary-001.json"
-
-
 def overlap(a, b) -> bool:
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
 
 @pytest.mark.parametrize("adapter", ["LongWordsAdapter", "WideLongWordsAdapter"])
 @pytest.mark.parametrize("width", WIDTHS)
-def test_a_gym_status_and_caption_keep_off_the_label_and_inside_the_view(summary_file, adapter, width):
+def test_a_gym_status_and_caption_keep_off_the_label_and_inside_the_view(summary_file, adapter, width):  # noqa: F811
     summary = json.loads(summary_file.read_text())
     summary["scenario"]["adapter"] = f"tests.render.test_status_layout:{adapter}"
     renderer = MeasuredGym(summary, [3, 1], RenderOptions(width=width))
@@ -122,7 +104,7 @@ def test_a_gym_status_and_caption_keep_off_the_label_and_inside_the_view(summary
             assert not overlap(others[0][2], others[1][2]), others
 
 
-def test_a_text_that_fits_keeps_its_size_and_words(summary_file):
+def test_a_text_that_fits_keeps_its_size_and_words(summary_file):  # noqa: F811
     """At the study's default width the track's own words fit: drawn whole, at the legend's size."""
     renderer = MeasuredGym(json.loads(summary_file.read_text()), [3, 1], RenderOptions())
     renderer.draw(renderer.frames[-1])
