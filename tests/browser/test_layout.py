@@ -150,6 +150,8 @@ def test_a_phone_shows_the_play_button_first_a_full_width_example_and_a_short_ra
     figures = [page.locator(".round-clips figure").nth(k).bounding_box() for k in range(3)]
     assert len({round(figure["y"]) for figure in figures}) == 1  # one row, scrolled sideways: one clip high
     assert figures[0]["width"] >= 0.8 * (PHONE["width"] - 32)  # each clip still nearly the column's width
+    assert PHONE["width"] - figures[1]["x"] >= 40  # the next clip shows a good part of itself
+    assert page.locator("[data-swipe-hint]").is_visible()  # and a line says the row scrolls sideways
     assert page.evaluate("document.documentElement.scrollHeight") <= 3.5 * PHONE["height"]
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
 
