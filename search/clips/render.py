@@ -281,6 +281,14 @@ def text_stamp(text: str, size: int, fill, anchor: str, bold: bool) -> tuple[Ima
     return stamp, (x0, y0)
 
 
+def tag_box(xy, text: str, size: int, anchor: str) -> tuple[float, float, float, float]:
+    """The box (left, top, right, bottom, px) a tag of ``text`` anchored at ``xy`` covers, its padding included."""
+    stamp, (x0, y0) = text_stamp(text, size, (0, 0, 0), anchor, True)
+    pad = size * 0.25
+    left, top = xy[0] + x0, xy[1] + y0
+    return left - pad, top - pad, left + stamp.width + pad, top + stamp.height + pad
+
+
 def text_width(text: str, size: int, bold: bool = False) -> int:
     """Pixels wide ``text`` is drawn (the width of its stamp)."""
     return text_stamp(text, size, (0, 0, 0), "lm", bold)[0].width
@@ -498,10 +506,7 @@ class ClipRenderer(ABC):
 
     def draw_tag(self, image: Image.Image, xy, text: str, size: int, anchor: str) -> None:
         """Black text on a yellow box with a black border: the collision colours, readable in greyscale too."""
-        stamp, (x0, y0) = text_stamp(text, size, (0, 0, 0), anchor, True)
-        pad = size * 0.25
-        left, top = xy[0] + x0, xy[1] + y0
-        box = (left - pad, top - pad, left + stamp.width + pad, top + stamp.height + pad)
+        box = tag_box(xy, text, size, anchor)
         ImageDraw.Draw(image).rectangle(box, fill=CRASH, outline=(0, 0, 0), width=max(2, size // 12))
         self.draw_text(image, xy, text, size, (0, 0, 0), anchor, bold=True)
 

@@ -41,6 +41,7 @@ from search.clips.render import (
     paste,
     sprite,
     status_text,
+    tag_box,
 )
 from search.crowd.scene import Scene, load_scene
 
@@ -137,8 +138,16 @@ class CrowdClipRenderer(ClipRenderer):
             draw.rectangle((x0, lay.header, x0 + lay.panel - 1, lay.header + lay.panel - 1), outline=MUTED, width=2)
         for k in range(scene.n_agents):
             self._draw_start_goal(image, k)
+        self._clip_to_arenas(image, Image.new("RGB", image.size, BACKGROUND))
         self._draw_scale_bar(image)
         return image
+
+    def _clip_to_arenas(self, image: Image.Image, clean: Image.Image) -> None:
+        """Whatever a mark near an arena's edge drew over the header or the legend band goes: ``clean``'s bands
+        are put back, so a goal never covers the scale bar and a tag never covers a status line."""
+        lay = self.layout
+        for band in ((0, 0, lay.width, lay.header), (0, lay.header + lay.panel, lay.width, lay.height)):
+            image.paste(clean.crop(band), band[:2])
 
     def _draw_start_goal(self, image: Image.Image, k: int) -> None:
         """Start: a hollow ring; goal: a target. Neutral ink and labelled, so ends that robots share read once."""
@@ -220,7 +229,8 @@ class CrowdClipRenderer(ClipRenderer):
         self._draw_robots(image, robots)
         for k in self.order:
             if happened[k]:
-                self._draw_event(image, happened[k], robots[k], frame)
+                self._draw_event(image, k, happened[k], robots[k], frame)
+        self._clip_to_arenas(image, self.background)
         self.draw_header(image, frame.time)
         if scene.parting is not None and scene.leader is not None and self.parting_shown(frame):
             _, at, _ = self._state(scene.parting)
@@ -249,7 +259,7 @@ class CrowdClipRenderer(ClipRenderer):
             x, y = int(round(robots[k][0])) - half + left, int(round(robots[k][1])) - half
             image.paste(piece, (x, y), piece)
 
-    def _draw_event(self, image: Image.Image, happened: tuple[str, float], xy, frame: Frame) -> None:
+    def _draw_event(self, image: Image.Image, k: int, happened: tuple[str, float], xy, frame: Frame) -> None:
         """An expanding ring while the clip pauses on the event; then a badge (arrival, timeout) on the robot, or
         a CRASH tag for a few seconds (it would hide the people walking past later)."""
         event, when = happened
@@ -262,7 +272,33 @@ class CrowdClipRenderer(ClipRenderer):
         if event != "collision":
             paste(image, self.sprites.badges[event], (xy[0] + r * 1.1, xy[1] - r * 1.1))
         elif since < self.options.event_hold + CRASH_TAG_SECONDS:
-            self.draw_tag(image, (xy[0], xy[1] - r * 3.0), "CRASH", max(12, int(self.layout.text * 0.85)), "mb")
+            at, anchor = self._crash_tag_place(k, xy)
+            self.draw_tag(image, at, "CRASH", self._crash_tag_size(), anchor)
+
+    def _crash_tag_size(self) -> int:
+        return max(12, int(self.layout.text * 0.85))
+
+    def _crash_tag_place(self, k: int, xy) -> tuple[tuple[float, float], str]:
+        """Where the CRASH tag goes: above the crash unless that covers a goal or another robot (and its badge)
+        or leaves the arena, then below, left or right of it, whichever stays clearest."""
+        lay, r, size = self.layout, self.robot_px, self._crash_tag_size()
+        panel = self.panel_of[k]
+        others = [j for j in range(self.scene.n_agents) if j != k and self.panel_of[j] == panel]
+        goals = [lay.to_pixel(panel, self.scene.goals[j]) for j in [k, *others]]
+        _, robots, _ = self._state(self.scene.outcomes[k][1])
+        # a goal's target and its label; the other robots at the crash and where they end, with their badges
+        clear = [(g, r * 1.6) for g in goals] + [((g[0], g[1] + r * 2.2), r) for g in goals]
+        clear += [(at, r * 2.2) for j in others for at in (robots[j], self.pixels_robots[-1, j])]
+        arena = (panel * lay.panel, lay.header, (panel + 1) * lay.panel, lay.header + lay.panel)
+
+        def score(place: tuple[tuple[float, float], str]) -> float:
+            box = tag_box(place[0], "CRASH", size, place[1])
+            outside = max(arena[0] - box[0], arena[1] - box[1], box[2] - arena[2], box[3] - arena[3], 0.0)
+            room = min((_distance_to_box(p, box) - radius for p, radius in clear), default=math.inf)
+            return min(room, r) - 1e6 * outside  # any side with a robot's width of room is as good as another
+
+        sides = ((0, -3, "mb"), (0, 3, "mt"), (-3, 0, "rm"), (3, 0, "lm"))
+        return max((((xy[0] + dx * r, xy[1] + dy * r), anchor) for dx, dy, anchor in sides), key=score)
 
     def _draw_legend(self, image: Image.Image, t: float) -> None:
         """One entry per robot: its icon, its name, and what has happened to it in words and a badge."""
@@ -315,3 +351,10 @@ def render_file(
 ) -> RenderResult:
     """`foil render` for a crowd summary: the clip, its poster and its contact sheet."""
     return render(load_scene(summary), out, numbers, options)
+
+
+def _distance_to_box(point, box) -> float:
+    """Pixels from ``point`` to the nearest point of ``box`` (0 inside it)."""
+    dx = max(box[0] - point[0], 0.0, point[0] - box[2])
+    dy = max(box[1] - point[1], 0.0, point[1] - box[3])
+    return math.hypot(dx, dy)

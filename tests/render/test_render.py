@@ -11,11 +11,13 @@ from pathlib import Path
 import imageio_ffmpeg
 import numpy as np
 import pytest
+from PIL import Image
 
 from search.clips.render import (
     AGENT_COLOURS,
     AGENT_SHAPES,
     AGENT_STYLES,
+    BACKGROUND,
     CRASH,
     INK,
     SUCCESS,
@@ -267,6 +269,39 @@ def test_collision_is_marked_where_and_when_it_happens(shared_summary):
     assert f"CRASHED · {when:.1f} s" in renderer.texts and "CRASH" in renderer.texts
 
 
+def test_the_crash_tag_moves_off_a_goal_and_off_the_other_robot(shared_summary):
+    """A goal just above a crash: the CRASH tag, drawn above a crash where there is room, goes to another side,
+    so the goal's target stays whole."""
+    scene = scene_from_summary(shared_summary)
+    k = [k for k, (event, _) in enumerate(scene.outcomes) if event == "collision"][0]
+    when = scene.outcomes[k][1]
+    plain = CrowdClipRenderer(scene)
+    i = int(np.searchsorted(scene.times, when, side="right") - 1)
+    goals = scene.goals.copy()
+    goals[1 - k] = scene.robots[i, k] + [0.0, 3.0 * plain.robot_px / plain.layout.scale]  # where the tag stood
+    renderer = CrowdClipRenderer(dataclasses.replace(scene, goals=goals))
+    frame = renderer.draw(Frame(when, renderer.event_starts[when] + renderer.options.event_hold + 0.5))
+    goal = renderer.layout.to_pixel(0, goals[1 - k])
+    assert "CRASH" in renderer.texts
+    assert blob_centre(colour_mask(frame, CRASH), goal, 1.4 * renderer.robot_px) is None
+
+
+def test_marks_near_the_arenas_edge_stay_off_the_header_and_the_legend(shared_summary):
+    """A goal far off widens the view until its target, kept at a readable size, is larger than the border around
+    it: it is cut at the arena's edge, and the header holds the clock and the scale bar alone."""
+    scene = scene_from_summary(shared_summary)
+    goals = scene.goals.copy()
+    goals[0] += [0.0, 30.0]
+    renderer = CrowdClipRenderer(dataclasses.replace(scene, goals=goals))
+    top = renderer.layout.to_pixel(0, goals[0])[1] - 1.4 * renderer.robot_px
+    assert top < renderer.layout.header  # drawn whole, the target would reach into the header
+    clean = Image.new("RGB", (renderer.layout.width, renderer.layout.height), BACKGROUND)
+    renderer._draw_scale_bar(clean)
+    renderer.draw_header(clean, 0.0)
+    header = (0, 0, renderer.layout.width, renderer.layout.header)
+    assert np.array_equal(np.asarray(renderer.draw(Frame(0.0)).crop(header)), np.asarray(clean.crop(header)))
+
+
 def test_arrival_and_timeout_are_marked(shared_summary):
     scene = scene_from_summary(shared_summary)
     k = [k for k, (event, _) in enumerate(scene.outcomes) if event == "success"][0]
@@ -342,8 +377,6 @@ def test_clip_is_browser_safe_h264_with_poster_and_contact_sheet(tmp_path, summa
     frames, _ = imageio_ffmpeg.count_frames_and_secs(str(result.clip))
     assert frames == result.frames
     assert result.poster.name == "clip.poster.png" and result.sheet.name == "clip.sheet.png"
-    from PIL import Image
-
     with Image.open(result.poster) as poster:
         assert poster.size == (width, height)
     with Image.open(result.sheet) as sheet:
