@@ -275,16 +275,25 @@ class GymClipRenderer(ClipRenderer):
             point = self.scene.crash_points[k]
             if happened and event == "collision" and point is not None:
                 sprite = self.sprites.crash if self._bursting(when, frame) else self.crash_mark
-                paste(image, sprite, (x0 + point[0] * lay.panel, y0 + point[1] * lay.view_height))
+                paste(image, sprite, self._in_view((x0, y0), point, sprite[1]))
             at = self.scene.parting_points[k]
             if at is not None and self.parting_shown(frame):
-                self.draw_ring(image, (x0 + at[0] * lay.panel, y0 + at[1] * lay.view_height), lay.text * 1.1)
+                self.draw_ring(image, self._in_view((x0, y0), at, lay.text * 1.1), lay.text * 1.1)
             shown = event if happened or t >= self.scene.end_time else ""
             self._draw_status(image, k, (x0, y0 + lay.view_height), shown, when, t)
         self.draw_header(image, t)
         if self.parting_shown(frame):
             self.draw_parting_caption(image, getattr(self.adapter, "parting_caption", PARTING_CAPTION))
         return image
+
+    def _in_view(self, corner: tuple[int, int], point: tuple[float, float], half: float) -> tuple[float, float]:
+        """The pixel of a point given as shares of a view, moved in so that a mark ``half`` px around it stays in
+        the view: an agent that left the view (a car off the road) is marked at the view's edge, never in the
+        status band beside it."""
+        lay = self.layout
+        x = min(max(point[0] * lay.panel, half), lay.panel - half)
+        y = min(max(point[1] * lay.view_height, half), lay.view_height - half)
+        return corner[0] + x, corner[1] + y
 
     def _view(self, k: int, t: float) -> Image.Image:
         """Agent k's view at time t, scaled to the layout (kept per agent: a view changes a few times a second)."""

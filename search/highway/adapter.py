@@ -79,7 +79,7 @@ WORDS = Words(
         " round's clips."
     ),
 )
-VIEW_METRES = 64.0  # of road along a view: about 45 m ahead of the ego and 19 m behind
+VIEW_METRES = 48.0  # of road along a view: about 34 m ahead of the ego and 14 m behind; a car 34 px long on a phone
 EGO_AT = 0.3  # where along the view the ego stays (highway-env's centering_position)
 ROAD_MARGIN = 2.0  # metres of verge above and below the road in a view
 LANE_WIDTH = 4.0  # highway-env's

@@ -230,6 +230,27 @@ def test_the_moment_the_agents_part_is_captioned_in_the_adapters_words(summary_f
     assert "Here the two blocks would move differently" in own.texts
 
 
+class OffTheViewAdapter(TrackAdapter):
+    def crash_point(self, env):
+        return (0.5, 1.6)  # below the view, as a car that left the road and its verge
+
+
+def test_a_crash_outside_the_view_is_marked_at_its_edge_not_in_the_band_beside_it(summary_file):
+    """The burst of a crash the adapter puts below the view is drawn whole inside the view, at its bottom edge."""
+    summary = json.loads(summary_file.read_text())
+    summary["scenario"]["adapter"] = "tests.gym.test_gym_clips:OffTheViewAdapter"
+    renderer = GymClipRenderer(summary, [3, 1], RenderOptions(width=480))
+    lay = renderer.layout
+    crash = renderer.event_starts[summary["outcomes"][0]["time"]]
+    image = np.asarray(renderer.draw(next(frame for frame in renderer.frames if frame.video >= crash)))
+    x0, y0 = lay.origin(1)  # the crashed agent's view
+    yellow = np.abs(image[:, x0 : x0 + lay.panel].astype(int) - CRASH).sum(axis=2) < 30
+    burst = yellow[y0 : y0 + lay.view_height]
+    assert burst.sum() > 50 and not burst[-1].any()  # whole inside the view
+    band = yellow[y0 + lay.view_height :, : lay.text * 2]  # the band's icon column, left of the CRASHED tag
+    assert not band.any()
+
+
 def test_highway_cars_part_in_a_drivers_words(tmp_path):
     """A highway search's summary with its cars following the cautious driver (who lasts the drive) for 3 s:
     both egos are at one place at that moment, and the caption speaks of cars."""

@@ -63,6 +63,8 @@ def test_each_view_is_highway_envs_road_with_the_ego_in_its_colour_grey_traffic_
         ego = near(view, own)
         rows, columns = np.nonzero(ego)
         assert ego.sum() > 20 and abs(columns.mean() / lay.panel - EGO_AT) < 0.05
+        phone = (360 - 32) / lay.width  # the clip as a 360-px phone shows it, the page's margins aside
+        assert (columns.max() - columns.min() + 1) * phone >= 30  # a car long enough to follow on a phone
         assert near(view, TRAFFIC).sum() > 200  # the traffic, in grey
         assert not any(near(view, colour).any() for colour in AGENT_COLOURS if tuple(colour) != tuple(own))
     assert {"Car 1", "Car 6"} <= renderer.texts and any(t.startswith("Time") for t in renderer.texts)
