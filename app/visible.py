@@ -134,7 +134,8 @@ class Words:
     """What a world's pages call the things its clips show; the defaults are the crowd's. Legend lines are plain
     text where ``**text**`` reads in bold (the pages escape everything else); an empty `legend_trails` or
     `others_marker` leaves that line or marker out. The outcome phrases follow a robot's label ("Robot 2 ...");
-    `success` and `collision` may say ``{seconds}``, the seconds the clip shows it took (one decimal, as the clip)."""
+    `success` and `collision` may say ``{seconds}``, the run's time it happened as the clip's clock shows it (one
+    decimal)."""
 
     agent: str = "Robot"  # the word before an agent's number, on its clips and the pages: "Robot 2"
     agents: str = ""  # the agents in running text ("the cars"); empty: the agent's word and an s ("robots")
@@ -298,6 +299,7 @@ class VisibleClip:
     to_goal: tuple[float | None, ...] = ()  # metres from the goal at the end, where known
     world: World = World()
     summed: tuple[float, ...] = ()  # per label its visible score summed over the clip (`Score.of`), where shown
+    clock_s: float = 0.0  # the run's seconds before the clip's first state (a window's start), as its clock shows
 
     @classmethod
     def of_summary(
@@ -323,7 +325,7 @@ class VisibleClip:
         cls, summary: Mapping[str, Any], order: Sequence[int], labels: Sequence[str], world: World | None
     ) -> VisibleClip:
         """The clip of the summary's robots ``order`` (its indices), labelled ``labels``. A summary with a ``window``
-        is seen as its clip shows it: its clock starts at the window's first state, so times count from there."""
+        is judged as its clip shows it, from the window's first state on; its times read, as its clock, the run's."""
         steps = summary.get("steps") or [{"t": 1.0}]
         first = int((summary.get("window") or [0])[0])
         start_s = float(steps[first - 1]["t"]) if 0 < first <= len(steps) else 0.0
@@ -335,6 +337,7 @@ class VisibleClip:
             world=world or World(),
             to_goal=tuple(_to_goal(summary, k) for k in order),
             summed=_summed(summary, order, first, world or World()),
+            clock_s=start_s,
         )
 
     def scores(self, observer: Observer) -> dict[str, float]:
@@ -388,7 +391,8 @@ class VisibleClip:
         phrase = {"success": words.success, "collision": words.collision, "timeout": words.timeout}.get(
             str(event), words.running
         )
-        text = f"{label} {phrase.format(seconds=one_decimal(float(outcome.get('time') or self.end_s)))}"
+        seconds = float(outcome.get("time") or self.end_s) + self.clock_s  # the run's time, as the clip's clock
+        text = f"{label} {phrase.format(seconds=one_decimal(seconds))}"
         to_goal = self.to_goal[self.labels.index(label)] if self.to_goal else None
         if event not in ("success", "collision", "timeout") and to_goal is not None:
             text += f", {one_decimal(to_goal)} m from the goal"
@@ -443,8 +447,8 @@ class VisibleReels:
         return SCORE_MARGIN if self.world.rule == "score" else observer.tie_margin
 
     def moments(self, label: str) -> list[str]:
-        """How the robot labelled ``label`` ended in each moment of its reel, one sentence a moment, each clock
-        started with its moment as the reel's is: ``Moment 2 of 3: Robot 4 reached the goal after 3.2 seconds.``"""
+        """How the robot labelled ``label`` ended in each moment of its reel, one sentence a moment, at its run's
+        time as the reel's clock shows it: ``Moment 2 of 3: Robot 4 reached the goal after 17.2 seconds.``"""
         reel = self.reels[self.labels.index(label)]
         return [f"Moment {i} of {len(reel)}: {segment.describe(label)}" for i, segment in enumerate(reel, 1)]
 

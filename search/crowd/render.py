@@ -231,7 +231,7 @@ class CrowdClipRenderer(ClipRenderer):
             if happened[k]:
                 self._draw_event(image, k, happened[k], robots[k], frame)
         self._clip_to_arenas(image, self.background)
-        self.draw_header(image, frame.time)
+        self.draw_header(image, frame.time + scene.clock)
         if scene.parting is not None and scene.leader is not None and self.parting_shown(frame):
             _, at, _ = self._state(scene.parting)
             self.draw_ring(image, at[scene.leader], self.robot_px * 2.3)
@@ -320,7 +320,7 @@ class CrowdClipRenderer(ClipRenderer):
             if not event and t >= self.scene.end_time:
                 event = "running"
             to_goal = math.dist(self.scene.robots[-1, k], self.scene.goals[k])
-            status = status_text(event, when, to_goal) if event else STATUS_RUNNING
+            status = status_text(event, when + self.scene.clock, to_goal) if event else STATUS_RUNNING
             badge = self.sprites.small_badges.get(event)
             gap = lay.text * 0.4 + badge[1] if badge else 0.0
             # side by side, the status fits its panel's margins; alone, what its name and badge leave of the line

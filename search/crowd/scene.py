@@ -38,6 +38,7 @@ class Scene:
     shown: tuple[int, ...] | None = None  # the summary's agents drawn, by index (None: all); a leader alone: one
     leader: int | None = None  # the agent the others followed (an index into the drawn agents)
     parting: float | None = None  # when agents that followed a leader part: a disagreement clip's moment
+    clock: float = 0.0  # the run's seconds before the first state shown (a window's start): what the clock adds
 
     @property
     def n_agents(self) -> int:
@@ -167,8 +168,8 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
             fail(f"outcomes[{k}].time must be a time within the steps (0 to {times[-1]} s), got {when!r}")
         parsed.append((str(event), float(when)))
 
-    # the window: the clock restarts at its first state; an outcome after its last is still running there, one
-    # before its first is shown from the start
+    # the window: its times count from its first state, which the clock shows at the run's time (``clock``); an
+    # outcome after its last is still running there, one before its first is shown from the start
     t0, t1 = times[first], times[last]
     parsed = [("running", t1 - t0) if e == "running" or w > t1 + 1e-6 else (e, max(w - t0, 0.0)) for e, w in parsed]
     shown, leader, parting = None, None, None
@@ -196,6 +197,7 @@ def scene_from_summary(summary: dict, source: str = "summary") -> Scene:
         shown=shown,
         leader=leader,
         parting=parting,
+        clock=float(t0),
     )
 
 

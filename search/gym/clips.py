@@ -10,8 +10,8 @@ that view stays readable. The adapter's hooks (search/gym/adapter.py) say what t
 adapter that names its own ``renderer`` gets that instead.
 
 A summary's ``window`` and ``follow`` (docs/clips.md) are honoured as the crowd renderer honours them: the replay
-follows the leader as the search did (``problem.override``), the clip shows the window's states with the clock
-from 0, a leader followed throughout is shown alone, and the moment the agents part is captioned in the adapter's
+follows the leader as the search did (``problem.override``), the clip shows the window's states with the run's
+clock, a leader followed throughout is shown alone, and the moment the agents part is captioned in the adapter's
 words (an optional ``parting_caption`` hook) with a ring where its ``crash_point`` puts the agent.
 """
 
@@ -118,6 +118,7 @@ class GymScene:
         shown: tuple[int, ...] | None = None,
         parting: float | None = None,
         parting_points: list[tuple[float, float] | None] | None = None,
+        clock: float = 0.0,
     ):
         self.views, self.captions, self.outcomes, self.crash_points = views, captions, outcomes, crash_points
         self.end_time, self.frames_per_step, self.dt = end_time, frames_per_step, dt
@@ -125,6 +126,7 @@ class GymScene:
         self.shown = shown  # as the crowd's Scene: the agents drawn (None: all; a leader followed throughout alone)
         self.parting = parting  # when agents that followed a leader part (a disagreement clip), else None
         self.parting_points = parting_points or [None] * self.n_agents  # where each agent is then, as crash_point
+        self.clock = clock  # the run's seconds before the first state shown (a window's start): what the clock adds
 
     def event_times(self) -> list[float]:
         return sorted({when for event, when in self.outcomes if event != "running"})
@@ -201,7 +203,7 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
         return float(summary["steps"][state - 1]["t"]) if state else 0.0
 
     t0, t1 = time_of(first), time_of(last)
-    if summary.get("window") is not None:  # its states, the clock from its first; an outcome after it is running
+    if summary.get("window") is not None:  # its states, timed from its first; an outcome after it is running
         views = [_part(frames, first * frames_per_step, last * frames_per_step) for frames in views]
         captions = [_part(texts, first, last) for texts in captions]
         measured = [_part(values, first, last) for values in measured]
@@ -222,6 +224,7 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
         shown=shown,
         parting=None if parting_step is None else time_of(parting_step) - t0,
         parting_points=parting_points,
+        clock=t0,
     )
     return scene, adapter
 
@@ -281,7 +284,7 @@ class GymClipRenderer(ClipRenderer):
                 self.draw_ring(image, self._in_view((x0, y0), at, lay.text * 1.1), lay.text * 1.1)
             shown = event if happened or t >= self.scene.end_time else ""
             self._draw_status(image, k, (x0, y0 + lay.view_height), shown, when, t)
-        self.draw_header(image, t)
+        self.draw_header(image, t + self.scene.clock)
         if self.parting_shown(frame):
             self.draw_parting_caption(image, getattr(self.adapter, "parting_caption", PARTING_CAPTION))
         return image
@@ -332,7 +335,7 @@ class GymClipRenderer(ClipRenderer):
         )
         status = self.adapter.status_words[event or "running"]
         if event in ("success", "collision"):
-            status += f" · {when:.{self.digits}f} s"
+            status += f" · {when + self.scene.clock:.{self.digits}f} s"
         xy = (label[2] + gap, y) if lay.columns == 1 else (x0 + lay.text * 2.4, y + lay.text * 1.5)
         tagged, caption = event == "collision", self.scene.caption(k, t)
         pad = lay.text * 0.25 if tagged else 0.0  # of a tag's box beyond its text

@@ -189,9 +189,10 @@ def test_a_reel_needs_segments_that_say_whom_they_follow():
         VisibleReels.of_summaries([[], [segment(0, SUCCESS, CRASH)]], ["A", "B"])
 
 
-def test_a_windowed_clip_counts_its_times_from_the_window_as_its_clock_does():
-    """A disagreement or HIGHLIGHTS moment shows only its window and its clock starts there: the audit, the bots and
-    the ranking page's lines count from there too, so a page never says another time than its clip."""
+def test_a_windowed_clip_is_judged_from_the_window_and_says_the_runs_time_as_its_clock_does():
+    """A disagreement or HIGHLIGHTS moment shows only its window, its clock at the run's time: the audit and the bots
+    judge what the window shows, and the ranking page's lines say the run's time, so a page never says another time
+    than its clip."""
     from app.visible import VisibleClip
 
     steps = [{"t": 0.25 * (i + 1), "agent_positions": [[0.0, 0.0], [0.0, 0.0]]} for i in range(40)]
@@ -207,7 +208,7 @@ def test_a_windowed_clip_counts_its_times_from_the_window_as_its_clock_does():
     }
     clip = VisibleClip.of_summary(summary, ["a", "b"], ["Robot 1", "Robot 2"])
     assert clip.end_s == 5.0
-    assert clip.describe("Robot 1").startswith("Robot 1 reached the goal after 2.5 seconds")
+    assert clip.describe("Robot 1").startswith("Robot 1 reached the goal after 7.5 seconds")
     assert clip.outcomes[1]["time"] == 0.0
     whole = VisibleClip.of_summary({k: v for k, v in summary.items() if k != "window"}, ["a", "b"], ["1", "2"])
     assert whole.end_s == 10.0 and whole.outcomes[0]["time"] == 7.5

@@ -174,9 +174,10 @@ def with_keys(summary_file, **keys) -> dict:
     return json.loads(summary_file.read_text()) | keys
 
 
-def test_a_window_shows_its_states_with_the_clock_from_zero(tmp_path, summary_file):
+def test_a_window_shows_its_states_with_the_runs_clock(tmp_path, summary_file):
     """States 1..4 (0.5 s to 2 s) of a clip whose fast agent crashes at 1.5 s and whose slow one runs out of
-    time at 3 s: 1.5 s of states, the crash at 1.0 s, the slow agent still running at the end."""
+    time at 3 s: 1.5 s of states, the crash 1.0 s into them, the slow agent still running at the end; the clock
+    reads the run's time (0.5 s to 2.0 s)."""
     full = GymClipRenderer(json.loads(summary_file.read_text()), [3, 1], RenderOptions(**PLAIN))
     summary = with_keys(summary_file, window=[1, 4])
     renderer = GymClipRenderer(summary, [3, 1], RenderOptions(**PLAIN))
@@ -189,7 +190,7 @@ def test_a_window_shows_its_states_with_the_clock_from_zero(tmp_path, summary_fi
     result = render_gym(path, tmp_path / "window.mp4", [3, 1], RenderOptions(**PLAIN))
     assert result.frames == 1.5 * 24 + 1 == imageio_ffmpeg.count_frames_and_secs(str(result.clip))[0]
     renderer.draw(renderer.frames[-1])
-    assert {"Time  1.5 s", TrackAdapter.status_words["running"]} <= renderer.texts
+    assert scene.clock == 0.5 and {"Time  2.0 s", TrackAdapter.status_words["running"]} <= renderer.texts
     assert TrackAdapter.status_words["timeout"] not in renderer.texts
 
 

@@ -1,5 +1,5 @@
 """Crowd clips of the summaries of Agent Disagreements and HIGHLIGHTS: a ``window`` shows only its states with the
-clock from 0, a leader followed throughout is drawn alone, and the moment agents that followed a leader part is
+run's clock, a leader followed throughout is drawn alone, and the moment agents that followed a leader part is
 captioned and ringed for about a second of video. Summaries from a real simulation, the keys written in by hand
 (the renderer reads them; it does not re-simulate)."""
 
@@ -32,9 +32,10 @@ def variant(summary: dict, **keys) -> dict:
     return json.loads(json.dumps(summary)) | keys
 
 
-def test_a_window_shows_only_its_states_with_the_clock_from_zero(tmp_path, shared_summary):
+def test_a_window_shows_only_its_states_with_the_runs_clock(tmp_path, shared_summary):
     """Window [4, 24] of a summary whose first robot crashes at 2.75 s and whose second arrives at 16.75 s: 5 s
-    of states from 1.0 s, the crash at 1.75 s, the arrival not yet (still on its way at the window's end)."""
+    of states from 1.0 s, the crash 1.75 s into them, the arrival not yet (still on its way at the window's end);
+    the clock and the crash read the run's time (1.0 s to 6.0 s, crashed at 2.8 s), as a whole run's clip would."""
     full = scene_from_summary(shared_summary)
     summary = variant(shared_summary, window=[4, 24])
     scene = scene_from_summary(summary)
@@ -53,9 +54,10 @@ def test_a_window_shows_only_its_states_with_the_clock_from_zero(tmp_path, share
     with Image.open(result.poster) as poster:  # the window's first state
         assert np.array_equal(np.asarray(poster.convert("RGB")), np.asarray(renderer.draw(renderer.frames[0])))
     renderer.draw(renderer.frames[-1])
-    assert {"Time  0.0 s", "Time  5.0 s", "CRASHED · 1.8 s"} <= renderer.texts
+    assert scene.clock == 1.0
+    assert {"Time  1.0 s", "Time  6.0 s", "CRASHED · 2.8 s"} <= renderer.texts
     assert any(text.startswith("still on its way · ") for text in renderer.texts)
-    assert not any("reached goal" in text or "Time  6.0 s" in text for text in renderer.texts)
+    assert not any("reached goal" in text or "Time  0.0 s" in text for text in renderer.texts)
 
 
 def test_trails_start_at_the_window(shared_summary):
