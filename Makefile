@@ -45,9 +45,9 @@ $(AXE):
 # The demo: build the demo study's bundle from the shipped agents (small search budgets; searches and clips
 # already built are reused), then serve it at http://127.0.0.1:8000/, with the admin pages at /admin.
 demo: install
+	@echo "Building the demo study. Its warnings are expected: its small searches find clips that show the worse"
+	@echo "robot as better, which a study keeps to see how people read them (docs/clips.md); the gallery says which."
 	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE) --jobs 2
-	@echo "The build's warnings are expected in the demo: its small searches find clips that show the worse robot as"
-	@echo "better, which a study keeps to see how people read them (docs/clips.md); the gallery says which they are."
 	@$(MAKE) -s demo-password
 	FOIL_ADMIN_PASSWORD="$${FOIL_ADMIN_PASSWORD:-$$(cat $(DEMO_BUNDLE).admin-password)}" \
 		$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
