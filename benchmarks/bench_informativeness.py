@@ -36,11 +36,12 @@ from search.bundle.build import (
     study_world,
 )
 from search.bundle.spec import load_build
-from search.solvers.runner import in_processes, run_search, write_outputs
+from search.solvers.runner import Backend, in_processes, run_search, write_outputs
 
 
-def judge(job, folder: Path, evaluations: dict, world) -> dict:
-    """What the clip of a search shows against the ground truth, as the bundle audits it, and what it cost."""
+def judge(job, folder: Path, evaluations: dict, world, close: dict | None = None) -> dict:
+    """What the clip of a search shows against the ground truth, as the bundle audits it (``close``: the pairs
+    compared on more paired episodes, `search.bundle.build.close_pairs`), and what it cost."""
     sources = shown_summaries(job, folder, world)
     summaries = [[json.loads(path.read_text()) for path in paths] for paths in sources]
     first = summaries[0][0]
@@ -49,7 +50,7 @@ def judge(job, folder: Path, evaluations: dict, world) -> dict:
     else:
         events = [o["event"] for o in first["outcomes"]]
     shown = [s.get("window", (0, len(s["steps"]))) for reel in summaries for s in reel]
-    return clip_audit(job, sources, evaluations, world)[2] | {
+    return clip_audit(job, sources, evaluations, world, close)[2] | {
         "events": events,
         "clip_s": sum(last - first_state for first_state, last in shown) * first["steps"][0]["t"],
         "sim_steps": first["solver"]["budget_used"],
@@ -67,7 +68,9 @@ def main() -> None:
     spec, _ = load_build(args.study)
     out = args.out or Path(tempfile.mkdtemp(prefix="informativeness-"))
     world, domain = study_world(spec), study_domain(spec)
-    evaluations = evaluate_agents(spec, domain, Cache(out / "cache"), lambda line: None, world, args.jobs)
+    evaluations = evaluate_agents(
+        spec, domain, Cache(out / "cache"), lambda line: None, world, Backend(workers=args.jobs)
+    )
     truth = {name: round(e["reward_mean"], 2) for name, e in evaluations.items()}
     print(f"{args.study}: ground truth (mean test reward): {truth}", flush=True)
     wanted = args.schemes.split(",") if args.schemes else list(spec.schemes)

@@ -40,6 +40,7 @@ def _release(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
+    from search.core.workers import jobs
     from search.solvers.domain import domain_for
 
     domain = domain_for([args.agent], args.scenario)
@@ -53,7 +54,8 @@ def _eval(args: argparse.Namespace) -> int:
                 "an episode ends when its environment says so (give one of its own settings with --world instead)"
             )
         world[domain.episode_seconds_setting] = args.time_limit
-    result = domain.evaluate(args.agent, args.episodes, args.seed, world, args.scenario) | {"agent": args.agent}
+    with jobs(args.jobs):
+        result = domain.evaluate(args.agent, args.episodes, args.seed, world, args.scenario) | {"agent": args.agent}
     print(json.dumps(result) if args.json else domain.describe_evaluation(result))
     return 0
 
@@ -75,9 +77,18 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _bundle(args: argparse.Namespace) -> int:
-    from search.bundle.build import build_bundle
+    from search.bundle.build import Cache, build_bundle, prepare
+    from search.bundle.plan import plan_lines
+    from search.core.workers import workers
+    from search.solvers.runner import Backend
 
-    build_bundle(args.study, args.out, workers=args.jobs)
+    count = workers() if args.jobs is None else args.jobs
+    if args.plan:
+        Backend(args.backend, count, args.ray_address)  # refuses bad settings as a build would
+        for line in plan_lines(prepare(args.study), Cache(Path(args.out) / "cache"), count):
+            print(line)
+        return 0
+    build_bundle(args.study, args.out, workers=count, backend=args.backend, ray_address=args.ray_address)
     return 0
 
 
@@ -109,6 +120,7 @@ def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str
 
 
 def _search(args: argparse.Namespace) -> int:
+    from search.core.workers import jobs
     from search.solvers.runner import SearchJob, run_search, write_outputs
 
     agents = comma_separated(args.agents)
@@ -118,7 +130,8 @@ def _search(args: argparse.Namespace) -> int:
         solver=args.solver,
         **_search_job_settings(args, args.solver, agents, args.scenario),
     )
-    files = run_search(job, progress=not args.quiet)
+    with jobs(args.jobs):
+        files = run_search(job, progress=not args.quiet)
     out = write_outputs(args.out, files)
     print(f"{out}: {len(list(out.glob('summary-*.json')))} summaries, best first; run.json has the search record")
     if not any(name.startswith("summary-") for name in files):
@@ -145,6 +158,8 @@ def _search_all(args: argparse.Namespace) -> int:
             agents, scenarios, [solver], joint=args.joint, **_search_job_settings(args, solver, agents, scenarios[0])
         )
     ]
+    if args.jobs is not None and args.jobs < 1:
+        raise ValueError(f"--jobs must be at least 1, got {args.jobs}")
     study = run_all(
         jobs, args.out, workers=args.jobs, backend=args.backend, ray_address=args.ray_address, progress=not args.quiet
     )
@@ -246,6 +261,7 @@ def build_parser() -> argparse.ArgumentParser:
         "distribution file (episodes are seeded by --seed; default: the agent's own test episodes)",
     )
     evaluate.add_argument("--json", action="store_true", help="print one JSON object")
+    _jobs_argument(evaluate, "episodes")
     evaluate.set_defaults(handler=_eval)
 
     add_server_commands(sub)
@@ -270,7 +286,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="bundle directory; searches already there are reused while their inputs are unchanged",
     )
     bundle.add_argument(
-        "--jobs", type=int, default=1, help="searches to run at once, each in its own process (default 1)"
+        "--jobs",
+        type=int,
+        default=None,
+        help="evaluations, searches, checks and clips to run at once, each in its own process or Ray task "
+        "(default: one per core); the bundle is the same whatever the number",
+    )
+    bundle.add_argument(
+        "--backend",
+        choices=("process", "ray"),
+        default="process",
+        help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]'; docs/search.md)",
+    )
+    bundle.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray instance)")
+    bundle.add_argument(
+        "--plan",
+        action="store_true",
+        help="print each step's count and, from a few timed steps of the world, the expected wall time at --jobs, "
+        "then stop (a build itself says each step's jobs done and the time left as it goes)",
     )
     bundle.set_defaults(handler=_bundle)
 
@@ -295,6 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
         "agent looks better; docs/search.md), or the field's summary methods disagreements, highlights and "
         "highlights-div (docs/methods.md)",
     )
+    _jobs_argument(search, "representative solver's starting states")
     search.set_defaults(handler=_search)
 
     search_all = sub.add_parser("search-all", help="search every agent pair on every scenario, in parallel")
@@ -350,6 +384,15 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
         help="world setting over the scenario's, e.g. env_action_mode=preferred",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _jobs_argument(parser: argparse.ArgumentParser, work: str) -> None:
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        help=f"processes that share the {work} in a world without a batched fast path (default: one per core; "
+        "the result is the same for any number)",
+    )
 
 
 def missing_offline_modules() -> list[str]:

@@ -3,6 +3,7 @@ fresh database per test (SQLite, and PostgreSQL on a throwaway server), and the 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -11,8 +12,13 @@ from fastapi.testclient import TestClient
 from app.store.database import migrate
 from app.web.main import create_app
 from app.web.settings import ServerSettings
+from search.core.workers import JOBS
 from tests.support import postgres
 from tests.support.survey import ADMIN_PASSWORD, AGENT_RANK, SECRET_NAMES, make_clip, study_text, write_bundle
+
+# The suite's commands keep their work in one process (their default is one worker per core) unless a test asks
+# for workers with --jobs: 2 cores shared by every test run at once, and the same results either way.
+os.environ.setdefault(JOBS, "1")
 
 
 @pytest.fixture(scope="session")

@@ -27,7 +27,9 @@ import json
 import os
 import random
 import shutil
+import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -49,10 +51,13 @@ from app.visible import VisibleClip, VisibleReels, World, audit
 from search.bundle.spec import BuildError, BuildSpec, Scheme, load_build
 from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
 from search.clips.render import RenderOptions, agent_label
+from search.core.workers import jobs as spread_over
 from search.solvers.domain import Domain, domain_for, domain_named, domain_of_summary
-from search.solvers.runner import SearchJob, in_processes, run_search, write_outputs
+from search.solvers.runner import Backend, SearchJob, run_search, write_outputs
 from search.solvers.solver import solver_named
 from search.solvers.summary import verify
+
+IN_THIS_PROCESS = Backend()  # one worker: every job of a step in the building process
 
 
 @dataclass(frozen=True)
@@ -112,7 +117,7 @@ def _draws(scheme: Scheme, parts: tuple[str, ...]) -> list[tuple[tuple[str, ...]
     return [(tuple(part for part in parts if part != "ranking"), "", scheme), (("ranking",), "/ranking", ranking)]
 
 
-def _key(inputs: dict) -> str:
+def input_key(inputs: dict) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -190,7 +195,7 @@ class Cache:
         self.root = root
 
     def path(self, kind: str, inputs: dict) -> Path:
-        return self.root / kind / _key(inputs)
+        return self.root / kind / input_key(inputs)
 
     def valid(self, kind: str, inputs: dict, *files: str) -> bool:
         folder = self.path(kind, inputs)
@@ -213,23 +218,53 @@ class Cache:
 
 
 def evaluate_agents(
-    spec: BuildSpec, domain: Domain, cache: Cache, log, world: dict | None = None, workers: int = 1
+    spec: BuildSpec, domain: Domain, cache: Cache, log, world: dict | None = None, backend: Backend = IN_THIS_PROCESS
 ) -> dict[str, dict]:
     """Each agent's `foil eval --json` object on the study's episodes (the manifest's ground truth) in the ``world``
     settings, with its per-episode rewards where the world gives them (`Domain.evaluate_episodes`)."""
     found = evaluate_runs(
-        spec, domain, cache, log, [(agent, spec.eval_episodes) for agent in spec.agents], world, workers
+        spec, domain, cache, log, [(agent, spec.eval_episodes) for agent in spec.agents], world, backend
     )
     return {agent: found[agent, spec.eval_episodes] for agent in spec.agents}
 
 
 def evaluate_runs(
-    spec: BuildSpec, domain: Domain, cache: Cache, log, runs: list[tuple[str, int]], world: dict | None, workers: int
+    spec: BuildSpec,
+    domain: Domain,
+    cache: Cache,
+    log,
+    runs: list[tuple[str, int]],
+    world: dict | None,
+    backend: Backend,
 ) -> dict[tuple[str, int], dict]:
-    """Each (agent, episodes)'s evaluation at the study's eval seed, computed once per input, ``workers`` at a time;
-    in a world whose agents act in their scenario's world, in the first scenario they are shown in."""
-    seed, world = spec.eval_seed, world or {}
-    todo, inputs_of = {}, {}
+    """Each (agent, episodes)'s evaluation at the study's eval seed, computed once per input on ``backend``."""
+    inputs_of, todo = {}, {}
+    for run, (inputs, task) in eval_tasks(spec, domain, runs, world).items():
+        inputs_of[run] = inputs
+        if cache.valid("eval", inputs, "eval.json"):
+            log(f"eval {_run_name(spec, *run)}: cached")
+        else:
+            todo[run] = task
+    described = {run: f"eval {_run_name(spec, *run)}" for run in todo}
+    for run, (result, seconds), progress in finished(todo, backend, described.get):
+        folder = cache.store("eval", inputs_of[run])
+        (folder / "eval.json").write_text(json.dumps(result, indent=1))
+        cache.seal("eval", inputs_of[run])
+        log(
+            f"{described[run]}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} "
+            f"({seconds:.1f} s) {progress}"
+        )
+    return {
+        run: json.loads((cache.path("eval", inputs) / "eval.json").read_text()) for run, inputs in inputs_of.items()
+    }
+
+
+def eval_tasks(
+    spec: BuildSpec, domain: Domain, runs: list[tuple[str, int]], world: dict | None
+) -> dict[tuple[str, int], tuple[dict, tuple]]:
+    """Each (agent, episodes)'s inputs and job (function, arguments); in a world whose agents act in their
+    scenario's world, in the first scenario they are shown in."""
+    seed, world, found = spec.eval_seed, world or {}, {}
     for agent, episodes in runs:
         shown = [name for clip_set in spec.sets if agent in clip_set.agents for name in clip_set.scenarios]
         scenario = domain.eval_scenario(shown)
@@ -238,24 +273,32 @@ def evaluate_runs(
         )
         if scenario is not None:
             inputs["scenario"] = domain.scenario_dict(scenario, world)
-        inputs_of[agent, episodes] = inputs
-        name = agent if episodes == spec.eval_episodes else f"{agent} on {episodes} episodes"
-        if cache.valid("eval", inputs, "eval.json"):
-            log(f"eval {name}: cached")
-        else:
-            todo[agent, episodes] = (_evaluate, (domain.name, agent, episodes, seed, world, scenario))
-    for (agent, episodes), (result, seconds) in in_processes(todo, workers):
-        folder = cache.store("eval", inputs_of[agent, episodes])
-        (folder / "eval.json").write_text(json.dumps(result, indent=1))
-        cache.seal("eval", inputs_of[agent, episodes])
-        name = agent if episodes == spec.eval_episodes else f"{agent} on {episodes} episodes"
-        log(f"eval {name}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} ({seconds:.1f} s)")
-    return {
-        run: json.loads((cache.path("eval", inputs) / "eval.json").read_text()) for run, inputs in inputs_of.items()
-    }
+        found[agent, episodes] = (inputs, (evaluation_job, (domain.name, agent, episodes, seed, world, scenario)))
+    return found
 
 
-def _evaluate(domain: str, agent: str, episodes: int, seed: int, world: dict, scenario: str | None):
+def _run_name(spec: BuildSpec, agent: str, episodes: int) -> str:
+    return agent if episodes == spec.eval_episodes else f"{agent} on {episodes} episodes"
+
+
+def finished(tasks: dict, backend: Backend, describe) -> Iterator[tuple[Any, Any, str]]:
+    """Run a step's ``tasks`` on ``backend``: (key, result, progress) as each finishes, its progress the jobs done
+    of the step's and, at the pace so far, the time left ("[3/8, about 2 min left]"), for a long step's log."""
+    started = time.perf_counter()
+    for done, (key, result) in enumerate(backend.run(tasks, describe), start=1):
+        left = (time.perf_counter() - started) / done * (len(tasks) - done)
+        yield key, result, f"[{done}/{len(tasks)}" + (f", about {duration(left)} left]" if done < len(tasks) else "]")
+
+
+def duration(seconds: float) -> str:
+    """A length of time as a person reads it: 40 s, 12 min, 2 h 5 min."""
+    if seconds < 90:
+        return f"{max(1, round(seconds))} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 90 else f"{minutes // 60} h {minutes % 60} min"
+
+
+def evaluation_job(domain: str, agent: str, episodes: int, seed: int, world: dict, scenario: str | None):
     """One agent's evaluation and the seconds it took (in a worker process: the domain is found by name)."""
     started = time.perf_counter()
     result = domain_named(domain).evaluate_episodes(agent, episodes, seed, world, scenario) | {"agent": agent}
@@ -270,7 +313,7 @@ def close_pairs(
     cache: Cache,
     log,
     world: dict | None = None,
-    workers: int = 1,
+    backend: Backend = IN_THIS_PROCESS,
 ) -> dict[tuple[str, str], PairedComparison]:
     """The pairs shown together that the study's own episodes cannot tell apart, each compared on more paired
     episodes until decided or at the cap (`search.bundle.truth`), with a line each (a warning for an undecided
@@ -280,7 +323,7 @@ def close_pairs(
 
     def rewards(wanted: set[tuple[str, int]]) -> dict[tuple[str, int], list[float]]:
         more = sorted(run for run in wanted if run[1] != spec.eval_episodes)  # the first look's are in hand
-        found = evaluate_runs(spec, domain, cache, log, more, world, workers) if more else {}
+        found = evaluate_runs(spec, domain, cache, log, more, world, backend) if more else {}
         found |= {(agent, n): evaluations[agent] for agent, n in wanted if n == spec.eval_episodes}
         return {run: result["episode_rewards"] for run, result in found.items()}
 
@@ -322,26 +365,28 @@ def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
     return True
 
 
-def _run_search(search: SearchJob, folder: Path) -> float:
-    """Run one search and write its files into ``folder``; the seconds it took."""
+def search_job_files(search: SearchJob) -> tuple[dict[str, str], float]:
+    """One search's files (`run_search`) and the seconds it took."""
     started = time.perf_counter()
-    write_outputs(folder, run_search(search))
-    return time.perf_counter() - started
+    return run_search(search), time.perf_counter() - started
 
 
-def run_searches(jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log, workers: int = 1) -> None:
-    """Run every search the cache cannot supply, ``workers`` at a time in separate processes; each result is
-    sealed in the cache as soon as it is complete, so an interrupted build keeps the finished ones."""
+def run_searches(
+    jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log, backend: Backend = IN_THIS_PROCESS
+) -> None:
+    """Run every search the cache cannot supply on ``backend``; each result is written and sealed in the cache as
+    soon as it is complete, so an interrupted build keeps the finished ones."""
     todo = {}
     for job, search, inputs in jobs:
-        if _key(inputs) not in todo and not _reusable(job, inputs, cache, log):
-            todo[_key(inputs)] = (job, search, inputs)
+        if input_key(inputs) not in todo and not _reusable(job, inputs, cache, log):
+            todo[input_key(inputs)] = (job, search, inputs)
 
-    tasks = {key: (_run_search, (search, cache.store("search", inputs))) for key, (_, search, inputs) in todo.items()}
-    for key, seconds in in_processes(tasks, workers):
+    tasks = {key: (search_job_files, (search,)) for key, (_, search, _) in todo.items()}
+    for key, (files, seconds), progress in finished(tasks, backend, lambda key: _describe(todo[key][0])):
         job, _, inputs = todo[key]
+        write_outputs(cache.store("search", inputs), files)
         cache.seal("search", inputs)
-        log(f"{_describe(job)}: {seconds:.1f} s")
+        log(f"{_describe(job)}: {seconds:.1f} s {progress}")
 
 
 def better_agent(
@@ -360,9 +405,13 @@ def better_agent(
 
 
 def render_clips(
-    clips: list[tuple[ClipJob, list[Path], Path]], options: RenderOptions, cache: Cache, log, workers: int = 1
+    clips: list[tuple[ClipJob, list[Path], Path]],
+    options: RenderOptions,
+    cache: Cache,
+    log,
+    backend: Backend = IN_THIS_PROCESS,
 ):
-    """Render each (job, summaries, clip) ``workers`` at a time, unless the same summaries, numbers, options and
+    """Render each (job, summaries, clip) on ``backend``, unless the same summaries, numbers, options and
     renderer already made the file there. One summary is a clip; several are one agent's reel of moments."""
     todo, inputs_of = {}, {}
     for job, summaries, out in clips:
@@ -383,13 +432,16 @@ def render_clips(
             log(f"render {out.stem}: cached")
             continue
         inputs_of[out.stem] = (inputs, out)
-        todo[out.stem] = (_render, (domain.name, summaries, out, list(job.numbers), options))
-    for name, frames in in_processes(todo, workers):
+        given = [(path.name, path.read_bytes()) for path in summaries]
+        todo[out.stem] = (render_job, (domain.name, given, out.name, list(job.numbers), options))
+    for name, (files, frames), progress in finished(todo, backend, lambda name: f"render {name}"):
         inputs, out = inputs_of[name]
+        for file, data in files.items():
+            (out.parent / file).write_bytes(data)
         folder = cache.store("render", inputs)
         (folder / "sha256").write_text(sha256_file(out))
         cache.seal("render", inputs)
-        log(f"render {name}: {frames}")
+        log(f"render {name}: {frames} {progress}")
 
 
 def moment_options(options: RenderOptions) -> RenderOptions:
@@ -405,17 +457,27 @@ def reel_files(summaries: list[Path]) -> list[Path]:
     return [Path(reel.__file__)] if len(summaries) > 1 else []
 
 
-def _render(domain: str, summaries: list[Path], out: Path, numbers: list[int], options: RenderOptions) -> str:
-    """Render one clip or reel (in a worker process: the domain is found by name); what it took, for the log."""
+def render_job(
+    domain: str, summaries: list[tuple[str, bytes]], clip: str, numbers: list[int], options: RenderOptions
+) -> tuple[dict[str, bytes], str]:
+    """Render one clip or reel from its summaries (name, contents) in a folder of its own, as a worker on another
+    machine does (the domain is found by name): the files made beside the clip (name -> contents) and what it
+    took, for the log."""
     from search.clips.reel import render_reel
 
     world = domain_named(domain)
-    if len(summaries) == 1:
-        result = world.render(summaries[0], out, numbers, options)
-    else:
-        moment = moment_options(options)
-        result = render_reel(summaries, out, lambda s, o: world.render(s, o, numbers, moment), options)
-    return f"{result.frames} frames in {result.render_s:.1f} s"
+    with tempfile.TemporaryDirectory(prefix="foil-render-") as folder:
+        paths, out = [Path(folder) / "summaries" / name for name, _ in summaries], Path(folder) / "clips" / clip
+        for path, (_, data) in zip(paths, summaries, strict=True):
+            path.parent.mkdir(exist_ok=True)
+            path.write_bytes(data)
+        if len(paths) == 1:
+            result = world.render(paths[0], out, numbers, options)
+        else:
+            moment = moment_options(options)
+            result = render_reel(paths, out, lambda s, o: world.render(s, o, numbers, moment), options)
+        files = {path.name: path.read_bytes() for path in sorted(out.parent.iterdir()) if path.is_file()}
+    return files, f"{result.frames} frames in {result.render_s:.1f} s"
 
 
 def reel_summaries(folder: Path) -> list[list[Path]]:
@@ -426,44 +488,74 @@ def reel_summaries(folder: Path) -> list[list[Path]]:
     return [reels[k] for k in sorted(reels)]
 
 
-def build_bundle(study: str | os.PathLike, out: str | os.PathLike, log=print, workers: int = 1) -> Manifest:
-    """Build (or bring up to date) the bundle of a study file in ``out``, running up to ``workers`` searches at
-    once; returns the manifest."""
+@dataclass(frozen=True)
+class Prepared:
+    """A study's build before any work: its clips, each clip's search and the search's inputs, checked."""
+
+    spec: BuildSpec
+    text: str
+    jobs: list[ClipJob]
+    world: dict
+    searches: list[SearchJob]
+    inputs: list[dict]
+
+
+def prepare(study: str | os.PathLike) -> Prepared:
+    """A study file's build, with bad settings and scenarios refused here, before any work."""
     spec, text = load_build(study)
     jobs = plan_clips(spec)
-    try:  # bad settings or scenarios fail here, before any work
+    try:
         world = study_world(spec)
         searches = [search_job(job, world, spec.world) for job in jobs]
         inputs = [search_inputs(search) for search in searches]
     except (ValueError, FileNotFoundError) as error:
         raise BuildError(f"{study}: [build]: {error}") from None
+    return Prepared(spec, text, jobs, world, searches, inputs)
+
+
+def build_bundle(
+    study: str | os.PathLike,
+    out: str | os.PathLike,
+    log=print,
+    workers: int = 1,
+    backend: str = "process",
+    ray_address: str | None = None,
+) -> Manifest:
+    """Build (or bring up to date) the bundle of a study file in ``out``, its evaluations, searches, checks and
+    clips run ``workers`` at a time on ``backend`` (processes here, or Ray tasks on the cluster at
+    ``ray_address``); `search.bundle.plan` says beforehand what it will cost. Returns the manifest; its
+    files are the same whatever the backend and number of workers."""
+    runner = Backend(backend, workers, ray_address)
+    prepared = prepare(study)
+    spec, jobs, world = prepared.spec, prepared.jobs, prepared.world
     out = Path(out)
+    cache = Cache(out / "cache")
     for folder in ("clips", "summaries"):
         (out / folder).mkdir(parents=True, exist_ok=True)
-    cache = Cache(out / "cache")
     log(f"{len(jobs)} clips, {len(spec.agents)} agents")
     domain = study_domain(spec)
-    evaluations = evaluate_agents(spec, domain, cache, log, world, workers)
-    close = close_pairs(spec, shown_pairs(jobs), evaluations, domain, cache, log, world, workers)
-    run_searches(list(zip(jobs, searches, inputs, strict=True)), cache, log, workers)
-    scenario_reports = representativeness(spec, cache, log, world, workers)
-    sources = {
-        job.id: job_summaries(job, cache.path("search", search), out, domain)
-        for job, search in zip(jobs, inputs, strict=True)
-    }
-    renders = []
-    for job in jobs:
-        if solver_named(job.scheme.solver).reels:
-            renders += [
-                (job, paths, out / "clips" / f"{job.id}.reel{k}.mp4") for k, paths in enumerate(sources[job.id])
-            ]
-        else:
-            renders.append((job, sources[job.id][0], out / "clips" / f"{job.id}.mp4"))
-    render_clips(renders, spec.render, cache, log, workers)
+    with spread_over(workers), runner.session():  # a job run here may spread its own work over the workers
+        evaluations = evaluate_agents(spec, domain, cache, log, world, runner)
+        close = close_pairs(spec, shown_pairs(jobs), evaluations, domain, cache, log, world, runner)
+        run_searches(list(zip(jobs, prepared.searches, prepared.inputs, strict=True)), cache, log, runner)
+        scenario_reports = representativeness(spec, cache, log, world, runner)
+        sources = {
+            job.id: job_summaries(job, cache.path("search", search), out, domain)
+            for job, search in zip(jobs, prepared.inputs, strict=True)
+        }
+        renders = []
+        for job in jobs:
+            if solver_named(job.scheme.solver).reels:
+                renders += [
+                    (job, paths, out / "clips" / f"{job.id}.reel{k}.mp4") for k, paths in enumerate(sources[job.id])
+                ]
+            else:
+                renders.append((job, sources[job.id][0], out / "clips" / f"{job.id}.mp4"))
+        render_clips(renders, spec.render, cache, log, runner)
     clips = [
         manifest_clip(job, sources[job.id], out, evaluations, domain.world(job.scenario), log, close) for job in jobs
     ]
-    (out / "study.toml").write_text(text, encoding="utf-8")
+    (out / "study.toml").write_text(prepared.text, encoding="utf-8")
     wanted = {path for c in clips for path in clip_files(c)} | {"study.toml"}
     for stale in [*(out / "clips").iterdir(), *(out / "summaries").iterdir()]:
         if str(stale.relative_to(out)) not in wanted:
@@ -682,13 +774,46 @@ def clip_summary(folder: Path, select: str, world: World) -> Path:
     return paths[largest_contrast([dict(load_summary(p)) for p in paths], world)]
 
 
-def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = None, workers: int = 1) -> list[dict]:
+def representativeness(
+    spec: BuildSpec, cache: Cache, log, world: dict | None = None, backend: Backend = IN_THIS_PROCESS
+) -> list[dict]:
     """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
     there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`, by
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
-    vote; pairs measured ``workers`` at a time. ``world`` is the study's comparison world (``study_world``),
+    vote; pairs measured on ``backend``. ``world`` is the study's comparison world (``study_world``),
     beneath each scenario's and the distribution's own settings."""
     from search.solvers.representative import strength
+
+    checks = check_tasks(spec, world)
+    todo = {
+        pair: task
+        for pair, (_, _, inputs, task) in checks.items()
+        if not cache.valid("representativeness", inputs, "report.json")
+    }
+    described = {pair: f"representativeness {pair[0]}-{pair[1]}" for pair in todo}
+    for pair, (found, seconds), progress in finished(todo, backend, described.get):
+        folder = cache.store("representativeness", checks[pair][2])
+        (folder / "report.json").write_text(json.dumps(found, indent=1))
+        cache.seal("representativeness", checks[pair][2])
+        log(f"{described[pair]}: {seconds:.1f} s {progress}")
+    reports = []
+    for pair, (names, distribution, inputs, _) in checks.items():
+        found = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
+        for name, one in zip(names, found, strict=True):
+            report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
+                key: value for key, value in one.items() if key != "scenario"
+            }
+            vote = report["distribution_vote"]  # a report cached before votes had their sign test gets it here
+            report["distribution_vote"] = vote | strength(vote["for_first"], vote["for_second"])
+            reports.append(report)
+            log(describe_representativeness(report))
+    return reports
+
+
+def check_tasks(spec: BuildSpec, world: dict | None) -> dict[tuple[str, str], tuple[list[str], str, dict, tuple]]:
+    """Each pair shown on a fixed scenario in a pairwise or ranking part, with its scenarios, the distribution
+    they are measured against, the check's inputs and its job (function, arguments); none in a world with no
+    distribution of starting states where the study names none."""
     from search.solvers.reward import RewardConfig
 
     settings = spec.representativeness
@@ -698,7 +823,7 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
             for pair, name in itertools.product(clip_set.pairs, clip_set.scenarios):
                 if not domain_for(pair, name, spec.world).is_distribution(name):
                     scenarios_of.setdefault(pair, []).append(name)
-    measured, todo = {}, {}
+    checks = {}
     for pair, names in scenarios_of.items():
         domain = domain_for(pair, names[0], spec.world)
         distribution = settings.distribution or domain.default_distribution
@@ -716,26 +841,9 @@ def representativeness(spec: BuildSpec, cache: Cache, log, world: dict | None = 
             "seed": settings.seed,
             "reward": RewardConfig().to_dict(),
         }
-        measured[pair] = (names, distribution, inputs)
-        if not cache.valid("representativeness", inputs, "report.json"):
-            todo[pair] = (_representativeness, (domain.name, pair, fixed, distribution, drawn_world, settings))
-    for pair, (found, seconds) in in_processes(todo, workers):
-        folder = cache.store("representativeness", measured[pair][2])
-        (folder / "report.json").write_text(json.dumps(found, indent=1))
-        cache.seal("representativeness", measured[pair][2])
-        log(f"representativeness {pair[0]}-{pair[1]}: {seconds:.1f} s")
-    reports = []
-    for pair, (names, distribution, inputs) in measured.items():
-        found = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
-        for name, one in zip(names, found, strict=True):
-            report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
-                key: value for key, value in one.items() if key != "scenario"
-            }
-            vote = report["distribution_vote"]  # a report cached before votes had their sign test gets it here
-            report["distribution_vote"] = vote | strength(vote["for_first"], vote["for_second"])
-            reports.append(report)
-            log(describe_representativeness(report))
-    return reports
+        task = (_representativeness, (domain.name, pair, fixed, distribution, drawn_world, settings))
+        checks[pair] = (names, distribution, inputs, task)
+    return checks
 
 
 def _representativeness(domain_name: str, pair, fixed: list, distribution: str, world: dict, settings):

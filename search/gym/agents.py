@@ -13,6 +13,7 @@ import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -24,11 +25,17 @@ SB3_ALGORITHMS = {"sac": "SAC", "td3": "TD3", "ddpg": "DDPG", "dqn": "DQN", "com
 
 @dataclass
 class GymAgent:
-    """A named policy: ``act(observations (B, ...)) -> actions (B, ...)``, deterministic."""
+    """A named policy: ``act(observations (B, ...)) -> actions (B, ...)``, deterministic. It pickles as its name and
+    source, and a worker process loads it from them once (search.core.workers)."""
 
     name: str
     source: str
     policy: Any
+
+    def __reduce__(self):
+        source = Path(self.source)
+        stamp = source.stat().st_mtime_ns if source.suffix == ".zip" and source.is_file() else None
+        return reloaded, (self.name, self.source, stamp)
 
     def act(self, observations: np.ndarray) -> np.ndarray:
         if hasattr(self.policy, "predict"):
@@ -116,6 +123,17 @@ def load_sb3(path: str | Path):
     import stable_baselines3
 
     return getattr(stable_baselines3, SB3_ALGORITHMS[family]).load(path, device="cpu")
+
+
+@cache
+def reloaded(name: str, source: str, stamp: int | None) -> GymAgent:
+    """The agent a pickled `GymAgent` stands for, loaded once per process (and again once its file changed:
+    ``stamp``)."""
+    if source.endswith(".zip"):
+        return GymAgent(name, source, load_sb3(source))
+    from search.gym.adapter import import_attribute
+
+    return GymAgent(name, source, import_attribute(source, "agent"))
 
 
 def load_agent(spec: str, adapter) -> GymAgent:

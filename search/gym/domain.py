@@ -22,6 +22,9 @@ from search.solvers.domain import Coupled, Domain
 
 class GymDomain(Domain):
     name = "gym"
+    # whether the world's coupled problems step their rows in one batched fast path (the highway kernel): then
+    # independent work stays in one process; a Python environment's is spread over worker processes
+    batched = False
 
     def __init__(self) -> None:
         self._agents: dict[tuple[str, str], GymAgent] = {}
@@ -124,10 +127,14 @@ class GymDomain(Domain):
 
     def roll_out(self, agents, states, reward, pushes, rng, tracker):
         """Rollouts scored from the problem's own record of each agent's ending, as its summary would say it (no
-        replay; `tests/gym/test_any_world.py` checks it against the summaries)."""
+        replay; `tests/gym/test_any_world.py` checks it against the summaries); the states over worker processes
+        unless the world steps them in one batch (``batched``)."""
+        from search.solvers.domain import roll_out_spread
         from search.solvers.representative import roll_out_problem
 
-        return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
+        if self.batched:
+            return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
+        return roll_out_spread(self.name, agents, states, reward, pushes, rng, tracker, shown)
 
     def shown(self, coupled: Coupled, row: int, steps: int, since: int, summary=None) -> float:
         """Read from the problem's record of each agent's ending (no replay)."""

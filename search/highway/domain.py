@@ -20,6 +20,7 @@ from search.highway.scenarios import ADAPTER, DISTRIBUTIONS, SCENARIOS, load_hig
 class HighwayDomain(GymDomain, Trainer):
     name = "highway"
     default_distribution = "highway-traffic"
+    batched = True  # the kernel steps every row of a search at once
 
     def shipped(self) -> Shipped:
         """Every name with the highway's prefix: its agents, scenarios and distribution (an unknown one is refused

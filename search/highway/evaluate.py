@@ -1,6 +1,13 @@
 """`foil eval` of a highway agent on the batched kernel: the test episodes of `search.gym.evaluate` (the same
-seeds, the same result), ``batch`` of them stepped at once, each exactly as highway-env plays it; and how the
-agent drives: its visible score (mean speed) and lane changes per drive."""
+seeds), ``batch`` of them stepped at once, each exactly as highway-env plays it under the agent's decisions; and
+how the agent drives: its visible score (mean speed) and lane changes per drive.
+
+The agent decides for every running episode of a batch in one call. Its network's outputs for an observation then
+differ from those of a lone call in the last bits (the matrix products sum in another order), so a decision
+differs from the one a lone highway-env episode gets only where two actions' values tie to those bits:
+`benchmarks/bench_highway.py --eval` counts such decisions (none in 200 test episodes of each shipped agent), and
+`tests/highway/test_kernel.py` plays the episodes in highway-env one observation at a time and compares with
+``==``. The batch an episode is decided in is fixed by ``batch`` alone, so the same seed gives the same result."""
 
 from __future__ import annotations
 
@@ -23,10 +30,9 @@ def evaluate(
     per_episode: bool = False,
 ) -> dict:
     """Rates, mean reward, mean speed and their 95% intervals, and mean lane changes, over ``episodes`` test
-    episodes, ``batch`` of them stepped at once on the highway kernel (search.highway.batch); with
-    ``per_episode``, each episode's reward too (``episode_rewards``). The agent still acts on one observation at
-    a time: its network's results depend on the batch around an observation in the last bits, and one at a time
-    they are the ones a lone highway-env episode gets."""
+    episodes, ``batch`` of them stepped at once on the highway kernel (search.highway.batch), the agent acting
+    on all of their observations in one call; with ``per_episode``, each episode's reward too
+    (``episode_rewards``)."""
     if episodes < 2:
         raise ValueError("evaluate at least 2 episodes (an interval needs them)")
     adapter = adapter or HighwayAdapter()
@@ -46,7 +52,7 @@ def evaluate(
         lanes = envs.ego(rows)[1]
         while running.any():
             live = rows[running]
-            actions = np.stack([agent.act(observations[b][None])[0] for b in live])
+            actions = agent.act(observations[live])
             observations[live], reward, terminated, truncated = envs.step(actions, live)
             speed, lane = envs.ego(live)
             for b, v in zip(live, speed, strict=True):

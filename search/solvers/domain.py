@@ -25,7 +25,7 @@ from app.visible import World
 from search.core.world import Agents, Claim, Clips, Scenarios, Shipped, Trainer
 
 if TYPE_CHECKING:
-    from search.solvers.representative import Rollouts
+    from search.solvers.representative import Rollouts, Shown
     from search.solvers.rollout import Tracker
 
 ENTRY_POINTS = "foil.domains"
@@ -218,3 +218,42 @@ def _choose(found: dict[str, dict[Domain, Claim]], where: str) -> Domain:
     names = [d.name for d in owning or common]
     keys = " or ".join(f'world = "{name}"' for name in names)
     raise ValueError(f"{', '.join(known)} could be in the worlds {names}: say which, add {keys} {where}")
+
+
+def roll_out_spread(
+    domain: str,
+    agents: Sequence[str],
+    states: list,
+    reward: dict,
+    pushes: int,
+    rng: np.random.Generator,
+    tracker: Tracker,
+    shown: Shown | None = None,
+) -> Rollouts:
+    """`roll_out_problem` of the world named ``domain``, the states over worker processes (search.core.workers):
+    every state's pushes are drawn here, in order, as `roll_out_problem` draws them, and each worker builds the
+    coupled problem of its states from the world's name, so the rollouts are the same whatever the number of
+    workers. ``shown`` must pickle (a module-level function)."""
+    from search.core.workers import in_order, workers
+    from search.solvers.representative import Rollouts, draw_pushes, roll_out_problem
+
+    coupled = [domain_named(domain).coupled(agents, state, reward) for state in states]
+    if workers() <= 1 or len(states) < 2:
+        return roll_out_problem(coupled, pushes, rng, tracker, shown)
+    envs = [draw_pushes(found.problem, pushes, rng) for found in coupled]
+    done = in_order(
+        _roll_out_state, [(domain, agents, state, reward, env, shown) for state, env in zip(states, envs, strict=True)]
+    )
+    parts = []
+    for index, (actions, contrast, steps) in enumerate(done):
+        tracker.count(steps)
+        parts.append(Rollouts(np.full(len(actions), index), actions, contrast))
+    return Rollouts.join(parts)
+
+
+def _roll_out_state(
+    domain: str, agents: Sequence[str], state: Any, reward: dict, env: np.ndarray, shown: Shown | None
+) -> tuple[list[np.ndarray], np.ndarray, int]:
+    from search.solvers.representative import roll_out_rows
+
+    return roll_out_rows(domain_named(domain).coupled(agents, state, reward), env, shown)

@@ -347,36 +347,53 @@ def roll_out_problem(
     coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
 ) -> Rollouts:
     """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
-    state one without pushes and ``pushes`` under uniform pushes, stepped together until the search's end rule
-    ends each. Each is scored by what its clip shows: ``shown(coupled, row, steps)`` reads it from the problem the
-    moment the row ends (a domain's fast path), or else each rollout's summary is built (exact, at twice the
-    steps)."""
+    state one without pushes and ``pushes`` under uniform pushes (`draw_pushes`), stepped together until the
+    search's end rule ends each (`roll_out_rows`)."""
     parts = []
     for index, found in enumerate(coupled):
-        problem = found.problem
-        rows, horizon, bound = pushes + 1, problem.horizon, problem.prior.bound
-        env = np.zeros((rows, horizon, *problem.action_shape))
-        env[1:] = rng.uniform(-bound, bound, (rows - 1, horizon, *problem.action_shape))
-        searched = np.full(rows, horizon)
-        contrast = np.zeros(rows)
-        running = np.ones(rows, dtype=bool)
-        problem.reset(rows)
-        for t in range(1, horizon + 1):
-            _, terminal = problem.step(env[:, t - 1])
-            tracker.count(int(running.sum()))
-            ended = running & np.asarray(terminal, dtype=bool)
-            searched[ended] = t
-            running &= ~ended
-            if shown is not None:
-                for row in np.flatnonzero(ended):
-                    contrast[row] = shown(found, int(row), t)
-            if not running.any():
-                break
-        actions = [env[row, : searched[row]] for row in range(rows)]
-        if shown is None:
-            contrast = np.array([summary_contrast(found.summarize(a, {}), found.world) for a in actions])
-        parts.append(Rollouts(np.full(rows, index), actions, contrast))
+        env = draw_pushes(found.problem, pushes, rng)
+        actions, contrast, steps = roll_out_rows(found, env, shown)
+        tracker.count(steps)
+        parts.append(Rollouts(np.full(len(env), index), actions, contrast))
     return Rollouts.join(parts)
+
+
+def draw_pushes(problem, pushes: int, rng: np.random.Generator) -> np.ndarray:
+    """The environment actions of one state's rollouts, (pushes + 1, horizon, *action_shape): none in the first,
+    uniform within the prior's bound in the others."""
+    env = np.zeros((pushes + 1, problem.horizon, *problem.action_shape))
+    bound = problem.prior.bound
+    env[1:] = rng.uniform(-bound, bound, (pushes, problem.horizon, *problem.action_shape))
+    return env
+
+
+def roll_out_rows(found, env: np.ndarray, shown: Shown | None = None) -> tuple[list[np.ndarray], np.ndarray, int]:
+    """One state's rollouts, a row each under ``env`` (rows, horizon, ...), stepped together until the search's
+    end rule ends each: each one's environment actions up to its end, its visible contrast and the steps all
+    took. The contrast is read by ``shown(coupled, row, steps)`` the moment a row ends (a domain's fast path), or
+    else from each rollout's summary (exact, at twice the steps)."""
+    problem = found.problem
+    rows, horizon = env.shape[:2]
+    searched = np.full(rows, horizon)
+    contrast = np.zeros(rows)
+    running = np.ones(rows, dtype=bool)
+    steps = 0
+    problem.reset(rows)
+    for t in range(1, horizon + 1):
+        _, terminal = problem.step(env[:, t - 1])
+        steps += int(running.sum())
+        ended = running & np.asarray(terminal, dtype=bool)
+        searched[ended] = t
+        running &= ~ended
+        if shown is not None:
+            for row in np.flatnonzero(ended):
+                contrast[row] = shown(found, int(row), t)
+        if not running.any():
+            break
+    actions = [env[row, : searched[row]] for row in range(rows)]
+    if shown is None:
+        contrast = np.array([summary_contrast(found.summarize(a, {}), found.world) for a in actions])
+    return actions, contrast, steps
 
 
 class Representative(OwnSummaries):

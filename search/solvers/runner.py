@@ -12,9 +12,12 @@ import itertools
 import json
 import os
 import re
+import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +25,7 @@ import numpy as np
 
 from app.formats import summary_json
 from search.core.settings import check_keys, field_types
+from search.core.workers import one_core
 from search.solvers.domain import domain_for
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
@@ -185,37 +189,156 @@ def study_jobs(
     ]
 
 
-def limit_threads() -> None:
-    """One search per core: keep libraries inside a worker from starting a thread per core each."""
-    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
-        os.environ.setdefault(name, "1")
+class JobFailed(RuntimeError):
+    """A job that raised on its worker (or whose worker died more often than Ray retries it), named by what it
+    was for: a search by its scheme, scenario and pair, an evaluation by its agent."""
 
 
-def in_processes(tasks: dict, workers: int) -> Iterator[tuple[Any, Any]]:
-    """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (in this one
-    when one worker or one task), yielding (key, result) as each finishes. A task that fails, or a caller that
-    stops reading, cancels the tasks not yet started."""
+def in_processes(
+    tasks: dict, workers: int, describe: Callable[[Any], str] = str, pool=None
+) -> Iterator[tuple[Any, Any]]:
+    """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (``pool``'s where
+    one is open, in this process when one worker or one task), yielding (key, result) as each finishes. A task
+    that fails raises JobFailed naming it by ``describe(key)``; it, or a caller that stops reading, cancels the
+    tasks not yet started."""
     if workers <= 1 or len(tasks) <= 1:
         for key, (function, arguments) in tasks.items():
-            yield key, function(*arguments)
+            with _named(key, describe):
+                result = function(*arguments)
+            yield key, result
         return
+    if pool is None:
+        with process_pool(min(workers, len(tasks))) as own:
+            yield from in_processes(tasks, workers, describe, own)
+        return
+    from concurrent.futures import as_completed
+
+    futures = {pool.submit(function, *arguments): key for key, (function, arguments) in tasks.items()}
+    try:
+        for future in as_completed(futures):
+            with _named(futures[future], describe):
+                result = future.result()
+            yield futures[future], result
+    except BaseException:  # GeneratorExit too: nobody waits for the rest
+        for future in futures:
+            future.cancel()
+        raise
+
+
+def process_pool(workers: int):
+    """``workers`` fresh processes, each with one core's worth of threads."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import ProcessPoolExecutor
 
     context = multiprocessing.get_context("spawn")  # no fork of a process holding numba or torch threads
-    with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=context, initializer=limit_threads) as pool:
-        futures = {pool.submit(function, *arguments): key for key, (function, arguments) in tasks.items()}
+    return ProcessPoolExecutor(workers, mp_context=context, initializer=one_core)
+
+
+@contextmanager
+def _named(key, describe: Callable[[Any], str]):
+    try:
+        yield
+    except Exception as error:
+        raise JobFailed(f"{describe(key)} failed: {type(error).__name__}: {error}") from error
+
+
+BACKENDS = ("process", "ray")
+RAY_ADDRESS = re.compile(r"auto|(ray://)?[A-Za-z0-9.\-\[\]:]+:[0-9]{1,5}")  # HOST:PORT, ray://HOST:PORT
+RAY_RETRIES = 2  # a task whose worker or node died is run again this many times; an exception is not (same seed)
+
+
+class Backend:
+    """Where a command's independent jobs run: ``workers`` processes on this machine (``process``), or tasks on
+    a Ray cluster (``ray``: the one at ``address``, else a local instance of ``workers`` CPUs). A job takes and
+    returns values, never paths, so a worker on another machine needs no shared disk; the caller writes the
+    files, so where a job ran never changes them."""
+
+    def __init__(self, name: str = "process", workers: int = 1, address: str | None = None):
+        if name not in BACKENDS:
+            raise ValueError(f"unknown backend {name!r}: use {' or '.join(map(repr, BACKENDS))}")
+        if workers < 1:
+            raise ValueError(f"--jobs must be at least 1, got {workers}")
+        if address is not None and name != "ray":
+            raise ValueError("--ray-address needs --backend ray")
+        if name == "ray" and find_spec("ray") is None:
+            raise ValueError("the ray backend needs Ray: pip install 'foil[ray]'")
+        if address is not None and not RAY_ADDRESS.fullmatch(address):
+            raise ValueError(
+                f"bad Ray address {address!r}: give HOST:PORT of the cluster's head (e.g. 10.0.0.5:6379), "
+                "ray://HOST:PORT of its client server, or auto"
+            )
+        self.name, self.workers, self.address = name, workers, address
+        self._pool = None
+
+    def __repr__(self) -> str:
+        return f"Backend({self.name!r}, workers={self.workers}, address={self.address!r})"
+
+    @contextmanager
+    def session(self) -> Iterator[Backend]:
+        """The backend held open for every ``run`` inside, so a command's steps share one set of worker
+        processes (started, and their imports paid, once) or one connection to Ray (a local instance started
+        here is stopped at the end)."""
+        if self.name == "process":
+            if self.workers == 1 or self._pool is not None:
+                yield self
+                return
+            with process_pool(self.workers) as self._pool:
+                try:
+                    yield self
+                finally:
+                    self._pool = None
+            return
+        import ray
+
+        started_here = not ray.is_initialized()
+        if started_here:
+            if self.address:
+                try:
+                    ray.init(address=self.address, log_to_driver=False)
+                except (ConnectionError, RuntimeError, ValueError) as error:
+                    raise ValueError(f"cannot connect to the Ray cluster at {self.address}: {error}") from None
+            else:
+                ray.init(num_cpus=self.workers, include_dashboard=False, log_to_driver=False)
         try:
-            for future in as_completed(futures):
-                yield futures[future], future.result()
-        except BaseException:  # GeneratorExit too: nobody waits for the rest
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
+            yield self
+        finally:
+            if started_here:
+                ray.shutdown()
+
+    def run(self, tasks: dict, describe: Callable[[Any], str] = str) -> Iterator[tuple[Any, Any]]:
+        """(key, result) of each of ``tasks`` (key -> (function, arguments)) as it finishes; a failed one raises
+        JobFailed naming it by ``describe(key)`` and cancels those not started."""
+        if self.name == "process":
+            yield from in_processes(tasks, self.workers, describe, self._pool)
+            return
+        with self.session():
+            import ray
+
+            remote = ray.remote(num_cpus=1, max_retries=RAY_RETRIES)(_in_worker)
+            place = (os.getcwd(), list(sys.path))
+            pending = {remote.remote(place, function, arguments): key for key, (function, arguments) in tasks.items()}
+            try:
+                while pending:
+                    done, _ = ray.wait(list(pending), num_returns=1)
+                    for ref in done:
+                        key = pending.pop(ref)
+                        with _named(key, describe):
+                            result = ray.get(ref)
+                        yield key, result
+            finally:
+                for ref in pending:
+                    ray.cancel(ref)
 
 
-def _job_in_worker(job: SearchJob) -> dict[str, str]:
-    limit_threads()
-    return run_search(job)
+def _in_worker(place: tuple[str, list[str]], function, arguments: tuple):
+    """A job on a Ray worker, one core's worth of threads, reading relative files and importing as the command
+    does where its folder is there too (a worker on this machine); elsewhere from the worker's own."""
+    one_core()
+    folder, path = place
+    if os.path.isdir(folder):
+        os.chdir(folder)
+        sys.path[:] = list(dict.fromkeys([*path, *sys.path]))
+    return function(*arguments)
 
 
 def run_all(
@@ -232,15 +355,11 @@ def run_all(
 
     started = time.perf_counter()
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    runner = Backend(backend, workers, ray_address)
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)
     results: dict[int, dict[str, str]] = {}
-    if backend == "ray":
-        finished = _run_ray(jobs, ray_address, workers)
-    elif backend == "process":
-        finished = in_processes({index: (run_search, (job,)) for index, job in enumerate(jobs)}, workers)
-    else:
-        raise ValueError(f"unknown backend {backend!r}: use 'process' or 'ray'")
-    for index, files in finished:
+    tasks = {index: (run_search, (job,)) for index, job in enumerate(jobs)}
+    for index, files in runner.run(tasks, lambda index: f"search {jobs[index].solver} {jobs[index].label}"):
         results[index] = files
         bar.update()
     bar.close()
@@ -270,27 +389,3 @@ def run_all(
     }
     (Path(out) / "study.json").write_text(json.dumps(study, indent=1) + "\n")
     return study
-
-
-def _run_ray(jobs: list[SearchJob], address: str | None, workers: int):
-    """Yield (index, files) as Ray tasks finish; a local Ray instance when no address is given."""
-    try:
-        import ray
-    except ImportError:
-        raise ValueError("the ray backend needs Ray: pip install 'foil[ray]'") from None
-    started_here = not ray.is_initialized()
-    if started_here:
-        if address:
-            ray.init(address=address)
-        else:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
-    try:
-        task = ray.remote(num_cpus=1)(_job_in_worker)
-        pending = {task.remote(job): index for index, job in enumerate(jobs)}
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            for ref in done:
-                yield pending.pop(ref), ray.get(ref)
-    finally:
-        if started_here:
-            ray.shutdown()

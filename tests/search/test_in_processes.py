@@ -1,4 +1,5 @@
-"""`in_processes`, which runs the bundle's and `foil search-all`'s searches: a failure stops the tasks not started."""
+"""`in_processes`, which runs the bundle's and `foil search-all`'s jobs on this machine: a failure, named, stops the
+tasks not started."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from search.solvers.runner import in_processes
+from search.solvers.runner import JobFailed, in_processes
 
 
 def mark(folder: str, number: int) -> int:
@@ -28,7 +29,7 @@ def test_every_result_comes_back_once(tmp_path):
 
 def test_a_failed_task_cancels_those_not_yet_started(tmp_path):
     tasks = {0: (fail, (str(tmp_path), 0))} | {n: (mark, (str(tmp_path), n)) for n in range(1, 40)}
-    with pytest.raises(ValueError, match="task 0 failed"):
-        for _ in in_processes(tasks, 2):
+    with pytest.raises(JobFailed, match="^job 0 failed: ValueError: task 0 failed$"):
+        for _ in in_processes(tasks, 2, describe=lambda number: f"job {number}"):
             pass
     assert len(list(tmp_path.glob("*.ran"))) < 39  # the rest were cancelled, not run to the end

@@ -1,0 +1,102 @@
+"""Independent work spread over worker processes, for a world without a batched fast path, whose Python
+environment steps on one core: `foil eval`'s episodes, the representative solver's starting states and the
+replays of its candidates.
+
+A task's result depends on the task alone, never on which worker ran it or how many there are, and results come
+back in the tasks' order, so one worker and many give byte-identical results. A task carries what it needs as
+names and values (a world's name, agents that pickle as their files, a scenario), each worker builds its own from
+them (a world caches its agents per process), and a worker does its share itself, with no workers of its own.
+
+How many: ``--jobs`` where a command takes it (`jobs`), else one per core. The worker processes stay up for the
+rest of the command, so a search that spreads each batch of states pays for starting them once.
+"""
+
+from __future__ import annotations
+
+import atexit
+import itertools
+import multiprocessing
+import os
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+from functools import cache
+from typing import Any
+
+JOBS = "FOIL_JOBS"  # the environment variable that carries the count into worker processes
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def workers() -> int:
+    """The worker processes independent work spreads over: what `jobs` set, else one per core; one in a process
+    that another started to share its work (`foil search-all`'s and the bundle's searches, these workers), whose
+    siblings already take the other cores."""
+    value = os.environ.get(JOBS)
+    if value:
+        return int(value)
+    return 1 if multiprocessing.parent_process() is not None else cores()
+
+
+@contextmanager
+def jobs(count: int | None) -> Iterator[None]:
+    """``count`` workers for the independent work done within (None: as before, by default one per core); worker
+    processes started within inherit it."""
+    if count is None:
+        yield
+        return
+    if count < 1:
+        raise ValueError(f"--jobs must be at least 1 (1: everything in this process), got {count}")
+    before = os.environ.get(JOBS)
+    os.environ[JOBS] = str(count)
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[JOBS]
+        else:
+            os.environ[JOBS] = before
+
+
+def in_order(function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], count: int | None = None) -> list[Any]:
+    """``function(*task)`` for every task, in the tasks' order, over ``count`` worker processes (default
+    `workers`); in this process where one worker or one task is all there is. ``function`` and the tasks must
+    pickle (a module-level function; names, numbers, arrays)."""
+    count = min(workers() if count is None else count, len(tasks))
+    if count <= 1:
+        return [function(*task) for task in tasks]
+    place = (os.getcwd(), list(sys.path))  # a worker reads relative files and imports as this process does now
+    try:
+        return list(_pool(count).map(_run, itertools.repeat(place), itertools.repeat(function), tasks))
+    except BrokenProcessPool:
+        _pool.cache_clear()  # a worker died (killed, out of memory): the next call starts new ones
+        raise
+
+
+def _run(place: tuple[str, list[str]], function: Callable[..., Any], task: tuple[Any, ...]) -> Any:
+    cwd, path = place
+    if os.getcwd() != cwd:
+        os.chdir(cwd)
+    sys.path[:] = path
+    return function(*task)
+
+
+def one_core() -> None:
+    """A worker process's start: its libraries use one thread each, and its own work stays in it (it starts no
+    workers of its own)."""
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
+    os.environ[JOBS] = "1"
+
+
+@cache
+def _pool(count: int) -> ProcessPoolExecutor:
+    # spawned, not forked: no fork of a process that holds numba's or torch's threads
+    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("spawn"), initializer=one_core)
+    atexit.register(pool.shutdown, cancel_futures=True)
+    return pool
