@@ -1,6 +1,6 @@
 """Independent work spread over worker processes, for a world without a batched fast path, whose Python
-environment steps on one core: `foil eval`'s episodes, the representative solver's starting states and the
-replays of its candidates.
+environment steps on one core: `foil eval`'s episodes, the representative solver's starting states (and the
+representativeness check's), and HIGHLIGHTS' and Agent Disagreements' episodes from drawn starting states.
 
 A task's result depends on the task alone, never on which worker ran it or how many there are, and results come
 back in the tasks' order, so one worker and many give byte-identical results. A task carries what it needs as

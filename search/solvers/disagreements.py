@@ -24,7 +24,9 @@ from h/2 steps before it to the branches' end. The defaults are the published on
 10 of the crowd's 0.25 s steps; 3 episodes, overlap 3); the published summary has K = 5 (``--top-k 5``).
 
 Budget: finding disagreements may use up to half the simulator steps; the forks use the rest. Where there are more
-disagreements than forks the budget pays for, an evenly spaced share of them is forked.
+disagreements than forks the budget pays for, an evenly spaced share of them is forked. In a world without a batched
+fast path the starting states' episodes play, and their disagreements fork, over worker processes
+(`search.solvers.episodes.in_turn`), with the same clips.
 """
 
 from __future__ import annotations
@@ -35,13 +37,13 @@ from typing import Any
 
 import numpy as np
 
-from search.solvers.episodes import Episodes, continuing, play
+from search.solvers.episodes import Episodes, Source, continuing, in_turn, play, tracker_at, within
 from search.solvers.follow import ALWAYS, Follow
 from search.solvers.problem import ActionGap, Follows, StateValues
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, held, register
-from search.solvers.watching import Summarize, Watching
+from search.solvers.watching import Summarize, Watching, spread_source
 
 IMPORTANCE = ("auto", "last_state", "outcome")
 
@@ -174,6 +176,29 @@ def fork(
     return [d for d in forks if d.branch > 0]
 
 
+def found_rows(group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget: int) -> list[tuple[int, list]]:
+    """`find`'s disagreements as (steps taken, rows), without the snapshots: what a worker process sends back."""
+    return [(t, rows) for t, _, rows in find(group, tracker, config, budget)]
+
+
+def replayed_forks(
+    group: Episodes,
+    tracker: Tracker,
+    config: DisagreementsConfig,
+    found_from: int,
+    limit: int,
+    kept: list[tuple[int, list]],
+    source: Source,
+    summarize: Callable[[Episodes, Disagreement], dict],
+) -> list[Disagreement]:
+    """The ``kept`` disagreements (steps taken, rows) of a group forked, in a process of its own: its episodes
+    played again as `find` played them from ``found_from`` steps (for the snapshots), then `fork`."""
+    rows_at = dict(kept)
+    found = find(group, tracker_at(tracker.budget, found_from), config, limit)
+    chosen = [(t, before, rows_at[t]) for t, before, _ in found if t in rows_at]
+    return fork(group, chosen, tracker, config, source.domain().shown, summarize)
+
+
 def unforked(group: Episodes, tracker: Tracker, config: DisagreementsConfig) -> Disagreement:
     """Where the agents never disagree (or never with room to fork), the clip is still a clip of the pair: the
     first episode with each agent on its own for h steps (``forked`` False)."""
@@ -200,18 +225,41 @@ def disagreements(
     config: DisagreementsConfig,
     shown: Callable[..., float],
     summarize: Callable[[Episodes, Disagreement], dict],
+    source: Source | None = None,
 ) -> tuple[list[dict], dict]:
     """The top-K disagreements' summaries, most important first, and the record of the search.
-    ``summarize(group, disagreement)`` builds a disagreement's summary; ``shown`` is `Domain.shown`."""
-    half = config.horizon // 2
-    found = [find(group, tracker, config, tracker.budget // 2) for group in groups]
+    ``summarize(group, disagreement)`` builds a disagreement's summary; ``shown`` is `Domain.shown`. With a
+    ``source`` the groups play over worker processes, where ``summarize`` must pickle."""
+    half, limit = config.horizon // 2, tracker.budget // 2
+    if source is None:
+        found = [find(group, tracker, config, limit) for group in groups]
+    else:
+        played = in_turn(found_rows, source, groups, [(config, limit)] * len(groups), tracker, within(limit))
+        found = [[(t, None, rows) for t, rows in rows_at] for _, rows_at in played]
     every = [(g, t, row) for g, rows_at in enumerate(found) for t, _, rows in rows_at for row in rows]
     affordable = max(1, tracker.remaining // max(half, 1))
     kept = {every[i] for i in np.linspace(0, len(every) - 1, min(len(every), affordable)).round().astype(int)}
+    chosen_at = [
+        [
+            (t, before, kept_rows)
+            for t, before, rows in found[g]
+            if (kept_rows := [r for r in rows if (g, t, r) in kept])
+        ]
+        for g in range(len(groups))
+    ]
     forked: list[Disagreement] = []
-    for g, group in enumerate(groups):
-        chosen_here = [(t, before, [row for row in rows if (g, t, row) in kept]) for t, before, rows in found[g]]
-        forked += fork(group, [f for f in chosen_here if f[2]], tracker, config, shown, summarize)
+    if source is None:
+        for group, chosen_here in zip(groups, chosen_at, strict=True):
+            forked += fork(group, chosen_here, tracker, config, shown, summarize)
+    else:
+        forking = [g for g in range(len(groups)) if chosen_at[g]]
+        tasks = [
+            (config, played[g][0], limit, [(t, rows) for t, _, rows in chosen_at[g]], source, summarize)
+            for g in forking
+        ]
+        forks = in_turn(replayed_forks, source, [groups[g] for g in forking], tasks, tracker, within(tracker.budget))
+        forked = [d for _, found_here in forks for d in found_here]
+        groups[0].coupled.problem.reset(1)  # the record's importance asks the agents of a state
     chosen = top_k(forked, tracker.queue.k, config.overlap, half) or [unforked(groups[0], tracker, config)]
     by_episode = {group.first + e: group for group in groups for e in range(len(group.env))}
     record = {
@@ -225,6 +273,23 @@ def disagreements(
         ],
     }
     return [summarize(by_episode[d.episode], d) for d in chosen], record
+
+
+@dataclass(frozen=True)
+class DisagreementSummary:
+    """A disagreement's clip as a summary: a value, so that a worker process that scores a fork by its summary
+    builds it as this one would."""
+
+    summary: Summarize
+    horizon: int
+
+    def __call__(self, group: Episodes, d: Disagreement) -> dict:
+        end = d.step + d.branch
+        if not d.forked:
+            return self.summary(group, d.episode, end, None, None, {"episode": d.episode, "disagreement_step": None})
+        window = (max(0, d.step - self.horizon // 2), end)
+        note = {"episode": d.episode, "disagreement_step": d.step, "importance": d.importance}
+        return self.summary(group, d.episode, end, Follow(0, d.step), window, note)
 
 
 class AgentDisagreements(Watching):
@@ -246,15 +311,10 @@ class AgentDisagreements(Watching):
         summary: Summarize,
         comparison: Comparison,
     ) -> tuple[list[dict], dict]:
-        def of_disagreement(group: Episodes, d: Disagreement) -> dict:
-            end = d.step + d.branch
-            if not d.forked:
-                return summary(group, d.episode, end, None, None, {"episode": d.episode, "disagreement_step": None})
-            window = (max(0, d.step - config.horizon // 2), end)
-            note = {"episode": d.episode, "disagreement_step": d.step, "importance": d.importance}
-            return summary(group, d.episode, end, Follow(0, d.step), window, note)
-
-        return disagreements(groups, tracker, config, comparison.domain.shown, of_disagreement)
+        summarize = DisagreementSummary(summary, config.horizon)
+        return disagreements(
+            groups, tracker, config, comparison.domain.shown, summarize, spread_source(comparison, groups)
+        )
 
 
 register(AgentDisagreements())

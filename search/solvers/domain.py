@@ -48,6 +48,10 @@ class Problems:
     """A world's coupled problems: the agents stepped side by side from one state, their summaries, the rollouts
     the representative solver scores, and the re-simulation ``foil verify`` compares a summary with."""
 
+    # whether the coupled problems step all their rows at once (the crowd's simulator, the highway kernel): then the
+    # summary methods play every group of episodes in this process; False: over worker processes (search.core.workers)
+    batched = True
+
     @abstractmethod
     def takes_summary(self, summary: Mapping[str, Any]) -> Claim | None:
         """Whether a summary is this world's, by its scenario."""

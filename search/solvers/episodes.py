@@ -4,6 +4,9 @@ under which environment actions they run, the same for every agent compared.
 From a fixed scenario the first episode runs without pushes and the others under environment actions drawn
 uniformly within their bound (the world's own variation, as the representative solver's rollouts); from a
 distribution each episode starts from its own drawn state, without pushes.
+
+In a world without a batched fast path the groups of episodes from drawn states play over worker processes
+(`in_turn`), with the same result as one after another in one process, whatever the number of workers.
 """
 
 from __future__ import annotations
@@ -14,7 +17,12 @@ from typing import Any
 
 import numpy as np
 
+from search.core.workers import in_order
 from search.solvers.rollout import Tracker
+
+# groups played at once over the workers, each from the steps counted when its chunk starts: a constant, so how far
+# ahead they play never depends on the number of workers
+CHUNK = 8
 
 
 @dataclass
@@ -24,6 +32,25 @@ class Episodes:
     coupled: Any  # a search.solvers.domain.Coupled
     env: np.ndarray  # (E, horizon, *action_shape)
     first: int  # the index of its first episode among all episodes
+    state: Any = None  # the starting state, which a worker process rebuilds the coupled problem from
+
+
+@dataclass(frozen=True)
+class Source:
+    """What a worker process rebuilds a group's coupled problem from: the world's name, the agents and the reward's
+    settings (with the group's starting state)."""
+
+    world: str
+    agents: tuple[str, ...]
+    reward: dict
+
+    def domain(self) -> Any:
+        from search.solvers.domain import domain_named  # the domain module imports the solvers
+
+        return domain_named(self.world)
+
+    def episodes(self, state: Any, env: np.ndarray, first: int) -> Episodes:
+        return Episodes(self.domain().coupled(self.agents, state, self.reward), env, first, state)
 
 
 def draw_episodes(coupled_of: Callable[[Any], Any], states: list, count: int, rng: np.random.Generator) -> list:
@@ -35,12 +62,12 @@ def draw_episodes(coupled_of: Callable[[Any], Any], states: list, count: int, rn
         env = np.zeros((count, problem.horizon, *problem.action_shape))
         bound = problem.prior.bound
         env[1:] = rng.uniform(-bound, bound, env[1:].shape)
-        return [Episodes(coupled, env, 0)]
+        return [Episodes(coupled, env, 0, states[0])]
     found = []
     for index, state in enumerate(states[:count]):
         coupled = coupled_of(state)
         problem = coupled.problem
-        found.append(Episodes(coupled, np.zeros((1, problem.horizon, *problem.action_shape)), index))
+        found.append(Episodes(coupled, np.zeros((1, problem.horizon, *problem.action_shape)), index, state))
     return found
 
 
@@ -78,3 +105,64 @@ def play(
         if not running.any():
             break
     return lengths
+
+
+def tracker_at(budget: int, steps: int) -> Tracker:
+    """A tracker of ``budget`` steps that has counted ``steps``: a group played apart, as it would be played in
+    turn."""
+    tracker = Tracker(budget, 1)
+    tracker.steps = steps
+    return tracker
+
+
+Same = Callable[[tuple, Any, int, int, int], bool]
+
+
+def in_turn(
+    function: Callable[..., Any], source: Source, groups: list, arguments: list[tuple], tracker: Tracker, same: Same
+) -> list[tuple[int, Any]]:
+    """``function(group, tracker, *arguments[g])`` of each group in turn, as one process plays them one after
+    another on one tracker, over worker processes; with the steps counted before each.
+
+    Each group's result depends on the steps counted before it (where the budget stops its play), which the groups
+    before it decide. So a chunk of groups plays at once, each from the steps counted when the chunk starts (the
+    most any of them can have left), then their results are taken in order: a result is kept where
+    ``same(arguments, result, steps, start, now)`` says that played from ``now`` steps, where the groups before it
+    leave the count, instead of ``start``, it comes out the same (no budget check goes another way), else that
+    group plays again here, from ``now``. ``steps`` is what the result counted. ``function`` must pickle."""
+    done = []
+    for first in range(0, len(groups), CHUNK):
+        start = tracker.steps
+        tasks = [
+            (function, source, group.state, group.env, group.first, tracker.budget, start, *arguments[first + i])
+            for i, group in enumerate(groups[first : first + CHUNK])
+        ]
+        for task, (result, steps) in zip(tasks, in_order(_played, tasks), strict=True):
+            now = tracker.steps
+            if now != start and not same(task[7:], result, steps, start, now):
+                result, steps = _played(*task[:6], now, *task[7:])
+            tracker.count(steps)
+            done.append((now, result))
+    return done
+
+
+def within(limit: int) -> Same:
+    """`in_turn`'s test for a play that stops before a step would take the count past ``limit`` (`find`, `play`):
+    from a later start it plays the same where all its steps still fit."""
+    return lambda arguments, result, steps, start, now: now + steps <= limit
+
+
+def _played(
+    function: Callable[..., Any],
+    source: Source,
+    state: Any,
+    env: np.ndarray,
+    first: int,
+    budget: int,
+    start: int,
+    *arguments: Any,
+) -> tuple[Any, int]:
+    """One group played apart, from ``start`` steps: its result and the steps it counted."""
+    tracker = tracker_at(budget, start)
+    result = function(source.episodes(state, env, first), tracker, *arguments)
+    return result, tracker.steps - start

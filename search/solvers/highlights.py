@@ -23,7 +23,8 @@ The summaries come out per agent (the first agent's, then the second's), each ag
 episodes. Each is one moment: it replays its episode with every agent following the reel's agent and shows the
 ``window`` around the state. Budget: each agent gets half the simulator steps (playing, then measuring
 importance); where the stand-in's rollouts of every state do not fit, an evenly spaced share of the states is
-measured and only those can be chosen.
+measured and only those can be chosen. In a world without a batched fast path the starting states' episodes play
+over worker processes (`search.solvers.episodes.in_turn`), with the same reels.
 """
 
 from __future__ import annotations
@@ -33,13 +34,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from search.solvers.episodes import Episodes, continuing, play
+from search.solvers.episodes import Episodes, Source, continuing, in_turn, play
 from search.solvers.follow import ALWAYS, Follow
 from search.solvers.problem import ActionValues, Alternatives, Features, Follows, provides
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, held, register
-from search.solvers.watching import Summarize, Watching
+from search.solvers.watching import Summarize, Watching, spread_source
 
 IMPORTANCE = ("auto", "max_min", "second_best", "rollouts")
 
@@ -159,18 +160,24 @@ def play_agent(group: Episodes, agent: int, tracker: Tracker, config: Highlights
     return kind, states, lengths
 
 
+def measured(states: int, left: int, cost: int) -> int:
+    """How many of ``states`` the stand-in measures with ``left`` steps to spend, ``cost`` steps each: as many as
+    fit, at least one."""
+    return min(states, max(1, left // cost))
+
+
 def rollout_importance(
     group: Episodes, agent: int, states: list, tracker: Tracker, config: HighlightsConfig, budget: int
-):
+) -> tuple[dict, int]:
     """The stand-in importance of the states (step, rows) whose rollouts fit before the tracker reaches ``budget``
-    steps (at least one state's): {(row, step): importance}."""
+    steps (at least one state's): {(row, step): importance}; and the steps of one state's rollouts."""
     problem = group.coupled.problem
     every = [(i, row) for i, (t, running, *_rest) in enumerate(states) for row in np.flatnonzero(running)]
     if not every:
-        return {}
+        return {}, 0
     alternatives = len(problem.alternatives(states[0][5][:1]))
     cost = alternatives * config.lookahead
-    count = min(len(every), max(1, (budget - tracker.steps) // cost))
+    count = measured(len(every), budget - tracker.steps, cost)
     chosen = [every[j] for j in np.linspace(0, len(every) - 1, count).round().astype(int)]
     parts, at, actions, env = [], [], [], []
     for i, row in chosen:
@@ -189,7 +196,8 @@ def rollout_importance(
 
     play(problem, np.stack(env), tracker, add)
     spread = returns.reshape(len(chosen), alternatives)
-    return {(int(row), states[i][0]): float(s.max() - s.min()) for (i, row), s in zip(chosen, spread, strict=True)}
+    scores = {(int(row), states[i][0]): float(s.max() - s.min()) for (i, row), s in zip(chosen, spread, strict=True)}
+    return scores, cost
 
 
 def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
@@ -217,25 +225,68 @@ def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
     return sorted((moments[i] for i in kept), key=lambda m: (m.episode, m.step))
 
 
-def agent_moments(groups: list[Episodes], agent: int, tracker: Tracker, config: HighlightsConfig, budget: int):
+@dataclass
+class Scored:
+    """An agent's scored states of one group of episodes, with what its budget checks went by."""
+
+    kind: str  # the importance
+    moments: list[Moment]
+    played: int  # steps played: one per state scored (or to score)
+    cost: int  # steps of one state's rollouts (the stand-in's; 0: none were played)
+
+
+def group_moments(group: Episodes, tracker: Tracker, agent: int, config: HighlightsConfig, share: int) -> Scored:
+    """The agent's scored states of one group, played until the tracker reaches ``share`` steps."""
+    start = tracker.steps
+    kind, states, lengths = play_agent(group, agent, tracker, config, share)
+    played, cost = tracker.steps - start, 0
+    if kind == "rollouts":
+        scores, cost = rollout_importance(group, agent, states, tracker, config, share)
+    else:
+        scores = {(int(row), t): float(q[row]) for t, running, _, q, _, _ in states for row in np.flatnonzero(running)}
+    moments = [
+        Moment(group.first + int(row), t, int(lengths[row]), scores[(int(row), t)], features[row])
+        for t, running, features, *_ in states
+        for row in np.flatnonzero(running)
+        if (int(row), t) in scores
+    ]
+    return Scored(kind, moments, played, cost)
+
+
+def agent_moments(
+    groups: list[Episodes],
+    agent: int,
+    tracker: Tracker,
+    config: HighlightsConfig,
+    budget: int,
+    source: Source | None = None,
+):
     """Every scored state of the agent's episodes, and the importance used; the steps left until ``budget`` are
-    shared out evenly over the groups of episodes (starting states)."""
-    moments, kind, start = [], "", tracker.steps
-    for g, group in enumerate(groups):
-        share = start + (budget - start) * (g + 1) // len(groups)
-        kind, states, lengths = play_agent(group, agent, tracker, config, share)
-        if kind == "rollouts":
-            scores = rollout_importance(group, agent, states, tracker, config, share)
-        else:
-            scores = {
-                (int(row), t): float(q[row]) for t, running, _, q, _, _ in states for row in np.flatnonzero(running)
-            }
-        for t, running, features, *_ in states:
-            for row in np.flatnonzero(running):
-                if (int(row), t) in scores:
-                    episode = group.first + int(row)
-                    moments.append(Moment(episode, t, int(lengths[row]), scores[(int(row), t)], features[row]))
-    return moments, kind
+    shared out evenly over the groups of episodes (starting states). With a ``source`` the groups play over worker
+    processes."""
+    start = tracker.steps
+    shares = [start + (budget - start) * (g + 1) // len(groups) for g in range(len(groups))]
+    if source is None:
+        scored = [
+            group_moments(group, tracker, agent, config, share) for group, share in zip(groups, shares, strict=True)
+        ]
+    else:
+
+        def same(arguments: tuple, found: Scored, steps: int, played_from: int, now: int) -> bool:
+            """Played from ``now``: the same play within the share, the same count of states measured, rollouts
+            within the budget."""
+            share = arguments[-1]
+            if now + found.played > share:
+                return False
+            left = share - found.played
+            return not found.cost or (
+                measured(found.played, left - now, found.cost) == measured(found.played, left - played_from, found.cost)
+                and now + steps <= tracker.budget
+            )
+
+        tasks = [(agent, config, share) for share in shares]
+        scored = [found for _, found in in_turn(group_moments, source, groups, tasks, tracker, same)]
+    return [m for found in scored for m in found.moments], scored[-1].kind
 
 
 def highlights(
@@ -243,13 +294,15 @@ def highlights(
     tracker: Tracker,
     config: HighlightsConfig,
     summarize: Callable[[Episodes, int, Moment], dict],
+    source: Source | None = None,
 ) -> tuple[list[dict], dict]:
     """Both agents' reels as summaries (the first agent's moments, then the second's) and the search's record.
-    ``summarize(group, agent, moment)`` builds a moment's summary."""
+    ``summarize(group, agent, moment)`` builds a moment's summary; with a ``source`` the groups play over worker
+    processes."""
     by_episode = {group.first + e: group for group in groups for e in range(len(group.env))}
     summaries, record = [], {}
     for agent in (0, 1):
-        moments, kind = agent_moments(groups, agent, tracker, config, tracker.budget * (agent + 1) // 2)
+        moments, kind = agent_moments(groups, agent, tracker, config, tracker.budget * (agent + 1) // 2, source)
         kept = select(moments, config)
         summaries += [summarize(by_episode[m.episode], agent, m) for m in kept]
         record[f"agent_{agent}"] = {
@@ -293,7 +346,7 @@ class Highlights(Watching):
             note = {"reel": agents[agent], "episode": m.episode, "state_step": m.step, "importance": m.importance}
             return summary(group, m.episode, end, Follow(agent, end), (first, end), note)
 
-        return highlights(groups, tracker, config, of_moment)
+        return highlights(groups, tracker, config, of_moment, spread_source(comparison, groups))
 
 
 class HighlightsDiv(Highlights):

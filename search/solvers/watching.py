@@ -6,11 +6,13 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from search.solvers.episodes import Episodes, draw_episodes
+from search.core.workers import workers
+from search.solvers.episodes import Episodes, Source, draw_episodes
 from search.solvers.follow import Follow
 from search.solvers.problem import Follows, require
 from search.solvers.rollout import Tracker
@@ -19,6 +21,29 @@ from search.solvers.solver import Comparison, OwnSummaries
 # A moment's summary: (its episodes, the episode, the steps it plays, whom the agents follow, the steps shown, what
 # its solver entry adds).
 Summarize = Callable[[Episodes, int, int, Follow | None, tuple[int, int] | None, dict], dict]
+
+
+@dataclass(frozen=True)
+class EpisodeSummary:
+    """A moment's summary (`Summarize`) with the solver entry every summary carries: a value, so that a worker
+    process that scores a fork by its summary builds it as this one would."""
+
+    entry: dict
+
+    def __call__(
+        self, group: Episodes, episode: int, end: int, follow: Follow | None, window: tuple[int, int] | None, note: dict
+    ) -> dict:
+        actions = group.env[episode - group.first, :end]
+        return group.coupled.summarize(actions, self.entry | note, follow=follow, window=window, horizon=end)
+
+
+def spread_source(comparison: Comparison, groups: list[Episodes]) -> Source | None:
+    """What worker processes rebuild the groups of episodes from, where they play over them
+    (`search.solvers.episodes.in_turn`): in a world without a batched fast path, with more than one group and more
+    than one worker; else None, and they play in this process."""
+    if comparison.domain.batched or workers() <= 1 or len(groups) < 2:
+        return None
+    return Source(comparison.domain.name, tuple(comparison.agents), comparison.reward_settings)
 
 
 class Watching(OwnSummaries):
@@ -41,14 +66,7 @@ class Watching(OwnSummaries):
             lambda s: domain.coupled(agents, s, comparison.reward_settings), states, config.episodes, rng
         )
         require(groups[0].coupled.problem, self.needs, self.name)
-
-        def summary(
-            group: Episodes, episode: int, end: int, follow: Follow | None, window: tuple[int, int] | None, note: dict
-        ) -> dict:
-            actions = group.env[episode - group.first, :end]
-            return group.coupled.summarize(actions, comparison.entry | note, follow=follow, window=window, horizon=end)
-
-        summaries, record = self.watch(groups, tracker, config, summary, comparison)
+        summaries, record = self.watch(groups, tracker, config, EpisodeSummary(comparison.entry), comparison)
         for chosen in summaries:
             chosen["solver"]["budget_used"] = tracker.steps
         return summaries, record
