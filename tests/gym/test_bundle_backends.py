@@ -36,7 +36,7 @@ def track(tmp_path_factory):
     before = os.getcwd()
     os.chdir(folder)
     try:
-        log: list[str] = []
+        log = []
         build_bundle("study.toml", "one", log=log.append, workers=1)
         yield folder, bundle_files(folder / "one"), log
     finally:
@@ -51,7 +51,7 @@ def in_track(track, monkeypatch):
 
 def test_two_worker_processes_build_the_bundle_one_process_builds(in_track):
     folder, one, log = in_track
-    two: list[str] = []
+    two = []
     build_bundle("study.toml", "two", log=two.append, workers=2)
     assert bundle_files(folder / "two") == one
     finished = [line for line in two if line.startswith("search ")]
