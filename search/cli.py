@@ -292,13 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="evaluations, searches, checks and clips to run at once, each in its own process or Ray task "
         "(default: one per core); the bundle is the same whatever the number",
     )
-    bundle.add_argument(
-        "--backend",
-        choices=("process", "ray"),
-        default="process",
-        help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]'; docs/search.md)",
-    )
-    bundle.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray instance)")
+    _backend_arguments(bundle)
     bundle.add_argument(
         "--plan",
         action="store_true",
@@ -340,13 +334,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     search_all.add_argument("--joint", action="store_true", help="search all agents together, not pair by pair")
     search_all.add_argument("--jobs", type=int, help="parallel searches (default: one per core)")
-    search_all.add_argument(
-        "--backend",
-        choices=("process", "ray"),
-        default="process",
-        help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]')",
-    )
-    search_all.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray instance)")
+    _backend_arguments(search_all)
     search_all.set_defaults(handler=_search_all)
 
     verify = sub.add_parser("verify", help="re-simulate summaries; exit status 1 if any number differs")
@@ -384,6 +372,16 @@ def _search_arguments(parser: argparse.ArgumentParser) -> None:
         help="world setting over the scenario's, e.g. env_action_mode=preferred",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _backend_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--backend",
+        choices=("process", "ray"),
+        default="process",
+        help="process: this machine (default); ray: a Ray cluster (pip install 'foil[ray]'; docs/search.md)",
+    )
+    parser.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray instance)")
 
 
 def _jobs_argument(parser: argparse.ArgumentParser, work: str) -> None:
