@@ -2,8 +2,8 @@
 # Both create .venv and install everything: the survey server (the base install), the offline side (the `search`
 # extra), the report's figures, highway driving and the test tools. PyTorch is pinned first so that a machine with
 # a local CPU wheel (or a GPU machine, which gets the regular build) satisfies the `search` extra's `torch`
-# requirement without pulling a second build. The editable install puts the checkout on the path (setuptools'
-# compat mode): the checkout is the package, and setuptools has no warning about folders that shadow it to print.
+# requirement without pulling a second build. The editable install leaves out setuptools' notice that folders named
+# as a package could shadow it: here the checkout is the package.
 PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
@@ -36,7 +36,7 @@ $(VENV)/.installed: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
-	$(BIN)/python -m pip install --quiet -e ".[search,figures,highway,dev]" --config-settings editable_mode=compat
+	PYTHONWARNINGS="ignore:Editable installation" $(BIN)/python -m pip install --quiet -e ".[search,figures,highway,dev]"
 	touch $@
 
 $(AXE):
