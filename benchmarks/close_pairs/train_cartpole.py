@@ -1,6 +1,6 @@
 """One small Stable-Baselines3 PPO run on CartPole-v1 whose snapshots the close-pairs benchmark compares.
 
-    python benchmarks/close_pairs/train_cartpole.py --out /tmp/cartpole-run [--steps 60000] [--every 2048]
+    python benchmarks/close_pairs/train_cartpole.py --out runs/close-pairs/cartpole [--steps 60000] [--every 2048]
 
 A fixed seed, one environment, one torch thread: the same snapshots (``OUT/ppo_STEPS_steps.zip``) on every run
 on the same machine and libraries.
