@@ -13,8 +13,9 @@ Python world: highway-env behind an adapter of its own (`PlainHighway`, which th
 highway world, so nothing runs on the kernel: a researcher's world), with `foil eval` and the representative solver
 at ``--jobs 1`` and at one per core; the results must be byte-identical.
 
-MCTS: what spreading its batch rows over workers would cost per step, against the step itself: a row's snapshot
-pickled there and its result pickled back.
+MCTS: a search with its batch rows in one process and over every core (search.gym.rows), in highway-env behind
+`PlainHighway` (a slow world) and in CartPole with gusts (a fast one, where the rows' trips to the workers cost more
+than their steps); the summaries must be byte-identical.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import pickle
 import sys
 import tempfile
 import time
@@ -146,30 +146,34 @@ def python_world_table(agent: str, episodes: int, budget: int, states: int, push
     )
 
 
-def mcts_table(agent: str, seconds: float) -> None:
-    """One row's step against the pickling a worker would need for it (the snapshot there, the result back)."""
-    adapter = PlainHighway()
-    policy = load_agent(agent, adapter)
-    env = adapter.make()
-    observation, _ = env.reset(seed=11)
-    steps, started = 0, time.perf_counter()
-    while time.perf_counter() - started < seconds:
-        observation, _, terminated, truncated, _ = env.step(policy.act(observation[None])[0])
-        steps += 1
-        if terminated or truncated:
-            observation, _ = env.reset(seed=11 + steps)
-    step = (time.perf_counter() - started) / steps
-    copies, started = 0, time.perf_counter()
-    while time.perf_counter() - started < seconds:
-        pickle.loads(pickle.dumps(adapter.snapshot_env(env)))
-        copies += 1
-    copy = (time.perf_counter() - started) / copies
-    size = len(pickle.dumps(adapter.snapshot_env(env)))
-    print(f"\nMCTS rows over workers, highway-env behind `PlainHighway`, load average {os.getloadavg()[0]:.1f}:\n")
-    print("| per row and step | ms |")
-    print("|---|---:|")
-    print(f"| step (agent and environment) | {1000 * step:.2f} |")
-    print(f"| snapshot pickled to a worker and back ({size / 1024:.0f} KiB) | {1000 * 2 * copy:.2f} |")
+def mcts_table(world: str, agents: tuple[str, str], scenario: str, budget: int) -> None:
+    """An MCTS search with its batch rows in one process, over every core where they move when it pays (the
+    default), and moved at once however quick the world (search.gym.rows): wall time, world steps/s, the
+    speed-up, and whether the summaries are byte-identical."""
+    from search.gym import rows as spread
+    from search.solvers.mcts import MCTSConfig
+    from search.solvers.runner import SearchJob, run_search
+
+    job = SearchJob(agents=agents, scenario=scenario, solver="mcts", budget=budget, seed=0, top_k=3)
+    runs, found = [], []
+    rule = spread.SPREAD_AFTER_S, spread.SPREAD_STEP_S
+    for count, how, (after, step) in ((1, "", rule), (cores(), "when it pays", rule), (cores(), "at once", (0, 0))):
+        spread.SPREAD_AFTER_S, spread.SPREAD_STEP_S = after, step
+        with jobs(count):
+            files = run_search(job)
+        run = json.loads(files["run.json"])
+        found.append([files[name] for name in sorted(files) if name.startswith("summary-")])
+        runs.append((f"{count} {how}".strip(), run["search_wall_s"], run["sim_steps"]))
+    spread.SPREAD_AFTER_S, spread.SPREAD_STEP_S = rule
+    print(
+        f"\nMCTS in {world} (budget {budget}, {MCTSConfig().batch} rows in flight), its rows in one process and "
+        f"over {cores()}; load average {os.getloadavg()[0]:.1f}:\n"
+    )
+    print("| processes (rows moved) | wall s | world steps/s | speed-up |")
+    print("|---|---:|---:|---:|")
+    for name, seconds, steps in runs:
+        print(f"| {name} | {seconds:.1f} | {steps / seconds:,.0f} | {runs[0][1] / seconds:.2f}x |")
+    print(f"\nbyte-identical summaries in every run: {all(f == found[0] for f in found)}")
 
 
 def main() -> None:
@@ -181,6 +185,7 @@ def main() -> None:
     parser.add_argument("--budget", type=int, default=8000, help="representative search budget (default 8000)")
     parser.add_argument("--states", type=int, default=8)
     parser.add_argument("--pushes", type=int, default=7)
+    parser.add_argument("--mcts-budget", type=int, default=2000, help="MCTS budget in highway-env (CartPole: 20x)")
     args = parser.parse_args()
     os.chdir(ROOT / "benchmarks")  # the adapter's module imports from the working directory, as a researcher's does
     print(f"{time.strftime('%Y-%m-%d')}, {cores()} cores, load average {os.getloadavg()[0]:.1f}")
@@ -191,7 +196,13 @@ def main() -> None:
             str(ROOT / "search/highway/agents/hi.zip"), args.episodes, args.budget, args.states, args.pushes
         )
     if args.only in (None, "mcts"):
-        mcts_table(args.agent, 5.0)
+        folder = Path(tempfile.mkdtemp())
+        (folder / "plain.toml").write_text('adapter = "bench_parallel:PlainHighway"\nseed = 11\n')
+        highway = tuple(str(ROOT / f"search/highway/agents/{name}.zip") for name in ("hi", "lo"))
+        mcts_table("highway-env behind `PlainHighway`", highway, str(folder / "plain.toml"), args.mcts_budget)
+        os.chdir(ROOT / "docs/examples/cartpole")
+        cartpole = ("cartpole_push:nudge", "cartpole_push:steady")
+        mcts_table("CartPole with gusts (docs/examples/cartpole)", cartpole, "cartpole.toml", 20 * args.mcts_budget)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,10 @@ them (a world caches its agents per process), and a worker does its share itself
 
 How many: ``--jobs`` where a command takes it (`jobs`), else one per core. The worker processes stay up for the
 rest of the command, so a search that spreads each batch of states pays for starting them once.
+
+Work whose state stays put between calls (a coupled problem's rows, which MCTS steps together for its whole
+search) goes to `Keepers` instead: workers that keep what their calls leave them, so each call sends only what
+changed.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import atexit
 import itertools
 import multiprocessing
 import os
+import pickle
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -100,3 +105,90 @@ def _pool(count: int) -> ProcessPoolExecutor:
     pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("spawn"), initializer=one_core)
     atexit.register(pool.shutdown, cancel_futures=True)
     return pool
+
+
+class Keepers:
+    """Worker processes that keep what their calls leave them, for work whose state stays put between calls: a
+    coupled problem's rows stay in the worker that holds them, and each step sends only the step's actions. Each
+    worker holds a dict that the functions it runs read and change (under a key of their own); its calls run on
+    all chosen workers at once. Started once per command, like the pool."""
+
+    def __init__(self, count: int):
+        context = multiprocessing.get_context("spawn")
+        self.connections: list[Any] = []
+        self.forgotten: list[list[Any]] = [[] for _ in range(count)]  # keys to drop with each worker's next call
+        for _ in range(count):
+            mine, theirs = context.Pipe()
+            context.Process(target=_keep, args=(theirs,), daemon=True).start()
+            theirs.close()
+            self.connections.append(mine)
+
+    @property
+    def count(self) -> int:
+        return len(self.connections)
+
+    def call(self, calls: dict[int, tuple[Callable[..., Any], tuple[Any, ...]]]) -> dict[int, Any]:
+        """``function(kept, *arguments)`` on each chosen worker, all at once; the results by worker. A worker's
+        error is raised here once every worker has answered, so the workers stay in step."""
+        place = (os.getcwd(), list(sys.path))
+        for worker, (function, arguments) in calls.items():
+            forgotten, self.forgotten[worker] = self.forgotten[worker], []
+            # the call as bytes, read once the worker imports as this process does (its classes may need that)
+            self.connections[worker].send((place, forgotten, pickle.dumps((function, arguments))))
+        results, failure = {}, None
+        for worker in calls:
+            try:
+                ok, value = self.connections[worker].recv()
+            except (EOFError, OSError):
+                keepers.cache_clear()  # a worker died: the next command's problem starts new ones
+                raise RuntimeError("a worker process holding a problem's rows died (killed, out of memory?)") from None
+            if ok:
+                results[worker] = value
+            else:
+                failure = failure or value
+        if failure is not None:
+            raise failure
+        return results
+
+    def forget(self, key: Any) -> None:
+        """Drop what every worker keeps under ``key``, with its next call (safe from a finaliser: sends nothing)."""
+        for forgotten in self.forgotten:
+            forgotten.append(key)
+
+
+def _keep(connection: Any) -> None:
+    """A keeper's loop: run each call on the worker's dict and send its result, or its error, back."""
+    one_core()
+    kept: dict[Any, Any] = {}
+    while True:
+        try:
+            (cwd, path), forgotten, call = connection.recv()
+        except EOFError:  # the command ended
+            return
+        if os.getcwd() != cwd:
+            os.chdir(cwd)
+        sys.path[:] = path
+        for key in forgotten:
+            kept.pop(key, None)
+        try:
+            function, arguments = pickle.loads(call)
+            connection.send((True, function(kept, *arguments)))
+        except Exception as error:  # noqa: BLE001 - the caller raises it
+            connection.send((False, _sendable(error)))
+
+
+def _sendable(error: Exception) -> Exception:
+    """The error itself where it pickles, else one that says what it was, with the worker's traceback."""
+    import traceback
+
+    try:
+        pickle.loads(pickle.dumps(error))
+        return error
+    except Exception:  # noqa: BLE001 - any failure to pickle
+        return RuntimeError("".join(traceback.format_exception(error)))
+
+
+@cache
+def keepers(count: int) -> Keepers:
+    """The command's keepers: ``count`` worker processes, started on first use."""
+    return Keepers(count)

@@ -141,8 +141,11 @@ class GymDomain(Domain):
         return shown(coupled, row, steps, since)
 
     def problem(self, agents: list[GymAgent], state: GymScenario, reward, adapter: Adapter) -> GymCoupledProblem:
-        """The coupled problem a search steps (its summaries replay in the environment itself)."""
-        return GymCoupledProblem(agents, state, reward, adapter)
+        """The coupled problem a search steps, its rows over the command's worker processes (its summaries replay
+        in the environment itself, in this process)."""
+        from search.core.workers import workers
+
+        return GymCoupledProblem(agents, state, reward, adapter, workers=workers())
 
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         from search.gym.summary import rebuild

@@ -21,14 +21,18 @@ Pairs are combined by their mean or minimum, as in the crowd world.
 
 from __future__ import annotations
 
+import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from search.core.outcomes import OUTCOME_NAMES, RUNNING
 from search.gym.adapter import Adapter, ending, load_adapter
 from search.gym.agents import GymAgent
+from search.gym.rows import Spread, advance, pays
 from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 
@@ -157,6 +161,7 @@ class GymCoupledProblem:
         reward: RewardConfig | None = None,
         adapter: Adapter | None = None,
         render: bool = False,
+        workers: int = 1,
     ):
         if len(agents) < 2:
             raise ValueError("a comparison needs at least two agents")
@@ -178,7 +183,10 @@ class GymCoupledProblem:
         self.divergence = Divergence(env.action_space, self.reward_config)
         saved = self.adapter.snapshot_env(env)
         self._initial = [Instance(saved, np.asarray(observation)) for _ in agents]  # every agent from one state
-        self.rows: list[list[Instance]] = []
+        self.rows: list[list[Instance]] = []  # each instance's environment is here, or in a worker (``spread``)
+        self.workers = workers  # processes the rows' environments step in (search.gym.rows)
+        self.spread: Spread | None = None
+        self.stepped_here = 0.0, 0  # seconds the environments took to step in this process, and their steps
         self.t = np.zeros(0, dtype=np.int64)
         self.last_agent_actions: list[list[np.ndarray]] = []  # the last step's, per row and agent (for replays)
         self.last_events = np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)  # the last step's (goal, end)
@@ -192,62 +200,87 @@ class GymCoupledProblem:
     def batch(self) -> int:
         return len(self.rows)
 
-    def _save(self, row: list[Instance]) -> list[Instance]:
-        """A row as saved instances (``env`` holds the adapter's snapshot of the environment)."""
-        return [
-            Instance(
-                self.adapter.snapshot_env(i.env), i.observation, i.outcome, i.event_step, i.path_length, [*i.measured]
-            )
-            for i in row
-        ]
-
-    def _load(self, row: list[Instance]) -> list[Instance]:
-        """Live instances from a saved row, which stays usable."""
-        return [
-            Instance(
-                self.adapter.restore_env(i.env), i.observation, i.outcome, i.event_step, i.path_length, [*i.measured]
-            )
-            for i in row
-        ]
-
     def reset(self, batch: int) -> None:
-        self.rows = [self._load(self._initial) for _ in range(batch)]
-        self.t = np.zeros(batch, dtype=np.int64)
+        self._set_rows([self._initial] * batch, np.zeros(batch, dtype=np.int64))
+
+    def _spread_if_it_pays(self) -> None:
+        """Move the rows' environments to worker processes once their steps here show that it pays
+        (`search.gym.rows.pays`), where the adapter and its snapshots pickle (else, with a one-line notice, they
+        stay here)."""
+        if self.spread is not None or self.workers <= 1 or not pays(*self.stepped_here):
+            return
+        refusal = Spread.refusal(self.adapter, self._initial[0].env)
+        if refusal is not None:
+            self.workers = 1
+            print(
+                f"note: {type(self.adapter).__name__}'s rows step in one process: its adapter or its snapshots do "
+                f"not pickle ({refusal})",
+                file=sys.stderr,
+            )
+            return
+        saved = self.snapshot()
+        self.spread = Spread(self.adapter, self.workers)
+        self._set_rows(saved.rows, saved.steps)
+
+    def _set_rows(self, saved: list[list[Instance]], steps: np.ndarray, index: list[int] | None = None) -> None:
+        """Rows from saved ones: all the rows (``index`` None) or rows ``index`` in place."""
+        spread = self.spread
+        if spread is None:
+            rows = [[_copy(i, self.adapter.restore_env(i.env)) for i in row] for row in saved]
+        else:
+            places = list(range(len(saved))) if index is None else index
+            spread.place(places, [[i.env for i in row] for row in saved], only=index is None)
+            rows = [[_copy(i, None) for i in row] for row in saved]
+        if index is None:
+            self.rows, self.t = rows, steps.copy()
+            return
+        for i, row, t in zip(index, rows, steps, strict=True):
+            self.rows[i], self.t[i] = row, t
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         actions = np.asarray(actions, dtype=np.float64)
         batch, n = self.batch, len(self.agents)
         agent_actions = self._chosen()
+        running = np.array([[i.outcome == RUNNING for i in row] for row in self.rows], dtype=bool).reshape(batch, n)
+        env_actions = np.clip(actions, -1.0, 1.0)
+        self._spread_if_it_pays()
+        if self.spread is None:
+            started = time.perf_counter()
+            stepped = [
+                [
+                    advance(self.adapter, self.ending, i.env, env_actions[b], agent_actions[k][b], running[b, k])
+                    for k, i in enumerate(row)
+                ]
+                for b, row in enumerate(self.rows)
+            ]
+            seconds, steps = self.stepped_here
+            self.stepped_here = seconds + time.perf_counter() - started, steps + int(running.sum())
+        else:
+            stepped = self.spread.step(env_actions, agent_actions, running)
         self.agent_rewards = np.zeros((batch, n))
         newly_done = np.zeros((batch, n), dtype=bool)
         outcome = np.zeros((batch, n), dtype=np.int64)
         scaled, positions = [], []
         self.t = self.t + 1
         for b, row in enumerate(self.rows):
-            row_scaled, row_positions = [], []
+            row_scaled = []
             for k, instance in enumerate(row):
-                if instance.outcome == RUNNING:
-                    # copies: an environment may move its position array in place
-                    before = np.array(self.adapter.position(instance.env), dtype=np.float64)
-                    self.adapter.apply(instance.env, np.clip(actions[b], -1.0, 1.0))
-                    observation, reward, terminated, truncated, info = instance.env.step(agent_actions[k][b])
-                    self.agent_rewards[b, k] = float(reward)
-                    instance.observation = np.asarray(observation)
-                    after = np.array(self.adapter.position(instance.env), dtype=np.float64)
-                    instance.path_length += float(np.linalg.norm(after - before))
-                    if terminated or truncated:
-                        event = self.ending(bool(terminated), bool(truncated), info, float(reward), instance.env)
-                        instance.outcome, instance.event_step = OUTCOME_NAMES.index(event), int(self.t[b])
+                found = stepped[b][k]
+                if running[b, k]:
+                    self.agent_rewards[b, k] = found.reward
+                    instance.observation = found.observation
+                    instance.path_length += found.moved
+                    if found.event is not None:
+                        instance.outcome, instance.event_step = OUTCOME_NAMES.index(found.event), int(self.t[b])
                         newly_done[b, k] = True
                     row_scaled.append(self.divergence.scaled(agent_actions[k][b]))
                 else:
                     row_scaled.append(self.divergence.finished())
-                row_positions.append(np.array(self.adapter.position(instance.env), dtype=np.float64))
-                if self.adapter.score is not None:  # a finished instance stands still: its score is read as shown
-                    instance.measured.append(float(self.adapter.measure(instance.env)))
+                if found.measured is not None:  # a finished instance stands still: its score is read as shown
+                    instance.measured.append(found.measured)
                 outcome[b, k] = instance.outcome
             scaled.append(row_scaled)
-            positions.append(row_positions)
+            positions.append([found.position for found in stepped[b]])
         return self._score(actions, agent_actions, newly_done, outcome, scaled, positions)
 
     def _score(self, actions, agent_actions, newly_done, outcome, scaled, positions) -> tuple[np.ndarray, np.ndarray]:
@@ -327,18 +360,29 @@ class GymCoupledProblem:
         return self.agents[agent].action_values(self.observations(agent))
 
     def snapshot(self, index=None) -> GymSnapshot:
-        rows = self.rows if index is None else [self.rows[i] for i in np.asarray(index).reshape(-1)]
-        steps = self.t.copy() if index is None else self.t[np.asarray(index).reshape(-1)]
-        return GymSnapshot([self._save(row) for row in rows], steps)
+        chosen = list(range(self.batch)) if index is None else np.asarray(index).reshape(-1).tolist()
+        if self.spread is None:
+            envs = [[self.adapter.snapshot_env(i.env) for i in self.rows[b]] for b in chosen]
+        else:
+            envs = self.spread.save(chosen)
+        rows = [
+            [_copy(i, env) for i, env in zip(self.rows[b], saved, strict=True)]
+            for b, saved in zip(chosen, envs, strict=True)
+        ]
+        return GymSnapshot(rows, self.t[chosen])
 
     def restore(self, snapshot: GymSnapshot) -> None:
-        self.rows = [self._load(row) for row in snapshot.rows]
-        self.t = snapshot.steps.copy()
+        self._set_rows(snapshot.rows, snapshot.steps)
 
     def assign(self, index, snapshot: GymSnapshot) -> None:
-        for i, row, t in zip(np.asarray(index).reshape(-1), snapshot.rows, snapshot.steps, strict=True):
-            self.rows[i] = self._load(row)
-            self.t[i] = t
+        self._set_rows(snapshot.rows, snapshot.steps, np.asarray(index).reshape(-1).tolist())
 
     def concat(self, snapshots: list[GymSnapshot]) -> GymSnapshot:
         return GymSnapshot([row for s in snapshots for row in s.rows], np.concatenate([s.steps for s in snapshots]))
+
+
+def _copy(instance: Instance, env: Any) -> Instance:
+    """The instance with ``env`` in place of its environment, and lists of its own."""
+    return Instance(
+        env, instance.observation, instance.outcome, instance.event_step, instance.path_length, [*instance.measured]
+    )

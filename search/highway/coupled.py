@@ -169,15 +169,16 @@ class KernelCoupledProblem(GymCoupledProblem):
 
 
 def coupled_problem(
-    agents: list[GymAgent], scenario: GymScenario, reward: RewardConfig | None = None, adapter=None
+    agents: list[GymAgent], scenario: GymScenario, reward: RewardConfig | None = None, adapter=None, workers: int = 1
 ) -> GymCoupledProblem:
     """The coupled problem for a scenario: on the kernel for highway scenarios it covers, otherwise
-    GymCoupledProblem over the environment itself (for a highway scenario, with a one-line notice)."""
+    GymCoupledProblem over the environment itself, its rows over ``workers`` processes (for a highway scenario,
+    with a one-line notice)."""
     adapter = adapter or scenario.load_adapter()
     if not isinstance(adapter, HighwayAdapter):
-        return GymCoupledProblem(agents, scenario, reward, adapter)
+        return GymCoupledProblem(agents, scenario, reward, adapter, workers=workers)
     spec = adapter_spec(adapter)
     if isinstance(spec, str):
         notice(spec)
-        return GymCoupledProblem(agents, scenario, reward, adapter)
+        return GymCoupledProblem(agents, scenario, reward, adapter, workers=workers)
     return KernelCoupledProblem(agents, scenario, reward, adapter)

@@ -81,9 +81,10 @@ class HighwayDomain(GymDomain, Trainer):
 
     def problem(self, agents, state, reward, adapter):
         """On the batched kernel where it covers the scenario (else highway-env, with a one-line notice)."""
+        from search.core.workers import workers
         from search.highway.coupled import coupled_problem
 
-        return coupled_problem(agents, state, reward, adapter)
+        return coupled_problem(agents, state, reward, adapter, workers())
 
     def eval_scenario(self, scenarios):
         """None: the shipped agents are judged in their training traffic, as their model cards report."""
