@@ -146,7 +146,7 @@ def python_world_table(agent: str, episodes: int, budget: int, states: int, push
     )
 
 
-def mcts_table(world: str, agents: tuple[str, str], scenario: str, budget: int) -> None:
+def mcts_table(world: str, agents: tuple[str, ...], scenario: str, budget: int) -> None:
     """An MCTS search with its batch rows in one process, over every core where they move when it pays (the
     default), and moved at once however quick the world (search.gym.rows): wall time, world steps/s, the
     speed-up, and whether the summaries are byte-identical."""

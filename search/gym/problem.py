@@ -266,7 +266,7 @@ class GymCoupledProblem:
             row_scaled = []
             for k, instance in enumerate(row):
                 found = stepped[b][k]
-                if running[b, k]:
+                if found.observation is not None:  # it was running: it stepped
                     self.agent_rewards[b, k] = found.reward
                     instance.observation = found.observation
                     instance.path_length += found.moved
