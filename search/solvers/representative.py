@@ -30,14 +30,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from app.visible import Observer, VisibleClip, World
+from search.core.workers import in_order, workers
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, OwnSummaries, register
+
+if TYPE_CHECKING:
+    from search.solvers.domain import Domain
 
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
@@ -152,17 +156,24 @@ def candidates(rollouts: Rollouts, result: Vote) -> list[int]:
 
 
 def choose(
-    order: list[int], direction: int, replayed_contrast: Callable[[int], tuple[float, object]], top_k: int
+    order: list[int],
+    direction: int,
+    replayed: Callable[[list[int]], list[tuple[float, object]]],
+    top_k: int,
+    ahead: int = 1,
 ) -> list[tuple[int, object]]:
     """The first ``top_k`` candidates whose exact replay is a non-tie in ``direction`` (any direction when it is
-    0), as (rollout, replay). ``replayed_contrast(i)`` gives the replay's contrast and the replay itself."""
-    kept = []
-    for i in order:
-        contrast, replay = replayed_contrast(i)
-        if contrast != 0 and (direction == 0 or np.sign(contrast) == direction):
-            kept.append((i, replay))
-            if len(kept) == top_k:
-                break
+    0), as (rollout, replay). ``replayed(candidates)`` gives each one's replay contrast and the replay itself;
+    it is asked for ``ahead`` candidates at a time (over worker processes), in order, so the choice is the one a
+    replay at a time makes."""
+    kept: list[tuple[int, object]] = []
+    for start in range(0, len(order), ahead):
+        chunk = order[start : start + ahead]
+        for i, (contrast, replay) in zip(chunk, replayed(chunk), strict=True):
+            if contrast != 0 and (direction == 0 or np.sign(contrast) == direction):
+                kept.append((i, replay))
+                if len(kept) == top_k:
+                    return kept
     return kept
 
 
@@ -289,16 +300,17 @@ def representative(
     tracker: Tracker,
     rng: np.random.Generator,
     config: RepresentativeConfig,
-    replay: Callable[[object, np.ndarray], tuple[float, object]],
+    replay: Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Any]]],
     horizon: int,
+    ahead: int = 1,
 ) -> tuple[list, dict]:
     """Roll out the drawn ``scenarios`` a batch of states at a time until the vote is decided or the budget fits no
     further state (each rollout takes at most ``horizon`` steps), vote, and choose the top-K clips. The vote is
     looked at after each full batch of the states the budget surely fits, the last look where it stops, each at
     ``alpha / looks`` (`strength`): the looks are planned before any state is drawn, so the test holds however
-    the states vote. ``replay(scenario, actions)`` gives an exact replay's contrast and
-    the replay (a summary), not counted against the budget, as no solver counts its summaries' replays. Returns
-    the chosen replays in order and the record of the vote for run.json."""
+    the states vote. ``replay([(scenario, actions), ...])`` gives each exact replay's contrast and the replay (a
+    summary), ``ahead`` at a time, not counted against the budget, as no solver counts its summaries' replays.
+    Returns the chosen replays in order and the record of the vote for run.json."""
     state_cost = (config.pushes + 1) * horizon
     if state_cost > tracker.budget:
         raise ValueError(
@@ -315,9 +327,11 @@ def representative(
     rollouts, done_states, stopped = roll_out_states(roll_out, scenarios, config, rng, tracker, state_cost, decided)
     result = vote(rollouts, done_states)
     order, how = candidates(rollouts, result), "voted direction"
-    chosen = choose(
-        order, result.direction, lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]), tracker.queue.k
-    )
+
+    def replayed(chosen: list[int]) -> list[tuple[float, object]]:
+        return replay([(scenarios[rollouts.state[i]], rollouts.actions[i]) for i in chosen])
+
+    chosen = choose(order, result.direction, replayed, tracker.queue.k, ahead)
     if not chosen:  # a tied vote, or no candidate of the vote survived its replay: the largest contrast
         how = (
             "largest contrast (tied vote)"
@@ -325,12 +339,10 @@ def representative(
             else "largest contrast (no candidate of the vote survived its replay)"
         )
         everything = candidates(rollouts, Vote(result.state_votes, 0))
-        chosen = choose(
-            everything, 0, lambda i: replay(scenarios[rollouts.state[i]], rollouts.actions[i]), tracker.queue.k
-        )
+        chosen = choose(everything, 0, replayed, tracker.queue.k, ahead)
     if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
         how = "no visible contrast anywhere: the first state without pushes"
-        chosen = [(0, replay(scenarios[0], rollouts.actions[0])[1])]
+        chosen = [(0, replayed([0])[0][1])]
     record = result.record(rollouts, config.alpha, looks) | {
         "stopped": stopped,
         "drawn": len(scenarios),
@@ -422,13 +434,17 @@ class Representative(OwnSummaries):
         def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
             return domain.roll_out(agents, states, reward_settings, pushes, rng, tracker)
 
-        def replay(scenario, actions) -> tuple[float, dict]:
-            coupled = domain.coupled(agents, scenario, reward_settings)
-            summary = coupled.summarize(actions, comparison.entry)
-            return summary_contrast(summary, coupled.world), summary
+        # a world without a batched fast path replays a candidate per worker at a time (search.core.workers)
+        ahead = 1 if domain.batched else workers()
+
+        def replay(candidates: list[tuple[object, np.ndarray]]) -> list[tuple[float, dict]]:
+            tasks = [(agents, scenario, reward_settings, actions, comparison.entry) for scenario, actions in candidates]
+            if ahead == 1:
+                return [replay_in(domain, *task) for task in tasks]
+            return in_order(replay_candidate, [(domain.name, *task) for task in tasks], ahead)
 
         horizon = RewardConfig.from_dict(reward_settings).horizon
-        summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon)
+        summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon, ahead)
         warning = weak_vote(vote, agents)
         if warning:
             vote["warning"] = warning
@@ -443,6 +459,22 @@ class Representative(OwnSummaries):
                 "vote": strength,
             }
         return summaries, vote
+
+
+def replay_in(
+    domain: Domain, agents: Sequence[str], scenario: object, reward: dict, actions: np.ndarray, entry: dict
+) -> tuple[float, dict]:
+    """A candidate's exact replay, as its summary, and that clip's visible contrast."""
+    coupled = domain.coupled(agents, scenario, reward)
+    summary = coupled.summarize(actions, entry)
+    return summary_contrast(summary, coupled.world), summary
+
+
+def replay_candidate(world: str, *task: Any) -> tuple[float, dict]:
+    """`replay_in` as a worker's task: the world by its name."""
+    from search.solvers.domain import domain_named
+
+    return replay_in(domain_named(world), *task)
 
 
 register(Representative())

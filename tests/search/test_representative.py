@@ -39,10 +39,28 @@ def test_a_tied_vote_is_reported_and_falls_back_to_the_largest_contrast():
 
 def test_a_replay_that_turns_into_a_tie_or_the_other_way_is_passed_over():
     replays = {0: -3.0, 1: 0.0, 2: 1.5, 3: -0.5}  # the exact replay of rollout 1 shows no difference, 2 flips
-    chosen = choose([1, 2, 0, 3], -1, lambda i: (replays[i], f"summary {i}"), top_k=2)
-    assert chosen == [(0, "summary 0"), (3, "summary 3")]
-    assert choose([1, 2], -1, lambda i: (replays[i], i), top_k=1) == []  # no agreeing candidate survives
-    assert choose([1, 2], 0, lambda i: (replays[i], i), top_k=1) == [(2, 2)]  # a tied vote takes either way
+
+    def replayed(chosen):
+        return [(replays[i], f"summary {i}") for i in chosen]
+
+    assert choose([1, 2, 0, 3], -1, replayed, top_k=2) == [(0, "summary 0"), (3, "summary 3")]
+    assert choose([1, 2], -1, replayed, top_k=1) == []  # no agreeing candidate survives
+    assert choose([1, 2], 0, replayed, top_k=1) == [(2, "summary 2")]  # a tied vote takes either way
+
+
+@pytest.mark.parametrize("ahead", [2, 3, 8])
+def test_candidates_replayed_several_at_a_time_are_chosen_as_one_at_a_time(ahead):
+    replays = {0: -3.0, 1: 0.0, 2: 1.5, 3: -0.5, 4: -1.0, 5: -2.0}
+    asked = []
+
+    def replayed(chosen):
+        asked.append(list(chosen))
+        return [(replays[i], i) for i in chosen]
+
+    order = [1, 2, 0, 3, 4, 5]
+    assert choose(order, -1, replayed, 2, ahead) == [(0, 0), (3, 3)]
+    # in order, ``ahead`` at a time, until the chunk holding the second kept (the fourth candidate)
+    assert asked == [order[start : start + ahead] for start in range(0, 4, ahead)]
 
 
 def test_no_agreeing_candidate_leaves_an_empty_list_for_the_fallback():
