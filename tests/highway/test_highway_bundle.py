@@ -46,6 +46,9 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
 
     text = STUDY.read_text().replace("budget = 600", "budget = 40").replace("episodes = 100", "episodes = 3")
     text = text.replace("budget = 5_000", "budget = 200").replace("states = 64", "states = 2")
+    # one fixed scenario of the two: the other's clips are made the same way
+    text = text.replace('scenarios = ["highway-dense", "highway-four-lanes"]', 'scenarios = ["highway-dense"]')
+    text = text.replace('representative = ["highway-traffic", "highway-traffic"]', 'representative = ["highway-traffic"]')
     text = text.replace(
         "[build.eval]",
         "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\nevent_hold = 0.2\nwidth = 480\n\n[build.eval]",
@@ -55,7 +58,7 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
     log = []
     manifest = build_bundle(study, tmp_path / "bundle", log=log.append)
     out = tmp_path / "bundle"
-    assert len(manifest.clips) == 19 and set(manifest.agents) == {"highway-lo", "highway-med", "highway-hi"}
+    assert len(manifest.clips) == 13 and set(manifest.agents) == {"highway-lo", "highway-med", "highway-hi"}
     for clip in manifest.clips:
         assert (out / clip.file).is_file() and (out / clip.poster).is_file() and clip.audit is not None
         assert json.loads((out / clip.summary).read_text())["scenario"]["domain"] == "gym"
