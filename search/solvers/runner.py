@@ -12,6 +12,7 @@ import itertools
 import json
 import os
 import re
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -245,6 +246,23 @@ def _named(key, describe: Callable[[Any], str]):
 BACKENDS = ("process", "ray")
 RAY_ADDRESS = re.compile(r"auto|(ray://)?[A-Za-z0-9.\-\[\]:]+:[0-9]{1,5}")  # HOST:PORT, ray://HOST:PORT
 RAY_RETRIES = 2  # a task whose worker or node died is run again this many times; an exception is not (same seed)
+RAY_CONNECT_S = 10.0  # how long a cluster's head may take to accept a connection (Ray itself waits for minutes)
+
+
+def answers(address: str) -> None:
+    """Refuse a Ray address where nothing accepts a connection, at once: Ray retries such an address for minutes,
+    printing warnings. ``auto`` is Ray's own to find."""
+    if address == "auto":
+        return
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_S).close()
+    except OSError as error:
+        raise ValueError(
+            f"no Ray cluster answers at {address} ({error or 'timed out'}): start its head with `ray start --head` "
+            "on that machine (docs/search.md), check the host and port, or leave out --ray-address for a Ray "
+            "instance on this machine"
+        ) from None
 
 
 class Backend:
@@ -267,6 +285,8 @@ class Backend:
                 f"bad Ray address {address!r}: give HOST:PORT of the cluster's head (e.g. 10.0.0.5:6379), "
                 "ray://HOST:PORT of its client server, or auto"
             )
+        if address is not None:
+            answers(address)
         self.name, self.workers, self.address = name, workers, address
         self._pool = None
 

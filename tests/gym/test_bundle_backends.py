@@ -5,6 +5,7 @@ that fails is named, and bad backend settings are refused with what to give inst
 from __future__ import annotations
 
 import os
+import socket
 from pathlib import Path
 
 import pytest
@@ -113,6 +114,20 @@ def test_a_failed_job_is_named(workers):
 def test_bad_backend_settings_are_refused_before_any_work(in_track, capsys, arguments, message):
     assert main(["bundle", "study.toml", "--out", "refused", *arguments]) == 2
     assert message in capsys.readouterr().err
+    assert not (in_track[0] / "refused").exists()
+
+
+def test_a_ray_address_where_no_cluster_answers_is_refused_at_once(in_track, capsys):
+    """Ray itself retries such an address for minutes; the build says what is wrong before any work."""
+    with socket.socket() as closed:  # a port that was free a moment ago: nothing listens on it
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    assert (
+        main(["bundle", "study.toml", "--out", "refused", "--backend", "ray", "--ray-address", f"127.0.0.1:{port}"])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert f"no Ray cluster answers at 127.0.0.1:{port}" in err and "ray start --head" in err
     assert not (in_track[0] / "refused").exists()
 
 
