@@ -88,6 +88,20 @@ class Problems:
 
         return summary_contrast(dict(summary()), coupled.world)
 
+    def replays(
+        self, agents: Sequence[str], candidates: list[tuple[Any, np.ndarray]], reward: dict, entry: dict
+    ) -> list[tuple[float, dict]]:
+        """Exact replays of candidate trajectories ``(state, env_actions)`` as summaries (solver entry ``entry``),
+        each with its clip's visible contrast, in order: the representative solver's candidate clips. Over the
+        worker processes where the world has no batched fast path (``batched``)."""
+        from search.solvers.representative import replay_in
+
+        if self.batched:
+            return [replay_in(self, agents, state, reward, actions, entry) for state, actions in candidates]
+        from search.core.workers import in_order
+
+        return in_order(_replay_candidate, [(self.name, agents, s, reward, a, entry) for s, a in candidates])
+
     @abstractmethod
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         """The summary that the file's own inputs produce now (``foil verify`` compares it with the file)."""
@@ -261,3 +275,10 @@ def _roll_out_state(
     from search.solvers.representative import roll_out_rows
 
     return roll_out_rows(domain_named(domain).coupled(agents, state, reward), env, shown)
+
+
+def _replay_candidate(world: str, *task: Any) -> tuple[float, dict]:
+    """`Problems.replays`'s task in a worker: the world by its name."""
+    from search.solvers.representative import replay_in
+
+    return replay_in(domain_named(world), *task)

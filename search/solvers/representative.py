@@ -30,18 +30,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from app.visible import Observer, VisibleClip, World
-from search.core.workers import in_order, workers
+from search.core.workers import workers
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, OwnSummaries, register
-
-if TYPE_CHECKING:
-    from search.solvers.domain import Domain
 
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
@@ -434,14 +431,11 @@ class Representative(OwnSummaries):
         def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
             return domain.roll_out(agents, states, reward_settings, pushes, rng, tracker)
 
-        # a world without a batched fast path replays a candidate per worker at a time (search.core.workers)
+        # a world without a batched fast path replays a candidate per worker at a time (Domain.replays)
         ahead = 1 if domain.batched else workers()
 
         def replay(candidates: list[tuple[object, np.ndarray]]) -> list[tuple[float, dict]]:
-            tasks = [(agents, scenario, reward_settings, actions, comparison.entry) for scenario, actions in candidates]
-            if ahead == 1:
-                return [replay_in(domain, *task) for task in tasks]
-            return in_order(replay_candidate, [(domain.name, *task) for task in tasks], ahead)
+            return domain.replays(agents, candidates, reward_settings, comparison.entry)
 
         horizon = RewardConfig.from_dict(reward_settings).horizon
         summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon, ahead)
@@ -462,19 +456,13 @@ class Representative(OwnSummaries):
 
 
 def replay_in(
-    domain: Domain, agents: Sequence[str], scenario: object, reward: dict, actions: np.ndarray, entry: dict
+    domain: Any, agents: Sequence[str], scenario: object, reward: dict, actions: np.ndarray, entry: dict
 ) -> tuple[float, dict]:
-    """A candidate's exact replay, as its summary, and that clip's visible contrast."""
+    """A candidate's exact replay in ``domain`` (a `search.solvers.domain.Domain`), as its summary, and that clip's
+    visible contrast."""
     coupled = domain.coupled(agents, scenario, reward)
     summary = coupled.summarize(actions, entry)
     return summary_contrast(summary, coupled.world), summary
-
-
-def replay_candidate(world: str, *task: Any) -> tuple[float, dict]:
-    """`replay_in` as a worker's task: the world by its name."""
-    from search.solvers.domain import domain_named
-
-    return replay_in(domain_named(world), *task)
 
 
 register(Representative())

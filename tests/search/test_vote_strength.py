@@ -38,8 +38,8 @@ def roll_out(states: list[int], pushes: int, rng: np.random.Generator, tracker: 
     return Rollouts(np.array(state), actions, np.array(contrast))
 
 
-def replay(lean, actions) -> tuple[float, dict]:
-    return float(np.sign(lean)), {"lean": int(lean), "steps": len(actions)}
+def replay(candidates: list) -> list[tuple[float, dict]]:
+    return [(float(np.sign(lean)), {"lean": int(lean), "steps": len(actions)}) for lean, actions in candidates]
 
 
 def search(leans: list[int], budget: int = 10**6, seed: int = 0, **settings) -> tuple[list, dict, Tracker]:
