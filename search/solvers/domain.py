@@ -88,20 +88,6 @@ class Problems:
 
         return summary_contrast(dict(summary()), coupled.world)
 
-    def replays(
-        self, agents: Sequence[str], candidates: list[tuple[Any, np.ndarray]], reward: dict, entry: dict
-    ) -> list[tuple[float, dict]]:
-        """Exact replays of candidate trajectories ``(state, env_actions)`` as summaries (solver entry ``entry``),
-        each with its clip's visible contrast, in order: the representative solver's candidate clips. Over the
-        worker processes where the world has no batched fast path (``batched``)."""
-        from search.solvers.representative import replay_in
-
-        if self.batched:
-            return [replay_in(self, agents, state, reward, actions, entry) for state, actions in candidates]
-        from search.core.workers import in_order
-
-        return in_order(_replay_candidate, [(self.name, agents, s, reward, a, entry) for s, a in candidates])
-
     @abstractmethod
     def rebuild(self, summary: Mapping[str, Any]) -> Any:
         """The summary that the file's own inputs produce now (``foil verify`` compares it with the file)."""
@@ -116,6 +102,20 @@ class Domain(Scenarios, Agents, Problems, Clips):
     def shipped(self) -> Shipped:
         """The names this world ships. Default: none."""
         return Shipped()
+
+    def replays(
+        self, agents: Sequence[str], candidates: list[tuple[Any, np.ndarray]], reward: dict, entry: dict
+    ) -> list[tuple[float, dict]]:
+        """Exact replays of candidate trajectories ``(state, env_actions)`` as summaries (solver entry ``entry``),
+        each with its clip's visible contrast, in order: the representative solver's candidate clips. Over the
+        worker processes where the world has no batched fast path (``batched``)."""
+        from search.solvers.representative import replay_in
+
+        if self.batched:
+            return [replay_in(self, agents, state, reward, actions, entry) for state, actions in candidates]
+        from search.core.workers import in_order
+
+        return in_order(_replay_candidate, [(self.name, agents, s, reward, a, entry) for s, a in candidates])
 
 
 @cache
