@@ -65,12 +65,13 @@ demo-password:
 		echo "(kept in $(DEMO_BUNDLE).admin-password; set FOIL_ADMIN_PASSWORD to choose your own)"; \
 	fi
 
+# Two tests at a time (pytest-xdist): each worker has its own fixtures, throwaway PostgreSQL server and browser.
 test: lint install browser postgres r
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2
 
 # The fast loop while working: everything but the slow and the browser tests (they run in `make test`).
 check: lint install postgres
-	$(BIN)/python -m pytest -q -m "not slow and not browser"
+	$(BIN)/python -m pytest -q -n 2 -m "not slow and not browser"
 
 # Lint and types (pyproject.toml configures all three). mypy is strict on app/, search/core/ and search/crowd/sim/;
 # the rest of the tree may only lose the errors listed in mypy-baseline.txt: `mypy-baseline filter` fails on a new
