@@ -56,8 +56,9 @@ def advance(
 
 
 # When a problem's rows move to workers: once its environments have stepped here for about what starting the
-# workers costs, and only where an instance's step takes long enough for the trips to the workers to pay (each
-# row's trip costs about 40 us, a snapshot's about 1 ms: BENCHMARKS.md, "MCTS's rows over workers")
+# workers costs, and only where an instance's step takes long enough for the trips to the workers to pay (MCTS in
+# CartPole, whose steps take microseconds, ran at half its speed with its rows moved: BENCHMARKS.md, "MCTS's rows
+# over workers")
 SPREAD_AFTER_S = 2.0
 SPREAD_STEP_S = 0.5e-3
 
