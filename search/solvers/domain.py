@@ -103,16 +103,25 @@ class Domain(Scenarios, Agents, Problems, Clips):
         """The names this world ships. Default: none."""
         return Shipped()
 
+    def replay(
+        self, agents: Sequence[str], state: Any, reward: dict, actions: np.ndarray, entry: dict
+    ) -> tuple[float, dict]:
+        """A candidate trajectory's exact replay as a summary (solver entry ``entry``), and its clip's visible
+        contrast."""
+        from search.solvers.representative import summary_contrast
+
+        coupled = self.coupled(agents, state, reward)
+        summary = coupled.summarize(actions, entry)
+        return summary_contrast(summary, coupled.world), summary
+
     def replays(
         self, agents: Sequence[str], candidates: list[tuple[Any, np.ndarray]], reward: dict, entry: dict
     ) -> list[tuple[float, dict]]:
         """Exact replays of candidate trajectories ``(state, env_actions)`` as summaries (solver entry ``entry``),
         each with its clip's visible contrast, in order: the representative solver's candidate clips. Over the
         worker processes where the world has no batched fast path (``batched``)."""
-        from search.solvers.representative import replay_in
-
         if self.batched:
-            return [replay_in(self, agents, state, reward, actions, entry) for state, actions in candidates]
+            return [self.replay(agents, state, reward, actions, entry) for state, actions in candidates]
         from search.core.workers import in_order
 
         return in_order(_replay_candidate, [(self.name, agents, s, reward, a, entry) for s, a in candidates])
@@ -278,7 +287,5 @@ def _roll_out_state(
 
 
 def _replay_candidate(world: str, *task: Any) -> tuple[float, dict]:
-    """`Problems.replays`'s task in a worker: the world by its name."""
-    from search.solvers.representative import replay_in
-
-    return replay_in(domain_named(world), *task)
+    """`Domain.replays`'s task in a worker: the world by its name."""
+    return domain_named(world).replay(*task)

@@ -455,14 +455,4 @@ class Representative(OwnSummaries):
         return summaries, vote
 
 
-def replay_in(
-    domain: Any, agents: Sequence[str], scenario: object, reward: dict, actions: np.ndarray, entry: dict
-) -> tuple[float, dict]:
-    """A candidate's exact replay in ``domain`` (a `search.solvers.domain.Domain`), as its summary, and that clip's
-    visible contrast."""
-    coupled = domain.coupled(agents, scenario, reward)
-    summary = coupled.summarize(actions, entry)
-    return summary_contrast(summary, coupled.world), summary
-
-
 register(Representative())
