@@ -122,6 +122,7 @@ def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str
 def _search(args: argparse.Namespace) -> int:
     from search.core.workers import jobs
     from search.solvers.runner import SearchJob, run_search, write_outputs
+    from search.solvers.solver import solver_named
 
     agents = comma_separated(args.agents)
     job = SearchJob(
@@ -139,8 +140,7 @@ def _search(args: argparse.Namespace) -> int:
             f"warning: {out}: no trajectory ended within the budget of {job.budget} steps: raise --budget (or, for "
             "a solver with a batch setting, lower it)"
         )
-    warning = json.loads(files["run.json"]).get("vote", {}).get("warning")
-    if warning:
+    for warning in solver_named(job.solver).warnings(json.loads(files["run.json"])):
         print(f"warning: {out}: {warning}")
     return 0
 

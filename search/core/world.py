@@ -8,17 +8,22 @@ it ships, a file's ``world = "<name>"`` key and these claims, never by the order
 
 from __future__ import annotations
 
+import inspect
 import re
+import tomllib
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
+from app.formats import sha256_file
 from app.visible import World
+from search.core.evaluation import Episode, describe
+from search.core.settings import check_keys
 
 
 class Claim(Enum):
@@ -50,19 +55,43 @@ class Scenarios(ABC):
 
     default_distribution: str | None = None  # what a study's fixed scenarios are checked against by default
     episode_seconds_setting: str | None = None  # the setting `foil eval --time-limit` sets, where one sets it
+    # the world settings it takes (``--world key=value``, a study's [build.world]), each with its default, whose
+    # type a given value must have (a whole number is taken for a float)
+    settings: ClassVar[Mapping[str, Any]] = {}
 
-    @abstractmethod
     def takes_scenario(self, name: str) -> Claim | None:
         """Whether a scenario or distribution file is this world's, by its content (shipped names and a file's
-        ``world`` key are looked up before)."""
+        ``world`` key are looked up before). Default: none is."""
+        return None
 
-    @abstractmethod
     def parse_world(self, items: list[str]) -> dict[str, Any]:
-        """``--world key=value`` settings, each converted to its type."""
+        """``--world key=value`` settings, each converted to its type. Default: each value read as a TOML value
+        (a bare word as text), then checked by `check_world`."""
+        parsed = {}
+        for item in items:
+            key, equals, value = item.partition("=")
+            if not equals:
+                raise ValueError(f"--world {item!r}: give key=value")
+            try:
+                parsed[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+            except tomllib.TOMLDecodeError:
+                parsed[key.strip()] = value
+        return self.check_world(parsed, "--world")
 
-    @abstractmethod
     def check_world(self, settings: dict[str, Any], what: str) -> dict[str, Any]:
-        """A study's world settings checked (a clear error for an unknown key or a bad value)."""
+        """A study's world settings checked (a clear error for an unknown key or a bad value). Default: the keys
+        of `settings` (the class's), each given in its default's type."""
+        check_keys(settings, type(self).settings, f"{what} setting")
+        checked = dict(settings)
+        for key, value in settings.items():
+            default = type(self).settings[key]
+            if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+                checked[key] = float(value)
+            elif type(value) is not type(default):
+                raise ValueError(
+                    f"{what} setting {key} = {value!r}: give a {type(default).__name__}, such as {default!r}"
+                )
+        return checked
 
     def agents_settings(self, agents: Sequence[str]) -> dict[str, Any]:
         """The world settings the agents bring (those they were trained in), shared by a whole study. Default:
@@ -78,13 +107,16 @@ class Scenarios(ABC):
         Default: those given."""
         return dict(settings)
 
-    @abstractmethod
     def is_distribution(self, name: str) -> bool:
-        """Whether ``name`` is a distribution of starting states (for the representative solver)."""
+        """Whether ``name`` is a distribution of starting states (for the representative solver). Default: a
+        world without distributions."""
+        return False
 
-    @abstractmethod
     def scenario_dict(self, name: str, world: dict[str, Any]) -> dict[str, Any]:
-        """The scenario or distribution ``name`` under ``world``, complete (every default written in)."""
+        """The scenario or distribution ``name`` under ``world``, complete (every default written in). Default:
+        its state's ``to_dict()``."""
+        found: dict[str, Any] = self.state(name, world).to_dict()
+        return found
 
     @abstractmethod
     def step_seconds(self, name: str, world: dict[str, Any]) -> float:
@@ -95,53 +127,67 @@ class Scenarios(ABC):
     def state(self, name: str, world: dict[str, Any]) -> Any:
         """The fixed scenario ``name`` under ``world``, complete: a state with a ``name`` and a ``to_dict()``."""
 
-    @abstractmethod
     def draw_states(self, name: str, world: dict[str, Any], rng: np.random.Generator, count: int) -> list[Any]:
-        """``count`` starting states drawn from distribution ``name`` under ``world``, each named ``name#i``."""
+        """``count`` starting states drawn from distribution ``name`` under ``world``, each named ``name#i``.
+        Default: a world without distributions refuses."""
+        raise ValueError(
+            f"{name!r} is no distribution of starting states here: this world has none (a world with them writes "
+            "is_distribution and draw_states)"
+        )
 
 
 class Agents(ABC):
-    """A world's agents: which it takes, how they do, and where they came from."""
+    """A world's agents: which it takes, how they do, and where they came from. A world plays test episodes
+    (`play`) and Foil computes the evaluation from them; a world with an evaluation of its own writes
+    `evaluate_episodes` and `evaluate` instead."""
 
-    @abstractmethod
     def takes_agent(self, spec: str) -> Claim | None:
         """Whether an agent file or ``module:attribute`` is this world's, by its kind (shipped names are looked up
-        before)."""
+        before). Default: none is (only the agents it ships)."""
+        return None
 
-    @abstractmethod
-    def describe_agents(self) -> str:
-        """What agents and scenarios this world takes, for an error that refuses a mix."""
+    def play(
+        self, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None = None
+    ) -> list[Episode]:
+        """``episodes`` test episodes of the agent alone, in ``scenario``'s world when given: episode i starts
+        alike for every agent at one seed, so two agents are compared episode by episode."""
+        raise NotImplementedError  # `search.solvers.domain.domains` refuses a world with neither this nor its own
 
     @abstractmethod
     def evaluate(
         self, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None = None
     ) -> dict[str, Any]:
-        """The agent's ``foil eval --json`` object (success, collision, timeout rates, mean reward and its 95%
-        interval), in ``scenario``'s world when given."""
+        """The agent's ``foil eval --json`` object (docs/formats.md): outcome rates where the world has
+        outcomes, mean reward, the visible score where the world declares one, each with its 95% interval
+        (`search.solvers.domain.Domain` computes it from `play`)."""
 
+    @abstractmethod
     def evaluate_episodes(
         self, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None = None
     ) -> dict[str, Any]:
-        """``evaluate``'s object with each episode's reward (``episode_rewards``; episode i starts alike for every
-        agent at one seed), so the bundle compares two agents episode by episode (search/bundle/truth.py). Default:
-        without them, and the bundle compares mean rewards alone."""
-        return self.evaluate(agent, episodes, seed, world, scenario)
+        """``evaluate``'s object with each episode's reward (``episode_rewards``), so the bundle compares two
+        agents episode by episode (search/bundle/truth.py)."""
 
-    @abstractmethod
     def describe_evaluation(self, result: dict[str, Any]) -> str:
-        """``foil eval``'s lines for a person (``--json`` prints the object itself)."""
+        """``foil eval``'s lines for a person (``--json`` prints the object itself). Default: Foil's
+        (`search.core.evaluation.describe`)."""
+        return describe(result)
 
     def eval_scenario(self, scenarios: Sequence[str]) -> str | None:
         """Which of a study's scenarios an agent is evaluated in (None: the world's own test episodes)."""
         return None
 
-    @abstractmethod
     def agent_file(self, agent: str) -> Path | None:
-        """The file an agent is loaded from (its checksum identifies it), or None for a scripted one."""
+        """The file an agent is loaded from (its checksum identifies it), or None for a scripted one. Default:
+        None."""
+        return None
 
-    @abstractmethod
     def agent_source(self, agent: str, world: dict[str, Any]) -> dict[str, Any]:
-        """Where an agent came from, for the manifest."""
+        """Where an agent came from, for the manifest. Default: its file and the file's checksum, or "scripted"."""
+        path = self.agent_file(agent)
+        if path is None or not path.is_file():
+            return {"kind": "scripted"}
+        return {"kind": "file", "checkpoint": str(path), "sha256": sha256_file(path)}
 
 
 class Clips(ABC):
@@ -151,9 +197,10 @@ class Clips(ABC):
     def render(self, summary: Path, out: Path, numbers: list[int], options: Any) -> Any:
         """``foil render``: the clip, its poster and its contact sheet (a `search.clips.render.RenderResult`)."""
 
-    @abstractmethod
     def renderer_files(self, summary: Path) -> list[Path]:
-        """The source files a clip of ``summary`` is drawn by (part of a rendered clip's cache key)."""
+        """The source files a clip of ``summary`` is drawn by (part of a rendered clip's cache key). Default: the
+        file the world's class is defined in; a world that draws in other files lists them."""
+        return [Path(inspect.getfile(type(self)))]
 
     def world(self, scenario: str | None = None) -> World:
         """What a clip visibly shows here and in which words. Default: `app.visible.World`'s."""

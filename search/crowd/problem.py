@@ -32,6 +32,7 @@ class CoupledProblem:
             self.action_shape, config.env_action_bound, self.reward_config.prior, self.reward_config.prior_sigma
         )
         self.reward = DivergenceReward(self.reward_config, self.prior)
+        self.agent_rewards = np.zeros((1, len(policies)))  # each agent's own reward on the last step
 
     @property
     def batch(self) -> int:

@@ -46,8 +46,8 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 
 from app.visible import Score, Words, World
+from search.core.evaluation import EVENTS
 
-EVENTS = ("success", "collision", "timeout")
 GENERIC_WORDS = Words(
     agent="Agent",
     clip_title="Clip of two agents side by side, each in its own copy of the same world",

@@ -181,9 +181,9 @@ class GymDomain(Domain):
         return evaluate(agent, episodes, seed, adapter, per_episode)
 
     def describe_evaluation(self, result: dict) -> str:
-        from search.gym.evaluate import format_result
+        from search.core.evaluation import describe
 
-        return format_result(result)
+        return describe(result)
 
     def eval_scenario(self, scenarios):
         """The first scenario the agent is shown in: a Gymnasium agent acts in the world its scenario names."""

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from search.core.evaluation import episodes_result, scores_result
 from search.gym.adapter import Adapter
 from search.gym.agents import GymAgent
-from search.gym.evaluate import EPISODE_BASE, episodes_result, scores_result
+from search.gym.evaluate import EPISODE_BASE
 from search.highway.adapter import HighwayAdapter, kmh
 from search.highway.batch import make_batch
 from search.highway.env import DURATION_S

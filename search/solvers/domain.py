@@ -11,7 +11,7 @@ clips and the coupled problems a search steps (`Problems`, here); a world that t
 from __future__ import annotations
 
 import tomllib
-from abc import abstractmethod
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.visible import World
+from search.core.evaluation import evaluation
 from search.core.world import Agents, Claim, Clips, Scenarios, Shipped, Trainer
 
 if TYPE_CHECKING:
@@ -44,7 +45,7 @@ class Coupled:
     world: World = World()
 
 
-class Problems:
+class Problems(ABC):
     """A world's coupled problems: the agents stepped side by side from one state, their summaries, the rollouts
     the representative solver scores, and the re-simulation ``foil verify`` compares a summary with."""
 
@@ -95,13 +96,39 @@ class Problems:
 
 class Domain(Scenarios, Agents, Problems, Clips):
     """A world Foil compares agents in. ``name`` goes into the manifest and is what a ``world = "..."`` key names;
-    ``shipped()`` the agents', scenarios' and distributions' names it ships."""
+    ``shipped()`` the agents', scenarios' and distributions' names it ships.
+
+    A world writes its abstract methods (``Domain.__abstractmethods__``: its scenarios' states and step, its
+    coupled problem, a summary's claim and rebuild, its clip) and `play` (or its own `evaluate` and
+    `evaluate_episodes`); Foil gives every other method a default (docs/gym.md, "A world of its own")."""
 
     name: str = ""
 
     def shipped(self) -> Shipped:
         """The names this world ships. Default: none."""
         return Shipped()
+
+    def describe_agents(self) -> str:
+        """What agents and scenarios this world takes, for an error that refuses a mix. Default: the names it
+        ships."""
+        shipped = self.shipped()
+        names = [*sorted(shipped.names), *(f"{prefix}..." for prefix in shipped.prefixes)]
+        return f"the {self.name} world takes {', '.join(names) if names else 'the files it claims'}"
+
+    def evaluate(
+        self, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None = None
+    ) -> dict[str, Any]:
+        """Default: `evaluate_episodes`' object without each episode's reward."""
+        result = self.evaluate_episodes(agent, episodes, seed, world, scenario)
+        return {key: value for key, value in result.items() if key != "episode_rewards"}
+
+    def evaluate_episodes(
+        self, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None = None
+    ) -> dict[str, Any]:
+        """Default: computed by Foil from `play`'s episodes (`search.core.evaluation.evaluation`), with the visible
+        score of the world's `World` where it declares one."""
+        played = self.play(agent, episodes, seed, world, scenario)
+        return evaluation(agent, seed, played, self.world(scenario).score, per_episode=True)
 
     def replay(
         self, agents: Sequence[str], state: Any, reward: dict, actions: np.ndarray, entry: dict
@@ -136,6 +163,11 @@ def domains() -> tuple[Domain, ...]:
         value, domain = entry.value, entry.load()()
         if not isinstance(domain, Domain):
             raise ValueError(f"the {ENTRY_POINTS} entry point {value!r} is no search.solvers.domain.Domain")
+        if type(domain).play is Agents.play and type(domain).evaluate_episodes is Domain.evaluate_episodes:
+            raise ValueError(
+                f"the {ENTRY_POINTS} entry point {value!r} plays no test episodes: write its Domain's play "
+                '(docs/gym.md, "A world of its own"), or evaluate and evaluate_episodes'
+            )
         if domain.name in found:
             raise ValueError(f"two installed worlds are named {domain.name!r}: rename one ({value})")
         found[domain.name] = domain

@@ -36,7 +36,7 @@ import numpy as np
 
 from search.solvers.episodes import Episodes, Source, continuing, in_turn, play
 from search.solvers.follow import ALWAYS, Follow
-from search.solvers.problem import ActionValues, Alternatives, Features, Follows, provides
+from search.solvers.problem import ActionValues, AgentRewards, Alternatives, Features, Follows, provides
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, held, register
@@ -317,7 +317,7 @@ class Highlights(Watching):
     name = "highlights"
     config_class: type = HighlightsConfig
     reels = True
-    needs = (Follows, Features, Alternatives)
+    needs = (Follows, Features, Alternatives, AgentRewards)
 
     def held_to_clip(
         self, config: HighlightsConfig, reward: RewardConfig, steps: int, given: dict

@@ -80,11 +80,16 @@ class ActionValues(Protocol):
 
 
 class Alternatives(Protocol):
-    """The actions an agent might have taken instead of its own: what HIGHLIGHTS' rollouts try. The rollouts read
-    each agent's own reward on the last step from ``agent_rewards`` (B, agents), which a problem may first set on
-    its first step, so it is no member here: no check before that step could see it."""
+    """The actions an agent might have taken instead of its own: what HIGHLIGHTS' rollouts try."""
 
     def alternatives(self, action: np.ndarray) -> list[np.ndarray]: ...
+
+
+class AgentRewards(Protocol):
+    """(B, agents) each agent's own reward on the last step: what HIGHLIGHTS' rollouts sum over the alternatives.
+    A problem has it from when it is built (zeros before the first step), so it is checked before any work."""
+
+    agent_rewards: np.ndarray
 
 
 class Features(Protocol):
@@ -104,13 +109,17 @@ def provides(problem: object, capability: type) -> bool:
     return all(hasattr(problem, name) for name in members(capability))
 
 
+CAPABILITIES_DOC = 'docs/gym.md, "What the summary methods need of a world"'
+
+
 def require(problem: object, capabilities: tuple[type, ...], solver: str) -> None:
-    """Refuse a problem that lacks a capability the solver needs, naming both."""
+    """Refuse a problem that lacks a capability the solver needs, naming both and where the capability is
+    documented."""
     for capability in capabilities:
         missing = [name for name in members(capability) if not hasattr(problem, name)]
         if missing:
             raise ValueError(
                 f"the {solver} solver needs a problem with {capability.__name__} "
-                f"(search.solvers.problem.{capability.__name__}); {type(problem).__name__} has no "
+                f"(search.api.{capability.__name__}; {CAPABILITIES_DOC}); {type(problem).__name__} has no "
                 f"{' and no '.join(missing)}: give it {' and '.join(missing)}, or use another solver"
             )

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from app.formats import ClipVote
 from app.visible import Observer, VisibleClip, World
 from search.core.workers import workers
 from search.solvers.reward import RewardConfig
@@ -453,6 +454,24 @@ class Representative(OwnSummaries):
                 "vote": strength,
             }
         return summaries, vote
+
+    def warnings(self, record: dict) -> list[str]:
+        """A weak vote's warning (`weak_vote`)."""
+        warning = record.get(self.record_key, {}).get("warning")
+        return [warning] if warning else []
+
+    def clip_vote(self, entry: dict) -> ClipVote | None:
+        """The vote's strength as the summary's entry records it."""
+        vote = entry.get(self.record_key)
+        if vote is None:
+            return None
+        return ClipVote(
+            states=vote["states"],
+            won=[vote["for_first"], vote["for_second"]],
+            no_majority=vote["no_majority"],
+            sign_test_p=vote["sign_test_p"],
+            decided=vote["decided"],
+        )
 
 
 register(Representative())

@@ -28,6 +28,7 @@ from app.formats import summary_json
 from search.core.settings import check_keys, field_types
 from search.core.workers import one_core
 from search.solvers.domain import domain_for
+from search.solvers.problem import require
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import DEFAULT_SOLVER, Comparison, OwnSummaries, ProblemSearch, solver_named
@@ -100,11 +101,28 @@ def parse_settings(cls, items: list[str], what: str) -> dict:
     return settings
 
 
+def refuse_missing_capabilities(job: SearchJob) -> None:
+    """Refuse a search whose solver needs a capability its world's coupled problem lacks
+    (`search.solvers.problem.require`), before any work: the problem of one starting state is built, never
+    stepped."""
+    solver = solver_named(job.solver)
+    if not solver.needs:
+        return
+    domain = domain_for(job.agents, job.scenario, job.world)
+    world = domain.search_settings(job.agents, job.world_settings, job.scenario)
+    if domain.is_distribution(job.scenario):
+        state = domain.draw_states(job.scenario, world, np.random.default_rng(job.seed), 1)[0]
+    else:
+        state = domain.state(job.scenario, world)
+    require(domain.coupled(job.agents, state, job.reward_settings).problem, solver.needs, solver.name)
+
+
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search in its agents' world and return its output files, name -> text: ``summary-001.json``, ...
     (best first, or in the order of a solver that chooses its own) and ``run.json``. Kept trajectories are
     replayed at batch size 1 and ranked by that authoritative reward."""
     started = time.perf_counter()
+    refuse_missing_capabilities(job)
     solver = solver_named(job.solver)
     domain = domain_for(job.agents, job.scenario, job.world)
     job = replace(job, world_settings=domain.search_settings(job.agents, job.world_settings, job.scenario))
@@ -374,6 +392,8 @@ def run_all(
     from tqdm import tqdm
 
     started = time.perf_counter()
+    for job in jobs:  # every job's capabilities before the first runs
+        refuse_missing_capabilities(job)
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     runner = Backend(backend, workers, ray_address)
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)
@@ -398,7 +418,7 @@ def run_all(
                 "wall_s": record["wall_s"],
                 "sim_steps": record["sim_steps"],
             }
-            | ({"warning": record["vote"]["warning"]} if "warning" in record.get("vote", {}) else {})
+            | ({"warning": " ".join(warnings)} if (warnings := solver_named(job.solver).warnings(record)) else {})
         )
     study = {
         "format": "foil.study-search/1",

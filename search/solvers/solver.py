@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any, Literal
 if TYPE_CHECKING:
     import numpy as np
 
+    from app.formats import ClipVote
     from search.solvers.problem import Problem
     from search.solvers.reward import RewardConfig
     from search.solvers.rollout import Tracker
@@ -37,6 +38,16 @@ class Solver(ABC):
     starts: Starts = "fixed"  # a fixed scenario, a distribution of starting states it draws from, or either
     reels: bool = False  # its clips are a reel of moments per agent, not one clip of the pair
     needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.solvers.problem)
+
+    def warnings(self, record: dict) -> list[str]:
+        """What a search's run.json record warns of, in words: the runner, `foil search` and the bundle print
+        these and read no solver's record themselves. Default: nothing."""
+        return []
+
+    def clip_vote(self, entry: dict) -> ClipVote | None:
+        """The vote over starting states that a summary's solver entry records for its clip, each agent's count
+        in the search's order (the bundle's audit holds it to the ground truth). Default: none."""
+        return None
 
     def takes(self, distribution: bool) -> bool:
         """Whether it starts from a scenario of this kind (a distribution of starting states, or a fixed one)."""

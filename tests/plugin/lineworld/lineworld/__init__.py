@@ -28,6 +28,7 @@ from search.api import (
     Claim,
     Coupled,
     Domain,
+    Episode,
     Problem,
     RenderOptions,
     RenderResult,
@@ -208,9 +209,11 @@ def render_clip(summary: Mapping[str, Any], out: Path, numbers: list[int], optio
 
 
 class LineDomain(Domain):
-    """Carts on a line: shipped agents and scenarios named line-..., scenario files with a [line] table."""
+    """Carts on a line: shipped agents and scenarios named line-..., scenario files with a [line] table; Foil
+    gives every other method its default (the evaluation from `play`, the settings' check from ``settings``)."""
 
     name = "line"
+    settings = {"goal": 4.0, "limit": 8}  # the world settings a study or --world may give
 
     def shipped(self) -> Shipped:
         return Shipped(prefixes=("line-",))
@@ -218,65 +221,25 @@ class LineDomain(Domain):
     def takes_scenario(self, name: str) -> Claim | None:
         return Claim.OWN if _scenario_file(name) is not None else None
 
-    def takes_agent(self, spec: str) -> Claim | None:
-        return None  # only the shipped carts
-
-    def describe_agents(self) -> str:
-        return f"line agents ({', '.join(AGENTS)}) go on line scenarios ({', '.join(SCENARIOS)}, [line] files)"
-
-    def parse_world(self, items: list[str]) -> dict:
-        return self.check_world({k: json.loads(v) for k, _, v in (i.partition("=") for i in items)}, "world")
-
-    def check_world(self, settings: dict, what: str) -> dict:
-        unknown = sorted(set(settings) - {"goal", "limit"})
-        if unknown:
-            raise ValueError(f"unknown {what} setting {unknown[0]!r}: the line world takes goal and limit")
-        return dict(settings)
-
-    def is_distribution(self, name: str) -> bool:
-        return False
-
-    def scenario_dict(self, name: str, world: dict) -> dict:
-        return self.state(name, world).to_dict()
+    def state(self, name: str, world: dict) -> LineState:
+        return load_state(name, world)
 
     def step_seconds(self, name: str, world: dict) -> float:
         return DT
 
-    def state(self, name: str, world: dict) -> LineState:
-        return load_state(name, world)
-
-    def draw_states(self, name: str, world: dict, rng: np.random.Generator, count: int) -> list:
-        raise ValueError("the line world has no distributions of starting states")
-
-    def evaluate(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
-        """Each episode in a gust of its own, constant through the run."""
+    def play(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> list[Episode]:
+        """Each episode in a gust of its own, constant through the run; sooner at the flag is better."""
         state = load_state(scenario or "line-short", world)
         gusts = np.random.default_rng(seed).uniform(-1, 1, episodes)
         problem = LineProblem([agent], state, RewardConfig(horizon=state.limit))
         problem.reset(episodes)
         while not (problem.outcome != RUNNING).all():
             problem.step(gusts)
-        rates = {name: float((problem.outcome[:, 0] == code).mean()) for code, name in enumerate(OUTCOME_NAMES)}
-        rewards = (problem.outcome[:, 0] == SUCCESS) - 0.1 * problem.event_step[:, 0]  # sooner is better
-        mean = float(rewards.mean())
-        half = 1.96 * float(rewards.std(ddof=1)) / math.sqrt(episodes) if episodes > 1 else 0.0
-        return {
-            "episodes": episodes,
-            "success_rate": rates["success"],
-            "collision_rate": rates["collision"],
-            "timeout_rate": rates["timeout"],
-            "reward_mean": mean,
-            "reward_ci95": [mean - half, mean + half],
-        }
-
-    def describe_evaluation(self, result: dict) -> str:
-        return f"success {result['success_rate']:.2f}, tipped over {result['collision_rate']:.2f}"
-
-    def agent_file(self, agent: str) -> Path | None:
-        return None
-
-    def agent_source(self, agent: str, world: dict) -> dict:
-        return {"kind": "scripted"}
+        outcome, steps = problem.outcome[:, 0], problem.event_step[:, 0]
+        rewards = (outcome == SUCCESS) - 0.1 * steps
+        return [
+            Episode(float(r), float(n * DT), OUTCOME_NAMES[code]) for r, n, code in zip(rewards, steps, outcome)
+        ]
 
     def takes_summary(self, summary: Mapping[str, Any]) -> Claim | None:
         scenario = summary.get("scenario")
@@ -301,9 +264,6 @@ class LineDomain(Domain):
 
     def render(self, summary: Path, out: Path, numbers: list[int], options: RenderOptions) -> RenderResult:
         return render_clip(json.loads(Path(summary).read_text()), Path(out), numbers, options)
-
-    def renderer_files(self, summary: Path) -> list[Path]:
-        return [Path(__file__)]
 
     def world(self, scenario: str | None = None) -> World:
         return World(domain="line", rule="goal", words=WORDS)
