@@ -60,4 +60,33 @@ WORLD_AUTHORS = (
 )
 METHOD_AUTHORS = ("Problem", "ProblemSearch", "Tracker", "fresh", "register", "rollout")
 
-__all__ = sorted({*ADAPTER_AUTHORS, *WORLD_AUTHORS, *METHOD_AUTHORS})
+__all__ = [
+    "ActionPrior",
+    "Adapter",
+    "COLLISION",
+    "Claim",
+    "Coupled",
+    "Domain",
+    "Episode",
+    "Follow",
+    "OUTCOME_NAMES",
+    "Problem",
+    "ProblemSearch",
+    "RUNNING",
+    "RenderOptions",
+    "RenderResult",
+    "RewardConfig",
+    "SUCCESS",
+    "SUMMARY_FORMAT",
+    "Score",
+    "Shipped",
+    "TIMEOUT",
+    "Tracker",
+    "Words",
+    "World",
+    "fresh",
+    "h264_writer",
+    "register",
+    "rollout",
+    "side_paths",
+]

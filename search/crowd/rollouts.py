@@ -14,8 +14,8 @@ from search.crowd.problem import concat_snapshots
 from search.crowd.sim.coupled import CoupledSimulator
 from search.crowd.sim.observation import Policy
 from search.crowd.sim.scenarios import Scenario
+from search.solvers.contrast import Rollouts, visible_contrast
 from search.solvers.prior import ActionPrior
-from search.solvers.representative import Rollouts, visible_contrast
 from search.solvers.reward import DivergenceReward, RewardConfig
 from search.solvers.rollout import Tracker
 

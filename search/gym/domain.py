@@ -129,8 +129,8 @@ class GymDomain(Domain):
         """Rollouts scored from the problem's own record of each agent's ending, as its summary would say it (no
         replay; `tests/gym/test_any_world.py` checks it against the summaries); the states over worker processes
         unless the world steps them in one batch (``batched``)."""
+        from search.solvers.contrast import roll_out_problem
         from search.solvers.domain import roll_out_spread
-        from search.solvers.representative import roll_out_problem
 
         if self.batched:
             return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
@@ -226,7 +226,7 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
     step ``since``: each agent's event and its time, and its visible score's sum where the world shows one, as
     `search.gym.summary.build_gym_summary` records them."""
     from search.core.outcomes import OUTCOME_NAMES
-    from search.solvers.representative import visible_contrast
+    from search.solvers.contrast import visible_contrast
 
     dt = coupled.problem.adapter.dt
     outcomes = tuple(

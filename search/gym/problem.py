@@ -336,7 +336,7 @@ class GymCoupledProblem:
         itself and each Box coordinate at either end of its range."""
         if self.divergence.discrete:
             return [np.full_like(np.asarray(action), a) for a in range(int(self.action_space.n))]
-        from search.solvers.highlights import box_alternatives
+        from search.solvers.problem import box_alternatives
 
         flat = np.asarray(action, np.float64).reshape(len(action), -1)
         shape = np.asarray(action).shape

@@ -58,7 +58,7 @@ def env_state(env, discrete: bool) -> dict[str, np.ndarray]:
 
 
 @dataclass
-class Comparison:
+class KernelComparison:
     """What a side-by-side run compared, and the first difference found (None: bit for bit)."""
 
     episodes: int = 0
@@ -95,7 +95,7 @@ def compare(
     settings: dict | None = None,
     env_action: str = "uniform",
     rng_seed: int = 0,
-) -> Comparison:
+) -> KernelComparison:
     """Run one episode per seed in highway-env and in the kernel side by side. ``settings``: the adapter's
     (``discrete = False`` for continuous control, highway-env config keys); ``env_action``: "none", "uniform" (the
     searches' prior) or "extreme" (every entry +-1: every commanded lane change that can happen, speeds at their
@@ -109,7 +109,7 @@ def compare(
     kernel = HighwayKernel(spec, len(seeds))
     rng = np.random.default_rng(rng_seed)
     observations = np.stack([env.reset(seed=seed)[0] for env, seed in zip(envs, seeds, strict=True)])
-    result = Comparison(episodes=len(seeds))
+    result = KernelComparison(episodes=len(seeds))
     kernel_observations = kernel.reset(seeds)
     running = np.ones(len(seeds), bool)
     lengths = np.zeros(len(seeds), np.int64)

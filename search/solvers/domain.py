@@ -26,7 +26,7 @@ from search.core.evaluation import evaluation
 from search.core.world import Agents, Claim, Clips, Scenarios, Shipped, Trainer
 
 if TYPE_CHECKING:
-    from search.solvers.representative import Rollouts, Shown
+    from search.solvers.contrast import Rollouts, Shown
     from search.solvers.rollout import Tracker
 
 ENTRY_POINTS = "foil.domains"
@@ -73,7 +73,7 @@ class Problems(ABC):
         """The representative solver's rollouts (see `search.solvers.representative`): from each state one
         without pushes and ``pushes`` under uniform pushes, each scored by what its clip visibly shows. Default:
         through the coupled problem, each rollout's clip built as its summary (exact, at twice the steps)."""
-        from search.solvers.representative import roll_out_problem
+        from search.solvers.contrast import roll_out_problem
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
 
@@ -85,7 +85,7 @@ class Problems(ABC):
         summary methods that fork (Agent Disagreements) score a fork. ``summary()`` builds the row's summary.
         Default: that summary's contrast (exact, at the cost of a replay); a world that can read it from its
         problem says so faster."""
-        from search.solvers.representative import summary_contrast
+        from search.solvers.contrast import summary_contrast
 
         return summary_contrast(dict(summary()), coupled.world)
 
@@ -135,7 +135,7 @@ class Domain(Scenarios, Agents, Problems, Clips):
     ) -> tuple[float, dict]:
         """A candidate trajectory's exact replay as a summary (solver entry ``entry``), and its clip's visible
         contrast."""
-        from search.solvers.representative import summary_contrast
+        from search.solvers.contrast import summary_contrast
 
         coupled = self.coupled(agents, state, reward)
         summary = coupled.summarize(actions, entry)
@@ -294,7 +294,7 @@ def roll_out_spread(
     coupled problem of its states from the world's name, so the rollouts are the same whatever the number of
     workers. ``shown`` must pickle (a module-level function)."""
     from search.core.workers import in_order, workers
-    from search.solvers.representative import Rollouts, draw_pushes, roll_out_problem
+    from search.solvers.contrast import Rollouts, draw_pushes, roll_out_problem
 
     coupled = [domain_named(domain).coupled(agents, state, reward) for state in states]
     if workers() <= 1 or len(states) < 2:
@@ -313,7 +313,7 @@ def roll_out_spread(
 def _roll_out_state(
     domain: str, agents: Sequence[str], state: Any, reward: dict, env: np.ndarray, shown: Shown | None
 ) -> tuple[list[np.ndarray], np.ndarray, int]:
-    from search.solvers.representative import roll_out_rows
+    from search.solvers.contrast import roll_out_rows
 
     return roll_out_rows(domain_named(domain).coupled(agents, state, reward), env, shown)
 

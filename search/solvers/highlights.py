@@ -77,18 +77,6 @@ class HighlightsDivConfig(HighlightsConfig):
     diversity: float = 0.5
 
 
-def box_alternatives(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> list[np.ndarray]:
-    """``action`` (B, d) itself, then, for each coordinate, the action with that coordinate at ``low`` and at
-    ``high``: the alternatives the stand-in importance tries for Box actions."""
-    out = [np.array(action, dtype=np.float64)]
-    for i in range(action.shape[-1]):
-        for end in (low[i], high[i]):
-            changed = np.array(action, dtype=np.float64)
-            changed[..., i] = end
-            out.append(changed)
-    return out
-
-
 def q_importance(values: np.ndarray, kind: str) -> np.ndarray:
     """HIGHLIGHTS' state importance from action values (B, A): max - min, or max - second best."""
     ordered = np.sort(values, axis=1)

@@ -269,7 +269,7 @@ class MCTS:
 
     def run(self) -> None:
         self.until = self._commit_point() if self.config.mode == "receding" else math.inf
-        Rollouts(self).run()
+        InFlight(self).run()
 
     def _commit_point(self) -> float:
         """Receding mode: the step count after which the root commits (its share of the remaining budget)."""
@@ -330,7 +330,7 @@ class MCTS:
         return self.problem.snapshot()
 
 
-class Rollouts:
+class InFlight:
     """The iterations in flight: up to ``batch`` rows stepped together. Each row expands its new edge (the edge's
     action held ``repeat`` steps, then a tree node with its snapshot) and rolls out with prior actions renewed
     every ``repeat`` steps. When rows end, their values are backed up at once and new iterations are selected

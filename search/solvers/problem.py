@@ -85,6 +85,18 @@ class Alternatives(Protocol):
     def alternatives(self, action: np.ndarray) -> list[np.ndarray]: ...
 
 
+def box_alternatives(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> list[np.ndarray]:
+    """``action`` (B, d) itself, then, for each coordinate, the action with that coordinate at ``low`` and at
+    ``high``: the alternatives the stand-in importance tries for Box actions."""
+    out = [np.array(action, dtype=np.float64)]
+    for i in range(action.shape[-1]):
+        for end in (low[i], high[i]):
+            changed = np.array(action, dtype=np.float64)
+            changed[..., i] = end
+            out.append(changed)
+    return out
+
+
 class AgentRewards(Protocol):
     """(B, agents) each agent's own reward on the last step: what HIGHLIGHTS' rollouts sum over the alternatives.
     A problem has it from when it is built (zeros before the first step), so it is checked before any work."""

@@ -35,20 +35,11 @@ from typing import Any
 import numpy as np
 
 from app.formats import ClipVote
-from app.visible import Observer, VisibleClip, World
 from search.core.workers import workers
+from search.solvers.contrast import ALPHA, RollOut, Rollouts, Vote, describe_vote, vote
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, OwnSummaries, register
-
-# A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
-# the agents and the reward).
-RollOut = Callable[[list, int, np.random.Generator, Tracker], "Rollouts"]
-# What a rollout's clip shows the moment its row ends: (a Coupled, the row, the steps it took) -> visible contrast.
-Shown = Callable[[Any, int, int], float]
-
-OBSERVER = Observer()
-ALPHA = 0.05  # a vote is decided when its sign test's p is below this, over its looks (`strength`)
 
 
 @dataclass(frozen=True)
@@ -63,82 +54,6 @@ class RepresentativeConfig:
             raise ValueError("invalid representative setting: states and batch_states must be >= 1, pushes >= 0")
         if not 0 < self.alpha < 1:
             raise ValueError("invalid representative setting: alpha must lie between 0 and 1")
-
-
-@dataclass
-class Rollouts:
-    """Every rollout: the state it started from, its searched environment actions and its visible contrast."""
-
-    state: np.ndarray  # (K,) index of the starting state
-    actions: list[np.ndarray]  # K arrays (L_k, *action_shape): the environment actions up to the search's end
-    contrast: np.ndarray  # (K,) first agent's visible score minus the second's; 0 under the tie margin
-
-    @classmethod
-    def join(cls, parts: list[Rollouts]) -> Rollouts:
-        return cls(
-            state=np.concatenate([p.state for p in parts]),
-            actions=[a for p in parts for a in p.actions],
-            contrast=np.concatenate([p.contrast for p in parts]),
-        )
-
-
-def sign_test(wins: int, losses: int) -> float:
-    """The exact two-sided sign test's p: the chance of a split at least as uneven as ``wins`` to ``losses`` were
-    each state as likely to vote either way. States without a majority are left out, as the test leaves out ties
-    (none left: 1). Exact in integers, so the same counts always give the same p."""
-    n, fewer = wins + losses, min(wins, losses)
-    if n == 0:
-        return 1.0
-    return min(1.0, 2 * sum(math.comb(n, k) for k in range(fewer + 1)) / 2**n)
-
-
-def strength(for_first: int, for_second: int, alpha: float = ALPHA, looks: int = 1) -> dict:
-    """A vote's sign test and whether it is decided, as its record says them: p below ``alpha / looks``. Looking
-    again until a vote decides would make a split between equally good agents look decided more often than
-    ``alpha`` (about 0.11 at 0.05 with 8 looks), so each of the ``looks`` that could have stopped it is tested at
-    the Bonferroni level."""
-    p = sign_test(for_first, for_second)
-    return {"sign_test_p": p, "alpha": alpha, "looks": looks, "decided": p < alpha / looks}
-
-
-@dataclass(frozen=True)
-class Vote:
-    """How the states voted: +1 when the first agent looks better, -1 when the second does, 0 for no majority."""
-
-    state_votes: np.ndarray  # (M,) one vote per state rolled out
-    direction: int  # the sign of the summed votes
-
-    @property
-    def margin(self) -> int:
-        return int(abs(self.state_votes.sum()))
-
-    @property
-    def p(self) -> float:
-        """The sign test of the states with a majority (`sign_test`)."""
-        return sign_test(int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum()))
-
-    def record(self, rollouts: Rollouts, alpha: float = ALPHA, looks: int = 1) -> dict:
-        """What run.json says of the vote, with its strength (`strength`)."""
-        signs = np.sign(rollouts.contrast)
-        for_first, for_second = int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum())
-        return {
-            "states": len(self.state_votes),
-            "rollouts": len(signs),
-            "for_first": for_first,
-            "for_second": for_second,
-            "no_majority": int((self.state_votes == 0).sum()),
-            "direction": self.direction,
-            "margin": self.margin,
-            "tied": self.direction == 0,
-            "agreeing_share": float((signs == self.direction).mean()) if self.direction else None,
-        } | strength(for_first, for_second, alpha, looks)
-
-
-def vote(rollouts: Rollouts, states: int) -> Vote:
-    """Each state's majority sign over its rollouts, and the sign of their sum."""
-    signs = np.sign(rollouts.contrast)
-    state_votes = np.array([int(np.sign(signs[rollouts.state == s].sum())) for s in range(states)], dtype=np.int64)
-    return Vote(state_votes, int(np.sign(state_votes.sum())))
 
 
 def candidates(rollouts: Rollouts, result: Vote) -> list[int]:
@@ -175,20 +90,6 @@ def choose(
     return kept
 
 
-def summary_contrast(summary: dict, world: World) -> float:
-    """``visible_contrast`` of a two-agent summary's clip, in its agents' order."""
-    agents = [a["name"] for a in summary["agents"]]
-    return visible_contrast(VisibleClip.of_summary(summary, agents, ["first", "second"], world))
-
-
-def visible_contrast(clip: VisibleClip) -> float:
-    """First agent's visible score minus the second's as the viewer sees the clip; 0 under the clip's tie margin
-    (`VisibleClip.margin`: by a visible score, sums that read the same)."""
-    first, second = clip.scores(OBSERVER).values()
-    difference = first - second
-    return difference if abs(difference) >= clip.margin(OBSERVER) else 0.0
-
-
 def roll_out_states(
     roll_out: RollOut,
     scenarios: list,
@@ -220,7 +121,7 @@ def roll_out_states(
     return Rollouts.join(parts), done_states, stopped
 
 
-def representativeness(
+def how_representative(
     roll_out: RollOut,
     fixed: list,
     drawn: list,
@@ -256,15 +157,6 @@ def representativeness(
     return reports
 
 
-def describe_vote(agents: Sequence[str], won: Sequence[int], no_majority: int, p: float) -> str:
-    """A vote in words, by agent name: how many starting states showed each agent as better, and its sign test."""
-    states = sum(won) + no_majority
-    return (
-        f"of {states} starting state{'' if states == 1 else 's'}, {won[0]} showed {agents[0]} as better, "
-        f"{won[1]} {agents[1]} and {no_majority} neither (sign test p {'< 0.001' if p < 0.001 else f'= {p:.2g}'})"
-    )
-
-
 def weak_vote(record: dict, agents: Sequence[str]) -> str | None:
     """The warning for a vote that ended undecided (None for a decided one): its clips may show either agent as the
     better one."""
@@ -282,14 +174,6 @@ def weak_vote(record: dict, agents: Sequence[str]) -> str | None:
         f"weak vote: {vote_line}, not below {level}{'; ' + why if why else ''}: its clips may show either "
         f"agent as the one that usually looks better"
     )
-
-
-def largest_contrast(summaries: list[dict], world: World) -> int:
-    """Which of a search's summaries (two agents, best reward first) shows the largest non-tie visible contrast,
-    in either direction: outcome-contrast selection. The first where none shows a visible difference."""
-    contrasts = [abs(summary_contrast(s, world)) for s in summaries]
-    best = max(range(len(contrasts)), key=contrasts.__getitem__)  # the first of equals
-    return best if contrasts[best] > 0 else 0
 
 
 def representative(
@@ -351,59 +235,6 @@ def representative(
         ],
     }
     return [summary for _, summary in chosen], record
-
-
-def roll_out_problem(
-    coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
-) -> Rollouts:
-    """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
-    state one without pushes and ``pushes`` under uniform pushes (`draw_pushes`), stepped together until the
-    search's end rule ends each (`roll_out_rows`)."""
-    parts = []
-    for index, found in enumerate(coupled):
-        env = draw_pushes(found.problem, pushes, rng)
-        actions, contrast, steps = roll_out_rows(found, env, shown)
-        tracker.count(steps)
-        parts.append(Rollouts(np.full(len(env), index), actions, contrast))
-    return Rollouts.join(parts)
-
-
-def draw_pushes(problem, pushes: int, rng: np.random.Generator) -> np.ndarray:
-    """The environment actions of one state's rollouts, (pushes + 1, horizon, *action_shape): none in the first,
-    uniform within the prior's bound in the others."""
-    env = np.zeros((pushes + 1, problem.horizon, *problem.action_shape))
-    bound = problem.prior.bound
-    env[1:] = rng.uniform(-bound, bound, (pushes, problem.horizon, *problem.action_shape))
-    return env
-
-
-def roll_out_rows(found, env: np.ndarray, shown: Shown | None = None) -> tuple[list[np.ndarray], np.ndarray, int]:
-    """One state's rollouts, a row each under ``env`` (rows, horizon, ...), stepped together until the search's
-    end rule ends each: each one's environment actions up to its end, its visible contrast and the steps all
-    took. The contrast is read by ``shown(coupled, row, steps)`` the moment a row ends (a domain's fast path), or
-    else from each rollout's summary (exact, at twice the steps)."""
-    problem = found.problem
-    rows, horizon = env.shape[:2]
-    searched = np.full(rows, horizon)
-    contrast = np.zeros(rows)
-    running = np.ones(rows, dtype=bool)
-    steps = 0
-    problem.reset(rows)
-    for t in range(1, horizon + 1):
-        _, terminal = problem.step(env[:, t - 1])
-        steps += int(running.sum())
-        ended = running & np.asarray(terminal, dtype=bool)
-        searched[ended] = t
-        running &= ~ended
-        if shown is not None:
-            for row in np.flatnonzero(ended):
-                contrast[row] = shown(found, int(row), t)
-        if not running.any():
-            break
-    actions = [env[row, : searched[row]] for row in range(rows)]
-    if shown is None:
-        contrast = np.array([summary_contrast(found.summarize(a, {}), found.world) for a in actions])
-    return actions, contrast, steps
 
 
 class Representative(OwnSummaries):

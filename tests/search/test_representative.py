@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from search.cli import main
-from search.solvers.representative import Rollouts, Vote, candidates, choose, vote
+from search.solvers.contrast import Rollouts, Vote, vote
+from search.solvers.representative import candidates, choose
 
 
 def rollouts(contrast_by_state: list[list[float]]) -> Rollouts:

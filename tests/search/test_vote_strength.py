@@ -11,13 +11,8 @@ import pytest
 
 from app.formats import ClipAudit
 from search.bundle.build import describe_representativeness, vote_warnings
-from search.solvers.representative import (
-    RepresentativeConfig,
-    Rollouts,
-    representative,
-    sign_test,
-    weak_vote,
-)
+from search.solvers.contrast import Rollouts, sign_test
+from search.solvers.representative import RepresentativeConfig, representative, weak_vote
 from search.solvers.rollout import Tracker
 from tests.search.test_representative import representative_search
 

@@ -238,7 +238,8 @@ class LineDomain(Domain):
         outcome, steps = problem.outcome[:, 0], problem.event_step[:, 0]
         rewards = (outcome == SUCCESS) - 0.1 * steps
         return [
-            Episode(float(r), float(n * DT), OUTCOME_NAMES[code]) for r, n, code in zip(rewards, steps, outcome)
+            Episode(float(r), float(n * DT), OUTCOME_NAMES[code])
+            for r, n, code in zip(rewards, steps, outcome, strict=True)
         ]
 
     def takes_summary(self, summary: Mapping[str, Any]) -> Claim | None:
