@@ -217,9 +217,32 @@ def _set_problems(build: BuildTable) -> list[Problem]:
     return problems
 
 
-def _scenario_problems(build: BuildTable) -> list[Problem]:
-    """Each set's scenarios found and of the kind its solvers search (a distribution for the representative
-    solver, a fixed scenario for the others), and the representativeness distribution a distribution."""
+def _study_domain(build: BuildTable, problems: list[Problem]) -> Domain | None:
+    """The one world of a study, from its agents and its first scenario (an agent given as module:attribute may
+    act in any world) and the world it names, if it does; None, with a problem, where there is none. The bundle
+    builder finds it the same way (`search.bundle.study.Study`)."""
+    try:
+        agents = [a for clip_set in build.sets for a in clip_set.all_agents()]
+        return domain_for(agents, build.sets[0].scenarios[0] if build.sets[0].scenarios else None, build.world)
+    except ValueError as error:
+        problems.append((("build", "sets"), str(error)))
+        return None
+
+
+def _other_world(name: str, found: Domain, study: Domain | None) -> str | None:
+    """Why a scenario or distribution of a world other than the study's cannot be built, if it is one."""
+    if study is None or found is study:
+        return None
+    return (
+        f"{name!r} is in the {found.name} world, the study's agents and first scenario in the {study.name} world: "
+        f"a study compares its agents in one world"
+    )
+
+
+def _scenario_problems(build: BuildTable, study: Domain | None) -> list[Problem]:
+    """Each set's scenarios found, in the study's world (``study``), and of the kind its solvers search (a
+    distribution for the representative solver, a fixed scenario for the others), and the representativeness
+    distribution a distribution."""
     problems: list[Problem] = []
     domain = None
     for i, clip_set in enumerate(build.sets):
@@ -230,6 +253,10 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
                 distribution = domain.is_distribution(scenario)
             except (ValueError, FileNotFoundError) as error:
                 problems.append((("build", "sets", i, "scenarios", j), str(error)))
+                continue
+            elsewhere = _other_world(scenario, domain, study)
+            if elsewhere is not None:
+                problems.append((("build", "sets", i, "scenarios", j), elsewhere))
                 continue
             known = solvers()
             names = {build.schemes[name].solver for name in clip_set.schemes if name in build.schemes}
@@ -248,7 +275,11 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
     at = ("build", "representativeness", "distribution")
     if distribution_name is not None and domain is not None:
         try:
-            if not domain_for([], distribution_name, build.world).is_distribution(distribution_name):
+            found = domain_for([], distribution_name, build.world)
+            elsewhere = _other_world(distribution_name, found, study)
+            if elsewhere is not None:
+                problems.append((at, elsewhere))
+            elif not found.is_distribution(distribution_name):
                 problems.append(
                     (
                         at,
@@ -261,16 +292,9 @@ def _scenario_problems(build: BuildTable) -> list[Problem]:
     return problems
 
 
-def _schemes(build: BuildTable, problems: list[Problem]) -> dict[str, Scheme]:
-    """Each scheme with its solver, reward and world settings checked against their fields, one problem per bad
-    key (or per bad table, where the values together are refused)."""
-    domain: Domain | None
-    try:
-        agents = [a for clip_set in build.sets for a in clip_set.all_agents()]
-        domain = domain_for(agents, build.sets[0].scenarios[0] if build.sets[0].scenarios else None, build.world)
-    except ValueError as error:
-        problems.append((("build", "sets"), str(error)))
-        domain = None
+def _schemes(build: BuildTable, domain: Domain | None, problems: list[Problem]) -> dict[str, Scheme]:
+    """Each scheme with its solver, reward and world settings checked against their fields (the study's world's,
+    ``domain``), one problem per bad key (or per bad table, where the values together are refused)."""
     schemes = {}
     for name, table in build.schemes.items():
         at = ("build", "schemes", name)
@@ -374,8 +398,9 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
     )
     problems: list[Problem] = []
     render = _render_options(build, problems)
-    schemes = _schemes(build, problems)
-    problems += _scenario_problems(build)
+    domain = _study_domain(build, problems)
+    schemes = _schemes(build, domain, problems)
+    problems += _scenario_problems(build, domain)
     refuse(text, source, problems, BuildError)
     return BuildSpec(
         seed=build.seed,
