@@ -5,10 +5,10 @@ For every pair of the study file's pairwise sets (benchmarks/close_pairs/: snaps
 test success rates differ by at most 5 points) and search seeds 0..N-1, the clip `foil bundle` would make with
 the study's representative scheme is judged as the bundle judges it: the ground truth is the pair compared
 episode by episode on the same starting states, on more paired episodes while undecided
-(`search.bundle.build.close_pairs`); the clip's audit says whether it shows the better agent (`judge` of
+(`search.bundle.evaluations.close_pairs`); the clip's audit says whether it shows the better agent (`judge` of
 bench_informativeness.py). A clip is **flagged** when the bundle warns of it without looking at the clip: the
 ground truth is undecided, or the solver's vote is weak or favours the agent the ground truth ranks worse
-(`search.bundle.build.vote_warnings`). A clip that does not show the better agent and is not flagged misleads
+(`search.bundle.clips.vote_warnings`). A clip that does not show the better agent and is not flagged misleads
 unflagged.
 
     python benchmarks/bench_close_pairs.py --study benchmarks/close_pairs/crowd.toml [--seeds 20] [--jobs 2]
@@ -36,22 +36,11 @@ from bench_informativeness import judge
 
 from app.analysis.statistics import wilson_interval
 from app.formats import load_summary
-from search.bundle.build import (
-    Cache,
-    better_agent,
-    clip_vote,
-    close_pairs,
-    evaluate_agents,
-    evaluate_runs,
-    plan_clips,
-    search_job,
-    shown_pairs,
-    shown_summaries,
-    study_domain,
-    study_world,
-    vote_warnings,
-)
-from search.bundle.spec import load_build
+from search.bundle.clips import clip_vote, shown_summaries, vote_warnings
+from search.bundle.evaluations import better_agent, close_pairs, evaluate_agents, evaluate_runs, shown_pairs
+from search.bundle.searches import plan_clips, search_job
+from search.bundle.steps import Cache
+from search.bundle.study import load_study
 from search.bundle.truth import LOOKS, PairedComparison, paired_comparison
 from search.solvers.runner import Backend, run_search, write_outputs
 
@@ -136,23 +125,23 @@ def main() -> None:
     if args.folder:
         os.chdir(args.folder)
     started = time.perf_counter()
-    spec, _ = load_build(study)
-    world, domain = study_world(spec), study_domain(spec)
+    resolved = load_study(study)
+    spec, domain = resolved.spec, resolved.domain
     cache, backend = Cache(out / "cache"), Backend(workers=args.jobs)
     jobs = [j for j in plan_clips(spec) if "pairwise" in j.parts and j.scheme.name == args.scheme]
     pairs = shown_pairs(jobs)
     with backend.session():
-        evaluations = evaluate_agents(spec, domain, cache, print, world, backend)
-        close = close_pairs(spec, pairs, evaluations, domain, cache, print, world, backend)
+        evaluations = evaluate_agents(resolved, cache, print, backend)
+        close = close_pairs(resolved, pairs, evaluations, cache, print, backend)
         truth = {pair: ground_truth(pair, evaluations, close) for pair in pairs}
         last = sorted({(agent, truth[pair].episodes) for pair in pairs for agent in pair})
-        runs = evaluate_runs(spec, domain, cache, lambda line: None, last, world, backend)  # each look's, cached
+        runs = evaluate_runs(resolved, cache, lambda line: None, last, backend)  # each look's, cached
         truth_s = time.perf_counter() - started
         tasks, where = {}, {}
         for seed in range(args.seeds):
             for job in jobs:
                 drawn = replace(job, scheme=replace(job.scheme, seed=seed))
-                search = search_job(drawn, world, spec.world)
+                search = search_job(drawn, resolved)
                 where[job.pair, seed] = (drawn, out / args.scheme / f"seed{seed}" / search.label)
                 tasks[job.pair, seed] = (run_search, (search,))
         verdicts: dict[tuple[str, str], list[dict]] = {pair: [] for pair in pairs}

@@ -25,23 +25,17 @@ from dataclasses import replace
 from pathlib import Path
 
 from app.analysis.statistics import wilson_interval
-from search.bundle.build import (
-    Cache,
-    clip_audit,
-    evaluate_agents,
-    plan_clips,
-    search_job,
-    shown_summaries,
-    study_domain,
-    study_world,
-)
-from search.bundle.spec import load_build
+from search.bundle.clips import clip_audit, shown_summaries
+from search.bundle.evaluations import evaluate_agents
+from search.bundle.searches import plan_clips, search_job
+from search.bundle.steps import Cache
+from search.bundle.study import load_study
 from search.solvers.runner import Backend, in_processes, run_search, write_outputs
 
 
 def judge(job, folder: Path, evaluations: dict, world, close: dict | None = None) -> dict:
     """What the clip of a search shows against the ground truth, as the bundle audits it (``close``: the pairs
-    compared on more paired episodes, `search.bundle.build.close_pairs`), and what it cost."""
+    compared on more paired episodes, `search.bundle.evaluations.close_pairs`), and what it cost."""
     sources = shown_summaries(job, folder, world)
     summaries = [[json.loads(path.read_text()) for path in paths] for paths in sources]
     first = summaries[0][0]
@@ -65,12 +59,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="keep the searches and verdicts here (default: a temporary folder)")
     parser.add_argument("--schemes", help="only these schemes (comma-separated names of the study's)")
     args = parser.parse_args()
-    spec, _ = load_build(args.study)
+    study = load_study(args.study)
+    spec, domain = study.spec, study.domain
     out = args.out or Path(tempfile.mkdtemp(prefix="informativeness-"))
-    world, domain = study_world(spec), study_domain(spec)
-    evaluations = evaluate_agents(
-        spec, domain, Cache(out / "cache"), lambda line: None, world, Backend(workers=args.jobs)
-    )
+    evaluations = evaluate_agents(study, Cache(out / "cache"), lambda line: None, Backend(workers=args.jobs))
     truth = {name: round(e["reward_mean"], 2) for name, e in evaluations.items()}
     print(f"{args.study}: ground truth (mean test reward): {truth}", flush=True)
     wanted = args.schemes.split(",") if args.schemes else list(spec.schemes)
@@ -80,8 +72,8 @@ def main() -> None:
         for job in clips:
             drawn = replace(job, scheme=replace(job.scheme, seed=seed))
             key = (job.scheme.name, job.scenario, job.pair, seed)
-            where[key] = (drawn, out / job.scheme.name / f"seed{seed}" / search_job(drawn, world).label)
-            tasks[key] = (run_search, (search_job(drawn, world),))
+            where[key] = (drawn, out / job.scheme.name / f"seed{seed}" / search_job(drawn, study).label)
+            tasks[key] = (run_search, (search_job(drawn, study),))
     verdicts: dict[str, list] = defaultdict(list)
     rounds: dict[tuple, list] = defaultdict(list)
     walls: dict[str, list] = defaultdict(list)

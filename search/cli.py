@@ -77,8 +77,9 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _bundle(args: argparse.Namespace) -> int:
-    from search.bundle.build import Cache, build_bundle, prepare
+    from search.bundle.build import build_bundle, prepare
     from search.bundle.plan import plan_lines
+    from search.bundle.steps import Cache
     from search.core.workers import workers
     from search.solvers.runner import Backend
 

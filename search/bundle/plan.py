@@ -17,18 +17,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from search.bundle.build import (
-    Cache,
-    Prepared,
-    check_tasks,
-    duration,
-    eval_tasks,
-    evaluation_job,
-    input_key,
-    render_job,
-    search_job_files,
-    study_domain,
-)
+from search.bundle.build import Prepared
+from search.bundle.clips import render_job
+from search.bundle.evaluations import eval_tasks, evaluation_job
+from search.bundle.representativeness import check_tasks
+from search.bundle.searches import search_job_files
+from search.bundle.steps import Cache, duration, input_key
 from search.clips.render import RenderOptions
 from search.core.workers import jobs
 from search.solvers.runner import SearchJob
@@ -100,8 +94,9 @@ def paced(run: Callable[[int], float], start: int, whole: int) -> Callable[[int]
 def plan_steps(prepared: Prepared, cache: Cache) -> tuple[list[Step], dict[str, float]]:
     """Every step of the build with its jobs' expected seconds, and the simulator steps per second each scheme's
     timed search ran at."""
-    spec, domain = prepared.spec, study_domain(prepared.spec)
-    runs = eval_tasks(spec, domain, [(agent, spec.eval_episodes) for agent in spec.agents], prepared.world)
+    study = prepared.study
+    spec, domain = study.spec, study.domain
+    runs = eval_tasks(study, [(agent, spec.eval_episodes) for agent in spec.agents])
     todo = [arguments for inputs, (_, arguments) in runs.values() if not cache.valid("eval", inputs, "eval.json")]
     evaluations = Step(
         "evaluations",
@@ -130,7 +125,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> tuple[list[Step], dict[str, 
         [timed[scheme][0](search.budget) for scheme, search in wanted],
     )
 
-    checks = check_tasks(spec, prepared.world)
+    checks = check_tasks(study)
     unchecked = [
         task for _, _, inputs, task in checks.values() if not cache.valid("representativeness", inputs, "report.json")
     ]

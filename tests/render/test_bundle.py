@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from app.survey.bundle import BundleError
-from search.bundle.build import build_bundle, plan_clips, search_inputs, search_job
+from search.bundle.build import build_bundle
+from search.bundle.searches import plan_clips, search_inputs, search_job
 from search.bundle.spec import BuildError, load_build, parse_build
 from search.solvers.mcts import MCTSConfig
 from search.solvers.reward import RewardConfig
@@ -408,7 +409,7 @@ def test_paper_build_reproduces_the_papers_clip_set():
 def test_the_representativeness_line_warns_when_the_scenario_disagrees_with_the_distribution(
     majority, disagrees, start, end
 ):
-    from search.bundle.build import describe_representativeness
+    from search.bundle.representativeness import describe_representativeness
 
     report = {
         "agents": ["lo", "hi"],

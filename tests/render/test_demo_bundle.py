@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from search.bundle.build import build_bundle, plan_clips, search_inputs, search_job
+from search.bundle.build import build_bundle
+from search.bundle.searches import plan_clips, search_inputs, search_job
 from search.bundle.spec import load_build
 
 pytestmark = pytest.mark.slow

@@ -195,7 +195,7 @@ def test_every_robot_style_is_distinct():
 def test_the_robots_of_a_clip_and_of_a_ranking_round_have_clearly_different_colours():
     """Not two blues (Robot 13 sky blue beside Robot 15 blue): `foil bundle` numbers a round's robots, and a clip's
     pair, in a block of consecutive numbers, and any three consecutive numbers are far apart in colour."""
-    from search.bundle.build import plan_clips
+    from search.bundle.searches import plan_clips
     from search.bundle.spec import load_build
 
     for name in ("demo", "paper"):

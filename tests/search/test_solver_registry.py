@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from search.bundle.build import plan_clips, search_inputs, search_job
+from search.bundle.searches import plan_clips, search_inputs, search_job
 from search.bundle.spec import BuildError, parse_build
 from search.solvers.baselines import SamplingConfig, random_search
 from search.solvers.episodes import Episodes, play

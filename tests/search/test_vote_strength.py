@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from app.formats import ClipAudit
-from search.bundle.build import describe_representativeness, vote_warnings
+from search.bundle.clips import vote_warnings
+from search.bundle.representativeness import describe_representativeness
 from search.solvers.contrast import Rollouts, sign_test
 from search.solvers.representative import RepresentativeConfig, representative, weak_vote
 from search.solvers.rollout import Tracker

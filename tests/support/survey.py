@@ -296,7 +296,7 @@ def write_long_bundle(clips: Path, root: Path) -> Path:
 
 
 def planned_bundle(jobs: list, root: Path):
-    """A bundle with one manifest entry per clip `foil bundle` plans (`search.bundle.build.plan_clips`), the first
+    """A bundle with one manifest entry per clip `foil bundle` plans (`search.bundle.searches.plan_clips`), the first
     agent of each pair the better: what the server's start-up check is given, without searching or rendering."""
     from app.survey.bundle import Bundle
     from search.crowd.render import robot_label

@@ -1,0 +1,45 @@
+"""The bundle's index.html: a static gallery of every clip for the researcher, with what participants never see
+(agents, ground truth, audits, votes, the representativeness reports and the close pairs). The offline side's one
+Jinja environment, over gallery.html beside this module."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from app.formats import ManifestClip
+from search.bundle.clips import vote_warnings
+from search.bundle.representativeness import describe_representativeness
+from search.bundle.truth import PairedComparison, describe_close_pair
+
+
+def write_gallery(
+    out: Path,
+    clips: list[ManifestClip],
+    evaluations: dict[str, dict],
+    scenario_reports: list[dict],
+    close: list[dict] | None = None,
+) -> None:
+    """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward, and
+    the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better agent for."""
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined
+
+    from search.solvers.contrast import describe_vote
+
+    templates = Environment(
+        loader=FileSystemLoader(Path(__file__).parent),
+        autoescape=True,
+        undefined=StrictUndefined,
+        keep_trailing_newline=True,
+    )
+    page = templates.get_template("gallery.html").render(
+        clips=clips,
+        evaluations=evaluations,
+        zip=zip,
+        scenarios=scenario_reports,
+        describe=describe_representativeness,
+        describe_vote=describe_vote,
+        vote_warnings=vote_warnings,
+        close=close or [],
+        describe_close=lambda pair: describe_close_pair(PairedComparison.from_manifest(pair)),
+    )
+    (out / "index.html").write_text(page, encoding="utf-8")

@@ -1,0 +1,160 @@
+"""A bundle's clips and the searches behind them: every clip the study's sets ask for, with its robot numbers
+(`plan_clips`), each clip's search with everything it depends on (its inputs, the key of its result in the cache),
+and the searches run on a backend, a cached one reused while its inputs are unchanged and it still re-simulates."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import random
+import time
+from dataclasses import asdict, dataclass, replace
+
+from search.bundle.spec import BuildSpec, Scheme
+from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished, input_key
+from search.bundle.study import Study
+from search.solvers.domain import Domain, domain_for
+from search.solvers.runner import Backend, SearchJob, run_search, write_outputs
+from search.solvers.solver import solver_named
+from search.solvers.summary import verify
+
+
+@dataclass(frozen=True)
+class ClipJob:
+    """One clip: the pair in search order (the summary's agents) and each one's robot number on screen."""
+
+    id: str
+    scheme: Scheme
+    scenario: str
+    pair: tuple[str, str]
+    numbers: tuple[int, int]
+    parts: tuple[str, ...]
+
+
+def plan_clips(spec: BuildSpec) -> list[ClipJob]:
+    """Every clip of the study with its robot numbers. Numbers are handed out in blocks and never twice: a block
+    of two per clip, or, in a set that feeds a ranking, one per scheme and scenario (a round) with one number per
+    agent across its clips. So a participant never sees one name (colour, shape) stand for two agents, whichever
+    clips their plan shows, and a round's robots keep theirs. Which agent gets which number of its block is drawn
+    from a seeded generator named after the clip or round."""
+    jobs, first = [], 1
+    for i, clip_set in enumerate(spec.sets):
+        for scheme, scenario in itertools.product(clip_set.schemes, clip_set.scenarios):
+            group = f"{spec.seed}/{i}/{scheme}/{scenario}"
+            if clip_set.ranking:
+                block = range(first, first + len(clip_set.agents))
+                first += len(block)
+                shared = dict(zip(clip_set.agents, random.Random(group).sample(block, len(block)), strict=True))
+            for pair in clip_set.pairs:
+                name = f"{group}/{pair[0]}/{pair[1]}"
+                if clip_set.ranking:
+                    numbers = tuple(shared[a] for a in pair)
+                else:
+                    numbers, first = tuple(random.Random(name).sample([first, first + 1], 2)), first + 2
+                for parts, suffix, drawn in _draws(spec.schemes[scheme], clip_set.parts):
+                    jobs.append(
+                        ClipJob(
+                            id="clip-" + hashlib.sha256(f"{name}{suffix}".encode()).hexdigest()[:10],
+                            scheme=drawn,
+                            scenario=scenario,
+                            pair=pair,
+                            numbers=numbers,
+                            parts=parts,
+                        )
+                    )
+    return jobs
+
+
+def _draws(scheme: Scheme, parts: tuple[str, ...]) -> list[tuple[tuple[str, ...], str, Scheme]]:
+    """The clips of a set's pair under a scheme, as (parts fed, suffix of the clip's name, scheme): one for all the
+    set's parts. A solver that starts only from a distribution (the representative solver) draws its starting
+    states at random, so a set feeding both parts gets a draw of its own (seed + 1) for the ranking, whose round
+    would otherwise replay part one's clips."""
+    if solver_named(scheme.solver).starts != "distribution" or not {"pairwise", "ranking"} <= set(parts):
+        return [(parts, "", scheme)]
+    ranking = replace(scheme, seed=scheme.seed + 1)
+    return [(tuple(part for part in parts if part != "ranking"), "", scheme), (("ranking",), "/ranking", ranking)]
+
+
+def search_job(job: ClipJob, study: Study | None = None) -> SearchJob:
+    """The search behind a clip, with its scheme's settings, in the ``study``'s world settings
+    (`Study.world_settings`: the agents', under the scenario file's and the scheme's); without a study, in the
+    scheme's world settings alone, in the world the agents and scenario belong to."""
+    scheme = job.scheme
+    world = study.world_settings(job.scenario, scheme.world) if study is not None else dict(scheme.world)
+    return SearchJob(
+        agents=job.pair,
+        scenario=job.scenario,
+        solver=scheme.solver,
+        budget=scheme.budget,
+        seed=scheme.seed,
+        top_k=scheme.top_k,
+        solver_config=scheme.solver_config,
+        reward_settings=scheme.reward.to_dict(),
+        world_settings=world,
+        world=study.named if study is not None else None,
+    )
+
+
+def search_inputs(search: SearchJob, domain: Domain | None = None) -> dict:
+    """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
+    input; ``domain`` is the search's world (a study's, `Study.domain`), else found from its agents and
+    scenario."""
+    from search.solvers.reward import RewardConfig
+
+    domain = domain or domain_for(search.agents, search.scenario, search.world)
+    return {
+        "agents": [agent_identity(a, domain) for a in search.agents],
+        "scenario": domain.scenario_dict(search.scenario, search.world_settings),
+        "solver": search.solver,
+        "solver_settings": asdict(search.solver_config),
+        "reward": RewardConfig(**search.reward_settings).to_dict(),
+        "budget": search.budget,
+        "seed": search.seed,
+        "top_k": search.top_k,
+    }
+
+
+def describe_search(job: ClipJob) -> str:
+    """A clip's search as the log names it."""
+    return f"search {job.scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
+
+
+def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
+    """A cached search is reused while its inputs are unchanged and its summary still re-simulates exactly
+    (`foil verify`), so changes to the simulator or the policies' code are caught too."""
+    if not cache.valid("search", inputs, "summary-001.json"):
+        return False
+    problems = verify(cache.path("search", inputs) / "summary-001.json")
+    if problems:
+        log(
+            f"{describe_search(job)}: the cached summary no longer re-simulates exactly ({problems[0]}); "
+            "searching again"
+        )
+        return False
+    log(f"{describe_search(job)}: cached")
+    return True
+
+
+def search_job_files(search: SearchJob) -> tuple[dict[str, str], float]:
+    """One search's files (`run_search`) and the seconds it took."""
+    started = time.perf_counter()
+    return run_search(search), time.perf_counter() - started
+
+
+def run_searches(
+    jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log, backend: Backend = IN_THIS_PROCESS
+) -> None:
+    """Run every search the cache cannot supply on ``backend``; each result is written and sealed in the cache as
+    soon as it is complete, so an interrupted build keeps the finished ones."""
+    todo = {}
+    for job, search, inputs in jobs:
+        if input_key(inputs) not in todo and not _reusable(job, inputs, cache, log):
+            todo[input_key(inputs)] = (job, search, inputs)
+
+    tasks = {key: (search_job_files, (search,)) for key, (_, search, _) in todo.items()}
+    for key, (files, seconds), progress in finished(tasks, backend, lambda key: describe_search(todo[key][0])):
+        job, _, inputs = todo[key]
+        write_outputs(cache.store("search", inputs), files)
+        cache.seal("search", inputs)
+        log(f"{describe_search(job)}: {seconds:.1f} s {progress}")
