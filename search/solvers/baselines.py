@@ -22,7 +22,7 @@ from search.solvers.solver import ProblemSearch, register
 class SamplingConfig:
     batch: int = 64  # trajectories rolled out together
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.batch < 1:
             raise ValueError("invalid sampling setting: batch must be >= 1")
 
@@ -35,7 +35,7 @@ class CEMConfig:
     initial_std: float = 1.0  # in units of the action bound
     min_std: float = 0.05  # in units of the action bound; keeps exploring after collapse
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (self.population >= 2, "population must be >= 2"),
             (
@@ -62,15 +62,17 @@ def _sample_batches(
         rollout(problem, tracker, actions, lengths, returns, lambda rows, depth: problem.prior.sample(rng, rows.size))
 
 
-def n_first(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: SamplingConfig | None = None):
+def n_first(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: SamplingConfig | None = None) -> None:
     _sample_batches(problem, tracker, rng, (config or SamplingConfig()).batch, stop_after=tracker.queue.k)
 
 
-def random_search(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: SamplingConfig | None = None):
+def random_search(
+    problem: Problem, tracker: Tracker, rng: np.random.Generator, config: SamplingConfig | None = None
+) -> None:
     _sample_batches(problem, tracker, rng, (config or SamplingConfig()).batch)
 
 
-def cem(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: CEMConfig | None = None):
+def cem(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: CEMConfig | None = None) -> None:
     config = config or CEMConfig()
     bound = problem.prior.bound
     shape = (problem.horizon, *problem.action_shape)
@@ -81,7 +83,12 @@ def cem(problem: Problem, tracker: Tracker, rng: np.random.Generator, config: CE
         count = tracker.affordable(config.population, problem.horizon)  # the last generation may be cut short
         population = np.clip(mean + std * rng.standard_normal((count, *shape)), -bound, bound)
         actions, lengths, returns = fresh(problem, count)
-        rollout(problem, tracker, actions, lengths, returns, lambda rows, depth, p=population: p[rows, depth])
+
+        def choose(rows: np.ndarray, depth: np.ndarray, p: np.ndarray = population) -> np.ndarray:
+            chosen: np.ndarray = p[rows, depth]
+            return chosen
+
+        rollout(problem, tracker, actions, lengths, returns, choose)
         if count < config.population:
             break
         elite = population[np.argsort(-returns, kind="stable")[:n_elite]]

@@ -12,18 +12,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from app.visible import Observer, VisibleClip, World
+from search.solvers.problem import Problem
 from search.solvers.rollout import Tracker
+
+if TYPE_CHECKING:
+    from search.solvers.domain import Coupled  # the domain module imports this one
 
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
-RollOut = Callable[[list, int, np.random.Generator, Tracker], "Rollouts"]
+RollOut = Callable[[list[Any], int, np.random.Generator, Tracker], "Rollouts"]
 # What a rollout's clip shows the moment its row ends: (a Coupled, the row, the steps it took) -> visible contrast.
-Shown = Callable[[Any, int, int], float]
+Shown = Callable[["Coupled", int, int], float]
 
 OBSERVER = Observer()
 ALPHA = 0.05  # a vote is decided when its sign test's p is below this, over its looks (`strength`)
@@ -53,10 +57,11 @@ def sign_test(wins: int, losses: int) -> float:
     n, fewer = wins + losses, min(wins, losses)
     if n == 0:
         return 1.0
-    return min(1.0, 2 * sum(math.comb(n, k) for k in range(fewer + 1)) / 2**n)
+    p: float = min(1.0, 2 * sum(math.comb(n, k) for k in range(fewer + 1)) / 2**n)
+    return p
 
 
-def strength(for_first: int, for_second: int, alpha: float = ALPHA, looks: int = 1) -> dict:
+def strength(for_first: int, for_second: int, alpha: float = ALPHA, looks: int = 1) -> dict[str, Any]:
     """A vote's sign test and whether it is decided, as its record says them: p below ``alpha / looks``. Looking
     again until a vote decides would make a split between equally good agents look decided more often than
     ``alpha`` (about 0.11 at 0.05 with 8 looks), so each of the ``looks`` that could have stopped it is tested at
@@ -81,7 +86,7 @@ class Vote:
         """The sign test of the states with a majority (`sign_test`)."""
         return sign_test(int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum()))
 
-    def record(self, rollouts: Rollouts, alpha: float = ALPHA, looks: int = 1) -> dict:
+    def record(self, rollouts: Rollouts, alpha: float = ALPHA, looks: int = 1) -> dict[str, Any]:
         """What run.json says of the vote, with its strength (`strength`)."""
         signs = np.sign(rollouts.contrast)
         for_first, for_second = int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum())
@@ -105,7 +110,7 @@ def vote(rollouts: Rollouts, states: int) -> Vote:
     return Vote(state_votes, int(np.sign(state_votes.sum())))
 
 
-def summary_contrast(summary: dict, world: World) -> float:
+def summary_contrast(summary: dict[str, Any], world: World) -> float:
     """``visible_contrast`` of a two-agent summary's clip, in its agents' order."""
     agents = [a["name"] for a in summary["agents"]]
     return visible_contrast(VisibleClip.of_summary(summary, agents, ["first", "second"], world))
@@ -128,7 +133,7 @@ def describe_vote(agents: Sequence[str], won: Sequence[int], no_majority: int, p
     )
 
 
-def largest_contrast(summaries: list[dict], world: World) -> int:
+def largest_contrast(summaries: list[dict[str, Any]], world: World) -> int:
     """Which of a search's summaries (two agents, best reward first) shows the largest non-tie visible contrast,
     in either direction: outcome-contrast selection. The first where none shows a visible difference."""
     contrasts = [abs(summary_contrast(s, world)) for s in summaries]
@@ -137,7 +142,7 @@ def largest_contrast(summaries: list[dict], world: World) -> int:
 
 
 def roll_out_problem(
-    coupled: list, pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
+    coupled: list[Coupled], pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
 ) -> Rollouts:
     """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
     state one without pushes and ``pushes`` under uniform pushes (`draw_pushes`), stepped together until the
@@ -151,7 +156,7 @@ def roll_out_problem(
     return Rollouts.join(parts)
 
 
-def draw_pushes(problem, pushes: int, rng: np.random.Generator) -> np.ndarray:
+def draw_pushes(problem: Problem, pushes: int, rng: np.random.Generator) -> np.ndarray:
     """The environment actions of one state's rollouts, (pushes + 1, horizon, *action_shape): none in the first,
     uniform within the prior's bound in the others."""
     env = np.zeros((pushes + 1, problem.horizon, *problem.action_shape))
@@ -160,7 +165,9 @@ def draw_pushes(problem, pushes: int, rng: np.random.Generator) -> np.ndarray:
     return env
 
 
-def roll_out_rows(found, env: np.ndarray, shown: Shown | None = None) -> tuple[list[np.ndarray], np.ndarray, int]:
+def roll_out_rows(
+    found: Coupled, env: np.ndarray, shown: Shown | None = None
+) -> tuple[list[np.ndarray], np.ndarray, int]:
     """One state's rollouts, a row each under ``env`` (rows, horizon, ...), stepped together until the search's
     end rule ends each: each one's environment actions up to its end, its visible contrast and the steps all
     took. The contrast is read by ``shown(coupled, row, steps)`` the moment a row ends (a domain's fast path), or

@@ -58,7 +58,7 @@ class DisagreementsConfig:
     importance: str = "auto"  # "last_state" (values), "outcome" (visible contrast), "auto": values where both have one
     agent_ratio: float = 1.0  # weight of agent A's values against B's in last_state
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (self.episodes >= 1, "episodes must be >= 1"),
             (self.horizon >= 2, "horizon must be >= 2 steps"),
@@ -89,7 +89,8 @@ def last_state(values: np.ndarray, ratio: float) -> np.ndarray:
     branch ended in (agents 0 = A, 1 = B)."""
     score_a = values[0, 0] * ratio + values[1, 0]
     score_b = values[0, 1] * ratio + values[1, 1]
-    return np.abs(score_a - score_b)
+    importance: np.ndarray = np.abs(score_a - score_b)
+    return importance
 
 
 def top_k(found: list[Disagreement], k: int, overlap: int, half: int) -> list[Disagreement]:
@@ -111,13 +112,17 @@ def top_k(found: list[Disagreement], k: int, overlap: int, half: int) -> list[Di
     return (chosen + skipped)[:k]
 
 
-def find(group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget: int) -> list[tuple[int, Any, list]]:
+# A step with disagreements: (steps taken, snapshot of every row before that step or None, rows that disagreed).
+Found = tuple[int, Any, list[int]]
+
+
+def find(group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget: int) -> list[Found]:
     """Play A's episodes with B asked at every step, until they end or ``budget`` steps are spent; the
     disagreements as (steps taken, snapshot of every row before that step, rows that disagreed there)."""
     problem = group.coupled.problem
     problem.reset(len(group.env))
     problem.override = Follow(0, ALWAYS)
-    found: list[tuple[int, Any, list]] = []
+    found: list[Found] = []
     running = np.ones(len(group.env), dtype=bool)
     for t in range(group.env.shape[1] - config.horizon // 2 + 1):  # a fork needs room for its branches
         if tracker.steps + running.sum() > budget:
@@ -137,11 +142,11 @@ def find(group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget:
 
 def fork(
     group: Episodes,
-    found: list[tuple[int, Any, list]],
+    found: list[Found],
     tracker: Tracker,
     config: DisagreementsConfig,
     shown: Callable[..., float],
-    summarize: Callable[[Episodes, Disagreement], dict],
+    summarize: Callable[[Episodes, Disagreement], dict[str, Any]],
 ) -> list[Disagreement]:
     """Each disagreement's two branches, h/2 steps each, all stepped together, and their importance."""
     problem, half = group.coupled.problem, config.horizon // 2
@@ -176,7 +181,9 @@ def fork(
     return [d for d in forks if d.branch > 0]
 
 
-def found_rows(group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget: int) -> list[tuple[int, list]]:
+def found_rows(
+    group: Episodes, tracker: Tracker, config: DisagreementsConfig, budget: int
+) -> list[tuple[int, list[int]]]:
     """`find`'s disagreements as (steps taken, rows), without the snapshots: what a worker process sends back."""
     return [(t, rows) for t, _, rows in find(group, tracker, config, budget)]
 
@@ -187,9 +194,9 @@ def replayed_forks(
     config: DisagreementsConfig,
     found_from: int,
     limit: int,
-    kept: list[tuple[int, list]],
+    kept: list[tuple[int, list[int]]],
     source: Source,
-    summarize: Callable[[Episodes, Disagreement], dict],
+    summarize: Callable[[Episodes, Disagreement], dict[str, Any]],
 ) -> list[Disagreement]:
     """The ``kept`` disagreements (steps taken, rows) of a group forked, in a process of its own: its episodes
     played again as `find` played them from ``found_from`` steps (for the snapshots), then `fork`."""
@@ -209,7 +216,7 @@ def unforked(group: Episodes, tracker: Tracker, config: DisagreementsConfig) -> 
     return Disagreement(group.first, 0, int(length[0]), forked=False)
 
 
-def importance_kind(problem, config: DisagreementsConfig) -> str:
+def importance_kind(problem: StateValues, config: DisagreementsConfig) -> str:
     """The importance a search uses: ``last_state`` needs both agents' values."""
     has_values = all(problem.values(x, of=x) is not None for x in (0, 1))
     if config.importance == "last_state" and not has_values:
@@ -224,9 +231,9 @@ def disagreements(
     tracker: Tracker,
     config: DisagreementsConfig,
     shown: Callable[..., float],
-    summarize: Callable[[Episodes, Disagreement], dict],
+    summarize: Callable[[Episodes, Disagreement], dict[str, Any]],
     source: Source | None = None,
-) -> tuple[list[dict], dict]:
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """The top-K disagreements' summaries, most important first, and the record of the search.
     ``summarize(group, disagreement)`` builds a disagreement's summary; ``shown`` is `Domain.shown`. With a
     ``source`` the groups play over worker processes, where ``summarize`` must pickle."""
@@ -283,7 +290,7 @@ class DisagreementSummary:
     summary: Summarize
     horizon: int
 
-    def __call__(self, group: Episodes, d: Disagreement) -> dict:
+    def __call__(self, group: Episodes, d: Disagreement) -> dict[str, Any]:
         end = d.step + d.branch
         if not d.forked:
             return self.summary(group, d.episode, end, None, None, {"episode": d.episode, "disagreement_step": None})
@@ -298,7 +305,7 @@ class AgentDisagreements(Watching):
     needs = (Follows, ActionGap, StateValues)
 
     def held_to_clip(
-        self, config: DisagreementsConfig, reward: RewardConfig, steps: int, given: dict
+        self, config: DisagreementsConfig, reward: RewardConfig, steps: int, given: dict[str, Any]
     ) -> tuple[DisagreementsConfig, RewardConfig]:
         """A disagreement's clip shows its h steps."""
         return replace(config, horizon=held(given, "settings", "horizon", steps)), reward
@@ -310,7 +317,7 @@ class AgentDisagreements(Watching):
         config: DisagreementsConfig,
         summary: Summarize,
         comparison: Comparison,
-    ) -> tuple[list[dict], dict]:
+    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
         summarize = DisagreementSummary(summary, config.horizon)
         return disagreements(
             groups, tracker, config, comparison.domain.shown, summarize, spread_source(comparison, groups)

@@ -41,7 +41,7 @@ class Coupled:
 
     problem: Any  # a search.solvers.problem.Problem
     scenario_name: str
-    summarize: Callable[..., dict]
+    summarize: Callable[..., dict[str, Any]]
     world: World = World()
 
 
@@ -58,14 +58,14 @@ class Problems(ABC):
         """Whether a summary is this world's, by its scenario."""
 
     @abstractmethod
-    def coupled(self, agents: Sequence[str], state: Any, reward: dict) -> Coupled:
+    def coupled(self, agents: Sequence[str], state: Any, reward: dict[str, Any]) -> Coupled:
         """The agents in one coupled problem from ``state``, scored by the divergence reward (its settings)."""
 
     def roll_out(
         self,
         agents: Sequence[str],
-        states: list,
-        reward: dict,
+        states: list[Any],
+        reward: dict[str, Any],
         pushes: int,
         rng: np.random.Generator,
         tracker: Tracker,
@@ -131,8 +131,8 @@ class Domain(Scenarios, Agents, Problems, Clips):
         return evaluation(agent, seed, played, self.world(scenario).score, per_episode=True)
 
     def replay(
-        self, agents: Sequence[str], state: Any, reward: dict, actions: np.ndarray, entry: dict
-    ) -> tuple[float, dict]:
+        self, agents: Sequence[str], state: Any, reward: dict[str, Any], actions: np.ndarray, entry: dict[str, Any]
+    ) -> tuple[float, dict[str, Any]]:
         """A candidate trajectory's exact replay as a summary (solver entry ``entry``), and its clip's visible
         contrast."""
         from search.solvers.contrast import summary_contrast
@@ -142,8 +142,12 @@ class Domain(Scenarios, Agents, Problems, Clips):
         return summary_contrast(summary, coupled.world), summary
 
     def replays(
-        self, agents: Sequence[str], candidates: list[tuple[Any, np.ndarray]], reward: dict, entry: dict
-    ) -> list[tuple[float, dict]]:
+        self,
+        agents: Sequence[str],
+        candidates: list[tuple[Any, np.ndarray]],
+        reward: dict[str, Any],
+        entry: dict[str, Any],
+    ) -> list[tuple[float, dict[str, Any]]]:
         """Exact replays of candidate trajectories ``(state, env_actions)`` as summaries (solver entry ``entry``),
         each with its clip's visible contrast, in order: the representative solver's candidate clips. Over the
         worker processes where the world has no batched fast path (``batched``)."""
@@ -282,8 +286,8 @@ def _choose(found: dict[str, dict[Domain, Claim]], where: str) -> Domain:
 def roll_out_spread(
     domain: str,
     agents: Sequence[str],
-    states: list,
-    reward: dict,
+    states: list[Any],
+    reward: dict[str, Any],
     pushes: int,
     rng: np.random.Generator,
     tracker: Tracker,
@@ -311,13 +315,13 @@ def roll_out_spread(
 
 
 def _roll_out_state(
-    domain: str, agents: Sequence[str], state: Any, reward: dict, env: np.ndarray, shown: Shown | None
+    domain: str, agents: Sequence[str], state: Any, reward: dict[str, Any], env: np.ndarray, shown: Shown | None
 ) -> tuple[list[np.ndarray], np.ndarray, int]:
     from search.solvers.contrast import roll_out_rows
 
     return roll_out_rows(domain_named(domain).coupled(agents, state, reward), env, shown)
 
 
-def _replay_candidate(world: str, *task: Any) -> tuple[float, dict]:
+def _replay_candidate(world: str, *task: Any) -> tuple[float, dict[str, Any]]:
     """`Domain.replays`'s task in a worker: the world by its name."""
     return domain_named(world).replay(*task)

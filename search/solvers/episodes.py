@@ -13,12 +13,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from search.core.workers import in_order
+from search.solvers.problem import Problem
 from search.solvers.rollout import Tracker
+
+if TYPE_CHECKING:
+    from search.solvers.domain import Coupled, Domain  # the domain module imports the solvers
 
 # groups played at once over the workers, each from the steps counted when its chunk starts: a constant, so how far
 # ahead they play never depends on the number of workers
@@ -29,7 +33,7 @@ CHUNK = 8
 class Episodes:
     """Episodes from one starting state: its coupled problem and each episode's environment actions."""
 
-    coupled: Any  # a search.solvers.domain.Coupled
+    coupled: Coupled
     env: np.ndarray  # (E, horizon, *action_shape)
     first: int  # the index of its first episode among all episodes
     state: Any = None  # the starting state, which a worker process rebuilds the coupled problem from
@@ -42,9 +46,9 @@ class Source:
 
     world: str
     agents: tuple[str, ...]
-    reward: dict
+    reward: dict[str, Any]
 
-    def domain(self) -> Any:
+    def domain(self) -> Domain:
         from search.solvers.domain import domain_named  # the domain module imports the solvers
 
         return domain_named(self.world)
@@ -53,7 +57,9 @@ class Source:
         return Episodes(self.domain().coupled(self.agents, state, self.reward), env, first, state)
 
 
-def draw_episodes(coupled_of: Callable[[Any], Any], states: list, count: int, rng: np.random.Generator) -> list:
+def draw_episodes(
+    coupled_of: Callable[[Any], Coupled], states: list[Any], count: int, rng: np.random.Generator
+) -> list[Episodes]:
     """``count`` episodes: from a single state, one without pushes then uniform pushes; from several drawn
     states, one episode each without pushes. ``coupled_of(state)`` is the coupled problem of a state."""
     if len(states) == 1:
@@ -63,7 +69,7 @@ def draw_episodes(coupled_of: Callable[[Any], Any], states: list, count: int, rn
         bound = problem.prior.bound
         env[1:] = rng.uniform(-bound, bound, env[1:].shape)
         return [Episodes(coupled, env, 0, states[0])]
-    found = []
+    found: list[Episodes] = []
     for index, state in enumerate(states[:count]):
         coupled = coupled_of(state)
         problem = coupled.problem
@@ -79,7 +85,7 @@ def continuing(env: np.ndarray, start: int, steps: int) -> np.ndarray:
 
 
 def play(
-    problem,
+    problem: Problem,
     env: np.ndarray,
     tracker: Tracker,
     on_step: Callable[[int, np.ndarray], None],
@@ -115,11 +121,16 @@ def tracker_at(budget: int, steps: int) -> Tracker:
     return tracker
 
 
-Same = Callable[[tuple, Any, int, int, int], bool]
+Same = Callable[[tuple[Any, ...], Any, int, int, int], bool]
 
 
 def in_turn(
-    function: Callable[..., Any], source: Source, groups: list, arguments: list[tuple], tracker: Tracker, same: Same
+    function: Callable[..., Any],
+    source: Source,
+    groups: list[Episodes],
+    arguments: list[tuple[Any, ...]],
+    tracker: Tracker,
+    same: Same,
 ) -> list[tuple[int, Any]]:
     """``function(group, tracker, *arguments[g])`` of each group in turn, as one process plays them one after
     another on one tracker, over worker processes; with the steps counted before each.

@@ -40,7 +40,7 @@ class Follow:
             executed.append(action)
         return executed
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, int]:
         return {"leader": int(self.leader), "steps": int(self.steps)}
 
     @classmethod
@@ -59,7 +59,7 @@ class Follow:
         return cls(leader, steps)
 
 
-def recorded(summary: dict, follow: Follow | None, window: tuple[int, int] | None) -> dict:
+def recorded(summary: dict[str, Any], follow: Follow | None, window: tuple[int, int] | None) -> dict[str, Any]:
     """``summary`` with its following and clip window written in (keys absent when there are none)."""
     if follow is not None:
         summary["follow"] = follow.to_dict()

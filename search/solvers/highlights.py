@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any, cast
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class HighlightsConfig:
     discount: float = 0.99  # of the stand-in's returns
     diversity: float = 0.0  # HIGHLIGHTS-DIV: the smallest feature distance between two moments (0: HIGHLIGHTS)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (self.episodes >= 1 and self.highlights >= 1, "episodes and highlights must be >= 1"),
             (self.context >= 2, "context must be >= 2 steps"),
@@ -80,7 +81,8 @@ class HighlightsDivConfig(HighlightsConfig):
 def q_importance(values: np.ndarray, kind: str) -> np.ndarray:
     """HIGHLIGHTS' state importance from action values (B, A): max - min, or max - second best."""
     ordered = np.sort(values, axis=1)
-    return ordered[:, -1] - (ordered[:, 0] if kind == "max_min" else ordered[:, -2])
+    importance: np.ndarray = ordered[:, -1] - (ordered[:, 0] if kind == "max_min" else ordered[:, -2])
+    return importance
 
 
 @dataclass
@@ -113,8 +115,8 @@ class Forced:
         return executed
 
 
-def importance_kind(problem, agent: int, config: HighlightsConfig) -> str:
-    has_q = provides(problem, ActionValues) and problem.action_values(agent) is not None
+def importance_kind(problem: object, agent: int, config: HighlightsConfig) -> str:
+    has_q = provides(problem, ActionValues) and cast(ActionValues, problem).action_values(agent) is not None
     if config.importance in ("max_min", "second_best") and not has_q:
         raise ValueError(f"{config.importance} importance needs the agent's action values; it has none")
     if config.importance == "auto":
@@ -122,14 +124,20 @@ def importance_kind(problem, agent: int, config: HighlightsConfig) -> str:
     return config.importance
 
 
-def play_agent(group: Episodes, agent: int, tracker: Tracker, config: HighlightsConfig, budget: int):
+# A state the agent played: (step, running rows, features, importance or None, snapshot or None, proposed action).
+Played = tuple[int, np.ndarray, np.ndarray, np.ndarray | None, Any, np.ndarray]
+
+
+def play_agent(
+    group: Episodes, agent: int, tracker: Tracker, config: HighlightsConfig, budget: int
+) -> tuple[str, list[Played], np.ndarray]:
     """The agent's episodes of one group: per state the episode row, step, features, Q importance (where used)
     and a snapshot and proposed action (for the stand-in); and each row's length."""
     problem = group.coupled.problem
     problem.reset(len(group.env))
     problem.override = Follow(agent, ALWAYS)
     kind = importance_kind(problem, agent, config)
-    states = []  # (step, running rows, features, importance or None, snapshot, proposed)
+    states: list[Played] = []
     lengths = np.zeros(len(group.env), dtype=np.int64)
     running = np.ones(len(group.env), dtype=bool)
     for t in range(group.env.shape[1]):
@@ -155,8 +163,8 @@ def measured(states: int, left: int, cost: int) -> int:
 
 
 def rollout_importance(
-    group: Episodes, agent: int, states: list, tracker: Tracker, config: HighlightsConfig, budget: int
-) -> tuple[dict, int]:
+    group: Episodes, agent: int, states: list[Played], tracker: Tracker, config: HighlightsConfig, budget: int
+) -> tuple[dict[tuple[int, int], float], int]:
     """The stand-in importance of the states (step, rows) whose rollouts fit before the tracker reaches ``budget``
     steps (at least one state's): {(row, step): importance}; and the steps of one state's rollouts."""
     problem = group.coupled.problem
@@ -230,8 +238,12 @@ def group_moments(group: Episodes, tracker: Tracker, agent: int, config: Highlig
     played, cost = tracker.steps - start, 0
     if kind == "rollouts":
         scores, cost = rollout_importance(group, agent, states, tracker, config, share)
-    else:
-        scores = {(int(row), t): float(q[row]) for t, running, _, q, _, _ in states for row in np.flatnonzero(running)}
+    else:  # every state has its Q importance
+        scores = {
+            (int(row), t): float(cast(np.ndarray, q)[row])
+            for t, running, _, q, _, _ in states
+            for row in np.flatnonzero(running)
+        }
     moments = [
         Moment(group.first + int(row), t, int(lengths[row]), scores[(int(row), t)], features[row])
         for t, running, features, *_ in states
@@ -248,7 +260,7 @@ def agent_moments(
     config: HighlightsConfig,
     budget: int,
     source: Source | None = None,
-):
+) -> tuple[list[Moment], str]:
     """Every scored state of the agent's episodes, and the importance used; the steps left until ``budget`` are
     shared out evenly over the groups of episodes (starting states). With a ``source`` the groups play over worker
     processes."""
@@ -260,7 +272,7 @@ def agent_moments(
         ]
     else:
 
-        def same(arguments: tuple, found: Scored, steps: int, played_from: int, now: int) -> bool:
+        def same(arguments: tuple[Any, ...], found: Scored, steps: int, played_from: int, now: int) -> bool:
             """Played from ``now``: the same play within the share, the same count of states measured, rollouts
             within the budget."""
             share = arguments[-1]
@@ -281,9 +293,9 @@ def highlights(
     groups: list[Episodes],
     tracker: Tracker,
     config: HighlightsConfig,
-    summarize: Callable[[Episodes, int, Moment], dict],
+    summarize: Callable[[Episodes, int, Moment], dict[str, Any]],
     source: Source | None = None,
-) -> tuple[list[dict], dict]:
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Both agents' reels as summaries (the first agent's moments, then the second's) and the search's record.
     ``summarize(group, agent, moment)`` builds a moment's summary; with a ``source`` the groups play over worker
     processes."""
@@ -308,7 +320,7 @@ class Highlights(Watching):
     needs = (Follows, Features, Alternatives, AgentRewards)
 
     def held_to_clip(
-        self, config: HighlightsConfig, reward: RewardConfig, steps: int, given: dict
+        self, config: HighlightsConfig, reward: RewardConfig, steps: int, given: dict[str, Any]
     ) -> tuple[HighlightsConfig, RewardConfig]:
         """Each reel is half of a question's clip (two reels per question), shared by its highlights."""
         context = steps // 2 // config.highlights
@@ -326,10 +338,10 @@ class Highlights(Watching):
         config: HighlightsConfig,
         summary: Summarize,
         comparison: Comparison,
-    ) -> tuple[list[dict], dict]:
+    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
         agents = comparison.agents
 
-        def of_moment(group: Episodes, agent: int, m: Moment) -> dict:
+        def of_moment(group: Episodes, agent: int, m: Moment) -> dict[str, Any]:
             first, end = m.window(config.context)
             note = {"reel": agents[agent], "episode": m.episode, "state_step": m.step, "importance": m.importance}
             return summary(group, m.episode, end, Follow(agent, end), (first, end), note)

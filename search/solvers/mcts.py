@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numba
 import numpy as np
@@ -60,7 +60,7 @@ class MCTSConfig:
     batch: int = 64  # iterations in flight together (rows of the batched rollouts)
     branch: str = "snapshot"  # "snapshot", or "replay" from reset as the AST toolbox does
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (self.exploration >= 0, "exploration must be >= 0"),
             (self.k > 0 and 0 < self.alpha <= 1, "k must be > 0 and alpha in (0, 1]"),
@@ -93,17 +93,17 @@ class Tree:
     added. An action's child is -1 until it is expanded, its q -inf while no return is back (its siblings go
     first), and it is open while its child does not end the trajectory. State 0 is the initial state."""
 
-    def __init__(self, action_shape: tuple[int, ...], snapshot):
+    def __init__(self, action_shape: tuple[int, ...], snapshot: Any) -> None:
         self.states = np.zeros((16, 7), np.int64)
         self.values = np.zeros(16)  # each state's reward accumulated from the initial state
-        self.snapshots: list = []  # each state's simulator row; None when branching by replay, terminal or dropped
+        self.snapshots: list[Any] = []  # each state's simulator row; None when branching by replay, terminal or dropped
         self.links = np.zeros((16, 6), np.int64)
         self.stats = np.zeros((16, 4))
         self.actions = np.zeros((16, *action_shape))  # each action's environment action, held ``repeat`` steps
         self.n_actions = 0
         self._add_state(-1, 0, 0.0, False, snapshot)
 
-    def _add_state(self, parent: int, depth: int, value: float, terminal: bool, snapshot) -> int:
+    def _add_state(self, parent: int, depth: int, value: float, terminal: bool, snapshot: Any) -> int:
         index = len(self.snapshots)
         if index == self.states.shape[0]:
             self.states, self.values = _grown(self.states), _grown(self.values)
@@ -130,7 +130,7 @@ class Tree:
         self.n_actions += 1
         return index
 
-    def expand(self, action: int, depth: int, value: float, terminal: bool, snapshot) -> None:
+    def expand(self, action: int, depth: int, value: float, terminal: bool, snapshot: Any) -> None:
         """Make the state ``action`` leads to (without its snapshot if the action was dropped meanwhile)."""
         child = self._add_state(action, depth, value, terminal, snapshot if self.links[action, KEPT] else None)
         self.links[action, CHILD] = child
@@ -184,7 +184,7 @@ def _grown(array: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _write_actions(state, states, links, actions, out):
+def _write_actions(state: int, states: np.ndarray, links: np.ndarray, actions: np.ndarray, out: np.ndarray) -> None:
     """``Tree.write_actions_to``: each action on the path to ``state``, once for every step it is held."""
     edge = states[state, PARENT]
     while edge >= 0:
@@ -195,7 +195,16 @@ def _write_actions(state, states, links, actions, out):
 
 
 @numba.njit(cache=True)
-def _descend(root, states, links, stats, k, alpha, exploration, path):
+def _descend(
+    root: int,
+    states: np.ndarray,
+    links: np.ndarray,
+    stats: np.ndarray,
+    k: float,
+    alpha: float,
+    exploration: float,
+    path: np.ndarray,
+) -> tuple[int, int]:
     """Selection's descent from ``root``, counting visits and selections, with the action ids it takes written
     into ``path``: at each state, while it has at least ``k * visits**alpha`` actions, the open one with the
     largest ``q + exploration * sqrt(ln visits / selections)`` (the first of equal scores), until an action
@@ -226,7 +235,7 @@ def _descend(root, states, links, stats, k, alpha, exploration, path):
 
 
 @numba.njit(cache=True)
-def _backup(path, value, mean, links, stats):
+def _backup(path: np.ndarray, value: float, mean: bool, links: np.ndarray, stats: np.ndarray) -> None:
     """Back a return up through the actions ``path``."""
     for action in path:
         links[action, COMPLETED] += 1
@@ -236,7 +245,18 @@ def _backup(path, value, mean, links, stats):
 
 
 @numba.njit(cache=True)
-def _record_step(held, reward, terminal, actions, lengths, returns, taken, countdown, repeat, rollout_depth):
+def _record_step(
+    held: np.ndarray,
+    reward: np.ndarray,
+    terminal: np.ndarray,
+    actions: np.ndarray,
+    lengths: np.ndarray,
+    returns: np.ndarray,
+    taken: np.ndarray,
+    countdown: np.ndarray,
+    repeat: int,
+    rollout_depth: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """Record one batched step in every row in use (as many as ``reward``): its action, length, return and step
     counts. Returns (expanded, ended): the rows whose new edge ends on this step (held ``repeat`` steps, or the
     trajectory ended first), and the rows whose iteration is over."""
@@ -256,7 +276,7 @@ def _record_step(held, reward, terminal, actions, lengths, returns, taken, count
 
 
 class MCTS:
-    def __init__(self, problem: Problem, tracker: Tracker, rng: np.random.Generator, config: MCTSConfig):
+    def __init__(self, problem: Problem, tracker: Tracker, rng: np.random.Generator, config: MCTSConfig) -> None:
         self.problem, self.tracker, self.rng, self.config = problem, tracker, rng, config
         problem.reset(1)
         self.tree = Tree(problem.action_shape, problem.snapshot() if config.branch == "snapshot" else None)
@@ -316,7 +336,7 @@ class MCTS:
     def backup(self, path: np.ndarray, value: float) -> None:
         _backup(path, value, self.config.backup == "mean", self.tree.links, self.tree.stats)
 
-    def state_of(self, state: int):
+    def state_of(self, state: int) -> Any:
         """The state's simulator row: its snapshot, or (the toolbox's way) a replay of its actions from reset,
         which leaves the problem holding that one row."""
         snapshot = self.tree.snapshots[state]
@@ -338,7 +358,7 @@ class InFlight:
 
     Row i of the simulator is row i of every array here (the first ``n`` rows are in use)."""
 
-    def __init__(self, search: MCTS):
+    def __init__(self, search: MCTS) -> None:
         self.search = search
         problem, width = search.problem, search.config.batch
         self.n = 0
@@ -446,7 +466,7 @@ class InFlight:
             spare = remaining - np.maximum(end - self.lengths[:n][running], 1.0).sum()
         places = ended.tolist() + list(range(n, width))  # ended rows first, then unused ones
         saved = problem.snapshot() if n and search.config.branch == "replay" else None
-        snapshots = []
+        snapshots: list[Any] = []
         while len(snapshots) < min(len(places), most) and spare > 0 and search.open and self._replay_fits():
             i = places[len(snapshots)]
             self.path_lengths[i], edge = search.select(self.paths[i])

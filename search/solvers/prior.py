@@ -33,7 +33,8 @@ class ActionPrior:
         """``count`` actions, shaped (count, *shape)."""
         size = (count, *self.shape)
         if self.kind == "uniform":
-            return rng.uniform(-self.bound, self.bound, size)
+            uniform: np.ndarray = rng.uniform(-self.bound, self.bound, size)
+            return uniform
         draws = rng.normal(0.0, self.sigma, size)
         outside = np.abs(draws) > self.bound
         while outside.any():  # rejection keeps the truncated Gaussian exact
@@ -47,4 +48,5 @@ class ActionPrior:
         axes = tuple(range(actions.ndim - len(self.shape), actions.ndim))
         if self.kind == "uniform":
             return np.full(actions.shape[: actions.ndim - len(self.shape)], self._log_norm)
-        return self._log_norm - 0.5 * np.sum((actions / self.sigma) ** 2, axis=axes)
+        log_prob: np.ndarray = self._log_norm - 0.5 * np.sum((actions / self.sigma) ** 2, axis=axes)
+        return log_prob

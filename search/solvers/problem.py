@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 from search.solvers.prior import ActionPrior
 
@@ -31,13 +32,13 @@ class Problem(Protocol):
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Advance every row by one action (B, *action_shape); return (reward (B,), terminal (B,))."""
 
-    def snapshot(self, index=None) -> Any:
+    def snapshot(self, index: npt.ArrayLike | None = None) -> Any:
         """A copy of rows ``index`` (all by default; indices may repeat)."""
 
-    def restore(self, snapshot) -> None:
+    def restore(self, snapshot: Any) -> None:
         """Continue from a snapshot; the batch becomes its rows."""
 
-    def concat(self, snapshots: list) -> Any:
+    def concat(self, snapshots: list[Any]) -> Any:
         """One snapshot holding the rows of several, in order."""
 
 
@@ -45,8 +46,12 @@ class Assign(Protocol):
     """Rows overwritten in place. Optional: MCTS rebuilds the batch with snapshot/concat/restore where a problem
     lacks it (more slowly)."""
 
-    def assign(self, index, snapshot) -> None:
+    def assign(self, index: npt.ArrayLike, snapshot: Any) -> None:
         """Overwrite rows ``index`` with a snapshot's rows (as many); the other rows go on untouched."""
+
+
+# What a coupled problem applies to the agents' proposed actions, given each row's steps taken so far.
+Override = Callable[[list[np.ndarray], np.ndarray], list[np.ndarray]]
 
 
 class Follows(Protocol):
@@ -54,7 +59,7 @@ class Follows(Protocol):
     choice into the actions executed (None: each its own), and ``proposed`` is each agent's own choice on the last
     step, (B, ...) per agent."""
 
-    override: Callable | None
+    override: Override | None
 
     @property
     def proposed(self) -> list[np.ndarray]: ...

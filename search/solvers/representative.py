@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -41,6 +41,8 @@ from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, OwnSummaries, register
 
+Replay = TypeVar("Replay")  # what a candidate's replay gives (a summary)
+
 
 @dataclass(frozen=True)
 class RepresentativeConfig:
@@ -49,7 +51,7 @@ class RepresentativeConfig:
     batch_states: int = 8  # states rolled out together
     alpha: float = ALPHA  # the vote is decided (no more states rolled out) once its sign test's p < alpha / looks
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.states < 1 or self.pushes < 0 or self.batch_states < 1:
             raise ValueError("invalid representative setting: states and batch_states must be >= 1, pushes >= 0")
         if not 0 < self.alpha < 1:
@@ -65,21 +67,22 @@ def candidates(rollouts: Rollouts, result: Vote) -> list[int]:
     else:
         chosen = signs != 0
     index = np.flatnonzero(chosen)
-    return index[np.argsort(-np.abs(rollouts.contrast[index]), kind="stable")].tolist()
+    order: list[int] = index[np.argsort(-np.abs(rollouts.contrast[index]), kind="stable")].tolist()
+    return order
 
 
 def choose(
     order: list[int],
     direction: int,
-    replayed: Callable[[list[int]], list[tuple[float, object]]],
+    replayed: Callable[[list[int]], list[tuple[float, Replay]]],
     top_k: int,
     ahead: int = 1,
-) -> list[tuple[int, object]]:
+) -> list[tuple[int, Replay]]:
     """The first ``top_k`` candidates whose exact replay is a non-tie in ``direction`` (any direction when it is
     0), as (rollout, replay). ``replayed(candidates)`` gives each one's replay contrast and the replay itself;
     it is asked for ``ahead`` candidates at a time (over worker processes), in order, so the choice is the one a
     replay at a time makes."""
-    kept: list[tuple[int, object]] = []
+    kept: list[tuple[int, Replay]] = []
     for start in range(0, len(order), ahead):
         chunk = order[start : start + ahead]
         for i, (contrast, replay) in zip(chunk, replayed(chunk), strict=True):
@@ -92,7 +95,7 @@ def choose(
 
 def roll_out_states(
     roll_out: RollOut,
-    scenarios: list,
+    scenarios: list[Any],
     config: RepresentativeConfig,
     rng: np.random.Generator,
     tracker: Tracker,
@@ -123,11 +126,11 @@ def roll_out_states(
 
 def how_representative(
     roll_out: RollOut,
-    fixed: list,
-    drawn: list,
+    fixed: list[Any],
+    drawn: list[Any],
     config: RepresentativeConfig,
     rng: np.random.Generator,
-) -> list[dict]:
+) -> list[dict[str, Any]]:
     """How representative each fixed scenario is of the distribution ``drawn`` was drawn from, for two agents:
     how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
     pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
@@ -137,7 +140,7 @@ def how_representative(
     result = vote(rollouts, states)
     signs = np.sign(rollouts.contrast)
     agreement = np.array([(signs[rollouts.state == s] == result.direction).mean() for s in range(states)])
-    reports = []
+    reports: list[dict[str, Any]] = []
     for scenario in fixed:
         own = np.sign(roll_out([scenario], config.pushes, rng, tracker).contrast)
         share = float((own == result.direction).mean()) if result.direction else None
@@ -157,7 +160,7 @@ def how_representative(
     return reports
 
 
-def weak_vote(record: dict, agents: Sequence[str]) -> str | None:
+def weak_vote(record: dict[str, Any], agents: Sequence[str]) -> str | None:
     """The warning for a vote that ended undecided (None for a decided one): its clips may show either agent as the
     better one."""
     if record["decided"]:
@@ -178,14 +181,14 @@ def weak_vote(record: dict, agents: Sequence[str]) -> str | None:
 
 def representative(
     roll_out: RollOut,
-    scenarios: list,
+    scenarios: list[Any],
     tracker: Tracker,
     rng: np.random.Generator,
     config: RepresentativeConfig,
-    replay: Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Any]]],
+    replay: Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Replay]]],
     horizon: int,
     ahead: int = 1,
-) -> tuple[list, dict]:
+) -> tuple[list[Replay], dict[str, Any]]:
     """Roll out the drawn ``scenarios`` a batch of states at a time until the vote is decided or the budget fits no
     further state (each rollout takes at most ``horizon`` steps), vote, and choose the top-K clips. The vote is
     looked at after each full batch of the states the budget surely fits, the last look where it stops, each at
@@ -210,7 +213,7 @@ def representative(
     result = vote(rollouts, done_states)
     order, how = candidates(rollouts, result), "voted direction"
 
-    def replayed(chosen: list[int]) -> list[tuple[float, object]]:
+    def replayed(chosen: list[int]) -> list[tuple[float, Replay]]:
         return replay([(scenarios[rollouts.state[i]], rollouts.actions[i]) for i in chosen])
 
     chosen = choose(order, result.direction, replayed, tracker.queue.k, ahead)
@@ -247,7 +250,7 @@ class Representative(OwnSummaries):
 
     def choose(
         self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: RepresentativeConfig
-    ) -> tuple[list[dict], dict]:
+    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
         """The summaries (in its order: the chosen clip first) and the record of its vote. Each summary's scenario
         is the starting state it was drawn as; its solver entry says which state and what contrast the search
         saw."""
@@ -260,13 +263,13 @@ class Representative(OwnSummaries):
         agents = comparison.pair(self.name, "solver votes which of two agents looks better")
         scenarios = domain.draw_states(scenario, comparison.world_settings, rng, config.states)
 
-        def roll_out(states: list, pushes: int, rng: np.random.Generator, tracker: Tracker):
+        def roll_out(states: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
             return domain.roll_out(agents, states, reward_settings, pushes, rng, tracker)
 
         # a world without a batched fast path replays a candidate per worker at a time (Domain.replays)
         ahead = 1 if domain.batched else workers()
 
-        def replay(candidates: list[tuple[object, np.ndarray]]) -> list[tuple[float, dict]]:
+        def replay(candidates: list[tuple[object, np.ndarray]]) -> list[tuple[float, dict[str, Any]]]:
             return domain.replays(agents, candidates, reward_settings, comparison.entry)
 
         horizon = RewardConfig.from_dict(reward_settings).horizon
@@ -286,12 +289,12 @@ class Representative(OwnSummaries):
             }
         return summaries, vote
 
-    def warnings(self, record: dict) -> list[str]:
+    def warnings(self, record: dict[str, Any]) -> list[str]:
         """A weak vote's warning (`weak_vote`)."""
         warning = record.get(self.record_key, {}).get("warning")
         return [warning] if warning else []
 
-    def clip_vote(self, entry: dict) -> ClipVote | None:
+    def clip_vote(self, entry: dict[str, Any]) -> ClipVote | None:
         """The vote's strength as the summary's entry records it."""
         vote = entry.get(self.record_key)
         if vote is None:

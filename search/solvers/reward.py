@@ -26,11 +26,14 @@ steps. The tests hold the formula written with numpy arrays, as the reference th
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from importlib import import_module
+from typing import Protocol, cast
 
 import numba
 import numpy as np
+import numpy.typing as npt
 
 from search.core.outcomes import COLLISION, SUCCESS
 from search.core.settings import ConfigTable
@@ -62,7 +65,7 @@ class RewardConfig(ConfigTable):
     prior: str = "uniform"  # environment action prior: "uniform" or "gaussian"
     prior_sigma: float = 0.1
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         checks = [
             (isinstance(self.horizon, int) and self.horizon >= 1, "horizon must be a whole number of steps >= 1"),
             (self.norm in ("plain", "squared"), "norm must be 'plain' or 'squared'"),
@@ -96,10 +99,13 @@ def state_divergence(agent_pos: np.ndarray, other_pos: np.ndarray, config: Rewar
     return pairwise_divergence(agent_pos, config.norm, config.combine)
 
 
-HEURISTICS = {"state_divergence": state_divergence}
+# h(agent_pos (..., N, 2), other_pos (..., n, 2), config) -> (...)
+Heuristic = Callable[[np.ndarray, np.ndarray, RewardConfig], np.ndarray]
+
+HEURISTICS: dict[str, Heuristic] = {"state_divergence": state_divergence}
 
 
-def heuristic_function(spec: str):
+def heuristic_function(spec: str) -> Heuristic:
     """A heuristic ``h(agent_pos (..., N, 2), other_pos (..., n, 2), config) -> (...)`` by name or
     ``module:attribute``: ``other_pos`` holds the world's other movers."""
     if spec in HEURISTICS:
@@ -107,19 +113,47 @@ def heuristic_function(spec: str):
     if ":" in spec:
         module_name, _, attribute = spec.partition(":")
         try:
-            return getattr(import_module(module_name), attribute)
+            return cast(Heuristic, getattr(import_module(module_name), attribute))
         except (ImportError, AttributeError) as error:
             raise ValueError(f"cannot load heuristic {spec!r}: {error}") from None
     raise ValueError(f"unknown heuristic {spec!r}: use one of {sorted(HEURISTICS)} or module:attribute")
 
 
+class Replayed(Protocol):
+    """A replayed trajectory as `DivergenceReward.trajectory` reads it (a world's, such as the crowd's
+    ``coupled.Trajectory``): per step (T, ...) and per agent (N,)."""
+
+    @property
+    def time(self) -> np.ndarray: ...  # (T,)
+
+    @property
+    def event_time(self) -> np.ndarray: ...  # (N,), NaN where an agent's episode has not ended
+
+    @property
+    def outcome(self) -> np.ndarray: ...  # (N,)
+
+    @property
+    def agent_actions(self) -> np.ndarray: ...  # (T, N, 2)
+
+    @property
+    def agent_pos(self) -> np.ndarray: ...  # (T, N, 2)
+
+    @property
+    def other_pos(self) -> np.ndarray: ...  # (T, n, 2)
+
+    @property
+    def env_actions(self) -> np.ndarray: ...  # (T, n, 2)
+
+
 class DivergenceReward:
-    def __init__(self, config: RewardConfig, prior: ActionPrior):
+    def __init__(self, config: RewardConfig, prior: ActionPrior) -> None:
         self.config = config
         self.prior = prior
         self.heuristic = heuristic_function(config.heuristic)
 
-    def events(self, newly_done: np.ndarray, outcome: np.ndarray, all_done: np.ndarray, t: np.ndarray):
+    def events(
+        self, newly_done: np.ndarray, outcome: np.ndarray, all_done: np.ndarray, t: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(goal, end) flags (...) of a step from per-agent flags (..., N) and the step number t (...)."""
         goal_outcome = outcome == SUCCESS
         if self.config.collision_is_goal:
@@ -131,7 +165,14 @@ class DivergenceReward:
         end = ~goal & ((t >= self.config.horizon) | finished)
         return goal, end
 
-    def divergence(self, agent_actions, agent_pos, other_pos, goal, end) -> np.ndarray:
+    def divergence(
+        self,
+        agent_actions: np.ndarray,
+        agent_pos: np.ndarray,
+        other_pos: np.ndarray,
+        goal: np.ndarray,
+        end: np.ndarray,
+    ) -> np.ndarray:
         """Each step's divergence term (B,), from agent arrays (B, N, 2), the other movers (B, n, 2) and the
         step's events (B,): the goal term on a goal step, the end term on an end step, the action divergence
         otherwise."""
@@ -156,7 +197,15 @@ class DivergenceReward:
         )
         return reward
 
-    def step_terms(self, agent_actions, agent_pos, other_pos, env_action, goal, end) -> dict[str, np.ndarray]:
+    def step_terms(
+        self,
+        agent_actions: np.ndarray,
+        agent_pos: np.ndarray,
+        other_pos: np.ndarray,
+        env_action: np.ndarray,
+        goal: np.ndarray,
+        end: np.ndarray,
+    ) -> dict[str, np.ndarray]:
         """Each reward term of one step (B,), from agent arrays (B, N, 2), the other movers (B, n, 2), the
         environment action (B, n, 2) and the step's events (B,)."""
         c = self.config
@@ -170,14 +219,22 @@ class DivergenceReward:
             else np.zeros(goal.shape),
         }
 
-    def step(self, agent_actions, agent_pos, other_pos, env_action, goal, end) -> np.ndarray:
+    def step(
+        self,
+        agent_actions: np.ndarray,
+        agent_pos: np.ndarray,
+        other_pos: np.ndarray,
+        env_action: np.ndarray,
+        goal: np.ndarray,
+        end: np.ndarray,
+    ) -> np.ndarray:
         """One step's reward (B,): the sum of its terms, of which only the divergence term and the plausibility
         term can be nonzero (a step is a goal, an end or neither)."""
         c = self.config
         reward = self.divergence(agent_actions, agent_pos, other_pos, goal, end)
         return reward + c.plausibility * self.prior.log_prob(env_action) if c.plausibility else reward
 
-    def trajectory(self, trajectory, dt: float) -> tuple[float, dict[str, float], np.ndarray]:
+    def trajectory(self, trajectory: Replayed, dt: float) -> tuple[float, dict[str, float], np.ndarray]:
         """Total reward, per-term totals and per-step terminal flags of a replayed ``coupled.Trajectory``.
 
         Totals are summed step by step in order, exactly as a search accumulates them.
@@ -199,7 +256,7 @@ class DivergenceReward:
 _STATE_DIVERGENCE = np.empty(0)  # _step's heuristic values when the heuristic is the state divergence
 
 
-def _rows(values) -> np.ndarray:
+def _rows(values: npt.ArrayLike) -> np.ndarray:
     """Agent vectors (..., N, 2) as rows (B, N, 2) of float64, as the kernels take them (no copy if they are)."""
     values = np.asarray(values, dtype=np.float64)
     if values.ndim < 2 or values.shape[-2] < 2 or values.shape[-1] != 2:
@@ -211,7 +268,7 @@ def _rows(values) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _divergence(values, row, squared, minimum):
+def _divergence(values: np.ndarray, row: int, squared: bool, minimum: bool) -> float:
     """The divergence of row ``row`` of agent vectors (B, N, 2): the plain or squared norm of each pair's
     difference, then their minimum or their mean (the pairs summed one by one, in the order (0, 1), (0, 2), ...,
     (1, 2), ...)."""
@@ -228,7 +285,7 @@ def _divergence(values, row, squared, minimum):
 
 
 @numba.njit(cache=True)
-def _divergences(values, squared, minimum, out):
+def _divergences(values: np.ndarray, squared: bool, minimum: bool, out: np.ndarray) -> None:
     """``_divergence`` of every row of ``values`` (B, N, 2) into ``out`` (B,)."""
     for b in range(out.shape[0]):
         out[b] = _divergence(values, b, squared, minimum)
@@ -236,8 +293,19 @@ def _divergences(values, squared, minimum, out):
 
 @numba.njit(cache=True)
 def _step(
-    agent_actions, agent_pos, goal, end, heuristic, squared, minimum, goal_bonus, alpha, horizon_offset, beta, reward
-):
+    agent_actions: np.ndarray,
+    agent_pos: np.ndarray,
+    goal: np.ndarray,
+    end: np.ndarray,
+    heuristic: np.ndarray,
+    squared: bool,
+    minimum: bool,
+    goal_bonus: float,
+    alpha: float,
+    horizon_offset: float,
+    beta: float,
+    reward: np.ndarray,
+) -> None:
     """Each row's divergence term into ``reward`` (B,): ``goal_bonus + alpha * d_s`` on a goal step,
     ``horizon_offset + beta * h`` on an end step (h: ``heuristic[b]``, or d_s where ``heuristic`` is empty), the
     action divergence d_a otherwise."""

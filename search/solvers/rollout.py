@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import cast
 
 import numpy as np
 
@@ -56,7 +57,7 @@ class Tracker:
     def count(self, steps: int) -> None:
         self.steps += int(steps)
         if self._bar is not None:
-            self._bar.update(min(int(steps), self._bar.total - self._bar.n))
+            self._bar.update(min(int(steps), cast(float, self._bar.total) - self._bar.n))  # total: the budget
 
     def finish(self, reward: float, actions: np.ndarray) -> None:
         self.trajectories += 1

@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from importlib.util import find_spec
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,12 @@ from search.solvers.problem import require
 from search.solvers.reward import RewardConfig
 from search.solvers.rollout import Tracker
 from search.solvers.solver import DEFAULT_SOLVER, Comparison, OwnSummaries, ProblemSearch, solver_named
+
+if TYPE_CHECKING:
+    from concurrent.futures import ProcessPoolExecutor
+
+# Independent jobs: key -> (function, arguments), each run as function(*arguments).
+Tasks = dict[Any, tuple[Callable[..., Any], tuple[Any, ...]]]
 
 
 @dataclass(frozen=True)
@@ -46,11 +52,11 @@ class SearchJob:
     seed: int = 0
     top_k: int = 30
     solver_config: Any = None
-    reward_settings: dict = field(default_factory=dict)
-    world_settings: dict = field(default_factory=dict)
+    reward_settings: dict[str, Any] = field(default_factory=dict)
+    world_settings: dict[str, Any] = field(default_factory=dict)
     world: str | None = None  # the world's name where a study names it (world = "..."), else found by the agents
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if len(self.agents) < 2:
             raise ValueError("a search compares at least two agents: give --agents A,B[,C...]")
         config_class = solver_named(self.solver).config_class
@@ -75,10 +81,10 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", stem)
 
 
-def parse_settings(cls, items: list[str], what: str) -> dict:
+def parse_settings(cls: type, items: list[str], what: str) -> dict[str, Any]:
     """``key=value`` strings as a dict for dataclass ``cls``, each value converted to its field's type."""
     types = field_types(cls)
-    settings = {}
+    settings: dict[str, Any] = {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip()
@@ -130,7 +136,9 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     entry = {"name": job.solver, "parameters": asdict(job.solver_config), "seed": job.seed, "budget": job.budget}
     tracker = Tracker(job.budget, job.top_k, progress=progress, description=job.label)
     rng = np.random.default_rng(job.seed)
-    chosen: tuple[str, list, dict] | None = None  # a solver's own: its record's key, summaries and record
+    chosen: tuple[str, list[dict[str, Any]], dict[str, Any]] | None = (
+        None  # a solver's own: its record's key, summaries and record
+    )
     try:
         if isinstance(solver, ProblemSearch):
             coupled = domain.coupled(job.agents, domain.state(job.scenario, job.world_settings), job.reward_settings)
@@ -196,7 +204,7 @@ def write_outputs(out: str | Path, files: dict[str, str]) -> Path:
 
 
 def study_jobs(
-    agents: list[str], scenarios: list[str], solvers: list[str], joint: bool = False, **common
+    agents: list[str], scenarios: list[str], solvers: list[str], joint: bool = False, **common: Any
 ) -> list[SearchJob]:
     """Every pair of agents (or, with ``joint``, all agents together) on every scenario with every solver."""
     groups = [tuple(agents)] if joint else list(itertools.combinations(agents, 2))
@@ -214,7 +222,7 @@ class JobFailed(RuntimeError):
 
 
 def in_processes(
-    tasks: dict, workers: int, describe: Callable[[Any], str] = str, pool=None
+    tasks: Tasks, workers: int, describe: Callable[[Any], str] = str, pool: ProcessPoolExecutor | None = None
 ) -> Iterator[tuple[Any, Any]]:
     """Run ``tasks`` (key -> (function, arguments)), ``workers`` at a time in separate processes (``pool``'s where
     one is open, in this process when one worker or one task), yielding (key, result) as each finishes. A task
@@ -244,7 +252,7 @@ def in_processes(
         raise
 
 
-def process_pool(workers: int):
+def process_pool(workers: int) -> ProcessPoolExecutor:
     """``workers`` fresh processes, each with one core's worth of threads."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
@@ -254,7 +262,7 @@ def process_pool(workers: int):
 
 
 @contextmanager
-def _named(key, describe: Callable[[Any], str]):
+def _named(key: Any, describe: Callable[[Any], str]) -> Iterator[None]:
     try:
         yield
     except Exception as error:
@@ -289,7 +297,7 @@ class Backend:
     returns values, never paths, so a worker on another machine needs no shared disk; the caller writes the
     files, so where a job ran never changes them."""
 
-    def __init__(self, name: str = "process", workers: int = 1, address: str | None = None):
+    def __init__(self, name: str = "process", workers: int = 1, address: str | None = None) -> None:
         if name not in BACKENDS:
             raise ValueError(f"unknown backend {name!r}: use {' or '.join(map(repr, BACKENDS))}")
         if workers < 1:
@@ -306,7 +314,7 @@ class Backend:
         if address is not None:
             answers(address)
         self.name, self.workers, self.address = name, workers, address
-        self._pool = None
+        self._pool: ProcessPoolExecutor | None = None
 
     def __repr__(self) -> str:
         return f"Backend({self.name!r}, workers={self.workers}, address={self.address!r})"
@@ -343,7 +351,7 @@ class Backend:
             if started_here:
                 ray.shutdown()
 
-    def run(self, tasks: dict, describe: Callable[[Any], str] = str) -> Iterator[tuple[Any, Any]]:
+    def run(self, tasks: Tasks, describe: Callable[[Any], str] = str) -> Iterator[tuple[Any, Any]]:
         """(key, result) of each of ``tasks`` (key -> (function, arguments)) as it finishes; a failed one raises
         JobFailed naming it by ``describe(key)`` and cancels those not started."""
         if self.name == "process":
@@ -368,7 +376,7 @@ class Backend:
                     ray.cancel(ref)
 
 
-def _in_worker(place: tuple[str, list[str]], function, arguments: tuple):
+def _in_worker(place: tuple[str, list[str]], function: Callable[..., Any], arguments: tuple[Any, ...]) -> Any:
     """A job on a Ray worker, one core's worth of threads, reading relative files and importing as the command
     does where its folder is there too (a worker on this machine); elsewhere from the worker's own."""
     one_core()
@@ -386,7 +394,7 @@ def run_all(
     backend: str = "process",
     ray_address: str | None = None,
     progress: bool = True,
-) -> dict:
+) -> dict[str, Any]:
     """Run jobs in parallel and write each one's files to ``out/<solver>/<agents>/<scenario>/``; also writes
     ``out/study.json`` with every job's record. Returns that record."""
     from tqdm import tqdm

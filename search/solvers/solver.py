@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from app.formats import ClipVote
+    from search.solvers.domain import Domain
     from search.solvers.problem import Problem
     from search.solvers.reward import RewardConfig
     from search.solvers.rollout import Tracker
@@ -39,12 +40,12 @@ class Solver(ABC):
     reels: bool = False  # its clips are a reel of moments per agent, not one clip of the pair
     needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.solvers.problem)
 
-    def warnings(self, record: dict) -> list[str]:
+    def warnings(self, record: dict[str, Any]) -> list[str]:
         """What a search's run.json record warns of, in words: the runner, `foil search` and the bundle print
         these and read no solver's record themselves. Default: nothing."""
         return []
 
-    def clip_vote(self, entry: dict) -> ClipVote | None:
+    def clip_vote(self, entry: dict[str, Any]) -> ClipVote | None:
         """The vote over starting states that a summary's solver entry records for its clip, each agent's count
         in the search's order (the bundle's audit holds it to the ground truth). Default: none."""
         return None
@@ -53,14 +54,16 @@ class Solver(ABC):
         """Whether it starts from a scenario of this kind (a distribution of starting states, or a fixed one)."""
         return self.starts == "either" or (self.starts == "distribution") == distribution
 
-    def held_to_clip(self, config: Any, reward: RewardConfig, steps: int, given: dict) -> tuple[Any, RewardConfig]:
+    def held_to_clip(
+        self, config: Any, reward: RewardConfig, steps: int, given: dict[str, Any]
+    ) -> tuple[Any, RewardConfig]:
         """Its settings and reward with each clip held to ``steps`` steps of video per question (a study's
         clip_seconds); ``given`` holds the settings the study gave ("settings", "reward"), refused where they say
         otherwise. By default a searched clip plays on to the reward's horizon."""
         return config, reward.with_horizon(held(given, "reward", "horizon", steps))
 
 
-def held(given: dict, table: str, key: str, value: int) -> int:
+def held(given: dict[str, Any], table: str, key: str, value: int) -> int:
     """``value`` for the setting ``table.key`` that a clip length fixes, refusing a study that gave another."""
     if key in given[table] and given[table][key] != value:
         raise ValueError(f"[build.budget] clip_seconds makes {key} {value} steps here; leave {table}.{key} out")
@@ -92,10 +95,10 @@ class Comparison:
 
     agents: tuple[str, ...]
     scenario: str
-    domain: Any
-    world_settings: dict
-    reward_settings: dict
-    entry: dict = field(default_factory=dict)
+    domain: Domain
+    world_settings: dict[str, Any]
+    reward_settings: dict[str, Any]
+    entry: dict[str, Any] = field(default_factory=dict)
 
     def pair(self, solver: str, what: str) -> list[str]:
         """The two agents compared, refusing any other number."""
@@ -113,7 +116,7 @@ class OwnSummaries(Solver):
     @abstractmethod
     def choose(
         self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: Any
-    ) -> tuple[list[dict], dict]:
+    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
         """The summaries, shown first first, and the record of how they were chosen."""
 
 

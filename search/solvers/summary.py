@@ -7,17 +7,18 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 from app.formats import load_summary, summary_json
 
 REPLAY_KEYS = ("agents", "scenario", "solver", "reward_parameters", "env_actions")  # what verify needs
 
 
-def differences(expected, found, where: str = "", limit: int = 10) -> list[str]:
+def differences(expected: Any, found: Any, where: str = "", limit: int = 10) -> list[str]:
     """Paths at which two JSON values differ (floats compared exactly), at most ``limit``."""
     out: list[str] = []
 
-    def walk(a, b, path):
+    def walk(a: Any, b: Any, path: str) -> None:
         if len(out) >= limit:
             return
         if isinstance(a, dict) and isinstance(b, dict):

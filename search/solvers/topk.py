@@ -71,4 +71,5 @@ class TopK:
 
 
 def _key(actions: np.ndarray) -> bytes:
-    return actions.shape[0].to_bytes(4, "little") + actions.tobytes()
+    rows: int = actions.shape[0]
+    return rows.to_bytes(4, "little") + actions.tobytes()

@@ -20,7 +20,7 @@ from search.solvers.solver import Comparison, OwnSummaries
 
 # A moment's summary: (its episodes, the episode, the steps it plays, whom the agents follow, the steps shown, what
 # its solver entry adds).
-Summarize = Callable[[Episodes, int, int, Follow | None, tuple[int, int] | None, dict], dict]
+Summarize = Callable[[Episodes, int, int, Follow | None, tuple[int, int] | None, dict[str, Any]], dict[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -28,11 +28,17 @@ class EpisodeSummary:
     """A moment's summary (`Summarize`) with the solver entry every summary carries: a value, so that a worker
     process that scores a fork by its summary builds it as this one would."""
 
-    entry: dict
+    entry: dict[str, Any]
 
     def __call__(
-        self, group: Episodes, episode: int, end: int, follow: Follow | None, window: tuple[int, int] | None, note: dict
-    ) -> dict:
+        self,
+        group: Episodes,
+        episode: int,
+        end: int,
+        follow: Follow | None,
+        window: tuple[int, int] | None,
+        note: dict[str, Any],
+    ) -> dict[str, Any]:
         actions = group.env[episode - group.first, :end]
         return group.coupled.summarize(actions, self.entry | note, follow=follow, window=window, horizon=end)
 
@@ -53,7 +59,7 @@ class Watching(OwnSummaries):
 
     def choose(
         self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: Any
-    ) -> tuple[list[dict], dict]:
+    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
         """The summaries the method chooses from the episodes it watches, each with the steps the whole search
         took, as every solver's summaries say."""
         agents = comparison.pair(self.name, "method compares two agents")
@@ -74,5 +80,5 @@ class Watching(OwnSummaries):
     @abstractmethod
     def watch(
         self, groups: list[Episodes], tracker: Tracker, config: Any, summary: Summarize, comparison: Comparison
-    ) -> tuple[list[dict], dict]:
+    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
         """The method's summaries of the watched episodes (each built by ``summary``) and its record."""
