@@ -30,7 +30,7 @@ from pydantic import (
 )
 from typing_extensions import TypedDict as CheckedDict  # the one pydantic validates on Python 3.11
 
-from app.visible import World
+from app.visible import CROWD, World
 
 SUMMARY_FORMAT = "foil.summary/2"
 # foil.summary/1 named a step's keys and the closest distance in the crowd's words: read as the /2 keys they were
@@ -273,8 +273,8 @@ class Manifest(BaseModel):
     @field_validator("world")
     @classmethod
     def _known_world(cls, world: dict[str, Any] | None) -> dict[str, Any] | None:
-        World.from_manifest(world)  # a world this server cannot speak of is refused at start-up
-        return world
+        shown = World.from_manifest(world)  # a world this server cannot speak of is refused at start-up
+        return None if shown == CROWD else world  # the crowd's world is no world object: a crowd manifest has none
 
     @model_serializer(mode="wrap")
     def _leaves_empty_keys_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:

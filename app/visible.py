@@ -129,68 +129,138 @@ class Score:
         return f"kept {self.name} within {low} to {high} for {one_decimal(summed)} seconds"
 
 
+# The words' defaults speak of agents and outcomes in general. A default text may name the agent's word: ``{Agent}``
+# as given ("Car"), ``{agent}`` in lower case, ``{an_agent}`` after its article ("a car", "an agent"), ``{agents}``
+# and ``{Agents}`` the agents in running text (`Words.many`) and capitalised; a `Words` fills them in when made, so
+# ``Words(agent="Car")`` reads "Car 7" and "cars" in every text it leaves at its default.
+_NAMED = ("{Agent}", "{agent}", "{an_agent}", "{Agents}", "{agents}")
+
+
 @dataclass(frozen=True)
 class Words:
-    """What a world's pages call the things its clips show; the defaults are the crowd's. Legend lines are plain
-    text where ``**text**`` reads in bold (the pages escape everything else); an empty `legend_trails` or
-    `others_marker` leaves that line or marker out. The outcome phrases follow a robot's label ("Robot 2 ...");
-    `success` and `collision` may say ``{seconds}``, the run's time it happened as the clip's clock shows it (one
-    decimal)."""
+    """What a world's pages call the things its clips show. The defaults speak of agents and outcomes in general,
+    in the agent's word (`agent`, `agents`): a world sets the texts its clips need in words of their own; the
+    crowd's are `CROWD_WORDS`. Legend lines are plain text where ``**text**`` reads in bold (the pages escape
+    everything else); an empty `legend_trails` or `others_marker` leaves that line or marker out. The outcome
+    phrases follow an agent's label ("Agent 2 ..."); `success` and `collision` may say ``{seconds}``, the run's time
+    it happened as the clip's clock shows it (one decimal)."""
 
-    agent: str = "Robot"  # the word before an agent's number, on its clips and the pages: "Robot 2"
-    agents: str = ""  # the agents in running text ("the cars"); empty: the agent's word and an s ("robots")
-    clip_title: str = "Clip of two robots in a crowd"  # the video's accessible name on a question's page
-    # a pair of reels (each robot on its own, in moments of its own runs): the line above them and each reel's
-    # accessible name, which the page follows with the robot's label
-    reels_intro: str = "Each robot is shown on its own, in moments from its own runs through a crowd."
-    reel_title: str = "Clip of one robot on its own in a crowd"
-    example_caption: str = (  # under the instructions' example clip, unless the study file says otherwise
-        "An example: two robots, each with its own colour, shape and name, move through a crowd to the same goal."
-    )
+    agent: str = "Agent"  # the word before an agent's number, on its clips and the pages: "Agent 2"
+    agents: str = ""  # the agents in running text ("the cars"); empty: the agent's word and an s ("agents")
+    clip_title: str = "Clip of two {agents} side by side, each in its own copy of the same world"  # a video's name
+    # a pair of reels (each agent on its own, in moments of its own runs): the line above them and each reel's
+    # accessible name, which the page follows with the agent's label
+    reels_intro: str = "Each {agent} is shown on its own, in moments from its own runs."
+    reel_title: str = "Clip of one {agent} on its own"
+    # under the instructions' example clip, unless the study file says otherwise
+    example_caption: str = "An example: two {agents}, each in its own copy of the same world, side by side."
     legend_robots: str = (
-        "Robots: each has a colour, a shape (disc, square, diamond, triangle, upside-down triangle or plus) and a"
-        " number of its own, drawn on it; its name, such as Robot 7, is listed below the picture."
+        "{Agents}: each view shows one {agent}, named below the picture, such as {Agent} 7, with a colour and a"
+        " shape of its own."
     )
-    others_marker: str = "0"  # the text in the grey disc that marks the others' legend line
-    legend_others: str = "People: grey discs with a number, each with a short tail showing where it walks."
-    legend_trails: str = "Trails: the line behind a robot is the path it has taken."
+    others_marker: str = ""  # the text in the grey disc that marks the others' legend line
+    legend_others: str = "Everything else in a view is the world: it starts the same in both views."
+    legend_trails: str = ""
     legend_crash: str = (
-        "A yellow-and-black burst and **CRASH** mark a robot bumping into a person; the list below the picture then"
-        " says **CRASHED**."
+        "A yellow-and-black burst marks the moment {an_agent} fails; the list below the picture then says **failed**."
     )
     legend_status: str = (
-        "Below the picture each robot's line says **reached goal** or **out of time** with the time, or **on its"
-        " way** (**still on its way** when the clip ends, with how far it stopped from its goal)."
+        "Below the picture each {agent}'s line says **succeeded**, **failed**, **out of time** or **running**, with"
+        " the time."
     )
-    success: str = "reached the goal after {seconds} seconds"
-    collision: str = "bumped into a person"
-    timeout: str = "ran out of time before reaching the goal"
-    running: str = "was still on its way when the clip ended"
-    close_call: str = "came close to people"
+    success: str = "succeeded after {seconds} seconds"
+    collision: str = "failed after {seconds} seconds"
+    timeout: str = "ran out of time"
+    running: str = "was still going when the clip ended"
+    close_call: str = ""
     # the instructions' paragraph on how agents are named, the line above a ranking round's clips and the notice
     # at each new round: a study file's [texts] robot_names, names_in_round and new_round say otherwise
     names: str = (
-        "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
-        "for two different robots in this study, and in a ranking round each name is one robot in "
-        "all of the round's clips. Each new round brings robots with new names."
+        "Every {agent} has a name (such as {Agent} 7), colour and shape of its own. A name never stands for two"
+        " different {agents} in this study, and in a ranking round each name is one {agent} in all of the round's"
+        " clips. Each new round brings {agents} with new names."
     )
-    names_in_round: str = "In this round each name, colour and shape is one robot in all three clips."
+    names_in_round: str = "In this round each name, colour and shape is one {agent} in all three clips."
     new_round: str = (
-        "A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
-        "from this round's clips."
+        "A new round begins. Its {agents} have names you have not seen in the earlier rounds: judge them from this"
+        " round's clips."
     )
+
+    def __post_init__(self) -> None:
+        """Fills the agent's word into each text left at its default (a text of the world's own stays as given)."""
+        many = self.many()
+        named = {
+            "{Agent}": self.agent,
+            "{agent}": self.agent.lower(),
+            "{an_agent}": ("an " if self.agent[:1].lower() in "aeiou" else "a ") + self.agent.lower(),
+            "{Agents}": many[:1].upper() + many[1:],
+            "{agents}": many,
+        }
+        for field in fields(self):
+            text = getattr(self, field.name)
+            if text == field.default and any(name in text for name in _NAMED):
+                for name, word in named.items():
+                    text = text.replace(name, word)
+                object.__setattr__(self, field.name, text)
 
     def many(self) -> str:
         """The agents in running text: `agents`, or the agent's word in lower case with an s."""
         return self.agents or self.agent.lower() + "s"
 
+    def one(self) -> str:
+        """One agent in running text: the agent's word in lower case ("robot", "car")."""
+        return self.agent.lower()
+
+
+# The crowd's words: robots among people, reaching a goal. A crowd bundle's manifest has no `world` object, and its
+# pages read these.
+CROWD_WORDS = Words(
+    agent="Robot",
+    clip_title="Clip of two robots in a crowd",
+    reels_intro="Each robot is shown on its own, in moments from its own runs through a crowd.",
+    reel_title="Clip of one robot on its own in a crowd",
+    example_caption=(
+        "An example: two robots, each with its own colour, shape and name, move through a crowd to the same goal."
+    ),
+    legend_robots=(
+        "Robots: each has a colour, a shape (disc, square, diamond, triangle, upside-down triangle or plus) and a"
+        " number of its own, drawn on it; its name, such as Robot 7, is listed below the picture."
+    ),
+    others_marker="0",
+    legend_others="People: grey discs with a number, each with a short tail showing where it walks.",
+    legend_trails="Trails: the line behind a robot is the path it has taken.",
+    legend_crash=(
+        "A yellow-and-black burst and **CRASH** mark a robot bumping into a person; the list below the picture then"
+        " says **CRASHED**."
+    ),
+    legend_status=(
+        "Below the picture each robot's line says **reached goal** or **out of time** with the time, or **on its"
+        " way** (**still on its way** when the clip ends, with how far it stopped from its goal)."
+    ),
+    success="reached the goal after {seconds} seconds",
+    collision="bumped into a person",
+    timeout="ran out of time before reaching the goal",
+    running="was still on its way when the clip ended",
+    close_call="came close to people",
+    names=(
+        "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
+        "for two different robots in this study, and in a ranking round each name is one robot in "
+        "all of the round's clips. Each new round brings robots with new names."
+    ),
+    names_in_round="In this round each name, colour and shape is one robot in all three clips.",
+    new_round=(
+        "A new round begins. Its robots have names you have not seen in the earlier rounds: judge them "
+        "from this round's clips."
+    ),
+)
+
 
 @dataclass(frozen=True)
 class World:
     """Which world a bundle's clips show, the rule that judges them (`RULES`) and its words: the manifest's
-    `world` object, absent for the crowd."""
+    `world` object, absent for the crowd (`CROWD`). The defaults are a world's in general, in `Words`' defaults."""
 
-    domain: str = "crowd"
+    domain: str = "world"
     rule: str = "goal"
     words: Words = Words()
     score: Score | None = None  # what each view shows of how its agent is doing (`Score`); None: nothing
@@ -210,14 +280,15 @@ class World:
 
     @classmethod
     def from_manifest(cls, data: Mapping[str, Any] | None) -> World:
-        """The world of a manifest's `world` object (None: the crowd's). Words it leaves out keep the crowd's; a
-        key, rule or word this version does not know is a ValueError that names it."""
+        """The world of a manifest's `world` object (None: the crowd's, `CROWD`). Words it leaves out keep their
+        defaults (`Words`, in its agent's word); a key, rule or word this version does not know is a ValueError
+        that names it."""
         if data is None:
-            return cls()
+            return CROWD
         if not isinstance(data, Mapping):
             raise ValueError(f"world must be an object with domain, rule, words and score, not {data!r}")
         _known("world", data, ("domain", "rule", "words", "score"))
-        domain, rule, words = data.get("domain", "crowd"), data.get("rule", "goal"), data.get("words", {})
+        domain, rule, words = data.get("domain", "world"), data.get("rule", "goal"), data.get("words", {})
         if not isinstance(domain, str) or not domain:
             raise ValueError(f"world.domain must be a world's name, not {domain!r}")
         if rule not in RULES:
@@ -234,6 +305,15 @@ class World:
                 raise ValueError(f"world.words.{name}: {text!r} may name only {{seconds}} ({error})") from None
         score = None if data.get("score") is None else Score.from_manifest(data["score"])
         return cls(domain=domain, rule=rule, words=Words(**words), score=score)
+
+    def has_outcomes(self) -> bool:
+        """Whether its clips end in outcomes a viewer reads (reaching a goal, a crash, lasting): not a world judged
+        by its visible score alone (the rule "score"), whose pages and reports speak of the score instead."""
+        return self.rule != "score"
+
+
+# The crowd's world: a manifest without a `world` object shows it, and the crowd's domain says so.
+CROWD = World(domain="crowd", rule="goal", words=CROWD_WORDS)
 
 
 def _known(where: str, data: Mapping[str, Any], keys: tuple[str, ...]) -> None:
@@ -297,7 +377,7 @@ class VisibleClip:
     progress: tuple[float, ...]
     end_s: float
     to_goal: tuple[float | None, ...] = ()  # metres from the goal at the end, where known
-    world: World = World()
+    world: World = CROWD
     summed: tuple[float, ...] = ()  # per label its visible score summed over the clip (`Score.of`), where shown
     clock_s: float = 0.0  # the run's seconds before the clip's first state (a window's start), as its clock shows
 
@@ -334,9 +414,9 @@ class VisibleClip:
             outcomes=tuple(_since(summary["outcomes"][k], start_s) for k in order),
             progress=tuple(_progress(summary, k) for k in order),
             end_s=max(float(steps[-1]["t"]) - start_s, 1e-6),
-            world=world or World(),
+            world=world or CROWD,
             to_goal=tuple(_to_goal(summary, k) for k in order),
-            summed=_summed(summary, order, first, world or World()),
+            summed=_summed(summary, order, first, world or CROWD),
             clock_s=start_s,
         )
 
@@ -410,7 +490,7 @@ class VisibleReels:
 
     labels: tuple[str, ...]
     reels: tuple[tuple[VisibleClip, ...], ...]  # per label, its reel's segments in the order shown
-    world: World = World()
+    world: World = CROWD
 
     @classmethod
     def of_summaries(
@@ -423,7 +503,7 @@ class VisibleReels:
             tuple(VisibleClip.of_segment(summary, label, world) for summary in segments)
             for label, segments in zip(labels, reels, strict=True)
         )
-        return cls(labels=tuple(labels), reels=shown, world=world or World())
+        return cls(labels=tuple(labels), reels=shown, world=world or CROWD)
 
     @property
     def reel_s(self) -> tuple[float, ...]:

@@ -20,7 +20,7 @@ from pydantic import ValidationError
 
 from app.formats import MANIFEST_FORMAT, Manifest, ManifestClip, sha256_file
 from app.survey.study import ClipRef, Study
-from app.visible import World
+from app.visible import CROWD, World
 
 
 class BundleError(ValueError):
@@ -32,7 +32,7 @@ class Bundle:
     root: Path
     clips: dict[str, ManifestClip]  # by id
     paths: dict[str, Path]  # sha256 -> file (a clip's or a reel's), what /clips/{sha256}.mp4 serves
-    world: World = World()  # the world the clips show: its rule and the words its pages use
+    world: World = CROWD  # the world the clips show: its rule and the words its pages use (the crowd's by default)
 
     def matching(self, scheme: str, scenario: str, agents: tuple[str, str], part: str = "") -> list[ManifestClip]:
         """The two-agent clips of a scheme, scenario and pair (in either order), in id order; with `part`, those

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from app.visible import CROWD, World
 from search.core.world import Claim, Shipped, Trainer, is_module_attribute
 from search.solvers.domain import Coupled, Domain
 
@@ -267,3 +268,8 @@ class CrowdDomain(Domain, Trainer):
         import search.crowd.scene as scene
 
         return [Path(renderer.__file__), Path(scene.__file__), Path(toolkit.__file__), Path(windows.__file__)]
+
+    def world(self, scenario: str | None = None) -> World:
+        """The crowd's world: robots among people, reaching a goal, in the crowd's words (its manifests leave the
+        `world` object out)."""
+        return CROWD

@@ -48,43 +48,6 @@ import numpy as np
 from app.visible import Score, Words, World
 from search.core.evaluation import EVENTS
 
-GENERIC_WORDS = Words(
-    agent="Agent",
-    clip_title="Clip of two agents side by side, each in its own copy of the same world",
-    reels_intro="Each agent is shown on its own, in moments from its own runs.",
-    reel_title="Clip of one agent on its own",
-    example_caption="An example: two agents, each in its own copy of the same world, side by side.",
-    legend_robots=(
-        "Agents: each view shows one agent, named below the picture, such as Agent 7, with a colour and a shape"
-        " of its own."
-    ),
-    others_marker="",
-    legend_others="Everything else in a view is the world: it starts the same in both views.",
-    legend_trails="",
-    legend_crash=(
-        "A yellow-and-black burst marks the moment an agent fails; the list below the picture then says **failed**."
-    ),
-    legend_status=(
-        "Below the picture each agent's line says **succeeded**, **failed**, **out of time** or **running**,"
-        " with the time."
-    ),
-    success="succeeded after {seconds} seconds",
-    collision="failed after {seconds} seconds",
-    timeout="ran out of time",
-    running="was still going when the clip ended",
-    close_call="",
-    names=(
-        "Every agent has a name (such as Agent 7), colour and shape of its own. A name never stands for two"
-        " different agents in this study, and in a ranking round each name is one agent in all of the round's"
-        " clips. Each new round brings agents with new names."
-    ),
-    names_in_round="In this round each name, colour and shape is one agent in all three clips.",
-    new_round=(
-        "A new round begins. Its agents have names you have not seen in the earlier rounds: judge them from this"
-        " round's clips."
-    ),
-)
-
 
 class Adapter(ABC):
     """Base class of environment adapters; ``settings`` (a JSON-able dict) are the scenario's own settings.
@@ -100,7 +63,7 @@ class Adapter(ABC):
     dt: float = 1.0
     domain: str = "gym"
     rule: str = "goal"
-    words: Words = GENERIC_WORDS
+    words: Words = Words()  # the words of agents and outcomes in general, in the agent's word
     score: Score | None = None  # the visible score each view shows, read by ``measure`` after each step
     # where ``score`` declares one, ``measure(self, env) -> float`` reads its value in ``env`` after the reset and
     # each step (what the view shows: the distance travelled, the error from a set point); checked at load

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from app.visible import Observer, VisibleClip, VisibleReels, Words, World, audit
+from app.visible import CROWD, Observer, VisibleClip, VisibleReels, Words, World, audit
 
 
 def summary(*outcomes: dict, ends: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.0)), t: float = 25.0):
@@ -98,7 +98,7 @@ def test_a_world_describes_its_clips_in_its_own_words():
 
 
 def test_a_world_goes_through_the_manifest_unchanged():
-    assert World.from_manifest(None) == World() == World.from_manifest({})
+    assert World.from_manifest(None) == CROWD and World.from_manifest({}) == World()  # no world object: the crowd
     assert World.from_manifest(json.loads(json.dumps(HIGHWAY.to_manifest()))) == HIGHWAY
     assert World.from_manifest({"domain": "cartpole", "rule": "survival"}).words == Words()
 

@@ -10,11 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from app.visible import Words, World
-from search.gym.adapter import GENERIC_WORDS
+from app.visible import CROWD_WORDS, Words, World
 from tests.app.test_world_words import with_world
 from tests.support.analysis import write_bot_bundle
 from tests.support.survey import start, walk
+
+GENERIC_WORDS = Words()  # a Gymnasium world's words unless its adapter says otherwise
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +37,7 @@ def test_a_gym_world_names_its_agents_in_its_own_words(make_client, crowd_bundle
     shown = "\n".join(texts)
     for paragraph in (GENERIC_WORDS.names, GENERIC_WORDS.names_in_round, GENERIC_WORDS.new_round):
         assert paragraph in shown
-    crowd = Words()
+    crowd = CROWD_WORDS
     for paragraph in (crowd.names, crowd.names_in_round, crowd.new_round):
         assert paragraph not in shown
     assert GENERIC_WORDS.names in next(text for text in texts if "How to read a clip" in text)
@@ -48,7 +49,7 @@ def test_a_gym_world_names_its_agents_in_its_own_words(make_client, crowd_bundle
 
 def test_a_crowd_bundle_keeps_its_naming_paragraphs(make_client, crowd_bundle):
     shown = "\n".join(page_texts(make_client(bundle_dir=crowd_bundle)))
-    crowd = Words()
+    crowd = CROWD_WORDS
     for paragraph in (crowd.names, crowd.names_in_round, crowd.new_round):
         assert paragraph in shown
 

@@ -15,7 +15,7 @@ import pytest
 from app.analysis.bots import ClipIndex
 from app.formats import Manifest, manifest_json
 from app.survey.bundle import BundleError, load_bundle
-from app.visible import Words, World
+from app.visible import CROWD, Words, World
 from tests.support.analysis import write_bot_bundle
 from tests.support.survey import start, walk
 
@@ -113,7 +113,7 @@ def test_the_bots_judge_and_explain_by_the_bundles_world(crowd_bundle, tmp_path)
 def test_only_a_world_of_its_own_is_written_into_a_manifest(crowd_bundle):
     crowd = Manifest.model_validate_json((crowd_bundle / "manifest.json").read_text())
     assert crowd.world is None and '"world"' not in manifest_json(crowd)
-    assert load_bundle(crowd_bundle).world == World()
+    assert load_bundle(crowd_bundle).world == CROWD
     highway = crowd.model_copy(update={"world": CARS.to_manifest()})
     assert Manifest.model_validate_json(manifest_json(highway)).shown_world() == CARS
 
