@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -20,14 +20,12 @@ from app.visible import Observer, VisibleClip, World
 from search.solvers.problem import Problem
 from search.solvers.rollout import Tracker
 
-if TYPE_CHECKING:
-    from search.solvers.domain import Coupled  # the domain module imports this one
-
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
 RollOut = Callable[[list[Any], int, np.random.Generator, Tracker], "Rollouts"]
 # What a rollout's clip shows the moment its row ends: (a Coupled, the row, the steps it took) -> visible contrast.
-Shown = Callable[["Coupled", int, int], float]
+# (A Coupled is Any here: the domain module imports this one, and no module imports itself back, tests/test_layers.py.)
+Shown = Callable[[Any, int, int], float]
 
 OBSERVER = Observer()
 ALPHA = 0.05  # a vote is decided when its sign test's p is below this, over its looks (`strength`)
@@ -142,7 +140,7 @@ def largest_contrast(summaries: list[dict[str, Any]], world: World) -> int:
 
 
 def roll_out_problem(
-    coupled: list[Coupled], pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
+    coupled: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
 ) -> Rollouts:
     """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
     state one without pushes and ``pushes`` under uniform pushes (`draw_pushes`), stepped together until the
@@ -165,9 +163,7 @@ def draw_pushes(problem: Problem, pushes: int, rng: np.random.Generator) -> np.n
     return env
 
 
-def roll_out_rows(
-    found: Coupled, env: np.ndarray, shown: Shown | None = None
-) -> tuple[list[np.ndarray], np.ndarray, int]:
+def roll_out_rows(found: Any, env: np.ndarray, shown: Shown | None = None) -> tuple[list[np.ndarray], np.ndarray, int]:
     """One state's rollouts, a row each under ``env`` (rows, horizon, ...), stepped together until the search's
     end rule ends each: each one's environment actions up to its end, its visible contrast and the steps all
     took. The contrast is read by ``shown(coupled, row, steps)`` the moment a row ends (a domain's fast path), or
