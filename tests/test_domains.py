@@ -2,14 +2,26 @@
 command line import no world's own modules, so a world can be added without editing them; and a world is found by
 the names it ships, a file's ``world`` key and what each world claims, never by the order worlds were installed."""
 
+import ast
+from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
 
 import pytest
 
 import search
+import search.solvers.domain
 from search.cli import main
 from search.core.world import Trainer
-from search.solvers.domain import domain_for, domain_named, domain_of_summary, domains, trainer_for
+from search.solvers.domain import (
+    ENTRY_POINTS,
+    Domain,
+    domain_for,
+    domain_named,
+    domain_of_summary,
+    domains,
+    trainer_for,
+)
+from search.solvers.solver import OwnSummaries, solvers
 from tests.support.imports import imported, package_modules
 
 ROOT = Path(search.__file__).parent
@@ -84,3 +96,47 @@ def test_training_finds_its_world_by_content_or_key_and_a_world_without_a_traine
     config.write_text("learning_speed = 3\n")
     assert main(["train", "--config", str(config), "--out", str(tmp_path / "run")]) == 2
     assert "no installed world trains from" in capsys.readouterr().err
+
+
+class Silent(Domain):
+    """A world that writes the abstract methods but plays no test episodes."""
+
+    name = "silent"
+
+    def state(self, name, world): ...
+    def step_seconds(self, name, world): ...
+    def takes_summary(self, summary): ...
+    def coupled(self, agents, state, reward): ...
+    def rebuild(self, summary): ...
+    def render(self, summary, out, numbers, options): ...
+
+
+def test_a_world_that_plays_no_test_episodes_is_refused_when_foil_starts(monkeypatch):
+    silent = EntryPoint("silent", "tests.test_domains:Silent", ENTRY_POINTS)
+    installed = list(entry_points(group=ENTRY_POINTS))
+    monkeypatch.setattr(search.solvers.domain, "entry_points", lambda group: [*installed, silent])
+    domains.cache_clear()
+    try:
+        with pytest.raises(ValueError, match="'tests.test_domains:Silent' plays no test episodes: write its Domain's"):
+            domains()
+    finally:
+        domains.cache_clear()
+
+
+def test_no_module_outside_the_solvers_reads_a_solvers_record():
+    """A solver's run.json record and a summary's solver entry are the solver's own to read: the runner, the command
+    line and the bundle ask it (`Solver.warnings`, `Solver.clip_vote`) and subscript none of its record keys."""
+    keys = {solver.record_key for solver in solvers().values() if isinstance(solver, OwnSummaries)}
+    found = []
+    for module, path in package_modules(ROOT).items():
+        if module.startswith("search.solvers."):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            key = None
+            if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant):
+                key = node.slice.value
+            elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get":
+                key = node.args[0].value if node.args and isinstance(node.args[0], ast.Constant) else None
+            if key in keys:
+                found.append(f"{module}:{node.lineno} reads {key!r}")
+    assert keys and found == []

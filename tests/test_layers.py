@@ -46,3 +46,12 @@ def test_a_world_imports_no_other_world_but_its_declared_parent():
 
 def test_no_import_circles():
     assert import_circles(ROOT) == []
+
+
+def test_the_architecture_page_names_every_module():
+    """docs/architecture.md is where a reader finds what each module is for: every module of both sides is named
+    there (as its file name, under its folder's entry)."""
+    page = (ROOT.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    modules = [path for side in ("search", "app") for path in (ROOT.parent / side).rglob("*.py")]
+    unnamed = [str(p.relative_to(ROOT.parent)) for p in modules if p.name != "__init__.py" and p.name not in page]
+    assert modules and unnamed == []

@@ -253,15 +253,15 @@ def manifest_clip(
 
 
 def clip_vote(summary: dict, order: list[int]) -> ClipVote | None:
-    """The representative solver's vote as a clip's summary records it, each agent's count in on-screen order
-    (``order``: search positions on screen); None for other clips."""
-    vote = summary["solver"].get("vote")
+    """The vote over starting states that chose a clip, as its solver reads it from the summary
+    (`Solver.clip_vote`), each agent's count in on-screen order (``order``: search positions on screen); None for
+    clips no vote chose."""
+    vote = solver_named(summary["solver"]["name"]).clip_vote(summary["solver"])
     if vote is None:
         return None
-    won = [vote["for_first"], vote["for_second"]]
     return ClipVote(
         states=vote["states"],
-        won=[won[k] for k in order],
+        won=[vote["won"][k] for k in order],
         no_majority=vote["no_majority"],
         sign_test_p=vote["sign_test_p"],
         decided=vote["decided"],

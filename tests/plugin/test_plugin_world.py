@@ -6,6 +6,7 @@ words."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import re
 import shutil
@@ -161,3 +162,39 @@ def test_a_study_bundles_and_serves_in_the_worlds_own_words(world, capsys):
         seen = "\n".join(walk(client, start(client)))
     assert "Clip of two carts on a line" in seen and "CARTS" in seen
     assert not re.search(r"person|people|crowd", seen, re.IGNORECASE)
+
+
+def test_the_world_writes_ten_methods_and_foil_the_rest(world, capsys):
+    from search.solvers.domain import Domain
+
+    LineDomain = importlib.import_module("lineworld").LineDomain  # installed by the fixture, unknown to mypy
+    written = {name for name, value in vars(LineDomain).items() if callable(value) and not name.startswith("_")}
+    assert Domain.__abstractmethods__ <= written and "play" in written and len(written) <= 10
+    line = LineDomain()
+    assert line.parse_world(["goal=6", "limit=9"]) == {"goal": 6.0, "limit": 9}  # the default check of `settings`
+    with pytest.raises(ValueError, match=r"--world setting limit = 'soon': give a int, such as 8"):
+        line.parse_world(["limit=soon"])
+    with pytest.raises(ValueError, match=r"unknown --world setting\(s\) \['wind'\]; known --world settings"):
+        line.parse_world(["wind=2"])
+    assert line.describe_agents() == "the line world takes line-..."
+    assert line.agent_source("line-hasty", {}) == {"kind": "scripted"}
+    # the evaluation Foil computes from the episodes the world plays, with its documented keys
+    assert main(["eval", "line-careful", "--scenario", "line-long", "--episodes", "6", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"success_rate", "success_ci95", "reward_mean", "reward_ci95", "length_mean"} <= set(result)
+    rates = [result[f"{ending}_rate"] for ending in ("success", "collision", "timeout")]
+    assert result["episodes"] == 6 and sum(rates) == pytest.approx(1.0)
+    assert main(["eval", "line-careful", "--scenario", "line-long", "--episodes", "6"]) == 0
+    assert f"line-careful: 6 episodes (seed 0), success rate {rates[0]:.3f}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("solver", ["disagreements", "highlights"])
+def test_a_literature_method_is_refused_before_any_work(world, capsys, solver):
+    """The line world's carts choose no actions of their own, so they cannot follow a leader: the methods that
+    need it are refused, naming the capability and where it is documented, before a step is played."""
+    args = ["--agents", PAIR, "--scenario", "line-short", "--budget", "120", "--out", "out", "--quiet"]
+    assert main(["search", *args, "--solver", solver]) == 2
+    error = capsys.readouterr().err
+    assert f"the {solver} solver needs a problem with Follows" in error
+    assert 'docs/gym.md, "What the summary methods need of a world"' in error and "LineProblem has no" in error
+    assert not (world / "out").exists()
