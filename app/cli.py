@@ -39,7 +39,9 @@ def _exclusion_rules(args: argparse.Namespace) -> ExclusionRules:
 def _export(args: argparse.Namespace) -> int:
     from app.analysis.export_csv import run_export
 
-    return run_export(database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args))
+    return run_export(
+        database_url=args.db, study=args.study, out=args.out, rules=_exclusion_rules(args), bundle=args.bundle
+    )
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -145,13 +147,14 @@ def add_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         )
         command.add_argument("--out", required=True, help="output directory")
         _add_exclusion_options(command)
+        command.add_argument(
+            "--bundle",
+            default=os.environ.get("FOIL_BUNDLE_DIR"),
+            help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one the server recorded "
+            "in the database): its world's words name the agents"
+            + ("; each clip's accuracy is shown beside its audit" if name == "report" else ""),
+        )
         if name == "report":
-            command.add_argument(
-                "--bundle",
-                default=os.environ.get("FOIL_BUNDLE_DIR"),
-                help="the bundle the study was served from (default FOIL_BUNDLE_DIR, else the one "
-                "the server recorded in the database): each clip's accuracy is shown beside its audit",
-            )
             command.add_argument(
                 "--prereg",
                 help="prereg.json from foil prereg: the report says whether the data match it, listing every deviation",

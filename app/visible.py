@@ -15,7 +15,7 @@ import math
 import random
 import statistics
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 SCORE_SUCCESS, SCORE_COLLISION = 2.0, -1.0
@@ -188,20 +188,25 @@ class Words:
 
     def __post_init__(self) -> None:
         """Fills the agent's word into each text left at its default (a text of the world's own stays as given)."""
-        many = self.many()
-        named = {
-            "{Agent}": self.agent,
-            "{agent}": self.agent.lower(),
-            "{an_agent}": ("an " if self.agent[:1].lower() in "aeiou" else "a ") + self.agent.lower(),
-            "{Agents}": many[:1].upper() + many[1:],
-            "{agents}": many,
-        }
         for field in fields(self):
             text = getattr(self, field.name)
             if text == field.default and any(name in text for name in _NAMED):
-                for name, word in named.items():
-                    text = text.replace(name, word)
-                object.__setattr__(self, field.name, text)
+                object.__setattr__(self, field.name, self.say(text))
+
+    def say(self, text: str) -> str:
+        """``text`` with the agent's word filled in where it names it (``{Agent}``, ``{agent}``, ``{an_agent}``,
+        ``{agents}``, ``{Agents}``): how the report, the codebook and the pages speak of this world's agents."""
+        many = self.many()
+        named = {
+            "{Agent}": self.agent,
+            "{agent}": self.one(),
+            "{an_agent}": ("an " if self.agent[:1].lower() in "aeiou" else "a ") + self.one(),
+            "{Agents}": many[:1].upper() + many[1:],
+            "{agents}": many,
+        }
+        for name, word in named.items():
+            text = text.replace(name, word)
+        return text
 
     def many(self) -> str:
         """The agents in running text: `agents`, or the agent's word in lower case with an s."""
@@ -272,6 +277,14 @@ class World:
                 "(app.visible.Score: its name, unit, which way is better, how a clip sums it) or use 'goal' or "
                 "'survival'"
             )
+        if not self.has_outcomes():  # no goal, no crash: the default legend lines of outcomes are left out
+            unsaid = {
+                name: ""
+                for name in ("legend_crash", "legend_status")
+                if getattr(self.words, name) == getattr(Words(agent=self.words.agent, agents=self.words.agents), name)
+            }
+            if unsaid:
+                object.__setattr__(self, "words", replace(self.words, **unsaid))
 
     def to_manifest(self) -> dict[str, Any]:
         """The manifest's `world` object; a world without a score writes no `score` key."""

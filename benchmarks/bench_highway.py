@@ -33,6 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from search.core.rollout import Tracker  # noqa: E402
 from search.gym.agents import load_agent  # noqa: E402
 from search.gym.problem import GymCoupledProblem  # noqa: E402
 from search.highway.adapter import PERTURBED  # noqa: E402
@@ -41,7 +42,6 @@ from search.highway.coupled import KernelCoupledProblem  # noqa: E402
 from search.highway.scenarios import SCENARIOS  # noqa: E402
 from search.solvers.mcts import MCTSConfig, mcts  # noqa: E402
 from search.solvers.reward import RewardConfig  # noqa: E402
-from search.solvers.rollout import Tracker  # noqa: E402
 
 
 def foil_search(agents, scenario, budget: int, batch: int, kernel: bool = False) -> float:

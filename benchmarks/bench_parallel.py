@@ -93,7 +93,7 @@ def kernel_table(agent_name: str, episodes: int) -> None:
 
 
 def python_world_table(agent: str, episodes: int, budget: int, states: int, pushes: int) -> None:
-    from search.solvers.domain import domain_for
+    from search.core.domain import domain_for
     from search.solvers.representative import RepresentativeConfig
     from search.solvers.runner import SearchJob, run_search
 

@@ -33,13 +33,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from search.core.rollout import Tracker  # noqa: E402
 from search.crowd.agents.policies import load_policy  # noqa: E402
 from search.crowd.problem import CoupledProblem  # noqa: E402
 from search.crowd.sim.coupled import CoupledSimulator  # noqa: E402
 from search.crowd.sim.scenarios import load_scenario  # noqa: E402
 from search.solvers.baselines import cem, n_first, random_search  # noqa: E402
 from search.solvers.mcts import MCTSConfig, mcts  # noqa: E402
-from search.solvers.rollout import Tracker  # noqa: E402
 from search.solvers.runner import parse_settings  # noqa: E402
 
 SCRIPTED = ["goal", "orca", "social_force"]

@@ -24,16 +24,16 @@ modules directly (tests/test_layers.py)."""
 from app.formats import SUMMARY_FORMAT
 from app.visible import Score, Words, World
 from search.clips.render import RenderOptions, RenderResult, h264_writer, side_paths
+from search.core.domain import Coupled, Domain
 from search.core.evaluation import Episode
 from search.core.outcomes import COLLISION, OUTCOME_NAMES, RUNNING, SUCCESS, TIMEOUT
+from search.core.prior import ActionPrior
+from search.core.problem import Problem
+from search.core.rollout import Tracker, fresh, rollout
 from search.core.world import Claim, Shipped
 from search.gym.adapter import Adapter
-from search.solvers.domain import Coupled, Domain
 from search.solvers.follow import Follow
-from search.solvers.prior import ActionPrior
-from search.solvers.problem import Problem
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker, fresh, rollout
 from search.solvers.solver import ProblemSearch, register
 
 ADAPTER_AUTHORS = ("Adapter", "Score", "Words", "World")

@@ -22,14 +22,14 @@ OFFLINE_MODULES = ("numpy", "numba", "torch", "gymnasium", "tqdm", "imageio_ffmp
 
 
 def _train(args: argparse.Namespace) -> int:
-    from search.solvers.domain import trainer_for
+    from search.core.domain import trainer_for
 
     print(f"last checkpoint: {trainer_for(Path(args.config)).train(Path(args.config), Path(args.out))}")
     return 0
 
 
 def _release(args: argparse.Namespace) -> int:
-    from search.solvers.domain import trainer_for
+    from search.core.domain import trainer_for
 
     trainer = trainer_for(args.run_dir)
     if args.validate_only:
@@ -40,8 +40,8 @@ def _release(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
+    from search.core.domain import domain_for
     from search.core.workers import jobs
-    from search.solvers.domain import domain_for
 
     domain = domain_for([args.agent], args.scenario)
     world = domain.parse_world(args.world)
@@ -63,7 +63,7 @@ def _eval(args: argparse.Namespace) -> int:
 def _render(args: argparse.Namespace) -> int:
     from app.formats import load_summary
     from search.clips.render import RenderOptions
-    from search.solvers.domain import domain_of_summary
+    from search.core.domain import domain_of_summary
 
     options = RenderOptions(fps=args.fps, speed=args.speed, width=args.width, crf=args.crf)
     data = load_summary(args.summary)
@@ -96,8 +96,8 @@ def _bundle(args: argparse.Namespace) -> int:
 def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str], scenario: str) -> dict:
     """A search job's settings from the command line: the solver's lengths of time in seconds by default, each
     converted by the scenario's step length (``--set horizon_steps=N`` gives steps)."""
+    from search.core.domain import domain_for
     from search.core.settings import in_steps
-    from search.solvers.domain import domain_for
     from search.solvers.reward import RewardConfig
     from search.solvers.runner import parse_settings
     from search.solvers.solver import solver_named
@@ -183,8 +183,8 @@ def _verify(args: argparse.Namespace) -> int:
 
 
 def _worlds(args: argparse.Namespace) -> int:
+    from search.core.domain import domains
     from search.core.world import Trainer
-    from search.solvers.domain import domains
 
     for domain in domains():
         trains = "; foil train and foil release make its agents" if isinstance(domain, Trainer) else ""

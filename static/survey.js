@@ -116,9 +116,10 @@
     const gated = box.hasAttribute("data-gated");
     const nextOnly = box.hasAttribute("data-next-only");  // a clip to watch, no questions: only Next unlocks
     const reel = box.hasAttribute("data-reel") ? parseInt(box.dataset.reel, 10) : null;  // its place among reels
-    const unlocks = nextOnly ? (reel !== null ? "The Next button unlocks when each robot's clip has ended."
+    const agent = box.dataset.agent || "robot";  // the world's word for an agent (a crowd's page names none)
+    const unlocks = nextOnly ? (reel !== null ? "The Next button unlocks when each " + agent + "'s clip has ended."
                                               : "The Next button unlocks when the clip ends.")
-                  : reel !== null ? "You can answer when each robot's clip has ended." : "You can answer when the clip ends.";
+                  : reel !== null ? "You can answer when each " + agent + "'s clip has ended." : "You can answer when the clip ends.";
     const width = parseFloat(video.getAttribute("width")), height = parseFloat(video.getAttribute("height"));
     if (width > 0 && height > 0) box.style.setProperty("--ratio", String(width / height));
     const keptWatched = state.watched || (reel !== null && state.reels.indexOf(reel) >= 0);
@@ -215,8 +216,8 @@
       }
       button.textContent = "Replay clip";
       say(!gated ? "Clip finished. You can replay it."
-          : !allWatched() ? (nextOnly ? "Clip finished. Now play the other robot's clip: Next unlocks when it has ended."
-                                      : "Clip finished. Now play the other robot's clip: you can answer when it has ended.")
+          : !allWatched() ? (nextOnly ? "Clip finished. Now play the other " + agent + "'s clip: Next unlocks when it has ended."
+                                      : "Clip finished. Now play the other " + agent + "'s clip: you can answer when it has ended.")
           : nextOnly ? "Clip finished. Press Next to go on, or replay the clip."
           : "Clip finished. You can now answer, or replay the clip.");
       if (gated && allWatched()) {
@@ -281,7 +282,7 @@
         if (clash) select.setAttribute("aria-invalid", "true"); else select.removeAttribute("aria-invalid");
       });
       message.hidden = !twice;
-      message.textContent = twice ? "Each robot can take only one place: " + twice + " is chosen twice." : "";
+      message.textContent = twice ? "Each " + (group.dataset.agent || "robot") + " can take only one place: " + twice + " is chosen twice." : "";
     }
     selects.forEach(function (select) { select.addEventListener("change", check); });
     check();

@@ -1,4 +1,4 @@
-"""Every world is reached through its domain (`search.solvers.domain`): the solvers, the bundle builder and the
+"""Every world is reached through its domain (`search.core.domain`): the solvers, the bundle builder and the
 command line import no world's own modules, so a world can be added without editing them; and a world is found by
 the names it ships, a file's ``world`` key and what each world claims, never by the order worlds were installed."""
 
@@ -9,10 +9,9 @@ from pathlib import Path
 import pytest
 
 import search
-import search.solvers.domain
+import search.core.domain
 from search.cli import main
-from search.core.world import Trainer
-from search.solvers.domain import (
+from search.core.domain import (
     ENTRY_POINTS,
     Domain,
     domain_for,
@@ -21,6 +20,7 @@ from search.solvers.domain import (
     domains,
     trainer_for,
 )
+from search.core.world import Trainer
 from search.solvers.solver import OwnSummaries, solvers
 from tests.support.imports import imported, package_modules
 
@@ -114,7 +114,7 @@ class Silent(Domain):
 def test_a_world_that_plays_no_test_episodes_is_refused_when_foil_starts(monkeypatch):
     silent = EntryPoint("silent", "tests.test_domains:Silent", ENTRY_POINTS)
     installed = list(entry_points(group=ENTRY_POINTS))
-    monkeypatch.setattr(search.solvers.domain, "entry_points", lambda group: [*installed, silent])
+    monkeypatch.setattr(search.core.domain, "entry_points", lambda group: [*installed, silent])
     domains.cache_clear()
     try:
         with pytest.raises(ValueError, match="'tests.test_domains:Silent' plays no test episodes: write its Domain's"):

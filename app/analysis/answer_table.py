@@ -118,9 +118,9 @@ LONG_COLUMNS = [
     Column(
         "agents",
         "string",
-        f"real agents on the screen, '{LIST_SEPARATOR}'-separated, in the order the robots were offered as answers",
+        f"real agents on the screen, '{LIST_SEPARATOR}'-separated, in the order the {{agents}} were offered as answers",
     ),
-    Column("labels", "string", "their on-screen labels (e.g. Robot 1), in the same order as `agents`"),
+    Column("labels", "string", "their on-screen labels (e.g. {Agent} 1), in the same order as `agents`"),
     Column(
         "question",
         "string",
@@ -136,7 +136,7 @@ LONG_COLUMNS = [
     Column(
         "answer",
         "string",
-        "what was submitted: the robot label chosen, the option chosen, the text, the scale "
+        "what was submitted: the {agent} label chosen, the option chosen, the text, the scale "
         f"point, or the ranking's labels best first joined by '{ORDER_SEPARATOR}'; an "
         "optional closing question left unanswered has no row",
     ),

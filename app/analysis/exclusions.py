@@ -23,6 +23,10 @@ REASONS = {
     "flagged_by_admin": "flagged for exclusion on the admin pages",
     "skipped_viewing": "answered a clip sooner than it plays, sped it up before it first ended, or never played it",
 }
+# The rules that judge how a person took the study (its time, its clips' viewing): a bot answers as fast as the pilot
+# link lets it, so where bots are analysed (a rehearsal of the analysis) these rules are skipped for them.
+PEOPLE_ONLY = ("too_fast", "skipped_viewing")
+BOTS_NOTE = "timing and viewing rules skipped for bots"
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,11 @@ class ExclusionRules:
     def kinds(self) -> tuple[str, ...]:
         """The participant kinds analysed: real participants, and the kinds included on request."""
         return ("real", *self.include_kinds)
+
+    @property
+    def bots_note(self) -> str:
+        """What the analysis of bots leaves out (`PEOPLE_ONLY`), where bots are analysed; empty otherwise."""
+        return BOTS_NOTE if "bot" in self.include_kinds else ""
 
     def threshold_s(self, median_s: float | None) -> float | None:
         """The completion time under which a participant counts as too fast; None when the rule is off."""
@@ -129,11 +138,13 @@ def exclusion_flags(
     plan: list[Screen] | None = None,
 ) -> dict[str, bool]:
     """One flag per reason in REASONS, plus `excluded` when any of them holds. `responses` with the
-    participant's `plan` give the viewing flag; without them it is not set."""
+    participant's `plan` give the viewing flag; without them it is not set. A bot is never flagged by the rules
+    that judge how a person took the study (`PEOPLE_ONLY`): analysed, it rehearses the analysis as it answered."""
     duration = duration_s(participant)
     kinds = (rules or ExclusionRules()).kinds
+    person = (getattr(participant, "kind", None) or "real") != "bot"
     plan = plan or []
-    skipped = any(
+    skipped = person and any(
         viewing_problems(r, screen)["skipped"]
         for r in responses or []
         if r.step < len(plan) and shows_clip(screen := plan[r.step])
@@ -142,7 +153,7 @@ def exclusion_flags(
         "pilot_or_bot": (getattr(participant, "kind", None) or "real") not in kinds,
         "incomplete": participant.status != "completed",
         "failed_attention": participant.attention_failures > 0,
-        "too_fast": threshold_s is not None and duration is not None and duration < threshold_s,
+        "too_fast": person and threshold_s is not None and duration is not None and duration < threshold_s,
         "flagged_by_admin": bool(participant.excluded),
         "skipped_viewing": skipped,
     }

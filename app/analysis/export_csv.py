@@ -13,8 +13,9 @@ import io
 import json
 import re
 import time
+from collections import Counter
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -30,10 +31,11 @@ from app.analysis.answer_table import (
     participant_row,
 )
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
-from app.analysis.source import analysis_database, analysis_study
+from app.analysis.source import analysis_database, analysis_study, bundle_world, served_bundle
 from app.store.database import Database
 from app.survey.assignment import conditions
 from app.survey.study import FEEDBACK, ChoiceQuestion, ScaleQuestion, Study
+from app.visible import Words
 
 # Whole cells that pandas (by default) or R read as a missing value, though a participant may type them.
 MISSING_TOKENS = {
@@ -147,6 +149,17 @@ class ExportResult:
     answers: int  # rows of long.csv
     excluded: int
     seconds: float
+    per_reason: Counter[str] = field(default_factory=Counter)  # participants each exclusion rule met
+    bots: str = ""  # where bots are analysed: the rules skipped for them
+
+    def lines(self) -> list[str]:
+        """Each rule that excluded anyone, with its count and reason, and the rules skipped for bots."""
+        said = [
+            f"  excluded: {self.per_reason[reason]} {reason} ({text})"
+            for reason, text in REASONS.items()
+            if self.per_reason[reason]
+        ]
+        return said + ([f"  {self.bots}"] if self.bots else [])
 
 
 def _question_codes(study: Study) -> dict[str, dict[str, Any]]:
@@ -171,7 +184,7 @@ def _question_codes(study: Study) -> dict[str, dict[str, Any]]:
 # How `foil report` models accuracy (app/analysis/model.py), so that an analyst can reproduce it from long.csv.
 MODEL_TEXT = (
     "foil report models each part's answers (long.csv rows with question_type choose or rank; correct is the "
-    "outcome; a ranking part by its pairwise orderings: each ranking of k robots gives k(k-1)/2 pairs, right when "
+    "outcome; a ranking part by its pairwise orderings: each ranking of k {agents} gives k(k-1)/2 pairs, right when "
     "answer_agent puts them in the order of truth) as a logistic regression correct ~ scheme, with the pair of "
     "agents and the scenario as fixed effects where a pairwise part has more than one, fitted with Firth's penalty; "
     "its cluster-robust standard errors (CR2) are clustered by participant, by clip and by both (a ranking's clip "
@@ -190,7 +203,7 @@ GLMER_SCRIPT = r"""# glmer.R: the logistic mixed model of accuracy for study @ST
 # Run it in the export folder: Rscript glmer.R  (needs R and the lme4 package: install.packages("lme4")).
 #
 # For each part (pairwise: the choose answers of long.csv; ranking: the rank answers, each ranking as its pairwise
-# orderings, as the report models them: k(k-1)/2 pairs of k robots, right when in the true order) it fits
+# orderings, as the report models them: k(k-1)/2 pairs of k @AGENTS@, right when in the true order) it fits
 #   glmer(correct ~ scheme + (1 | participant) + (1 | clip), family = binomial)
 # to the participants the export's rules keep (excluded = 0 in participants.csv) and prints the fit's summary,
 # each scheme's accuracy for a typical participant on a typical clip, and the odds ratio of every pair of schemes,
@@ -269,19 +282,25 @@ for (part in c("pairwise", "ranking")) {
 """
 
 
-def glmer_script(study: Study) -> str:
-    """glmer.R for this study: its schemes in the study file's order, so the reference level is the report's."""
+def glmer_script(study: Study, words: Words | None = None) -> str:
+    """glmer.R for this study: its schemes in the study file's order, so the reference level is the report's; its
+    agents in the words of the world its clips show (``words``)."""
     return (
         GLMER_SCRIPT.replace("@STUDY@", study.study.id)
+        .replace("@AGENTS@", (words or Words()).many())
         .replace("@SCHEMES@", ", ".join(json.dumps(s) for s in study.design.schemes))
         .replace("@SEPARATOR@", LIST_SEPARATOR)
         .replace("@ORDER@", ORDER_SEPARATOR)
     )
 
 
-def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None) -> dict[str, Any]:
+def codebook(
+    study: Study, layout: WideLayout, rules: ExclusionRules, median_s: float | None, words: Words | None = None
+) -> dict[str, Any]:
     """Everything an analyst needs to read the files: columns with their types, questions with their scales,
-    conditions, exclusion rules, and the arguments that make pandas read each file with exact types."""
+    conditions, exclusion rules, and the arguments that make pandas read each file with exact types; its texts
+    speak of the agents in ``words``, those of the world the study's clips show."""
+    say = (words or Words()).say
     files = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
     return {
         "format": "foil.export/1",
@@ -294,7 +313,7 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
         },
         "files": {
             name: {
-                "columns": [asdict(c) for c in columns],
+                "columns": [asdict(c) | {"description": say(c.description)} for c in columns],
                 "read_csv": {
                     "dtype": {c.name: c.dtype for c in columns if c.dtype != "datetime"},
                     "parse_dates": [c.name for c in columns if c.dtype == "datetime"],
@@ -317,8 +336,9 @@ def codebook(study: Study, layout: WideLayout, rules: ExclusionRules, median_s: 
             "analysed_kinds": list(rules.kinds),
             "too_fast_threshold_s": rules.threshold_s(median_s),
             "median_duration_s": median_s,
-        },
-        "model": MODEL_TEXT,
+        }
+        | ({"bots": rules.bots_note} if rules.bots_note else {}),
+        "model": say(MODEL_TEXT),
         "neutralised_cells": "no piece of a cell can start a formula in a spreadsheet, however it splits cells (on a "
         "comma, semicolon, tab or line break) or trims spaces: an apostrophe is put at the "
         "start of the cell and right after each of those characters where the text then "
@@ -375,15 +395,26 @@ def codebook_markdown(book: dict[str, Any]) -> str:
         f"- time threshold of this export: {rules['too_fast']}",
         f"- participant kinds analysed (the others are flagged `pilot_or_bot`): "
         f"{', '.join(rules.get('analysed_kinds', ['real']))}",
+        *(
+            [f"- {rules['bots']} (a rehearsal of the analysis: they answer as fast as the pilot link lets them)"]
+            if rules.get("bots")
+            else []
+        ),
         "",
     ]
     return "\n".join(lines)
 
 
 def export_study(
-    db: Database, study: Study, out: str | Path, rules: ExclusionRules | None = None, batch: int = 500
+    db: Database,
+    study: Study,
+    out: str | Path,
+    rules: ExclusionRules | None = None,
+    batch: int = 500,
+    words: Words | None = None,
 ) -> ExportResult:
-    """Write the three CSV files, the codebook and glmer.R into `out`, reading `batch` participants at a time."""
+    """Write the three CSV files, the codebook and glmer.R into `out`, reading `batch` participants at a time; the
+    codebook and glmer.R speak of the agents in ``words`` (the world's the clips show; by default, agents)."""
     started = time.perf_counter()
     rules = rules or ExclusionRules()
     out = Path(out)
@@ -396,11 +427,13 @@ def export_study(
         name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols) for name, cols in columns.items()
     }
     excluded = 0
+    per_reason: Counter[str] = Counter()
     study_conditions = conditions(study)
     try:
         for record in participant_records(db, study.study.id, batch=batch):
             flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
             excluded += flags["excluded"]
+            per_reason.update(reason for reason in REASONS if flags[reason])
             long = list(long_rows(study, record))
             for row in long:
                 tables["long.csv"].write(row)
@@ -409,24 +442,31 @@ def export_study(
     finally:
         for table in tables.values():
             table.close()
-    book = codebook(study, layout, rules, median_s)
+    book = codebook(study, layout, rules, median_s, words)
     (out / "codebook.json").write_text(json.dumps(book, indent=1) + "\n", encoding="utf-8")
     (out / "codebook.md").write_text(codebook_markdown(book), encoding="utf-8")
-    (out / "glmer.R").write_text(glmer_script(study), encoding="utf-8")
+    (out / "glmer.R").write_text(glmer_script(study, words), encoding="utf-8")
     return ExportResult(
         out=out,
         participants=tables["participants.csv"].rows,
         answers=tables["long.csv"].rows,
         excluded=excluded,
         seconds=time.perf_counter() - started,
+        per_reason=per_reason,
+        bots=rules.bots_note,
     )
 
 
-def run_export(*, database_url: str, study: str | None, out: str, rules: ExclusionRules) -> int:
-    """`foil export`: prints what was written."""
+def run_export(
+    *, database_url: str, study: str | None, out: str, rules: ExclusionRules, bundle: str | None = None
+) -> int:
+    """`foil export`: prints what was written, and each exclusion rule's count and reason. The codebook names the
+    agents in the words of the world of ``bundle``, by default the bundle the server last served the study from."""
     db = analysis_database(database_url)
     try:
-        result = export_study(db, analysis_study(db, study), out, rules)
+        read = analysis_study(db, study)
+        world = bundle_world(bundle or served_bundle(db, read.study.id))
+        result = export_study(db, read, out, rules, words=world.words)
     finally:
         db.dispose()
     print(
@@ -434,4 +474,6 @@ def run_export(*, database_url: str, study: str | None, out: str, rules: Exclusi
         f"the rules), {result.answers} answer row{'' if result.answers == 1 else 's'} in {result.seconds:.1f} s: "
         f"{', '.join(FILES)}, codebook.md, codebook.json, glmer.R in {result.out}"
     )
+    for line in result.lines():
+        print(line)
     return 0

@@ -24,20 +24,21 @@ from app.analysis.design import chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
 from app.analysis.model import Answers, ModelResult, RatingResult, Ratings, fit_accuracy, fit_ratings
 from app.analysis.prereg import deviations
-from app.analysis.source import analysis_database, analysis_study_text, served_bundle
+from app.analysis.source import analysis_database, analysis_study_text, bundle_world, served_bundle
 from app.analysis.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
 from app.page_templates import page_templates
 from app.store.database import Database
 from app.survey.study import ScaleQuestion, Study
+from app.visible import World
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 ALL = "all scenarios"
 ORDERINGS = "orderings"  # a ranking part's pairwise orderings (`ReportData.model`)
-TASKS = {
-    "pairwise": "part one: pairwise (which robot is better)",
-    "ranking": "part two: global ranking (all robots in the right order)",
+TASKS = {  # each part's title, in the world's words (`Words.say`, `ReportData.task_titles`)
+    "pairwise": "part one: pairwise (which {agent} is better)",
+    "ranking": "part two: global ranking (all {agents} in the right order)",
 }
 FIGURES_EXTRA = "pip install 'foil[figures]'"
 # The paper's Figure 4: orange for disagreement, blue for agreement, grey for the middle.
@@ -73,10 +74,21 @@ class Exclusions:
     rule: str = ""
     flagged: int = 0
     included: bool = False
+    bots: str = ""  # where bots are analysed: the rules skipped for them (`ExclusionRules.bots_note`)
 
     def reasons(self) -> str:
         """How many each rule met, as "pilot_or_bot: 3, skipped_viewing: 3"."""
         return ", ".join(f"{reason}: {self.per_reason[reason]}" for reason in REASONS if self.per_reason[reason])
+
+    def lines(self) -> list[str]:
+        """Each rule that excluded anyone, with its count and reason, and the rules skipped for bots: what
+        `foil report` and `foil export` print below their counts."""
+        said = [
+            f"  excluded: {self.per_reason[reason]} {reason} ({text})"
+            for reason, text in REASONS.items()
+            if self.per_reason[reason]
+        ]
+        return said + ([f"  {self.bots}"] if self.bots else [])
 
     def notice(self) -> str:
         """What a reader must know before the numbers: that excluded participants are in them, or that every
@@ -116,12 +128,17 @@ class ReportData:
     answers: dict[str, Answers] = field(default_factory=dict)  # task -> its scored answers, for the model
     rated: dict[str, Ratings] = field(default_factory=dict)  # scale question -> its ratings, for their model
     prereg: list[str] | None = None  # how the data differ from the preregistration (empty: they match), if given
+    world: World = field(default_factory=World)  # the world the clips show, in whose words the report speaks
     _models: dict[str, ModelResult] = field(default_factory=dict, repr=False)
     _ratings: dict[str, RatingResult] = field(default_factory=dict, repr=False)
 
     @property
     def schemes(self) -> list[str]:
         return list(self.study.design.schemes)
+
+    def task_titles(self) -> dict[str, str]:
+        """Each part's title in the world's words ("part one: pairwise (which robot is better)")."""
+        return {task: self.world.words.say(title) for task, title in TASKS.items()}
 
     def scopes(self) -> list[str]:
         seen = {scope for _, scope, _ in self.accuracy}
@@ -177,7 +194,7 @@ def tally_study(
     rules = rules or ExclusionRules()
     median_s = median_duration_s(db, study.study.id)  # real participants' pace, whoever is analysed
     threshold = rules.threshold_s(median_s)
-    exclusions = Exclusions(rule=rules.describe(median_s), included=include_excluded)
+    exclusions = Exclusions(rule=rules.describe(median_s), included=include_excluded, bots=rules.bots_note)
     accuracy: dict[tuple[str, str, str], Tally] = defaultdict(Tally)
     ratings: dict[str, dict[str, Counter[int]]] = {
         name: {scheme: Counter() for scheme in study.design.schemes}
@@ -494,7 +511,7 @@ def exclusion_rows(data: ReportData) -> list[dict[str, Any]]:
         for reason, text in REASONS.items()
     ]
     analysed = "analysed (every participant: --include-excluded)" if e.included else "analysed (no rule applies)"
-    rows.append({"rule": analysed, "participants": e.after})
+    rows.append({"rule": analysed + (f"; {e.bots}" if e.bots else ""), "participants": e.after})
     return rows
 
 
@@ -706,7 +723,7 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
             .get_template("report.html")
             .render(
                 data=data,
-                tasks=TASKS,
+                tasks=data.task_titles(),
                 all_scopes=ALL,
                 figures=figures,
                 exclusion_rows=tables["exclusions.csv"],
@@ -777,6 +794,7 @@ def run_report(
         data = replace(data, prereg=[source.differs, *found] if source.differs else found)
     elif source.differs:
         print(f"warning: {source.differs}", file=sys.stderr)
+    data = replace(data, world=bundle_world(bundle))
     if bundle is not None and (Path(bundle) / "manifest.json").is_file():
         data = replace(data, audits=_audits(bundle))
     else:
@@ -790,6 +808,8 @@ def run_report(
         print(f"warning: the report has no figures: they need matplotlib: {FIGURES_EXTRA}", file=sys.stderr)
     e = data.exclusions
     print(f"{e.before} participant{'s' * (e.before != 1)}, {e.after} analysed after exclusions")
+    for line in e.lines():
+        print(line)
     if e.notice():
         print(e.notice())
     for row in table1_rows(data):

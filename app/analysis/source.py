@@ -18,9 +18,11 @@ from sqlalchemy import select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError, OperationalError
 
+from app.formats import Manifest
 from app.store.database import Database, DatabaseError, check_migrated
 from app.store.models import ServerSetting
 from app.survey.study import Study, parse_study
+from app.visible import World
 
 
 def analysis_database(url: str) -> Database:
@@ -96,6 +98,19 @@ def served_bundle(db: Database, study_id: str) -> str | None:
     with db.reading() as session:
         row = session.get(ServerSetting, BUNDLE_KEY + study_id)
     return None if row is None else row.value
+
+
+def bundle_world(bundle: str | Path | None) -> World:
+    """The world a bundle's clips show, in whose words the export and the report speak of its agents: its
+    manifest's `world` (the crowd's, where the manifest has none); the world in general (`World()`) where the
+    bundle is not known or its manifest cannot be read."""
+    manifest = None if bundle is None else Path(bundle) / "manifest.json"
+    if manifest is None or not manifest.is_file():
+        return World()
+    try:
+        return Manifest.model_validate_json(manifest.read_text(encoding="utf-8")).shown_world()
+    except ValueError:
+        return World()
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import json
 import time
 
 from search.bundle.truth import paired_comparison
-from search.solvers.domain import domain_for
+from search.core.domain import domain_for
 from search.solvers.runner import in_processes
 
 

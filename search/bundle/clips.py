@@ -28,7 +28,7 @@ from search.bundle.spec import BuildError
 from search.bundle.steps import IN_THIS_PROCESS, Cache, finished
 from search.bundle.truth import PairedComparison
 from search.clips.render import RenderOptions, agent_label
-from search.solvers.domain import Domain, domain_named, domain_of_summary
+from search.core.domain import Domain, domain_named, domain_of_summary
 from search.solvers.runner import Backend
 from search.solvers.solver import solver_named
 
@@ -65,7 +65,7 @@ def job_summaries(job: ClipJob, folder: Path, out: Path, domain: Domain) -> list
 def clip_summary(folder: Path, select: str, world: World) -> Path:
     """The summary of a search that becomes the clip: the best by reward, or with ``select = "contrast"`` the one
     of the search's top-K whose clip shows the largest visible difference (no ground truth is read)."""
-    from search.solvers.contrast import largest_contrast
+    from search.core.contrast import largest_contrast
 
     first = folder / "summary-001.json"
     if select == "reward":
@@ -271,7 +271,7 @@ def clip_vote(summary: dict, order: list[int]) -> ClipVote | None:
 def vote_warnings(agents: list[str], better: str | None, vote: ClipVote | None) -> list[str]:
     """What a clip's vote warns of, naming agents (never their labels): a weak vote, and a vote for the agent the
     ground truth ranks worse (``better`` None: no truth to hold it to)."""
-    from search.solvers.contrast import describe_vote
+    from search.core.contrast import describe_vote
 
     if vote is None:
         return []

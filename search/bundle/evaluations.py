@@ -12,7 +12,7 @@ from search.bundle.spec import BuildError, BuildSpec
 from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished
 from search.bundle.study import Study
 from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
-from search.solvers.domain import domain_named
+from search.core.domain import domain_named
 from search.solvers.runner import Backend
 
 

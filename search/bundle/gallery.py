@@ -23,7 +23,7 @@ def write_gallery(
     the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better agent for."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-    from search.solvers.contrast import describe_vote
+    from search.core.contrast import describe_vote
 
     templates = Environment(
         loader=FileSystemLoader(Path(__file__).parent),

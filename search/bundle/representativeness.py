@@ -11,7 +11,7 @@ import time
 
 from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished
 from search.bundle.study import Study
-from search.solvers.domain import domain_named
+from search.core.domain import domain_named
 from search.solvers.runner import Backend
 
 
@@ -21,7 +21,7 @@ def representativeness(study: Study, cache: Cache, log, backend: Backend = IN_TH
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
     vote; pairs measured on ``backend``, each scenario and the distribution in the study's world settings
     (`Study.world_settings`)."""
-    from search.solvers.contrast import strength
+    from search.core.contrast import strength
 
     checks = check_tasks(study)
     todo = {
@@ -110,7 +110,7 @@ def describe_representativeness(report: dict) -> str:
     """One line on a fixed scenario against the distribution, a warning when their majorities disagree; a weak
     distribution vote (its sign test not below alpha) is called weak, since it cannot say which agent most states
     show as better."""
-    from search.solvers.contrast import strength
+    from search.core.contrast import strength
 
     first, second = report["agents"]
     vote = report["distribution_vote"]

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, replace
 from search.bundle.spec import BuildSpec, Scheme
 from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished, input_key
 from search.bundle.study import Study
-from search.solvers.domain import Domain, domain_for
+from search.core.domain import Domain, domain_for
 from search.solvers.runner import Backend, SearchJob, run_search, write_outputs
 from search.solvers.solver import solver_named
 from search.solvers.summary import verify

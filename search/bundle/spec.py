@@ -27,8 +27,8 @@ from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 from app.survey.study import Names, Pair, Strict, StudyError, Text, distinct, parse_study
 from app.toml_errors import Problem, TomlFileError, load_toml, refuse, validated
 from search.clips.render import AGENT_STYLES, RenderOptions
+from search.core.domain import Domain, domain_for
 from search.core.settings import check_keys, check_values, in_steps
-from search.solvers.domain import Domain, domain_for
 from search.solvers.reward import RewardConfig
 from search.solvers.solver import Solver, solver_named, solvers
 

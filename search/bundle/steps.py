@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from app.formats import sha256_file
-from search.solvers.domain import Domain
+from search.core.domain import Domain
 from search.solvers.runner import Backend
 
 IN_THIS_PROCESS = Backend()  # one worker: every job of a step in the building process

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from search.bundle.spec import BuildError, BuildSpec, load_build
-from search.solvers.domain import Domain, domain_for
+from search.core.domain import Domain, domain_for
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """What a world offers Foil, one small interface per concept, so nothing outside a world needs to know which world
 it is: its `Scenarios` (and settings), its `Agents`, its `Clips` and, where it trains agents of its own, a
-`Trainer`. The coupled problems a search steps are the fourth concept, `search.solvers.domain.Problems`: their
-default rollouts are the solvers' own. A world is all of them together (`search.solvers.domain.Domain`).
+`Trainer`. The coupled problems a search steps are the fourth concept, `search.core.domain.Problems`: their
+default rollouts are the solvers' own. A world is all of them together (`search.core.domain.Domain`).
 
 Each interface says whether a world takes a name, a file or a folder as a `Claim`: Foil finds a world by the names
 it ships, a file's ``world = "<name>"`` key and these claims, never by the order worlds were installed in."""
@@ -151,7 +151,7 @@ class Agents(ABC):
     ) -> list[Episode]:
         """``episodes`` test episodes of the agent alone, in ``scenario``'s world when given: episode i starts
         alike for every agent at one seed, so two agents are compared episode by episode."""
-        raise NotImplementedError  # `search.solvers.domain.domains` refuses a world with neither this nor its own
+        raise NotImplementedError  # `search.core.domain.domains` refuses a world with neither this nor its own
 
     @abstractmethod
     def evaluate(
@@ -159,7 +159,7 @@ class Agents(ABC):
     ) -> dict[str, Any]:
         """The agent's ``foil eval --json`` object (docs/formats.md): outcome rates where the world has
         outcomes, mean reward, the visible score where the world declares one, each with its 95% interval
-        (`search.solvers.domain.Domain` computes it from `play`)."""
+        (`search.core.domain.Domain` computes it from `play`)."""
 
     @abstractmethod
     def evaluate_episodes(

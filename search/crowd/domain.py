@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from app.visible import CROWD, World
+from search.core.domain import Coupled, Domain
 from search.core.world import Claim, Shipped, Trainer, is_module_attribute
-from search.solvers.domain import Coupled, Domain
 
 CHECKPOINT_SUFFIXES = (".pt", ".pth", ".ts")  # PyTorch checkpoints and TorchScript files
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from search.core.prior import ActionPrior
+from search.core.problem import box_alternatives
 from search.crowd.sim.coupled import CoupledSimulator, Snapshot
 from search.crowd.sim.observation import Policy
 from search.crowd.sim.scenarios import Scenario
 from search.crowd.sim.world import WorldConfig, WorldState
-from search.solvers.prior import ActionPrior
-from search.solvers.problem import box_alternatives
 from search.solvers.reward import DivergenceReward, RewardConfig
 
 

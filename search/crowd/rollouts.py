@@ -1,6 +1,6 @@
 """The crowd world's rollouts for the representative solver: every drawn state's rollouts stepped together in one
 batched coupled simulator, each scored by what its clip visibly shows, read from the final state without a
-replay (the crowd's fast path; `search.solvers.domain.Domain.roll_out` is the generic one)."""
+replay (the crowd's fast path; `search.core.domain.Domain.roll_out` is the generic one)."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import math
 import numpy as np
 
 from app.visible import VisibleClip, progress_towards
+from search.core.contrast import Rollouts, visible_contrast
 from search.core.outcomes import OUTCOME_NAMES
+from search.core.prior import ActionPrior
+from search.core.rollout import Tracker
 from search.crowd.problem import concat_snapshots
 from search.crowd.sim.coupled import CoupledSimulator
 from search.crowd.sim.observation import Policy
 from search.crowd.sim.scenarios import Scenario
-from search.solvers.contrast import Rollouts, visible_contrast
-from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
-from search.solvers.rollout import Tracker
 
 
 def roll_out(

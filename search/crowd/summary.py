@@ -20,11 +20,11 @@ import numpy as np
 
 from app.formats import SUMMARY_FORMAT
 from search.core.outcomes import OUTCOME_NAMES
+from search.core.prior import ActionPrior
 from search.crowd.agents.policies import SCRIPTED, load_policy
 from search.crowd.sim.coupled import replay
 from search.crowd.sim.scenarios import Scenario
 from search.solvers.follow import Follow, recorded
-from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 
 

@@ -12,12 +12,12 @@ from typing import Any
 import numpy as np
 
 from app.visible import VisibleClip, World
+from search.core.domain import Coupled, Domain
 from search.core.world import Claim, is_module_attribute
 from search.gym.adapter import Adapter, load_adapter
 from search.gym.agents import GymAgent, load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario
 from search.gym.scenarios import GymDistribution, gym_file, load_gym_file
-from search.solvers.domain import Coupled, Domain
 
 
 class GymDomain(Domain):
@@ -129,8 +129,8 @@ class GymDomain(Domain):
         """Rollouts scored from the problem's own record of each agent's ending, as its summary would say it (no
         replay; `tests/gym/test_any_world.py` checks it against the summaries); the states over worker processes
         unless the world steps them in one batch (``batched``)."""
-        from search.solvers.contrast import roll_out_problem
-        from search.solvers.domain import roll_out_spread
+        from search.core.contrast import roll_out_problem
+        from search.core.domain import roll_out_spread
 
         if self.batched:
             return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
@@ -225,8 +225,8 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
     """The visible contrast of a row of a Gymnasium problem that just ended, its clip shown from the state after
     step ``since``: each agent's event and its time, and its visible score's sum where the world shows one, as
     `search.gym.summary.build_gym_summary` records them."""
+    from search.core.contrast import visible_contrast
     from search.core.outcomes import OUTCOME_NAMES
-    from search.solvers.contrast import visible_contrast
 
     dt = coupled.problem.adapter.dt
     outcomes = tuple(

@@ -30,10 +30,10 @@ from typing import Any
 import numpy as np
 
 from search.core.outcomes import OUTCOME_NAMES, RUNNING
+from search.core.prior import ActionPrior
 from search.gym.adapter import Adapter, ending, load_adapter
 from search.gym.agents import GymAgent
 from search.gym.rows import Spread, advance, pays
-from search.solvers.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig
 
 FINISHED = -1  # a finished agent's discrete action: differs from every action
@@ -336,7 +336,7 @@ class GymCoupledProblem:
         itself and each Box coordinate at either end of its range."""
         if self.divergence.discrete:
             return [np.full_like(np.asarray(action), a) for a in range(int(self.action_space.n))]
-        from search.solvers.problem import box_alternatives
+        from search.core.problem import box_alternatives
 
         flat = np.asarray(action, np.float64).reshape(len(action), -1)
         shape = np.asarray(action).shape

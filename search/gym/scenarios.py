@@ -25,7 +25,7 @@ from app.toml_errors import load_toml
 from search.core.settings import check_keys
 from search.gym.problem import GymScenario
 
-# world = "<name>" names the world a file is for, where its adapter alone leaves it open (search.solvers.domain)
+# world = "<name>" names the world a file is for, where its adapter alone leaves it open (search.core.domain)
 SCENARIO_KEYS = {"name", "world", "adapter", "seed", "settings", "description"}
 DISTRIBUTION_KEYS = {"name", "world", "adapter", "distribution", "settings", "description"}
 

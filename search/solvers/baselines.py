@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from search.solvers.problem import Problem
-from search.solvers.rollout import Tracker, fresh, rollout
+from search.core.problem import Problem
+from search.core.rollout import Tracker, fresh, rollout
 from search.solvers.solver import ProblemSearch, register
 
 

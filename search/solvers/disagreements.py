@@ -37,11 +37,11 @@ from typing import Any
 
 import numpy as np
 
+from search.core.problem import ActionGap, Follows, StateValues
+from search.core.rollout import Tracker
 from search.solvers.episodes import Episodes, Source, continuing, in_turn, play, tracker_at, within
 from search.solvers.follow import ALWAYS, Follow
-from search.solvers.problem import ActionGap, Follows, StateValues
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, held, register
 from search.solvers.watching import Summarize, Watching, spread_source
 

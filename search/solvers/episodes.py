@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from search.core.problem import Problem
+from search.core.rollout import Tracker
 from search.core.workers import in_order
-from search.solvers.problem import Problem
-from search.solvers.rollout import Tracker
 
 if TYPE_CHECKING:
-    from search.solvers.domain import Coupled, Domain  # the domain module imports the solvers
+    from search.core.domain import Coupled, Domain  # the domain module imports the solvers
 
 # groups played at once over the workers, each from the steps counted when its chunk starts: a constant, so how far
 # ahead they play never depends on the number of workers
@@ -49,7 +49,7 @@ class Source:
     reward: dict[str, Any]
 
     def domain(self) -> Domain:
-        from search.solvers.domain import domain_named  # the domain module imports the solvers
+        from search.core.domain import domain_named  # the domain module imports the solvers
 
         return domain_named(self.world)
 

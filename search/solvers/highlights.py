@@ -35,11 +35,11 @@ from typing import Any, cast
 
 import numpy as np
 
+from search.core.problem import ActionValues, AgentRewards, Alternatives, Features, Follows, provides
+from search.core.rollout import Tracker
 from search.solvers.episodes import Episodes, Source, continuing, in_turn, play
 from search.solvers.follow import ALWAYS, Follow
-from search.solvers.problem import ActionValues, AgentRewards, Alternatives, Features, Follows, provides
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, held, register
 from search.solvers.watching import Summarize, Watching, spread_source
 

@@ -37,8 +37,8 @@ from typing import Any, cast
 import numba
 import numpy as np
 
-from search.solvers.problem import Assign, Problem, provides
-from search.solvers.rollout import Tracker
+from search.core.problem import Assign, Problem, provides
+from search.core.rollout import Tracker
 from search.solvers.solver import ProblemSearch, register
 
 

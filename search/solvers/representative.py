@@ -35,10 +35,10 @@ from typing import Any, TypeVar
 import numpy as np
 
 from app.formats import ClipVote
+from search.core.contrast import ALPHA, RollOut, Rollouts, Vote, describe_vote, vote
+from search.core.rollout import Tracker
 from search.core.workers import workers
-from search.solvers.contrast import ALPHA, RollOut, Rollouts, Vote, describe_vote, vote
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, OwnSummaries, register
 
 Replay = TypeVar("Replay")  # what a candidate's replay gives (a summary)

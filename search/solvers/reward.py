@@ -36,8 +36,8 @@ import numpy as np
 import numpy.typing as npt
 
 from search.core.outcomes import COLLISION, SUCCESS
+from search.core.prior import PRIOR_KINDS, ActionPrior
 from search.core.settings import ConfigTable
-from search.solvers.prior import PRIOR_KINDS, ActionPrior
 
 TERMS = ("action_divergence", "goal", "horizon", "plausibility")
 

@@ -25,12 +25,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.formats import summary_json
+from search.core.domain import domain_for
+from search.core.problem import require
+from search.core.rollout import Tracker
 from search.core.settings import check_keys, field_types
 from search.core.workers import one_core
-from search.solvers.domain import domain_for
-from search.solvers.problem import require
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 from search.solvers.solver import DEFAULT_SOLVER, Comparison, OwnSummaries, ProblemSearch, solver_named
 
 if TYPE_CHECKING:
@@ -109,7 +109,7 @@ def parse_settings(cls: type, items: list[str], what: str) -> dict[str, Any]:
 
 def refuse_missing_capabilities(job: SearchJob) -> None:
     """Refuse a search whose solver needs a capability its world's coupled problem lacks
-    (`search.solvers.problem.require`), before any work: the problem of one starting state is built, never
+    (`search.core.problem.require`), before any work: the problem of one starting state is built, never
     stepped."""
     solver = solver_named(job.solver)
     if not solver.needs:

@@ -21,10 +21,10 @@ if TYPE_CHECKING:
     import numpy as np
 
     from app.formats import ClipVote
-    from search.solvers.domain import Domain
-    from search.solvers.problem import Problem
+    from search.core.domain import Domain
+    from search.core.problem import Problem
+    from search.core.rollout import Tracker
     from search.solvers.reward import RewardConfig
-    from search.solvers.rollout import Tracker
 
 DEFAULT_SOLVER = "mcts"
 ENTRY_POINTS = "foil.solvers"
@@ -38,7 +38,7 @@ class Solver(ABC):
     config_class: type  # its settings, one frozen dataclass from the study file (or --set) to the search
     starts: Starts = "fixed"  # a fixed scenario, a distribution of starting states it draws from, or either
     reels: bool = False  # its clips are a reel of moments per agent, not one clip of the pair
-    needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.solvers.problem)
+    needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.core.problem)
 
     def warnings(self, record: dict[str, Any]) -> list[str]:
         """What a search's run.json record warns of, in words: the runner, `foil search` and the bundle print
@@ -81,7 +81,7 @@ class ProblemSearch(Solver):
     needs: tuple[type, ...] = ()
 
     def run(self, problem: Problem, tracker: Tracker, rng: np.random.Generator, config: Any) -> None:
-        from search.solvers.problem import require
+        from search.core.problem import require
 
         require(problem, self.needs, self.name)
         self.search(problem, tracker, rng, config)
@@ -90,7 +90,7 @@ class ProblemSearch(Solver):
 @dataclass(frozen=True)
 class Comparison:
     """What a solver that chooses its own summaries starts from: the agents in their world (``domain``, a
-    `search.solvers.domain.Domain`, which imports the solvers, so none of them imports it), the scenario, the
+    `search.core.domain.Domain`, which imports the solvers, so none of them imports it), the scenario, the
     settings, and the solver entry every summary carries."""
 
     agents: tuple[str, ...]

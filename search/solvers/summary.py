@@ -42,7 +42,7 @@ def differences(expected: Any, found: Any, where: str = "", limit: int = 10) -> 
 def verify(path: str | Path) -> list[str]:
     """Re-simulate a summary in its domain; the list of differences is empty when every number is reproduced
     exactly."""
-    from search.solvers.domain import domain_of_summary
+    from search.core.domain import domain_of_summary
 
     data = load_summary(path)
     missing = [key for key in REPLAY_KEYS if key not in data]

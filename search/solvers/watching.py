@@ -11,11 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from search.core.problem import Follows, require
+from search.core.rollout import Tracker
 from search.core.workers import workers
 from search.solvers.episodes import Episodes, Source, draw_episodes
 from search.solvers.follow import Follow
-from search.solvers.problem import Follows, require
-from search.solvers.rollout import Tracker
 from search.solvers.solver import Comparison, OwnSummaries
 
 # A moment's summary: (its episodes, the episode, the steps it plays, whom the agents follow, the steps shown, what

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from search.core.domain import domain_for
 from search.crowd.agents.dsrnn import observation_tensors
-from search.solvers.domain import domain_for
 
 
 def test_a_dsrnn_value_is_its_critic_of_the_state_after_its_memory():

@@ -181,8 +181,8 @@ class LastingTrack(TrackAdapter):
 def test_the_fast_rollouts_score_every_clip_as_its_summary_does(world, adapter):
     """The Gymnasium domain reads each rollout's ending from the problem; the interface's default builds each
     rollout's summary. Both must see the same clips, by the adapter's own rule."""
-    from search.solvers.domain import Domain, domain_for
-    from search.solvers.rollout import Tracker
+    from search.core.domain import Domain, domain_for
+    from search.core.rollout import Tracker
 
     (world / "starts.toml").write_text(f'adapter = "{adapter}"\n[distribution]\nseeds = [0, 100]\n')
     domain = domain_for([FAST, SLOW], "starts.toml")

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
+from search.core.rollout import Tracker
 from search.gym.adapter import load_adapter
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem, GymScenario, GymSnapshot
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from search.solvers.solver import ProblemSearch, solvers
 from search.solvers.summary import verify

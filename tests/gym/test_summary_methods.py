@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
+from search.core.domain import domain_for
+from search.core.rollout import Tracker
 from search.solvers.disagreements import Disagreement, DisagreementsConfig, find, last_state, top_k
-from search.solvers.domain import domain_for
 from search.solvers.episodes import draw_episodes
 from search.solvers.follow import Follow
 from search.solvers.highlights import HighlightsConfig, Moment, q_importance, select
-from search.solvers.rollout import Tracker
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from search.solvers.solver import solver_named
 from search.solvers.summary import verify
@@ -239,9 +239,9 @@ def test_a_domain_without_a_fast_path_scores_forks_by_their_summaries_alike(tmp_
     from its problem. A world that brings no fast path of its own gets the same disagreements, only slower."""
     import numpy as np
 
+    from search.core.domain import Domain
+    from search.core.rollout import Tracker
     from search.gym.domain import GymDomain
-    from search.solvers.domain import Domain
-    from search.solvers.rollout import Tracker
     from search.solvers.solver import Comparison, OwnSummaries
 
     class Replaying(GymDomain):

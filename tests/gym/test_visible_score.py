@@ -333,8 +333,8 @@ class Unread(DriftAdapter):
 def test_the_fast_rollouts_see_each_clips_score_as_its_summary_does(world):
     """The representative vote and the representativeness check read each rollout's score from the problem; the
     interface's default builds each rollout's summary. Both must see the same clips."""
-    from search.solvers.domain import Domain, domain_for
-    from search.solvers.rollout import Tracker
+    from search.core.domain import Domain, domain_for
+    from search.core.rollout import Tracker
 
     domain = domain_for([STEADY, IDLE], "drift-starts.toml")
     states = domain.draw_states("drift-starts.toml", {}, np.random.default_rng(0), 4)

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from search.cli import main
+from search.core.domain import domain_for
 from search.highway.release import apart, checkpoints, choose, is_highway_run
-from search.solvers.domain import domain_for
 
 DRIVERS = "tests.highway.drivers:idle,tests.highway.drivers:slower"
 

@@ -6,6 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from search.core.rollout import Tracker
 from search.gym.agents import load_agent
 from search.gym.problem import GymCoupledProblem
 from search.highway.adapter import HighwayAdapter
@@ -13,7 +14,6 @@ from search.highway.coupled import KernelCoupledProblem, coupled_problem
 from search.highway.scenarios import SCENARIOS
 from search.solvers.mcts import MCTSConfig, mcts
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 
 
 def _drivers(*names):

@@ -22,7 +22,7 @@ from app.store.database import migrate
 from app.web.main import create_app
 from app.web.settings import ServerSettings
 from search.cli import main
-from search.solvers.domain import domain_for, domains
+from search.core.domain import domain_for, domains
 from tests.support.survey import start, walk
 
 PACKAGE = Path(__file__).parent / "lineworld"
@@ -165,7 +165,7 @@ def test_a_study_bundles_and_serves_in_the_worlds_own_words(world, capsys):
 
 
 def test_the_world_writes_ten_methods_and_foil_the_rest(world, capsys):
-    from search.solvers.domain import Domain
+    from search.core.domain import Domain
 
     LineDomain = importlib.import_module("lineworld").LineDomain  # installed by the fixture, unknown to mypy
     written = {name for name, value in vars(LineDomain).items() if callable(value) and not name.startswith("_")}

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from search.core.rollout import Tracker
 from search.crowd.agents.policies import load_policy
 from search.crowd.problem import CoupledProblem
 from search.crowd.sim.coupled import replay
@@ -8,7 +9,6 @@ from search.crowd.sim.scenarios import load_scenario
 from search.solvers.baselines import random_search
 from search.solvers.mcts import CHILD, DEPTH, PARENT, STATE, TERMINAL, VISITS, MCTSConfig, Tree, mcts
 from search.solvers.reward import RewardConfig
-from search.solvers.rollout import Tracker
 from tests.support.synthetic import LockProblem
 
 SEEDS = range(5)

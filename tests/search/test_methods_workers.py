@@ -10,9 +10,9 @@ import json
 import pytest
 
 from search.cli import main
+from search.core.domain import Problems
 from search.gym.domain import GymDomain
 from search.highway.domain import HighwayDomain
-from search.solvers.domain import Problems
 
 ADAPTER = "tests.gym.test_gym_clips:TrackAdapter"
 AGENTS = "tests.gym.test_gym_clips:fast,tests.gym.test_gym_clips:slow"

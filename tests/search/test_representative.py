@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from search.cli import main
-from search.solvers.contrast import Rollouts, Vote, vote
+from search.core.contrast import Rollouts, Vote, vote
 from search.solvers.representative import candidates, choose
 
 

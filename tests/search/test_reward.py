@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from search.core.outcomes import COLLISION, RUNNING, SUCCESS
-from search.solvers.prior import ActionPrior
+from search.core.prior import ActionPrior
 from search.solvers.reward import DivergenceReward, RewardConfig, pairwise_divergence
 
 PRIOR = ActionPrior((1, 2), 0.25)

@@ -11,11 +11,11 @@ import pytest
 
 from search.bundle.searches import plan_clips, search_inputs, search_job
 from search.bundle.spec import BuildError, parse_build
+from search.core.problem import ActionValues, Follows, require
+from search.core.rollout import Tracker
 from search.solvers.baselines import SamplingConfig, random_search
 from search.solvers.episodes import Episodes, play
 from search.solvers.follow import ALWAYS, Follow
-from search.solvers.problem import ActionValues, Follows, require
-from search.solvers.rollout import Tracker
 from search.solvers.runner import SearchJob, run_search, write_outputs
 from search.solvers.solver import SOLVERS, Comparison, ProblemSearch, register, solver_named, solvers
 from search.solvers.summary import verify

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from search.solvers.topk import TopK
+from search.core.topk import TopK
 
 
 def seq(value: float, length: int = 3) -> np.ndarray:

@@ -12,9 +12,9 @@ import pytest
 from app.formats import ClipAudit
 from search.bundle.clips import vote_warnings
 from search.bundle.representativeness import describe_representativeness
-from search.solvers.contrast import Rollouts, sign_test
+from search.core.contrast import Rollouts, sign_test
+from search.core.rollout import Tracker
 from search.solvers.representative import RepresentativeConfig, representative, weak_vote
-from search.solvers.rollout import Tracker
 from tests.search.test_representative import representative_search
 
 HORIZON = 10

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from search.solvers.prior import ActionPrior
+from search.core.prior import ActionPrior
 
 
 class LockProblem:

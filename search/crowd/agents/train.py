@@ -144,7 +144,7 @@ def load_train_config(path: str | Path) -> TrainConfig:
     if not path.is_file():
         raise FileNotFoundError(f"no training config at {str(path)!r}")
     data = load_toml(path.read_text(), str(path))
-    if data.get("world") == "crowd":  # names the config's world (search.solvers.domain), not its [world] settings
+    if data.get("world") == "crowd":  # names the config's world (search.core.domain), not its [world] settings
         del data["world"]
     return TrainConfig.from_dict(data)
 

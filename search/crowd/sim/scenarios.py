@@ -217,7 +217,7 @@ class ScenarioDistribution:
 
 
 def _settings(data: dict[str, Any]) -> object:
-    """A file's ``[world]`` settings; ``world = "crowd"`` names the file's world instead (search.solvers.domain)."""
+    """A file's ``[world]`` settings; ``world = "crowd"`` names the file's world instead (search.core.domain)."""
     world = data.get("world", {})
     return {} if world == "crowd" else world
 

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from search.solvers.prior import ActionPrior
+from search.core.prior import ActionPrior
 
 
 class Problem(Protocol):

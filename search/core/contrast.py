@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from app.visible import Observer, VisibleClip, World
-from search.solvers.problem import Problem
-from search.solvers.rollout import Tracker
+from search.core.problem import Problem
+from search.core.rollout import Tracker
 
 # A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
 # the agents and the reward).
@@ -142,7 +142,7 @@ def largest_contrast(summaries: list[dict[str, Any]], world: World) -> int:
 def roll_out_problem(
     coupled: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
 ) -> Rollouts:
-    """Rollouts through any domain's coupled problems (one `search.solvers.domain.Coupled` per state): from each
+    """Rollouts through any domain's coupled problems (one `search.core.domain.Coupled` per state): from each
     state one without pushes and ``pushes`` under uniform pushes (`draw_pushes`), stepped together until the
     search's end rule ends each (`roll_out_rows`)."""
     parts = []

@@ -26,8 +26,8 @@ from search.core.evaluation import evaluation
 from search.core.world import Agents, Claim, Clips, Scenarios, Shipped, Trainer
 
 if TYPE_CHECKING:
-    from search.solvers.contrast import Rollouts, Shown
-    from search.solvers.rollout import Tracker
+    from search.core.contrast import Rollouts, Shown
+    from search.core.rollout import Tracker
 
 ENTRY_POINTS = "foil.domains"
 
@@ -39,7 +39,7 @@ class Coupled:
     agents followed a leader), ``window`` (the steps a clip shows) and ``horizon`` (the reward's horizon, where
     the summary ends before the search's)."""
 
-    problem: Any  # a search.solvers.problem.Problem
+    problem: Any  # a search.core.problem.Problem
     scenario_name: str
     summarize: Callable[..., dict[str, Any]]
     world: World = World()
@@ -73,7 +73,7 @@ class Problems(ABC):
         """The representative solver's rollouts (see `search.solvers.representative`): from each state one
         without pushes and ``pushes`` under uniform pushes, each scored by what its clip visibly shows. Default:
         through the coupled problem, each rollout's clip built as its summary (exact, at twice the steps)."""
-        from search.solvers.contrast import roll_out_problem
+        from search.core.contrast import roll_out_problem
 
         return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
 
@@ -85,7 +85,7 @@ class Problems(ABC):
         summary methods that fork (Agent Disagreements) score a fork. ``summary()`` builds the row's summary.
         Default: that summary's contrast (exact, at the cost of a replay); a world that can read it from its
         problem says so faster."""
-        from search.solvers.contrast import summary_contrast
+        from search.core.contrast import summary_contrast
 
         return summary_contrast(dict(summary()), coupled.world)
 
@@ -135,7 +135,7 @@ class Domain(Scenarios, Agents, Problems, Clips):
     ) -> tuple[float, dict[str, Any]]:
         """A candidate trajectory's exact replay as a summary (solver entry ``entry``), and its clip's visible
         contrast."""
-        from search.solvers.contrast import summary_contrast
+        from search.core.contrast import summary_contrast
 
         coupled = self.coupled(agents, state, reward)
         summary = coupled.summarize(actions, entry)
@@ -166,7 +166,7 @@ def domains() -> tuple[Domain, ...]:
     for entry in {entry.value: entry for entry in entry_points(group=ENTRY_POINTS)}.values():
         value, domain = entry.value, entry.load()()
         if not isinstance(domain, Domain):
-            raise ValueError(f"the {ENTRY_POINTS} entry point {value!r} is no search.solvers.domain.Domain")
+            raise ValueError(f"the {ENTRY_POINTS} entry point {value!r} is no search.core.domain.Domain")
         if type(domain).play is Agents.play and type(domain).evaluate_episodes is Domain.evaluate_episodes:
             raise ValueError(
                 f"the {ENTRY_POINTS} entry point {value!r} plays no test episodes: write its Domain's play "
@@ -297,8 +297,8 @@ def roll_out_spread(
     every state's pushes are drawn here, in order, as `roll_out_problem` draws them, and each worker builds the
     coupled problem of its states from the world's name, so the rollouts are the same whatever the number of
     workers. ``shown`` must pickle (a module-level function)."""
+    from search.core.contrast import Rollouts, draw_pushes, roll_out_problem
     from search.core.workers import in_order, workers
-    from search.solvers.contrast import Rollouts, draw_pushes, roll_out_problem
 
     coupled = [domain_named(domain).coupled(agents, state, reward) for state in states]
     if workers() <= 1 or len(states) < 2:
@@ -317,7 +317,7 @@ def roll_out_spread(
 def _roll_out_state(
     domain: str, agents: Sequence[str], state: Any, reward: dict[str, Any], env: np.ndarray, shown: Shown | None
 ) -> tuple[list[np.ndarray], np.ndarray, int]:
-    from search.solvers.contrast import roll_out_rows
+    from search.core.contrast import roll_out_rows
 
     return roll_out_rows(domain_named(domain).coupled(agents, state, reward), env, shown)
 

@@ -12,8 +12,8 @@ from typing import cast
 
 import numpy as np
 
-from search.solvers.problem import Problem
-from search.solvers.topk import TopK
+from search.core.problem import Problem
+from search.core.topk import TopK
 
 
 class Tracker:
