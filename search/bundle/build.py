@@ -29,6 +29,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from app.formats import MANIFEST_FORMAT, ClosePair, Manifest, manifest_json, sha256_file
 from app.visible import World
@@ -38,7 +39,7 @@ from search.bundle.gallery import write_gallery
 from search.bundle.representativeness import representativeness
 from search.bundle.searches import ClipJob, plan_clips, run_searches, search_inputs, search_job
 from search.bundle.spec import BuildError
-from search.bundle.steps import Cache
+from search.bundle.steps import Cache, Log
 from search.bundle.study import Study, load_study
 from search.core.workers import jobs as spread_over
 from search.solvers.runner import Backend, SearchJob
@@ -52,10 +53,10 @@ class Prepared:
     study: Study
     jobs: list[ClipJob]
     searches: list[SearchJob]
-    inputs: list[dict]
+    inputs: list[dict[str, Any]]
 
 
-def prepare(study: str | os.PathLike) -> Prepared:
+def prepare(study: str | os.PathLike[str]) -> Prepared:
     """A study file's build, with bad settings and scenarios refused here, before any work."""
     resolved = load_study(study)
     jobs = plan_clips(resolved.spec)
@@ -68,9 +69,9 @@ def prepare(study: str | os.PathLike) -> Prepared:
 
 
 def build_bundle(
-    study: str | os.PathLike,
-    out: str | os.PathLike,
-    log=print,
+    study: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    log: Log = print,
     workers: int = 1,
     backend: str = "process",
     ray_address: str | None = None,

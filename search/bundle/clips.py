@@ -9,7 +9,7 @@ import shutil
 import tempfile
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from app.formats import (
     ClipAudit,
@@ -25,9 +25,9 @@ from app.visible import VisibleClip, VisibleReels, World, audit
 from search.bundle.evaluations import better_agent
 from search.bundle.searches import ClipJob, describe_search
 from search.bundle.spec import BuildError
-from search.bundle.steps import IN_THIS_PROCESS, Cache, finished
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, finished
 from search.bundle.truth import PairedComparison
-from search.clips.render import RenderOptions, agent_label
+from search.clips.render import RenderOptions, RenderResult, agent_label
 from search.core.domain import Domain, domain_named, domain_of_summary
 from search.solvers.runner import Backend
 from search.solvers.solver import solver_named
@@ -86,15 +86,16 @@ def render_clips(
     clips: list[tuple[ClipJob, list[Path], Path]],
     options: RenderOptions,
     cache: Cache,
-    log,
+    log: Log,
     backend: Backend = IN_THIS_PROCESS,
-):
+) -> None:
     """Render each (job, summaries, clip) on ``backend``, unless the same summaries, numbers, options and
     renderer already made the file there. One summary is a clip; several are one agent's reel of moments."""
-    todo, inputs_of = {}, {}
+    todo: dict[str, Task] = {}
+    inputs_of: dict[str, tuple[dict[str, Any], Path]] = {}
     for job, summaries, out in clips:
         domain = domain_of_summary(load_summary(summaries[0]))
-        inputs = {
+        inputs: dict[str, Any] = {
             "summary": sha256_file(summaries[0]) if len(summaries) == 1 else [sha256_file(s) for s in summaries],
             "numbers": list(job.numbers),
             "options": asdict(options if len(summaries) == 1 else moment_options(options)),
@@ -149,6 +150,7 @@ def render_job(
         for path, (_, data) in zip(paths, summaries, strict=True):
             path.parent.mkdir(exist_ok=True)
             path.write_bytes(data)
+        result: RenderResult
         if len(paths) == 1:
             result = world.render(paths[0], out, numbers, options)
         else:
@@ -161,7 +163,7 @@ def render_job(
 def clip_audit(
     job: ClipJob,
     sources: list[list[Path]],
-    evaluations: dict[str, dict],
+    evaluations: dict[str, dict[str, Any]],
     shown: World,
     close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> tuple[list[str], list[str], dict[str, str]]:
@@ -181,9 +183,9 @@ def manifest_clip(
     job: ClipJob,
     sources: list[list[Path]],
     out: Path,
-    evaluations: dict[str, dict],
+    evaluations: dict[str, dict[str, Any]],
     shown: World,
-    log,
+    log: Log,
     close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> ManifestClip:
     """A clip's manifest entry: agents and labels in on-screen order, ground truth, audit (a warning line when it
@@ -221,7 +223,7 @@ def manifest_clip(
         "agents": agents,
         "labels": labels,
         "better": better,
-        "audit": ClipAudit(**shown_audit, vote=vote),
+        "audit": ClipAudit(**cast(dict[str, Any], shown_audit), vote=vote),  # shows: audit's "better", "worse" or "tie"
         "parts": list(job.parts),
         "solver": job.scheme.solver,
         "spent": spent,
@@ -252,7 +254,7 @@ def manifest_clip(
     )
 
 
-def clip_vote(summary: dict, order: list[int]) -> ClipVote | None:
+def clip_vote(summary: dict[str, Any], order: list[int]) -> ClipVote | None:
     """The vote over starting states that chose a clip, as its solver reads it from the summary
     (`Solver.clip_vote`), each agent's count in on-screen order (``order``: search positions on screen); None for
     clips no vote chose."""

@@ -6,17 +6,20 @@ from __future__ import annotations
 
 import json
 import time
+from typing import Any
 
 from search.bundle.searches import ClipJob
 from search.bundle.spec import BuildError, BuildSpec
-from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, agent_identity, finished
 from search.bundle.study import Study
 from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
 from search.core.domain import domain_named
 from search.solvers.runner import Backend
 
 
-def evaluate_agents(study: Study, cache: Cache, log, backend: Backend = IN_THIS_PROCESS) -> dict[str, dict]:
+def evaluate_agents(
+    study: Study, cache: Cache, log: Log, backend: Backend = IN_THIS_PROCESS
+) -> dict[str, dict[str, Any]]:
     """Each agent's `foil eval --json` object on the study's episodes (the manifest's ground truth) in the study's
     world settings, with its per-episode rewards where the world gives them (`Domain.evaluate_episodes`)."""
     spec = study.spec
@@ -25,10 +28,12 @@ def evaluate_agents(study: Study, cache: Cache, log, backend: Backend = IN_THIS_
 
 
 def evaluate_runs(
-    study: Study, cache: Cache, log, runs: list[tuple[str, int]], backend: Backend
-) -> dict[tuple[str, int], dict]:
+    study: Study, cache: Cache, log: Log, runs: list[tuple[str, int]], backend: Backend
+) -> dict[tuple[str, int], dict[str, Any]]:
     """Each (agent, episodes)'s evaluation at the study's eval seed, computed once per input on ``backend``."""
-    spec, inputs_of, todo = study.spec, {}, {}
+    spec = study.spec
+    inputs_of: dict[tuple[str, int], dict[str, Any]] = {}
+    todo: dict[tuple[str, int], Task] = {}
     for run, (inputs, task) in eval_tasks(study, runs).items():
         inputs_of[run] = inputs
         if cache.valid("eval", inputs, "eval.json"):
@@ -36,7 +41,7 @@ def evaluate_runs(
         else:
             todo[run] = task
     described = {run: f"eval {run_name(spec, *run)}" for run in todo}
-    for run, (result, seconds), progress in finished(todo, backend, described.get):
+    for run, (result, seconds), progress in finished(todo, backend, described.__getitem__):
         folder = cache.store("eval", inputs_of[run])
         (folder / "eval.json").write_text(json.dumps(result, indent=1))
         cache.seal("eval", inputs_of[run])
@@ -49,12 +54,13 @@ def evaluate_runs(
     }
 
 
-def eval_tasks(study: Study, runs: list[tuple[str, int]]) -> dict[tuple[str, int], tuple[dict, tuple]]:
+def eval_tasks(study: Study, runs: list[tuple[str, int]]) -> dict[tuple[str, int], tuple[dict[str, Any], Task]]:
     """Each (agent, episodes)'s inputs and job (function, arguments), in the study's world settings (the agents'
     own, `Study.world`); in a world whose agents act in their scenario's world, in the first scenario they are
     shown in."""
     spec, domain = study.spec, study.domain
-    seed, world, found = spec.eval_seed, study.world, {}
+    seed, world = spec.eval_seed, study.world
+    found: dict[tuple[str, int], tuple[dict[str, Any], Task]] = {}
     for agent, episodes in runs:
         shown = [name for clip_set in spec.sets if agent in clip_set.agents for name in clip_set.scenarios]
         scenario = domain.eval_scenario(shown)
@@ -71,7 +77,9 @@ def run_name(spec: BuildSpec, agent: str, episodes: int) -> str:
     return agent if episodes == spec.eval_episodes else f"{agent} on {episodes} episodes"
 
 
-def evaluation_job(domain: str, agent: str, episodes: int, seed: int, world: dict, scenario: str | None):
+def evaluation_job(
+    domain: str, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None
+) -> tuple[dict[str, Any], float]:
     """One agent's evaluation and the seconds it took (in a worker process: the domain is found by name)."""
     started = time.perf_counter()
     result = domain_named(domain).evaluate_episodes(agent, episodes, seed, world, scenario) | {"agent": agent}
@@ -81,9 +89,9 @@ def evaluation_job(domain: str, agent: str, episodes: int, seed: int, world: dic
 def close_pairs(
     study: Study,
     pairs: list[tuple[str, str]],
-    evaluations: dict[str, dict],
+    evaluations: dict[str, dict[str, Any]],
     cache: Cache,
-    log,
+    log: Log,
     backend: Backend = IN_THIS_PROCESS,
 ) -> dict[tuple[str, str], PairedComparison]:
     """The pairs shown together that the study's own episodes cannot tell apart, each compared on more paired
@@ -115,13 +123,15 @@ def shown_pairs(jobs: list[ClipJob]) -> list[tuple[str, str]]:
     return pairs
 
 
-def without_episodes(evaluation: dict) -> dict:
+def without_episodes(evaluation: dict[str, Any]) -> dict[str, Any]:
     """An evaluation as `foil eval --json` prints it, for the manifest: without its per-episode rewards."""
     return {key: value for key, value in evaluation.items() if key != "episode_rewards"}
 
 
 def better_agent(
-    pair: tuple[str, str], evaluations: dict[str, dict], close: dict[tuple[str, str], PairedComparison] | None = None
+    pair: tuple[str, str],
+    evaluations: dict[str, dict[str, Any]],
+    close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> str:
     """The ground truth: the agent with the higher mean test reward (the paper ranks its agents by it); for a close
     pair, over the most paired episodes it was evaluated on."""

@@ -5,6 +5,7 @@ Jinja environment, over gallery.html beside this module."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from app.formats import ManifestClip
 from search.bundle.clips import vote_warnings
@@ -15,9 +16,9 @@ from search.bundle.truth import PairedComparison, describe_close_pair
 def write_gallery(
     out: Path,
     clips: list[ManifestClip],
-    evaluations: dict[str, dict],
-    scenario_reports: list[dict],
-    close: list[dict] | None = None,
+    evaluations: dict[str, dict[str, Any]],
+    scenario_reports: list[dict[str, Any]],
+    close: list[dict[str, Any]] | None = None,
 ) -> None:
     """A static page of every clip with what participants never see: agents, ground truth, outcomes, reward, and
     the close pairs (manifest `close_pairs`), whose undecided ones no clip marks a better agent for."""

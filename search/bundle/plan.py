@@ -16,13 +16,14 @@ import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any, cast
 
 from search.bundle.build import Prepared
 from search.bundle.clips import render_job
 from search.bundle.evaluations import eval_tasks, evaluation_job
 from search.bundle.representativeness import check_tasks
 from search.bundle.searches import search_job_files
-from search.bundle.steps import Cache, duration, input_key
+from search.bundle.steps import Cache, Task, duration, input_key
 from search.clips.render import RenderOptions
 from search.core.workers import jobs
 from search.solvers.runner import SearchJob
@@ -105,7 +106,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> tuple[list[Step], dict[str, 
         [_evaluation(arguments)(arguments[2]) for arguments in todo],
     )
 
-    searches: dict[str, tuple[str, SearchJob, dict]] = {}  # one per input: clips may share a search
+    searches: dict[str, tuple[str, SearchJob, dict[str, Any]]] = {}  # one per input: clips may share a search
     for job, search, inputs in zip(prepared.jobs, prepared.searches, prepared.inputs, strict=True):
         searches.setdefault(input_key(inputs), (job.scheme.name, search, inputs))
     wanted = [
@@ -151,7 +152,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> tuple[list[Step], dict[str, 
     return [evaluations, search_step, check_step, clips], rates
 
 
-def _evaluation(arguments: tuple) -> Callable[[int], float]:
+def _evaluation(arguments: tuple[Any, ...]) -> Callable[[int], float]:
     """An agent's evaluation's pace, on a few of its episodes."""
     domain, agent, episodes, *rest = arguments
     return paced(lambda size: evaluation_job(domain, agent, size, *rest)[1], FEWEST_EPISODES, episodes)
@@ -184,12 +185,14 @@ def _search(search: SearchJob) -> tuple[Callable[[int], float], float, bytes | N
     return pace, rate, found["summary-001.json"].encode() if "summary-001.json" in found else None
 
 
-def _check(task: tuple) -> Callable[[int], float]:
+def _check(task: Task) -> Callable[[int], float]:
     """A pair's check's pace, on a few of its starting states."""
     function, (domain, pair, fixed, distribution, world, settings) = task
 
     def run(states: int) -> float:
-        return function(domain, pair, fixed, distribution, world, settings.model_copy(update={"states": states}))[1]
+        return cast(
+            float, function(domain, pair, fixed, distribution, world, settings.model_copy(update={"states": states}))[1]
+        )
 
     return paced(run, 1, settings.states)
 

@@ -8,14 +8,18 @@ from __future__ import annotations
 import itertools
 import json
 import time
+from typing import Any
 
-from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished
+from search.bundle.spec import Representativeness
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, agent_identity, finished
 from search.bundle.study import Study
 from search.core.domain import domain_named
 from search.solvers.runner import Backend
 
 
-def representativeness(study: Study, cache: Cache, log, backend: Backend = IN_THIS_PROCESS) -> list[dict]:
+def representativeness(
+    study: Study, cache: Cache, log: Log, backend: Backend = IN_THIS_PROCESS
+) -> list[dict[str, Any]]:
     """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
     there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`, by
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
@@ -30,12 +34,12 @@ def representativeness(study: Study, cache: Cache, log, backend: Backend = IN_TH
         if not cache.valid("representativeness", inputs, "report.json")
     }
     described = {pair: f"representativeness {pair[0]}-{pair[1]}" for pair in todo}
-    for pair, (found, seconds), progress in finished(todo, backend, described.get):
+    for pair, (found, seconds), progress in finished(todo, backend, described.__getitem__):
         folder = cache.store("representativeness", checks[pair][2])
         (folder / "report.json").write_text(json.dumps(found, indent=1))
         cache.seal("representativeness", checks[pair][2])
         log(f"{described[pair]}: {seconds:.1f} s {progress}")
-    reports = []
+    reports: list[dict[str, Any]] = []
     for pair, (names, distribution, inputs, _) in checks.items():
         found = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
         for name, one in zip(names, found, strict=True):
@@ -49,7 +53,7 @@ def representativeness(study: Study, cache: Cache, log, backend: Backend = IN_TH
     return reports
 
 
-def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dict, tuple]]:
+def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dict[str, Any], Task]]:
     """Each pair shown on a fixed scenario in a pairwise or ranking part, with its scenarios, the distribution
     they are measured against, the check's inputs and its job (function, arguments); none in a world with no
     distribution of starting states where the study names none."""
@@ -85,7 +89,14 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
     return checks
 
 
-def representativeness_job(domain_name: str, pair, fixed: list, distribution: str, world: dict, settings):
+def representativeness_job(
+    domain_name: str,
+    pair: tuple[str, str],
+    fixed: list[Any],
+    distribution: str,
+    world: dict[str, Any],
+    settings: Representativeness,
+) -> tuple[list[dict[str, Any]], float]:
     """One pair's representativeness reports and the seconds they took (in a worker process: the domain is
     found by name)."""
     import numpy as np
@@ -106,7 +117,7 @@ def representativeness_job(domain_name: str, pair, fixed: list, distribution: st
     return found, time.perf_counter() - started
 
 
-def describe_representativeness(report: dict) -> str:
+def describe_representativeness(report: dict[str, Any]) -> str:
     """One line on a fixed scenario against the distribution, a warning when their majorities disagree; a weak
     distribution vote (its sign test not below alpha) is called weak, since it cannot say which agent most states
     show as better."""

@@ -9,9 +9,10 @@ import itertools
 import random
 import time
 from dataclasses import asdict, dataclass, replace
+from typing import Any, cast
 
 from search.bundle.spec import BuildSpec, Scheme
-from search.bundle.steps import IN_THIS_PROCESS, Cache, agent_identity, finished, input_key
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, agent_identity, finished, input_key
 from search.bundle.study import Study
 from search.core.domain import Domain, domain_for
 from search.solvers.runner import Backend, SearchJob, run_search, write_outputs
@@ -48,9 +49,12 @@ def plan_clips(spec: BuildSpec) -> list[ClipJob]:
             for pair in clip_set.pairs:
                 name = f"{group}/{pair[0]}/{pair[1]}"
                 if clip_set.ranking:
-                    numbers = tuple(shared[a] for a in pair)
+                    numbers = cast(tuple[int, int], tuple(shared[a] for a in pair))
                 else:
-                    numbers, first = tuple(random.Random(name).sample([first, first + 1], 2)), first + 2
+                    numbers, first = (
+                        cast(tuple[int, int], tuple(random.Random(name).sample([first, first + 1], 2))),
+                        first + 2,
+                    )
                 for parts, suffix, drawn in _draws(spec.schemes[scheme], clip_set.parts):
                     jobs.append(
                         ClipJob(
@@ -96,7 +100,7 @@ def search_job(job: ClipJob, study: Study | None = None) -> SearchJob:
     )
 
 
-def search_inputs(search: SearchJob, domain: Domain | None = None) -> dict:
+def search_inputs(search: SearchJob, domain: Domain | None = None) -> dict[str, Any]:
     """Everything a clip's search depends on, with every default resolved, so a changed default is a changed
     input; ``domain`` is the search's world (a study's, `Study.domain`), else found from its agents and
     scenario."""
@@ -120,7 +124,7 @@ def describe_search(job: ClipJob) -> str:
     return f"search {job.scheme.name} {job.scenario} {job.pair[0]}-{job.pair[1]}"
 
 
-def _reusable(job: ClipJob, inputs: dict, cache: Cache, log) -> bool:
+def _reusable(job: ClipJob, inputs: dict[str, Any], cache: Cache, log: Log) -> bool:
     """A cached search is reused while its inputs are unchanged and its summary still re-simulates exactly
     (`foil verify`), so changes to the simulator or the policies' code are caught too."""
     if not cache.valid("search", inputs, "summary-001.json"):
@@ -143,7 +147,7 @@ def search_job_files(search: SearchJob) -> tuple[dict[str, str], float]:
 
 
 def run_searches(
-    jobs: list[tuple[ClipJob, SearchJob, dict]], cache: Cache, log, backend: Backend = IN_THIS_PROCESS
+    jobs: list[tuple[ClipJob, SearchJob, dict[str, Any]]], cache: Cache, log: Log, backend: Backend = IN_THIS_PROCESS
 ) -> None:
     """Run every search the cache cannot supply on ``backend``; each result is written and sealed in the cache as
     soon as it is complete, so an interrupted build keeps the finished ones."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -305,6 +306,7 @@ def _schemes(build: BuildTable, domain: Domain | None, problems: list[Problem]) 
             problems.append(((*at, "solver"), str(error)))
             solver = None
         checked: dict[str, dict[str, Scalar]] = {}
+        check: Callable[[dict[str, Scalar]], dict[str, Any]]
         for key, check in (
             (
                 "settings",

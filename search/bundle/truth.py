@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 ALPHA = 0.05  # the error allowed over all the looks together
 LOOKS = 4  # the study's episodes, then 2, 4 and 8 times as many: the cap is 8 times the study's episodes
@@ -36,12 +37,12 @@ class PairedComparison:
     decided: bool  # the interval excludes 0
 
     @classmethod
-    def from_manifest(cls, data: dict) -> PairedComparison:
+    def from_manifest(cls, data: dict[str, Any]) -> PairedComparison:
         first, second = data["agents"]
         low, high = data["ci95"]
         return cls((first, second), data["difference"], (low, high), data["p"], data["episodes"], data["decided"])
 
-    def to_manifest(self) -> dict:
+    def to_manifest(self) -> dict[str, Any]:
         return {
             "agents": list(self.agents),
             "difference": self.difference,
