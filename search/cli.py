@@ -8,8 +8,12 @@ import argparse
 import json
 import math
 import sys
+import warnings
+from collections.abc import Callable
+from functools import partial
 from importlib.util import find_spec
 from pathlib import Path
+from typing import Any
 
 from app.cli import COMMANDS as SERVER_COMMANDS
 from app.cli import add_commands as add_server_commands
@@ -412,10 +416,22 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     try:
-        return int(args.handler(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = partial(_warn, args.command, warnings.showwarning)
+            return int(args.handler(args) or 0)
     except (ValueError, FileNotFoundError) as error:
         print(f"foil {args.command}: error: {error}", file=sys.stderr)
         return 2
+
+
+def _warn(command: str, otherwise: Callable[..., None], message: Warning | str, category: type, *rest: Any) -> None:
+    """A setting's warning as one line of the command's, like its errors; any other warning as Python shows it."""
+    from search.core.settings import ShortLength
+
+    if issubclass(category, ShortLength):
+        print(f"foil {command}: warning: {message}", file=sys.stderr)
+    else:
+        otherwise(message, category, *rest)
 
 
 if __name__ == "__main__":

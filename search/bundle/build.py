@@ -42,7 +42,7 @@ from search.bundle.spec import BuildError
 from search.bundle.steps import Cache, Log
 from search.bundle.study import Study, load_study
 from search.core.workers import jobs as spread_over
-from search.solvers.runner import Backend, SearchJob
+from search.solvers.runner import Backend, SearchJob, refuse_missing_capabilities
 from search.solvers.solver import solver_named
 
 
@@ -57,12 +57,15 @@ class Prepared:
 
 
 def prepare(study: str | os.PathLike[str]) -> Prepared:
-    """A study file's build, with bad settings and scenarios refused here, before any work."""
+    """A study file's build, with bad settings and scenarios refused here, before any work, and a scheme whose
+    method needs a capability the world's coupled problem lacks (`refuse_missing_capabilities`)."""
     resolved = load_study(study)
     jobs = plan_clips(resolved.spec)
     try:
         searches = [search_job(job, resolved) for job in jobs]
         inputs = [search_inputs(search, resolved.domain) for search in searches]
+        for search in {(s.solver, s.agents, s.scenario): s for s in searches}.values():
+            refuse_missing_capabilities(search)
     except (ValueError, FileNotFoundError) as error:
         raise BuildError(f"{study}: [build]: {error}") from None
     return Prepared(resolved, jobs, searches, inputs)
@@ -109,7 +112,7 @@ def build_bundle(
             stale.unlink()
     compared = [comparison.to_manifest() for comparison in close.values()]
     write_gallery(out, clips, evaluations, scenario_reports, compared)
-    study_shows = domain.world(spec.sets[0].scenarios[0])  # the crowd's words are the default: left out
+    study_shows = domain.world(spec.sets[0].scenarios[0])  # left out where a reader assumes it (the crowd's)
     manifest = Manifest(
         format=MANIFEST_FORMAT,
         label_seed=spec.seed,
@@ -118,7 +121,7 @@ def build_bundle(
         sources={agent: domain.agent_source(agent, resolved.world) for agent in spec.agents},
         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
         representativeness=scenario_reports,
-        world=None if study_shows == World() else study_shows.to_manifest(),
+        world=None if study_shows == World.from_manifest(None) else study_shows.to_manifest(),
         close_pairs=[ClosePair.model_validate(pair) for pair in compared],
     )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")

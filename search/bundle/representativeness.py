@@ -57,7 +57,6 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
     """Each pair shown on a fixed scenario in a pairwise or ranking part, with its scenarios, the distribution
     they are measured against, the check's inputs and its job (function, arguments); none in a world with no
     distribution of starting states where the study names none."""
-    from search.solvers.reward import RewardConfig
 
     spec, domain = study.spec, study.domain
     settings = spec.representativeness
@@ -75,6 +74,7 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
         names = list(dict.fromkeys(names))
         fixed = [domain.state(name, study.world_settings(name)) for name in names]
         drawn_world = study.world_settings(distribution)
+        reward = clip_reward(study, distribution, drawn_world)
         inputs = {
             "agents": [agent_identity(a, domain) for a in pair],
             "scenarios": [s.to_dict() for s in fixed],
@@ -82,11 +82,24 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
             "states": settings.states,
             "pushes": settings.pushes,
             "seed": settings.seed,
-            "reward": RewardConfig().to_dict(),
+            "reward": reward,
+            "check": 2,  # the check's rules (2: ties count half in the percentile; a test decides the warning)
         }
-        task = (representativeness_job, (domain.name, pair, fixed, distribution, drawn_world, settings))
+        task = (representativeness_job, (domain.name, pair, fixed, distribution, drawn_world, settings, reward))
         checks[pair] = (names, distribution, inputs, task)
     return checks
+
+
+def clip_reward(study: Study, distribution: str, world: dict[str, Any]) -> dict[str, Any]:
+    """The divergence reward's settings the check's rollouts end by: the study's clip length where
+    `[build.budget] clip_seconds` holds every scheme to one, else the reward's default length, in the
+    distribution's steps (so a clip the check scores is as long as a clip the study shows)."""
+    from search.core.settings import in_steps
+    from search.solvers.reward import RewardConfig
+
+    given = {} if study.spec.clip_seconds is None else {"horizon": study.spec.clip_seconds}
+    steps = in_steps(RewardConfig, given, study.domain.step_seconds(distribution, world), defaults=True)
+    return RewardConfig(**steps).to_dict()
 
 
 def representativeness_job(
@@ -96,15 +109,15 @@ def representativeness_job(
     distribution: str,
     world: dict[str, Any],
     settings: Representativeness,
+    reward: dict[str, Any],
 ) -> tuple[list[dict[str, Any]], float]:
     """One pair's representativeness reports and the seconds they took (in a worker process: the domain is
     found by name)."""
     import numpy as np
 
     from search.solvers.representative import RepresentativeConfig, how_representative
-    from search.solvers.reward import RewardConfig
 
-    started, domain, reward = time.perf_counter(), domain_named(domain_name), RewardConfig().to_dict()
+    started, domain = time.perf_counter(), domain_named(domain_name)
     rng = np.random.default_rng(settings.seed)
     drawn = domain.draw_states(distribution, world, rng, settings.states)
     found = how_representative(
@@ -136,8 +149,8 @@ def describe_representativeness(report: dict[str, Any]) -> str:
     )
     if report["percentile"] is not None:
         line += (
-            f"; it agrees with that vote more often than {report['percentile']:.0f}% of the distribution's states do "
-            f"(percentile {report['percentile']:.0f}; low: an unusual scenario for a pair)"
+            f"; it agrees with that vote as often as or more often than {report['percentile']:.0f}% of the "
+            f"distribution's states do (percentile {report['percentile']:.0f}; near 0: unusual for the pair)"
         )
     weak = (
         ""
@@ -145,6 +158,12 @@ def describe_representativeness(report: dict[str, Any]) -> str:
         else f"; a weak vote (p not below {tested['alpha']}): too few or too evenly split states to say which agent "
         f"most starting states show as better"
     )
+    if report["disagrees"] and not report["decided"]:
+        agreeing = f"binomial test p = {report['agreeing_p']:.2g}"
+        return (
+            f"representativeness {line}: undecided, its {report['rollouts']} rollouts cannot tell whether it shows "
+            f"less than the vote ({agreeing}); raise [build.representativeness] pushes to decide it{weak}"
+        )
     if report["disagrees"] and report["majority"] == 0:
         return (
             f"warning: unrepresentative scenario {line}: its clips tend to show no difference where most "

@@ -180,6 +180,7 @@ class BuildSpec:
     sets: tuple[ClipSet, ...]
     representativeness: Representativeness = Representativeness()
     world: str | None = None  # the world the study names (world = "..."), else found by its agents and scenarios
+    clip_seconds: float | None = None  # seconds of clip per question every scheme is held to ([build.budget])
 
     @property
     def agents(self) -> list[str]:
@@ -422,6 +423,7 @@ def parse_build(text: str, source: str = "study file") -> BuildSpec:
         ),
         representativeness=build.representativeness,
         world=build.world,
+        clip_seconds=build.budget.clip_seconds,
     )
 
 

@@ -4,6 +4,7 @@ the lengths of time a study or the command line gives in seconds where a datacla
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from dataclasses import fields
 from typing import Any, ClassVar, Self
@@ -37,10 +38,20 @@ def field_types(cls: type) -> dict[str, type]:
     return types
 
 
+FEWEST_STEPS = 5  # a length of time shorter than this many steps shows too little to read (a moment, a window)
+
+
+class ShortLength(UserWarning):
+    """A length of time given in seconds that is fewer than `FEWEST_STEPS` steps in this world."""
+
+
 def in_steps(cls: type, given: dict[str, Any], step_seconds: float, defaults: bool = False) -> dict[str, Any]:
     """Settings of dataclass ``cls`` as given (`field_types`) with each length of time in steps under its field's
     name: seconds divided by the world's ``step_seconds`` and rounded, NAME_steps as they are; with ``defaults``,
-    each length not given too, from its default in seconds. The other settings pass through."""
+    each length not given too, from its default in seconds but never fewer than `FEWEST_STEPS` steps (a default
+    is a decision for every world: 2.5 s is 10 steps of the crowd's, 2 of a world of 1-s steps). A length given in
+    seconds that is fewer than `FEWEST_STEPS` steps warns (`ShortLength`), naming the setting; NAME_steps is
+    taken as it is. The other settings pass through."""
     settings = dict(given)
     for name, default in durations(cls).items():
         steps_name = name + STEPS
@@ -48,14 +59,24 @@ def in_steps(cls: type, given: dict[str, Any], step_seconds: float, defaults: bo
             raise ValueError(f"give {name} in seconds or {steps_name} in steps, not both")
         if steps_name in settings:
             settings[name] = settings.pop(steps_name)
-        elif name in settings or defaults:
-            seconds = settings.get(name, default)
+        elif name in settings:
+            seconds = settings[name]
             settings[name] = round(seconds / step_seconds)
             if settings[name] < 1:
                 raise ValueError(
                     f"{name} = {seconds} s is less than one step of {step_seconds:g} s in this world: give more "
                     f"seconds, or {steps_name} in steps"
                 )
+            if settings[name] < FEWEST_STEPS:
+                warnings.warn(
+                    f"{name} = {seconds} s is only {settings[name]} step{'s' if settings[name] > 1 else ''} of "
+                    f"{step_seconds:g} s in this world, too few to show much: give more seconds, or {steps_name} = "
+                    f"{settings[name]} to keep it",
+                    ShortLength,
+                    stacklevel=2,
+                )
+        elif defaults:
+            settings[name] = max(round(default / step_seconds), FEWEST_STEPS)
     return settings
 
 

@@ -157,6 +157,7 @@ class CrowdDomain(Domain, Trainer):
             lambda actions, solver, follow=None, window=None, horizon=None: build_summary(
                 list(agents), policies, state, reward_config.with_horizon(horizon), actions, solver, follow, window
             ),
+            self.world(),
         )
 
     def roll_out(self, agents, states, reward, pushes, rng, tracker):

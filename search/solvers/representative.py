@@ -134,7 +134,10 @@ def how_representative(
     """How representative each fixed scenario is of the distribution ``drawn`` was drawn from, for two agents:
     how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
     pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
-    of rollouts that agree with the vote (0: none of the drawn states agrees less)."""
+    of rollouts that agree with the vote (ties with a state count half: 50 where every state agrees as often).
+    Whether its rollouts decide that it shows something else than the vote is a test, not a majority: the exact
+    one-sided binomial test that fewer than half of them agree with the vote (``agreeing_p``, ``decided`` below
+    ``config.alpha``); a few rollouts that disagree leave it undecided."""
     tracker = Tracker(2**62, 1)  # no budget: every drawn state votes, whatever it costs
     rollouts, states, _ = roll_out_states(roll_out, drawn, config, rng, tracker, state_cost=1)
     result = vote(rollouts, states)
@@ -144,6 +147,10 @@ def how_representative(
     for scenario in fixed:
         own = np.sign(roll_out([scenario], config.pushes, rng, tracker).contrast)
         share = float((own == result.direction).mean()) if result.direction else None
+        percentile = None
+        if share is not None:
+            percentile = float(100 * ((agreement < share).mean() + 0.5 * (agreement == share).mean()))
+        agreeing_p = fewer_than_half(int((own == result.direction).sum()), len(own)) if result.direction else 1.0
         reports.append(
             {
                 "scenario": scenario.name,
@@ -153,11 +160,19 @@ def how_representative(
                 "no_difference": float((own == 0).mean()),
                 "majority": int(np.sign(own.sum())),
                 "distribution_vote": result.record(rollouts, config.alpha),
-                "percentile": None if share is None else float(100 * (agreement < share).mean()),
+                "percentile": percentile,
                 "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction),
+                "agreeing_p": agreeing_p,
+                "decided": agreeing_p < config.alpha,
             }
         )
     return reports
+
+
+def fewer_than_half(agreeing: int, rollouts: int) -> float:
+    """The exact one-sided binomial test's p that a scenario's rollouts agree with a vote less often than half the
+    time: the chance of ``agreeing`` or fewer of ``rollouts`` were each as likely to agree as not."""
+    return sum(math.comb(rollouts, k) for k in range(agreeing + 1)) / 2**rollouts
 
 
 def weak_vote(record: dict[str, Any], agents: Sequence[str]) -> str | None:
@@ -200,7 +215,9 @@ def representative(
     if state_cost > tracker.budget:
         raise ValueError(
             f"a budget of {tracker.budget} steps fits no starting state: one state's rollouts take up to "
-            f"{state_cost} steps ((pushes + 1) x horizon); raise --budget or lower pushes"
+            f"{state_cost} steps ((pushes + 1) x a horizon of {horizon} steps); raise --budget or lower pushes. A "
+            "horizon written as steps before lengths of time became seconds now asks for that many seconds: give "
+            "it in seconds (horizon = S), or in steps as horizon_steps = N"
         )
     # the looks: after each full batch of the states the budget surely fits (at most M), the last where it stops
     looks = math.ceil(min(len(scenarios), tracker.remaining // state_cost) / config.batch_states)

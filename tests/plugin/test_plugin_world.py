@@ -198,3 +198,11 @@ def test_a_literature_method_is_refused_before_any_work(world, capsys, solver):
     assert f"the {solver} solver needs a problem with Follows" in error
     assert 'docs/gym.md, "What the summary methods need of a world"' in error and "LineProblem has no" in error
     assert not (world / "out").exists()
+
+
+def test_a_study_with_a_literature_method_is_refused_before_any_work(world, capsys):
+    (world / "study.toml").write_text(STUDY.replace('solver = "nfirst"', 'solver = "highlights"'))
+    assert main(["bundle", "study.toml", "--out", "bundle"]) == 2
+    error = capsys.readouterr().err
+    assert "the highlights solver needs a problem with Follows" in error and "LineProblem has no" in error
+    assert not (world / "bundle" / "cache").exists()  # no agent evaluated, no search run

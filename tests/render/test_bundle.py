@@ -384,16 +384,18 @@ def test_paper_build_reproduces_the_papers_clip_set():
 
 
 @pytest.mark.parametrize(
-    "majority, disagrees, start, end",
+    "majority, disagrees, decided, start, end",
     [
         (
             1,
             False,
+            False,
             "representativeness paper-bl-tr, lo vs hi:",
-            "(percentile 40; low: an unusual scenario for a pair)",
+            "(percentile 40; near 0: unusual for the pair)",
         ),
         (
             -1,
+            True,
             True,
             "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
             "its clips tend to show the other agent as better than most starting states do",
@@ -401,13 +403,22 @@ def test_paper_build_reproduces_the_papers_clip_set():
         (
             0,
             True,
+            True,
             "warning: unrepresentative scenario paper-bl-tr, lo vs hi:",
             "its clips tend to show no difference where most starting states show one",
         ),
+        (  # a few rollouts that disagree: no warning, the line says it is undecided and what would decide it
+            -1,
+            True,
+            False,
+            "representativeness paper-bl-tr, lo vs hi:",
+            "undecided, its 33 rollouts cannot tell whether it shows less than the vote (binomial test p = 0.3); "
+            "raise [build.representativeness] pushes to decide it",
+        ),
     ],
 )
-def test_the_representativeness_line_warns_when_the_scenario_disagrees_with_the_distribution(
-    majority, disagrees, start, end
+def test_the_representativeness_line_warns_when_the_scenario_decidedly_disagrees_with_the_distribution(
+    majority, disagrees, decided, start, end
 ):
     from search.bundle.representativeness import describe_representativeness
 
@@ -422,10 +433,12 @@ def test_the_representativeness_line_warns_when_the_scenario_disagrees_with_the_
         "majority": majority,
         "percentile": 40.0,
         "disagrees": disagrees,
+        "agreeing_p": 0.001 if decided else 0.3,
+        "decided": decided,
         "distribution_vote": {"direction": 1, "states": 64, "for_first": 50, "for_second": 4},
     }
     line = describe_representativeness(report)
     assert line.startswith(start) and line.endswith(end)
     assert "lo looks better in 10% of 33 nominal rollouts, hi in 70%" in line
     assert "training's 64 states vote lo (50 for lo, 4 for hi)" in line
-    assert "agrees with that vote more often than 40% of the distribution's states do" in line
+    assert "agrees with that vote as often as or more often than 40% of the distribution's states do" in line

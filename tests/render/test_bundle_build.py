@@ -236,5 +236,6 @@ def test_the_representative_clip_and_the_representativeness_of_the_fixed_scenari
     direction = report["distribution_vote"]["direction"]
     assert report["disagrees"] == bool(direction and report["majority"] != direction)
     line = next(line for line in log if "paper-bl-tr, goal vs orca" in line)
-    assert line.startswith("warning: unrepresentative" if report["disagrees"] else "representativeness")
+    warned = report["disagrees"] and report["decided"]  # 4 rollouts decide nothing: at most 1 in 16 by chance
+    assert line.startswith("warning: unrepresentative" if warned else "representativeness")
     assert "How representative the study" in (out / "index.html").read_text()

@@ -6,12 +6,13 @@ are what they were in steps; a world of 0.5 s steps gets 5."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import pytest
 
 from search.bundle.spec import BuildError, parse_build
 from search.cli import main
-from search.core.settings import in_steps
+from search.core.settings import FEWEST_STEPS, ShortLength, in_steps
 from search.solvers.disagreements import DisagreementsConfig
 from search.solvers.highlights import HighlightsConfig, HighlightsDivConfig
 
@@ -36,6 +37,18 @@ def test_seconds_become_steps_by_the_worlds_step_length():
         in_steps(HighlightsConfig, {"context": 0.1}, 0.25)
 
 
+def test_a_default_length_is_never_too_few_steps_and_a_short_given_one_warns():
+    """2.5 s is 2 steps of a world of 1-s steps: the default is then the fewest steps a moment reads in, and a
+    length given in seconds that short warns, naming the setting and how to keep it."""
+    assert in_steps(HighlightsConfig, {}, 1.0, defaults=True) == {"context": FEWEST_STEPS, "gap": FEWEST_STEPS}
+    assert in_steps(DisagreementsConfig, {}, 1.0, defaults=True) == {"horizon": FEWEST_STEPS}
+    with pytest.warns(ShortLength, match=r"context = 2.0 s is only 2 steps of 1 s in this world.*context_steps = 2"):
+        assert in_steps(HighlightsConfig, {"context": 2.0}, 1.0) == {"context": 2}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # given in steps: taken as it is
+        assert in_steps(HighlightsConfig, {"context_steps": 2}, 1.0) == {"context": 2}
+
+
 def search(solver: str, *settings: str) -> dict:
     """The solver's parameters as run.json records them, after `foil search` on the track."""
     args = ["--budget", "200", "--top-k", "1", "--reward", "horizon_steps=6", "--out", "out", "--quiet", *settings]
@@ -44,12 +57,13 @@ def search(solver: str, *settings: str) -> dict:
         return json.load(file)["solver"]["parameters"]
 
 
-def test_the_command_line_takes_seconds_and_steps_where_asked(track):
+def test_the_command_line_takes_seconds_and_steps_where_asked(track, capsys):
     assert search("disagreements")["horizon"] == 5  # the default 2.5 s
     assert search("disagreements", "--set", "horizon=4")["horizon"] == 8
     assert search("disagreements", "--set", "horizon_steps=3")["horizon"] == 3
     found = search("highlights", "--set", "context=1.5", "--set", "gap_steps=4", "--set", "lookahead=2")
     assert (found["context"], found["gap"], found["lookahead"]) == (3, 4, 2)  # lookahead is a number of steps
+    assert "foil search: warning: context = 1.5 s is only 3 steps of 0.5 s" in capsys.readouterr().err
 
 
 def test_the_reward_horizon_is_seconds_on_the_command_line_and_in_a_study(track):

@@ -144,6 +144,8 @@ def test_the_representativeness_line_reports_its_sign_test_and_calls_a_weak_vote
         "majority": 1,
         "percentile": 40.0,
         "disagrees": False,
+        "agreeing_p": 0.9,
+        "decided": False,
         "distribution_vote": {"direction": 1, "states": 16, "for_first": 5, "for_second": 3},
     }
     line = describe_representativeness(report)
