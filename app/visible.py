@@ -173,6 +173,8 @@ class Words:
     timeout: str = "ran out of time"
     running: str = "was still going when the clip ended"
     close_call: str = ""
+    # what a clip visibly shows of a run, in a few words: where the bundle's gallery says what makes a clip misleading
+    shown: str = "how each {agent}'s run ended, and when"
     # the instructions' paragraph on how agents are named, the line above a ranking round's clips and the notice
     # at each new round: a study file's [texts] robot_names, names_in_round and new_round say otherwise
     names: str = (
@@ -247,6 +249,7 @@ CROWD_WORDS = Words(
     timeout="ran out of time before reaching the goal",
     running="was still on its way when the clip ended",
     close_call="came close to people",
+    shown="who bumped into a person, who reached the goal and when, how far the others got",
     names=(
         "Every robot has a name (such as Robot 7), colour and shape of its own. A name never stands "
         "for two different robots in this study, and in a ranking round each name is one robot in "

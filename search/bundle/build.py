@@ -111,8 +111,7 @@ def build_bundle(
         if str(stale.relative_to(out)) not in wanted:
             stale.unlink()
     compared = [comparison.to_manifest() for comparison in close.values()]
-    write_gallery(out, clips, evaluations, scenario_reports, compared)
-    study_shows = domain.world(spec.sets[0].scenarios[0])  # left out where a reader assumes it (the crowd's)
+    write_gallery(out, clips, evaluations, scenario_reports, resolved.shows, compared)
     manifest = Manifest(
         format=MANIFEST_FORMAT,
         label_seed=spec.seed,
@@ -121,7 +120,8 @@ def build_bundle(
         sources={agent: domain.agent_source(agent, resolved.world) for agent in spec.agents},
         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
         representativeness=scenario_reports,
-        world=None if study_shows == World.from_manifest(None) else study_shows.to_manifest(),
+        # left out where a reader assumes it (the crowd's)
+        world=None if resolved.shows == World.from_manifest(None) else resolved.shows.to_manifest(),
         close_pairs=[ClosePair.model_validate(pair) for pair in compared],
     )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")

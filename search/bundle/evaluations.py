@@ -8,6 +8,7 @@ import json
 import time
 from typing import Any
 
+from app.visible import World
 from search.bundle.searches import ClipJob
 from search.bundle.spec import BuildError, BuildSpec
 from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, agent_identity, finished
@@ -45,13 +46,21 @@ def evaluate_runs(
         folder = cache.store("eval", inputs_of[run])
         (folder / "eval.json").write_text(json.dumps(result, indent=1))
         cache.seal("eval", inputs_of[run])
-        log(
-            f"{described[run]}: reward {result['reward_mean']:.2f}, success {result['success_rate']:.2f} "
-            f"({seconds:.1f} s) {progress}"
-        )
+        log(f"{described[run]}: {in_brief(result, study.shows)} ({seconds:.1f} s) {progress}")
     return {
         run: json.loads((cache.path("eval", inputs) / "eval.json").read_text()) for run, inputs in inputs_of.items()
     }
+
+
+def in_brief(result: dict[str, Any], world: World) -> str:
+    """An evaluation in a few words for the build's log: the mean reward, the success rate where the world's clips
+    end in outcomes, the visible score where the world declares one."""
+    parts = [f"reward {result['reward_mean']:.2f}"]
+    if world.has_outcomes() and "success_rate" in result:
+        parts.append(f"success {result['success_rate']:.2f}")
+    if "score" in result:
+        parts.append(f"{result['score']['name']} {result['score']['mean']:.{result['score'].get('digits', 1)}f}")
+    return ", ".join(parts)
 
 
 def eval_tasks(study: Study, runs: list[tuple[str, int]]) -> dict[tuple[str, int], tuple[dict[str, Any], Task]]:

@@ -10,6 +10,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
+from app.visible import World
 from search.bundle.spec import BuildError, BuildSpec, load_build
 from search.core.domain import Domain, domain_for
 
@@ -32,6 +33,11 @@ class Study:
         (`search.bundle.spec` refuses a study whose scenarios are in different worlds)."""
         domain = domain_for(spec.agents, spec.sets[0].scenarios[0], spec.world)
         return cls(spec, text, domain, domain.agents_settings(spec.agents))
+
+    @property
+    def shows(self) -> World:
+        """What the study's clips visibly show, and in which words: its world's, at its first scenario."""
+        return self.domain.world(self.spec.sets[0].scenarios[0])
 
     @property
     def named(self) -> str | None:

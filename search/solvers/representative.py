@@ -172,7 +172,7 @@ def how_representative(
 def fewer_than_half(agreeing: int, rollouts: int) -> float:
     """The exact one-sided binomial test's p that a scenario's rollouts agree with a vote less often than half the
     time: the chance of ``agreeing`` or fewer of ``rollouts`` were each as likely to agree as not."""
-    return sum(math.comb(rollouts, k) for k in range(agreeing + 1)) / 2**rollouts
+    return float(sum(math.comb(rollouts, k) for k in range(agreeing + 1)) / 2**rollouts)
 
 
 def weak_vote(record: dict[str, Any], agents: Sequence[str]) -> str | None:

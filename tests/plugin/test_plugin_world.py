@@ -148,11 +148,18 @@ def test_search_verify_and_render(world, capsys, solver):
     assert (world / "clip.mp4").stat().st_size > 0 and (world / "clip.poster.png").is_file()
 
 
+CROWD_WORDS = re.compile(r"\b(robots?|crowds?|pedestrians?|humans?|bumped|a person|people)\b", re.IGNORECASE)
+
+
 def test_a_study_bundles_and_serves_in_the_worlds_own_words(world, capsys):
     (world / "study.toml").write_text(STUDY)
     assert main(["bundle", "study.toml", "--out", "bundle"]) == 0
     manifest = json.loads((world / "bundle" / "manifest.json").read_text())
     assert manifest["world"]["domain"] == "line" and len(manifest["clips"]) == 1
+    gallery, log = (world / "bundle" / "index.html").read_text(), capsys.readouterr()
+    for written in (gallery, json.dumps(manifest["world"]), log.out, log.err):
+        assert CROWD_WORDS.findall(written) == []
+    assert "which cart tipped over, which reached the flag and when" in gallery
     database = f"sqlite:///{world / 'survey.sqlite3'}"
     migrate(database)
     settings = ServerSettings(

@@ -45,22 +45,19 @@ SCENARIOS = {"line-short": {"goal": 3.0, "limit": 6}, "line-long": {"goal": 5.0,
 TIP_SPEED = 1.2  # a cart faster than this in one step tips over
 COLOURS = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40))  # by the cart's number
 DT = 0.5
-WORDS = Words(
+WORDS = Words(  # the carts' words where Foil's defaults (in the agent's word) do not fit
+    agent="Cart",
     clip_title="Clip of two carts on a line, side by side, in the same wind",
-    reels_intro="Each cart is shown on its own, in moments from its own runs.",
-    reel_title="Clip of one cart on its own",
     example_caption="An example: two carts, each on its own line, drive to a flag in the same wind.",
-    legend_robots="Carts: each line shows one cart, named beside it, such as Robot 7, in a colour of its own.",
-    others_marker="",
+    legend_robots="Carts: each line shows one cart, named beside it, such as Cart 7, in a colour of its own.",
     legend_others="The flag on each line is the cart's goal.",
-    legend_trails="",
     legend_crash="A cart that tips over turns black; its line then says **tipped over**.",
     legend_status="Beside each line the cart's status says **at the flag**, **tipped over** or **out of time**.",
     success="reached the flag after {seconds} seconds",
     collision="tipped over after {seconds} seconds",
     timeout="ran out of time before the flag",
     running="was still driving when the clip ended",
-    close_call="",
+    shown="which cart tipped over, which reached the flag and when",
 )
 
 
