@@ -66,11 +66,11 @@ def summary_for(agents: list[str], misleading: bool) -> dict:
     }
 
 
-def write_bot_bundle(folder: Path, root: Path) -> Path:
+def write_bot_bundle(folder: Path, root: Path, seconds: float = 1) -> Path:
     """The paper study's bundle in `root` with a distinct clip file (same picture, different metadata) per entry,
-    each with its summary; `folder` holds the clips made on the way."""
+    each with its summary and playing `seconds`; `folder` holds the clips made on the way."""
     base = folder / "base.mp4"
-    make_clip(base, "testsrc")
+    make_clip(base, "testsrc", seconds=seconds)
     n_clips = len(SCHEMES) * len(SCENARIOS) * 3 + 1
     files = []
     for n in range(n_clips):
