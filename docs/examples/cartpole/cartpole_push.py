@@ -22,12 +22,13 @@ class CartPolePush(Adapter):
     domain = "cartpole"
     rule = "survival"  # the task is to keep the pole up: falling later is better
     words = Words(
+        agent="Controller",
         clip_title="Clip of two controllers, each balancing a pole on its own cart in the same gusts",
         example_caption="An example: two controllers, each balancing a pole on a cart, side by side.",
-        legend_robots="Controllers: each view shows one cart with its pole; its name, such as Robot 7, is below it.",
-        others_marker="",
+        legend_robots=(
+            "Controllers: each view shows one cart with its pole; its name, such as Controller 7, is below it."
+        ),
         legend_others="Gusts: both poles get the same gusts of wind, which you cannot see, only their effect.",
-        legend_trails="",
         legend_crash="A yellow-and-black burst marks the moment a pole falls; the list below then says **failed**.",
         legend_status="Below the picture each controller's line shows the pole's angle and says **failed** once "
         "its pole has fallen.",
@@ -35,7 +36,6 @@ class CartPolePush(Adapter):
         collision="let the pole fall after {seconds} seconds",
         timeout="kept the pole up until the end",
         running="still had the pole up when the clip ended",
-        close_call="",
     )
 
     status_words = {"success": "kept it up", "collision": "pole fell", "timeout": "kept it up", "running": "balancing"}
