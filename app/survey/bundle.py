@@ -123,7 +123,7 @@ def required_clips(study: Study) -> list[NeededClip]:
 
 def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
     """Refuse a bundle that lacks a clip the study needs, shows a pair of reels anywhere but on a pairwise or ranking
-    part's screens, or whose ranking clips label one robot two ways."""
+    part's screens, or whose ranking clips label one agent two ways."""
     problems = []
     for ref, where, kind in required_clips(study):
         found = bundle.matching(ref.scheme, ref.scenario, ref.agents, kind)
@@ -138,7 +138,7 @@ def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
             problems.append(
                 f"{where} would show clips of reels ({', '.join(map(repr, reels))}) of scheme {ref.scheme!r}; only "
                 "pairwise and ranking parts show reels, the example and a video attention check show clips of both "
-                "robots together"
+                "agents together"
             )
     for p, part in enumerate(study.parts):
         if part.kind != "ranking":
@@ -156,7 +156,13 @@ def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
                     shown = {agent: sorted(found) for agent, found in labels.items()}
                     problems.append(
                         f"parts[{p}]: the ranking clips of scheme {scheme!r}, scenario {scenario!r} label the "
-                        f"robots {shown}; a ranking needs one label per robot and a different label for each"
+                        f"agents {shown}; a ranking needs one label per agent and a different label for each"
                     )
     if problems:
-        raise BundleError("the bundle does not match the study:\n" + "\n".join(dict.fromkeys(problems)))
+        found = list(dict.fromkeys(problems))
+        shown = found if len(found) <= 10 else [*found[:10], f"... and {len(found) - 10} more"]
+        raise BundleError(
+            f"the bundle does not match the study ({len(found)} problem{'s' if len(found) > 1 else ''}): it was built "
+            "from another study file, or the study changed since: rebuild it with foil bundle STUDY.toml --out "
+            "BUNDLE (clips already built are reused)\n" + "\n".join(shown)
+        )

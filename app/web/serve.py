@@ -10,6 +10,7 @@ from logging.handlers import QueueHandler, QueueListener
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
 
@@ -26,7 +27,12 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
 
     # Options not given are left to the FOIL_* variables and the defaults.
     given: dict[str, Any] = {"bundle_dir": bundle, "study_file": study, "database_url": database_url}
-    settings = ServerSettings(**{key: value for key, value in given.items() if value is not None})
+    settings = checked_settings({key: value for key, value in given.items() if value is not None})
+    if not settings.bundle_dir.is_dir():
+        raise ValueError(
+            f"no bundle folder at {settings.bundle_dir}: build one with foil bundle STUDY.toml --out "
+            f"{settings.bundle_dir}, or give the folder that holds manifest.json"
+        )
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
     load_study(settings.study_path())  # a bad study file is named first, whatever listens on the port
     listening = _bind(host, port)  # before anything is changed: a port in use touches no database
@@ -63,6 +69,20 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
         for listener in listeners:
             listener.stop()  # writes what is still queued
     return 0
+
+
+def checked_settings(given: dict[str, Any]) -> ServerSettings:
+    """The server's settings from the options given and the FOIL_* variables, or one ValueError that says what is
+    wrong with each, in the variables' names and without the values (a password's start is never printed)."""
+    try:
+        return ServerSettings(**given)
+    except ValidationError as error:
+        problems = []
+        for found in error.errors():
+            message = str(found["msg"]).removeprefix("Value error, ")
+            field = ".".join(str(part) for part in found["loc"])
+            problems.append(f"FOIL_{field.upper()}: {message}" if field else message)
+        raise ValueError(f"the server's settings: {'; '.join(problems)}") from None
 
 
 class _Queued(QueueHandler):

@@ -74,6 +74,16 @@ def test_a_clip_the_study_needs_is_missing(bundle_copy):
         check_study_against_bundle(parse_study(study_text()), load_bundle(bundle_copy))
 
 
+def test_a_bundle_of_another_study_says_to_rebuild_it_and_lists_ten_problems_at_most(bundle_copy):
+    edit_manifest(bundle_copy, lambda m: m.update(clips=[c for c in m["clips"] if c["scheme"] != "schemenfirstsecret"]))
+    with pytest.raises(BundleError) as refused:
+        check_study_against_bundle(parse_study(study_text()), load_bundle(bundle_copy))
+    lines = str(refused.value).splitlines()
+    count = int(lines[0].split("(")[1].split(" ")[0])
+    assert lines[0].startswith("the bundle does not match the study (") and "rebuild it with foil bundle" in lines[0]
+    assert count > 10 and len(lines) == 12 and lines[-1] == f"... and {count - 10} more"
+
+
 def test_ranking_clips_must_label_each_robot_once(bundle_copy):
     def relabel(manifest):
         clip = next(c for c in manifest["clips"] if "agenthighsecret" in c["agents"])
@@ -81,7 +91,7 @@ def test_ranking_clips_must_label_each_robot_once(bundle_copy):
         clip["labels"] = ["Robot 9" if agent == "agenthighsecret" else label for agent, label in pairs]
 
     edit_manifest(bundle_copy, relabel)
-    with pytest.raises(BundleError, match="a ranking needs one label per robot"):
+    with pytest.raises(BundleError, match="a ranking needs one label per agent"):
         check_study_against_bundle(parse_study(study_text()), load_bundle(bundle_copy))
 
 

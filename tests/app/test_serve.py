@@ -157,3 +157,21 @@ def test_a_server_whose_output_nobody_reads_keeps_answering(tmp_path, bundle_dir
     finally:
         server.kill()
         server.wait(timeout=30)
+
+
+def test_bad_settings_and_a_missing_bundle_are_one_line_each_that_names_what_to_fix(tmp_path, bundle_dir):
+    """A too-short admin password is named by its variable, never printed; a bundle folder that is not there says
+    how to build one."""
+    secret = "shhh-7"
+    short = foil("serve", "--bundle", str(bundle_dir), cwd=tmp_path, env_extra={"FOIL_ADMIN_PASSWORD": secret})
+    output, _ = short.communicate(timeout=60)
+    assert short.returncode == 2 and secret not in output
+    assert output.strip() == (
+        "foil serve: error: the server's settings: FOIL_ADMIN_PASSWORD must be at least 8 characters long"
+    )
+    missing = foil("serve", "--bundle", str(tmp_path / "bundles" / "demo"), cwd=tmp_path)
+    output, _ = missing.communicate(timeout=60)
+    assert missing.returncode == 2 and output.strip().splitlines() == [
+        f"foil serve: error: no bundle folder at {tmp_path / 'bundles' / 'demo'}: build one with foil bundle "
+        f"STUDY.toml --out {tmp_path / 'bundles' / 'demo'}, or give the folder that holds manifest.json"
+    ]
