@@ -43,13 +43,14 @@ $(AXE):
 	npm install --silent --no-audit --no-fund --prefix .cache/axe axe-core@4
 
 # The demo: build the demo study's bundle from the shipped agents (small search budgets; searches and clips
-# already built are reused), then serve it at http://127.0.0.1:8000/, with the admin pages at /admin.
+# already built are reused), then serve it at http://127.0.0.1:8000/, with the admin pages at /admin. It prints what
+# a researcher needs, not its command lines nor a line per request, so the address and password stay on screen.
 demo: install
 	@echo "Building the demo study. Its warnings are expected: its small searches find clips that show the worse"
 	@echo "robot as better, which a study keeps to see how people read them (docs/clips.md); the gallery says which."
-	$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE) --jobs 2
+	@$(BIN)/foil bundle studies/demo.toml --out $(DEMO_BUNDLE) --jobs 2
 	@$(MAKE) -s demo-password
-	FOIL_ADMIN_PASSWORD="$${FOIL_ADMIN_PASSWORD:-$$(cat $(DEMO_BUNDLE).admin-password)}" \
+	@FOIL_ADMIN_PASSWORD="$${FOIL_ADMIN_PASSWORD:-$$(cat $(DEMO_BUNDLE).admin-password)}" FOIL_ACCESS_LOG=false \
 		$(BIN)/foil serve --bundle $(DEMO_BUNDLE) --db sqlite:///$(DEMO_BUNDLE).sqlite3
 
 # The demo's admin password: FOIL_ADMIN_PASSWORD when set; otherwise one generated on the first `make demo`, kept

@@ -34,6 +34,7 @@ def serve(*, bundle: Path, study: Path | None, database_url: str | None, host: s
             f"{settings.bundle_dir}, or give the folder that holds manifest.json"
         )
     logging.basicConfig(level=logging.INFO, format="%(levelname)s: %(message)s")
+    logging.getLogger("alembic").setLevel(logging.WARNING)  # the migrations' chatter: a failed one still says why
     load_study(settings.study_path())  # a bad study file is named first, whatever listens on the port
     listening = _bind(host, port)  # before anything is changed: a port in use touches no database
     try:

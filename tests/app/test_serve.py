@@ -49,7 +49,9 @@ def test_foil_serve_migrates_and_serves(tmp_path, bundle_dir):
     finally:
         server.terminate()
         server.wait(timeout=10)
-    assert f"the admin pages are at http://127.0.0.1:{port}/admin" in server.stdout.read()
+    said = server.stdout.read()
+    assert f"the admin pages are at http://127.0.0.1:{port}/admin" in said
+    assert "Running upgrade" not in said and "Context impl" not in said  # no migration chatter
 
 
 def test_foil_serve_refuses_a_bad_study_with_its_line_even_when_its_port_is_taken(tmp_path, bundle_dir):
@@ -120,6 +122,7 @@ def test_make_demo_prints_a_generated_admin_password_and_serves_with_it(tmp_path
     served = make("-n", "demo", f"VENV={Path(sys.executable).parent.parent}")
     assert f'FOIL_ADMIN_PASSWORD="${{FOIL_ADMIN_PASSWORD:-$(cat {saved})}}"' in served
     assert "foil serve --bundle" in served.split("FOIL_ADMIN_PASSWORD=", 1)[1]
+    assert "FOIL_ACCESS_LOG=false" in served  # no line per request to push the address and password off screen
 
 
 def test_the_server_never_imports_search_torch_or_the_highway_packages():
