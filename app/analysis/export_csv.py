@@ -220,8 +220,8 @@ suppressPackageStartupMessages(library(lme4))
 
 schemes <- c(@SCHEMES@)
 long <- read.csv("long.csv", encoding = "UTF-8")
-roster <- read.csv("participants.csv", encoding = "UTF-8")
-kept <- roster$participant[roster$excluded == 0]
+people <- read.csv("participants.csv", encoding = "UTF-8")
+kept <- people$participant[people$excluded == 0]
 z <- qnorm(0.975)
 
 # 1 for each pair of agents that the answer puts in the true order (both best first, "@ORDER@"-separated)

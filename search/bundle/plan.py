@@ -187,12 +187,11 @@ def _search(search: SearchJob) -> tuple[Callable[[int], float], float, bytes | N
 
 def _check(task: Task) -> Callable[[int], float]:
     """A pair's check's pace, on a few of its starting states."""
-    function, (domain, pair, fixed, distribution, world, settings) = task
+    function, (domain, pair, fixed, distribution, world, settings, reward) = task
 
     def run(states: int) -> float:
-        return cast(
-            float, function(domain, pair, fixed, distribution, world, settings.model_copy(update={"states": states}))[1]
-        )
+        fewer = settings.model_copy(update={"states": states})
+        return cast(float, function(domain, pair, fixed, distribution, world, fewer, reward)[1])
 
     return paced(run, 1, settings.states)
 

@@ -52,10 +52,10 @@ def test_the_script_reads_only_columns_the_export_has(exported):
     out, study = exported
     script = (out / "glmer.R").read_text()
     long, people = pd.read_csv(out / "long.csv"), pd.read_csv(out / "participants.csv")
-    used = set(re.findall(r"\b(long|d|roster)\$(\w+)", script))
-    assert {table for table, _ in used} == {"long", "d", "roster"}
+    used = set(re.findall(r"\b(long|d|people)\$(\w+)", script))
+    assert {table for table, _ in used} == {"long", "d", "people"}
     for table, column in used:
-        assert column in (people if table == "roster" else long).columns, f"{table}${column}"
+        assert column in (people if table == "people" else long).columns, f"{table}${column}"
     for question_type in ("choose", "rank"):  # the rows each part fits
         assert f'"{question_type}"' in script and question_type in set(long.question_type)
     assert f"schemes <- c({', '.join(f'{s!r}'.replace(chr(39), chr(34)) for s in study.design.schemes)})" in script
