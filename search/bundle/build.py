@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import Any
 
 from app.formats import MANIFEST_FORMAT, ClosePair, Manifest, manifest_json, sha256_file
-from app.visible import World
 from search.bundle.clips import clip_files, describe_questions_at_risk, job_summaries, manifest_clip, render_clips
 from search.bundle.evaluations import close_pairs, evaluate_agents, shown_pairs, without_episodes
 from search.bundle.gallery import write_gallery
@@ -120,8 +119,7 @@ def build_bundle(
         sources={agent: domain.agent_source(agent, resolved.world) for agent in spec.agents},
         files={name: sha256_file(out / name) for name in sorted(wanted | {"index.html"})},
         representativeness=scenario_reports,
-        # left out where a reader assumes it (the crowd's)
-        world=None if resolved.shows == World.from_manifest(None) else resolved.shows.to_manifest(),
+        world=resolved.shows.to_manifest(),  # the crowd's is left out (`Manifest`): a reader assumes it
         close_pairs=[ClosePair.model_validate(pair) for pair in compared],
     )
     (out / "manifest.json").write_text(manifest_json(manifest), encoding="utf-8")
