@@ -1,7 +1,7 @@
 """The report's small-sample degrees of freedom beside R's clubSandwich, and its population-averaged log odds ratios
 beside lme4's conditional ones, on the same data sets.
 
-1. The data set of tests/analysis/test_small_sample.py (14 participants, 9 clips, 3 schemes): R's
+1. The data set of tests/app/analysis/test_small_sample.py (14 participants, 9 clips, 3 schemes): R's
    `glm` + `vcovCR(type = "CR2")` + `coef_test(test = "Satterthwaite")` and `Wald_test(test = "HTZ")`, one-way by
    clip and by participant, against Foil's `_wishart_df` at R's estimate.
 2. Simulated studies (two schemes, 6 clips each, 40 participants) at several participant and clip standard
@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from app.analysis.model import Answers, _covariance, _part, _Robust, _scheme_test, _wishart_df, fit_accuracy  # noqa: E402
 from app.analysis.power import log_odds_for  # noqa: E402
-from tests.analysis.test_small_sample import reference_data, reference_fit  # noqa: E402
+from tests.app.analysis.test_small_sample import reference_data, reference_fit  # noqa: E402
 
 CLUBSANDWICH = """
 suppressMessages(library(clubSandwich))

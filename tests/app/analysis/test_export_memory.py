@@ -12,7 +12,7 @@ import pytest
 from app.analysis.export_csv import export_study
 from app.store.database import Database, migrate
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_export.py"
+BENCH = Path(__file__).resolve().parents[3] / "benchmarks" / "bench_export.py"
 
 
 def load_bench():

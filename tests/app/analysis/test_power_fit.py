@@ -11,7 +11,7 @@ import pytest
 
 from app.analysis.power import Crossing, PowerCurve, crossings, describe, fit_power_curve, run_power
 
-STUDIES = Path(__file__).resolve().parents[2] / "studies"
+STUDIES = Path(__file__).resolve().parents[3] / "studies"
 
 GRID = list(range(12, 121, 12))
 

@@ -15,10 +15,10 @@ from app.analysis.power import Assumptions, layout, parse_accuracies, simulate
 from app.analysis.report import render_report, tally_study
 from app.analysis.statistics import accuracy_difference
 from app.survey.study import load_study
-from tests.analysis.test_report import known_answers, known_db  # noqa: F401  (the fixture)
+from tests.app.analysis.test_report import known_answers, known_db  # noqa: F401  (the fixture)
 from tests.support.analysis import SCHEMES, add_participant
 
-STUDIES = Path(__file__).resolve().parents[2] / "studies"
+STUDIES = Path(__file__).resolve().parents[3] / "studies"
 
 
 def test_under_no_effect_the_model_rejects_far_less_often_than_the_pooled_test():

@@ -9,7 +9,7 @@ from sqlalchemy import update
 
 from app.analysis.report import render_report, tally_study
 from app.store.models import Participant
-from tests.analysis.test_report import known_answers
+from tests.app.analysis.test_report import known_answers
 from tests.support.analysis import add_participant
 
 TOLD = "All 3 participants were excluded (pilot_or_bot: 3), so nothing is analysed."

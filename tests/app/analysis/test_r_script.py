@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from app.analysis.export_csv import export_study
-from tests.analysis.test_export import answer_of
+from tests.app.analysis.test_export import answer_of
 from tests.support.analysis import SCHEMES, add_participant, label_of
 
 

@@ -11,7 +11,7 @@ from importlib.metadata import version
 import pytest
 
 from app.analysis.model import MODEL_VERSION
-from tests.analysis.test_report import known_answers, known_db  # noqa: F401  (the fixture)
+from tests.app.analysis.test_report import known_answers, known_db  # noqa: F401  (the fixture)
 
 EDITED = "\n# an edit made while the study was collecting\n"
 

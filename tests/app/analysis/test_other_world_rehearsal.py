@@ -16,7 +16,7 @@ from app.analysis.bots import simulate
 from app.survey.kinds import pilot_token
 from app.visible import Words, World
 from search.cli import main
-from tests.analysis.test_simulate import serve
+from tests.app.analysis.test_simulate import serve
 from tests.support.analysis import SCHEMES, write_bot_bundle
 from tests.support.survey import start, study_text, walk
 
