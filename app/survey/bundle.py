@@ -159,10 +159,10 @@ def check_study_against_bundle(study: Study, bundle: Bundle) -> None:
                         f"agents {shown}; a ranking needs one label per agent and a different label for each"
                     )
     if problems:
-        found = list(dict.fromkeys(problems))
-        shown = found if len(found) <= 10 else [*found[:10], f"... and {len(found) - 10} more"]
+        distinct = list(dict.fromkeys(problems))
+        listed = distinct if len(distinct) <= 10 else [*distinct[:10], f"... and {len(distinct) - 10} more"]
         raise BundleError(
-            f"the bundle does not match the study ({len(found)} problem{'s' if len(found) > 1 else ''}): it was built "
-            "from another study file, or the study changed since: rebuild it with foil bundle STUDY.toml --out "
-            "BUNDLE (clips already built are reused)\n" + "\n".join(shown)
+            f"the bundle does not match the study ({len(distinct)} problem{'s' if len(distinct) > 1 else ''}): it was "
+            "built from another study file, or the study changed since: rebuild it with foil bundle STUDY.toml --out "
+            "BUNDLE (clips already built are reused)\n" + "\n".join(listed)
         )

@@ -18,7 +18,7 @@ from search.clips.render import CRASH, PARTING_SECONDS, RenderOptions, agent_sty
 from search.gym.clips import GymClipRenderer, render_gym
 from search.solvers.baselines import SamplingConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
-from tests.render.test_render import colour_mask, probe, top_level_boxes
+from tests.clips.test_render import colour_mask, probe, top_level_boxes
 
 FAST = dict(speed=4.0, hold_start=0.2, hold_end=0.2, event_hold=0.2, width=480)
 

@@ -15,7 +15,7 @@ from search.gym.clips import GymClipRenderer, render_gym
 from search.highway.adapter import EGO_AT, TRAFFIC
 from search.solvers.baselines import SamplingConfig
 from search.solvers.runner import SearchJob, run_search, write_outputs
-from tests.render.test_render import probe, top_level_boxes
+from tests.clips.test_render import probe, top_level_boxes
 
 DRIVERS = ("tests.highway.drivers:idle", "tests.highway.drivers:slower")
 

@@ -82,7 +82,7 @@ def overlap(a, b) -> bool:
 @pytest.mark.parametrize("width", WIDTHS)
 def test_a_gym_status_and_caption_keep_off_the_label_and_inside_the_view(summary_file, adapter, width):  # noqa: F811
     summary = json.loads(summary_file.read_text())
-    summary["scenario"]["adapter"] = f"tests.render.test_status_layout:{adapter}"
+    summary["scenario"]["adapter"] = f"tests.clips.test_status_layout:{adapter}"
     renderer = MeasuredGym(summary, [3, 1], RenderOptions(width=width))
     lay = renderer.layout
     assert lay.columns == (2 if adapter == "LongWordsAdapter" else 1)

@@ -117,7 +117,7 @@ def careful_b(observations):
 
 
 ADAPTER = "tests.gym.test_gym_clips:TrackAdapter"
-CAREFUL_A, CAREFUL_B = "tests.render.test_close_pairs:careful_a", "tests.render.test_close_pairs:careful_b"
+CAREFUL_A, CAREFUL_B = "tests.bundle.test_close_pairs:careful_a", "tests.bundle.test_close_pairs:careful_b"
 FAST, SLOW = "tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"
 STUDY = f"""
 [study]

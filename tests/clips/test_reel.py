@@ -16,7 +16,7 @@ from search.cli import main
 from search.clips.reel import CARD_SECONDS, render_reel
 from search.clips.render import INK, RenderOptions
 from search.core.domain import domain_for
-from tests.render.test_render import colour_mask, probe, top_level_boxes
+from tests.clips.test_render import colour_mask, probe, top_level_boxes
 
 FAST = RenderOptions(speed=4.0, hold_start=0.25, hold_end=0.25, event_hold=0.25)
 

@@ -22,7 +22,7 @@ from search.clips.render import (
 from search.crowd.render import CrowdClipRenderer, faded, render_file
 from search.crowd.scene import scene_from_summary
 from search.crowd.sim.scenarios import load_scenario
-from tests.render.test_render import colour_mask
+from tests.clips.test_render import colour_mask
 from tests.support.summaries import summary_from_simulation, visible
 
 PLAIN = RenderOptions(hold_start=0, hold_end=0, event_hold=0)  # one frame per 1/24 s of the summary, no more
