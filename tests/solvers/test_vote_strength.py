@@ -15,7 +15,7 @@ from search.bundle.representativeness import describe_representativeness
 from search.core.contrast import Rollouts, sign_test
 from search.core.rollout import Tracker
 from search.solvers.representative import RepresentativeConfig, representative, weak_vote
-from tests.search.test_representative import representative_search
+from tests.solvers.test_representative import representative_search
 
 HORIZON = 10
 

@@ -164,7 +164,7 @@ def numpy_step_terms(config, heuristic, prior, agent_actions, agent_pos, other_p
     [
         {},
         {"norm": "squared", "combine": "min", "goal_bonus": 100.0, "beta": 1e4, "horizon_offset": -1e5},
-        {"plausibility": 0.3, "prior": "gaussian", "heuristic": "tests.search.test_reward:far_humans"},
+        {"plausibility": 0.3, "prior": "gaussian", "heuristic": "tests.solvers.test_reward:far_humans"},
     ],
 )
 def test_the_compiled_reward_equals_the_numpy_formulas_bit_for_bit(agents, settings):

@@ -129,7 +129,7 @@ class Failing(TrackAdapter):
 
 
 def test_a_workers_error_reaches_the_search(spread_at_once):
-    p = problem("tests.search.test_spread_rows:Failing", (FAST, SLOW), 2)
+    p = problem("tests.gym.test_spread_rows:Failing", (FAST, SLOW), 2)
     p.reset(4)
     with pytest.raises(ValueError, match="the wind broke the track"):
         for _ in range(20):
