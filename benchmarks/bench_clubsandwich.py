@@ -28,7 +28,7 @@ sys.path.insert(0, str(REPO))
 import numpy as np  # noqa: E402
 
 from app.analysis.model import Answers, _covariance, _part, _Robust, _scheme_test, _wishart_df, fit_accuracy  # noqa: E402
-from app.analysis.power import log_odds_for  # noqa: E402
+from app.analysis.simulation import log_odds_for  # noqa: E402
 from tests.app.analysis.test_small_sample import reference_data, reference_fit  # noqa: E402
 
 CLUBSANDWICH = """

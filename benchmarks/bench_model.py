@@ -35,7 +35,7 @@ sys.path.insert(0, str(REPO))
 
 from app.analysis.design import chance  # noqa: E402
 from app.analysis.model import Answers, ModelResult, fit_accuracy  # noqa: E402
-from app.analysis.power import Assumptions, layout, log_odds_for, simulate  # noqa: E402
+from app.analysis.simulation import Assumptions, layout, log_odds_for, simulate  # noqa: E402
 from app.analysis.statistics import wilson_interval  # noqa: E402
 from app.survey.study import load_study  # noqa: E402
 

@@ -14,6 +14,7 @@ from typing import Any
 from app.analysis.design import chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules
 from app.analysis.model import MODEL_VERSION
+from app.analysis.simulation import MEASURES, Assumptions, simulated_fits
 from app.analysis.source import sha256
 from app.survey.assignment import conditions
 from app.survey.study import Study, parse_study
@@ -52,6 +53,7 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
     """What the preregistration fixes, as data."""
     design = study.design
     schemes = ", ".join(design.schemes)
+    untestable = untestable_tasks(study, participants)
     return {
         "version": VERSION,
         "foil": foil_version(),
@@ -66,8 +68,12 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
             "two-sided, alpha 0.05, unadjusted); secondary, each Holm-adjusted as a family: each scheme's accuracy "
             f"differs from chance ({0.5 if task == 'ranking' else chance(study, task):.3g}), and with three schemes "
             "or more each pair of schemes differs"
+            if task not in untestable
+            else f"{task}: no test that the schemes differ is preregistered, as this design cannot run it: "
+            f"{untestable[task]}. The report describes the part's accuracies and their intervals alone"
             for task in tasks(study)
         ],
+        "untestable": untestable,
         "design": {
             "schemes": list(design.schemes),
             "scheme_factor": design.scheme_factor,
@@ -93,6 +99,20 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
             "within scenarios, where it has at least 20 arrangements); a ranking part by its pairwise orderings"
         ),
     }
+
+
+def untestable_tasks(study: Study, participants: int) -> dict[str, str]:
+    """Each part's task whose primary test (the schemes differ) this design cannot run, with the report's words for
+    why: its model fitted to one simulated study of the planned participants, every scheme at 75% (a scheme with
+    too few clips, or a test with too few degrees of freedom, is untestable whatever the answers)."""
+    assume = Assumptions({scheme: 0.75 for scheme in study.design.schemes})
+    found = {}
+    for task in tasks(study):
+        fitted = simulated_fits(study, task, participants, assume, 1, 0)[MEASURES[task][0]][0]
+        if fitted.estimable and fitted.scheme_p is None:
+            why = fitted.scheme_test.removeprefix("not tested: ")
+            found[task] = f"in a simulated study of {participants} participants, {why}"
+    return found
 
 
 def markdown(fixed: dict[str, Any]) -> str:

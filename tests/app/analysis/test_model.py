@@ -11,8 +11,9 @@ import pytest
 
 from app.analysis.design import chance
 from app.analysis.model import fit_accuracy
-from app.analysis.power import Assumptions, layout, parse_accuracies, simulate
+from app.analysis.power import parse_accuracies
 from app.analysis.report import render_report, tally_study
+from app.analysis.simulation import Assumptions, layout, simulate
 from app.analysis.statistics import accuracy_difference
 from app.survey.study import load_study
 from tests.app.analysis.test_report import known_answers, known_db  # noqa: F401  (the fixture)

@@ -112,7 +112,7 @@ def test_rankings_are_simulated_as_people_rank_and_powered_both_ways(capsys):
     whole order. Each simulated ranking gives three orderings, its whole order right exactly when all three are,
     at the whole-order accuracy asked for; the paper's design (two ranked sets per scheme) is never tested, and
     `foil power` says so instead of fitting a curve to zeros."""
-    from app.analysis.power import Assumptions, layout, ranking_odds_for, simulate_rankings, whole_order_accuracy
+    from app.analysis.simulation import Assumptions, layout, ranking_odds_for, simulate_rankings, whole_order_accuracy
     from app.survey.study import load_study
 
     study = load_study(STUDIES / "paper.toml")

@@ -128,3 +128,25 @@ def test_the_versions_of_foil_and_of_the_model_are_preregistered(served, tmp_pat
         in (printed)
     )
     assert "does not record the version of the report's model" in printed
+
+
+def test_a_primary_test_the_design_cannot_run_is_not_preregistered(tmp_path):
+    """The demo's ranking part has one ranked set of the representative scheme: the report can never test its
+    schemes, so the preregistration says so, in the report's words, instead of fixing a test that cannot run."""
+    from pathlib import Path
+
+    from app.analysis.exclusions import ExclusionRules
+    from app.analysis.prereg import markdown, plan
+    from app.survey.study import parse_study
+
+    raw = (Path(__file__).parents[3] / "studies" / "demo.toml").read_bytes()
+    manifest = tmp_path / "manifest.json"
+    manifest.write_text("{}")
+    fixed = plan(raw, parse_study(raw.decode("utf-8")), manifest, 40, ExclusionRules())
+    assert list(fixed["untestable"]) == ["ranking"]
+    assert fixed["untestable"]["ranking"].startswith("in a simulated study of 40 participants, only ")
+    assert "representative left out (fewer than two clips)" in fixed["untestable"]["ranking"]
+    pairwise, ranking = fixed["hypotheses"]
+    assert "(the primary test, two-sided" in pairwise
+    assert ranking.startswith("ranking: no test that the schemes differ is preregistered, as this design cannot")
+    assert ranking in markdown(fixed)
