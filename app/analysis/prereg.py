@@ -14,7 +14,6 @@ from typing import Any
 from app.analysis.design import chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules
 from app.analysis.model import MODEL_VERSION
-from app.analysis.simulation import MEASURES, Assumptions, simulated_fits
 from app.analysis.source import sha256
 from app.survey.assignment import conditions
 from app.survey.study import Study, parse_study
@@ -105,6 +104,8 @@ def untestable_tasks(study: Study, participants: int) -> dict[str, str]:
     """Each part's task whose primary test (the schemes differ) this design cannot run, with the report's words for
     why: its model fitted to one simulated study of the planned participants, every scheme at 75% (a scheme with
     too few clips, or a test with too few degrees of freedom, is untestable whatever the answers)."""
+    from app.analysis.simulation import MEASURES, Assumptions, simulated_fits  # numpy: not at the server's start
+
     assume = Assumptions({scheme: 0.75 for scheme in study.design.schemes})
     found = {}
     for task in tasks(study):
