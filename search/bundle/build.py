@@ -41,7 +41,7 @@ from search.bundle.spec import BuildError
 from search.bundle.steps import Cache, Log
 from search.bundle.study import Study, load_study
 from search.core.workers import jobs as spread_over
-from search.solvers.runner import Backend, SearchJob, refuse_missing_capabilities
+from search.solvers.runner import Backend, SearchJob, refuse_before_work
 from search.solvers.solver import solver_named
 
 
@@ -57,14 +57,14 @@ class Prepared:
 
 def prepare(study: str | os.PathLike[str]) -> Prepared:
     """A study file's build, with bad settings and scenarios refused here, before any work, and a scheme whose
-    method needs a capability the world's coupled problem lacks (`refuse_missing_capabilities`)."""
+    clip is longer than an episode or whose method needs a capability the world lacks (`refuse_before_work`)."""
     resolved = load_study(study)
     jobs = plan_clips(resolved.spec)
     try:
         searches = [search_job(job, resolved) for job in jobs]
         inputs = [search_inputs(search, resolved.domain) for search in searches]
-        for search in {(s.solver, s.agents, s.scenario): s for s in searches}.values():
-            refuse_missing_capabilities(search)
+        for search in {(s.solver, s.agents, s.scenario, repr(s.reward_settings)): s for s in searches}.values():
+            refuse_before_work(search)
     except (ValueError, FileNotFoundError) as error:
         raise BuildError(f"{study}: [build]: {error}") from None
     return Prepared(resolved, jobs, searches, inputs)

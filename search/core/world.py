@@ -123,6 +123,11 @@ class Scenarios(ABC):
         """Simulated seconds per step in scenario or distribution ``name`` under ``world``: how a study's seconds of
         clip become steps."""
 
+    def episode_seconds(self, name: str, world: dict[str, Any]) -> float | None:
+        """The longest an episode of scenario or distribution ``name`` lasts under ``world``, in seconds: no
+        searched clip is longer. Default: None, no limit known."""
+        return None
+
     @abstractmethod
     def state(self, name: str, world: dict[str, Any]) -> Any:
         """The fixed scenario ``name`` under ``world``, complete: a state with a ``name`` and a ``to_dict()``."""

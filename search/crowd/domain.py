@@ -108,6 +108,12 @@ class CrowdDomain(Domain, Trainer):
 
         return comparison_world(list(agents), settings, self.scenario_settings(scenario))
 
+    def episode_seconds(self, name: str, world: dict) -> float | None:
+        """The world's time limit (``world`` holds the search's settings, `search_settings`)."""
+        from search.crowd.sim.world import WorldConfig
+
+        return float(WorldConfig.from_dict(world).time_limit)
+
     def is_distribution(self, name: str) -> bool:
         from search.crowd.sim.scenarios import ScenarioDistribution, load_scenario_or_distribution
 

@@ -79,6 +79,14 @@ class GymDomain(Domain):
     def step_seconds(self, name: str, world: dict) -> float:
         return float(self.adapter(name).dt)
 
+    def episode_seconds(self, name: str, world: dict) -> float | None:
+        """The environment's step limit (its spec's ``max_episode_steps``) in seconds; None where it has none."""
+        adapter = self.adapter(name)
+        env = type(adapter)(adapter.settings | world).make()
+        steps = getattr(env.spec, "max_episode_steps", None)
+        env.close()
+        return float(steps * adapter.dt) if steps else None
+
     def state(self, name: str, world: dict) -> GymScenario:
         found = self.load(name)
         if isinstance(found, GymDistribution):

@@ -107,15 +107,24 @@ def parse_settings(cls: type, items: list[str], what: str) -> dict[str, Any]:
     return settings
 
 
-def refuse_missing_capabilities(job: SearchJob) -> None:
-    """Refuse a search whose solver needs a capability its world's coupled problem lacks
-    (`search.core.problem.require`), before any work: the problem of one starting state is built, never
-    stepped."""
+def refuse_before_work(job: SearchJob) -> None:
+    """Refuse, before any work, a search that cannot be what was meant: a searched clip longer than an episode of
+    its world (a horizon written in steps before lengths of time became seconds), and a solver that needs a
+    capability its world's coupled problem lacks (`search.core.problem.require`; the problem of one starting state
+    is built, never stepped)."""
     solver = solver_named(job.solver)
-    if not solver.needs:
-        return
     domain = domain_for(job.agents, job.scenario, job.world)
     world = domain.search_settings(job.agents, job.world_settings, job.scenario)
+    horizon = RewardConfig.from_dict(job.reward_settings).horizon
+    seconds, longest = horizon * domain.step_seconds(job.scenario, world), domain.episode_seconds(job.scenario, world)
+    if longest is not None and seconds > longest:
+        raise ValueError(
+            f"the reward's horizon is {horizon} steps ({seconds:g} s), longer than an episode here ({longest:g} s): "
+            "a horizon written in steps before lengths of time became seconds now asks for that many seconds; give "
+            "it in seconds (horizon = S) or in steps as horizon_steps = N"
+        )
+    if not solver.needs:
+        return
     if domain.is_distribution(job.scenario):
         state = domain.draw_states(job.scenario, world, np.random.default_rng(job.seed), 1)[0]
     else:
@@ -128,7 +137,7 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     (best first, or in the order of a solver that chooses its own) and ``run.json``. Kept trajectories are
     replayed at batch size 1 and ranked by that authoritative reward."""
     started = time.perf_counter()
-    refuse_missing_capabilities(job)
+    refuse_before_work(job)
     solver = solver_named(job.solver)
     domain = domain_for(job.agents, job.scenario, job.world)
     job = replace(job, world_settings=domain.search_settings(job.agents, job.world_settings, job.scenario))
@@ -401,7 +410,7 @@ def run_all(
 
     started = time.perf_counter()
     for job in jobs:  # every job's capabilities before the first runs
-        refuse_missing_capabilities(job)
+        refuse_before_work(job)
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     runner = Backend(backend, workers, ray_address)
     bar = tqdm(total=len(jobs), unit="search", disable=not progress)

@@ -81,6 +81,18 @@ def test_the_reward_horizon_is_seconds_on_the_command_line_and_in_a_study(track)
     assert parse_build(scheme.replace("{{", "{").replace("}}", "}")).schemes["method"].reward.horizon == 8
 
 
+def test_a_horizon_longer_than_an_episode_names_the_change_to_seconds(tmp_path, monkeypatch, capsys):
+    """`--reward horizon=250`, meant as steps before lengths became seconds, asks for 250 s of a crowd whose episodes
+    end at 50 s: refused before any work, naming the change and horizon_steps."""
+    monkeypatch.chdir(tmp_path)
+    args = ["--agents", "goal,orca", "--scenario", "paper-bl-tr", "--solver", "nfirst", "--budget", "50"]
+    assert main(["search", *args, "--reward", "horizon=250", "--out", "out", "--quiet"]) == 2
+    error = capsys.readouterr().err
+    assert "the reward's horizon is 1000 steps (250 s), longer than an episode here (50 s)" in error
+    assert "horizon_steps = N" in error and not (tmp_path / "out").exists()
+    assert main(["search", *args, "--reward", "horizon_steps=150", "--out", "out", "--quiet"]) == 0  # 37.5 s
+
+
 def test_the_command_line_refuses_steps_of_what_is_no_length_of_time(track, capsys):
     assert main(["search", "--agents", f"{FAST},{SLOW}", "--scenario", "track.toml", "--solver", "highlights",
                  "--set", "lookahead_steps=2", "--out", "out", "--quiet"]) == 2  # fmt: skip
