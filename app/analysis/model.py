@@ -295,8 +295,9 @@ class _Robust:
         df = _wishart_df(chosen[0], self.x, self.weight, self.bread, constraints)
         if df < MIN_DF:
             return None, (
-                f"not tested: only {df:.1f} degrees of freedom for {what} (at least {MIN_DF:g} needed): too few "
-                "clips or participants inform it"
+                # rounded down: 1.96 reads 1.9, never a "2.0" that looks enough
+                f"not tested: only {math.floor(df * 10) / 10:.1f} degrees of freedom for {what} (at least "
+                f"{MIN_DF:g} needed): too few clips or participants inform it"
             )
         return df, ""
 

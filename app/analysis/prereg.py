@@ -209,9 +209,9 @@ def deviations(
     found += _served(starts or [], "study_file", study_file, "a study file", sha256(study_text.encode("utf-8")))
     found += _served(starts or [], "bundle_manifest", fixed["bundle_manifest"], "a bundle manifest", manifest_now)
     if analysed < fixed["participants"]:
-        found.append(f"{analysed} participants analysed, fewer than the {fixed['participants']} planned")
+        found.append(f"{_participants(analysed)} analysed, fewer than the {fixed['participants']} planned")
     elif analysed > fixed["participants"]:
-        found.append(f"{analysed} participants analysed, more than the {fixed['participants']} planned")
+        found.append(f"{_participants(analysed)} analysed, more than the {fixed['participants']} planned")
     if _rules(rules) != fixed["exclusions"]:
         found.append(
             f"exclusions differ: {_rules_text({'exclusions': _rules(rules)})}; preregistered {_rules_text(fixed)}"
@@ -252,6 +252,10 @@ def _served(starts: list[dict[str, Any]], key: str, preregistered: str, what: st
                 f"differs from the preregistered one ({served or 'not readable'}){later}"
             )
     return found
+
+
+def _participants(n: int) -> str:
+    return f"{n} participant{'' if n == 1 else 's'}"
 
 
 def _times(n: int) -> str:

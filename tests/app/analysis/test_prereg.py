@@ -150,3 +150,17 @@ def test_a_primary_test_the_design_cannot_run_is_not_preregistered(tmp_path):
     assert "(the primary test, two-sided" in pairwise
     assert ranking.startswith("ranking: no test that the schemes differ is preregistered, as this design cannot")
     assert ranking in markdown(fixed)
+
+
+def test_one_participant_analysed_is_said_in_the_singular(tmp_path):
+    from app.analysis.exclusions import ExclusionRules
+    from app.analysis.prereg import deviations, plan
+    from app.survey.study import parse_study
+    from tests.support.survey import study_text
+
+    text = study_text()
+    manifest = tmp_path / "manifest.json"
+    manifest.write_text("{}")
+    fixed = plan(text.encode("utf-8"), parse_study(text), manifest, 3, ExclusionRules())
+    found = deviations(fixed, text, manifest, 1, ExclusionRules())
+    assert "1 participant analysed, fewer than the 3 planned" in found
