@@ -5,7 +5,7 @@ The names are grouped by who uses them:
 - **Adapter authors** bring a Gymnasium environment into Foil (docs/gym.md): they subclass `Adapter` and say what
   participants read in `Words`, and, where a clip is judged by a number it shows, its `Score`.
 - **World authors** write a world of its own, in a package registered under the ``foil.domains`` entry point
-  (tests/plugin/lineworld): a `Domain` with its abstract methods and `play` (docs/gym.md, "A world of its own").
+  (tests/plugin/lineworld): a `Domain` with its abstract methods and `play` (docs/worlds.md).
   It says which names it ships (`Shipped`) and which files it takes (`Claim`), steps its agents in a coupled
   problem (`Problem`, with an `ActionPrior` over environment actions and the divergence reward's settings,
   `RewardConfig`) that it returns as a `Coupled`, reports endings as the outcome codes, writes `SUMMARY_FORMAT`

@@ -117,10 +117,26 @@ def test_a_world_that_plays_no_test_episodes_is_refused_when_foil_starts(monkeyp
     monkeypatch.setattr(search.core.domain, "entry_points", lambda group: [*installed, silent])
     domains.cache_clear()
     try:
-        with pytest.raises(ValueError, match="'tests.test_domains:Silent' plays no test episodes: write its Domain's"):
+        refused = r"'tests.test_domains:Silent' cannot be made: .*abstract method play: .*docs/worlds.md"
+        with pytest.raises(ValueError, match=refused):
             domains()
     finally:
         domains.cache_clear()
+
+
+@pytest.mark.parametrize(("agent", "scenario"), [("goal", None), ("tests.gym.corridor:dodging", "corridor.toml")])
+def test_a_worlds_test_episodes_are_the_ones_its_evaluation_summarises(agent, scenario, tmp_path, monkeypatch):
+    """Foil's own worlds evaluate in their own way; their `play` gives the same episodes, so Foil's evaluation from
+    them agrees with theirs."""
+    monkeypatch.chdir(tmp_path)
+    if scenario is not None:
+        (tmp_path / scenario).write_text('adapter = "tests.gym.corridor:CorridorAdapter"\nseed = 3\n')
+    domain = domain_for([agent], scenario)
+    own = domain.evaluate_episodes(agent, 6, 2, {}, scenario)
+    played = domain.play(agent, 6, 2, {}, scenario)
+    assert [episode.reward for episode in played] == own["episode_rewards"]
+    assert sum(e.event == "success" for e in played) / 6 == own["success_rate"]
+    assert sum(e.event == "collision" for e in played) / 6 == own["collision_rate"]
 
 
 def test_no_module_outside_the_solvers_reads_a_solvers_record():

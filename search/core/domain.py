@@ -5,7 +5,7 @@ A domain is a world's small interfaces together (`search.core.world`): its scena
 clips and the coupled problems a search steps (`Problems`, here); a world that trains agents of its own is a
 `search.core.world.Trainer` too. Every world, Foil's own included, is installed through the entry point group
 ``foil.domains`` (name = "module:Class", pyproject.toml), and is found for a command by the names it ships, a file's
-``world = "<name>"`` key and what each world claims (docs/gym.md), never by the order worlds were installed in.
+``world = "<name>"`` key and what each world claims (docs/worlds.md), never by the order worlds were installed in.
 """
 
 from __future__ import annotations
@@ -99,8 +99,8 @@ class Domain(Scenarios, Agents, Problems, Clips):
     ``shipped()`` the agents', scenarios' and distributions' names it ships.
 
     A world writes its abstract methods (``Domain.__abstractmethods__``: its scenarios' states and step, its
-    coupled problem, a summary's claim and rebuild, its clip) and `play` (or its own `evaluate` and
-    `evaluate_episodes`); Foil gives every other method a default (docs/gym.md, "A world of its own")."""
+    coupled problem, a summary's claim and rebuild, its clip, its test episodes); Foil gives every other method a
+    default (docs/worlds.md)."""
 
     name: str = ""
 
@@ -164,14 +164,16 @@ def domains() -> tuple[Domain, ...]:
     once)."""
     found: dict[str, Domain] = {}
     for entry in {entry.value: entry for entry in entry_points(group=ENTRY_POINTS)}.values():
-        value, domain = entry.value, entry.load()()
+        value, world_class = entry.value, entry.load()
+        try:
+            domain = world_class()
+        except TypeError as error:  # a Domain without every method a world writes
+            raise ValueError(
+                f"the {ENTRY_POINTS} entry point {value!r} cannot be made: {error}: write the methods docs/worlds.md "
+                'lists ("The methods a world writes")'
+            ) from None
         if not isinstance(domain, Domain):
             raise ValueError(f"the {ENTRY_POINTS} entry point {value!r} is no search.core.domain.Domain")
-        if type(domain).play is Agents.play and type(domain).evaluate_episodes is Domain.evaluate_episodes:
-            raise ValueError(
-                f"the {ENTRY_POINTS} entry point {value!r} plays no test episodes: write its Domain's play "
-                '(docs/gym.md, "A world of its own"), or evaluate and evaluate_episodes'
-            )
         if domain.name in found:
             raise ValueError(f"two installed worlds are named {domain.name!r}: rename one ({value})")
         found[domain.name] = domain

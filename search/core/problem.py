@@ -126,7 +126,7 @@ def provides(problem: object, capability: type) -> bool:
     return all(hasattr(problem, name) for name in members(capability))
 
 
-CAPABILITIES_DOC = 'docs/gym.md, "What the summary methods need of a world"'
+CAPABILITIES_DOC = 'docs/worlds.md, "What the summary methods need of a world"'
 
 
 def require(problem: object, capabilities: tuple[type, ...], solver: str) -> None:

@@ -143,20 +143,20 @@ class Scenarios(ABC):
 
 class Agents(ABC):
     """A world's agents: which it takes, how they do, and where they came from. A world plays test episodes
-    (`play`) and Foil computes the evaluation from them; a world with an evaluation of its own writes
-    `evaluate_episodes` and `evaluate` instead."""
+    (`play`) and Foil computes the evaluation from them; a world with an evaluation of its own (more keys, a
+    faster path) overrides `evaluate_episodes` and `evaluate` too."""
 
     def takes_agent(self, spec: str) -> Claim | None:
         """Whether an agent file or ``module:attribute`` is this world's, by its kind (shipped names are looked up
         before). Default: none is (only the agents it ships)."""
         return None
 
+    @abstractmethod
     def play(
         self, agent: str, episodes: int, seed: int, world: dict[str, Any], scenario: str | None = None
     ) -> list[Episode]:
         """``episodes`` test episodes of the agent alone, in ``scenario``'s world when given: episode i starts
         alike for every agent at one seed, so two agents are compared episode by episode."""
-        raise NotImplementedError  # `search.core.domain.domains` refuses a world with neither this nor its own
 
     @abstractmethod
     def evaluate(

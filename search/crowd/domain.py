@@ -195,6 +195,21 @@ class CrowdDomain(Domain, Trainer):
         config = WorldConfig.from_dict(comparison_world([agent], world))
         return evaluate(load_policy(agent), episodes=episodes, seed=seed, config=config, per_episode=per_episode)
 
+    def play(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> list:
+        """The test episodes `evaluate` summarises, one `Episode` each (the crowd shows no visible score)."""
+        from search.core.evaluation import Episode
+        from search.core.outcomes import OUTCOME_NAMES
+        from search.crowd.agents.evaluate import play
+        from search.crowd.agents.policies import comparison_world, load_policy
+        from search.crowd.sim.world import WorldConfig
+
+        config = WorldConfig.from_dict(comparison_world([agent], world))
+        returns, outcome, event_time, _ = play(load_policy(agent), episodes, seed, config)
+        return [
+            Episode(float(r), float(t), OUTCOME_NAMES[int(code)])
+            for r, code, t in zip(returns, outcome, event_time, strict=True)
+        ]
+
     def evaluate_episodes(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
         return self.evaluate(agent, episodes, seed, world, scenario, per_episode=True)
 

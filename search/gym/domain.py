@@ -177,6 +177,14 @@ class GymDomain(Domain):
         adapter = type(adapter)(adapter.settings | world)
         return self.evaluation(self.agent(agent, adapter), episodes, seed, adapter, per_episode)
 
+    def play(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> list:
+        """The test episodes `evaluate` summarises, in the adapter's environment."""
+        from search.gym.evaluate import test_episodes
+
+        adapter = self.adapter(scenario)
+        adapter = type(adapter)(adapter.settings | world)
+        return test_episodes(self.agent(agent, adapter), episodes, seed, adapter)
+
     def evaluate_episodes(self, agent: str, episodes: int, seed: int, world: dict, scenario: str | None = None) -> dict:
         return self.evaluate(agent, episodes, seed, world, scenario, per_episode=True)
 

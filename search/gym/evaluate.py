@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from search.core.evaluation import episodes_result, scores_result
+from search.core.evaluation import Episode, episodes_result, scores_result
 from search.core.workers import in_order
 from search.gym.adapter import Adapter, ending
 from search.gym.agents import GymAgent
@@ -25,19 +25,36 @@ CHUNK = 8
 
 
 def evaluate(agent: GymAgent, episodes: int, seed: int, adapter: Adapter, per_episode: bool = False) -> dict:
-    """The ``foil eval --json`` object of ``episodes`` test episodes in the adapter's environment, ``CHUNK`` at a
-    time side by side (`play`), the chunks over worker processes (search.core.workers); with ``per_episode``,
-    each episode's reward too (``episode_rewards``)."""
-    if episodes < 2:
-        raise ValueError("evaluate at least 2 episodes (an interval needs them)")
-    seeds = [EPISODE_BASE * (seed + 1) + i for i in range(episodes)]
-    played = in_order(play, [(agent, adapter, seeds[i : i + CHUNK]) for i in range(0, episodes, CHUNK)])
-    events, rewards, steps, scores = ([x for part in played for x in part[k]] for k in range(4))
-    limit = played[0][4]
+    """The ``foil eval --json`` object of ``episodes`` test episodes in the adapter's environment (`played`), with
+    the environment's time limit; with ``per_episode``, each episode's reward too (``episode_rewards``)."""
+    events, rewards, steps, scores, limit = played(agent, episodes, seed, adapter)
     result = episodes_result(
         agent.name, seed, events, rewards, steps, adapter.dt, limit * adapter.dt if limit else None
     ) | scores_result(adapter.score, scores)
     return result | ({"episode_rewards": rewards} if per_episode else {})
+
+
+def test_episodes(agent: GymAgent, episodes: int, seed: int, adapter: Adapter) -> list[Episode]:
+    """The test episodes `evaluate` summarises, one `Episode` each (the domain's `play`)."""
+    events, rewards, steps, scores, _ = played(agent, episodes, seed, adapter)
+    shown = scores if adapter.score is not None else [None] * len(events)
+    return [
+        Episode(reward, n * adapter.dt, event, score)
+        for event, reward, n, score in zip(events, rewards, steps, shown, strict=True)
+    ]
+
+
+def played(
+    agent: GymAgent, episodes: int, seed: int, adapter: Adapter
+) -> tuple[list[str], list[float], list[int], list[float], int | None]:
+    """``episodes`` test episodes, ``CHUNK`` at a time side by side (`play`), the chunks over worker processes
+    (search.core.workers): each one's event, reward, steps and visible score, and the environment's step limit."""
+    if episodes < 2:
+        raise ValueError("evaluate at least 2 episodes (an interval needs them)")
+    seeds = [EPISODE_BASE * (seed + 1) + i for i in range(episodes)]
+    chunks = in_order(play, [(agent, adapter, seeds[i : i + CHUNK]) for i in range(0, episodes, CHUNK)])
+    events, rewards, steps, scores = ([x for part in chunks for x in part[k]] for k in range(4))
+    return events, rewards, steps, scores, chunks[0][4]
 
 
 def play(

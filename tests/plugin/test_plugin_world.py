@@ -203,7 +203,7 @@ def test_a_literature_method_is_refused_before_any_work(world, capsys, solver):
     assert main(["search", *args, "--solver", solver]) == 2
     error = capsys.readouterr().err
     assert f"the {solver} solver needs a problem with Follows" in error
-    assert 'docs/gym.md, "What the summary methods need of a world"' in error and "LineProblem has no" in error
+    assert 'docs/worlds.md, "What the summary methods need of a world"' in error and "LineProblem has no" in error
     assert not (world / "out").exists()
 
 

@@ -36,7 +36,7 @@ def documented_imports(path: Path) -> set[str]:
 
 def test_every_name_is_used_by_a_world_an_adapter_or_the_world_authors_docs():
     used = set().union(*(imported(path, "search") for path in (*LINEWORLD, *ADAPTERS)))
-    used |= documented_imports(ROOT / "docs" / "gym.md")
+    used |= documented_imports(ROOT / "docs" / "worlds.md")
     assert [name for name in search.api.__all__ if f"search.api.{name}" not in used] == []
 
 

@@ -22,12 +22,11 @@ from search.crowd.sim.world import WorldConfig
 TEST_STREAM = 1
 
 
-def evaluate(
-    policy: Policy, episodes: int = 500, seed: int = 0, config: WorldConfig | None = None, per_episode: bool = False
-) -> dict:
-    """The ``foil eval --json`` object for ``policy`` on ``episodes`` test episodes of ``config``'s world; with
-    ``per_episode``, each episode's reward too (``episode_rewards``: episode i starts from the seed's i-th drawn
-    state, the same for every agent, so a bundle can pair them)."""
+def play(
+    policy: Policy, episodes: int, seed: int = 0, config: WorldConfig | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, WorldConfig]:
+    """``episodes`` test episodes of ``policy`` in ``config``'s world, all at once: each one's return, outcome code
+    and the time of its outcome (episode i starts from the seed's i-th drawn state, the same for every agent)."""
     if episodes < 2:
         raise ValueError("evaluation needs at least 2 episodes (for a confidence interval)")
     config = config or WorldConfig()
@@ -39,7 +38,15 @@ def evaluate(
         action, policy_state = policy.act(observation, policy_state)
         action = np.where(observation.done[:, None], 0.0, action)
         returns += world.step(state, config, action[:, None, :])[:, 0]
-    outcome = state.outcome[:, 0]
+    return returns, state.outcome[:, 0], state.event_time[:, 0], config
+
+
+def evaluate(
+    policy: Policy, episodes: int = 500, seed: int = 0, config: WorldConfig | None = None, per_episode: bool = False
+) -> dict:
+    """The ``foil eval --json`` object for ``policy`` on ``episodes`` test episodes of ``config``'s world (`play`);
+    with ``per_episode``, each episode's reward too (``episode_rewards``, so a bundle can pair them)."""
+    returns, outcome, event_time, config = play(policy, episodes, seed, config)
     success = outcome == SUCCESS
     half_width = 1.96 * returns.std(ddof=1) / math.sqrt(episodes)
     mean = float(returns.mean())
@@ -51,7 +58,7 @@ def evaluate(
         "timeout_rate": float((outcome == TIMEOUT).mean()),
         "reward_mean": mean,
         "reward_ci95": [float(mean - half_width), float(mean + half_width)],
-        "nav_time_mean": float(state.event_time[success, 0].mean()) if success.any() else None,
+        "nav_time_mean": float(event_time[success].mean()) if success.any() else None,
         "time_limit": float(config.time_limit),
     }
     return result | ({"episode_rewards": returns.tolist()} if per_episode else {})
