@@ -265,7 +265,7 @@
     if (events) record(document.visibilityState === "hidden" ? "hidden" : "visible");
   });
 
-  // A ranking names each robot once: say so as soon as a robot is chosen twice, before sending.
+  // A ranking names each agent once: say so as soon as one is chosen twice, before sending.
   document.querySelectorAll("[data-ranking]").forEach(function (group) {
     const selects = Array.prototype.slice.call(group.querySelectorAll("select"));
     const message = group.querySelector("[data-rank-error]");

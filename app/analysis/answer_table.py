@@ -25,13 +25,13 @@ from app.survey.screens import (
     Attention,
     Closing,
     InPart,
+    Option,
     Pairwise,
     Ranking,
-    Robot,
     Round,
     Screen,
     Watch,
-    WithRobots,
+    WithOptions,
     parse_plan,
     shows_clip,
 )
@@ -179,13 +179,13 @@ LONG_COLUMNS = [
 ]
 
 
-def _robots(screen: Screen | None) -> list[Robot]:
+def _options(screen: Screen | None) -> list[Option]:
     return [] if screen is None else screen.offered()
 
 
 def _scored(question_type: str, value: Any, screen: Screen | None) -> dict[str, Any]:
     """answer, answer_agent, value, truth and correct of one submitted value."""
-    agent_of = {robot.label: robot.agent for robot in _robots(screen)}
+    agent_of = {option.label: option.agent for option in _options(screen)}
     if question_type == "choose":
         agent = agent_of.get(value)
         better = screen.better if isinstance(screen, Pairwise | Watch) else None
@@ -240,8 +240,8 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict[str, Any
     types |= dict.fromkeys(checks, "comprehension")
     for response in record.responses:
         screen = plan[response.step] if response.step < len(plan) else None
-        robots = _robots(screen)
-        scheme, scenario = (screen.scheme, screen.scenario) if isinstance(screen, WithRobots) else (None, None)
+        options = _options(screen)
+        scheme, scenario = (screen.scheme, screen.scenario) if isinstance(screen, WithOptions) else (None, None)
         common = {
             "study": participant.study,
             "participant": participant.code,
@@ -254,8 +254,8 @@ def long_rows(study: Study, record: ParticipantRecord) -> Iterator[dict[str, Any
             "clip": _clips(screen),
             "scheme": scheme,
             "scenario": scenario,
-            "agents": LIST_SEPARATOR.join(r.agent for r in robots) or None,
-            "labels": LIST_SEPARATOR.join(r.label for r in robots) or None,
+            "agents": LIST_SEPARATOR.join(option.agent for option in options) or None,
+            "labels": LIST_SEPARATOR.join(option.label for option in options) or None,
             "time_on_page_ms": response.client_ms,
             "server_ms": response.server_ms,
             "plays": response.plays,
@@ -330,7 +330,7 @@ PARTICIPANT_COLUMNS = [
 
 
 def part_scenarios(plan: list[Screen]) -> list[str]:
-    by_part = {screen.part: screen.scenario for screen in plan if isinstance(screen, WithRobots)}
+    by_part = {screen.part: screen.scenario for screen in plan if isinstance(screen, WithOptions)}
     return [by_part[part] for part in sorted(by_part)]
 
 

@@ -3,9 +3,9 @@ way a viewer would.
 
 A bot reads each page's form, fetches the clip the page points to (as a browser would), and answers from what the
 clip visibly shows. It knows a clip by its address (the sha256 in /clips/SHA.mp4; a pair of reels by both reels'),
-finds it in the bundle and reads the clip's summary.json (a reel's: its segments'): which robot collided, which
+finds it in the bundle and reads the clip's summary.json (a reel's: its segments'): which agent collided, which
 reached the goal and when, which timed out, how close each came to people. The observer model turns that into a
-score per robot (a reel's robot: averaged over its segments), by the rule of the bundle's world
+score per agent (a reel's agent: averaged over its segments), by the rule of the bundle's world
 (`app.visible.World`), plus Gaussian perception noise; the ground truth (`better` in the manifest, the agents'
 evaluations) is never read.
 """
@@ -354,7 +354,7 @@ class Bot:
         self, name: str, options: list[tuple[str, str]], legend: str, seen: dict[str, float], ranked: list[str]
     ) -> str:
         values = [value for value, _ in options]
-        if seen and set(values) <= set(seen):  # which robot is better
+        if seen and set(values) <= set(seen):  # which agent is better
             return max(values, key=seen.__getitem__)
         if all(value.isdigit() for value in values):
             return str(self._scale_point(options, legend, seen, ranked))

@@ -9,7 +9,7 @@ from app.survey.study import Study
 
 
 def chance(study: Study, task: str) -> float:
-    """The accuracy of guessing: one of two robots, or one of the k! orders of a ranking part's k agents."""
+    """The accuracy of guessing: one of two agents, or one of the k! orders of a ranking part's k agents."""
     if task == "pairwise":
         return 0.5
     agents = next(len(part.agents) for part in study.parts if part.kind == "ranking")

@@ -137,7 +137,7 @@ class ReportData:
         return list(self.study.design.schemes)
 
     def task_titles(self) -> dict[str, str]:
-        """Each part's title in the world's words ("part one: pairwise (which robot is better)")."""
+        """Each part's title in the world's words ("part one: pairwise (which agent is better)")."""
         return {task: self.world.words.say(title) for task, title in TASKS.items()}
 
     def scopes(self) -> list[str]:
@@ -148,7 +148,7 @@ class ReportData:
 
     def model(self, task: str) -> ModelResult:
         """The report's model of the task's answers (app/analysis/model.py), fitted once. A ranking part's model
-        is of its pairwise orderings: each ranking of k robots gives k(k-1)/2 of them, each right or wrong against
+        is of its pairwise orderings: each ranking of k agents gives k(k-1)/2 of them, each right or wrong against
         a chance of one half, so a ranking with one pair swapped counts as mostly right (the whole order's
         accuracy stays in Table 1)."""
         if task not in self._models:
@@ -289,7 +289,7 @@ def orderings(answer: str, truth: str) -> list[int]:
 
 def _audits(bundle_dir: str) -> dict[str, dict[str, Any]]:
     """Each clip's audit (what it visibly shows against the ground truth) from the bundle's manifest, with which
-    label on screen is which agent (``labels``: "Robot 2 = hi, Robot 5 = lo"), since its words name labels."""
+    label on screen is which agent (``labels``: "Agent 2 = hi, Agent 5 = lo"), since its words name labels."""
     from app.formats import Manifest
 
     manifest = Manifest.model_validate_json((Path(bundle_dir) / "manifest.json").read_text(encoding="utf-8"))

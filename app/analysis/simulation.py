@@ -101,8 +101,8 @@ def _ranking_noise(agents: int) -> np.ndarray:
 
 
 def whole_order_accuracy(eta: float, sd: float, agents: int) -> float:
-    """The share of rankings with every robot in the true order, over participants and clips, when a person ranks
-    as Thurstone's model says: robot i's quality (agents - 1 - i) times the discriminability exp(eta + effect),
+    """The share of rankings with every agent in the true order, over participants and clips, when a person ranks
+    as Thurstone's model says: agent i's quality (agents - 1 - i) times the discriminability exp(eta + effect),
     seen with standard normal noise, the effect normal with standard deviation `sd`."""
     nodes, weights = np.polynomial.hermite_e.hermegauss(20)
     seen = np.arange(agents)[::-1] * np.exp(eta + sd * nodes)[:, None, None] + _ranking_noise(agents)

@@ -143,7 +143,7 @@ def clips_played(events: list[dict[str, Any]], clips: int) -> int:
 def check_screen(study: Study, screen: Screen, form: FormData) -> Checked:
     """The submitted form of `screen`: its answers, or the errors to show next to its fields."""
     out = Checked()
-    labels = [robot.label for robot in screen.offered()]
+    labels = [option.label for option in screen.offered()]
     for asked in screen.asks(study):
         if not asked.required and _unanswered(form, asked.name):
             continue  # an optional answer left empty: nothing is stored for it

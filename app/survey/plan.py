@@ -1,6 +1,6 @@
 """A participant's plan: the screens they see, in order, built once when their condition is known.
 
-The plan is stored on the participant, so the clip order, the clip variants and the order in which the robots are
+The plan is stored on the participant, so the clip order, the clip variants and the order in which the agents are
 offered as answers are recorded and never re-randomised. It holds the ground truth (real agent names, the better
 agent), which is why it never leaves the server: pages receive only labels and clip addresses.
 """
@@ -19,15 +19,15 @@ from app.survey.screens import (
     Attention,
     Closing,
     Instructions,
+    Option,
     Pairwise,
     Ranking,
     Reel,
-    Robot,
     Round,
     Screen,
     Shape,
     Watch,
-    WithRobots,
+    WithOptions,
 )
 from app.survey.study import RankingPart, Study
 
@@ -65,15 +65,15 @@ def _shape(bundle: Bundle, sha256: str) -> Shape:
     return Shape(clip_ms=shape.ms, width=shape.width, height=shape.height)
 
 
-def _robots(pairs: list[tuple[str, str]]) -> list[Robot]:
-    """Answer options as (label, agent) in the order the clips' legends list them, by robot number (the numbers
+def _options(pairs: list[tuple[str, str]]) -> list[Option]:
+    """Answer options as (label, agent) in the order the clips' legends list them, by agent number (the numbers
     are drawn per clip or round when the bundle is built, so no agent is always offered first)."""
-    robots = [Robot(label=label, agent=agent) for agent, label in dict(pairs).items()]
-    return sorted(robots, key=lambda robot: _number(robot.label))
+    options = [Option(label=label, agent=agent) for agent, label in dict(pairs).items()]
+    return sorted(options, key=lambda option: _number(option.label))
 
 
 def _number(label: str) -> tuple[bool, int]:
-    """Sorts a label such as "Robot 7" by its number; a label without one keeps its place after the numbered."""
+    """Sorts a label such as "Agent 7" by its number; a label without one keeps its place after the numbered."""
     last = label.rsplit(" ", 1)[-1]
     numbered = last.isascii() and last.isdigit()
     return (not numbered, int(last) if numbered else 0)
@@ -86,7 +86,7 @@ def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle:
         "clip": clip.id,
         "scheme": clip.scheme,
         "scenario": clip.scenario,
-        "robots": _robots(list(zip(clip.agents, clip.labels, strict=True))),
+        "robots": _options(list(zip(clip.agents, clip.labels, strict=True))),
         "better": clip.better,
         "questions": questions,
     }
@@ -98,7 +98,7 @@ def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle:
 
 def _round_videos(clips: list[ManifestClip]) -> list[str]:
     """The sha256 of each video a ranking page lists: every clip's file (even where two clips share one), and a
-    robot's reel once, however often it is paired."""
+    agent's reel once, however often it is paired."""
     videos: list[str] = []
     for clip in clips:
         if not clip.reels:
@@ -108,7 +108,7 @@ def _round_videos(clips: list[ManifestClip]) -> list[str]:
 
 
 def _reel(bundle: Bundle, reel: ManifestReel, label: str) -> Reel:
-    """A reel as a screen shows it: its robot's label, its file's address and shape."""
+    """A reel as a screen shows it: its agent's label, its file's address and shape."""
     return Reel(label=label, media=reel.sha256.lower(), **_shape(bundle, reel.sha256).model_dump(exclude_unset=True))
 
 
@@ -143,7 +143,7 @@ def _ranking_screens(
             clips=[clip.id for clip in clips],
             media_list=[sha.lower() for sha in videos],
             shapes=[_shape(bundle, sha) for sha in videos],
-            robots=_robots(labels),
+            robots=_options(labels),
             true_order=_true_order(clips, part.agents),
             questions=list(part.questions),
         )
@@ -223,9 +223,9 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                 screens.insert(min(check.after, len(screens)), screen)
         _label_progress(screens, part_no, len(study.parts))
         for screen in screens:
-            if isinstance(screen, WithRobots):
-                for robot in screen.robots:
-                    used.setdefault(robot.label, robot.agent)
+            if isinstance(screen, WithOptions):
+                for option in screen.robots:
+                    used.setdefault(option.label, option.agent)
         plan += screens
     if study.closing is not None:  # the closing questions and feedback box, after the last part
         plan.append(

@@ -48,7 +48,7 @@ class _Stored(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-class Robot(_Stored):
+class Option(_Stored):
     """An answer option: the label the page shows and the real agent behind it, which never leaves the server."""
 
     label: str
@@ -71,7 +71,7 @@ class Clip(NamedTuple):
 
 
 class Reel(_Stored):
-    """One robot's reel on a screen of reels (each robot on its own): its label, its file's sha256 and shape."""
+    """One agent's reel on a screen of reels (each agent on its own): its label, its file's sha256 and shape."""
 
     label: str
     media: str
@@ -110,8 +110,8 @@ class _Screen(_Stored):
         """The screen as text, made once: the page cache's key (a screen read from a stored plan never changes)."""
         return repr(self)
 
-    def offered(self) -> list[Robot]:
-        """The robots the screen offers as answers, in order."""
+    def offered(self) -> list[Option]:
+        """The agents the screen offers as answers, in order."""
         return []
 
     def question_names(self) -> list[str]:
@@ -187,14 +187,14 @@ class _InPart(_Screen):
 
 
 class _ClipScreen(_InPart):
-    """A screen of one clip of two robots: a video of both (`media`), or a pair of reels, one per robot (`reels`)."""
+    """A screen of one clip of two agents: a video of both (`media`), or a pair of reels, one per agent (`reels`)."""
 
     kind: Literal["pairwise", "watch"]
     clip: str
     media: str = ""  # the clip file's sha256: its address; empty for a pair of reels
     scheme: str
     scenario: str
-    robots: list[Robot]  # in the order the robots are offered as answers
+    robots: list[Option]  # in the order the agents are offered as answers
     better: str
     questions: list[str]
     clip_ms: int | None = None
@@ -202,7 +202,7 @@ class _ClipScreen(_InPart):
     height: int | None = None
     reels: list[Reel] = []  # in the order shown
 
-    def offered(self) -> list[Robot]:
+    def offered(self) -> list[Option]:
         return self.robots
 
     def question_names(self) -> list[str]:
@@ -224,7 +224,7 @@ class _ClipScreen(_InPart):
 
 
 class Pairwise(_ClipScreen):
-    """A clip of two robots and the part's questions about it."""
+    """A clip of two agents and the part's questions about it."""
 
     kind: Literal["pairwise"]
     progress: str = ""
@@ -245,7 +245,7 @@ class Watch(_ClipScreen):
 
 
 class Ranking(_InPart):
-    """The ranking of a round's robots, after its clips (`clips`, `media_list`, `shapes`, in the order shown)."""
+    """The ranking of a round's agents, after its clips (`clips`, `media_list`, `shapes`, in the order shown)."""
 
     kind: Literal["ranking"]
     block: int
@@ -254,13 +254,13 @@ class Ranking(_InPart):
     clips: list[str]
     media_list: list[str] = []
     shapes: list[Shape] = []
-    robots: list[Robot]
+    robots: list[Option]
     true_order: list[str] | None  # best to worst; None when the clips do not give a strict order
     questions: list[str]
     progress: str = ""
     position: tuple[int, int] | None = None
 
-    def offered(self) -> list[Robot]:
+    def offered(self) -> list[Option]:
         return self.robots
 
     def question_names(self) -> list[str]:
@@ -358,7 +358,7 @@ class Closing(_Screen):
 
 Screen = Annotated[Instructions | Pairwise | Watch | Ranking | Attention | Closing, Field(discriminator="kind")]
 InPart = Pairwise | Watch | Ranking | Attention
-WithRobots = Pairwise | Watch | Ranking
+WithOptions = Pairwise | Watch | Ranking
 Round = Watch | Ranking  # screens of a ranking round (`block`)
 PLAN: TypeAdapter[list[Screen]] = TypeAdapter(list[Screen])
 
@@ -385,7 +385,7 @@ def page_view(screen: Screen, study: Study, bundle: Bundle) -> dict[str, Any]:
         "kind": screen.kind,
         "progress": screen.progress,
         "position": screen.position,
-        "labels": [robot.label for robot in screen.offered()],
+        "labels": [option.label for option in screen.offered()],
         "questions": [(name, study.questions[name]) for name in screen.question_names()],
         "block": None,
         "round_start": False,
@@ -399,12 +399,12 @@ def _reels(bundle: Bundle) -> list[ManifestReel]:
 
 
 def _outcomes(bundle: Bundle, sha: str) -> list[str]:
-    """How each robot of a clip visibly ends, by its label in the words of the bundle's world (what the clip itself
+    """How each agent of a clip visibly ends, by its label in the words of the bundle's world (what the clip itself
     shows, from its summary.json; nothing when the bundle has none): written beside a ranking round's clips."""
     clip = next((clip for clip in bundle.clips.values() if clip.sha256.lower() == sha), None)
     reel = next((reel for reel in _reels(bundle) if reel.sha256.lower() == sha), None)
     try:
-        if reel is not None:  # one robot's reel: how it ended in each of its moments, a line each
+        if reel is not None:  # one agent's reel: how it ended in each of its moments, a line each
             owner = next(c for c in bundle.clips.values() if reel in c.reels)
             label = owner.labels[owner.agents.index(reel.agent)]
             segments = [load_summary(bundle.root / path) for path in reel.summaries]

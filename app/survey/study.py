@@ -104,7 +104,7 @@ class Texts(Strict):
     preview: Text = "Accept the HIT to start the study."
     watch: Text = "Watch the clip to the end. The questions unlock when it has finished; you can replay it."
     watch_only: Text = "Watch the clip to the end. The Next button unlocks when it has finished; you can replay it."
-    watch_reels: Text = (  # above a pair of reels, each robot's clip on its own
+    watch_reels: Text = (  # above a pair of reels, each agent's clip on its own
         "Play both clips to the end, one after the other (the second is beside or below the first). The questions "
         "unlock when both have finished; you can replay them."
     )
@@ -131,7 +131,7 @@ class Completion(Strict):
 
 
 # Checking a submitted form field: `read(field)` gives the field's one value (None when it is missing or repeated),
-# `labels` the robots on the screen; a check gives (the answer, None) or (None, the message shown next to the field).
+# `labels` the agents on the screen; a check gives (the answer, None) or (None, the message shown next to the field).
 FieldReader = Callable[[str], str | None]
 Answer = str | int | list[str]
 CheckedAnswer = tuple[Answer, None] | tuple[None, str]
@@ -148,7 +148,7 @@ def check_option(options: list[str], value: str | None) -> CheckedAnswer:
 
 
 class ChooseQuestion(Strict):
-    """Pick one of the robots shown in the clip."""
+    """Pick one of the agents shown in the clip."""
 
     type: Literal["choose"]
     text: Text
@@ -215,14 +215,14 @@ class ScaleQuestion(Strict):
 
 
 class RankQuestion(Strict):
-    """Order every robot of a ranking part from best to worst."""
+    """Order every agent of a ranking part from best to worst."""
 
     type: Literal["rank"]
     text: Text
     help: str = ""  # neutral help text under the question (never an example answer)
 
     def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
-        """The robots best first, from the fields `name-1` (the best place) to `name-N`."""
+        """The agents best first, from the fields `name-1` (the best place) to `name-N`."""
         ranking = [read(f"{name}-{place}") for place in range(1, len(labels) + 1)]
         if any(not value for value in ranking):
             return None, "Put a name in every place of the ranking."
@@ -261,7 +261,7 @@ FEEDBACK = "feedback"  # the name of the closing screen's feedback box in the da
 
 class ClosingQuestions(Strict):
     """An optional last screen after the parts, before the completion page: closing questions (demographics,
-    experience with robots) and a free-text feedback box, every answer optional unless named in `required`."""
+    experience with agents) and a free-text feedback box, every answer optional unless named in `required`."""
 
     title: Text = "Before you finish"
     intro: str = "These last questions are optional: answer the ones you are comfortable answering."
@@ -301,7 +301,7 @@ Part = Annotated[PairwisePart | RankingPart, Field(discriminator="kind")]
 class AttentionCheck(Strict):
     """An instructed-response item shown after screen `after` of part `part` (both counted from 1). With `clip`,
     a video attention check: the clip is shown (and must be watched) and the question has a known answer about
-    what it visibly shows (say, whether a robot crashed)."""
+    what it visibly shows (say, whether an agent crashed)."""
 
     part: Annotated[int, Field(ge=1)]
     after: Annotated[int, Field(ge=0)]

@@ -466,7 +466,7 @@ def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
         Environment(loader=FileSystemLoader(root / "templates"), autoescape=True).get_template("_macros.html").module
     )
     for number in range(1, 2 * len(AGENT_STYLES) + 1):
-        marker = str(macros.robot_marker(f"Robot {number}"))
+        marker = str(macros.agent_marker(f"Robot {number}"))
         colour, shape = re.fullmatch(
             r'<span class="marker robot-colour-(\d+) robot-([a-z-]+)" aria-hidden="true">'
             r"</span>",
@@ -474,4 +474,4 @@ def test_the_pages_robot_key_shows_each_robots_colour_and_shape():
         ).groups()
         assert (colours[int(colour)], shape) == agent_style(number)
         assert shape in shapes
-    assert "robot-x" in str(macros.robot_marker("Robot A"))
+    assert "robot-x" in str(macros.agent_marker("Robot A"))
