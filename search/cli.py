@@ -126,7 +126,7 @@ def _search_job_settings(args: argparse.Namespace, solver: str, agents: list[str
 
 def _search(args: argparse.Namespace) -> int:
     from search.core.workers import jobs
-    from search.solvers.runner import SearchJob, run_search, write_outputs
+    from search.solvers.runner import SearchJob, refuse_before_work, run_search, write_outputs
     from search.solvers.solver import solver_named
 
     agents = comma_separated(args.agents)
@@ -136,6 +136,7 @@ def _search(args: argparse.Namespace) -> int:
         solver=args.solver,
         **_search_job_settings(args, args.solver, agents, args.scenario),
     )
+    refuse_before_work(job)
     with jobs(args.jobs):
         files = run_search(job, progress=not args.quiet)
     out = write_outputs(args.out, files)

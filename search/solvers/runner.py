@@ -135,9 +135,9 @@ def refuse_before_work(job: SearchJob) -> None:
 def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
     """Run one search in its agents' world and return its output files, name -> text: ``summary-001.json``, ...
     (best first, or in the order of a solver that chooses its own) and ``run.json``. Kept trajectories are
-    replayed at batch size 1 and ranked by that authoritative reward."""
+    replayed at batch size 1 and ranked by that authoritative reward. Its callers refuse, once and before any work,
+    a search that cannot be what was meant (`refuse_before_work`)."""
     started = time.perf_counter()
-    refuse_before_work(job)
     solver = solver_named(job.solver)
     domain = domain_for(job.agents, job.scenario, job.world)
     job = replace(job, world_settings=domain.search_settings(job.agents, job.world_settings, job.scenario))
