@@ -1,7 +1,7 @@
 """What a clip visibly shows, judged the way a viewer would: the rule the `foil simulate` bots answer by and the
 one `foil bundle` audits every clip with against the ground truth, and the words a world's pages use for it.
 
-Only what is on screen counts: how each robot ended (in the crowd: which bumped into a person, which reached its
+Only what is on screen counts: how each agent ended (in the crowd: which bumped into a person, which reached its
 goal and when, how far one that is still on its way got, how close each came to people). A world (`World`) says
 which rule judges its clips ("goal": reach it, sooner is better; "survival": last, longer is better) and the words
 its participants, audit and report read (`Words`); the bundle's manifest carries it, so the server never needs the
@@ -340,12 +340,12 @@ def _known(where: str, data: Mapping[str, Any], keys: tuple[str, ...]) -> None:
 
 @dataclass(frozen=True)
 class Observer:
-    """How a viewer judges a robot in a clip. By the "goal" rule reaching the goal beats timing out beats
+    """How a viewer judges an agent in a clip. By the "goal" rule reaching the goal beats timing out beats
     colliding, and sooner is better; by the "survival" rule (the task is to last: driving, balancing) lasting
     the clip beats crashing, and crashing later is better. Coming closer than `comfort_m` to a person counts
-    against a robot that did not collide. `noise` is the standard deviation of
+    against an agent that did not collide. `noise` is the standard deviation of
     the perception noise, in the same units (reaching the goal at once versus at the end of the clip is 1).
-    Scores closer than `tie_margin` look the same (two robots both still on their way, a few metres apart). A
+    Scores closer than `tie_margin` look the same (two agents both still on their way, a few metres apart). A
     world's visible score (`Score`) judges its clips by the "score" rule, and breaks such ties in the others: there
     two agents look the same only where their sums read the same (`VisibleClip.margin`)."""
 
@@ -401,26 +401,26 @@ class VisibleClip:
     def of_summary(
         cls, summary: Mapping[str, Any], agents: list[str], labels: list[str], world: World | None = None
     ) -> VisibleClip:
-        """The clip of a summary.json whose robots ``agents`` (on-screen order) carry ``labels``, in ``world``
+        """The clip of a summary.json whose agents ``agents`` (in on-screen order) carry ``labels``, in ``world``
         (the crowd's when None)."""
         names = [agent["name"] for agent in summary["agents"]]
-        order = [names.index(agent) for agent in agents]  # the summary's index of each label's robot
+        order = [names.index(agent) for agent in agents]  # the summary's index of each label's agent
         return cls._of_robots(summary, order, labels, world)
 
     @classmethod
     def of_segment(cls, summary: Mapping[str, Any], label: str, world: World | None = None) -> VisibleClip:
-        """One segment of a reel as a clip of the one robot labelled ``label``: in a segment every agent's instance
+        """One segment of a reel as a clip of the one agent labelled ``label``: in a segment every agent's instance
         follows the reel's agent (the summary's ``follow.leader``), so the leader's outcome is what it shows."""
         follow = summary.get("follow")
         if not isinstance(follow, Mapping) or not isinstance(follow.get("leader"), int):
-            raise ValueError(f"a reel's segment says whom its robots follow (follow.leader); this one has {follow!r}")
+            raise ValueError(f"a reel's segment says whom its agents follow (follow.leader); this one has {follow!r}")
         return cls._of_robots(summary, [follow["leader"]], [label], world)
 
     @classmethod
     def _of_robots(
         cls, summary: Mapping[str, Any], order: Sequence[int], labels: Sequence[str], world: World | None
     ) -> VisibleClip:
-        """The clip of the summary's robots ``order`` (its indices), labelled ``labels``. A summary with a ``window``
+        """The clip of the summary's agents ``order`` (its indices), labelled ``labels``. A summary with a ``window``
         is judged as its clip shows it, from the window's first state on; its times read, as its clock, the run's."""
         steps = summary.get("steps") or [{"t": 1.0}]
         first = int((summary.get("window") or [0])[0])
@@ -468,7 +468,7 @@ class VisibleClip:
         }, True
 
     def describe(self, label: str) -> str:
-        """How the robot labelled ``label`` visibly ended, as one sentence in the world's words: by its visible
+        """How the agent labelled ``label`` visibly ended, as one sentence in the world's words: by its visible
         score in a "score" world, its outcome then the score where a world shows both."""
         score = self.world.score
         if score is None or len(self.summed) != len(self.labels):
@@ -479,7 +479,7 @@ class VisibleClip:
         return f"{self._ending(label).removesuffix('.')}; it {summed}."
 
     def _ending(self, label: str) -> str:
-        """How the robot labelled ``label`` visibly ended by its outcome."""
+        """How the agent labelled ``label`` visibly ended by its outcome."""
         outcome = self.outcomes[self.labels.index(label)]
         event = outcome.get("event")
         words = self.world.words
@@ -501,7 +501,7 @@ class VisibleClip:
 @dataclass(frozen=True)
 class VisibleReels:
     """What a pair of reels shows (HIGHLIGHTS: each agent on its own, in moments of its own episodes): per on-screen
-    label the segments of its reel, each a one-robot `VisibleClip`. A robot is judged by its visible score averaged
+    label the segments of its reel, each a one-agent `VisibleClip`. An agent is judged by its visible score averaged
     over its reel's segments, by the same observer as a clip of both."""
 
     labels: tuple[str, ...]
@@ -543,29 +543,29 @@ class VisibleReels:
         return SCORE_MARGIN if self.world.rule == "score" else observer.tie_margin
 
     def moments(self, label: str) -> list[str]:
-        """How the robot labelled ``label`` ended in each moment of its reel, one sentence a moment, at its run's
-        time as the reel's clock shows it: ``Moment 2 of 3: Robot 4 reached the goal after 17.2 seconds.``"""
+        """How the agent labelled ``label`` ended in each moment of its reel, one sentence a moment, at its run's
+        time as the reel's clock shows it: ``Moment 2 of 3: Agent 4 reached the goal after 17.2 seconds.``"""
         reel = self.reels[self.labels.index(label)]
         return [f"Moment {i} of {len(reel)}: {segment.describe(label)}" for i, segment in enumerate(reel, 1)]
 
     def describe(self, label: str) -> str:
-        """How the robot labelled ``label`` ended in each moment of its reel, as one sentence in the world's words."""
+        """How the agent labelled ``label`` ended in each moment of its reel, as one sentence in the world's words."""
         reel = self.reels[self.labels.index(label)]
         moments = "; ".join(segment.describe(label).removeprefix(f"{label} ").removesuffix(".") for segment in reel)
         return f"{label}, in {len(reel)} moment{'' if len(reel) == 1 else 's'} of its own: {moments}."
 
 
-Visible = VisibleClip | VisibleReels  # what one question's video shows: a clip of both robots, or their reels
+Visible = VisibleClip | VisibleReels  # what one question's video shows: a clip of both agents, or their reels
 
 
 def audit(clip: Visible, better: str, observer: Observer | None = None) -> dict[str, str]:
-    """Whether a two-robot clip (or pair of reels) visibly shows the better robot (label ``better``) as better, as
+    """Whether a two-agent clip (or pair of reels) visibly shows the better agent (label ``better``) as better, as
     worse, or shows no difference, judged without perception noise: ``{"shows": "better" | "worse" | "tie", "why":
     ...}``."""
     observer = observer or Observer()
     scores = clip.scores(observer)
     if better not in scores or len(scores) != 2:
-        raise ValueError(f"an audit compares two robots, one of them {better!r}; the clip has {list(scores)}")
+        raise ValueError(f"an audit compares two agents, one of them {better!r}; the clip has {list(scores)}")
     other = next(label for label in clip.labels if label != better)
     difference = scores[better] - scores[other]
     shows = "tie" if abs(difference) < clip.margin(observer) else "better" if difference > 0 else "worse"
@@ -578,7 +578,7 @@ def one_decimal(value: float) -> str:
 
 
 def _ends(summary: Mapping[str, Any], k: int) -> tuple[Sequence[float], Sequence[float], Sequence[float]] | None:
-    """Robot k's start, goal and place at the end of the clip (None when the summary lacks them)."""
+    """Agent k's start, goal and place at the end of the clip (None when the summary lacks them)."""
     try:
         robot = summary["scenario"]["robot"]
         return robot["start"], robot["goal"], summary["steps"][-1]["agent_positions"][k]
@@ -587,7 +587,7 @@ def _ends(summary: Mapping[str, Any], k: int) -> tuple[Sequence[float], Sequence
 
 
 def _progress(summary: Mapping[str, Any], k: int) -> float:
-    """Share of the start-to-goal distance robot k covered by the end of the clip (0 when unknown)."""
+    """Share of the start-to-goal distance agent k covered by the end of the clip (0 when unknown)."""
     ends = _ends(summary, k)
     return progress_towards(*ends) if ends else 0.0
 
@@ -600,7 +600,7 @@ def _since(outcome: Mapping[str, Any], start_s: float) -> Mapping[str, Any]:
 
 
 def _summed(summary: Mapping[str, Any], order: Sequence[int], first: int, world: World) -> tuple[float, ...]:
-    """Each robot's visible score summed over the states its clip shows after its first (none where the world
+    """Each agent's visible score summed over the states its clip shows after its first (none where the world
     shows no score or the summary records none)."""
     steps = summary.get("steps") or []
     shown = steps[first:]
@@ -612,7 +612,7 @@ def _summed(summary: Mapping[str, Any], order: Sequence[int], first: int, world:
 
 
 def _to_goal(summary: Mapping[str, Any], k: int) -> float | None:
-    """How far robot k's centre is from its goal at the end of the clip (None when unknown)."""
+    """How far agent k's centre is from its goal at the end of the clip (None when unknown)."""
     ends = _ends(summary, k)
     return math.dist(ends[1], ends[2]) if ends else None
 

@@ -50,7 +50,7 @@ def test_audit_names_what_happened():
     )
     why = audit(clip, "Robot 2")["why"]
     assert why == "Robot 2 reached the goal after 14.0 seconds. Robot 1 bumped into a person."
-    with pytest.raises(ValueError, match="compares two robots"):
+    with pytest.raises(ValueError, match="compares two agents"):
         audit(clip, "Robot 3")
 
 
@@ -183,7 +183,7 @@ def test_a_robots_reel_is_judged_by_its_moments_on_average_read_at_the_robot_fol
 
 
 def test_a_reel_needs_segments_that_say_whom_they_follow():
-    with pytest.raises(ValueError, match="says whom its robots follow"):
+    with pytest.raises(ValueError, match="says whom its agents follow"):
         VisibleReels.of_summaries([[summary(SUCCESS, CRASH)], [segment(0, SUCCESS, CRASH)]], ["A", "B"])
     with pytest.raises(ValueError, match="at least one segment"):
         VisibleReels.of_summaries([[], [segment(0, SUCCESS, CRASH)]], ["A", "B"])
