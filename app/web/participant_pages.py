@@ -292,12 +292,10 @@ def _status_page(request: Request, ctx: Context, participant: queries.Record) ->
     if participant.status == "declined":
         page = ctx.message(request, "Thank you", ctx.study.texts.declined)
     elif participant.status == "returned":
-        page = ctx.message(
-            request,
-            "You have left the study",
-            "You chose to stop taking part, so the study cannot be taken again from this link. "
-            "If you came from Prolific, please return your submission there.",
-        )
+        left = "You chose to stop taking part, so the study cannot be taken again from this link."
+        if ctx.study.study.platform == "prolific":
+            left += " Please return your submission on Prolific, if you have not done so yet."
+        page = ctx.message(request, "You have left the study", left)
     else:
         page = ctx.render(request, "complete.html", completion=ctx.study.completion)
     return page

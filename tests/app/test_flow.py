@@ -147,10 +147,20 @@ def test_leaving_marks_returned_and_keeps_answers(make_client):
     page = start(client, PROLIFIC_LINK.format(n=3))
     client.post("/study", data=answer_for(page))
     confirm = client.get("/leave")
+    assert "please also return your submission on Prolific" in confirm.text  # said before stopping, too
     left = client.post("/leave", data={"csrf_token": FormReader(confirm.text).hidden["csrf_token"]})
-    assert "You have left the study" in left.text
+    assert "You have left the study" in left.text and "Please return your submission on Prolific" in left.text
     (person,) = stored(client, Participant)
     assert person.status == "returned" and len(stored(client, Response)) == 1
+
+
+def test_leaving_a_study_on_another_platform_speaks_of_no_prolific_submission(make_client):
+    client = make_client({"platform": '"mturk"'})
+    start(client, "?workerId=W4&assignmentId=A4&hitId=H4")
+    confirm = client.get("/leave")
+    left = client.post("/leave", data={"csrf_token": FormReader(confirm.text).hidden["csrf_token"]})
+    assert "You have left the study" in left.text
+    assert "Prolific" not in confirm.text and "Prolific" not in left.text
 
 
 def test_desktop_only_study_turns_phones_away(make_client):
