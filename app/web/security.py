@@ -4,6 +4,7 @@ signed cookie, app.web.main), admin login throttling and admin session versions.
 from __future__ import annotations
 
 import hmac
+import ipaddress
 import secrets
 import threading
 import time
@@ -176,14 +177,31 @@ async def _form(request: Request) -> FormData:
 MAX_FIELDS, MAX_FIELD_CHARS = 64, 32 * 1024
 
 
+def client_group(address: str) -> str:
+    """Whom the login throttle counts as one client: an IPv4 address, or an IPv6 address's /64 (one subscriber's
+    network, whose addresses a single machine may all hold); anything else, such as a Unix socket's name, as it is."""
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        return address
+    if isinstance(ip, ipaddress.IPv6Address):
+        if ip.ipv4_mapped is not None:
+            return str(ip.ipv4_mapped)
+        return str(ipaddress.IPv6Network((ip, 64), strict=False))
+    return str(ip)
+
+
 class LoginThrottle:
-    """Failed admin logins in this process, per client address and overall. After `free` failures (per client:
-    `free_per_client`; from everyone together: `free_overall`) each further attempt must wait a delay that starts
-    at `delay_s` and doubles with every failure, up to `max_delay_s`; an attempt during the delay is refused
-    without checking the password. The overall delay holds back only addresses that have failed before: a
-    researcher's first attempt from an address of their own is always checked, so guessing from many addresses
-    cannot lock them out (each new address gets one guess, then waits). A success clears its client's count;
-    counts are forgotten a day after their last failure. With several worker processes each keeps its own
+    """Failed admin logins in this process, per client (`client_group`: an IPv4 address or an IPv6 /64) and
+    overall. After `free` failures (per client: `free_per_client`; from everyone together: `free_overall`) each
+    further attempt must wait a delay that starts at `delay_s` and doubles with every failure, up to `max_delay_s`;
+    an attempt during the delay is refused without checking the password. The overall delay holds back every
+    client, one never seen included, so a pool of addresses gets no more guesses checked than the overall limit
+    allows; only a client that has logged in since the server started passes it (the password is the only way
+    in), so the researcher's own address is not locked out by others' guessing. A success clears its client's
+    count; counts are forgotten a day after their last failure. The table of clients holds at most `MAX_CLIENTS`:
+    when it is full the longest-unseen client makes room once its delay has passed, and until then a new client
+    waits as long, so a delayed client is never forgotten. With several worker processes each keeps its own
     counts."""
 
     FORGET_S = 24 * 3600
@@ -201,8 +219,10 @@ class LoginThrottle:
         self.free_per_client, self.free_overall = free_per_client, free_overall
         self.delay_s, self.max_delay_s = delay_s, max_delay_s
         self.clock = clock
-        self.clients: dict[str, tuple[int, float]] = {}  # address -> (failures, time of the last one)
+        self.clients: dict[str, tuple[int, float]] = {}  # client -> (failures, time of the last one), oldest first
         self.overall: tuple[int, float] = (0, 0.0)
+        self.logged_in: set[str] = set()  # clients the overall delay lets pass
+        self.lock = threading.Lock()  # the login endpoint runs in the thread pool
 
     def _wait(self, count: tuple[int, float], free: int, now: float) -> float:
         failures, last = count
@@ -211,29 +231,40 @@ class LoginThrottle:
         delay = min(self.max_delay_s, self.delay_s * 2.0 ** min(failures - free, 40))
         return max(0.0, last + delay - now)
 
-    def wait_s(self, client: str) -> float:
-        """Seconds before `client` may try a password again (0: now)."""
-        now = self.clock()
+    def _own_wait(self, client: str, now: float) -> float:
+        """The client's own delay; a client not in a full table waits for room (for the longest-unseen one's)."""
         own = self.clients.get(client)
-        if own is None or now - own[1] > self.FORGET_S:
-            return 0.0
-        return max(self._wait(own, self.free_per_client, now), self._wait(self.overall, self.free_overall, now))
+        if own is None and len(self.clients) >= self.MAX_CLIENTS:
+            own = next(iter(self.clients.values()))
+        return 0.0 if own is None else self._wait(own, self.free_per_client, now)
 
-    def failed(self, client: str) -> int:
-        """Count a wrong password; returns the client's failures so far."""
-        now = self.clock()
-        failures, last = self.clients.get(client, (0, now))
-        failures = 1 if now - last > self.FORGET_S else failures + 1
-        if client not in self.clients and len(self.clients) >= self.MAX_CLIENTS:
-            self.clients.pop(next(iter(self.clients)))  # the longest unseen
-        self.clients.pop(client, None)
-        self.clients[client] = (failures, now)
-        total, last_any = self.overall
-        self.overall = (1 if now - last_any > self.FORGET_S else total + 1, now)
-        return failures
+    def wait_s(self, address: str) -> float:
+        """Seconds before a client at `address` may try a password again (0: now)."""
+        client = client_group(address)
+        with self.lock:
+            now = self.clock()
+            overall = 0.0 if client in self.logged_in else self._wait(self.overall, self.free_overall, now)
+            return max(self._own_wait(client, now), overall)
 
-    def succeeded(self, client: str) -> None:
-        self.clients.pop(client, None)
+    def failed(self, address: str) -> int:
+        """Count a wrong password; returns its client's failures so far."""
+        client = client_group(address)
+        with self.lock:
+            now = self.clock()
+            failures, last = self.clients.pop(client, (0, now))
+            failures = 1 if now - last > self.FORGET_S else failures + 1
+            if len(self.clients) >= self.MAX_CLIENTS and self._own_wait(client, now) == 0:
+                self.clients.pop(next(iter(self.clients)))  # the longest unseen, its delay over
+            self.clients[client] = (failures, now)
+            total, last_any = self.overall
+            self.overall = (1 if now - last_any > self.FORGET_S else total + 1, now)
+            return failures
+
+    def succeeded(self, address: str) -> None:
+        client = client_group(address)
+        with self.lock:
+            self.clients.pop(client, None)
+            self.logged_in.add(client)
 
 
 class ArrivalLimit:

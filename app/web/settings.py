@@ -49,8 +49,9 @@ class ServerSettings(BaseSettings):
     # server process (docs/survey.md).
     sqlite_synchronous: Literal["normal", "full"] = "full"
     access_log: bool = True  # uvicorn's line per request, from `foil serve`
-    # Admin password guessing: after this many wrong passwords (per client address; from everyone together) each
-    # attempt waits a delay that starts at login_delay_s and doubles with every failure, up to login_max_delay_s.
+    # Admin password guessing: after this many wrong passwords (per client, an IPv4 address or an IPv6 /64; from
+    # everyone together) each attempt waits a delay that starts at login_delay_s and doubles with every failure, up
+    # to login_max_delay_s.
     login_free_attempts: int = Field(default=5, ge=1)
     login_free_attempts_overall: int = Field(default=100, ge=1)
     login_delay_s: float = Field(default=1.0, gt=0, allow_inf_nan=False)
