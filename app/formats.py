@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, NotRequired, TypedDict, cast
 
 from pydantic import (
+    AliasChoices,
     BaseModel,
     ConfigDict,
     Field,
@@ -134,14 +135,17 @@ def _upgraded(data: dict[str, Any], source: str) -> dict[str, Any]:
 
 class ClipVote(CheckedDict):
     """The representative solver's vote behind a clip: how many of the starting states it rolled out showed each
-    agent as better (in the order of the clip's `agents`), how many neither, and the exact two-sided sign test of
-    those with a majority. An undecided (weak) vote may have chosen a clip of either agent as the better one."""
+    agent as better (in the order of the clip's `agents`), how many neither, their summed weight (a viewer's expected
+    vote per state, positive for the first agent) and the sign-flip test of those weights. An undecided (weak) vote
+    may have chosen a clip of either agent as the better one. A manifest written before the weights has
+    `sign_test_p` for `p` and no `weight`."""
 
     states: Annotated[int, Field(ge=0)]
     won: list[int]
     no_majority: Annotated[int, Field(ge=0)]
-    sign_test_p: Annotated[float, Field(ge=0, le=1)]
-    decided: bool  # sign_test_p below the solver's alpha over its looks (docs/search.md)
+    p: Annotated[float, Field(ge=0, le=1, validation_alias=AliasChoices("p", "sign_test_p"))]
+    decided: bool  # p below the solver's alpha over its looks (docs/search.md)
+    weight: NotRequired[float]
 
 
 class ClipAudit(BaseModel):

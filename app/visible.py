@@ -374,6 +374,16 @@ class Observer:
             score -= self.closeness_weight * max(0.0, self.comfort_m - float(closest))
         return score
 
+    def expected_vote(self, difference: float) -> float:
+        """What a clip whose two agents' scores differ by ``difference`` (first minus second) is worth to a vote: the
+        share of viewers who pick the first minus the share who pick the second, as `perceive` picks (each score
+        seen with independent noise: P(first) = Phi(difference / (noise * sqrt 2)), so erf(difference / (2 * noise)));
+        a difference of a crash against lasting (1 or more) counts almost fully, one a viewer barely sees almost
+        nothing. Without noise, every viewer picks the higher score."""
+        if self.noise == 0:
+            return float((difference > 0) - (difference < 0))
+        return math.erf(difference / (2 * self.noise))
+
     def perceive(self, clip: Visible, rng: random.Random) -> dict[str, float]:
         """Each on-screen label's perceived score for one viewing (``rng``: a ``random.Random``)."""
         return {label: score + rng.gauss(0.0, self.noise) for label, score in clip.scores(self).items()}

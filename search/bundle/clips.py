@@ -25,7 +25,7 @@ from app.visible import VisibleClip, VisibleReels, World, audit
 from search.bundle.evaluations import better_agent
 from search.bundle.searches import ClipJob, describe_search
 from search.bundle.spec import BuildError
-from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, finished
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, Work, finished
 from search.bundle.truth import PairedComparison
 from search.clips.render import RenderOptions, RenderResult, agent_label
 from search.core.domain import Domain, domain_named, domain_of_summary
@@ -113,14 +113,16 @@ def render_clips(
         inputs_of[out.stem] = (inputs, out)
         given = [(path.name, path.read_bytes()) for path in summaries]
         todo[out.stem] = (render_job, (domain.name, given, out.name, list(job.numbers), options))
-    for name, (files, frames), progress in finished(todo, backend, lambda name: f"render {name}"):
+    for name, ((files, frames), seconds), progress in finished(
+        todo, backend, lambda name: f"render {name}", lambda name: Work("", 1)
+    ):
         inputs, out = inputs_of[name]
         for file, data in files.items():
             (out.parent / file).write_bytes(data)
         folder = cache.store("render", inputs)
         (folder / "sha256").write_text(sha256_file(out))
         cache.seal("render", inputs)
-        log(f"render {name}: {frames} {progress}")
+        log(f"render {name}: {frames} frames in {seconds:.1f} s {progress}")
 
 
 def moment_options(options: RenderOptions) -> RenderOptions:
@@ -138,10 +140,10 @@ def reel_files(summaries: list[Path]) -> list[Path]:
 
 def render_job(
     domain: str, summaries: list[tuple[str, bytes]], clip: str, numbers: list[int], options: RenderOptions
-) -> tuple[dict[str, bytes], str]:
+) -> tuple[tuple[dict[str, bytes], int], float]:
     """Render one clip or reel from its summaries (name, contents) in a folder of its own, as a worker on another
-    machine does (the domain is found by name): the files made beside the clip (name -> contents) and what it
-    took, for the log."""
+    machine does (the domain is found by name): the files made beside the clip (name -> contents) and its frames,
+    and the seconds its rendering took."""
     from search.clips.reel import render_reel
 
     world = domain_named(domain)
@@ -157,7 +159,7 @@ def render_job(
             moment = moment_options(options)
             result = render_reel(paths, out, lambda s, o: world.render(s, o, numbers, moment), options)
         files = {path.name: path.read_bytes() for path in sorted(out.parent.iterdir()) if path.is_file()}
-    return files, f"{result.frames} frames in {result.render_s:.1f} s"
+    return (files, result.frames), result.render_s
 
 
 def clip_audit(
@@ -265,8 +267,9 @@ def clip_vote(summary: dict[str, Any], order: list[int]) -> ClipVote | None:
         states=vote["states"],
         won=[vote["won"][k] for k in order],
         no_majority=vote["no_majority"],
-        sign_test_p=vote["sign_test_p"],
+        p=vote["p"],
         decided=vote["decided"],
+        weight=vote["weight"] if order[0] == 0 else -vote["weight"],
     )
 
 
@@ -277,10 +280,11 @@ def vote_warnings(agents: list[str], better: str | None, vote: ClipVote | None) 
 
     if vote is None:
         return []
-    line = describe_vote(agents, vote["won"], vote["no_majority"], vote["sign_test_p"])
+    line = describe_vote(agents, vote["won"], vote["no_majority"], vote["p"])
     found = [] if vote["decided"] else [f"weak vote: {line}; the clip may show either agent as the better one"]
     first, second = vote["won"]
-    voted = None if first == second else agents[0] if first > second else agents[1]
+    weight = vote.get("weight", first - second)  # a vote before the weights leaned by its counts
+    voted = None if weight == 0 else agents[0] if weight > 0 else agents[1]
     if better is not None and voted is not None and voted != better:
         found.append(f"vote against the ground truth: it favours {voted}, but {better} is better ({line})")
     return found

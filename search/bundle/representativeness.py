@@ -11,7 +11,7 @@ import time
 from typing import Any
 
 from search.bundle.spec import Representativeness
-from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, agent_identity, finished
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, Work, agent_identity, finished
 from search.bundle.study import Study
 from search.core.domain import domain_named
 from search.solvers.runner import Backend
@@ -25,8 +25,6 @@ def representativeness(
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
     vote; pairs measured on ``backend``, each scenario and the distribution in the study's world settings
     (`Study.world_settings`)."""
-    from search.core.contrast import strength
-
     checks = check_tasks(study)
     todo = {
         pair: task
@@ -34,7 +32,9 @@ def representativeness(
         if not cache.valid("representativeness", inputs, "report.json")
     }
     described = {pair: f"representativeness {pair[0]}-{pair[1]}" for pair in todo}
-    for pair, (found, seconds), progress in finished(todo, backend, described.__getitem__):
+    for pair, (found, seconds), progress in finished(
+        todo, backend, described.__getitem__, lambda pair: check_work(todo[pair])
+    ):
         folder = cache.store("representativeness", checks[pair][2])
         (folder / "report.json").write_text(json.dumps(found, indent=1))
         cache.seal("representativeness", checks[pair][2])
@@ -46,8 +46,6 @@ def representativeness(
             report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
                 key: value for key, value in one.items() if key != "scenario"
             }
-            vote = report["distribution_vote"]  # a report cached before votes had their sign test gets it here
-            report["distribution_vote"] = vote | strength(vote["for_first"], vote["for_second"])
             reports.append(report)
             log(describe_representativeness(report))
     return reports
@@ -83,11 +81,20 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
             "pushes": settings.pushes,
             "seed": settings.seed,
             "reward": reward,
-            "check": 2,  # the check's rules (2: ties count half in the percentile; a test decides the warning)
+            "check": 3,  # the check's rules (2: ties count half in the percentile; a test decides the warning; 3: the
+            # distribution's states weigh in by how plainly they show a difference)
         }
         task = (representativeness_job, (domain.name, pair, fixed, distribution, drawn_world, settings, reward))
         checks[pair] = (names, distribution, inputs, task)
     return checks
+
+
+def check_work(task: Task, states: int | None = None) -> Work:
+    """A check's size in simulator steps, its rollouts' most: (``states`` drawn, by default its settings', and its
+    scenarios) x (pushes + 1) rollouts of the reward's horizon."""
+    _, (_, _, fixed, _, _, settings, reward) = task
+    drawn = settings.states if states is None else states
+    return Work("", (drawn + len(fixed)) * (settings.pushes + 1) * reward["horizon"])
 
 
 def clip_reward(study: Study, distribution: str, world: dict[str, Any]) -> dict[str, Any]:
@@ -132,20 +139,17 @@ def representativeness_job(
 
 def describe_representativeness(report: dict[str, Any]) -> str:
     """One line on a fixed scenario against the distribution, a warning when their majorities disagree; a weak
-    distribution vote (its sign test not below alpha) is called weak, since it cannot say which agent most states
+    distribution vote (its test not below alpha) is called weak, since it cannot say which agent most states
     show as better."""
-    from search.core.contrast import strength
-
     first, second = report["agents"]
     vote = report["distribution_vote"]
     voted = {1: first, -1: second, 0: "neither"}[vote["direction"]]
-    tested = strength(vote["for_first"], vote["for_second"])  # one look, at the default alpha
-    p = tested["sign_test_p"]
+    p = vote["p"]  # one look
     line = (
         f"{report['scenario']}, {first} vs {second}: {first} looks better in {report['first_looks_better']:.0%} "
         f"of {report['rollouts']} nominal rollouts, {second} in {report['second_looks_better']:.0%}; "
         f"{report['distribution']}'s {vote['states']} states vote {voted} ({vote['for_first']} for {first}, "
-        f"{vote['for_second']} for {second}), sign test p {'< 0.001' if p < 0.001 else f'= {p:.2g}'}"
+        f"{vote['for_second']} for {second}, weighed by how plainly), p {'< 0.001' if p < 0.001 else f'= {p:.2g}'}"
     )
     if report["percentile"] is not None:
         line += (
@@ -154,8 +158,8 @@ def describe_representativeness(report: dict[str, Any]) -> str:
         )
     weak = (
         ""
-        if tested["decided"]
-        else f"; a weak vote (p not below {tested['alpha']}): too few or too evenly split states to say which agent "
+        if vote["decided"]
+        else f"; a weak vote (p not below {vote['alpha']}): too few or too evenly split states to say which agent "
         f"most starting states show as better"
     )
     if report["disagrees"] and not report["decided"]:

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any, cast
 
 from search.bundle.spec import BuildSpec, Scheme
-from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, agent_identity, finished, input_key
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Work, agent_identity, finished, input_key
 from search.bundle.study import Study
 from search.core.domain import Domain, domain_for
 from search.solvers.runner import Backend, SearchJob, run_search, write_outputs
@@ -111,6 +111,7 @@ def search_inputs(search: SearchJob, domain: Domain | None = None) -> dict[str, 
         "agents": [agent_identity(a, domain) for a in search.agents],
         "scenario": domain.scenario_dict(search.scenario, search.world_settings),
         "solver": search.solver,
+        "rules": solver_named(search.solver).rules,
         "solver_settings": asdict(search.solver_config),
         "reward": RewardConfig(**search.reward_settings).to_dict(),
         "budget": search.budget,
@@ -140,6 +141,11 @@ def _reusable(job: ClipJob, inputs: dict[str, Any], cache: Cache, log: Log) -> b
     return True
 
 
+def search_work(job: ClipJob, search: SearchJob) -> Work:
+    """A search's size: its budget in simulator steps, at its scheme's pace."""
+    return Work(job.scheme.name, search.budget)
+
+
 def search_job_files(search: SearchJob) -> tuple[dict[str, str], float]:
     """One search's files (`run_search`) and the seconds it took."""
     started = time.perf_counter()
@@ -157,7 +163,9 @@ def run_searches(
             todo[input_key(inputs)] = (job, search, inputs)
 
     tasks = {key: (search_job_files, (search,)) for key, (_, search, _) in todo.items()}
-    for key, (files, seconds), progress in finished(tasks, backend, lambda key: describe_search(todo[key][0])):
+    for key, (files, seconds), progress in finished(
+        tasks, backend, lambda key: describe_search(todo[key][0]), lambda key: search_work(*todo[key][:2])
+    ):
         job, _, inputs = todo[key]
         write_outputs(cache.store("search", inputs), files)
         cache.seal("search", inputs)

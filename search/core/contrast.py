@@ -3,18 +3,21 @@ library the representative solver, the representativeness check of a study's fix
 and every world's rollouts share (docs/search.md, "The representative solver").
 
 A rollout's clip is scored by the viewer's rule (`app.visible.Observer`, no perception noise): the first agent's
-visible score minus the second's, none (0) under the observer's tie margin. Each starting state votes by the sign
-of its rollouts' majority; a vote's strength is the exact two-sided sign test over the states with a majority,
-held to Bonferroni's level over the looks that could have stopped it."""
+visible score minus the second's, none (0) under the observer's tie margin. A state weighs in by how plainly its
+clips show that difference: the mean over its rollouts of a viewer's expected vote (`Observer.expected_vote`,
+the `foil simulate` bots' own rule), so a state where one agent crashes and the other drives on outweighs one where
+both drive on at speeds a viewer can barely tell apart. A vote's strength is the sign-flip test of the states'
+weights (`weighted_test`: with equal weights, the sign test), held to Bonferroni's level over the looks that could
+have stopped it."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.stats import permutation_test
 
 from app.visible import Observer, VisibleClip, World
 from search.core.problem import Problem
@@ -28,7 +31,8 @@ RollOut = Callable[[list[Any], int, np.random.Generator, Tracker], "Rollouts"]
 Shown = Callable[[Any, int, int], float]
 
 OBSERVER = Observer()
-ALPHA = 0.05  # a vote is decided when its sign test's p is below this, over its looks (`strength`)
+ALPHA = 0.05  # a vote is decided when its test's p is below this, over its looks (`strength`)
+FLIPS = 9_999  # the sign flips `weighted_test` draws where there are too many to count
 
 
 @dataclass
@@ -48,64 +52,79 @@ class Rollouts:
         )
 
 
-def sign_test(wins: int, losses: int) -> float:
-    """The exact two-sided sign test's p: the chance of a split at least as uneven as ``wins`` to ``losses`` were
-    each state as likely to vote either way. States without a majority are left out, as the test leaves out ties
-    (none left: 1). Exact in integers, so the same counts always give the same p."""
-    n, fewer = wins + losses, min(wins, losses)
-    if n == 0:
+def weighted_test(weights: np.ndarray) -> float:
+    """The two-sided sign-flip test's p of states' weights: the chance of a sum at least as far from 0 were each
+    state as likely to weigh in for either agent by the same amount. States that weigh nothing are left out, as the
+    sign test leaves out ties (one or none left: 1); with equal weights it is the sign test. Exact up to 13 states, else
+    over 9,999 seeded sign flips (scipy's `permutation_test`), so the same weights always give the same p."""
+    weighed = np.asarray(weights, dtype=float)
+    weighed = weighed[weighed != 0]
+    if len(weighed) < 2:  # one state flipped is as far from 0 as it is
         return 1.0
-    p: float = min(1.0, 2 * sum(math.comb(n, k) for k in range(fewer + 1)) / 2**n)
-    return p
+    tested = permutation_test(
+        (weighed,),
+        lambda x, axis: np.sum(x, axis=axis),
+        permutation_type="samples",
+        vectorized=True,
+        n_resamples=FLIPS,
+        alternative="two-sided",
+        random_state=np.random.default_rng(0),
+    )
+    return float(min(1.0, tested.pvalue))
 
 
-def strength(for_first: int, for_second: int, alpha: float = ALPHA, looks: int = 1) -> dict[str, Any]:
-    """A vote's sign test and whether it is decided, as its record says them: p below ``alpha / looks``. Looking
-    again until a vote decides would make a split between equally good agents look decided more often than
-    ``alpha`` (about 0.11 at 0.05 with 8 looks), so each of the ``looks`` that could have stopped it is tested at
-    the Bonferroni level."""
-    p = sign_test(for_first, for_second)
-    return {"sign_test_p": p, "alpha": alpha, "looks": looks, "decided": p < alpha / looks}
+def strength(weights: np.ndarray, alpha: float = ALPHA, looks: int = 1) -> dict[str, Any]:
+    """A vote's test and whether it is decided, as its record says them: p below ``alpha / looks``. Looking again
+    until a vote decides would make a split between equally good agents look decided more often than ``alpha``
+    (about 0.11 at 0.05 with 8 looks), so each of the ``looks`` that could have stopped it is tested at the
+    Bonferroni level."""
+    p = weighted_test(weights)
+    return {"p": p, "alpha": alpha, "looks": looks, "decided": p < alpha / looks}
 
 
 @dataclass(frozen=True)
 class Vote:
-    """How the states voted: +1 when the first agent looks better, -1 when the second does, 0 for no majority."""
+    """How the states voted: each state's weight, a viewer's expected vote over its clips from -1 (every viewer
+    would pick the second agent) to +1 (the first), 0 where its clips show no difference or cancel out."""
 
-    state_votes: np.ndarray  # (M,) one vote per state rolled out
-    direction: int  # the sign of the summed votes
+    state_weights: np.ndarray  # (M,) one weight per state rolled out
+    direction: int  # the sign of the summed weights
 
     @property
-    def margin(self) -> int:
-        return int(abs(self.state_votes.sum()))
+    def state_votes(self) -> np.ndarray:
+        """Which way each state leans: +1, -1, or 0 for none."""
+        return np.sign(self.state_weights).astype(np.int64)
 
     @property
     def p(self) -> float:
-        """The sign test of the states with a majority (`sign_test`)."""
-        return sign_test(int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum()))
+        """The sign-flip test of the states' weights (`weighted_test`)."""
+        return weighted_test(self.state_weights)
 
     def record(self, rollouts: Rollouts, alpha: float = ALPHA, looks: int = 1) -> dict[str, Any]:
         """What run.json says of the vote, with its strength (`strength`)."""
         signs = np.sign(rollouts.contrast)
-        for_first, for_second = int((self.state_votes > 0).sum()), int((self.state_votes < 0).sum())
+        votes = self.state_votes
         return {
-            "states": len(self.state_votes),
+            "states": len(votes),
             "rollouts": len(signs),
-            "for_first": for_first,
-            "for_second": for_second,
-            "no_majority": int((self.state_votes == 0).sum()),
+            "for_first": int((votes > 0).sum()),
+            "for_second": int((votes < 0).sum()),
+            "no_majority": int((votes == 0).sum()),
             "direction": self.direction,
-            "margin": self.margin,
+            "weight": round(float(self.state_weights.sum()), 6),
             "tied": self.direction == 0,
             "agreeing_share": float((signs == self.direction).mean()) if self.direction else None,
-        } | strength(for_first, for_second, alpha, looks)
+        } | strength(self.state_weights, alpha, looks)
 
 
-def vote(rollouts: Rollouts, states: int) -> Vote:
-    """Each state's majority sign over its rollouts, and the sign of their sum."""
-    signs = np.sign(rollouts.contrast)
-    state_votes = np.array([int(np.sign(signs[rollouts.state == s].sum())) for s in range(states)], dtype=np.int64)
-    return Vote(state_votes, int(np.sign(state_votes.sum())))
+def vote(rollouts: Rollouts, states: int, observer: Observer = OBSERVER) -> Vote:
+    """Each state's weight, the mean of its rollouts' expected votes (`Observer.expected_vote`), and the sign of
+    their sum."""
+    expected = np.array([observer.expected_vote(c) for c in rollouts.contrast.tolist()])
+    weights = np.array(
+        [expected[rollouts.state == s].mean() if (rollouts.state == s).any() else 0.0 for s in range(states)]
+    )
+    return Vote(weights, int(np.sign(weights.sum())))
 
 
 def summary_contrast(summary: dict[str, Any], world: World) -> float:
@@ -123,11 +142,13 @@ def visible_contrast(clip: VisibleClip) -> float:
 
 
 def describe_vote(agents: Sequence[str], won: Sequence[int], no_majority: int, p: float) -> str:
-    """A vote in words, by agent name: how many starting states showed each agent as better, and its sign test."""
+    """A vote in words, by agent name: how many starting states showed each agent as better, and its test, which
+    weighs each state by how plainly it showed it."""
     states = sum(won) + no_majority
     return (
         f"of {states} starting state{'' if states == 1 else 's'}, {won[0]} showed {agents[0]} as better, "
-        f"{won[1]} {agents[1]} and {no_majority} neither (sign test p {'< 0.001' if p < 0.001 else f'= {p:.2g}'})"
+        f"{won[1]} {agents[1]} and {no_majority} neither (weighed by how plainly, p "
+        f"{'< 0.001' if p < 0.001 else f'= {p:.2g}'})"
     )
 
 

@@ -8,10 +8,12 @@ truth (no evaluation result and no agent's identity is read).
 3. Score each clip's visible contrast with the viewer's rule (`app.visible.Observer`, no perception noise): the
    first agent's visible score minus the second's, none (0) under the observer's tie margin (by a world's visible
    score: where the two sums read the same on screen).
-4. Each state votes by the sign of its majority; the direction is the sign of the summed votes. States are rolled
-   out a batch at a time until the vote is decided (`sign_test`, Bonferroni over its planned looks), the budget
-   fits no further state at the most steps one can take, or every drawn state has voted: the budget is never
-   overspent.
+4. Each state weighs in by how plainly its clips show a difference: the mean over its rollouts of a viewer's
+   expected vote (`app.visible.Observer.expected_vote`, the bots' rule: a crash against lasting counts almost
+   fully, a readout a viewer barely tells apart almost nothing); the direction is the sign of the summed weights.
+   States are rolled out a batch at a time until the vote is decided (`weighted_test`, Bonferroni over its planned
+   looks), the budget fits no further state at the most steps one can take, or every drawn state has voted: the
+   budget is never overspent.
 5. Candidates are the rollouts that agree with the direction, from states that voted that way, largest contrast
    first. The clip is the first candidate whose exact replay (batch size 1, as `foil verify` replays it) is still a
    non-tie in that direction; the top-K are the first K such.
@@ -185,9 +187,7 @@ def weak_vote(record: dict[str, Any], agents: Sequence[str]) -> str | None:
         "states": f"all {record.get('drawn', record['states'])} drawn states voted (raise states)",
     }.get(record.get("stopped", ""), "")
     level = f"{record['alpha']} / {record['looks']} looks" if record["looks"] > 1 else f"{record['alpha']}"
-    vote_line = describe_vote(
-        agents, [record["for_first"], record["for_second"]], record["no_majority"], record["sign_test_p"]
-    )
+    vote_line = describe_vote(agents, [record["for_first"], record["for_second"]], record["no_majority"], record["p"])
     return (
         f"weak vote: {vote_line}, not below {level}{'; ' + why if why else ''}: its clips may show either "
         f"agent as the one that usually looks better"
@@ -240,7 +240,7 @@ def representative(
             if not result.direction
             else "largest contrast (no candidate of the vote survived its replay)"
         )
-        everything = candidates(rollouts, Vote(result.state_votes, 0))
+        everything = candidates(rollouts, Vote(result.state_weights, 0))
         chosen = choose(everything, 0, replayed, tracker.queue.k, ahead)
     if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
         how = "no visible contrast anywhere: the first state without pushes"
@@ -261,6 +261,7 @@ class Representative(OwnSummaries):
     """The representative solver: it draws its own starting states and records its vote under ``vote``."""
 
     name = "representative"
+    rules = 2  # 2: states weigh in by how plainly their clips show a difference
     config_class = RepresentativeConfig
     starts = "distribution"
     record_key = "vote"
@@ -295,7 +296,7 @@ class Representative(OwnSummaries):
         if warning:
             vote["warning"] = warning
         strength = {
-            key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "sign_test_p", "decided")
+            key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "weight", "p", "decided")
         }
         for summary, chosen in zip(summaries, vote["chosen"], strict=True):
             summary["solver"] = summary["solver"] | {
@@ -320,8 +321,9 @@ class Representative(OwnSummaries):
             states=vote["states"],
             won=[vote["for_first"], vote["for_second"]],
             no_majority=vote["no_majority"],
-            sign_test_p=vote["sign_test_p"],
+            p=vote["p"],
             decided=vote["decided"],
+            weight=vote["weight"],
         )
 
 

@@ -39,6 +39,7 @@ class Solver(ABC):
     starts: Starts = "fixed"  # a fixed scenario, a distribution of starting states it draws from, or either
     reels: bool = False  # its clips are a reel of moments per agent, not one clip of the pair
     needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.core.problem)
+    rules: int = 1  # raised when the same settings choose differently, so a bundle's cached searches are redone
 
     def warnings(self, record: dict[str, Any]) -> list[str]:
         """What a search's run.json record warns of, in words: the runner, `foil search` and the bundle print

@@ -2,6 +2,7 @@
 command line (determinism, `foil verify`, the vote in run.json, the refusals)."""
 
 import json
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,10 +21,12 @@ def rollouts(contrast_by_state: list[list[float]]) -> Rollouts:
     )
 
 
-def test_states_vote_by_their_majority_and_candidates_agree_with_the_direction():
+def test_states_weigh_in_by_their_expected_votes_and_candidates_agree_with_the_direction():
     found = rollouts([[-1.0, -0.5, 0.8], [-2.0, 0.0, 0.0], [3.0, 0.6, -0.4], [-0.9, -0.7, -0.3]])
     result = vote(found, 4)
-    assert result.state_votes.tolist() == [-1, -1, 1, -1] and result.direction == -1 and result.margin == 2
+    assert result.state_votes.tolist() == [-1, -1, 1, -1] and result.direction == -1
+    # each state weighs in by its rollouts' mean expected vote, erf(contrast) at the bots' noise of 0.5
+    assert result.state_weights[1] == pytest.approx(math.erf(-2.0) / 3)
     # the largest agreeing contrast (3.0 of state 2 disagrees; -0.4 comes from a state that voted the other way)
     assert candidates(found, result) == [3, 0, 9, 10, 1, 11]
     record = result.record(found)
@@ -32,11 +35,11 @@ def test_states_vote_by_their_majority_and_candidates_agree_with_the_direction()
 
 
 def test_a_tied_vote_is_reported_and_falls_back_to_the_largest_contrast():
-    found = rollouts([[1.0, 0.5], [-2.0, -0.2], [0.0, 0.0]])
+    found = rollouts([[1.0, 0.5], [-1.0, -0.5], [0.0, 0.0]])
     result = vote(found, 3)
     assert result.state_votes.tolist() == [1, -1, 0] and result.direction == 0
     assert result.record(found)["tied"] and result.record(found)["agreeing_share"] is None
-    assert candidates(found, result) == [2, 0, 1, 3]  # every non-tie rollout, largest contrast first
+    assert candidates(found, result) == [0, 2, 1, 3]  # every non-tie rollout, largest contrast first
 
 
 def test_a_replay_that_turns_into_a_tie_or_the_other_way_is_passed_over():
