@@ -180,6 +180,10 @@ class Words:
     names: str = (
         "Every {agent} has a name (such as {Agent} 7), colour and shape of its own. A name never stands for two"
         " different {agents} in this study, and in a ranking round each name is one {agent} in all of the round's"
+    # a compare question's answers (app.survey.study.CompareQuestion): after an agent's label, that it is better;
+    # or no difference seen between the two
+    is_better: str = "is better"
+    no_difference: str = "No difference I can see between the two {agents}"
         " clips. Each new round brings {agents} with new names."
     )
     names_in_round: str = "In this round each name, colour and shape is one {agent} in all three clips."

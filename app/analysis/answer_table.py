@@ -35,7 +35,7 @@ from app.survey.screens import (
     parse_plan,
     shows_clip,
 )
-from app.survey.study import FEEDBACK, PairwisePart, Study
+from app.survey.study import FEEDBACK, NO_DIFFERENCE, PairwisePart, Study
 
 LIST_SEPARATOR = ";"  # between the agents (or labels) of a screen
 ORDER_SEPARATOR = ">"  # between the places of a ranking, best first
@@ -179,6 +179,29 @@ LONG_COLUMNS = [
 ]
 
 
+# long.csv's columns of a study of updates (`[design] updates`), after the others; other studies' files have none
+UPDATE_COLUMNS = [
+    Column("later", "string", "on an update pair: its later version (the agent); empty on other screens"),
+    Column(
+        "update",
+        "string",
+        "on an update pair: what the ground truth says of the update: better, worse or equal (the truth cannot "
+        "tell the two apart, or the study holds them to be a control)",
+    ),
+    Column("later_first", "Int64", "on an update pair: 1 when the later version was offered first, 0 when second"),
+    Column(
+        "called",
+        "string",
+        f"a compare answer on an update pair: later or earlier (the version it calls better) or {NO_DIFFERENCE}",
+    ),
+]
+
+
+def long_columns(study: Study) -> list[Column]:
+    """long.csv's columns: a study of updates has UPDATE_COLUMNS besides."""
+    return LONG_COLUMNS + (UPDATE_COLUMNS if study.design.updates else [])
+
+
 def _options(screen: Screen | None) -> list[Option]:
     return [] if screen is None else screen.offered()
 
@@ -195,6 +218,8 @@ def _scored(question_type: str, value: Any, screen: Screen | None) -> dict[str, 
             "truth": better,
             "correct": None if agent is None else int(agent == better),
         }
+    if question_type == "compare":
+        return _compared(value, agent_of, screen)
     if question_type == "rank":
         agents = [agent_of.get(label) for label in value]
         truth = screen.true_order if isinstance(screen, Ranking) else None
@@ -209,6 +234,30 @@ def _scored(question_type: str, value: Any, screen: Screen | None) -> dict[str, 
     if question_type == "attention" and isinstance(screen, Attention):
         return {"answer": value, "truth": screen.expected, "correct": int(value == screen.expected)}
     return {"answer": value if isinstance(value, str) else str(value)}
+
+
+def _compared(value: Any, agent_of: dict[str, str], screen: Screen | None) -> dict[str, Any]:
+    """A compare answer scored: right when it names the better agent or, on an equal pair, no difference; on an
+    update pair also which version it calls better."""
+    agent = NO_DIFFERENCE if value == NO_DIFFERENCE else agent_of.get(value)
+    if not isinstance(screen, Pairwise):
+        return {"answer": value, "answer_agent": agent}
+    truth = NO_DIFFERENCE if screen.equal else screen.better
+    scored = {
+        "answer": value,
+        "answer_agent": agent,
+        "truth": truth,
+        "correct": None if agent is None else int(agent == truth),
+    }
+    if screen.later is not None:
+        version = {option.agent: "earlier" for option in screen.robots} | {screen.later: "later"}
+        scored |= {
+            "later": screen.later,
+            "update": screen.update(),
+            "later_first": int(screen.robots[0].agent == screen.later),
+            "called": version.get(agent or "", NO_DIFFERENCE if agent else None),
+        }
+    return scored
 
 
 def _clips(screen: Screen | None) -> str | None:
@@ -378,13 +427,14 @@ def _answer_columns(question: str, kind: str, prefix: str, what: str) -> list[Co
     dtype = {"scale": "Int64"}.get(kind, "string")
     meaning = {
         "choose": "the agent chosen",
+        "compare": f"the agent chosen as better, or {NO_DIFFERENCE}",
         "rank": f"the agents ranked, best first, joined by '{ORDER_SEPARATOR}'",
         "scale": "the scale point",
         "text": "the text written",
         "choice": "the option chosen",
     }[kind]
     columns = [Column(f"{prefix}_{question}", dtype, f"{what}, question {question}: {meaning}")]
-    if kind in ("choose", "rank"):
+    if kind in ("choose", "compare", "rank"):
         columns.append(Column(f"{prefix}_{question}_correct", "Int64", f"{what}, question {question}: 1 if right"))
     return columns
 
@@ -472,9 +522,12 @@ class WideLayout:
                     f"of scheme {screen.scheme!r} that the study file does not define: is it the "
                     "study file the survey was served with?"
                 )
-            value_key = {"choose": "answer_agent", "rank": "answer_agent", "scale": "value"}.get(
-                answer["question_type"], "answer"
-            )
+            value_key = {
+                "choose": "answer_agent",
+                "compare": "answer_agent",
+                "rank": "answer_agent",
+                "scale": "value",
+            }.get(answer["question_type"], "answer")
             row[key] = answer[value_key]
             if f"{key}_correct" in self.names:
                 row[f"{key}_correct"] = answer["correct"]

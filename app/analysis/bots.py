@@ -7,7 +7,9 @@ finds it in the bundle and reads the clip's summary.json (a reel's: its segments
 reached the goal and when, which timed out, how close each came to people. The observer model turns that into a
 score per agent (a reel's agent: averaged over its segments), by the rule of the bundle's world
 (`app.visible.World`), plus Gaussian perception noise; the ground truth (`better` in the manifest, the agents'
-evaluations) is never read.
+evaluations) is never read. A three-way question (which is better, or no difference) reads as "no difference"
+when the two perceived scores differ by less than the clip's tie margin (`VisibleClip.margin`: the observer's
+`tie_margin`, or where the world's visible score judges the clip, any difference that shows on screen).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any, Protocol
 
 from app.formats import Manifest, Summary, load_summary
 from app.survey.clip_length import clip_shape
+from app.survey.study import NO_DIFFERENCE
 from app.visible import Observer, Visible, VisibleClip, VisibleReels, contrast
 
 
@@ -302,8 +305,9 @@ class Bot:
             if form.answerable and not (form.radios or form.textareas):
                 self.block.append((sha, seen))  # a clip of a ranking block: remember it for the ranking
         ranked = self._ranking() if form.selects else []
+        margin = clip.margin(self.observer) if clip is not None else 0.0
         for name, options in form.radios.items():
-            data[name] = self._radio(name, options, form.legends.get(name, ""), seen, ranked)
+            data[name] = self._radio(name, options, form.legends.get(name, ""), seen, ranked, margin)
         for prefix in {name.rsplit("-", 1)[0] for name in form.selects}:
             for place, label in enumerate(ranked, start=1):
                 data[f"{prefix}-{place}"] = label
@@ -351,9 +355,20 @@ class Bot:
         return contrast(*(sum(values) / len(values) if values else 0.0 for values in mean.values()))
 
     def _radio(
-        self, name: str, options: list[tuple[str, str]], legend: str, seen: dict[str, float], ranked: list[str]
+        self,
+        name: str,
+        options: list[tuple[str, str]],
+        legend: str,
+        seen: dict[str, float],
+        ranked: list[str],
+        margin: float,
     ) -> str:
+        """`margin`: how far apart two perceived scores must be to look different (the clip's, by the world's rule)."""
         values = [value for value, _ in options]
+        agents = [value for value in values if value != NO_DIFFERENCE]
+        if seen and len(agents) == 2 and NO_DIFFERENCE in values and set(agents) <= set(seen):  # better, or none
+            first, second = (seen[agent] for agent in agents)
+            return NO_DIFFERENCE if abs(first - second) < margin else max(agents, key=seen.__getitem__)
         if seen and set(values) <= set(seen):  # which agent is better
             return max(values, key=seen.__getitem__)
         if all(value.isdigit() for value in values):

@@ -21,11 +21,11 @@ from typing import Any, TextIO
 
 from app.analysis.answer_table import (
     LIST_SEPARATOR,
-    LONG_COLUMNS,
     ORDER_SEPARATOR,
     PARTICIPANT_COLUMNS,
     Column,
     WideLayout,
+    long_columns,
     long_rows,
     participant_records,
     participant_row,
@@ -132,7 +132,7 @@ class _Table:
 def long_csv_chunks(db: Database, study: Study) -> Iterator[str]:
     """long.csv as text, one participant at a time, for a download that starts at once and streams."""
     buffer = io.StringIO()
-    table = _Table(buffer, LONG_COLUMNS)
+    table = _Table(buffer, long_columns(study))
     for record in participant_records(db, study.study.id):
         for row in long_rows(study, record):
             table.write(row)
@@ -301,7 +301,7 @@ def codebook(
     conditions, exclusion rules, and the arguments that make pandas read each file with exact types; its texts
     speak of the agents in ``words``, those of the world the study's clips show."""
     say = (words or Words()).say
-    files = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
+    files = {"long.csv": long_columns(study), "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
     return {
         "format": "foil.export/1",
         "study": {
@@ -422,7 +422,7 @@ def export_study(
     layout = WideLayout(study)
     median_s = median_duration_s(db, study.study.id)  # real participants' pace, whoever is analysed
     threshold = rules.threshold_s(median_s)
-    columns = {"long.csv": LONG_COLUMNS, "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
+    columns = {"long.csv": long_columns(study), "wide.csv": layout.columns, "participants.csv": PARTICIPANT_COLUMNS}
     tables = {
         name: _Table((out / name).open("w", encoding="utf-8", newline=""), cols) for name, cols in columns.items()
     }

@@ -71,7 +71,8 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
             else f"{task}: no test that the schemes differ is preregistered, as this design cannot run it: "
             f"{untestable[task]}. The report describes the part's accuracies and their intervals alone"
             for task in tasks(study)
-        ],
+        ]
+        + _update_hypotheses(study),
         "untestable": untestable,
         "design": {
             "schemes": list(design.schemes),
@@ -81,6 +82,7 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
             "counterbalance_scenarios": design.counterbalance_scenarios,
             "counterbalance_scheme_order": design.counterbalance_scheme_order,
             "conditions": len(conditions(study)),
+            **_update_design(study),
             "parts": [
                 {"kind": part.kind, "pairs": [list(p) for p in part.pairs]}
                 if part.kind == "pairwise"
@@ -98,6 +100,37 @@ def plan(study_file: bytes, study: Study, manifest: Path, participants: int, rul
             "within scenarios, where it has at least 20 arrangements); a ranking part by its pairwise orderings"
         ),
     }
+
+
+def _update_hypotheses(study: Study) -> list[str]:
+    """A study of updates: what the report estimates of its update pairs (none for other studies)."""
+    if not study.design.updates:
+        return []
+    from app.analysis.report import GUESS, UPDATE_MEASURES  # the report's own measures
+
+    return [
+        "updates: the pairwise accuracy above is of the compare answers on the update pairs the ground truth decides; "
+        f"per scheme, each of {'; '.join(UPDATE_MEASURES)} is estimated with its 95% interval and tested against "
+        f"guessing one of the three answers ({GUESS:.3g}), by the same model, and the schemes compared on it "
+        "(secondary, descriptive of the bias to call an update better)"
+    ]
+
+
+def _update_design(study: Study) -> dict[str, Any]:
+    """The update pairs (earlier, later) and controls of a study of updates; nothing for other studies."""
+    design = study.design
+    if not design.updates:
+        return {}
+    return {"updates": [list(pair) for pair in design.updates], "controls": [list(pair) for pair in design.controls]}
+
+
+def _update_lines(design: dict[str, Any]) -> list[str]:
+    """prereg.md's line on a study's update pairs and controls; none for other studies."""
+    if not design.get("updates"):
+        return []
+    controls = ", ".join(" and ".join(pair) for pair in design["controls"]) or "none"
+    updates = ", ".join(" to ".join(pair) for pair in design["updates"])
+    return [f"- Updates (earlier to later): {updates}; controls: {controls}"]
 
 
 def untestable_tasks(study: Study, participants: int) -> dict[str, str]:
@@ -146,6 +179,7 @@ def markdown(fixed: dict[str, Any]) -> str:
             )
             for n, part in enumerate(design["parts"], 1)
         ),
+        *_update_lines(design),
         "",
         "## Exclusions",
         "",

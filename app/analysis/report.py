@@ -28,7 +28,7 @@ from app.analysis.source import analysis_database, analysis_study_text, bundle_w
 from app.analysis.statistics import TestResult, accuracy_difference, ordinal_difference, wilson_interval
 from app.page_templates import page_templates
 from app.store.database import Database
-from app.survey.study import ScaleQuestion, Study
+from app.survey.study import NO_DIFFERENCE, ScaleQuestion, Study
 from app.visible import World
 
 if TYPE_CHECKING:
@@ -41,6 +41,15 @@ TASKS = {  # each part's title, in the world's words (`Words.say`, `ReportData.t
     "ranking": "part two: global ranking (all {agents} in the right order)",
 }
 FIGURES_EXTRA = "pip install 'foil[figures]'"
+# A study of updates (`[design] updates`): per measure, the updates whose answers it reads (what the ground truth
+# says of each: better, worse, equal) and the answer it counts (`called`: later, earlier or no difference, or
+# `right`: the answer names the better version). Each is modelled as accuracy is, against guessing one of three.
+UPDATE_MEASURES = {
+    "right on decided updates": (("better", "worse"), "right"),
+    "no difference on equal pairs": (("equal",), NO_DIFFERENCE),
+    "later called better on equal and worse updates": (("equal", "worse"), "later"),
+}
+GUESS = 1 / 3  # one of a compare question's three answers
 # The paper's Figure 4: orange for disagreement, blue for agreement, grey for the middle.
 DISAGREE, NEUTRAL, AGREE = ("#e66101", "#fdb863"), "#d9d9d9", ("#92c5de", "#0571b0")
 
@@ -127,6 +136,7 @@ class ReportData:
     audits: dict[str, dict[str, Any]] = field(default_factory=dict)  # clip id -> the manifest's audit, when known
     answers: dict[str, Answers] = field(default_factory=dict)  # task -> its scored answers, for the model
     rated: dict[str, Ratings] = field(default_factory=dict)  # scale question -> its ratings, for their model
+    updates: dict[str, Answers] = field(default_factory=dict)  # UPDATE_MEASURES name -> its answers, 1 = counted
     prereg: list[str] | None = None  # how the data differ from the preregistration (empty: they match), if given
     world: World = field(default_factory=World)  # the world the clips show, in whose words the report speaks
     _models: dict[str, ModelResult] = field(default_factory=dict, repr=False)
@@ -156,6 +166,13 @@ class ReportData:
             found = self.answers.get(ORDERINGS if task == "ranking" else task, empty)
             self._models[task] = fit_accuracy(found, self.schemes, self.model_chance(task))
         return self._models[task]
+
+    def update_model(self, measure: str) -> ModelResult:
+        """A measure of a study of updates (UPDATE_MEASURES), modelled as accuracy is, against guessing."""
+        if measure not in self._models:
+            empty = Answers((), (), (), (), (), ())
+            self._models[measure] = fit_accuracy(self.updates.get(measure, empty), self.schemes, GUESS)
+        return self._models[measure]
 
     def model_chance(self, task: str) -> float:
         return 0.5 if task == "ranking" else chance(self.study, task)
@@ -210,6 +227,10 @@ def tally_study(
     rated: dict[str, dict[str, list[Any]]] = {
         name: {column: [] for column in ("participant", "clip", "scheme", "value")} for name in ratings
     }
+    updates: dict[str, dict[str, list[Any]]] = {
+        measure: {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair", "correct")}
+        for measure in (UPDATE_MEASURES if study.design.updates else ())
+    }
     for record in participant_records(db, study.study.id):
         flags = exclusion_flags(record.participant, threshold, record.responses, rules, record.plan)
         exclusions.before += 1
@@ -221,11 +242,13 @@ def tally_study(
         exclusions.after += 1
         for row in long_rows(study, record):
             kind = row.get("question_type")
-            if kind in ("choose", "rank"):
+            if row.get("called") is not None:
+                _tally_update(row, updates)
+            if kind in ("choose", "rank") or (kind == "compare" and row.get("truth") not in (None, NO_DIFFERENCE)):
                 if row["correct"] is None:
                     unscored += 1
                     continue
-                task = "pairwise" if kind == "choose" else "ranking"
+                task = "ranking" if kind == "rank" else "pairwise"
                 pair = " vs ".join(sorted(row["agents"].split(";"))) if task == "pairwise" else ""
                 if task == "pairwise" and row.get("clip"):
                     entry = per_clip.setdefault(
@@ -276,7 +299,19 @@ def tally_study(
         per_clip=dict(sorted(per_clip.items())),
         answers={task: Answers(**values) for task, values in columns.items()},
         rated={name: Ratings(**values) for name, values in rated.items()},
+        updates={measure: Answers(**values) for measure, values in updates.items()},
     )
+
+
+def _tally_update(row: dict[str, Any], updates: dict[str, dict[str, list[Any]]]) -> None:
+    """A compare answer on an update pair, into each measure that reads its kind of update."""
+    pair = " vs ".join(sorted(row["agents"].split(";")))
+    for measure, (kinds, counted) in UPDATE_MEASURES.items():
+        if row["update"] in kinds:
+            hit = row["correct"] if counted == "right" else int(row["called"] == counted)
+            for name, value in zip(updates[measure], (row["participant"], row["clip"], row["scheme"], row["scenario"],
+                                   pair, hit), strict=True):  # fmt: skip
+                updates[measure][name].append(value)
 
 
 def orderings(answer: str, truth: str) -> list[int]:
@@ -480,6 +515,52 @@ def rating_model_rows(data: ReportData) -> list[dict[str, Any]]:
              "p_value": _significant(c.p_value), "p_holm": _significant(c.p_holm), "note": c.note}
             for c in fit.contrasts
         ]  # fmt: skip
+    return rows
+
+
+def update_rows(data: ReportData) -> list[dict[str, Any]]:
+    """A study of updates: per measure and scheme, its rate with the model's 95% interval and the test against
+    guessing, or why there is none; then per measure the test that the schemes differ."""
+    rows: list[dict[str, Any]] = []
+    for measure, answers in data.updates.items():
+        fit = data.update_model(measure)
+        estimated = {e.scheme: e for e in fit.schemes}
+        for scheme in data.schemes:
+            counted = [hit for hit, s in zip(answers.correct, answers.scheme, strict=True) if s == scheme]
+            e = estimated.get(scheme)
+            rows.append(
+                {
+                    "measure": measure,
+                    "scheme": scheme,
+                    "answers": len(counted),
+                    "clips": e.clips
+                    if e
+                    else len({c for c, s in zip(answers.clip, answers.scheme, strict=True) if s == scheme}),
+                    "rate": _number(sum(counted) / len(counted) if counted else None),
+                    "ci95_low": _number(e.low if e else None),
+                    "ci95_high": _number(e.high if e else None),
+                    "guessing": _number(GUESS),
+                    "df": _number(e.df if e else None, 2),
+                    "p_vs_guessing": _significant(e.p_chance if e else None),
+                    "note": e.note if e else (fit.note or "not tested: no answers"),
+                }
+            )
+        tested = fit.scheme_p is not None
+        rows.append(
+            {
+                "measure": measure,
+                "scheme": "schemes differ",
+                "answers": len(answers.correct),
+                "clips": fit.clips,
+                "rate": "",
+                "ci95_low": "",
+                "ci95_high": "",
+                "guessing": "",
+                "df": _number(fit.df, 2) if tested else "",
+                "p_vs_guessing": _significant(fit.scheme_p),
+                "note": fit.scheme_test if fit.estimable else fit.note,
+            }
+        )
     return rows
 
 
@@ -715,6 +796,8 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
             "exclusions.csv": exclusion_rows(data),
             "per_clip.csv": per_clip_rows(data),
         }
+        if data.updates:  # a study of updates only: the others' reports stay as they were
+            tables["updates.csv"] = update_rows(data)
         if out is not None:
             for name, rows in tables.items():
                 _write_csv(folder / name, rows)
@@ -735,6 +818,7 @@ def render_report(data: ReportData, out: Path | None = None) -> str:
                 figures_extra=FIGURES_EXTRA,
                 chance={task: data.model_chance(task) for task in data.tasks()},
                 prereg=data.prereg,
+                updates=tables.get("updates.csv", []),
             )
         )
         if out is not None:
@@ -822,6 +906,13 @@ def run_report(
         fit = data.model(task)
         tested = f"{fit.scheme_test}, p = {fit.scheme_p:.3g}" if fit.scheme_p is not None else fit.scheme_test
         print(f"{task} model: " + (tested if fit.estimable else fit.note))
+    for row in update_rows(data):
+        if row["scheme"] != "schemes differ":
+            interval = f" (95% interval {row['ci95_low']} to {row['ci95_high']})" if row["ci95_low"] != "" else ""
+            print(
+                f"{row['measure']}, {row['scheme']}: {row['rate']} of {row['answers']}{interval}"
+                + (f"; {row['note']}" if row["note"] else "")
+            )
     if data.prereg:
         n = len(data.prereg)
         print(f"{n} deviation{'s' * (n != 1)} from the preregistration: " + "; ".join(data.prereg))

@@ -37,9 +37,11 @@ class Layout:
 
 def layout(study: Study, task: str, participants: int) -> Layout:
     """The answers of `participants` participants in the study's design, conditions assigned in turn as the
-    balanced assignment does. A ranking's clip is its block: the scheme's clips of the scenario it ranks."""
+    balanced assignment does. A ranking's clip is its block: the scheme's clips of the scenario it ranks. A study
+    of updates scores its decided pairs: its controls (`[design] controls`) have no right version, so none here."""
     columns: dict[str, list[str]] = {name: [] for name in ("participant", "clip", "scheme", "scenario", "pair")}
     design = conditions(study)
+    controls = {tuple(pair) for pair in study.design.controls} | {tuple(reversed(p)) for p in study.design.controls}
     for k in range(participants):
         condition = design[k % len(design)]
         for p, part in enumerate(study.parts):
@@ -47,7 +49,11 @@ def layout(study: Study, task: str, participants: int) -> Layout:
                 continue
             for scheme in condition.schemes:
                 scenario = study.part_scenario(p, condition.rotation, scheme)
-                pairs = ["-".join(sorted(pair)) for pair in part.pairs] if part.kind == "pairwise" else [""]
+                pairs = (
+                    ["-".join(sorted(pair)) for pair in part.pairs if tuple(pair) not in controls]
+                    if part.kind == "pairwise"
+                    else [""]
+                )
                 for pair in pairs:
                     for name, value in zip(
                         columns, (f"p{k}", f"{scheme}/{scenario}/{pair}", scheme, scenario, pair), strict=True
@@ -156,7 +162,9 @@ def simulated_fits(
     fits: dict[str, list[ModelResult]] = {measure: [] for measure in MEASURES[task]}
     for _ in range(studies):
         if task == "pairwise":
-            fits["answers"].append(fit_accuracy(simulate(study, task, plan, assume, rng), schemes, 0.5, True))
+            fits["answers"].append(
+                fit_accuracy(simulate(study, task, plan, assume, rng), schemes, chance(study, task), True)
+            )
             continue
         whole, orderings = simulate_rankings(study, plan, assume, rng)
         fits["orderings"].append(fit_accuracy(orderings, schemes, 0.5, True))

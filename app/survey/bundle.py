@@ -33,6 +33,7 @@ class Bundle:
     clips: dict[str, ManifestClip]  # by id
     paths: dict[str, Path]  # sha256 -> file (a clip's or a reel's), what /clips/{sha256}.mp4 serves
     world: World = CROWD  # the world the clips show: its rule and the words its pages use (the crowd's by default)
+    undecided: frozenset[frozenset[str]] = frozenset()  # pairs the ground truth cannot tell apart (close pairs)
 
     def matching(self, scheme: str, scenario: str, agents: tuple[str, str], part: str = "") -> list[ManifestClip]:
         """The two-agent clips of a scheme, scenario and pair (in either order), in id order; with `part`, those
@@ -87,7 +88,8 @@ def load_bundle(root: str | Path) -> Bundle:
                 paths[sha256.lower()] = path
     if problems:
         raise BundleError(f"bundle {root}:\n" + "\n".join(problems))
-    return Bundle(root=root, clips=clips, paths=paths, world=manifest.shown_world())
+    undecided = frozenset(frozenset(pair.agents) for pair in manifest.close_pairs if not pair.decided)
+    return Bundle(root=root, clips=clips, paths=paths, world=manifest.shown_world(), undecided=undecided)
 
 
 def _part_scenarios(study: Study, part_index: int, scheme: str) -> list[str]:

@@ -79,8 +79,11 @@ def _number(label: str) -> tuple[bool, int]:
     return (not numbered, int(last) if numbered else 0)
 
 
-def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle: Bundle) -> dict[str, Any]:
-    """The fields of a pairwise or watch screen showing `clip`: its video, or its reels with their labels."""
+def _clip_fields(
+    part_no: int, clip: ManifestClip, questions: list[str], bundle: Bundle, study: Study | None = None
+) -> dict[str, Any]:
+    """The fields of a pairwise or watch screen showing `clip`: its video, or its reels with their labels; on an
+    update pair of the `study`'s design, its later version and whether the two are equal."""
     fields: dict[str, Any] = {
         "part": part_no,
         "clip": clip.id,
@@ -92,8 +95,14 @@ def _clip_fields(part_no: int, clip: ManifestClip, questions: list[str], bundle:
     }
     if clip.reels:
         labelled = zip(clip.reels, clip.labels, strict=True)
-        return fields | {"reels": [_reel(bundle, reel, label) for reel, label in labelled]}
-    return fields | {"media": clip.sha256.lower(), **_shape(bundle, clip.sha256).model_dump(exclude_unset=True)}
+        fields |= {"reels": [_reel(bundle, reel, label) for reel, label in labelled]}
+    else:
+        fields |= {"media": clip.sha256.lower(), **_shape(bundle, clip.sha256).model_dump(exclude_unset=True)}
+    update = study.design.update_of(clip.agents) if study is not None else None
+    if study is not None and update is not None:
+        equal = update in study.design.controls or frozenset(clip.agents) in bundle.undecided
+        fields |= {"later": update[1], "equal": equal}
+    return fields
 
 
 def _round_videos(clips: list[ManifestClip]) -> list[str]:
@@ -188,6 +197,7 @@ def build_plan(study: Study, bundle: Bundle, condition: Condition, rng: random.R
                             _pick(bundle, scheme, scenario[scheme], pair, "pairwise", rng, used),
                             list(part.questions),
                             bundle,
+                            study,
                         ),
                     )
                     for pair in part.pairs

@@ -201,9 +201,20 @@ class _ClipScreen(_InPart):
     width: int | None = None
     height: int | None = None
     reels: list[Reel] = []  # in the order shown
+    # an update pair of the study's design: its later version, and whether the two are equal (the ground truth
+    # cannot tell them apart, or the study holds them to be a control); set only on update pairs
+    later: str | None = None
+    equal: bool | None = None
 
     def offered(self) -> list[Option]:
         return self.robots
+
+    def update(self) -> str | None:
+        """What the ground truth says of the update this screen shows: "better", "worse" or "equal"; None when it
+        shows no update pair."""
+        if self.later is None:
+            return None
+        return "equal" if self.equal else "better" if self.better == self.later else "worse"
 
     def question_names(self) -> list[str]:
         return self.questions

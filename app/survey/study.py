@@ -79,6 +79,11 @@ class Design(Strict):
     # a scheme whose clips come from other scenarios than `scenarios`, as many (e.g. a distribution of starting
     # states for the representative solver): scheme -> its scenario for each of the design's scenarios
     scheme_scenarios: dict[Text, Annotated[list[Text], Field(min_length=1)]] = {}
+    # a study of updates: pairs (earlier, later) of versions of one agent, each a pair of a pairwise part; the
+    # pages never say which is which. `controls`: update pairs the study holds to be equal (two snapshots the
+    # ground truth calls equal), whatever the truth decides
+    updates: list[Pair] = []
+    controls: list[Pair] = []
 
     @model_validator(mode="after")
     def _scheme_scenarios(self) -> Design:
@@ -90,7 +95,19 @@ class Design(Strict):
                     f"scheme_scenarios.{scheme} gives {len(names)} scenarios; the design has "
                     f"{len(self.scenarios)}, one for each"
                 )
+        if len({frozenset(pair) for pair in self.updates}) != len(self.updates):
+            raise ValueError("updates lists a pair twice: list each (earlier, later) pair once")
+        for earlier, later in self.controls:
+            if (earlier, later) not in self.updates:
+                raise ValueError(
+                    f"controls names [{earlier!r}, {later!r}], which is not one of updates: a control is an update "
+                    "pair, (earlier, later) as updates lists it"
+                )
         return self
+
+    def update_of(self, agents: tuple[str, str] | list[str]) -> tuple[str, str] | None:
+        """The (earlier, later) update pair of these two agents, in either order; None for no update pair."""
+        return next((pair for pair in self.updates if set(pair) == set(agents)), None)
 
 
 class Texts(Strict):
@@ -158,6 +175,29 @@ class ChooseQuestion(Strict):
         value = read(name)
         if value not in labels:
             return None, "Choose one of the names shown." if not value else "That name is not in this clip."
+        return value, None
+
+
+NO_DIFFERENCE = "no difference"  # the answer of a compare question that sees no difference between the agents
+
+
+class CompareQuestion(Strict):
+    """Which of the two agents in the clip is better, or no difference seen: three answers, the two agents in the
+    order the clip's legend lists them (the bundle draws their numbers per clip, so either may come first) and
+    "no difference I can see" between them, in the words of the bundle's world (`app.visible.Words`)."""
+
+    type: Literal["compare"]
+    text: Text
+    help: str = ""  # neutral help text under the question (never an example answer)
+
+    def answers(self, labels: list[str]) -> list[str]:
+        """The answers in the order the page lists them: "no difference" between the two agents it compares."""
+        return [labels[0], NO_DIFFERENCE, *labels[1:]]
+
+    def check(self, name: str, read: FieldReader, labels: list[str]) -> CheckedAnswer:
+        value = read(name)
+        if value != NO_DIFFERENCE and value not in labels:
+            return None, "Choose one of the answers." if not value else "That name is not in this clip."
         return value, None
 
 
@@ -253,7 +293,8 @@ class ChoiceQuestion(Strict):
 
 
 Question = Annotated[
-    ChooseQuestion | TextQuestion | ScaleQuestion | RankQuestion | ChoiceQuestion, Field(discriminator="type")
+    ChooseQuestion | CompareQuestion | TextQuestion | ScaleQuestion | RankQuestion | ChoiceQuestion,
+    Field(discriminator="type"),
 ]
 
 FEEDBACK = "feedback"  # the name of the closing screen's feedback box in the data
@@ -375,7 +416,7 @@ def _reference_problems(study: Study) -> list[Problem]:
         if not re.fullmatch(r"[a-z][a-z0-9_]{0,39}", name):
             problems.append((("questions", name), "question names are lower_snake_case, at most 40 characters"))
     for p, part in enumerate(study.parts):
-        allowed = {"pairwise": {"choose", "text", "scale"}, "ranking": {"rank", "text", "scale"}}[part.kind]
+        allowed = {"pairwise": {"choose", "compare", "text", "scale"}, "ranking": {"rank", "text", "scale"}}[part.kind]
         for q, name in enumerate(part.questions):
             question = study.questions.get(name)
             if question is None:
@@ -412,15 +453,31 @@ def _reference_problems(study: Study) -> list[Problem]:
                 problems.append((("closing", "required", r), f"{name!r} is not asked on the closing screen"))
         if not closing.asks():
             problems.append((("closing",), "give closing questions, a feedback question, or both"))
+    problems += _update_problems(study)
     for c, check in enumerate(study.attention_checks):
         if check.part > len(study.parts):
             problems.append((("attention_checks", c, "part"), f"there are only {len(study.parts)} parts"))
     return problems
 
 
+def _update_problems(study: Study) -> list[Problem]:
+    """Each update pair is a pair of a pairwise part that asks a compare question about it."""
+    problems: list[Problem] = []
+    for u, pair in enumerate(study.design.updates):
+        parts = [p for p in study.parts if p.kind == "pairwise" and any(set(pair) == set(q) for q in p.pairs)]
+        if not parts:
+            problems.append(
+                (("design", "updates", u), f"{list(pair)} is no pair of a pairwise part: add it to a part's pairs")
+            )
+        elif not all(any(getattr(study.questions.get(n), "type", "") == "compare" for n in p.questions) for p in parts):
+            message = f"a part that shows {list(pair)} asks no 'compare' question: add one to its questions"
+            problems.append((("design", "updates", u), message))
+    return problems
+
+
 def _loc_without_union_tags(loc: Loc) -> Loc:
     """Pydantic puts the chosen union member (`questions.NAME.scale...`) in the location; the file does not."""
-    tags = {"parts": {"pairwise", "ranking"}, "questions": {"choose", "text", "scale", "rank", "choice"}}
+    tags = {"parts": {"pairwise", "ranking"}, "questions": {"choose", "compare", "text", "scale", "rank", "choice"}}
     if len(loc) >= 3 and loc[0] in tags and loc[2] in tags[str(loc[0])]:
         return loc[:2] + loc[3:]
     return loc

@@ -143,7 +143,8 @@ def better_agent(
     close: dict[tuple[str, str], PairedComparison] | None = None,
 ) -> str:
     """The ground truth: the agent with the higher mean test reward (the paper ranks its agents by it); for a close
-    pair, over the most paired episodes it was evaluated on."""
+    pair, over the most paired episodes it was evaluated on. A close pair the truth leaves undecided with no
+    difference at all records its first agent: its questions rest on a coin toss, as every undecided pair's do."""
     comparison = (close or {}).get(pair) or (close or {}).get(pair[::-1])
     if comparison is not None:  # the mean paired difference, first minus second
         pair, (first, second) = comparison.agents, (comparison.difference, 0.0)
@@ -152,3 +153,5 @@ def better_agent(
     if first == second:
         raise BuildError(f"{pair[0]} and {pair[1]} have the same mean reward; no better agent to record")
     return pair[0] if first > second else pair[1]
+    if first == second and comparison is not None and not comparison.decided:
+        return pair[0]  # no difference at all (a control: the same controller twice): any is a coin toss
