@@ -25,6 +25,11 @@ BETTER = ("higher", "lower")
 SCORE_MARGIN = 1e-9  # visible scores' sums are rounded as the screen shows them: any difference is seen
 
 
+def a_or_an(word: str) -> str:
+    """The article before ``word``, by its first letter: "an error", "a speed"."""
+    return "an" if word[:1].lower() in "aeiou" else "a"
+
+
 @dataclass(frozen=True)
 class Score:
     """A quantity each view shows on screen as it changes (a distance travelled, the error from a set point, a
@@ -103,9 +108,9 @@ class Score:
         scale = end_s if self.summed == "band" else float(self.span or 1.0)
         return (1.0 if self.better == "higher" else -1.0) * summed / max(scale, 1e-9)
 
-    def value_text(self, value: float) -> str:
-        """A value as the pages write it: ``error 0.04``, ``distance 12.3 m``."""
-        return f"{self.name} {value:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
+    def reading(self, value: float) -> str:
+        """A value as the screen shows it, with its unit: ``0.04``, ``12.3 m``."""
+        return f"{value:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
 
     def caption(self, now: float, since_first: Sequence[float], dt: float) -> str:
         """What a view shows under it at a state, number first so a line too short for the name still shows it
@@ -115,18 +120,18 @@ class Score:
         if self.summed == "band":
             return f"{one_decimal(self.of(since_first, dt) if since_first else 0.0)} s in band"
         summed = self.of(since_first, dt) if since_first and self.summed == "mean" else now
-        number = f"{summed:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
-        return f"{number} {'mean ' if self.summed == 'mean' else ''}{self.name}"
+        return f"{self.reading(summed)} {'mean ' if self.summed == 'mean' else ''}{self.name}"
 
     def describe(self, summed: float) -> str:
-        """A clip's sum in words, after an agent's label."""
+        """A clip's sum in words, after an agent's label: ``ended with a distance of 12.3 m``, ``had a mean speed of
+        72 km/h``, ``kept its offset within -0.20 to 0.20 for 3.5 seconds``."""
         if self.summed == "final":
-            return f"ended with {self.value_text(summed)}"
+            return f"ended with {a_or_an(self.name)} {self.name} of {self.reading(summed)}"
         if self.summed == "mean":
-            return f"had a mean {self.value_text(summed)}"
+            return f"had a mean {self.name} of {self.reading(summed)}"
         assert self.band is not None
         low, high = (f"{v:.{self.digits}f}" for v in self.band)
-        return f"kept {self.name} within {low} to {high} for {one_decimal(summed)} seconds"
+        return f"kept its {self.name} within {low} to {high} for {one_decimal(summed)} seconds"
 
 
 # The words' defaults speak of agents and outcomes in general. A default text may name the agent's word: ``{Agent}``
@@ -175,15 +180,15 @@ class Words:
     close_call: str = ""
     # what a clip visibly shows of a run, in a few words: where the bundle's gallery says what makes a clip misleading
     shown: str = "how each {agent}'s run ended, and when"
+    # a compare question's answers (app.survey.study.CompareQuestion): after an agent's label, that it is better;
+    # or no difference seen between the two
+    is_better: str = "is better"
+    no_difference: str = "No difference I can see between the two {agents}"
     # the instructions' paragraph on how agents are named, the line above a ranking round's clips and the notice
     # at each new round: a study file's [texts] robot_names, names_in_round and new_round say otherwise
     names: str = (
         "Every {agent} has a name (such as {Agent} 7), colour and shape of its own. A name never stands for two"
         " different {agents} in this study, and in a ranking round each name is one {agent} in all of the round's"
-    # a compare question's answers (app.survey.study.CompareQuestion): after an agent's label, that it is better;
-    # or no difference seen between the two
-    is_better: str = "is better"
-    no_difference: str = "No difference I can see between the two {agents}"
         " clips. Each new round brings {agents} with new names."
     )
     names_in_round: str = "In this round each name, colour and shape is one {agent} in all three clips."
@@ -206,7 +211,7 @@ class Words:
         named = {
             "{Agent}": self.agent,
             "{agent}": self.one(),
-            "{an_agent}": ("an " if self.agent[:1].lower() in "aeiou" else "a ") + self.one(),
+            "{an_agent}": f"{a_or_an(self.agent)} {self.one()}",
             "{Agents}": many[:1].upper() + many[1:],
             "{agents}": many,
         }
@@ -614,15 +619,28 @@ def _since(outcome: Mapping[str, Any], start_s: float) -> Mapping[str, Any]:
 
 
 def _summed(summary: Mapping[str, Any], order: Sequence[int], first: int, world: World) -> tuple[float, ...]:
-    """Each agent's visible score summed over the states its clip shows after its first (none where the world
-    shows no score or the summary records none)."""
+    """Each agent's visible score summed over the states its clip shows after its first, up to its ending (a view
+    stops where its agent's run ended, and so does its readout); none where the world shows no score or the
+    summary records none."""
     steps = summary.get("steps") or []
     shown = steps[first:]
     if world.score is None or not shown or any("scores" not in step for step in shown):
         return ()
     start_s = float(steps[first - 1]["t"]) if first > 0 else 0.0
     dt = (float(shown[-1]["t"]) - start_s) / len(shown)
-    return tuple(world.score.of([float(step["scores"][k]) for step in shown], dt) for k in order)
+    return tuple(
+        world.score.of([float(step["scores"][k]) for step in _until_ended(summary, k, shown)], dt) for k in order
+    )
+
+
+def _until_ended(summary: Mapping[str, Any], k: int, shown: Sequence[Mapping[str, Any]]) -> Sequence[Mapping[str, Any]]:
+    """The states of ``shown`` up to agent k's ending (at least the first: one that ended before the clip began
+    shows where it ended); all of them for an agent still running."""
+    ended = summary["outcomes"][k]
+    if ended.get("event") in (None, "running") or ended.get("time") is None:
+        return shown
+    until = [step for step in shown if float(step["t"]) <= float(ended["time"]) + 1e-9]
+    return until or shown[:1]
 
 
 def _to_goal(summary: Mapping[str, Any], k: int) -> float | None:

@@ -255,6 +255,14 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
     )
     end_s = max((steps - since) * dt, 1e-6)
     score = coupled.world.score
-    summed = () if score is None else tuple(score.of(m[since:steps], dt) for m in coupled.problem.measured(row))
+    ends = [step for _, step in coupled.problem.endings(row)]  # a view and its readout stop where its run ended
+    summed = (
+        ()
+        if score is None
+        else tuple(
+            score.of(m[since : max(end, since + 1) if end else steps], dt)
+            for m, end in zip(coupled.problem.measured(row), ends, strict=True)
+        )
+    )
     clip = VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world, summed=summed)
     return visible_contrast(clip)

@@ -187,7 +187,7 @@ def test_a_world_of_reward_alone_is_judged_by_its_visible_score(world):
     clip = VisibleClip.of_summary(summary, [STEADY, IDLE], ["Agent 1", "Agent 2"], DriftAdapter().world())
     verdict = audit(clip, "Agent 1")
     assert verdict["shows"] == "better", verdict
-    assert verdict["why"].startswith("Agent 1 kept offset within -0.20 to 0.20 for ")
+    assert verdict["why"].startswith("Agent 1 kept its offset within -0.20 to 0.20 for ")
 
 
 def test_eval_reports_each_agents_visible_score(world, capsys):
@@ -268,6 +268,22 @@ def test_each_way_a_clip_sums_its_score(score, values, summed):
     assert Score.from_manifest(json.loads(json.dumps(score.to_manifest()))) == score
 
 
+@pytest.mark.parametrize(
+    "score, summed, sentence",
+    [
+        (Score("speed", "km/h", "higher", "mean", digits=0, span=20.0), 72.0, "had a mean speed of 72 km/h"),
+        (Score("distance", "m", "higher", "final", span=5.0), 11.0, "ended with a distance of 11.0 m"),
+        (Score("error", "", "lower", "final", digits=2, span=0.5), 0.04, "ended with an error of 0.04"),
+        (HOLD, 0.8, "kept its offset within -0.20 to 0.20 for 0.8 seconds"),
+    ],
+)
+def test_each_way_a_clip_sums_its_score_reads_as_a_sentence_after_the_label(score, summed, sentence):
+    assert score.describe(summed) == sentence
+    ended = ({"event": "success", "time": 10.0}, {"event": "success", "time": 10.0})
+    clip = VisibleClip(("Car 3", "Car 4"), ended, (0.0, 0.0), 20.0, world=World(score=score), summed=(summed, 0.0))
+    assert clip.describe("Car 3") == f"Car 3 succeeded after 10.0 seconds; it {sentence}."
+
+
 def test_a_score_reads_as_a_viewer_reads_it():
     error = Score("error", "", "lower", "mean", digits=1, span=1.0)
     world = World(domain="gym", rule="score", score=error)
@@ -292,7 +308,7 @@ def test_the_score_breaks_a_tie_of_outcomes_in_a_goal_world():
     assert audit(VisibleClip(("A", "B"), arrivals, (0.0, 0.0), 20.0, world=plain), "B")["shows"] == "tie"
     shorter = VisibleClip(("A", "B"), arrivals, (0.0, 0.0), 20.0, world=scored, summed=(12.0, 11.0))
     verdict = audit(shorter, "B")
-    assert verdict["shows"] == "better" and "it ended with distance 11.0 m" in verdict["why"]
+    assert verdict["shows"] == "better" and "it ended with a distance of 11.0 m" in verdict["why"]
     same = VisibleClip(("A", "B"), arrivals, (0.0, 0.0), 20.0, world=scored, summed=(11.0, 11.0))
     assert audit(same, "B")["shows"] == "tie"
     crash = ({"event": "collision", "time": 3.0}, arrivals[1])
@@ -359,4 +375,4 @@ def test_a_pair_of_reels_is_judged_by_each_agents_score_over_its_moments():
     shown = VisibleReels.of_summaries(reels, ["Agent 1", "Agent 2"], DriftAdapter().world())
     assert [reel[0].summed for reel in shown.reels] == [(0.8,), (0.0,)]  # 3 steps after the window's first state
     assert audit(shown, "Agent 1")["shows"] == "better"
-    assert "kept offset within -0.20 to 0.20 for 0.8 seconds" in shown.describe("Agent 1")
+    assert "kept its offset within -0.20 to 0.20 for 0.8 seconds" in shown.describe("Agent 1")
