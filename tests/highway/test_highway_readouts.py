@@ -1,0 +1,60 @@
+"""A crashed car's readout stops where its run ended: the speed its view shows from the crash on, the one the pages
+and the audit read from its summary, and the one the representative vote's fast rollouts score are the same."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from app.visible import VisibleClip
+from search.core.domain import Domain, domain_for
+from search.core.rollout import Tracker
+from search.gym.clips import load_gym_scene
+from search.solvers.representative import RepresentativeConfig
+from search.solvers.runner import SearchJob, run_search
+
+AGENTS = ("tests.highway.drivers:faster", "tests.highway.drivers:slower")  # the faster one crashes in traffic
+
+
+@pytest.fixture(scope="module")
+def crash():
+    """The representative clip of two drivers from highway traffic, in which the faster driver crashes."""
+    job = SearchJob(
+        agents=AGENTS,
+        scenario="highway-traffic",
+        solver="representative",
+        budget=400,
+        top_k=1,
+        solver_config=RepresentativeConfig(states=2, pushes=0),
+        reward_settings={"horizon": 20},
+    )
+    summary = json.loads(run_search(job)["summary-001.json"])
+    assert summary["outcomes"][0]["event"] == "collision" and summary["outcomes"][1]["event"] != "collision"
+    return summary
+
+
+def test_the_crashed_cars_view_page_and_audit_read_one_speed(crash):
+    domain = domain_for(list(AGENTS), "highway-traffic")
+    world = domain.world("highway-traffic")
+    clip = VisibleClip.of_summary(crash, list(AGENTS), ["Car 1", "Car 2"], world)
+    crashed_at = crash["outcomes"][0]["time"]
+    speeds = [step["scores"][0] for step in crash["steps"] if step["t"] <= crashed_at]
+    assert clip.summed[0] == round(float(np.mean(speeds)))  # the mean up to the crash, not over the whole clip
+    assert clip.summed[0] != round(float(np.mean([step["scores"][0] for step in crash["steps"]])))
+    scene, _ = load_gym_scene(crash, [1, 2], 480)
+    shown = re.search(r"(\d+) km/h mean speed", scene.caption(0, scene.end_time))
+    assert shown and int(shown.group(1)) == clip.summed[0]  # the frozen view's readout
+    assert f"had a mean speed of {clip.summed[0]:.0f} km/h" in clip.describe("Car 1")  # the pages' and audit's
+
+
+def test_the_fast_rollouts_score_a_crash_as_its_summary_does():
+    domain = domain_for(list(AGENTS), "highway-traffic")
+    states = domain.draw_states("highway-traffic", {}, np.random.default_rng(0), 2)
+    fast, exact = (
+        roll_out(domain, list(AGENTS), states, {"horizon": 20}, 1, np.random.default_rng(1), Tracker(10**6, 1))
+        for roll_out in (type(domain).roll_out, Domain.roll_out)
+    )
+    assert np.array_equal(fast.contrast, exact.contrast) and (fast.contrast <= -1).any()  # crashes among them
