@@ -11,7 +11,7 @@ from typing import Any
 from app.visible import World
 from search.bundle.searches import ClipJob
 from search.bundle.spec import BuildError, BuildSpec
-from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, agent_identity, finished
+from search.bundle.steps import IN_THIS_PROCESS, Cache, Log, Task, Work, agent_identity, finished
 from search.bundle.study import Study
 from search.bundle.truth import PairedComparison, compare_pairs, describe_close_pair
 from search.core.domain import domain_named
@@ -42,7 +42,9 @@ def evaluate_runs(
         else:
             todo[run] = task
     described = {run: f"eval {run_name(spec, *run)}" for run in todo}
-    for run, (result, seconds), progress in finished(todo, backend, described.__getitem__):
+    for run, (result, seconds), progress in finished(
+        todo, backend, described.__getitem__, lambda run: evaluation_work(todo[run])
+    ):
         folder = cache.store("eval", inputs_of[run])
         (folder / "eval.json").write_text(json.dumps(result, indent=1))
         cache.seal("eval", inputs_of[run])
@@ -80,6 +82,12 @@ def eval_tasks(study: Study, runs: list[tuple[str, int]]) -> dict[tuple[str, int
             inputs["scenario"] = domain.scenario_dict(scenario, world)
         found[agent, episodes] = (inputs, (evaluation_job, (domain.name, agent, episodes, seed, world, scenario)))
     return found
+
+
+def evaluation_work(task: Task) -> Work:
+    """An evaluation's size: its episodes, at its agent's pace."""
+    _, (_, agent, episodes, *_) = task
+    return Work(agent, episodes)
 
 
 def run_name(spec: BuildSpec, agent: str, episodes: int) -> str:
@@ -150,8 +158,8 @@ def better_agent(
         pair, (first, second) = comparison.agents, (comparison.difference, 0.0)
     else:
         first, second = (evaluations[a]["reward_mean"] for a in pair)
+    if first == second and comparison is not None and not comparison.decided:
+        return pair[0]  # no difference at all (a control: the same controller twice): any is a coin toss
     if first == second:
         raise BuildError(f"{pair[0]} and {pair[1]} have the same mean reward; no better agent to record")
     return pair[0] if first > second else pair[1]
-    if first == second and comparison is not None and not comparison.decided:
-        return pair[0]  # no difference at all (a control: the same controller twice): any is a coin toss

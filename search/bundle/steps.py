@@ -1,14 +1,17 @@
 """What every step of a bundle's build shares: results kept in the bundle's cache by a hash of their inputs (with
-an agent's identity among them), and a step's jobs run on a backend with their progress for the log. The
-evaluations, searches, checks and renders each use both; `search.bundle.plan` times the same jobs."""
+an agent's identity among them), and a step's jobs run on a backend with their progress for the log: its time
+left from each job's size (`Work`) at the rate the jobs done ran at. The evaluations, searches, checks and renders
+each use both; `search.bundle.plan` sizes the same jobs and measures their rates beforehand."""
 
 from __future__ import annotations
 
 import hashlib
+import heapq
 import json
 import shutil
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -61,13 +64,76 @@ class Cache:
         (self.path(kind, inputs) / "inputs.json").write_text(json.dumps(inputs, sort_keys=True, indent=1))
 
 
-def finished(tasks: Tasks, backend: Backend, describe: Callable[[Any], str]) -> Iterator[tuple[Any, Any, str]]:
-    """Run a step's ``tasks`` on ``backend``: (key, result, progress) as each finishes, its progress the jobs done
-    of the step's and, at the pace so far, the time left ("[3/8, about 2 min left]"), for a long step's log."""
+@dataclass(frozen=True)
+class Work:
+    """A job's size in its step's units (a search's budget in simulator steps, an evaluation's episodes, a check's
+    rollout steps, a clip's file) and the group whose pace it follows (a search its scheme's, an evaluation its
+    agent's; "" the step's)."""
+
+    group: str
+    units: float
+
+
+@dataclass(frozen=True)
+class Rate:
+    """What a job of a group takes: ``per_unit`` seconds for each unit of its size, and ``besides`` seconds."""
+
+    per_unit: float
+    besides: float = 0.0
+
+    def seconds(self, work: Work) -> float:
+        return self.besides + self.per_unit * work.units
+
+
+def expected(work: Work, rates: dict[str, Rate]) -> float:
+    """A job's expected seconds at its group's rate, else at its step's (under "")."""
+    return (rates[work.group] if work.group in rates else rates[""]).seconds(work)
+
+
+def learned(done: list[tuple[Work, float]]) -> dict[str, Rate]:
+    """The rates of a step's jobs done, from their sizes and seconds: each group's, and the step's under ""."""
+    totals: dict[str, tuple[float, float]] = {}
+    for work, seconds in done:
+        for group in {work.group, ""}:
+            units, took = totals.get(group, (0.0, 0.0))
+            totals[group] = (units + work.units, took + seconds)
+    return {group: Rate(took / units) for group, (units, took) in totals.items() if units > 0}
+
+
+def makespan(seconds: list[float], workers: int, busy: list[float] | None = None) -> float:
+    """When the last of jobs taking ``seconds`` finishes, each started in order on the first worker free;
+    ``busy``: the seconds left of the jobs some workers are running."""
+    busy = busy or []
+    free = busy + [0.0] * min(workers - len(busy), len(seconds))
+    heapq.heapify(free)
+    for job in seconds:
+        heapq.heappush(free, heapq.heappop(free) + job)
+    return max(free, default=0.0)
+
+
+def finished(
+    tasks: Tasks, backend: Backend, describe: Callable[[Any], str], work: Callable[[Any], Work]
+) -> Iterator[tuple[Any, Any, str]]:
+    """Run a step's ``tasks``, each returning (result, its seconds), on ``backend``: (key, (result, seconds),
+    progress) as each finishes, its progress the jobs done of the step's and the time left ("[3/8, about 2 min
+    left]"): the jobs not done, sized by ``work``, at the rates of those done (`learned`: a scheme's searches at
+    that scheme's pace once one is done), dealt to the workers in order as the backend deals them, less what
+    the running ones have already run."""
+    waiting = list(tasks)
     started = time.perf_counter()
-    for done, (key, result) in enumerate(backend.run(tasks, describe), start=1):
-        left = (time.perf_counter() - started) / done * (len(tasks) - done)
-        yield key, result, f"[{done}/{len(tasks)}" + (f", about {duration(left)} left]" if done < len(tasks) else "]")
+    running = dict.fromkeys(waiting[: backend.workers], started)
+    del waiting[: backend.workers]
+    done: list[tuple[Work, float]] = []
+    for count, (key, result) in enumerate(backend.run(tasks, describe), start=1):
+        now = time.perf_counter()
+        done.append((work(key), result[1]))
+        del running[key]
+        if waiting:
+            running[waiting.pop(0)] = now
+        rates = learned(done)
+        busy = [max(expected(work(k), rates) - (now - began), 0.0) for k, began in running.items()]
+        left = makespan([expected(work(k), rates) for k in waiting], backend.workers, busy)
+        yield key, result, f"[{count}/{len(tasks)}" + (f", about {duration(left)} left]" if count < len(tasks) else "]")
 
 
 def duration(seconds: float) -> str:

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from search.bundle.build import build_bundle, prepare
-from search.bundle.plan import makespan, plan_lines
-from search.bundle.steps import Cache
+from search.bundle.plan import plan_lines
+from search.bundle.steps import Cache, makespan
 from search.cli import main
 from search.solvers.runner import Backend, JobFailed
 from tests.gym.test_any_world import ADAPTER, STUDY
