@@ -30,6 +30,18 @@ def test_the_highway_study_plans_highway_searches_the_server_accepts():
     check_study_against_bundle(load_study(STUDY), planned_bundle(jobs, ROOT))
 
 
+@pytest.mark.parametrize("name", ["highway.toml", "methods-highway.toml"])
+def test_a_highway_studys_instructions_say_what_a_car_that_lasts_reads_on_its_clips(name):
+    """The instructions name a car that lasted the drive as its clips' status line and legend do ("drove through"),
+    not in words of their own."""
+    from app.survey.study import load_study
+    from search.highway.adapter import HighwayAdapter
+
+    instructions = load_study(ROOT / "studies" / name).texts.instructions
+    assert f'"{HighwayAdapter.status_words["success"]}"' in instructions
+    assert "drives through" not in instructions
+
+
 def test_a_highway_study_mixing_worlds_is_refused_at_its_line(tmp_path):
     from search.bundle.spec import BuildError
 
