@@ -172,7 +172,8 @@ LONG_COLUMNS = [
     Column(
         "skipped_viewing",
         "Int64",
-        "1 when answered sooner than the clip plays, sped up before its end, or never played",
+        "1 when answered sooner than the clip plays, sped up before its end, never played, or its record ends it "
+        "before it plays",
     ),
     Column("viewport", "string", "the browser window's size when the screen was sent, WIDTHxHEIGHT in CSS px"),
     Column("submitted_at", "datetime", "when the screen was submitted (UTC)"),
@@ -371,7 +372,8 @@ PARTICIPANT_COLUMNS = [
     Column(
         "skipped_viewing",
         "Int64",
-        "1 when any clip was answered sooner than it plays, sped up before its end, or never played",
+        "1 when any clip was answered sooner than it plays, sped up before its end, never played, or its record "
+        "ends it before it plays",
     ),
     Column("excluded", "Int64", "1 when any exclusion rule applies: the report leaves the participant out"),
     Column("user_agent", "string", "the browser's User-Agent at consent"),

@@ -12,7 +12,12 @@ from sqlalchemy import Row, select
 
 from app.store.database import Database, as_utc
 from app.store.models import Participant, Response
-from app.survey.answers import VIEW_TOLERANCE_MS, clips_played, full_view_at  # the server's own check, applied again
+from app.survey.answers import (  # the server's own check, applied again
+    VIEW_TOLERANCE_MS,
+    clips_played,
+    ended_before_played,
+    full_view_at,
+)
 from app.survey.screens import Attention, Pairwise, Screen, Watch, shows_clip, watching_ms
 
 REASONS = {
@@ -21,7 +26,10 @@ REASONS = {
     "failed_attention": "failed at least one attention check",
     "too_fast": "completed faster than the time threshold",
     "flagged_by_admin": "flagged for exclusion on the admin pages",
-    "skipped_viewing": "answered a clip sooner than it plays, sped it up before it first ended, or never played it",
+    "skipped_viewing": (
+        "answered a clip sooner than it plays, sped it up before it first ended, never played it, or sent a record "
+        "of it that ends before it plays"
+    ),
 }
 # The rules that judge how a person took the study (its time, its clips' viewing): a bot answers as fast as the pilot
 # link lets it, so where bots are analysed (a rehearsal of the analysis) these rules are skipped for them.
@@ -103,7 +111,9 @@ def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | A
     """How a clip screen was watched, from its response and the plan's screen: the clip's length (a pair of reels:
     theirs together), time on screen (server), plays, seeks, blocked seeks, rate changes, time with the tab hidden;
     `skipped` when the screen was answered sooner than the clip plays (by the server's clock), with playback
-    faster than normal before the clip (every reel) first ended, or with a clip (a reel) never played."""
+    faster than normal before the clip (every reel) first ended, with a clip (a reel) never played, or with a
+    record that ends a clip before it played (by the page's stamps, which no page writes: the server refuses it
+    where full views are required, but a study that does not, or answers stored before, may hold one)."""
     events = response.video_events or []
     clip_ms = watching_ms(screen)
     hidden_ms, hidden_at = 0, None
@@ -118,7 +128,8 @@ def viewing_problems(response: Response | Row[Any], screen: Pairwise | Watch | A
     before_end = events if first_end is None else events[:first_end]
     sped = any(e["type"] == "ratechange" and e.get("v", 1) > 1.01 for e in before_end)
     too_soon = bool(clip_ms and response.server_ms + VIEW_TOLERANCE_MS < clip_ms)
-    skipped = bool(shows_clip(screen) and (sped or too_soon or clips_played(events, clips) < clips))
+    unplayed = clips_played(events, clips) < clips or ended_before_played(events, clips)
+    skipped = bool(shows_clip(screen) and (sped or too_soon or unplayed))
     return {
         "clip_ms": clip_ms,
         "seeks": sum(e["type"] == "seek" for e in events),

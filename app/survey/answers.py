@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from enum import Enum
@@ -115,23 +116,39 @@ def _video_events(raw: str | None) -> list[dict[str, Any]] | None:
     return clean
 
 
-def full_view_at(events: list[dict[str, Any]], clips: int) -> int | None:
-    """The index of the event by which the record shows every clip of the screen played to its end: its one clip
-    (a `play`, then an `ended`), or each of its reels (a `play`, then an `ended`, of every `reel`); None when it
-    shows none such. An `ended` without a `play` before it is no viewing: a page cannot end a clip it never
-    started."""
-    played: set[int | None] = set()
-    ended: set[int | None] = set()
-    wanted = {None} if clips == 1 else set(range(clips))
+def _ends(events: list[dict[str, Any]], clips: int) -> Iterator[tuple[int, int | None, int, int | None]]:
+    """Each `ended` of the screen's clips in the record: its index, its clip (None: the screen's one clip; else its
+    `reel`), its stamp, and the earliest stamp of a `play` of that clip before it in the record (None: none).
+    Stamps are the page's milliseconds since it loaded: they start again at a reload, so the earliest play, not the
+    last, is what an honest end comes after."""
+    first_play: dict[int | None, int] = {}
     for at, event in enumerate(events):
         clip = None if clips == 1 else event.get("reel")
         if event["type"] == "play":
-            played.add(clip)
-        elif event["type"] == "ended" and clip in played:
+            first_play[clip] = min(event["t"], first_play.get(clip, event["t"]))
+        elif event["type"] == "ended":
+            yield at, clip, event["t"], first_play.get(clip)
+
+
+def full_view_at(events: list[dict[str, Any]], clips: int) -> int | None:
+    """The index of the event by which the record shows every clip of the screen played to its end: its one clip
+    (a `play`, then an `ended`), or each of its reels (a `play`, then an `ended`, of every `reel`); None when it
+    shows none such. An `ended` counts only after a `play` of its clip, in the record and by the page's stamps (see
+    `ended_before_played`): a page cannot end a clip it never started."""
+    ended: set[int | None] = set()
+    wanted = {None} if clips == 1 else set(range(clips))
+    for at, clip, stamp, played in _ends(events, clips):
+        if played is not None and played <= stamp:
             ended.add(clip)
             if wanted <= ended:
                 return at
     return None
+
+
+def ended_before_played(events: list[dict[str, Any]], clips: int) -> bool:
+    """Whether the record ends a clip before it played: an `ended` stamped earlier than every `play` of its clip
+    before it in the record, which no page writes (its play and its end come in one load of the page, in order)."""
+    return any(played is not None and stamp < played for _, _, stamp, played in _ends(events, clips))
 
 
 def clips_played(events: list[dict[str, Any]], clips: int) -> int:

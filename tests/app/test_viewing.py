@@ -265,3 +265,25 @@ def test_a_record_of_clips_that_ended_without_playing_is_no_viewing(make_client)
         response = session.scalar(select(Response).where(Response.step == 1))
     plan = parse_plan(stored(lenient, Participant)[0].plan)
     assert response.plays == 0 and viewing_problems(response, plan[1])["skipped"]
+
+
+def test_a_record_whose_play_is_stamped_after_its_end_is_no_viewing(make_client, tmp_path):
+    """The page stamps its events in milliseconds since it loaded: a record of a clip that ends 90 s before it
+    starts playing was written by no page. Where full views are required the server refuses it as unwatched; where
+    not, the export flags it as skipped viewing."""
+    forged = json.dumps([{"type": "loaded", "t": 5}, {"type": "play", "t": 91000}, {"type": "ended", "t": 1000}])
+    client = make_client(ANONYMOUS)
+    page = to_first_clip(client, f"?pilot={pilot_token(client.app.state.context.db, 'paper')}")  # no clip-time wait
+    refused = client.post("/study", data=answer_for(page) | {"video_events": forged})
+    assert refused.status_code == 422 and "watch the clip to the end" in refused.text
+    assert [r.step for r in stored(client, Response)] == [0]
+
+    lenient = make_client(ANONYMOUS | {"require_full_view": "false"})
+    ctx = lenient.app.state.context
+    page = to_first_clip(lenient, f"?pilot={pilot_token(ctx.db, 'paper')}")
+    assert lenient.post("/study", data=answer_for(page) | {"video_events": forged}).status_code == 200
+    export_study(ctx.db, ctx.study, tmp_path / "export")
+    import csv
+
+    long = list(csv.DictReader((tmp_path / "export" / "long.csv").open(encoding="utf-8")))
+    assert {r["skipped_viewing"] for r in long if r["screen"] == "pairwise"} == {"1"}
