@@ -16,6 +16,7 @@ import math
 import os
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache, lru_cache
 from pathlib import Path
@@ -60,6 +61,7 @@ PHONE_WIDTH = 360  # the narrowest screen a clip must stay readable on
 MIN_PHONE_TEXT = 13  # px of legend text on that screen
 MIN_PHONE_MARKER = 10  # px radius of a marker on that screen, so an agent's number is about 10 px tall
 CRASH_TAG_SECONDS = 3.0  # of video after a collision's pause
+OPEN_BURST_HOLE = 0.42  # an open burst's hole, in its radii: inside the points' inner ends (0.55)
 PARTING_SECONDS = 1.0  # of video around the moment agents that followed a leader part, during which it is marked
 
 
@@ -330,11 +332,12 @@ def agent_marker(number: int, radius: float, scale: float) -> Sprite:
 class AgentSprites:
     """Agents' markers and marks pre-rendered once per clip: at the view's scale, and at legend size."""
 
-    def __init__(self, numbers: list[int], marker: float, legend_text: int):
-        """``marker``: an agent marker's radius in px; ``numbers``: the clip's agent numbers."""
+    def __init__(self, numbers: list[int], marker: float, legend_text: int, burst: Callable | None = None):
+        """``marker``: an agent marker's radius in px; ``numbers``: the clip's agent numbers; ``burst``: how a
+        collision's burst is painted (`paint_burst`, or `paint_open_burst` over an agent drawn before it)."""
         self.markers = {n: agent_marker(n, marker, 1.0) for n in numbers}
         self.icons = {n: agent_marker(n, marker, legend_text * 0.85 / (marker * 1.5)) for n in numbers}
-        self.crash = sprite(marker * 2.6, 1.0, paint_burst)
+        self.crash = sprite(marker * 2.6, 1.0, burst or paint_burst)
         self.badges = {
             "success": sprite(marker * 0.75, 1.0, paint_check),
             "timeout": sprite(marker * 0.75, 1.0, paint_clock),
@@ -354,6 +357,14 @@ def paint_burst(draw, c, ppm):
         r = c * (0.98 if k % 2 == 0 else 0.55)
         points.append((c + r * math.cos(angle), c + r * math.sin(angle)))
     draw.polygon(points, fill=CRASH, outline=(0, 0, 0), width=max(2, int(c / 14)))
+
+
+def paint_open_burst(draw, c, ppm):
+    """A collision's burst with its middle open (a black-rimmed hole inside its inner points), for a burst drawn
+    over the agent that crashed: the agent's own colour still shows through it."""
+    paint_burst(draw, c, ppm)
+    r = c * OPEN_BURST_HOLE
+    draw.ellipse((c - r, c - r, c + r, c + r), fill=(0, 0, 0, 0), outline=(0, 0, 0), width=max(2, int(c / 14)))
 
 
 def paint_check(draw, c, ppm):

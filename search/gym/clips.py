@@ -6,8 +6,9 @@ The summary is replayed with rendering environments (the scenario's settings wit
 scaled to the view's width, never squeezed; the views sit side by side, or one above the other where that shows
 them larger (wide views such as a road's), and each has its robot's label, status and caption beneath it. A view
 whose episode ended stays where it ended. A crash shows a burst for a moment, then a small mark, so the rest of
-that view stays readable. The adapter's hooks (search/gym/adapter.py) say what this renderer cannot know; an
-adapter that names its own ``renderer`` gets that instead.
+that view stays readable; both are open in the middle, so the agent the environment drew under them still shows.
+The adapter's hooks (search/gym/adapter.py) say what this renderer cannot know; an adapter that names its own
+``renderer`` gets that instead.
 
 A summary's ``window`` and ``follow`` (docs/clips.md) are honoured as the crowd renderer honours them: the replay
 follows the leader as the search did (``problem.override``), the clip shows the window's states with the run's
@@ -44,7 +45,7 @@ from search.clips.render import (
     agent_style,
     encode,
     fit_text,
-    paint_burst,
+    paint_open_burst,
     paste,
     round16,
     sprite,
@@ -257,8 +258,10 @@ class GymClipRenderer(ClipRenderer):
         self.order = sorted(shown, key=lambda k: self.numbers[k])
         self.layout = GymLayout.make(len(self.order), self.scene.views[0][0].shape[:2], self.options)
         text = self.layout.text
-        self.sprites = AgentSprites(self.numbers, text * 0.6, text)
-        self.crash_mark = sprite(text * 0.45, 1.0, paint_burst)  # what stays of a crash once its burst is over
+        # a crash's burst and the mark that stays once it is over, drawn over the environment's picture of the
+        # agent: open in the middle, so the agent under them still shows
+        self.sprites = AgentSprites(self.numbers, text * 0.6, text, burst=paint_open_burst)
+        self.crash_mark = sprite(text * 0.45, 1.0, paint_open_burst)
         self.digits = 0 if float(self.adapter.dt).is_integer() else 1  # of an event's time
         self.texts: set[str] = set()
         self._views: dict[int, tuple[int, Image.Image]] = {}  # per agent, its last scaled view

@@ -79,6 +79,26 @@ def test_each_view_is_highway_envs_road_with_the_ego_in_its_colour_grey_traffic_
     assert not any(agent in text for agent in DRIVERS for text in renderer.texts)  # never the real names
 
 
+def test_a_crashed_car_shows_its_colour_through_the_crash_burst(summary_file):
+    """The burst is drawn over highway-env's picture of the car that crashed: open in the middle, so the car's own
+    colour (Car 6's orange, close to the burst's yellow) still fills the place it crashed."""
+    import json
+
+    summary = json.loads(summary_file.read_text())
+    renderer = GymClipRenderer(summary, [6, 1])
+    k = next(k for k, outcome in enumerate(summary["outcomes"]) if outcome["event"] == "collision")
+    start = renderer.event_starts[summary["outcomes"][k]["time"]]
+    image = np.asarray(renderer.draw(next(f for f in renderer.frames if f.video >= start))).astype(int)
+    lay, half = renderer.layout, renderer.sprites.crash[1]
+    x0, y0 = lay.origin(renderer.order.index(k))
+    point = renderer.scene.crash_points[k]
+    x, y = round(x0 + point[0] * lay.panel), round(y0 + point[1] * lay.view_height)
+    r = half // 4  # the burst's middle: a quarter of its radius around the place the car crashed
+    rows, columns = np.ogrid[-r : r + 1, -r : r + 1]
+    middle = near(image[y - r : y + r + 1, x - r : x + r + 1], agent_style(renderer.numbers[k])[0])
+    assert middle[rows**2 + columns**2 <= r * r].mean() > 0.9
+
+
 def near(view: np.ndarray, colour) -> np.ndarray:
     """Where a view's pixels are (nearly) ``colour``."""
     return np.abs(view - np.array(colour)).sum(axis=2) < 30
