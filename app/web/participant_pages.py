@@ -149,21 +149,27 @@ def landing(request: Request, ctx: ContextDep) -> Response:
         request.session["participant"] = known.code
         return _see_current()
     request.session.pop("participant", None)
+    if info.platform == "none":  # the code consent gives: a consent sent again (its reply lost) finds its participant
+        request.session.setdefault("entering", secrets.token_hex(16))
     return ctx.render_form(request, ("consent.html", False), "consent.html", lambda: {"preview": False})
 
 
-def _enter(ctx: Context, identity: dict[str, str], agreed: bool, user_agent: str, kind: str = "real") -> str:
-    """Create the participant (or find the one a concurrent request created) and assign them; returns the code.
+def _enter(
+    ctx: Context, identity: dict[str, str], agreed: bool, user_agent: str, kind: str = "real", drawn: object = None
+) -> str:
+    """Create the participant (or find the one a concurrent or earlier consent created: by `identity`, the
+    platform's ids, or else by `drawn`, the code the consent page's session drew) and assign them; returns the code.
 
-    Conflicts on the unique identity or slot make the transaction fail as a whole and the loop tries again."""
+    Conflicts on the unique identity, code or slot make the transaction fail as a whole and the loop tries again."""
     info = ctx.study.study
     for _ in range(50):
         try:
             with ctx.db.writing() as session:
-                if identity and (known := _by_identity(session, ctx, identity)) is not None:
+                known = _by_identity(session, ctx, identity) if identity else _by_code(session, ctx, drawn)
+                if known is not None:
                     return str(known.code)
                 now = datetime.now(UTC)
-                code = secrets.token_hex(16)
+                code = drawn if isinstance(drawn, str) and not identity else secrets.token_hex(16)
                 values: dict[str, Any] = {
                     "code": code,
                     "study": info.id,
@@ -238,9 +244,11 @@ def consent(request: Request, ctx: ContextDep, form: FormDep) -> RedirectRespons
             f"{ceil(wait)} seconds, then press the button again.",
             headers={"retry-after": str(ceil(wait))},
         )
-    code = _enter(ctx, identity, choice == "agree", request.headers.get("user-agent", ""), kind)
+    user_agent = request.headers.get("user-agent", "")
+    code = _enter(ctx, identity, choice == "agree", user_agent, kind, request.session.get("entering"))
     request.session["participant"] = code
     request.session.pop("identity", None)
+    request.session.pop("entering", None)  # the next consent in this browser, after a new landing, is someone new
     return _see_current()
 
 

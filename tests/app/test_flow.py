@@ -142,6 +142,28 @@ def test_decline_ends_politely(make_client):
     assert "You chose not to take part" in client.get("/" + PROLIFIC_LINK.format(n=2)).text
 
 
+def test_a_consent_sent_again_after_its_reply_was_lost_finds_its_participant(make_client):
+    """Anonymous, so no platform id can tell: the consent page's session holds the code its consent gives, so the
+    same consent sent again (the reply, with the cookie naming the participant, was lost) takes no second slot."""
+    client = make_client({"platform": '"none"', "assignment": '"balanced"'})
+    token = FormReader(client.get("/").text).hidden["csrf_token"]
+    before_consent = client.cookies["foil_session"]
+
+    def consent_whose_reply_is_lost() -> None:
+        assert client.post("/consent", data={"csrf_token": token, "choice": "agree"}).status_code == 200
+        client.cookies.clear()
+        client.cookies.set("foil_session", before_consent)  # the browser still holds the consent page's cookie
+
+    consent_whose_reply_is_lost()
+    consent_whose_reply_is_lost()  # the browser sends the form again
+    assert FormReader(client.get("/").text).hidden["csrf_token"] == token  # or the consent page is opened again
+    consent_whose_reply_is_lost()
+    (person,) = stored(client, Participant)
+    assert person.slot is not None
+    start(TestClient(client.app))  # someone else, in another browser: a participant of their own
+    assert len(stored(client, Participant)) == 2
+
+
 def test_leaving_marks_returned_and_keeps_answers(make_client):
     client = make_client(PROLIFIC)
     page = start(client, PROLIFIC_LINK.format(n=3))
