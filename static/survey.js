@@ -104,6 +104,12 @@
     if (answers) answers.disabled = false;
     const stale = document.getElementById("video-error");
     if (stale) stale.hidden = true;
+    const listed = document.querySelector(".error-summary a[href='#video-error']");  // and its line at the top
+    if (listed) {
+      const summary = listed.closest(".error-summary");
+      listed.closest("li").remove();
+      if (!summary.querySelector("li")) summary.hidden = true;
+    }
     const hint = document.querySelector("[data-example-hint]");
     if (hint) hint.hidden = true;
   }
@@ -346,8 +352,15 @@
     copy.textContent = "Selected: press Ctrl+C (or Copy)";
   }
 
+  // The errors at the top, and under them the clip's Play button: where a phone's window is too short for both
+  // below the title, the page scrolls just far enough to show the button, never past the errors' top.
   const summary = document.querySelector("[data-focus]");
-  if (summary) summary.focus();
+  if (summary) {
+    summary.focus();
+    const play = document.querySelector("[data-play]");
+    const below = play ? play.getBoundingClientRect().bottom - window.innerHeight : 0;
+    if (below > 0) window.scrollBy(0, Math.min(below + 8, summary.getBoundingClientRect().top));
+  }
 
   const redirect = document.querySelector("[data-redirect]");
   if (redirect) setTimeout(function () { window.location.href = redirect.href; }, 4000);

@@ -1,6 +1,8 @@
 """In Chromium, against `foil serve` whose pairwise screens show pairs of reels (each robot on its own): the answers
-stay locked until every reel has played to its end, one reel plays at a time, and a desktop shows the reels side by
-side while a phone stacks them full width. Screenshots go to test-artifacts/browser/reels/."""
+stay locked until every reel has played to its end, one reel plays at a time, a desktop shows the reels side by
+side as large as a pairwise clip while a phone stacks them full width, and an answer refused because a reel was not
+watched leaves the Play button in view and its message goes once every reel has ended. Screenshots go to
+test-artifacts/browser/reels/."""
 
 from __future__ import annotations
 
@@ -12,9 +14,10 @@ from sqlalchemy import select
 from app.store.database import Database
 from app.store.models import Response
 from app.survey.kinds import pilot_token
+from search.clips.render import MIN_PHONE_TEXT, PHONE_WIDTH
 from tests.support.analysis import add_reels
 from tests.support.browser import ARTIFACTS, SERIOUS, long_clip_server
-from tests.support.survey import make_clip
+from tests.support.survey import make_clip, watched_reels
 
 pytestmark = pytest.mark.browser
 DESKTOP = {"width": 1366, "height": 768}
@@ -82,6 +85,9 @@ def test_the_answers_unlock_only_once_every_reel_has_played_to_its_end(reels_ser
     first, second = reel_boxes(page)
     assert abs(first["top"] - second["top"]) < 2 and second["left"] >= first["left"] + first["width"]  # side by side
     assert max(first["bottom"], second["bottom"]) <= DESKTOP["height"]
+    # each as large as a pairwise clip of its shape is here (445 px wide): its legend, drawn MIN_PHONE_TEXT px high
+    # per PHONE_WIDTH px of clip (search/clips/render.py), reads at 16 px, not the 13 px of 369-px reels
+    assert min(first["width"], second["width"]) * MIN_PHONE_TEXT / PHONE_WIDTH >= 16
     next_button = page.locator(NEXT).bounding_box()  # the questions beside the reels, Next in the first view
     assert next_button["x"] > second["left"] + second["width"] and next_button["y"] + next_button["height"] <= 768
     found = page.evaluate("async () => (await axe.run(document, {resultTypes: ['violations']})).violations")
@@ -115,3 +121,38 @@ def test_a_phone_stacks_the_reels_full_width(reels_server, new_context):
     play = page.locator("[data-reel='0'] [data-play]").bounding_box()
     assert play["y"] + play["height"] <= PHONE["height"]  # the first reel's Play button in the first view
     assert page.evaluate("document.documentElement.scrollWidth") <= PHONE["width"]
+
+
+def test_a_refused_answer_keeps_the_play_button_in_view_and_its_message_goes_once_every_reel_ended(
+    reels_server, new_context
+):
+    """Sent with only the first reel played to its end: refused. On a phone the message at the top leaves the first
+    reel's Play button in the window; once both reels have played to their ends, the message is gone."""
+    page = new_context(PHONE).new_page()
+    to_reels(page, reels_server)
+    page.evaluate(
+        """(events) => {
+        document.querySelector('fieldset[data-answers]').disabled = false;
+        document.querySelector('input[name=better]').checked = true;
+        document.querySelector('textarea[name=justification]').value = 'a reason';
+        document.querySelector('input[name=difficulty][value="5"]').checked = true;
+        document.querySelector('[data-events]').value = events;
+    }""",
+        watched_reels([0]),
+    )
+    with page.expect_navigation():
+        page.click(NEXT)
+    page.wait_for_function("() => [...document.querySelectorAll('[data-reel] video')].every(v => v.readyState >= 2)")
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "refused-phone.png"))
+    summary, play = page.locator(".error-summary"), page.locator("[data-reel='0'] [data-play]")
+    assert "Please watch each clip to the end" in summary.inner_text() and page.locator(NEXT).is_disabled()
+    assert summary.bounding_box()["y"] >= 0  # the message, and under it the first reel with its Play button
+    assert play.bounding_box()["y"] + play.bounding_box()["height"] <= PHONE["height"]
+    for k in (0, 1):
+        page.click(f"[data-reel='{k}'] [data-play]")
+        ended(page, k)
+    page.screenshot(path=str(SHOTS / "refused-then-watched-phone.png"))
+    assert page.locator(NEXT).is_enabled()
+    assert not summary.is_visible() and not page.locator("#video-error").is_visible()
+    assert "watch each clip" not in page.locator("main").inner_text()
