@@ -212,7 +212,8 @@ def manifest_clip(
             "manifest.json say which and why: the log keeps the labels blind for a pilot)"
         )
     vote = clip_vote(data, order)
-    for line in vote_warnings(agents, None if undecided else better, vote):
+    solver_says = solver_named(data["solver"]["name"]).clip_warnings(data["solver"])
+    for line in [*vote_warnings(agents, None if undecided else better, vote), *solver_says]:
         log(f"warning: clip {job.id} ({job.scheme.name}, {job.pair[0]} vs {job.pair[1]}): {line}")
     spent = {
         "sim_steps": int(data["solver"]["budget_used"]),

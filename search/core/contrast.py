@@ -93,7 +93,8 @@ class Vote:
     @property
     def state_votes(self) -> np.ndarray:
         """Which way each state leans: +1, -1, or 0 for none."""
-        return np.sign(self.state_weights).astype(np.int64)
+        leans: np.ndarray = np.sign(self.state_weights).astype(np.int64)
+        return leans
 
     @property
     def p(self) -> float:

@@ -47,6 +47,13 @@ class HighwayDomain(GymDomain, Trainer):
     def load(self, name: str) -> GymScenario | GymDistribution:
         return load_highway_scenario(name) if name in self.shipped() else super().load(name)
 
+    def episode_seconds(self, name: str, world: dict) -> float | None:
+        """highway-env's ``duration``, the decisions an episode lasts (its environment has no step limit of its own)."""
+        from search.highway.env import DURATION_S
+
+        adapter = self.adapter(name)
+        return float((adapter.settings | world).get("duration", DURATION_S)) * adapter.dt
+
     def adapter(self, scenario: str | None) -> Adapter:
         """The scenario's adapter; the highway's own default world when no scenario is given."""
         return HighwayAdapter() if scenario is None else super().adapter(scenario)

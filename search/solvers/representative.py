@@ -31,12 +31,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 import numpy as np
 
 from app.formats import ClipVote
+from app.visible import one_decimal
 from search.core.contrast import ALPHA, RollOut, Rollouts, Vote, describe_vote, vote
 from search.core.rollout import Tracker
 from search.core.workers import workers
@@ -51,11 +52,16 @@ class RepresentativeConfig:
     states: int = 64  # starting states drawn from the distribution (M): the most that vote
     pushes: int = 32  # rollouts per state under uniform pushes (R), besides the one without pushes
     batch_states: int = 8  # states rolled out together
-    alpha: float = ALPHA  # the vote is decided (no more states rolled out) once its sign test's p < alpha / looks
+    alpha: float = ALPHA  # the vote is decided (no more states rolled out) once its test's p < alpha / looks
+    # the longest clip it may choose where the vote at the reward's horizon is weak (`clip_lengths`); no longer than
+    # the horizon (the default): the horizon's alone
+    longest: int = field(default=0, metadata={"seconds": 0.0})
 
     def __post_init__(self) -> None:
-        if self.states < 1 or self.pushes < 0 or self.batch_states < 1:
-            raise ValueError("invalid representative setting: states and batch_states must be >= 1, pushes >= 0")
+        if self.states < 1 or self.pushes < 0 or self.batch_states < 1 or self.longest < 0:
+            raise ValueError(
+                "invalid representative setting: states and batch_states must be >= 1, pushes and longest >= 0"
+            )
         if not 0 < self.alpha < 1:
             raise ValueError("invalid representative setting: alpha must lie between 0 and 1")
 
@@ -179,7 +185,7 @@ def fewer_than_half(agreeing: int, rollouts: int) -> float:
 
 def weak_vote(record: dict[str, Any], agents: Sequence[str]) -> str | None:
     """The warning for a vote that ended undecided (None for a decided one): its clips may show either agent as the
-    better one."""
+    better one. Where longer clips were tried, each one's vote; where none were, that a longer clip may decide it."""
     if record["decided"]:
         return None
     why = {
@@ -188,29 +194,94 @@ def weak_vote(record: dict[str, Any], agents: Sequence[str]) -> str | None:
     }.get(record.get("stopped", ""), "")
     level = f"{record['alpha']} / {record['looks']} looks" if record["looks"] > 1 else f"{record['alpha']}"
     vote_line = describe_vote(agents, [record["for_first"], record["for_second"]], record["no_majority"], record["p"])
+    longer = "; a longer clip may decide it (longest, docs/search.md)"
+    if "lengths" in record:
+        longer = "; " + "; ".join(
+            f"at {one_decimal(one['seconds'])} s: {describe_length(one, agents)}" for one in record["lengths"][1:]
+        )
     return (
-        f"weak vote: {vote_line}, not below {level}{'; ' + why if why else ''}: its clips may show either "
+        f"weak vote: {vote_line}, not below {level}{'; ' + why if why else ''}{longer}: its clips may show either "
         f"agent as the one that usually looks better"
     )
 
 
+def describe_length(vote: dict[str, Any], agents: Sequence[str]) -> str:
+    """One length's vote in short: ``8 highway-med, 30 highway-hi, p < 0.001, decided``."""
+    p = "< 0.001" if vote["p"] < 0.001 else f"= {vote['p']:.2g}"
+    decided = ", decided" if vote["decided"] else ""
+    return f"{vote['for_first']} {agents[0]}, {vote['for_second']} {agents[1]}, p {p}{decided}"
+
+
+def longer_clip(record: dict[str, Any], agents: Sequence[str]) -> str | None:
+    """Where the vote chose a longer clip than the reward's horizon (the study's clip length), that it did and
+    why, so a study comparing schemes at one clip length says where one differs."""
+    lengths = record.get("lengths", [])
+    if not lengths or record["horizon"] == lengths[0]["horizon"]:
+        return None
+    first, chosen = lengths[0], next(one for one in lengths if one["horizon"] == record["horizon"])
+    return (
+        f"longer clip: {one_decimal(chosen['seconds'])} s, not {one_decimal(first['seconds'])} s: at "
+        f"{one_decimal(first['seconds'])} s the vote was weak ({describe_length(first, agents)}); at "
+        f"{one_decimal(chosen['seconds'])} s {describe_length(chosen, agents)}"
+    )
+
+
 def representative(
-    roll_out: RollOut,
-    scenarios: list[Any],
+    roll_out: Callable[[int], RollOut],
+    draw: Callable[[], list[Any]],
     tracker: Tracker,
     rng: np.random.Generator,
     config: RepresentativeConfig,
-    replay: Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Replay]]],
-    horizon: int,
+    replay: Callable[[int], Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Replay]]]],
+    lengths: Sequence[int],
     ahead: int = 1,
 ) -> tuple[list[Replay], dict[str, Any]]:
-    """Roll out the drawn ``scenarios`` a batch of states at a time until the vote is decided or the budget fits no
-    further state (each rollout takes at most ``horizon`` steps), vote, and choose the top-K clips. The vote is
-    looked at after each full batch of the states the budget surely fits, the last look where it stops, each at
-    ``alpha / looks`` (`strength`): the looks are planned before any state is drawn, so the test holds however
-    the states vote. ``replay([(scenario, actions), ...])`` gives each exact replay's contrast and the replay (a
-    summary), ``ahead`` at a time, not counted against the budget, as no solver counts its summaries' replays.
-    Returns the chosen replays in order and the record of the vote for run.json."""
+    """Vote at each clip length of ``lengths`` in turn (in steps, shortest first), each on states newly ``draw``n,
+    until a vote is decided or the budget fits no state of the next length (`vote_states`); then choose the top-K
+    clips of the first decided vote, or of the first length's where none is (`choose_clips`). Every look at every
+    length is planned before any state is drawn and tested at ``alpha`` over all of them, so trying a longer clip
+    holds the test as one vote does. ``roll_out(n)`` rolls out states to ``n`` steps; ``replay(n)([(scenario,
+    actions), ...])`` gives each exact replay's contrast and the replay (a summary) at ``n`` steps, ``ahead`` at a
+    time, not counted against the budget, as no solver counts its summaries' replays. Returns the chosen replays
+    in order and the record of the vote for run.json."""
+    fitting = [n for n in lengths if (config.pushes + 1) * n <= tracker.budget] or list(lengths[:1])
+    looks = [planned_looks(config.states, tracker, config, n) for n in fitting]
+    tried: list[tuple[int, list[Any], Rollouts, Vote, dict[str, Any]]] = []
+    for n, own in zip(fitting, looks, strict=True):
+        if tried and tracker.remaining < (config.pushes + 1) * n:
+            break
+        scenarios = draw()
+        tried.append((n, scenarios, *vote_states(roll_out(n), scenarios, tracker, rng, config, n, own, sum(looks))))
+        if tried[-1][4]["decided"]:
+            break
+    n, scenarios, rollouts, result, record = next((one for one in tried if one[4]["decided"]), tried[0])
+    chosen, record["candidates"], record["selection"] = choose_clips(
+        rollouts, result, scenarios, replay(n), tracker.queue.k, ahead
+    )
+    record["chosen"] = [
+        {"state": int(rollouts.state[i]), "rollout": i, "contrast": float(rollouts.contrast[i])} for i, _ in chosen
+    ]
+    if len(lengths) > 1:  # the length chosen, and every length's vote
+        record["horizon"] = n
+        record["lengths"] = [{"horizon": one[0]} | {key: one[4][key] for key in STRENGTH} for one in tried]
+    return [summary for _, summary in chosen], record
+
+
+STRENGTH = ("states", "for_first", "for_second", "no_majority", "weight", "p", "decided")  # a vote in short
+
+
+def clip_lengths(horizon: int, longest: int) -> list[int]:
+    """The clip lengths a vote may try, in steps: the reward's ``horizon``, then twice as long and so on up to
+    ``longest`` (which is tried last); only the horizon where ``longest`` is no longer."""
+    lengths = [horizon]
+    while lengths[-1] < longest:
+        lengths.append(min(2 * lengths[-1], longest))
+    return lengths
+
+
+def planned_looks(states: int, tracker: Tracker, config: RepresentativeConfig, horizon: int) -> int:
+    """How often a vote at ``horizon`` may be looked at: after each full batch of the states the budget surely fits
+    (at most ``states``), the last where it stops. Refuses a budget that fits no state."""
     state_cost = (config.pushes + 1) * horizon
     if state_cost > tracker.budget:
         raise ValueError(
@@ -219,42 +290,64 @@ def representative(
             "horizon written as steps before lengths of time became seconds now asks for that many seconds: give "
             "it in seconds (horizon = S), or in steps as horizon_steps = N"
         )
-    # the looks: after each full batch of the states the budget surely fits (at most M), the last where it stops
-    looks = math.ceil(min(len(scenarios), tracker.remaining // state_cost) / config.batch_states)
+    return math.ceil(min(states, tracker.remaining // state_cost) / config.batch_states)
+
+
+def vote_states(
+    roll_out: RollOut,
+    scenarios: list[Any],
+    tracker: Tracker,
+    rng: np.random.Generator,
+    config: RepresentativeConfig,
+    horizon: int,
+    looks: int,
+    all_looks: int,
+) -> tuple[Rollouts, Vote, dict[str, Any]]:
+    """The vote of the drawn ``scenarios``, rolled out a batch of states at a time until it is decided or the budget
+    fits no further state: looked at after each of its ``looks`` planned batches, each look at
+    ``alpha / all_looks`` (`strength`), ``all_looks`` being every look planned before any state was drawn (of
+    every clip length tried), so the test holds however the states vote."""
+    state_cost = (config.pushes + 1) * horizon
 
     def decided(found: Rollouts, states: int) -> bool:
         early = states % config.batch_states == 0 and states < looks * config.batch_states
-        return early and vote(found, states).p < config.alpha / looks
+        return early and vote(found, states).p < config.alpha / all_looks
 
     rollouts, done_states, stopped = roll_out_states(roll_out, scenarios, config, rng, tracker, state_cost, decided)
     result = vote(rollouts, done_states)
+    record = result.record(rollouts, config.alpha, all_looks) | {"stopped": stopped, "drawn": len(scenarios)}
+    return rollouts, result, record
+
+
+def choose_clips(
+    rollouts: Rollouts,
+    result: Vote,
+    scenarios: list[Any],
+    replay: Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Replay]]],
+    top_k: int,
+    ahead: int,
+) -> tuple[list[tuple[int, Replay]], int, str]:
+    """The vote's top-K clips (`candidates`, `choose`) as (rollout, replay), how many candidates it had, and how
+    they were chosen: a tied vote, or one none of whose candidates survives its replay, falls back to the largest
+    contrast either way."""
     order, how = candidates(rollouts, result), "voted direction"
 
     def replayed(chosen: list[int]) -> list[tuple[float, Replay]]:
         return replay([(scenarios[rollouts.state[i]], rollouts.actions[i]) for i in chosen])
 
-    chosen = choose(order, result.direction, replayed, tracker.queue.k, ahead)
-    if not chosen:  # a tied vote, or no candidate of the vote survived its replay: the largest contrast
+    chosen = choose(order, result.direction, replayed, top_k, ahead)
+    if not chosen:
         how = (
             "largest contrast (tied vote)"
             if not result.direction
             else "largest contrast (no candidate of the vote survived its replay)"
         )
         everything = candidates(rollouts, Vote(result.state_weights, 0))
-        chosen = choose(everything, 0, replayed, tracker.queue.k, ahead)
+        chosen = choose(everything, 0, replayed, top_k, ahead)
     if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
         how = "no visible contrast anywhere: the first state without pushes"
         chosen = [(0, replayed([0])[0][1])]
-    record = result.record(rollouts, config.alpha, looks) | {
-        "stopped": stopped,
-        "drawn": len(scenarios),
-        "candidates": len(order),
-        "selection": how,
-        "chosen": [
-            {"state": int(rollouts.state[i]), "rollout": i, "contrast": float(rollouts.contrast[i])} for i, _ in chosen
-        ],
-    }
-    return [summary for _, summary in chosen], record
+    return chosen, len(order), how
 
 
 class Representative(OwnSummaries):
@@ -279,25 +372,33 @@ class Representative(OwnSummaries):
                 f"'training'); {scenario!r} is one fixed scenario"
             )
         agents = comparison.pair(self.name, "solver votes which of two agents looks better")
-        scenarios = domain.draw_states(scenario, comparison.world_settings, rng, config.states)
+        world = comparison.world_settings
 
-        def roll_out(states: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
-            return domain.roll_out(agents, states, reward_settings, pushes, rng, tracker)
+        def roll_out(horizon: int) -> RollOut:
+            def at(states: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+                return domain.roll_out(agents, states, reward_settings | {"horizon": horizon}, pushes, rng, tracker)
+
+            return at
 
         # a world without a batched fast path replays a candidate per worker at a time (Domain.replays)
         ahead = 1 if domain.batched else workers()
 
-        def replay(candidates: list[tuple[object, np.ndarray]]) -> list[tuple[float, dict[str, Any]]]:
-            return domain.replays(agents, candidates, reward_settings, comparison.entry)
+        def replay(horizon: int) -> Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, dict[str, Any]]]]:
+            reward = reward_settings | {"horizon": horizon}
+            return lambda candidates: domain.replays(agents, candidates, reward, comparison.entry)
 
-        horizon = RewardConfig.from_dict(reward_settings).horizon
-        summaries, vote = representative(roll_out, scenarios, tracker, rng, config, replay, horizon, ahead)
+        def draw() -> list[Any]:
+            return domain.draw_states(scenario, world, rng, config.states)
+
+        lengths = clip_lengths(RewardConfig.from_dict(reward_settings).horizon, config.longest)
+        summaries, vote = representative(roll_out, draw, tracker, rng, config, replay, lengths, ahead)
+        for entry in vote.get("lengths", []):  # each length tried, in seconds too, as the study gave them
+            entry["seconds"] = entry["horizon"] * domain.step_seconds(scenario, world)
         warning = weak_vote(vote, agents)
         if warning:
             vote["warning"] = warning
-        strength = {
-            key: vote[key] for key in ("states", "for_first", "for_second", "no_majority", "weight", "p", "decided")
-        }
+        strength = {key: vote[key] for key in STRENGTH}
+        longer = longer_clip(vote, agents)
         for summary, chosen in zip(summaries, vote["chosen"], strict=True):
             summary["solver"] = summary["solver"] | {
                 "budget_used": tracker.steps,
@@ -305,12 +406,23 @@ class Representative(OwnSummaries):
                 "search_contrast": chosen["contrast"],
                 "vote": strength,
             }
+            if longer:
+                summary["solver"]["longer_clip"] = longer
         return summaries, vote
 
     def warnings(self, record: dict[str, Any]) -> list[str]:
-        """A weak vote's warning (`weak_vote`)."""
-        warning = record.get(self.record_key, {}).get("warning")
-        return [warning] if warning else []
+        """A weak vote's warning (`weak_vote`), and a clip longer than the study's (`longer_clip`)."""
+        vote = record.get(self.record_key, {})
+        found = [vote.get("warning"), longer_clip(vote, record["agents"]) if vote else None]
+        return [line for line in found if line]
+
+    def longest_clip(self, config: RepresentativeConfig, horizon: int) -> int:
+        """The horizon, or ``longest`` where the vote may choose a longer clip."""
+        return max(horizon, config.longest)
+
+    def clip_warnings(self, entry: dict[str, Any]) -> list[str]:
+        """A clip longer than the study's (`longer_clip`)."""
+        return [entry["longer_clip"]] if "longer_clip" in entry else []
 
     def clip_vote(self, entry: dict[str, Any]) -> ClipVote | None:
         """The vote's strength as the summary's entry records it."""

@@ -108,20 +108,26 @@ def parse_settings(cls: type, items: list[str], what: str) -> dict[str, Any]:
 
 
 def refuse_before_work(job: SearchJob) -> None:
-    """Refuse, before any work, a search that cannot be what was meant: a searched clip longer than an episode of
-    its world (a horizon written in steps before lengths of time became seconds), and a solver that needs a
-    capability its world's coupled problem lacks (`search.core.problem.require`; the problem of one starting state
-    is built, never stepped)."""
+    """Refuse, before any work, a search that cannot be what was meant: a searched clip given longer than an episode
+    of its world (a horizon written in steps before lengths of time became seconds, a longest clip), and a solver
+    that needs a capability its world's coupled problem lacks (`search.core.problem.require`; the problem of one
+    starting state is built, never stepped)."""
     solver = solver_named(job.solver)
     domain = domain_for(job.agents, job.scenario, job.world)
     world = domain.search_settings(job.agents, job.world_settings, job.scenario)
     horizon = RewardConfig.from_dict(job.reward_settings).horizon
-    seconds, longest = horizon * domain.step_seconds(job.scenario, world), domain.episode_seconds(job.scenario, world)
-    if longest is not None and seconds > longest:
+    step, longest = domain.step_seconds(job.scenario, world), domain.episode_seconds(job.scenario, world)
+    if longest is not None and "horizon" in job.reward_settings and horizon * step > longest:
         raise ValueError(
-            f"the reward's horizon is {horizon} steps ({seconds:g} s), longer than an episode here ({longest:g} s): "
-            "a horizon written in steps before lengths of time became seconds now asks for that many seconds; give "
-            "it in seconds (horizon = S) or in steps as horizon_steps = N"
+            f"the reward's horizon is {horizon} steps ({horizon * step:g} s), longer than an episode here "
+            f"({longest:g} s): a horizon written in steps before lengths of time became seconds now asks for that many "
+            "seconds; give it in seconds (horizon = S) or in steps as horizon_steps = N"
+        )
+    clip = solver.longest_clip(job.solver_config, horizon)
+    if longest is not None and clip > horizon and clip * step > longest:
+        raise ValueError(
+            f"the {solver.name} solver's longest clip is {clip} steps ({clip * step:g} s), longer than an episode here "
+            f"({longest:g} s): give it at most {longest:g} s"
         )
     if not solver.needs:
         return

@@ -51,6 +51,15 @@ class Solver(ABC):
         in the search's order (the bundle's audit holds it to the ground truth). Default: none."""
         return None
 
+    def longest_clip(self, config: Any, horizon: int) -> int:
+        """The most steps a clip of its search may last, for a reward of ``horizon`` steps. Default: the horizon."""
+        return horizon
+
+    def clip_warnings(self, entry: dict[str, Any]) -> list[str]:
+        """What a summary's solver entry warns of for its clip, in words, where the bundle logs each clip (a clip
+        longer than the study's, say). Default: nothing."""
+        return []
+
     def takes(self, distribution: bool) -> bool:
         """Whether it starts from a scenario of this kind (a distribution of starting states, or a fixed one)."""
         return self.starts == "either" or (self.starts == "distribution") == distribution

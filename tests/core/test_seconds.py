@@ -93,6 +93,15 @@ def test_a_horizon_longer_than_an_episode_names_the_change_to_seconds(tmp_path, 
     assert main(["search", *args, "--reward", "horizon_steps=150", "--out", "out", "--quiet"]) == 0  # 37.5 s
 
 
+def test_a_representative_vote_may_not_choose_a_clip_longer_than_an_episode(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    args = ["--agents", "goal,orca", "--scenario", "training", "--solver", "representative", "--budget", "500"]
+    assert main(["search", *args, "--reward", "horizon=10", "--set", "longest=60", "--out", "out", "--quiet"]) == 2
+    error = capsys.readouterr().err
+    assert "the representative solver's longest clip is 240 steps (60 s), longer than an episode here (50 s)" in error
+    assert not (tmp_path / "out").exists()
+
+
 def test_the_command_line_refuses_steps_of_what_is_no_length_of_time(track, capsys):
     assert main(["search", "--agents", f"{FAST},{SLOW}", "--scenario", "track.toml", "--solver", "highlights",
                  "--set", "lookahead_steps=2", "--out", "out", "--quiet"]) == 2  # fmt: skip

@@ -58,3 +58,11 @@ def test_the_fast_rollouts_score_a_crash_as_its_summary_does():
         for roll_out in (type(domain).roll_out, Domain.roll_out)
     )
     assert np.array_equal(fast.contrast, exact.contrast) and (fast.contrast <= -1).any()  # crashes among them
+
+
+def test_a_clip_longer_than_a_highway_episode_is_refused_before_any_work(tmp_path, capsys):
+    from search.cli import main
+
+    args = ["search", "--agents", ",".join(AGENTS), "--scenario", "highway-dense", "--solver", "nfirst"]
+    assert main([*args, "--reward", "horizon=40", "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert "longer than an episode here (30 s)" in capsys.readouterr().err and not (tmp_path / "out").exists()

@@ -19,7 +19,7 @@ from search.bundle.clips import vote_warnings
 from search.bundle.representativeness import describe_representativeness
 from search.core.contrast import Rollouts, visible_contrast, vote, weighted_test
 from search.core.rollout import Tracker
-from search.solvers.representative import RepresentativeConfig, representative, weak_vote
+from search.solvers.representative import Representative, RepresentativeConfig, clip_lengths, representative, weak_vote
 from tests.solvers.test_representative import representative_search
 
 HORIZON = 10
@@ -47,7 +47,9 @@ def replay(candidates: list) -> list[tuple[float, dict]]:
 def search(leans: list[int], budget: int = 10**6, seed: int = 0, **settings) -> tuple[list, dict, Tracker]:
     tracker = Tracker(budget, 1)
     config = RepresentativeConfig(states=len(leans), **({"pushes": 3, "batch_states": 2} | settings))
-    chosen, record = representative(roll_out, leans, tracker, np.random.default_rng(seed), config, replay, HORIZON)
+    chosen, record = representative(
+        lambda n: roll_out, lambda: leans, tracker, np.random.default_rng(seed), config, lambda n: replay, [HORIZON]
+    )
     return chosen, record, tracker
 
 
@@ -272,3 +274,66 @@ def test_a_states_weight_is_the_share_of_bots_that_pick_each_agent(faster_kmh):
     picks = [(lambda seen: seen["first"] > seen["second"])(observer.perceive(clip, rng)) for _ in range(20_000)]
     shares = sum(picks) / len(picks)
     assert 2 * shares - 1 == pytest.approx(observer.expected_vote(visible_contrast(clip)), abs=0.02)
+
+
+def test_clip_lengths_double_up_to_the_longest():
+    assert clip_lengths(20, 0) == [20] and clip_lengths(20, 20) == [20]
+    assert (
+        clip_lengths(20, 40) == [20, 40] and clip_lengths(20, 50) == [20, 40, 50] and clip_lengths(20, 30) == [20, 30]
+    )
+
+
+def test_a_weak_vote_tries_a_longer_clip_and_says_so():
+    """At the study's length the states split evenly; twice as long, every state shows the second agent as better
+    (as a crash that comes later in the drive would): the vote at the longer length decides, its clip is replayed at
+    that length, every look of both lengths holds the test, and the warnings say the clip is longer and why."""
+
+    def at(n: int):
+        def roll(states, pushes, rng, tracker):
+            return roll_out([-1] * len(states) if n > HORIZON else states, pushes, rng, tracker)
+
+        return roll
+
+    replayed_at = []
+
+    def replay_at(n: int):
+        replayed_at.append(n)
+        return replay
+
+    leans = [1, -1] * 20
+    config = RepresentativeConfig(states=len(leans), pushes=3, batch_states=4)
+    tracker = Tracker(10**6, 1)
+    chosen, record = representative(
+        at, lambda: leans, tracker, np.random.default_rng(0), config, replay_at, clip_lengths(HORIZON, 2 * HORIZON)
+    )
+    assert record["horizon"] == 2 * HORIZON and replayed_at == [2 * HORIZON] and record["decided"]
+    first, longer = record["lengths"]
+    assert (first["horizon"], first["for_first"], first["for_second"], first["decided"]) == (HORIZON, 20, 20, False)
+    assert longer["horizon"] == 2 * HORIZON and longer["for_second"] == longer["states"] and longer["decided"]
+    assert record["looks"] == 20  # 10 planned looks at each length, every one at 0.05 / 20
+    for entry in record["lengths"]:
+        entry["seconds"] = entry["horizon"] * 2.0
+    [line] = Representative().warnings({"agents": ["lo", "hi"], "vote": record})
+    assert line.startswith("longer clip: 40.0 s, not 20.0 s: at 20.0 s the vote was weak (20 lo, 20 hi, p = 0.99")
+    assert line.endswith(f"at 40.0 s 0 lo, {longer['states']} hi, p < 0.001, decided")
+
+
+def test_a_weak_vote_at_every_length_keeps_the_studys_length_and_lists_each():
+    config = RepresentativeConfig(states=8, pushes=1, batch_states=4)
+    _, record = representative(
+        lambda n: roll_out,
+        lambda: [1, -1] * 4,
+        Tracker(10**6, 1),
+        np.random.default_rng(0),
+        config,
+        lambda n: replay,
+        [HORIZON, 2 * HORIZON],
+    )
+    assert record["horizon"] == HORIZON and not record["decided"] and len(record["lengths"]) == 2
+    for entry in record["lengths"]:
+        entry["seconds"] = float(entry["horizon"])
+    warning = weak_vote(record, ["lo", "hi"])
+    assert warning.endswith(
+        "; at 20.0 s: 4 lo, 4 hi, p = 1: its clips may show either agent as the one that usually looks better"
+    )
+    assert "longer clip" not in " ".join(Representative().warnings({"agents": ["lo", "hi"], "vote": record}))
