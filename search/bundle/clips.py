@@ -114,7 +114,7 @@ def render_clips(
         given = [(path.name, path.read_bytes()) for path in summaries]
         todo[out.stem] = (render_job, (domain.name, given, out.name, list(job.numbers), options))
     for name, ((files, frames), seconds), progress in finished(
-        todo, backend, lambda name: f"render {name}", lambda name: Work("", 1)
+        todo, backend, lambda name: f"render {name}", lambda name: Work("clip", 1)
     ):
         inputs, out = inputs_of[name]
         for file, data in files.items():

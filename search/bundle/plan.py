@@ -4,20 +4,22 @@ expected wall time at the chosen number of workers, from rates measured on a few
 Each job is sized in its step's units as the build's progress sizes it (`search.bundle.steps.Work`: a search's
 budget, an evaluation's episodes, a check's rollout steps, a clip's file), and its seconds follow its group's
 rate: each scheme's simulator steps per second, each agent's seconds per episode, the check's seconds per rollout
-step, one clip's rendering. A rate is measured on its group's first job made small, in one process as a worker
-runs it: run once to pay what a worker pays once (imports, an agent's loading, a compiled kernel), then timed,
-doubled until a run takes PROBE_SECONDS (at least twice, or whole), so the last two give the seconds per unit and
-the time the job takes besides. A step's jobs are dealt out to the workers in order as the build deals them, so
-its wall time is its last worker's finish. Work the cache already holds is counted, not timed.
+step, one clip's rendering. A rate is measured on its group's first job made small, run as the build runs it
+(`_where_jobs_run`: ``workers`` at once in worker processes): once to pay what a worker pays once (imports, a
+compiled kernel), then at doubling sizes (`measured`), so the first and last runs give the seconds per unit and
+the time the job takes besides (a search's setup and choice of clips, an evaluation's batch). A step's jobs are
+dealt out to the workers in order as the build deals them, so its wall time is its last worker's finish. Work
+the cache already holds is counted, not timed.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 from search.bundle.build import Prepared
 from search.bundle.clips import render_job
@@ -27,14 +29,24 @@ from search.bundle.searches import search_job_files, search_work
 from search.bundle.steps import Cache, Rate, Task, Work, duration, expected, input_key, makespan
 from search.clips.render import RenderOptions
 from search.core.workers import jobs
-from search.solvers.runner import SearchJob
+from search.solvers.runner import SearchJob, process_pool
 from search.solvers.solver import solver_named
 
 FEWEST_EPISODES = 2  # an evaluation's fewest (an interval needs two)
 PROBE_STEPS = 200  # simulator steps of each scheme's first timed search
-PROBE_SECONDS = 0.5  # a timed job is doubled until it takes this long
+PROBE_TOTAL = 4.0  # a timed job is doubled until its runs took this long together (or it is whole)
 
-Run = Callable[[int], tuple[float, int]]  # a job made small: its size -> (seconds, the size it reached)
+Run = Callable[[int], "Timed"]  # a job made small, run at a size
+Call = Callable[..., Any]  # call(function, *arguments): a job's function run where the build runs it
+
+
+class Timed(NamedTuple):
+    """A job made small, run: its seconds, the size it reached (a search may stop short of its budget), and of its
+    seconds those its size does not change (a search's setup and choice of clips, as its record says)."""
+
+    seconds: float
+    reached: int
+    fixed: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -46,7 +58,7 @@ class Step:
     count: str
     cached: int
     work: list[Work]
-    probes: dict[str, Callable[[], Rate]] = field(default_factory=dict)
+    probes: dict[str, Callable[[Call], Rate]] = field(default_factory=dict)
 
 
 def plan_lines(prepared: Prepared, cache: Cache, workers: int) -> list[str]:
@@ -54,10 +66,13 @@ def plan_lines(prepared: Prepared, cache: Cache, workers: int) -> list[str]:
     the whole build's."""
     started = time.perf_counter()
     steps = plan_steps(prepared, cache)
-    with jobs(1):  # each job as a worker runs it: in one process
-        rates = [{group: probe() for group, probe in step.probes.items()} for step in steps]
+    with jobs(1), _where_jobs_run(workers) as call:
+        rates = [{group: probe(call) for group, probe in step.probes.items()} for step in steps]
     walls = [step_seconds(step, rate, workers) for step, rate in zip(steps, rates, strict=True)]
-    paces = [f"{scheme} {1 / rate.per_unit:,.0f} steps/s" for scheme, rate in rates[1].items() if rate.per_unit]
+    searches: dict[str, Work] = {}  # each scheme's first search, at its rate
+    for work in steps[1].work:
+        searches.setdefault(work.group, work)
+    paces = [f"{scheme} {work.units / expected(work, rates[1]):,.0f} steps/s" for scheme, work in searches.items()]
     lines = [
         f"plan at --jobs {workers}, timed on this machine in {time.perf_counter() - started:.1f} s"
         + (f" ({', '.join(paces)})" if paces else "")
@@ -73,31 +88,61 @@ def plan_lines(prepared: Prepared, cache: Cache, workers: int) -> list[str]:
     return lines
 
 
+@contextmanager
+def _where_jobs_run(workers: int) -> Iterator[Call]:
+    """Where and how the build runs its jobs, to time them so: in this process at one worker, else ``workers`` at
+    once in worker processes of one core's threads, their seconds' mean (this process's libraries may use every
+    core's threads, which under load wait on each other far longer than one does alone; jobs run at once share
+    the cores, and a clip's encoder the threads it would use alone). A job returns (result, seconds)."""
+    if workers == 1:
+        yield lambda function, *arguments: function(*arguments)
+        return
+
+    def at_once(function: Callable[..., Any], *arguments: Any) -> tuple[Any, float]:
+        results = [future.result() for future in [pool.submit(function, *arguments) for _ in range(workers)]]
+        return results[0][0], sum(seconds for _, seconds in results) / workers
+
+    with process_pool(workers) as pool:
+        yield at_once
+
+
 def step_seconds(step: Step, rates: dict[str, Rate], workers: int) -> float:
-    """A step's expected wall time: its jobs at their groups' ``rates``, dealt in order to ``workers``."""
-    return makespan([expected(work, rates) for work in step.work], workers)
+    """A step's expected wall time: its jobs at their groups' ``rates``, dealt in order to ``workers``, each
+    worker's first paying the step's warm-up."""
+    seconds = [expected(work, rates) for work in step.work]
+    warm_up = max((rate.warm_up for rate in rates.values()), default=0.0)
+    return makespan(seconds, workers, [warm_up] * min(workers, len(seconds)))
 
 
 def measured(run: Run, start: int, whole: int, units: Callable[[int], float] = float) -> Rate:
-    """A job's rate from ``run`` at ``start``, once to warm up and then timed, doubled until a run takes
-    PROBE_SECONDS (at least twice) or is whole: the last two runs' seconds per unit (``units`` of the size each
-    reached) and what the last took besides. A job that stops by itself short of its size (a search that found
-    what it looks for) reaches as far at a larger one, and takes as long."""
-    run(start)
-    size, timed = start, []
-    while True:
-        took, reached = run(size)
-        timed.append((units(reached), took))
-        if size == whole or (len(timed) > 1 and (took >= PROBE_SECONDS or timed[-1][0] == timed[-2][0])):
-            break
-        size = min(2 * size, whole)
-    if len(timed) == 1:  # whole at its start
-        return Rate(took / max(timed[0][0], 1.0))
-    (before, took_before), (last, took) = timed[-2:]
-    if last == before:  # it stopped by itself
-        return Rate(0.0, took)
-    per_unit = max(took - took_before, 0.0) / (last - before)
-    return Rate(per_unit, max(took - per_unit * last, 0.0))
+    """A job's rate from ``run``: once at ``start`` to warm up, then timed from ``start`` at doubling sizes, or
+    whole once the runs so far say it takes PROBE_TOTAL at most, until they have taken PROBE_TOTAL together or one
+    is whole (`fitted`, each run at ``units`` of its size), with what the first run took more than the same run
+    warm. A job that stops by itself short of its size (a search that found what it looks for) reaches as far at
+    a larger one, and takes as long."""
+    cold, size = run(start), start
+    timed = [(units(size), run(size))]
+    warm_up = max(cold.seconds - timed[0][1].seconds, 0.0)
+    while size < whole and sum(one.seconds for _, one in timed) < PROBE_TOTAL:
+        cheap = fitted(timed, warm_up).seconds(Work("", units(whole))) <= PROBE_TOTAL
+        size = whole if cheap else min(2 * size, whole)
+        timed.append((units(size), run(size)))
+        if timed[-1][1].reached <= timed[-2][1].reached:  # it stopped by itself
+            return Rate(0.0, timed[-1][1].seconds, warm_up)
+    return fitted(timed, warm_up)
+
+
+def fitted(timed: list[tuple[float, Timed]], warm_up: float) -> Rate:
+    """The rate of a job timed at growing sizes (units, run): the seconds per unit between the last two runs (a
+    batched world's jobs grow more slowly than their size, so the largest say best how the rest grows; one run
+    alone: its seconds per unit), and what the last took besides."""
+    at, last = timed[-1]
+    following = last.seconds - last.fixed
+    if len(timed) == 1:
+        return Rate(following / max(at, 1.0), last.fixed, warm_up)
+    at_before, before = timed[-2]
+    per_unit = max(following - (before.seconds - before.fixed), 0.0) / (at - at_before)
+    return Rate(per_unit, max(following - per_unit * at, 0.0) + last.fixed, warm_up)
 
 
 def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
@@ -123,7 +168,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
         if not cache.valid("search", inputs, "summary-001.json")
     ]
     found: dict[str, bytes] = {}  # a summary a timed search found, to time a clip's rendering by
-    probes: dict[str, Callable[[], Rate]] = {}
+    probes: dict[str, Callable[[Call], Rate]] = {}
     for work, search in wanted:
         if work.group not in probes:  # a scheme's first search
             probes[work.group] = _search(search, found)
@@ -147,7 +192,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
         f"{settings.pushes} pushes",
         len(checks) - len(unchecked),
         [check_work(task) for task in unchecked],
-        {"": lambda: _check(unchecked[0])} if unchecked else {},
+        {"check": lambda call: _check(unchecked[0], call)} if unchecked else {},
     )
 
     files = sum(2 if solver_named(job.scheme.solver).reels else 1 for job in prepared.jobs)
@@ -155,34 +200,38 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
         "clips",
         f"{files} files to render" + ("" if wanted else ", those whose summaries are unchanged reused"),
         0,
-        [Work("", 1)] * files if wanted else [],
-        {"": lambda: _render(domain.name, found.get("summary"), spec.render)} if wanted else {},
+        [Work("clip", 1)] * files if wanted else [],
+        {"clip": lambda call: _render(domain.name, found.get("summary"), spec.render, call)} if wanted else {},
     )
     return [evaluations, search_step, check_step, clips]
 
 
-def _evaluation(task: Task) -> Callable[[], Rate]:
+def _evaluation(task: Task) -> Callable[[Call], Rate]:
     """An agent's evaluation's rate, on a few of its episodes."""
     domain, agent, episodes, *rest = task[1]
 
-    def run(size: int) -> tuple[float, int]:
-        return evaluation_job(domain, agent, size, *rest)[1], size
+    def rate(call: Call) -> Rate:
+        def run(size: int) -> Timed:
+            return Timed(call(evaluation_job, domain, agent, size, *rest)[1], size)
 
-    return lambda: measured(run, min(FEWEST_EPISODES, episodes), episodes)
+        return measured(run, min(FEWEST_EPISODES, episodes), episodes)
+
+    return rate
 
 
-def _search(search: SearchJob, found: dict[str, bytes]) -> Callable[[], Rate]:
+def _search(search: SearchJob, found: dict[str, bytes]) -> Callable[[Call], Rate]:
     """A scheme's rate in seconds per simulator step of its budget, from its first search on small budgets (from
     the fewest steps its solver accepts: one that must finish whole rollouts refuses too few); the best summary
     found is kept in ``found``, to time a clip's rendering by."""
 
-    def run(budget: int) -> tuple[float, int]:
-        files, took = search_job_files(replace(search, budget=budget))
-        if "summary-001.json" in files:
-            found.setdefault("summary", files["summary-001.json"].encode())
-        return took, json.loads(files["run.json"])["solver"]["budget_used"]  # one may stop short of its budget
+    def rate(call: Call) -> Rate:
+        def run(budget: int) -> Timed:
+            files, took = call(search_job_files, replace(search, budget=budget))
+            if "summary-001.json" in files:
+                found.setdefault("summary", files["summary-001.json"].encode())
+            record = json.loads(files["run.json"])
+            return Timed(took, record["solver"]["budget_used"], max(took - record["search_wall_s"], 0.0))
 
-    def rate() -> Rate:
         start = min(search.budget, PROBE_STEPS)
         while True:
             try:
@@ -195,19 +244,19 @@ def _search(search: SearchJob, found: dict[str, bytes]) -> Callable[[], Rate]:
     return rate
 
 
-def _check(task: Task) -> Rate:
+def _check(task: Task, call: Call) -> Rate:
     """A pair's check's rate in seconds per rollout step, on a few of its starting states."""
     function, (domain, pair, fixed, distribution, world, settings, reward) = task
 
-    def run(states: int) -> tuple[float, int]:
+    def run(states: int) -> Timed:
         fewer = settings.model_copy(update={"states": states})
-        return cast(float, function(domain, pair, fixed, distribution, world, fewer, reward)[1]), states
+        return Timed(cast(float, call(function, domain, pair, fixed, distribution, world, fewer, reward)[1]), states)
 
     return measured(run, 1, settings.states, lambda states: check_work(task, states).units)
 
 
-def _render(domain: str, summary: bytes | None, options: RenderOptions) -> Rate:
+def _render(domain: str, summary: bytes | None, options: RenderOptions, call: Call) -> Rate:
     """The seconds one clip takes to render, timed on a short search's summary (none where no search found one)."""
     if summary is None:
         return Rate(0.0)
-    return Rate(render_job(domain, [("summary.json", summary)], "plan.mp4", [1, 2], options)[1])
+    return Rate(call(render_job, domain, [("summary.json", summary)], "plan.mp4", [1, 2], options)[1])

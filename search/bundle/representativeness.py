@@ -94,7 +94,7 @@ def check_work(task: Task, states: int | None = None) -> Work:
     scenarios) x (pushes + 1) rollouts of the reward's horizon."""
     _, (_, _, fixed, _, _, settings, reward) = task
     drawn = settings.states if states is None else states
-    return Work("", (drawn + len(fixed)) * (settings.pushes + 1) * reward["horizon"])
+    return Work("check", (drawn + len(fixed)) * (settings.pushes + 1) * reward["horizon"])
 
 
 def clip_reward(study: Study, distribution: str, world: dict[str, Any]) -> dict[str, Any]:

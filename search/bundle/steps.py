@@ -68,7 +68,7 @@ class Cache:
 class Work:
     """A job's size in its step's units (a search's budget in simulator steps, an evaluation's episodes, a check's
     rollout steps, a clip's file) and the group whose pace it follows (a search its scheme's, an evaluation its
-    agent's; "" the step's)."""
+    agent's)."""
 
     group: str
     units: float
@@ -76,28 +76,32 @@ class Work:
 
 @dataclass(frozen=True)
 class Rate:
-    """What a job of a group takes: ``per_unit`` seconds for each unit of its size, and ``besides`` seconds."""
+    """What a job of a group takes: ``per_unit`` seconds for each unit of its size, and ``besides`` seconds; a
+    worker's first job of its step ``warm_up`` seconds more (its imports, a compiled kernel)."""
 
     per_unit: float
     besides: float = 0.0
+    warm_up: float = 0.0
 
     def seconds(self, work: Work) -> float:
         return self.besides + self.per_unit * work.units
 
 
 def expected(work: Work, rates: dict[str, Rate]) -> float:
-    """A job's expected seconds at its group's rate, else at its step's (under "")."""
+    """A job's expected seconds at its group's rate, else at the step's (under "")."""
     return (rates[work.group] if work.group in rates else rates[""]).seconds(work)
 
 
 def learned(done: list[tuple[Work, float]]) -> dict[str, Rate]:
-    """The rates of a step's jobs done, from their sizes and seconds: each group's, and the step's under ""."""
+    """The rates of a step's jobs done, from their sizes and seconds: each group's seconds per unit, and under ""
+    the mean seconds of a job, for a group none of whose jobs is done yet (a scheme's first search: budgets say
+    little across schemes, where one scheme's searches stop by themselves well short of theirs)."""
     totals: dict[str, tuple[float, float]] = {}
     for work, seconds in done:
-        for group in {work.group, ""}:
-            units, took = totals.get(group, (0.0, 0.0))
-            totals[group] = (units + work.units, took + seconds)
-    return {group: Rate(took / units) for group, (units, took) in totals.items() if units > 0}
+        units, took = totals.get(work.group, (0.0, 0.0))
+        totals[work.group] = (units + work.units, took + seconds)
+    rates = {group: Rate(took / units) for group, (units, took) in totals.items() if units > 0}
+    return rates | {"": Rate(0.0, sum(seconds for _, seconds in done) / len(done))}
 
 
 def makespan(seconds: list[float], workers: int, busy: list[float] | None = None) -> float:

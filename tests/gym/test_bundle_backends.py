@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 
 from search.bundle.build import build_bundle, prepare
-from search.bundle.plan import plan_lines
-from search.bundle.steps import Cache, makespan
+from search.bundle.plan import plan_lines, plan_steps, step_seconds
+from search.bundle.steps import Cache, Rate, Work, makespan
 from search.cli import main
 from search.solvers.runner import Backend, JobFailed
-from tests.gym.test_any_world import ADAPTER, STUDY
+from tests.gym.test_any_world import ADAPTER, FAST, SLOW, STUDY
 
 
 def bundle_files(out: Path) -> dict[str, bytes]:
@@ -84,6 +84,25 @@ def test_the_plan_counts_each_step_and_times_it_before_any_work(in_track, capsys
     assert "evaluations: 2 agents x 4 episodes, 2 cached: about" in cached[1]
     assert "searches: 4 of 60 to 400 steps, 4 cached: about" in cached[2]
     assert "those whose summaries are unchanged reused" in cached[4]
+
+
+def test_the_plan_sizes_each_job_and_times_it_at_its_groups_rate(in_track):
+    folder, _, _ = in_track
+    (folder / "doubled.toml").write_text(STUDY.replace("budget = 400", "budget = 800"))
+    rates = {"": Rate(0.0, 5.0), "representative": Rate(0.01, 1.0), "nfirst": Rate(0.0, 2.0)}
+    planned = {}
+    for study in ("study.toml", "doubled.toml"):
+        evaluations, searches, checks, _ = plan_steps(prepare(study), Cache(folder / "nothing"))
+        assert evaluations.work == [Work(FAST, 4), Work(SLOW, 4)]  # each agent's episodes, at its own rate
+        assert checks.work == [Work("check", (4 + 1) * (2 + 1) * 50)]  # (states + scenario) x (pushes + 1) x 50 steps
+        planned[study] = searches
+    budgets = {study: {work.group: work.units for work in step.work} for study, step in planned.items()}
+    assert budgets["study.toml"] == {"nfirst": 60, "representative": 400, "disagreements": 200, "highlights": 300}
+    assert budgets["doubled.toml"]["representative"] == 800
+    one, doubled = (step_seconds(planned[study], rates, 1) for study in ("study.toml", "doubled.toml"))
+    assert one == 2.0 + (1.0 + 0.01 * 400) + 5.0 + 5.0  # a scheme without a rate of its own at the step's
+    assert doubled - one == 0.01 * 400  # the representative search's 400 more steps at its rate
+    assert step_seconds(planned["study.toml"], rates | {"": Rate(0.0, 5.0, warm_up=3.0)}, 2) == 3.0 + 5.0 + 5.0
 
 
 def test_jobs_are_dealt_to_the_first_worker_free():
