@@ -88,6 +88,13 @@ def _bundle(args: argparse.Namespace) -> int:
     from search.solvers.runner import Backend
 
     count = workers() if args.jobs is None else args.jobs
+    if args.pilot:
+        from search.bundle.pilot import pilot_lines
+
+        backend = Backend(args.backend, count, args.ray_address)
+        for line in pilot_lines(prepare(args.study), Cache(Path(args.out) / "cache"), backend):
+            print(line, flush=True)
+        return 0
     if args.plan:
         Backend(args.backend, count, args.ray_address)  # refuses bad settings as a build would
         for line in plan_lines(prepare(args.study), Cache(Path(args.out) / "cache"), count):
@@ -304,6 +311,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="print each step's count and, from a few timed steps of the world, the expected wall time at --jobs, "
         "then stop (a build itself says each step's jobs done and the time left as it goes)",
+    )
+    bundle.add_argument(
+        "--pilot",
+        action="store_true",
+        help="vote each pair of the representative scheme as its search will, and at longer clips where the vote is "
+        "weak, and compare each shown pair on a few test episodes; say which will be weak or undecided and what "
+        "would decide them, then stop",
     )
     bundle.set_defaults(handler=_bundle)
 

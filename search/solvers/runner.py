@@ -109,7 +109,8 @@ def parse_settings(cls: type, items: list[str], what: str) -> dict[str, Any]:
 
 def refuse_before_work(job: SearchJob) -> None:
     """Refuse, before any work, a search that cannot be what was meant: a searched clip given longer than an episode
-    of its world (a horizon written in steps before lengths of time became seconds, a longest clip), and a solver
+    of its world (a horizon written in steps before lengths of time became seconds, a longest clip; the reward's
+    default of 100 steps is no length anyone wrote, and its rollouts end with the episode), and a solver
     that needs a capability its world's coupled problem lacks (`search.core.problem.require`; the problem of one
     starting state is built, never stepped)."""
     solver = solver_named(job.solver)
@@ -117,14 +118,15 @@ def refuse_before_work(job: SearchJob) -> None:
     world = domain.search_settings(job.agents, job.world_settings, job.scenario)
     horizon = RewardConfig.from_dict(job.reward_settings).horizon
     step, longest = domain.step_seconds(job.scenario, world), domain.episode_seconds(job.scenario, world)
-    if longest is not None and "horizon" in job.reward_settings and horizon * step > longest:
+    clip = solver.longest_clip(job.solver_config, horizon)
+    written = job.reward_settings.get("horizon", RewardConfig().horizon) != RewardConfig().horizon  # not the default
+    if clip is not None and longest is not None and written and horizon * step > longest:
         raise ValueError(
             f"the reward's horizon is {horizon} steps ({horizon * step:g} s), longer than an episode here "
             f"({longest:g} s): a horizon written in steps before lengths of time became seconds now asks for that many "
             "seconds; give it in seconds (horizon = S) or in steps as horizon_steps = N"
         )
-    clip = solver.longest_clip(job.solver_config, horizon)
-    if longest is not None and clip > horizon and clip * step > longest:
+    if clip is not None and longest is not None and clip > horizon and clip * step > longest:
         raise ValueError(
             f"the {solver.name} solver's longest clip is {clip} steps ({clip * step:g} s), longer than an episode here "
             f"({longest:g} s): give it at most {longest:g} s"

@@ -51,8 +51,9 @@ class Solver(ABC):
         in the search's order (the bundle's audit holds it to the ground truth). Default: none."""
         return None
 
-    def longest_clip(self, config: Any, horizon: int) -> int:
-        """The most steps a clip of its search may last, for a reward of ``horizon`` steps. Default: the horizon."""
+    def longest_clip(self, config: Any, horizon: int) -> int | None:
+        """The most steps a clip of its search may last, for a reward of ``horizon`` steps (None: its clips are
+        moments of episodes, never longer than one). Default: the horizon."""
         return horizon
 
     def clip_warnings(self, entry: dict[str, Any]) -> list[str]:

@@ -57,6 +57,10 @@ class Watching(OwnSummaries):
     record_key = "method"
     needs: tuple[type, ...] = (Follows,)
 
+    def longest_clip(self, config: Any, horizon: int) -> int | None:
+        """None: its clips are moments of the episodes it watches, never longer than one."""
+        return None
+
     def choose(
         self, comparison: Comparison, tracker: Tracker, rng: np.random.Generator, config: Any
     ) -> tuple[list[dict[str, Any]], dict[str, Any]]:

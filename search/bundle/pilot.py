@@ -1,0 +1,159 @@
+"""What a study's representative clips and ground truth will say, known before the build (`foil bundle --pilot`).
+
+For each pair the representative scheme shows, the pilot votes as the build's search will: the same drawn states,
+pushes and budget at the study's clip length, so a vote it calls weak the build's will be too (its replays and
+clips are left out). Where that vote is weak, it votes again at each longer length the world allows (twice the
+study's, and so on up to an episode), each on the scheme's whole budget, and says which length decides it and the
+`longest` setting that lets the search choose it; where none does, roughly how many states would, from the spread
+of the states' weights. For each pair it also compares the two agents on a few paired test episodes
+(`PILOT_EPISODES`), as the build's ground truth does on the study's episodes and more: a pair those cannot tell
+apart may rest on a coin toss in the study. It costs a search's rollouts per pair and length, a few test episodes
+per agent: seconds to minutes, against the build's evaluations, searches, checks and clips."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from scipy.stats import norm
+
+from search.bundle.build import Prepared
+from search.bundle.evaluations import evaluate_runs
+from search.bundle.steps import Cache
+from search.bundle.truth import paired_comparison
+from search.core.contrast import ALPHA, Rollouts, describe_vote
+from search.core.domain import domain_for
+from search.core.rollout import Tracker
+from search.solvers.representative import RepresentativeConfig, clip_lengths, planned_looks, vote_states
+from search.solvers.reward import RewardConfig
+from search.solvers.runner import Backend, SearchJob
+
+PILOT_EPISODES = 20  # paired test episodes per pair (at most the study's)
+POWER = 0.8  # the chance of deciding that "about N states" aims at
+
+
+def pilot_lines(prepared: Prepared, cache: Cache, backend: Backend) -> Iterator[str]:
+    """The pilot's lines, a pair at a time: each representative search's vote at the study's length (and longer
+    where it is weak), then each shown pair's ground truth on a few paired episodes."""
+    searches = {
+        (search.agents, search.scenario, search.seed, search.budget): search
+        for search in prepared.searches
+        if search.solver == "representative"
+    }
+    if not searches:
+        yield "pilot: no representative scheme to vote; ground truth only"
+    for search in searches.values():
+        yield from vote_lines(search)
+    yield from truth_lines(prepared, cache, backend)
+
+
+def vote_lines(search: SearchJob) -> Iterator[str]:
+    """One search's vote at the study's clip length and, where weak, at each longer length up to an episode."""
+    domain = domain_for(search.agents, search.scenario, search.world)
+    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
+    step = domain.step_seconds(search.scenario, world)
+    horizon = RewardConfig.from_dict(search.reward_settings).horizon
+    episode = domain.episode_seconds(search.scenario, world)
+    agents = list(search.agents)
+    yield (
+        f"pilot {search.solver} {agents[0]} vs {agents[1]} from {search.scenario} ({search.budget:,} steps, seed "
+        f"{search.seed}):"
+    )
+    longest = max(horizon, round(episode / step)) if episode is not None else 2 * horizon
+    tried = []
+    for length in clip_lengths(horizon, longest):
+        if length > horizon and (search.solver_config.pushes + 1) * length > search.budget:
+            yield f"  at {length * step:.1f} s: one state's rollouts take more than the budget"
+            break
+        record, weights = pilot_vote(search, length)
+        tried.append((length, record, weights))
+        mark = " (the study's)" if length == horizon else ""
+        line = describe_vote(agents, [record["for_first"], record["for_second"]], record["no_majority"], record["p"])
+        verdict = f"decided for {agents[0] if record['direction'] > 0 else agents[1]}" if record["decided"] else "weak"
+        yield f"  at {length * step:.1f} s{mark}: {verdict}: {line}"
+        if record["decided"]:
+            break
+    chosen = tried[-1]
+    if len(tried) == 1 and chosen[1]["decided"]:
+        return
+    if chosen[1]["decided"]:
+        seconds = chosen[0] * step
+        yield (
+            f"  -> longest = {seconds:g} in the scheme's settings lets its search choose {seconds:.1f}-s clips where "
+            f"the study's {horizon * step:.1f} s leave the vote weak (docs/search.md)"
+        )
+        return
+    best = max(tried, key=lambda one: abs(float(np.mean(one[2]))) / (float(np.std(one[2])) or math.inf))
+    states = states_needed(best[2], best[1]["looks"])
+    cost = (search.solver_config.pushes + 1) * best[0]
+    yield (
+        "  -> no length up to an episode decides it at this budget"
+        + (
+            f"; about {states} states would at {best[0] * step:.1f} s (states = {states}, a budget of about "
+            f"{states * cost:,} steps)"
+            if states is not None
+            else "; its states show no difference on the whole: these agents may look alike in any clip"
+        )
+    )
+
+
+def pilot_vote(search: SearchJob, horizon: int) -> tuple[dict[str, Any], np.ndarray]:
+    """The vote the search's representative solver takes at ``horizon`` steps, on its whole budget: the same states,
+    pushes and looks (its seed's generator, drawn first as the solver draws), without the replays of its clips."""
+    domain = domain_for(search.agents, search.scenario, search.world)
+    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
+    config: RepresentativeConfig = search.solver_config
+    rng = np.random.default_rng(search.seed)
+    tracker = Tracker(search.budget, 1)
+    scenarios = domain.draw_states(search.scenario, world, rng, config.states)
+    reward = search.reward_settings | {"horizon": horizon}
+
+    def roll_out(states: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+        return domain.roll_out(list(search.agents), states, reward, pushes, rng, tracker)
+
+    looks = planned_looks(config.states, tracker, config, horizon)
+    _, result, record = vote_states(roll_out, scenarios, tracker, rng, config, horizon, looks, looks)
+    return record, result.state_weights
+
+
+def states_needed(weights: np.ndarray, looks: int) -> int | None:
+    """Roughly how many states a vote needs to decide, with chance `POWER`, a lean as large as these weights' (their
+    mean over their spread), tested at ``ALPHA / looks``: the normal approximation of the sign-flip test. None
+    where they lean nowhere."""
+    mean, spread = float(np.mean(weights)), float(np.std(weights, ddof=1)) if len(weights) > 1 else 0.0
+    if mean == 0 or spread == 0:
+        return None
+    z = float(norm.ppf(1 - ALPHA / looks / 2) + norm.ppf(POWER))
+    return math.ceil((z * spread / abs(mean)) ** 2)
+
+
+def truth_lines(prepared: Prepared, cache: Cache, backend: Backend) -> Iterator[str]:
+    """Each pair some clip shows, compared on a few paired test episodes at the study's evaluation seed."""
+    spec = prepared.study.spec
+    pairs = list(dict.fromkeys(tuple(job.pair) for job in prepared.jobs))
+    episodes = min(PILOT_EPISODES, spec.eval_episodes)
+    agents = sorted({agent for pair in pairs for agent in pair})
+    found = evaluate_runs(prepared.study, cache, lambda line: None, [(agent, episodes) for agent in agents], backend)
+    if any("episode_rewards" not in found[agent, episodes] for agent in agents):
+        yield "pilot ground truth: this world gives no per-episode rewards to compare pairs on"
+        return
+    for first, second in pairs:
+        compared = paired_comparison(
+            (first, second),
+            found[first, episodes]["episode_rewards"],
+            found[second, episodes]["episode_rewards"],
+            looks=1,
+        )
+        low, high = compared.ci95
+        numbers = f"{first} - {second} {compared.difference:.2f} reward, 95% interval {low:.2f} to {high:.2f}"
+        if compared.decided:
+            better = first if compared.difference > 0 else second
+            verdict = f"{better} is better"
+        else:
+            verdict = (
+                f"undecided: the build compares them on {spec.eval_episodes} paired episodes and more while "
+                "undecided; a pair it cannot decide rests on a coin toss"
+            )
+        yield f"pilot ground truth {first} vs {second} on {episodes} paired episodes: {verdict} ({numbers})"
