@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import gymnasium
 import numpy as np
-
 from cartpole_push import GUST
 
 # The weights after each update of `train()`, as it gives them (rounded to 6 decimals)
