@@ -33,7 +33,7 @@ from search.solvers.runner import SearchJob, process_pool
 from search.solvers.solver import solver_named
 
 FEWEST_EPISODES = 2  # an evaluation's fewest (an interval needs two)
-PROBE_STEPS = 200  # simulator steps of each scheme's first timed search
+PROBE_STEPS = 100  # simulator steps of each scheme's first timed search (more where its solver asks for more)
 PROBE_TOTAL = 4.0  # a timed job is doubled until its runs took this long together (or it is whole)
 
 Run = Callable[[int], "Timed"]  # a job made small, run at a size
@@ -114,16 +114,16 @@ def step_seconds(step: Step, rates: dict[str, Rate], workers: int) -> float:
     return makespan(seconds, workers, [warm_up] * min(workers, len(seconds)))
 
 
-def measured(run: Run, start: int, whole: int, units: Callable[[int], float] = float) -> Rate:
-    """A job's rate from ``run``: once at ``start`` to warm up, then timed from ``start`` at doubling sizes, or
-    whole once the runs so far say it takes PROBE_TOTAL at most, until they have taken PROBE_TOTAL together or one
-    is whole (`fitted`, each run at ``units`` of its size), with what the first run took more than the same run
-    warm. A job that stops by itself short of its size (a search that found what it looks for) reaches as far at
-    a larger one, and takes as long."""
-    cold, size = run(start), start
+def measured(run: Run, start: int, whole: int, units: Callable[[int], float] = float, cold: bool = True) -> Rate:
+    """A job's rate from ``run``: once at ``start`` to warm up where the workers are ``cold`` (its step's first
+    job), then timed from ``start`` at doubling sizes, or whole once the runs so far say it takes PROBE_TOTAL at
+    most, until two or more have taken PROBE_TOTAL together or one is whole (`fitted`, each run at ``units`` of
+    its size), with what the cold run took more than the same run warm. A job that stops by itself short of its size (a
+    search that found what it looks for) reaches as far at a larger one, and takes as long."""
+    first, size = run(start) if cold else None, start
     timed = [(units(size), run(size))]
-    warm_up = max(cold.seconds - timed[0][1].seconds, 0.0)
-    while size < whole and sum(one.seconds for _, one in timed) < PROBE_TOTAL:
+    warm_up = max(first.seconds - timed[0][1].seconds, 0.0) if first else 0.0
+    while size < whole and (len(timed) == 1 or sum(one.seconds for _, one in timed) < PROBE_TOTAL):
         cheap = fitted(timed, warm_up).seconds(Work("", units(whole))) <= PROBE_TOTAL
         size = whole if cheap else min(2 * size, whole)
         timed.append((units(size), run(size)))
@@ -156,7 +156,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
         f"{len(spec.agents)} agents x {spec.eval_episodes} episodes",
         len(runs) - len(todo),
         [evaluation_work(task) for task in todo],
-        {evaluation_work(task).group: _evaluation(task) for task in todo},
+        {evaluation_work(task).group: _evaluation(task, cold=n == 0) for n, task in enumerate(todo)},
     )
 
     searches: dict[str, tuple[Work, SearchJob, dict[str, Any]]] = {}  # one per input: clips may share a search
@@ -171,7 +171,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
     probes: dict[str, Callable[[Call], Rate]] = {}
     for work, search in wanted:
         if work.group not in probes:  # a scheme's first search
-            probes[work.group] = _search(search, found)
+            probes[work.group] = _search(search, found, cold=not probes)
     budgets = sorted({search.budget for _, search, _ in searches.values()})
     search_step = Step(
         "searches",
@@ -206,7 +206,7 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
     return [evaluations, search_step, check_step, clips]
 
 
-def _evaluation(task: Task) -> Callable[[Call], Rate]:
+def _evaluation(task: Task, cold: bool) -> Callable[[Call], Rate]:
     """An agent's evaluation's rate, on a few of its episodes."""
     domain, agent, episodes, *rest = task[1]
 
@@ -214,12 +214,12 @@ def _evaluation(task: Task) -> Callable[[Call], Rate]:
         def run(size: int) -> Timed:
             return Timed(call(evaluation_job, domain, agent, size, *rest)[1], size)
 
-        return measured(run, min(FEWEST_EPISODES, episodes), episodes)
+        return measured(run, min(FEWEST_EPISODES, episodes), episodes, cold=cold)
 
     return rate
 
 
-def _search(search: SearchJob, found: dict[str, bytes]) -> Callable[[Call], Rate]:
+def _search(search: SearchJob, found: dict[str, bytes], cold: bool) -> Callable[[Call], Rate]:
     """A scheme's rate in seconds per simulator step of its budget, from its first search on small budgets (from
     the fewest steps its solver accepts: one that must finish whole rollouts refuses too few); the best summary
     found is kept in ``found``, to time a clip's rendering by."""
@@ -235,7 +235,7 @@ def _search(search: SearchJob, found: dict[str, bytes]) -> Callable[[Call], Rate
         start = min(search.budget, PROBE_STEPS)
         while True:
             try:
-                return measured(run, start, search.budget)
+                return measured(run, start, search.budget, cold=cold)
             except ValueError:
                 if start == search.budget:
                     raise
