@@ -112,15 +112,19 @@ class Score:
         """A value as the screen shows it, with its unit: ``0.04``, ``12.3 m``."""
         return f"{value:.{self.digits}f}{' ' + self.unit if self.unit else ''}"
 
-    def caption(self, now: float, since_first: Sequence[float], dt: float) -> str:
+    def caption(self, now: float, since_first: Sequence[float], dt: float, moment: bool = False) -> str:
         """What a view shows under it at a state, number first so a line too short for the name still shows it
         (`search.clips.render.fit_text` cuts the end): the value ``now`` (``12.3 m distance``), or for a mean or a
         band what the clip has summed so far over ``since_first``, the values of the states after its first
-        (``0.35 rad mean angle error``, ``1.2 s in band``)."""
+        (``0.35 rad mean angle error``, ``1.2 s in band``). In a ``moment`` of a reel the sum starts again with
+        each moment, so a mean or a band says whose it is (``92 km/h mean speed this moment``), never read as the
+        reel's running sum."""
+        over = " this moment" if moment else ""
         if self.summed == "band":
-            return f"{one_decimal(self.of(since_first, dt) if since_first else 0.0)} s in band"
-        summed = self.of(since_first, dt) if since_first and self.summed == "mean" else now
-        return f"{self.reading(summed)} {'mean ' if self.summed == 'mean' else ''}{self.name}"
+            return f"{one_decimal(self.of(since_first, dt) if since_first else 0.0)} s in band{over}"
+        if self.summed == "mean":
+            return f"{self.reading(self.of(since_first, dt) if since_first else now)} mean {self.name}{over}"
+        return f"{self.reading(now)} {self.name}"
 
     def describe(self, summed: float) -> str:
         """A clip's sum in words, after an agent's label: ``ended with a distance of 12.3 m``, ``had a mean speed of

@@ -211,9 +211,10 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
         outcomes = [
             ("running", math.inf) if e == "running" or w > t1 + 1e-6 else (e, max(w - t0, 0.0)) for e, w in outcomes
         ]
-    if adapter.score is not None:
-        captions = [scored(adapter, texts, values) for texts, values in zip(captions, measured, strict=True)]
     shown = (follow[0],) if follow is not None and follow[1] >= steps else None  # followed throughout: alone
+    if adapter.score is not None:  # a leader alone is a reel's moment (HIGHLIGHTS), whose sum starts with it
+        moment = shown is not None
+        captions = [scored(adapter, texts, values, moment) for texts, values in zip(captions, measured, strict=True)]
     scene = GymScene(
         views,
         captions,
@@ -230,11 +231,13 @@ def load_gym_scene(summary: dict, numbers: list[int], width: int) -> tuple[GymSc
     return scene, adapter
 
 
-def scored(adapter: Adapter, captions: list[str], measured: list[float]) -> list[str]:
+def scored(adapter: Adapter, captions: list[str], measured: list[float], moment: bool) -> list[str]:
     """Each state's caption with the visible score after it (`app.visible.Score.caption`): its value, and for a mean
-    or a band what the clip summed so far; a view that stopped keeps its last caption, as its last frame."""
+    or a band what the clip summed so far, from its first state shown (in a reel's ``moment``, said to be the
+    moment's); a view that stopped keeps its last caption, as its last frame."""
     assert adapter.score is not None
-    texts = [adapter.score.caption(now, measured[1 : i + 1], adapter.dt) for i, now in enumerate(measured)]
+    score, dt = adapter.score, adapter.dt
+    texts = [score.caption(now, measured[1 : i + 1], dt, moment) for i, now in enumerate(measured)]
     return [" · ".join(filter(None, (caption, text))) for caption, text in zip(captions, texts, strict=True)]
 
 

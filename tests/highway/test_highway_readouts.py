@@ -9,10 +9,11 @@ import re
 import numpy as np
 import pytest
 
-from app.visible import VisibleClip
+from app.visible import VisibleClip, VisibleReels
 from search.core.domain import Domain, domain_for
 from search.core.rollout import Tracker
 from search.gym.clips import load_gym_scene
+from search.solvers.highlights import HighlightsDivConfig
 from search.solvers.representative import RepresentativeConfig
 from search.solvers.runner import SearchJob, run_search
 
@@ -66,3 +67,28 @@ def test_a_clip_longer_than_a_highway_episode_is_refused_before_any_work(tmp_pat
     args = ["search", "--agents", ",".join(AGENTS), "--scenario", "highway-dense", "--solver", "nfirst"]
     assert main([*args, "--reward", "horizon=40", "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert "longer than an episode here (30 s)" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+def test_a_reels_readout_at_each_moments_end_is_that_moments_score():
+    """HIGHLIGHTS shows each car in moments of its own drives, one after the other: each moment's readout sums
+    that moment alone and says so, so where the next moment starts it never reads as a mean over the reel."""
+    job = SearchJob(
+        agents=AGENTS,
+        scenario="highway-traffic",
+        solver="highlights-div",
+        budget=400,
+        solver_config=HighlightsDivConfig(episodes=3, highlights=2, context=5, lookahead=2),
+        reward_settings={"horizon": 20},
+    )
+    files = run_search(job)
+    moments = [json.loads(files[name]) for name in sorted(files) if name.startswith("summary-")]
+    reels = [[m for m in moments if m["follow"]["leader"] == k] for k in range(2)]
+    world = domain_for(list(AGENTS), "highway-traffic").world("highway-traffic")
+    judged = VisibleReels.of_summaries(reels, ["Car 1", "Car 2"], world)
+    assert [len(reel) for reel in judged.reels] == [2, 2]
+    for k, reel in enumerate(reels):
+        for moment, shown in zip(reel, judged.reels[k], strict=True):
+            scene, _ = load_gym_scene(moment, [1, 2], 480)
+            assert scene.caption(k, scene.end_time) == f"{shown.summed[0]:.0f} km/h mean speed this moment"
+    ended = [m["outcomes"][m["follow"]["leader"]]["event"] for m in moments]
+    assert "collision" in ended  # a crashed car's moment among them: its readout froze at the crash
