@@ -89,6 +89,7 @@ class Contrast:
     primary: bool = False  # the part's preregistered test (the schemes differ), read unadjusted
     note: str = ""
     or_p_value: float | None = None  # the odds ratio's own t test, on the log-odds scale (its interval's test)
+    or_note: str = ""  # why the odds ratio has no interval where the difference has one
 
 
 @dataclass(frozen=True)
@@ -293,13 +294,16 @@ class _Robust:
                 "to measure its uncertainty by"
             )
         df = _wishart_df(chosen[0], self.x, self.weight, self.bread, constraints)
-        if df < MIN_DF:
-            return None, (
-                # rounded down: 1.96 reads 1.9, never a "2.0" that looks enough
-                f"not tested: only {math.floor(df * 10) / 10:.1f} degrees of freedom for {what} (at least "
-                f"{MIN_DF:g} needed): too few clips or participants inform it"
-            )
-        return df, ""
+        return (None, _too_few_degrees(df, what)) if df < MIN_DF else (df, "")
+
+
+def _too_few_degrees(df: float, what: str) -> str:
+    """Why a test on `df` degrees of freedom, below MIN_DF, is not run. The df is rounded down (1.96 reads 1.9),
+    never to a "2.0" that reads as enough against the floor beside it."""
+    return (
+        f"not tested: only {math.floor(df * 10) / 10:.1f} degrees of freedom for {what} (at least {MIN_DF:g} "
+        "needed): too few clips or participants inform it"
+    )
 
 
 def _robust(
@@ -447,6 +451,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float, primar
         return ModelResult(False, "not tested: the fit does not converge", formula, participants, clips)
     scheme_of = np.asarray(answers.scheme)
     boundary = [s for s in present if len(set(y[scheme_of == s])) == 1]
+    alike = {s: f"every answer under {s} was {'right' if y[scheme_of == s][0] else 'wrong'}" for s in boundary}
     if boundary:
         notes.append(
             f"every answer under {', '.join(boundary)} is the same (all right or all wrong): "
@@ -529,7 +534,10 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float, primar
             bounded = max(min(difference, 1 - 1e-12), -1 + 1e-12)
             se = math.sqrt(float(robust.variance(gradient[None, :])[0, 0])) / (1 - bounded**2)
             quantile = _t_quantile(df)
-            or_df, _ = degrees(log_odds[None, :], what)
+            or_df, or_reason = degrees(log_odds[None, :], f"the odds ratio of {what}")
+            # near the ceiling a scheme's log odds rest on few answers that vary, so its own test may lack the
+            # degrees of freedom the difference's has: say why rather than leave a bare dash
+            or_why = [alike[s] for s in (scheme, reference) if s in alike] + [or_reason.removeprefix("not tested: ")]
             or_se = math.sqrt(float(robust.variance(log_odds[None, :])[0, 0])) if or_df else 0.0
             or_half = _t_quantile(or_df) * or_se if or_df else 0.0
             contrasts.append(
@@ -546,6 +554,7 @@ def fit_accuracy(answers: Answers, schemes: Sequence[str], chance: float, primar
                     df,
                     test=f"t test of the difference on {df:.1f} degrees of freedom (Satterthwaite)",
                     or_p_value=_t_p(log_or / or_se, or_df) if or_df else None,
+                    or_note="" if or_df else "interval not estimable: " + "; ".join(or_why),
                 )
             )
     testable = [s for s in present if clips_of[s] >= 2]
@@ -599,7 +608,7 @@ def _scheme_test(
         return reason, None, 0.0
     df = nu - q + 1
     if df < MIN_DF:
-        return f"not tested: only {df:.1f} degrees of freedom for the schemes together", None, 0.0
+        return _too_few_degrees(df, "the schemes together"), None, 0.0
     difference = constraints @ beta
     wald = float(difference @ np.linalg.solve(robust.variance(constraints), difference))
     f = (nu - q + 1) / (nu * q) * wald

@@ -428,6 +428,7 @@ def model_contrast_rows(data: ReportData) -> list[dict[str, Any]]:
             "or_ci95_low": _number(c.or_low),
             "or_ci95_high": _number(c.or_high),
             "or_p_value": _significant(c.or_p_value),
+            "or_note": c.or_note,
             "test": c.test,
             "df": _number(c.df, 2),
             "p_value": _significant(c.p_value),

@@ -3,6 +3,7 @@ designs and on hand-built databases. The full calibration (500 studies per desig
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -99,6 +100,25 @@ def test_two_participants_get_no_test_from_the_model(survey_db, paper_study, bun
     assert "Not tested: 2 participants" in model and "p =" not in model
     assert "ignoring repeated measures" in appendix and "Fisher" in appendix and "p =" in appendix
     assert html.index('id="model"') < html.index('id="table1"') < html.index('id="appendix"')
+
+
+def test_the_report_and_its_csv_say_why_an_odds_ratio_has_no_interval(known_db, tmp_path):  # noqa: F811
+    """Part one's answers replaced by a small study where every answer under N-first is right: its odds ratio is
+    shown with the reason it has no interval, in the table and in model_contrasts.csv, never a bare dash."""
+    from dataclasses import replace
+
+    from tests.app.analysis.test_small_sample import _study
+
+    db, study = known_db
+    adaptive, nfirst = SCHEMES
+    answers = _study({adaptive: 3, nfirst: 3}, 3, {adaptive: 0.7, nfirst: 0.9}, seed=2)
+    data = replace(tally_study(db, study), answers={"pairwise": answers})
+    html = render_report(data, tmp_path / "report")
+    why = f"nterval not estimable: every answer under {nfirst} was right; only 1.7 degrees of freedom for the odds"
+    assert f'<td class="text">I{why}' in html.split('id="model"')[1].split('id="table1"')[0]
+    with (tmp_path / "report" / "model_contrasts.csv").open() as handle:
+        (row,) = [row for row in csv.DictReader(handle) if row["task"] == "pairwise"]
+    assert row["ci95_low"] and not row["or_ci95_low"] and row["or_note"].startswith(f"i{why}")
 
 
 def test_power_and_prereg_commands(known_db, paper_study, bundle_dir, tmp_path, capsys):  # noqa: F811

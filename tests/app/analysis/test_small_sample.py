@@ -266,3 +266,24 @@ def test_ratings_model_intervals_stay_on_the_scale():
         assert m.low is not None and m.high is not None and 1 <= m.low <= m.mean <= m.high <= 5
     (c,) = fit.contrasts
     assert c.low is not None and c.high is not None and -4 < c.low <= c.difference <= c.high < 0
+
+
+def test_a_df_below_the_floor_never_reads_as_the_floor():
+    """Three schemes of 2, 3 and 2 clips, 4 participants: the schemes' joint test has 1.96 degrees of freedom,
+    which read "only 2.0 ... (at least 2 needed)" before; they are rounded down, as the pairwise tests' are."""
+    fit = fit_accuracy(_study({"a": 2, "b": 3, "c": 2}, 4, {"a": 0.6, "b": 0.7, "c": 0.8}, seed=20), list("abc"), 0.5)
+    assert fit.scheme_p is None
+    assert fit.scheme_test.startswith("not tested: only 1.9 degrees of freedom for the schemes together (at least 2")
+
+
+def test_an_odds_ratio_without_an_interval_says_why():
+    """3 participants, 3 clips a scheme, every answer under b right: the difference has its interval (3.0 degrees
+    of freedom) but the odds ratio's own test has 1.7, so its interval is not estimable, and the contrast says why
+    instead of leaving a bare dash."""
+    fit = fit_accuracy(_study({"a": 3, "b": 3}, 3, {"a": 0.7, "b": 0.9}, seed=2), ["a", "b"], 0.5)
+    (contrast,) = fit.contrasts
+    assert contrast.low is not None and contrast.odds_ratio > 1 and contrast.or_low is None
+    assert contrast.or_note.startswith(
+        "interval not estimable: every answer under b was right; only 1.7 degrees of freedom for the odds ratio of b "
+        "against a (at least 2 needed)"
+    )
