@@ -201,6 +201,10 @@ def _worlds(args: argparse.Namespace) -> int:
     for domain in domains():
         trains = "; foil train and foil release make its agents" if isinstance(domain, Trainer) else ""
         print(f"{domain.name}: {domain.describe_agents()}{trains}")
+        shipped = domain.shipped_scenarios()
+        for kind, drawn in (("scenarios", False), ("distributions of starting states", True)):
+            if names := [name for name in shipped if domain.is_distribution(name) == drawn]:
+                print(f"  shipped {kind}: {', '.join(names)}")
     return 0
 
 

@@ -3,6 +3,7 @@ command line import no world's own modules, so a world can be added without edit
 the names it ships, a file's ``world`` key and what each world claims, never by the order worlds were installed."""
 
 import ast
+import re
 from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
 
@@ -50,6 +51,20 @@ def test_foils_own_worlds_are_installed_as_entry_points_and_found_by_what_they_s
     assert domain_for(["highway-lo"], "highway-traffic").name == "highway"
     with pytest.raises(ValueError, match="no installed world takes nobody"):
         domain_for(["nobody"])  # a plain name no world ships is not taken for the crowd's
+
+
+def test_foil_worlds_lists_each_worlds_shipped_scenarios_and_distributions(capsys):
+    assert main(["worlds"]) == 0
+    listed = dict(re.findall(r"^(\w+): .*\n((?:  .*\n)*)", capsys.readouterr().out, re.MULTILINE))
+    assert listed["crowd"] == (
+        "  shipped scenarios: paper-bl-tr, paper-code, paper-tl-br\n"
+        "  shipped distributions of starting states: training\n"
+    )
+    assert listed["highway"] == (
+        "  shipped scenarios: highway-dense, highway-four-lanes, highway-light\n"
+        "  shipped distributions of starting states: highway-traffic\n"
+    )
+    assert listed["gym"] == ""  # it takes scenario files and ships none
 
 
 def test_the_world_key_picks_the_world_and_an_ambiguous_file_names_the_key(tmp_path):

@@ -108,6 +108,11 @@ class Domain(Scenarios, Agents, Problems, Clips):
         """The names this world ships. Default: none."""
         return Shipped()
 
+    def shipped_scenarios(self) -> list[str]:
+        """The names of the scenarios and distributions of starting states this world ships, which `foil worlds`
+        lists. Default: none."""
+        return []
+
     def describe_agents(self) -> str:
         """What agents and scenarios this world takes, for an error that refuses a mix. Default: the names it
         ships."""

@@ -59,6 +59,11 @@ class CrowdDomain(Domain, Trainer):
 
         return Shipped(frozenset(SCRIPTED) | frozenset(SHIPPED_AGENTS) | frozenset(shipped_scenarios()))
 
+    def shipped_scenarios(self) -> list[str]:
+        from search.crowd.sim.scenarios import shipped_scenarios
+
+        return shipped_scenarios()
+
     def takes_agent(self, spec: str) -> Claim | None:
         """A checkpoint or TorchScript file; ``module:attribute`` read as a crowd policy where nothing else names
         a world."""

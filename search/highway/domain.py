@@ -40,9 +40,11 @@ class HighwayDomain(GymDomain, Trainer):
         own = super().takes_summary(summary) and summary["scenario"].get("adapter") == ADAPTER
         return Claim.OWN if own else None
 
+    def shipped_scenarios(self) -> list[str]:
+        return sorted([*SCENARIOS, *DISTRIBUTIONS])
+
     def describe_agents(self) -> str:
-        shipped = ", ".join(sorted(SCENARIOS) + sorted(DISTRIBUTIONS))
-        return f"highway agents (highway-lo, highway-med, highway-hi, .zip files) go on highway scenarios ({shipped})"
+        return "highway agents (highway-lo, highway-med, highway-hi, .zip files) go on highway scenarios"
 
     def load(self, name: str) -> GymScenario | GymDistribution:
         return load_highway_scenario(name) if name in self.shipped() else super().load(name)
