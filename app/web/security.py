@@ -178,8 +178,9 @@ MAX_FIELDS, MAX_FIELD_CHARS = 64, 32 * 1024
 
 
 def client_group(address: str) -> str:
-    """Whom the login throttle counts as one client: an IPv4 address, or an IPv6 address's /64 (one subscriber's
-    network, whose addresses a single machine may all hold); anything else, such as a Unix socket's name, as it is."""
+    """Whom the login throttle and the arrival limit count as one client: an IPv4 address, or an IPv6 address's /64
+    (one subscriber's network, whose addresses a single machine may all hold); anything else, such as a Unix
+    socket's name, as it is."""
     try:
         ip = ipaddress.ip_address(address)
     except ValueError:
@@ -268,10 +269,11 @@ class LoginThrottle:
 
 
 class ArrivalLimit:
-    """New participants (consent answers) per client address in this process: a token bucket of `burst` arrivals
-    that refills at `per_minute`. A lab whose participants all start at once behind one address passes; a script
-    creating thousands of participants is held to the refill rate. With several worker processes each keeps its
-    own buckets."""
+    """New participants (consent answers) per client (`client_group`: an IPv4 address or an IPv6 /64, so a
+    machine cannot pass as many by taking more addresses of its network) in this process: a token bucket of
+    `burst` arrivals that refills at `per_minute`. A lab whose participants all start at once behind one address
+    passes; a script creating thousands of participants is held to the refill rate. With several worker processes
+    each keeps its own buckets."""
 
     MAX_CLIENTS = 10_000
 
@@ -280,11 +282,12 @@ class ArrivalLimit:
     ) -> None:
         self.burst, self.per_s = burst, per_minute / 60.0
         self.clock = clock
-        self.buckets: dict[str, tuple[float, float]] = {}  # address -> (arrivals left, time they were counted)
+        self.buckets: dict[str, tuple[float, float]] = {}  # client -> (arrivals left, time they were counted)
         self.lock = threading.Lock()  # the consent endpoint runs in the thread pool
 
-    def take(self, client: str) -> float:
-        """Count one arrival from `client`: 0 when it may arrive now, else the seconds until it may."""
+    def take(self, address: str) -> float:
+        """Count one arrival from `address`: 0 when its client may arrive now, else the seconds until it may."""
+        client = client_group(address)
         with self.lock:
             now = self.clock()
             left, then = self.buckets.pop(client, (float(self.burst), now))

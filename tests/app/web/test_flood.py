@@ -54,6 +54,16 @@ def test_a_flood_of_arrivals_from_one_address_is_held_to_the_refill_rate(make_cl
     assert consent(client, "198.51.100.1", "?bot=1").status_code == 429  # a bot link without the token is held
 
 
+def test_addresses_of_one_ipv6_64_share_one_allowance(make_client):
+    """A machine may hold every address of its /64: taking a new one per arrival gets no more arrivals than one
+    address does; the next /64 is another client."""
+    client = make_client(ANONYMOUS, arrivals_burst=3, arrivals_per_minute=1)
+    client.app.state.arrivals.clock = Clock()
+    replies = [consent(client, f"2001:db8:5:7::{n:x}").status_code for n in range(1, 5)]
+    assert replies == [303, 303, 303, 429]
+    assert consent(client, "2001:db8:5:8::1").status_code == 303
+
+
 @pytest.mark.parametrize("status", ["", "started", "real"])
 def test_the_admin_overview_loads_one_page_of_participants(make_client, status):
     client = make_client(ANONYMOUS)
