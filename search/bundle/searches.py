@@ -37,7 +37,8 @@ def plan_clips(spec: BuildSpec) -> list[ClipJob]:
     of two per clip, or, in a set that feeds a ranking, one per scheme and scenario (a round) with one number per
     agent across its clips. So a participant never sees one name (colour, shape) stand for two agents, whichever
     clips their plan shows, and a round's robots keep theirs. Which agent gets which number of its block is drawn
-    from a seeded generator named after the clip or round."""
+    from a seeded generator named after the clip or round. An agent's reels in one part show other moments in each
+    of its questions (`_distinct_reels`)."""
     jobs, first = [], 1
     for i, clip_set in enumerate(spec.sets):
         for scheme, scenario in itertools.product(clip_set.schemes, clip_set.scenarios):
@@ -66,7 +67,27 @@ def plan_clips(spec: BuildSpec) -> list[ClipJob]:
                             parts=parts,
                         )
                     )
-    return jobs
+    return _distinct_reels(jobs)
+
+
+def _distinct_reels(jobs: list[ClipJob]) -> list[ClipJob]:
+    """The jobs with each reel search told, per agent, how many of its reels the study shows before it in the
+    same part under the same scheme and scenario (the solver's ``earlier``): it then shows the agent's next
+    moments, so a participant who meets an agent in two questions of a part sees two different reels, not one
+    twice. A scheme whose reels may repeat (``reels = "repeat"``), and reels in different parts, are left alone."""
+    shown: dict[tuple[str, str, str, str], int] = {}  # (part, scheme, scenario, agent): its reels planned so far
+    planned = []
+    for job in jobs:
+        scheme = job.scheme
+        if solver_named(scheme.solver).reels and scheme.reels == "distinct":
+            keys = [[(part, scheme.name, job.scenario, agent) for part in job.parts] for agent in job.pair]
+            earlier = tuple(max(shown.get(key, 0) for key in agent_keys) for agent_keys in keys)
+            for agent_keys, count in zip(keys, earlier, strict=True):
+                shown |= dict.fromkeys(agent_keys, count + 1)
+            if any(earlier):
+                job = replace(job, scheme=replace(scheme, solver_config=replace(scheme.solver_config, earlier=earlier)))
+        planned.append(job)
+    return planned
 
 
 def _draws(scheme: Scheme, parts: tuple[str, ...]) -> list[tuple[tuple[str, ...], str, Scheme]]:

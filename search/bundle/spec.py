@@ -10,7 +10,7 @@ The table as the researcher writes it (docs/clips.md)::
     [build.representativeness]         the distribution the fixed scenarios are measured against
     [build.budget]                     steps and clip_seconds every scheme is held to
     [build.render]                     RenderOptions fields
-    [build.schemes.NAME]               solver, budget, seed, top_k, select; [.settings], [.reward], [.world]
+    [build.schemes.NAME]               solver, budget, seed, top_k, select, reels; [.settings], [.reward], [.world]
     [[build.sets]]                     parts, schemes, scenarios; agents (every pair) or pairs
 """
 
@@ -71,6 +71,8 @@ class SchemeTable(Strict):
     seed: Whole
     top_k: Positive = 1
     select: Literal["reward", "contrast"] = "reward"  # which of the top-K becomes the clip (docs/clips.md)
+    # a reel solver's: an agent's reels in several questions of one part show other moments, or may "repeat"
+    reels: Literal["distinct", "repeat"] = "distinct"
     settings: ScalarTable = {}
     reward: ScalarTable = {}
     world: ScalarTable = {}
@@ -152,6 +154,7 @@ class Scheme:
     solver_config: Any  # an instance of its solver's config_class
     reward: RewardConfig
     world: dict[str, Scalar]
+    reels: str = "distinct"  # a reel solver's: "distinct" moments for an agent's reels in one part, or "repeat"
 
 
 @dataclass(frozen=True)
@@ -322,6 +325,8 @@ def _schemes(build: BuildTable, domain: Domain | None, problems: list[Problem]) 
                     checked[key] |= check({setting: value})
                 except ValueError as error:
                     problems.append(((*at, key, setting), str(error)))
+        if solver is not None and "reels" in table.model_fields_set and not solver.reels:
+            problems.append(((*at, "reels"), f"the {table.solver} solver shows no reels: leave reels out"))
         if len(problems) > found or solver is None:
             continue
         step_seconds = domain.step_seconds(build.sets[0].scenarios[0], {}) if domain is not None else None
@@ -364,6 +369,7 @@ def _schemes(build: BuildTable, domain: Domain | None, problems: list[Problem]) 
             solver_config=solver_config,
             reward=reward,
             world=checked["world"],
+            reels=table.reels,
         )
     return schemes
 

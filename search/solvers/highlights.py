@@ -58,12 +58,16 @@ class HighlightsConfig:
     lookahead: int = 5  # the stand-in's steps after each alternative action
     discount: float = 0.99  # of the stand-in's returns
     diversity: float = 0.0  # HIGHLIGHTS-DIV: the smallest feature distance between two moments (0: HIGHLIGHTS)
+    # per agent (in the search's order), its reels a study shows before this one in the same part (a bundle's plan
+    # sets it): this reel shows the moments the selection keeps after theirs, so it shows other moments
+    earlier: tuple[int, int] = (0, 0)
 
     def __post_init__(self) -> None:
         checks = [
             (self.episodes >= 1 and self.highlights >= 1, "episodes and highlights must be >= 1"),
             (self.context >= 2, "context must be >= 2 steps"),
             (self.gap >= 0 and self.diversity >= 0, "gap and diversity must be >= 0"),
+            (len(self.earlier) == 2 and min(self.earlier) >= 0, "earlier must be two reel counts >= 0"),
             (self.lookahead >= 1, "lookahead must be >= 1"),
             (0 < self.discount <= 1, "discount must be in (0, 1]"),
             (self.importance in IMPORTANCE, f"importance must be one of {IMPORTANCE}"),
@@ -196,9 +200,10 @@ def rollout_importance(
     return scores, cost
 
 
-def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
+def select(moments: list[Moment], config: HighlightsConfig, earlier: int = 0) -> list[Moment]:
     """Greedy: most important first, at least ``gap`` steps from the kept ones of its episode and (DIV) no closer
-    than ``diversity`` to any kept one; the kept ones in episode order."""
+    than ``diversity`` to any kept one; the kept ones in episode order. After ``earlier`` reels of the agent, the
+    greedy goes on past their moments: this reel's are the next it keeps, as far from theirs as from each other."""
     if not moments:
         return []
     features = np.stack([m.features for m in moments])
@@ -216,9 +221,15 @@ def select(moments: list[Moment], config: HighlightsConfig) -> list[Moment]:
         ):
             continue
         kept.append(i)
-        if len(kept) == config.highlights:
+        if len(kept) == config.highlights * (earlier + 1):
             break
-    return sorted((moments[i] for i in kept), key=lambda m: (m.episode, m.step))
+    if earlier and len(kept) <= config.highlights * earlier:
+        raise ValueError(
+            f"highlights: the agent's episodes hold {len(kept)} moments far enough apart, too few for "
+            f"{earlier + 1} reels of {config.highlights}: give more episodes, a larger budget or fewer highlights, "
+            'or let a study\'s reels repeat in a part (reels = "repeat" in its scheme, docs/clips.md)'
+        )
+    return sorted((moments[i] for i in kept[config.highlights * earlier :]), key=lambda m: (m.episode, m.step))
 
 
 @dataclass
@@ -303,11 +314,12 @@ def highlights(
     summaries, record = [], {}
     for agent in (0, 1):
         moments, kind = agent_moments(groups, agent, tracker, config, tracker.budget * (agent + 1) // 2, source)
-        kept = select(moments, config)
+        kept = select(moments, config, config.earlier[agent])
         summaries += [summarize(by_episode[m.episode], agent, m) for m in kept]
         record[f"agent_{agent}"] = {
             "importance": kind,
             "states": len(moments),
+            "earlier": config.earlier[agent],
             "chosen": [{"episode": m.episode, "step": m.step, "importance": m.importance} for m in kept],
         }
     return summaries, record

@@ -95,6 +95,19 @@ def test_highlights_gap_and_the_div_filter():
     assert [(m.episode, m.step) for m in div] == [(0, 10), (1, 30)]  # the look-alike is left out
 
 
+def test_a_later_reel_shows_the_next_moments_the_selection_keeps():
+    moments = [
+        moment(0, 10, 5.0, [0.0, 0.0]),
+        moment(0, 14, 4.0, [3.0, 3.0]),  # too close in time to the first (gap 10), in any reel
+        moment(1, 10, 3.0, [0.01, 0.0]),
+        moment(1, 30, 2.0, [-3.0, 3.0]),
+    ]
+    second = select(moments, HighlightsConfig(highlights=2, gap=10), earlier=1)
+    assert [(m.episode, m.step) for m in second] == [(1, 30)]  # the first reel's are (0, 10) and (1, 10)
+    with pytest.raises(ValueError, match="hold 2 moments far enough apart, too few for 3 reels of 1: give more"):
+        select(moments, HighlightsConfig(highlights=1, gap=10, diversity=0.5), earlier=2)
+
+
 def corridor_groups(agents, discrete, tmp_path, count=2):
     where = scenario_file(tmp_path, discrete)
     domain = domain_for(agents, where)
