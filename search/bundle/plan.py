@@ -15,6 +15,7 @@ the cache already holds is counted, not timed.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -116,20 +117,37 @@ def step_seconds(step: Step, rates: dict[str, Rate], workers: int) -> float:
 
 def measured(run: Run, start: int, whole: int, units: Callable[[int], float] = float, cold: bool = True) -> Rate:
     """A job's rate from ``run``: once at ``start`` to warm up where the workers are ``cold`` (its step's first
-    job), then timed from ``start`` at doubling sizes, or whole once the runs so far say it takes PROBE_TOTAL at
-    most, until two or more have taken PROBE_TOTAL together or one is whole (`fitted`, each run at ``units`` of
-    its size), with what the cold run took more than the same run warm. A job that stops by itself short of its size (a
-    search that found what it looks for) reaches as far at a larger one, and takes as long."""
+    job), then timed from ``start`` at doubling sizes (eight times the size, at most whole, where the runs so far
+    say that may take no more than twice what they took or PROBE_TOTAL: `hoped`), until two or more have taken
+    PROBE_TOTAL together or one is whole (`fitted`, each run at ``units`` of its size), with what the cold run
+    took more than the same run warm. A job that reaches well short of its size may have stopped by itself (a
+    search that found what it looks for): a larger run tells, and if it reaches no further, the job takes as long
+    at any size."""
     first, size = run(start) if cold else None, start
     timed = [(units(size), run(size))]
     warm_up = max(first.seconds - timed[0][1].seconds, 0.0) if first else 0.0
-    while size < whole and (len(timed) == 1 or sum(one.seconds for _, one in timed) < PROBE_TOTAL):
-        cheap = fitted(timed, warm_up).seconds(Work("", units(whole))) <= PROBE_TOTAL
-        size = whole if cheap else min(2 * size, whole)
+    while size < whole:
+        spent, short = sum(one.seconds for _, one in timed), timed[-1][1].reached < 0.75 * size
+        if len(timed) > 1 and spent >= PROBE_TOTAL and not short:
+            break
+        leap = min(8 * size, whole)
+        size = leap if hoped(timed, units(leap)) <= max(PROBE_TOTAL, 2 * spent) else min(2 * size, whole)
         timed.append((units(size), run(size)))
         if timed[-1][1].reached <= timed[-2][1].reached:  # it stopped by itself
             return Rate(0.0, timed[-1][1].seconds, warm_up)
     return fitted(timed, warm_up)
+
+
+def hoped(timed: list[tuple[float, Timed]], units: float) -> float:
+    """A hopeful guess at what a job of ``units`` takes, from runs at growing sizes (units, run): the last run's
+    seconds grown as the last two grew, by the same power of the size (a batched world's jobs grow more slowly
+    than their size; a lone run: in proportion)."""
+    at, last = timed[-1]
+    if len(timed) == 1:
+        return last.seconds * units / max(at, 1.0)
+    at_before, before = timed[-2]
+    grew = math.log(max(last.seconds, 1e-9) / max(before.seconds, 1e-9)) / math.log(at / at_before)
+    return last.seconds * (units / at) ** min(max(grew, 0.0), 1.0)
 
 
 def fitted(timed: list[tuple[float, Timed]], warm_up: float) -> Rate:

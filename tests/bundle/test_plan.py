@@ -45,3 +45,12 @@ def test_a_job_that_stops_by_itself_takes_what_it_took_at_any_size():
     rate = measured(lambda budget: Timed(0.3, min(budget, 71)), 200, 5000)  # it finds its clip in 71 steps
     assert rate == Rate(0.0, 0.3)
     assert rate.seconds(Work("", 5000)) == 0.3
+
+
+def test_a_slow_job_that_falls_short_of_its_size_is_run_larger_to_tell_whether_it_stopped_by_itself():
+    def run(budget: int) -> Timed:  # a search that finds its moments in 137 steps, 20 ms a step after 2 s
+        steps = min(budget, 137)
+        return Timed(2.0 + 0.02 * steps, steps)
+
+    rate = measured(run, 100, 5000)  # its two runs at 100 and 200 steps take PROBE_TOTAL, but the second fell short
+    assert rate.seconds(Work("", 5000)) == pytest.approx(2.0 + 0.02 * 137)
