@@ -89,12 +89,16 @@ def verdict(job, folder: Path, evaluations: dict, world, close: dict) -> dict:
     for_better, for_worse = (
         (vote["won"][agents.index(better)], vote["won"][1 - agents.index(better)]) if vote else (0, 0)
     )
+    # the vote leans by its states' summed weight (on-screen order), a vote before the weights by its counts
+    lean = float(for_better - for_worse)
+    if vote is not None and "weight" in vote:
+        lean = vote["weight"] if agents[0] == better else -vote["weight"]
     return (
         found
         | classify(found["shows"], undecided, warnings)
         | {
             "vote": f"{for_better}-{for_worse} ({vote['no_majority'] if vote else 0})",
-            "vote_for": "better" if for_better > for_worse else "worse" if for_worse > for_better else "neither",
+            "vote_for": "better" if lean > 0 else "worse" if lean < 0 else "neither",
             "vote_decided": bool(vote and vote["decided"]),
             "warnings": warnings,
         }

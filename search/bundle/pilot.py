@@ -23,10 +23,10 @@ from search.bundle.build import Prepared
 from search.bundle.evaluations import evaluate_runs
 from search.bundle.steps import Cache
 from search.bundle.truth import paired_comparison
-from search.core.contrast import ALPHA, Rollouts, describe_vote
+from search.core.contrast import ALPHA, describe_vote
 from search.core.domain import domain_for
 from search.core.rollout import Tracker
-from search.solvers.representative import RepresentativeConfig, clip_lengths, planned_looks, vote_states
+from search.solvers.representative import RepresentativeConfig, Tried, clip_lengths, drawn_states, vote_lengths
 from search.solvers.reward import RewardConfig
 from search.solvers.runner import Backend, SearchJob
 
@@ -50,10 +50,12 @@ def pilot_lines(prepared: Prepared, cache: Cache, backend: Backend) -> Iterator[
 
 
 def vote_lines(search: SearchJob) -> Iterator[str]:
-    """One search's vote at the study's clip length and, where weak, at each longer length up to an episode."""
+    """One search's votes as it will take them, and where they are weak, what would decide them: the longest clip
+    (up to an episode) with which the search's own votes decide, or roughly how many states would."""
     domain = domain_for(search.agents, search.scenario, search.world)
     world = domain.search_settings(search.agents, search.world_settings, search.scenario)
     step = domain.step_seconds(search.scenario, world)
+    config: RepresentativeConfig = search.solver_config
     horizon = RewardConfig.from_dict(search.reward_settings).horizon
     episode = domain.episode_seconds(search.scenario, world)
     agents = list(search.agents)
@@ -61,70 +63,78 @@ def vote_lines(search: SearchJob) -> Iterator[str]:
         f"pilot {search.solver} {agents[0]} vs {agents[1]} from {search.scenario} ({search.budget:,} steps, seed "
         f"{search.seed}):"
     )
-    longest = max(horizon, round(episode / step)) if episode is not None else 2 * horizon
-    tried = []
-    for length in clip_lengths(horizon, longest):
-        if length > horizon and (search.solver_config.pushes + 1) * length > search.budget:
-            yield f"  at {length * step:.1f} s: one state's rollouts take more than the budget"
-            break
-        record, weights = pilot_vote(search, length)
-        tried.append((length, record, weights))
+    own = clip_lengths(horizon, config.longest)
+    tried = pilot_votes(search, own)
+    for length, *_, record in tried:
         mark = " (the study's)" if length == horizon else ""
-        line = describe_vote(agents, [record["for_first"], record["for_second"]], record["no_majority"], record["p"])
-        verdict = f"decided for {agents[0] if record['direction'] > 0 else agents[1]}" if record["decided"] else "weak"
-        yield f"  at {length * step:.1f} s{mark}: {verdict}: {line}"
-        if record["decided"]:
+        yield f"  at {length * step:.1f} s{mark}: {verdict(record, agents)}"
+    if any(one[4]["decided"] for one in tried):
+        return
+    longest = round(episode / step) if episode is not None else 2 * own[-1]
+    for more in clip_lengths(horizon, longest)[len(own) :]:
+        if (config.pushes + 1) * more > search.budget:
+            yield f"  with longest = {more * step:g}: one state's rollouts would take more than the budget"
             break
-    chosen = tried[-1]
-    if len(tried) == 1 and chosen[1]["decided"]:
+        longer = pilot_votes(search, clip_lengths(horizon, more))
+        chosen = longer[-1]
+        yield f"  with longest = {more * step:g}, at {chosen[0] * step:.1f} s: {verdict(chosen[4], agents)}"
+        tried += longer
+        if chosen[4]["decided"]:
+            yield (
+                f"  -> longest = {more * step:g} in the scheme's settings lets its search choose "
+                f"{chosen[0] * step:.1f}-s clips where the study's {horizon * step:.1f} s leave the vote weak "
+                "(docs/search.md)"
+            )
+            return
+    best = max(tried, key=lambda one: lean(one[3].state_weights))
+    states = states_needed(best[3].state_weights, best[4]["looks"])
+    if states is None:
+        yield "  -> its states show no difference on the whole: these agents may look alike in any clip"
         return
-    if chosen[1]["decided"]:
-        seconds = chosen[0] * step
-        yield (
-            f"  -> longest = {seconds:g} in the scheme's settings lets its search choose {seconds:.1f}-s clips where "
-            f"the study's {horizon * step:.1f} s leave the vote weak (docs/search.md)"
-        )
-        return
-    best = max(tried, key=lambda one: abs(float(np.mean(one[2]))) / (float(np.std(one[2])) or math.inf))
-    states = states_needed(best[2], best[1]["looks"])
-    cost = (search.solver_config.pushes + 1) * best[0]
+    cost = (config.pushes + 1) * best[0]
     yield (
-        "  -> no length up to an episode decides it at this budget"
-        + (
-            f"; about {states} states would at {best[0] * step:.1f} s (states = {states}, a budget of about "
-            f"{states * cost:,} steps)"
-            if states is not None
-            else "; its states show no difference on the whole: these agents may look alike in any clip"
-        )
+        f"  -> no clip up to an episode decides it at this budget; about {states} states would at "
+        f"{best[0] * step:.1f} s (states = {states}, a budget of about {states * cost:,} steps; the vote stops early "
+        "once decided)"
     )
 
 
-def pilot_vote(search: SearchJob, horizon: int) -> tuple[dict[str, Any], np.ndarray]:
-    """The vote the search's representative solver takes at ``horizon`` steps, on its whole budget: the same states,
-    pushes and looks (its seed's generator, drawn first as the solver draws), without the replays of its clips."""
+def verdict(record: dict[str, Any], agents: list[str]) -> str:
+    """A vote's verdict and its states in words."""
+    line = describe_vote(agents, [record["for_first"], record["for_second"]], record["no_majority"], record["p"])
+    if not record["decided"]:
+        return f"weak: {line}"
+    return f"decided for {agents[0] if record['direction'] > 0 else agents[1]}: {line}"
+
+
+def lean(weights: np.ndarray) -> float:
+    """How far states' weights lean, over their spread (0 where they do not)."""
+    mean, spread = abs(float(np.mean(weights))), float(np.std(weights))
+    return mean / spread if spread else math.inf if mean else 0.0
+
+
+def pilot_votes(search: SearchJob, lengths: list[int]) -> list[Tried]:
+    """The votes the search's representative solver takes at ``lengths`` (steps, `vote_lengths`): the same states,
+    pushes, budget and looks (its seed's generator, drawn first as the solver draws), without the replays of its
+    clips."""
     domain = domain_for(search.agents, search.scenario, search.world)
     world = domain.search_settings(search.agents, search.world_settings, search.scenario)
     config: RepresentativeConfig = search.solver_config
     rng = np.random.default_rng(search.seed)
-    tracker = Tracker(search.budget, 1)
-    scenarios = domain.draw_states(search.scenario, world, rng, config.states)
-    reward = search.reward_settings | {"horizon": horizon}
-
-    def roll_out(states: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
-        return domain.roll_out(list(search.agents), states, reward, pushes, rng, tracker)
-
-    looks = planned_looks(config.states, tracker, config, horizon)
-    _, result, record = vote_states(roll_out, scenarios, tracker, rng, config, horizon, looks, looks)
-    return record, result.state_weights
+    roll_out, draw = drawn_states(domain, list(search.agents), search.scenario, world, search.reward_settings,
+                                  config.states, rng)  # fmt: skip
+    return vote_lengths(roll_out, draw, Tracker(search.budget, 1), rng, config, lengths)
 
 
 def states_needed(weights: np.ndarray, looks: int) -> int | None:
     """Roughly how many states a vote needs to decide, with chance `POWER`, a lean as large as these weights' (their
-    mean over their spread), tested at ``ALPHA / looks``: the normal approximation of the sign-flip test. None
-    where they lean nowhere."""
+    mean over their spread), tested at ``ALPHA / looks``: the normal approximation of the sign-flip test; where every
+    state leans alike, the fewest whose unanimous sign test decides. None where they lean nowhere."""
     mean, spread = float(np.mean(weights)), float(np.std(weights, ddof=1)) if len(weights) > 1 else 0.0
-    if mean == 0 or spread == 0:
+    if mean == 0:
         return None
+    if spread == 0:  # n alike: p = 2 / 2**n
+        return math.floor(1 + math.log2(looks / ALPHA)) + 1
     z = float(norm.ppf(1 - ALPHA / looks / 2) + norm.ppf(POWER))
     return math.ceil((z * spread / abs(mean)) ** 2)
 

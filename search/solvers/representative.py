@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from search.core.rollout import Tracker
 from search.core.workers import workers
 from search.solvers.reward import RewardConfig
 from search.solvers.solver import Comparison, OwnSummaries, register
+
+if TYPE_CHECKING:
+    from search.core.domain import Domain
 
 Replay = TypeVar("Replay")  # what a candidate's replay gives (a summary)
 
@@ -244,16 +247,7 @@ def representative(
     actions), ...])`` gives each exact replay's contrast and the replay (a summary) at ``n`` steps, ``ahead`` at a
     time, not counted against the budget, as no solver counts its summaries' replays. Returns the chosen replays
     in order and the record of the vote for run.json."""
-    fitting = [n for n in lengths if (config.pushes + 1) * n <= tracker.budget] or list(lengths[:1])
-    looks = [planned_looks(config.states, tracker, config, n) for n in fitting]
-    tried: list[tuple[int, list[Any], Rollouts, Vote, dict[str, Any]]] = []
-    for n, own in zip(fitting, looks, strict=True):
-        if tried and tracker.remaining < (config.pushes + 1) * n:
-            break
-        scenarios = draw()
-        tried.append((n, scenarios, *vote_states(roll_out(n), scenarios, tracker, rng, config, n, own, sum(looks))))
-        if tried[-1][4]["decided"]:
-            break
+    tried = vote_lengths(roll_out, draw, tracker, rng, config, lengths)
     n, scenarios, rollouts, result, record = next((one for one in tried if one[4]["decided"]), tried[0])
     chosen, record["candidates"], record["selection"] = choose_clips(
         rollouts, result, scenarios, replay(n), tracker.queue.k, ahead
@@ -265,6 +259,56 @@ def representative(
         record["horizon"] = n
         record["lengths"] = [{"horizon": one[0]} | {key: one[4][key] for key in STRENGTH} for one in tried]
     return [summary for _, summary in chosen], record
+
+
+def drawn_states(
+    domain: Domain,
+    agents: Sequence[str],
+    scenario: str,
+    world: dict[str, Any],
+    reward: dict[str, Any],
+    states: int,
+    rng: np.random.Generator,
+) -> tuple[Callable[[int], RollOut], Callable[[], list[Any]]]:
+    """A search's rollouts at a clip length (``roll_out(n)``: its world's `Domain.roll_out` at ``n`` steps) and its
+    draw of ``states`` starting states from the distribution ``scenario``, both on ``rng``."""
+
+    def roll_out(horizon: int) -> RollOut:
+        def at(drawn: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
+            return domain.roll_out(agents, drawn, reward | {"horizon": horizon}, pushes, rng, tracker)
+
+        return at
+
+    def draw() -> list[Any]:
+        return domain.draw_states(scenario, world, rng, states)
+
+    return roll_out, draw
+
+
+Tried = tuple[int, list[Any], Rollouts, Vote, dict[str, Any]]  # a length, its states, rollouts, vote and record
+
+
+def vote_lengths(
+    roll_out: Callable[[int], RollOut],
+    draw: Callable[[], list[Any]],
+    tracker: Tracker,
+    rng: np.random.Generator,
+    config: RepresentativeConfig,
+    lengths: Sequence[int],
+) -> list[Tried]:
+    """The votes `representative` takes: at each length in turn, on newly drawn states, until one is decided or the
+    budget fits no state of the next length, every look of every length planned first and tested together."""
+    fitting = [n for n in lengths if (config.pushes + 1) * n <= tracker.budget] or list(lengths[:1])
+    looks = [planned_looks(config.states, tracker, config, n) for n in fitting]
+    tried: list[Tried] = []
+    for n, own in zip(fitting, looks, strict=True):
+        if tried and tracker.remaining < (config.pushes + 1) * n:
+            break
+        scenarios = draw()
+        tried.append((n, scenarios, *vote_states(roll_out(n), scenarios, tracker, rng, config, n, own, sum(looks))))
+        if tried[-1][4]["decided"]:
+            break
+    return tried
 
 
 STRENGTH = ("states", "for_first", "for_second", "no_majority", "weight", "p", "decided")  # a vote in short
@@ -373,12 +417,7 @@ class Representative(OwnSummaries):
             )
         agents = comparison.pair(self.name, "solver votes which of two agents looks better")
         world = comparison.world_settings
-
-        def roll_out(horizon: int) -> RollOut:
-            def at(states: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
-                return domain.roll_out(agents, states, reward_settings | {"horizon": horizon}, pushes, rng, tracker)
-
-            return at
+        roll_out, draw = drawn_states(domain, agents, scenario, world, reward_settings, config.states, rng)
 
         # a world without a batched fast path replays a candidate per worker at a time (Domain.replays)
         ahead = 1 if domain.batched else workers()
@@ -386,9 +425,6 @@ class Representative(OwnSummaries):
         def replay(horizon: int) -> Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, dict[str, Any]]]]:
             reward = reward_settings | {"horizon": horizon}
             return lambda candidates: domain.replays(agents, candidates, reward, comparison.entry)
-
-        def draw() -> list[Any]:
-            return domain.draw_states(scenario, world, rng, config.states)
 
         lengths = clip_lengths(RewardConfig.from_dict(reward_settings).horizon, config.longest)
         summaries, vote = representative(roll_out, draw, tracker, rng, config, replay, lengths, ahead)

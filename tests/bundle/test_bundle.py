@@ -435,10 +435,18 @@ def test_the_representativeness_line_warns_when_the_scenario_decidedly_disagrees
         "disagrees": disagrees,
         "agreeing_p": 0.001 if decided else 0.3,
         "decided": decided,
-        "distribution_vote": {"direction": 1, "states": 64, "for_first": 50, "for_second": 4},
+        "distribution_vote": {
+            "direction": 1,
+            "states": 64,
+            "for_first": 50,
+            "for_second": 4,
+            "p": 0.0001,
+            "alpha": 0.05,
+            "decided": True,
+        },
     }
     line = describe_representativeness(report)
     assert line.startswith(start) and line.endswith(end)
     assert "lo looks better in 10% of 33 nominal rollouts, hi in 70%" in line
-    assert "training's 64 states vote lo (50 for lo, 4 for hi)" in line
+    assert "training's 64 states vote lo (50 for lo, 4 for hi, weighed by how plainly)" in line
     assert "agrees with that vote as often as or more often than 40% of the distribution's states do" in line

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from search.bundle.build import prepare
-from search.bundle.pilot import pilot_vote, states_needed
+from search.bundle.pilot import pilot_votes, states_needed
 from search.cli import main
 from search.solvers.reward import RewardConfig
 from search.solvers.runner import run_search
@@ -20,7 +20,8 @@ from tests.gym.test_any_world import FAST, SLOW, world  # noqa: F401  (the resea
 def test_the_pilot_votes_as_the_builds_search_does(world):  # noqa: F811
     [search] = [s for s in prepare("study.toml").searches if s.solver == "representative"]
     built = json.loads(run_search(search)["run.json"])["vote"]
-    piloted, weights = pilot_vote(search, RewardConfig.from_dict(search.reward_settings).horizon)
+    [(_, _, _, result, piloted)] = pilot_votes(search, [RewardConfig.from_dict(search.reward_settings).horizon])
+    weights = result.state_weights
     same = ("states", "for_first", "for_second", "no_majority", "weight", "p", "decided", "looks", "stopped")
     assert {key: piloted[key] for key in same} == {key: built[key] for key in same}
     assert len(weights) == built["states"]
@@ -51,3 +52,16 @@ def test_the_states_a_lean_needs_shrink_as_it_grows_and_a_simulation_agrees(lean
     ]
     assert 0.65 <= np.mean(decided) <= 0.95
     assert states_needed(np.zeros(8), 1) is None
+    assert states_needed(np.full(8, 0.3), 1) == 6  # alike: six of six decide the sign test (p = 1/32 < 0.05)
+
+
+def test_a_weak_vote_is_said_with_what_would_decide_it(world, capsys):  # noqa: F811
+    """Two states never decide a vote (p >= 1/2): the pilot says so at the study's length, tries longer clips the
+    budget fits, and names roughly how many states would decide it, or that none can."""
+    study = (world / "study.toml").read_text().replace("states = 4, pushes = 2 }", "states = 2, pushes = 2 }")
+    (world / "study.toml").write_text(study)
+    assert main(["bundle", "study.toml", "--out", "piloted", "--pilot", "--jobs", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "(the study's): weak: of 2 starting states" in lines[1]
+    advice = next(line for line in lines if line.startswith("  -> "))
+    assert "about 6 states would at" in advice  # both states show the slow runner as better, alike
