@@ -147,7 +147,7 @@ def hoped(timed: list[tuple[float, Timed]], units: float) -> float:
         return last.seconds * units / max(at, 1.0)
     at_before, before = timed[-2]
     grew = math.log(max(last.seconds, 1e-9) / max(before.seconds, 1e-9)) / math.log(at / at_before)
-    return last.seconds * (units / at) ** min(max(grew, 0.0), 1.0)
+    return last.seconds * math.pow(units / at, min(max(grew, 0.0), 1.0))
 
 
 def fitted(timed: list[tuple[float, Timed]], warm_up: float) -> Rate:
