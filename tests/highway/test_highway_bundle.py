@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -59,19 +60,27 @@ def test_a_tiny_highway_bundle_builds_and_serves(tmp_path):
 
     text = STUDY.read_text().replace("budget = 600", "budget = 40").replace("episodes = 100", "episodes = 3")
     text = text.replace("budget = 5_000", "budget = 200").replace("states = 64", "states = 2")
-    # one fixed scenario of the two: the other's clips are made the same way
+    # one fixed scenario of the two, and part one alone on the example's two cars: every scheme's clip of one pair
+    # (4 clips with the example's, where three cars and the ranking part made 13 the same way)
     text = text.replace('scenarios = ["highway-dense", "highway-four-lanes"]', 'scenarios = ["highway-dense"]')
     text = text.replace('["highway-traffic", "highway-traffic"]', '["highway-traffic"]')
+    text, ranking = re.subn(r'\[\[parts\]\]\nkind = "ranking"\n.*?\n\n', "", text, flags=re.DOTALL)
+    text = re.sub(r"pairs = \[\[.*\]\]\n", 'pairs = [["highway-lo", "highway-hi"]]\n', text, count=1)
+    text = text.replace('parts = ["pairwise", "ranking"]', 'parts = ["pairwise"]')
+    text = text.replace('agents = ["highway-lo", "highway-med", "highway-hi"]', 'agents = ["highway-lo", "highway-hi"]')
     text = text.replace(
         "[build.eval]",
-        "[build.render]\nspeed = 8.0\nhold_start = 0.2\nhold_end = 0.2\nevent_hold = 0.2\nwidth = 480\n\n[build.eval]",
+        "[build.render]\nspeed = 20.0\nfps = 20\nhold_start = 0.2\nhold_end = 0.2\nevent_hold = 0.2\nwidth = 320\n\n"
+        "[build.eval]",
     )
+    assert ranking == 1
     study = tmp_path / "highway.toml"
     study.write_text(text)
     log = []
     manifest = build_bundle(study, tmp_path / "bundle", log=log.append)
     out = tmp_path / "bundle"
-    assert len(manifest.clips) == 13 and set(manifest.agents) == {"highway-lo", "highway-med", "highway-hi"}
+    assert len(manifest.clips) == 4 and set(manifest.agents) == {"highway-lo", "highway-hi"}
+    assert {clip.scheme for clip in manifest.clips} == {"adaptive", "nfirst", "representative"}
     for clip in manifest.clips:
         assert (out / clip.file).is_file() and (out / clip.poster).is_file() and clip.audit is not None
         assert json.loads((out / clip.summary).read_text())["scenario"]["domain"] == "gym"
