@@ -5,7 +5,17 @@ from __future__ import annotations
 
 import math
 
-from app.survey.study import Study
+from app.survey.study import NO_DIFFERENCE, Study
+
+# A study of updates (`[design] updates`): per measure, the updates whose answers it reads (what the ground truth
+# says of each: better, worse, equal) and the answer it counts (`called`: later, earlier or no difference, or
+# `right`: the answer names the better version). Each is modelled as accuracy is, against guessing one of three.
+UPDATE_MEASURES = {
+    "right on decided updates": (("better", "worse"), "right"),
+    "no difference on equal pairs": (("equal",), NO_DIFFERENCE),
+    "later called better on equal and worse updates": (("equal", "worse"), "later"),
+}
+GUESS = 1 / 3  # one of a compare question's three answers
 
 
 def chance(study: Study, task: str) -> float:

@@ -11,7 +11,7 @@ from itertools import groupby
 from pathlib import Path
 from typing import Any
 
-from app.analysis.design import chance, tasks
+from app.analysis.design import GUESS, UPDATE_MEASURES, chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules
 from app.analysis.model import MODEL_VERSION
 from app.analysis.source import sha256
@@ -106,7 +106,6 @@ def _update_hypotheses(study: Study) -> list[str]:
     """A study of updates: what the report estimates of its update pairs (none for other studies)."""
     if not study.design.updates:
         return []
-    from app.analysis.report import GUESS, UPDATE_MEASURES  # the report's own measures
 
     return [
         "updates: the pairwise accuracy above is of the compare answers on the update pairs the ground truth decides; "

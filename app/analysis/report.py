@@ -20,7 +20,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from app.analysis.answer_table import ORDER_SEPARATOR, long_rows, participant_records
-from app.analysis.design import chance, tasks
+from app.analysis.design import GUESS, UPDATE_MEASURES, chance, tasks
 from app.analysis.exclusions import REASONS, ExclusionRules, exclusion_flags, median_duration_s
 from app.analysis.model import Answers, ModelResult, RatingResult, Ratings, fit_accuracy, fit_ratings
 from app.analysis.prereg import deviations
@@ -41,15 +41,6 @@ TASKS = {  # each part's title, in the world's words (`Words.say`, `ReportData.t
     "ranking": "part two: global ranking (all {agents} in the right order)",
 }
 FIGURES_EXTRA = "pip install 'foil[figures]'"
-# A study of updates (`[design] updates`): per measure, the updates whose answers it reads (what the ground truth
-# says of each: better, worse, equal) and the answer it counts (`called`: later, earlier or no difference, or
-# `right`: the answer names the better version). Each is modelled as accuracy is, against guessing one of three.
-UPDATE_MEASURES = {
-    "right on decided updates": (("better", "worse"), "right"),
-    "no difference on equal pairs": (("equal",), NO_DIFFERENCE),
-    "later called better on equal and worse updates": (("equal", "worse"), "later"),
-}
-GUESS = 1 / 3  # one of a compare question's three answers
 # The paper's Figure 4: orange for disagreement, blue for agreement, grey for the middle.
 DISAGREE, NEUTRAL, AGREE = ("#e66101", "#fdb863"), "#d9d9d9", ("#92c5de", "#0571b0")
 
