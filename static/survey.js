@@ -122,7 +122,7 @@
     const gated = box.hasAttribute("data-gated");
     const nextOnly = box.hasAttribute("data-next-only");  // a clip to watch, no questions: only Next unlocks
     const reel = box.hasAttribute("data-reel") ? parseInt(box.dataset.reel, 10) : null;  // its place among reels
-    const agent = box.dataset.agent || "robot";  // the world's word for an agent (a crowd's page names none)
+    const agent = box.dataset.agent;  // the world's word for an agent
     const unlocks = nextOnly ? (reel !== null ? "The Next button unlocks when each " + agent + "'s clip has ended."
                                               : "The Next button unlocks when the clip ends.")
                   : reel !== null ? "You can answer when each " + agent + "'s clip has ended." : "You can answer when the clip ends.";
@@ -288,7 +288,7 @@
         if (clash) select.setAttribute("aria-invalid", "true"); else select.removeAttribute("aria-invalid");
       });
       message.hidden = !twice;
-      message.textContent = twice ? "Each " + (group.dataset.agent || "robot") + " can take only one place: " + twice + " is chosen twice." : "";
+      message.textContent = twice ? "Each " + group.dataset.agent + " can take only one place: " + twice + " is chosen twice." : "";
     }
     selects.forEach(function (select) { select.addEventListener("change", check); });
     check();
