@@ -459,6 +459,23 @@ class VisibleClip:
             clock_s=start_s,
         )
 
+    def pick(self, indices: Sequence[int], end_s: float) -> VisibleClip:
+        """The clip of the agents at ``indices`` alone, ending at ``end_s``: a pair's clip read from a rollout of
+        more agents, in which each agent's outcome, progress and score are its own up to its ending."""
+
+        def of(values: tuple[Any, ...]) -> tuple[Any, ...]:
+            return tuple(values[i] for i in indices) if values else ()
+
+        return replace(
+            self,
+            labels=of(self.labels),
+            outcomes=of(self.outcomes),
+            progress=of(self.progress),
+            to_goal=of(self.to_goal),
+            summed=of(self.summed),
+            end_s=end_s,
+        )
+
     def scores(self, observer: Observer) -> dict[str, float]:
         return self._judged(observer)[0]
 

@@ -12,6 +12,7 @@ per agent: seconds to minutes, against the build's evaluations, searches, checks
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -21,12 +22,14 @@ from scipy.stats import norm
 
 from search.bundle.build import Prepared
 from search.bundle.evaluations import evaluate_runs
+from search.bundle.searches import pool_key
 from search.bundle.steps import Cache
 from search.bundle.truth import paired_comparison
 from search.core.contrast import ALPHA, describe_vote
 from search.core.domain import domain_for
 from search.core.rollout import Tracker
-from search.solvers.representative import RepresentativeConfig, Tried, clip_lengths, drawn_states, vote_lengths
+from search.solvers.pool import Pool
+from search.solvers.representative import RepresentativeConfig, Tried, clip_lengths, vote_lengths
 from search.solvers.reward import RewardConfig
 from search.solvers.runner import Backend, SearchJob
 
@@ -44,14 +47,47 @@ def pilot_lines(prepared: Prepared, cache: Cache, backend: Backend) -> Iterator[
     }
     if not searches:
         yield "pilot: no representative scheme to vote; ground truth only"
-    for search in searches.values():
-        yield from vote_lines(search)
+    keyed = [(search, shared_key(search)) for search in searches.values()]
+    agents: dict[str, list[str]] = {}  # the agents of the searches that share a pool
+    for search, key in keyed:
+        agents.setdefault(key, []).extend(search.agents)
+    pools = {key: search_pool(next(s for s, own in keyed if own == key), agents[key]) for key in agents}
+    for search, key in keyed:
+        yield from vote_lines(search, pools[key])
     yield from truth_lines(prepared, cache, backend)
 
 
-def vote_lines(search: SearchJob) -> Iterator[str]:
-    """One search's votes as it will take them, and where they are weak, what would decide them: the longest clip
-    (up to an episode) with which the search's own votes decide, or roughly how many states would."""
+def shared_key(search: SearchJob) -> str:
+    """What the pool of a representative search depends on (`search.bundle.searches.pool_key`) and the world
+    settings its agents resolve to: searches with one key share a pool."""
+    domain = domain_for(search.agents, search.scenario, search.world)
+    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
+    return json.dumps([pool_key(search), world], sort_keys=True)
+
+
+def search_pool(search: SearchJob, agents: list[str]) -> Pool:
+    """The pool a study's representative searches share (`search.bundle.searches.search_group_files`), here for
+    ``agents``: the same draws as each search's own."""
+    domain = domain_for(search.agents, search.scenario, search.world)
+    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
+    config: RepresentativeConfig = search.solver_config
+    return Pool(
+        domain,
+        list(dict.fromkeys(agents)),
+        search.scenario,
+        world,
+        search.reward_settings,
+        config.states,
+        config.pushes,
+        config.batch_states,
+        np.random.default_rng(search.seed),
+    )
+
+
+def vote_lines(search: SearchJob, pool: Pool) -> Iterator[str]:
+    """One search's votes as it will take them (read from ``pool``), and where they are weak, what would decide
+    them: the longest clip (up to an episode) with which the search's own votes decide, or roughly how many states
+    would."""
     domain = domain_for(search.agents, search.scenario, search.world)
     world = domain.search_settings(search.agents, search.world_settings, search.scenario)
     step = domain.step_seconds(search.scenario, world)
@@ -64,7 +100,7 @@ def vote_lines(search: SearchJob) -> Iterator[str]:
         f"{search.seed}):"
     )
     own = clip_lengths(horizon, config.longest)
-    tried = pilot_votes(search, own)
+    tried = pilot_votes(search, pool, own)
     for length, *_, record in tried:
         mark = " (the study's)" if length == horizon else ""
         yield f"  at {length * step:.1f} s{mark}: {verdict(record, agents)}"
@@ -75,7 +111,7 @@ def vote_lines(search: SearchJob) -> Iterator[str]:
         if (config.pushes + 1) * more > search.budget:
             yield f"  with longest = {more * step:g}: one state's rollouts would take more than the budget"
             break
-        longer = pilot_votes(search, clip_lengths(horizon, more))
+        longer = pilot_votes(search, pool, clip_lengths(horizon, more))
         chosen = longer[-1]
         yield f"  with longest = {more * step:g}, at {chosen[0] * step:.1f} s: {verdict(chosen[4], agents)}"
         tried += longer
@@ -113,17 +149,13 @@ def lean(weights: np.ndarray) -> float:
     return mean / spread if spread else math.inf if mean else 0.0
 
 
-def pilot_votes(search: SearchJob, lengths: list[int]) -> list[Tried]:
+def pilot_votes(search: SearchJob, pool: Pool, lengths: list[int]) -> list[Tried]:
     """The votes the search's representative solver takes at ``lengths`` (steps, `vote_lengths`): the same states,
-    pushes, budget and looks (its seed's generator, drawn first as the solver draws), without the replays of its
+    pushes, budget and looks (read from ``pool``, which draws as the search's own), without the replays of its
     clips."""
-    domain = domain_for(search.agents, search.scenario, search.world)
-    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
+    agents = list(search.agents)
     config: RepresentativeConfig = search.solver_config
-    rng = np.random.default_rng(search.seed)
-    roll_out, draw = drawn_states(domain, list(search.agents), search.scenario, world, search.reward_settings,
-                                  config.states, rng)  # fmt: skip
-    return vote_lengths(roll_out, draw, Tracker(search.budget, 1), rng, config, lengths)
+    return vote_lengths(lambda n: pool.rollouts(agents, n), pool.draw, Tracker(search.budget, 1), config, lengths)
 
 
 def states_needed(weights: np.ndarray, looks: int) -> int | None:

@@ -25,7 +25,7 @@ from typing import Any, NamedTuple, cast
 from search.bundle.build import Prepared
 from search.bundle.clips import render_job
 from search.bundle.evaluations import eval_tasks, evaluation_job, evaluation_work
-from search.bundle.representativeness import check_tasks, check_work
+from search.bundle.representativeness import check_job, check_tasks, check_work
 from search.bundle.searches import search_job_files, search_work
 from search.bundle.steps import Cache, Rate, Task, Work, duration, expected, input_key, makespan
 from search.clips.render import RenderOptions
@@ -200,15 +200,17 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
     )
 
     checks = check_tasks(study)
-    unchecked = [
-        task for _, _, inputs, task in checks.values() if not cache.valid("representativeness", inputs, "report.json")
-    ]
+    pending: dict[str, dict[tuple[str, str], list[str]]] = {}  # distribution -> its pairs not cached
+    for pair, (names, distribution, inputs) in checks.items():
+        if not cache.valid("representativeness", inputs, "report.json"):
+            pending.setdefault(distribution, {})[pair] = names
+    unchecked = [check_job(study, distribution, pairs) for distribution, pairs in pending.items()]
     settings = spec.representativeness
     check_step = Step(
         "representativeness checks",
         f"{len(checks)} pair{'' if len(checks) == 1 else 's'} x ({settings.states} states + their scenarios) x "
         f"{settings.pushes} pushes",
-        len(checks) - len(unchecked),
+        len(checks) - sum(len(pairs) for pairs in pending.values()),
         [check_work(task) for task in unchecked],
         {"check": lambda call: _check(unchecked[0], call)} if unchecked else {},
     )
@@ -263,12 +265,12 @@ def _search(search: SearchJob, found: dict[str, bytes], cold: bool) -> Callable[
 
 
 def _check(task: Task, call: Call) -> Rate:
-    """A pair's check's rate in seconds per rollout step, on a few of its starting states."""
-    function, (domain, pair, fixed, distribution, world, settings, reward) = task
+    """A distribution's check's rate in seconds per rollout step, on a few of its starting states."""
+    function, (domain, fixed, distribution, world, settings, reward) = task
 
     def run(states: int) -> Timed:
         fewer = settings.model_copy(update={"states": states})
-        return Timed(cast(float, call(function, domain, pair, fixed, distribution, world, fewer, reward)[1]), states)
+        return Timed(cast(float, call(function, domain, fixed, distribution, world, fewer, reward)[1]), states)
 
     return measured(run, 1, settings.states, lambda states: check_work(task, states).units)
 

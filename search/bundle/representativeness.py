@@ -23,24 +23,30 @@ def representativeness(
     """For every pair shown on a fixed scenario in a pairwise or ranking part: how often each agent looks better
     there under nominal pushes, against the vote of the task's distribution (`[build.representativeness]`, by
     default the world's own), with a warning line when the scenario's majority disagrees with the distribution's
-    vote; pairs measured on ``backend``, each scenario and the distribution in the study's world settings
-    (`Study.world_settings`)."""
+    vote; each distribution's pairs measured together on ``backend`` (one job: each agent plays each drawn state
+    and each scenario once, `search.solvers.pool`), each scenario and the distribution in the study's world
+    settings (`Study.world_settings`)."""
     checks = check_tasks(study)
-    todo = {
-        pair: task
-        for pair, (_, _, inputs, task) in checks.items()
-        if not cache.valid("representativeness", inputs, "report.json")
-    }
-    described = {pair: f"representativeness {pair[0]}-{pair[1]}" for pair in todo}
-    for pair, (found, seconds), progress in finished(
-        todo, backend, described.__getitem__, lambda pair: check_work(todo[pair])
+    todo: dict[str, dict[tuple[str, str], Any]] = {}  # distribution -> its pairs not cached
+    for pair, (names, distribution, inputs) in checks.items():
+        if not cache.valid("representativeness", inputs, "report.json"):
+            todo.setdefault(distribution, {})[pair] = names
+    tasks = {distribution: check_job(study, distribution, pairs) for distribution, pairs in todo.items()}
+
+    def described(distribution: str) -> str:
+        return f"representativeness {distribution}: {', '.join(f'{a}-{b}' for a, b in todo[distribution])}"
+
+    for distribution, (found, seconds), progress in finished(
+        tasks, backend, described, lambda distribution: check_work(tasks[distribution])
     ):
-        folder = cache.store("representativeness", checks[pair][2])
-        (folder / "report.json").write_text(json.dumps(found, indent=1))
-        cache.seal("representativeness", checks[pair][2])
-        log(f"{described[pair]}: {seconds:.1f} s {progress}")
+        for pair, reports in found.items():
+            inputs = checks[pair][2]
+            folder = cache.store("representativeness", inputs)
+            (folder / "report.json").write_text(json.dumps(reports, indent=1))
+            cache.seal("representativeness", inputs)
+        log(f"{described(distribution)}: {seconds:.1f} s {progress}")
     reports: list[dict[str, Any]] = []
-    for pair, (names, distribution, inputs, _) in checks.items():
+    for pair, (names, distribution, inputs) in checks.items():
         found = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
         for name, one in zip(names, found, strict=True):
             report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
@@ -51,10 +57,10 @@ def representativeness(
     return reports
 
 
-def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dict[str, Any], Task]]:
+def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dict[str, Any]]]:
     """Each pair shown on a fixed scenario in a pairwise or ranking part, with its scenarios, the distribution
-    they are measured against, the check's inputs and its job (function, arguments); none in a world with no
-    distribution of starting states where the study names none."""
+    they are measured against and the check's inputs; none in a world with no distribution of starting states
+    where the study names none."""
 
     spec, domain = study.spec, study.domain
     settings = spec.representativeness
@@ -72,7 +78,6 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
         names = list(dict.fromkeys(names))
         fixed = [domain.state(name, study.world_settings(name)) for name in names]
         drawn_world = study.world_settings(distribution)
-        reward = clip_reward(study, distribution, drawn_world)
         inputs = {
             "agents": [agent_identity(a, domain) for a in pair],
             "scenarios": [s.to_dict() for s in fixed],
@@ -80,21 +85,36 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
             "states": settings.states,
             "pushes": settings.pushes,
             "seed": settings.seed,
-            "reward": reward,
-            "check": 3,  # the check's rules (2: ties count half in the percentile; a test decides the warning; 3: the
-            # distribution's states weigh in by how plainly they show a difference)
+            "reward": clip_reward(study, distribution, drawn_world),
+            "check": 4,  # the check's rules (2: ties count half in the percentile; a test decides the warning; 3: the
+            # distribution's states weigh in by how plainly they show a difference; 4: every agent is pushed until
+            # each one's episode has ended, and each scenario's pushes are its own)
         }
-        task = (representativeness_job, (domain.name, pair, fixed, distribution, drawn_world, settings, reward))
-        checks[pair] = (names, distribution, inputs, task)
+        checks[pair] = (names, distribution, inputs)
     return checks
+
+
+def check_job(study: Study, distribution: str, pairs: dict[tuple[str, str], list[str]]) -> Task:
+    """The job that checks ``pairs`` (each with its scenarios' names) against ``distribution``: every agent's
+    rollouts played once for all of them."""
+    domain, world = study.domain, study.world_settings(distribution)
+    fixed = {
+        pair: [(name, domain.state(name, study.world_settings(name))) for name in names]
+        for pair, names in pairs.items()
+    }
+    reward = clip_reward(study, distribution, world)
+    settings = study.spec.representativeness
+    return (representativeness_job, (domain.name, fixed, distribution, world, settings, reward))
 
 
 def check_work(task: Task, states: int | None = None) -> Work:
     """A check's size in simulator steps, its rollouts' most: (``states`` drawn, by default its settings', and its
-    scenarios) x (pushes + 1) rollouts of the reward's horizon."""
-    _, (_, _, fixed, _, _, settings, reward) = task
+    scenarios) x (pushes + 1) rollouts of the reward's horizon, for each agent."""
+    _, (_, fixed, _, _, settings, reward) = task
+    agents = {agent for pair in fixed for agent in pair}
+    scenarios = {name for named in fixed.values() for name, _ in named}
     drawn = settings.states if states is None else states
-    return Work("check", (drawn + len(fixed)) * (settings.pushes + 1) * reward["horizon"])
+    return Work("check", len(agents) * (drawn + len(scenarios)) * (settings.pushes + 1) * reward["horizon"])
 
 
 def clip_reward(study: Study, distribution: str, world: dict[str, Any]) -> dict[str, Any]:
@@ -111,29 +131,37 @@ def clip_reward(study: Study, distribution: str, world: dict[str, Any]) -> dict[
 
 def representativeness_job(
     domain_name: str,
-    pair: tuple[str, str],
-    fixed: list[Any],
+    fixed: dict[tuple[str, str], list[tuple[str, Any]]],
     distribution: str,
     world: dict[str, Any],
     settings: Representativeness,
     reward: dict[str, Any],
-) -> tuple[list[dict[str, Any]], float]:
-    """One pair's representativeness reports and the seconds they took (in a worker process: the domain is
-    found by name)."""
+) -> tuple[dict[tuple[str, str], list[dict[str, Any]]], float]:
+    """The representativeness reports of every pair checked against one distribution (each with its fixed
+    scenarios: name and state), and the seconds they took (in a worker process: the domain is found by name):
+    every agent plays each drawn state and each scenario once (`search.solvers.pool.Pool`), and each pair's
+    reports read the same whichever pairs are checked beside it."""
     import numpy as np
 
-    from search.solvers.representative import RepresentativeConfig, how_representative
+    from search.core.contrast import Rollouts
+    from search.core.rollout import Tracker
+    from search.solvers.pool import Pool
+    from search.solvers.representative import RepresentativeConfig, how_representative, roll_out_states
 
     started, domain = time.perf_counter(), domain_named(domain_name)
+    agents = list(dict.fromkeys(agent for pair in fixed for agent in pair))
+    config = RepresentativeConfig(states=settings.states, pushes=settings.pushes)
     rng = np.random.default_rng(settings.seed)
-    drawn = domain.draw_states(distribution, world, rng, settings.states)
-    found = how_representative(
-        lambda states, pushes, rng, tracker: domain.roll_out(pair, states, reward, pushes, rng, tracker),
-        fixed,
-        drawn,
-        RepresentativeConfig(states=settings.states, pushes=settings.pushes),
-        rng,
-    )
+    pool = Pool(domain, agents, distribution, world, reward, config.states, config.pushes, config.batch_states, rng)
+    horizon, found = reward["horizon"], {}
+    for pair, scenarios in fixed.items():
+        tracker = Tracker(2**62, 1)  # no budget: every drawn state votes, whatever it costs
+        drawn, states, _ = roll_out_states(pool.rollouts(pair, horizon), pool.draw(horizon), config, tracker, 1)
+        first, second = (agents.index(agent) for agent in pair)
+        own: list[tuple[str, Rollouts]] = [
+            (name, pool.fixed(name, state, horizon).pair(first, second)[0]) for name, state in scenarios
+        ]
+        found[pair] = how_representative(drawn, states, own, config.alpha)
     return found, time.perf_counter() - started
 
 

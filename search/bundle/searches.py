@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import json
 import random
 import time
 from dataclasses import asdict, dataclass, replace
@@ -92,12 +93,12 @@ def _distinct_reels(jobs: list[ClipJob]) -> list[ClipJob]:
 
 def _draws(scheme: Scheme, parts: tuple[str, ...]) -> list[tuple[tuple[str, ...], str, Scheme]]:
     """The clips of a set's pair under a scheme, as (parts fed, suffix of the clip's name, scheme): one for all the
-    set's parts. A solver that starts only from a distribution (the representative solver) draws its starting
-    states at random, so a set feeding both parts gets a draw of its own (seed + 1) for the ranking, whose round
-    would otherwise replay part one's clips."""
-    if solver_named(scheme.solver).starts != "distribution" or not {"pairwise", "ranking"} <= set(parts):
+    set's parts. A solver that votes on rollouts it shares (``pooled``: the representative solver) would choose
+    the same clip for both parts, so a set feeding both gets a clip of its own for the ranking, whose round would
+    otherwise replay part one's clips: from the same vote, another state (``earlier = 1``)."""
+    if not solver_named(scheme.solver).pooled or not {"pairwise", "ranking"} <= set(parts):
         return [(parts, "", scheme)]
-    ranking = replace(scheme, seed=scheme.seed + 1)
+    ranking = replace(scheme, solver_config=replace(scheme.solver_config, earlier=1))
     return [(tuple(part for part in parts if part != "ranking"), "", scheme), (("ranking",), "/ranking", ranking)]
 
 
@@ -173,21 +174,86 @@ def search_job_files(search: SearchJob) -> tuple[dict[str, str], float]:
     return run_search(search), time.perf_counter() - started
 
 
+def pool_key(search: SearchJob) -> str | None:
+    """What a search's shared rollouts depend on (`search.solvers.pool`), for a solver whose votes read a pool:
+    searches with one key run in one job, in which each agent plays each drawn state once for all of them. None
+    for any other search."""
+    if not solver_named(search.solver).pooled:
+        return None
+    config = asdict(search.solver_config)
+    shared = {key: config[key] for key in ("states", "pushes", "batch_states", "longest")}
+    return json.dumps(
+        {
+            "scenario": search.scenario,
+            "world": search.world,
+            "world_settings": search.world_settings,
+            "reward": search.reward_settings,
+            "seed": search.seed,
+        }
+        | shared,
+        sort_keys=True,
+    )
+
+
+def search_group_files(searches: list[SearchJob]) -> tuple[list[dict[str, str]], float]:
+    """The files of searches with one `pool_key` (`run_search`) and the seconds they took: one pool for each world
+    settings they resolve to (an agent may bring its own), playing every agent of its searches."""
+    import numpy as np
+
+    from search.solvers.pool import Pool
+
+    started = time.perf_counter()
+    first = searches[0]
+    if pool_key(first) is None:
+        return [run_search(search) for search in searches], time.perf_counter() - started
+    domain = domain_for(first.agents, first.scenario, first.world)
+    settings = [json.dumps(domain.search_settings(s.agents, s.world_settings, s.scenario)) for s in searches]
+    pools = {}
+    for key in dict.fromkeys(settings):
+        agents = dict.fromkeys(a for s, own in zip(searches, settings, strict=True) if own == key for a in s.agents)
+        config = first.solver_config
+        pools[key] = Pool(
+            domain,
+            list(agents),
+            first.scenario,
+            json.loads(key),
+            first.reward_settings,
+            config.states,
+            config.pushes,
+            config.batch_states,
+            np.random.default_rng(first.seed),
+        )
+    files = [run_search(search, pool=pools[key]) for search, key in zip(searches, settings, strict=True)]
+    return files, time.perf_counter() - started
+
+
 def run_searches(
     jobs: list[tuple[ClipJob, SearchJob, dict[str, Any]]], cache: Cache, log: Log, backend: Backend = IN_THIS_PROCESS
 ) -> None:
-    """Run every search the cache cannot supply on ``backend``; each result is written and sealed in the cache as
-    soon as it is complete, so an interrupted build keeps the finished ones."""
+    """Run every search the cache cannot supply on ``backend``, those that share a pool (`pool_key`) in one job;
+    each result is written and sealed in the cache as soon as its job is complete, so an interrupted build keeps
+    the finished ones."""
     todo = {}
     for job, search, inputs in jobs:
         if input_key(inputs) not in todo and not _reusable(job, inputs, cache, log):
             todo[input_key(inputs)] = (job, search, inputs)
+    groups: dict[str, list[str]] = {}  # a job's key -> the searches it runs
+    for key, (_, search, _) in todo.items():
+        groups.setdefault(pool_key(search) or key, []).append(key)
 
-    tasks = {key: (search_job_files, (search,)) for key, (_, search, _) in todo.items()}
-    for key, (files, seconds), progress in finished(
-        tasks, backend, lambda key: describe_search(todo[key][0]), lambda key: search_work(*todo[key][:2])
-    ):
-        job, _, inputs = todo[key]
-        write_outputs(cache.store("search", inputs), files)
-        cache.seal("search", inputs)
-        log(f"{describe_search(job)}: {seconds:.1f} s {progress}")
+    tasks = {group: (search_group_files, ([todo[key][1] for key in keys],)) for group, keys in groups.items()}
+
+    def described(group: str) -> str:
+        named = [describe_search(todo[key][0]) for key in groups[group]]
+        return named[0] if len(named) == 1 else f"{named[0]} and {len(named) - 1} more sharing its rollouts"
+
+    def work(group: str) -> Work:
+        found = [search_work(*todo[key][:2]) for key in groups[group]]
+        return Work(found[0].group, sum(one.units for one in found))
+
+    for group, (files, seconds), progress in finished(tasks, backend, described, work):
+        for key, found in zip(groups[group], files, strict=True):
+            job, _, inputs = todo[key]
+            write_outputs(cache.store("search", inputs), found)
+            cache.seal("search", inputs)
+        log(f"{described(group)}: {seconds:.1f} s {progress}")

@@ -23,16 +23,71 @@ from app.visible import Observer, VisibleClip, World
 from search.core.problem import Problem
 from search.core.rollout import Tracker
 
-# A domain's rollouts of some drawn states: (states, pushes, rng, tracker) -> Rollouts (Domain.roll_out, bound to
-# the agents and the reward).
-RollOut = Callable[[list[Any], int, np.random.Generator, Tracker], "Rollouts"]
-# What a rollout's clip shows the moment its row ends: (a Coupled, the row, the steps it took) -> visible contrast.
-# (A Coupled is Any here: the domain module imports this one, and no module imports itself back, tests/test_layers.py.)
-Shown = Callable[[Any, int, int], float]
+# A pair's rollouts of some drawn states, counted against a tracker: (states, tracker) -> Rollouts (a
+# `search.solvers.pool.Pool`'s, read from every agent's).
+RollOut = Callable[[list[Any], Tracker], "Rollouts"]
+# What a rollout's clip shows the moment its row ends: (a Coupled, the row, the steps it took) -> the clip of every
+# agent (labels "0", "1", ...) and the step each agent's episode ended on (0: it ran on). (A Coupled is Any here: the
+# domain module imports this one, and no module imports itself back, tests/test_layers.py.)
+Seen = Callable[[Any, int, int], tuple[VisibleClip, list[int]]]
 
 OBSERVER = Observer()
 ALPHA = 0.05  # a vote is decided when its test's p is below this, over its looks (`strength`)
 FLIPS = 9_999  # the sign flips `weighted_test` draws where there are too many to count
+
+
+@dataclass
+class Played:
+    """Every agent's rollouts of some drawn states. Each row is pushed until every agent's episode has ended (or
+    the horizon), so each agent's record in it (its outcome, progress and score up to its ending) is its own,
+    whichever agents are played beside it: any pair's rollouts read from it (`pair`) are those of the pair played
+    alone, and each agent plays each state and push once, however many pairs read it."""
+
+    state: np.ndarray  # (K,) index of the starting state
+    env: list[np.ndarray]  # K arrays (L_k, *action_shape): the pushes until every agent's episode ended or the horizon
+    ends: np.ndarray  # (K, N) the step each agent's episode ended on; 0 where it ran on to the horizon
+    clips: list[VisibleClip]  # K clips of every agent (labels "0", "1", ...), each agent's record up to its ending
+
+    @classmethod
+    def of_state(cls, index: int, env: list[np.ndarray], ends: np.ndarray, clips: list[VisibleClip]) -> Played:
+        """One state's rows."""
+        return cls(np.full(len(env), index), env, np.asarray(ends, dtype=np.int64), clips)
+
+    @classmethod
+    def join(cls, parts: list[Played]) -> Played:
+        return cls(
+            state=np.concatenate([p.state for p in parts]),
+            env=[e for p in parts for e in p.env],
+            ends=np.concatenate([p.ends for p in parts]),
+            clips=[c for p in parts for c in p.clips],
+        )
+
+    def states(self, start: int, end: int) -> Played:
+        """The rows of states ``start`` to ``end`` (not included), each state counted from the first's index."""
+        low, high = (int(np.searchsorted(self.state, bound)) for bound in (start, end))
+        return Played(self.state[low:high] - start, self.env[low:high], self.ends[low:high], self.clips[low:high])
+
+    def pair(self, first: int, second: int) -> tuple[Rollouts, int]:
+        """The rollouts of agents ``first`` and ``second`` (their columns), as a search of the pair alone under
+        ``finish = "last"`` finds them: each row's pushes up to where the later of the two ended (the horizon where
+        one ran on), and its clip's contrast from there; with the steps they took together (a coupled step
+        counted once, as a search of the pair counts it)."""
+        both = self.ends[:, [first, second]]
+        lengths = [max(ends) if min(ends) else len(env) for ends, env in zip(both.tolist(), self.env, strict=True)]
+        contrast = np.array(
+            [visible_contrast(clip.pick((first, second), pair_end_s(clip, (first, second)))) for clip in self.clips]
+        )
+        actions = [env[:n] for env, n in zip(self.env, lengths, strict=True)]
+        return Rollouts(self.state.copy(), actions, contrast), sum(lengths)
+
+
+def pair_end_s(clip: VisibleClip, pair: tuple[int, int]) -> float:
+    """When a pair's clip ends: where both agents' episodes ended, with the later of them; else at the horizon,
+    where the rollout of every agent ended too."""
+    times = [clip.outcomes[k].get("time") for k in pair]
+    if any(time is None for time in times):
+        return clip.end_s
+    return max(max(float(time) for time in times), 1e-6)
 
 
 @dataclass
@@ -161,19 +216,15 @@ def largest_contrast(summaries: list[dict[str, Any]], world: World) -> int:
     return best if contrasts[best] > 0 else 0
 
 
-def roll_out_problem(
-    coupled: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker, shown: Shown | None = None
-) -> Rollouts:
-    """Rollouts through any domain's coupled problems (one `search.core.domain.Coupled` per state): from each
-    state one without pushes and ``pushes`` under uniform pushes (`draw_pushes`), stepped together until the
-    search's end rule ends each (`roll_out_rows`)."""
+def play_problem(coupled: list[Any], pushes: int, rng: np.random.Generator, seen: Seen | None = None) -> Played:
+    """Every agent's rollouts through any domain's coupled problems (one `search.core.domain.Coupled` per state,
+    its reward ending as ``finish = "last"``): from each state one without pushes and ``pushes`` under uniform
+    pushes (`draw_pushes`), stepped together until every agent's episode has ended or the horizon (`play_rows`)."""
     parts = []
     for index, found in enumerate(coupled):
         env = draw_pushes(found.problem, pushes, rng)
-        actions, contrast, steps = roll_out_rows(found, env, shown)
-        tracker.count(steps)
-        parts.append(Rollouts(np.full(len(env), index), actions, contrast))
-    return Rollouts.join(parts)
+        parts.append(Played.of_state(index, *play_rows(found, env, seen)))
+    return Played.join(parts)
 
 
 def draw_pushes(problem: Problem, pushes: int, rng: np.random.Generator) -> np.ndarray:
@@ -185,30 +236,42 @@ def draw_pushes(problem: Problem, pushes: int, rng: np.random.Generator) -> np.n
     return env
 
 
-def roll_out_rows(found: Any, env: np.ndarray, shown: Shown | None = None) -> tuple[list[np.ndarray], np.ndarray, int]:
-    """One state's rollouts, a row each under ``env`` (rows, horizon, ...), stepped together until the search's
-    end rule ends each: each one's environment actions up to its end, its visible contrast and the steps all
-    took. The contrast is read by ``shown(coupled, row, steps)`` the moment a row ends (a domain's fast path), or
-    else from each rollout's summary (exact, at twice the steps)."""
+def play_rows(found: Any, env: np.ndarray, seen: Seen | None = None) -> tuple[list[np.ndarray], np.ndarray, list[Any]]:
+    """One state's rollouts, a row each under ``env`` (rows, horizon, ...), stepped together until each row's
+    problem ends it (every agent's episode ended, or the horizon): each one's environment actions up to its end,
+    the step each agent's episode ended on (0: it ran on) and its clip of every agent. The clip is read by
+    ``seen(coupled, row, steps)`` the moment a row ends (a domain's fast path), or else from each rollout's
+    summary (exact, at twice the steps)."""
     problem = found.problem
     rows, horizon = env.shape[:2]
     searched = np.full(rows, horizon)
-    contrast = np.zeros(rows)
+    read: dict[int, tuple[Any, list[int]]] = {}
     running = np.ones(rows, dtype=bool)
-    steps = 0
     problem.reset(rows)
     for t in range(1, horizon + 1):
         _, terminal = problem.step(env[:, t - 1])
-        steps += int(running.sum())
         ended = running & np.asarray(terminal, dtype=bool)
         searched[ended] = t
         running &= ~ended
-        if shown is not None:
+        if seen is not None:
             for row in np.flatnonzero(ended):
-                contrast[row] = shown(found, int(row), t)
+                read[int(row)] = seen(found, int(row), t)
         if not running.any():
             break
     actions = [env[row, : searched[row]] for row in range(rows)]
-    if shown is None:
-        contrast = np.array([summary_contrast(found.summarize(a, {}), found.world) for a in actions])
-    return actions, contrast, steps
+    if seen is None:
+        read = dict(enumerate(summary_clip(found.summarize(a, {}), found.world) for a in actions))
+    ends = np.array([read[row][1] for row in range(rows)], dtype=np.int64)
+    return actions, ends, [read[row][0] for row in range(rows)]
+
+
+def summary_clip(summary: dict[str, Any], world: World) -> tuple[VisibleClip, list[int]]:
+    """The clip of every agent of a summary, and the step each agent's episode ended on (0: it ran on), as
+    `play_rows` reads a rollout without a fast path."""
+    times = [float(step["t"]) for step in summary["steps"]]
+    ends = [
+        0 if outcome.get("time") is None else 1 + int(np.argmin(np.abs(np.subtract(times, outcome["time"]))))
+        for outcome in summary["outcomes"]
+    ]
+    agents = [a["name"] for a in summary["agents"]]
+    return VisibleClip.of_summary(summary, agents, [str(k) for k in range(len(agents))], world), ends

@@ -26,8 +26,7 @@ from search.core.evaluation import evaluation
 from search.core.world import Agents, Claim, Clips, Scenarios, Shipped, Trainer
 
 if TYPE_CHECKING:
-    from search.core.contrast import Rollouts, Shown
-    from search.core.rollout import Tracker
+    from search.core.contrast import Played, Seen
 
 ENTRY_POINTS = "foil.domains"
 
@@ -61,21 +60,17 @@ class Problems(ABC):
     def coupled(self, agents: Sequence[str], state: Any, reward: dict[str, Any]) -> Coupled:
         """The agents in one coupled problem from ``state``, scored by the divergence reward (its settings)."""
 
-    def roll_out(
-        self,
-        agents: Sequence[str],
-        states: list[Any],
-        reward: dict[str, Any],
-        pushes: int,
-        rng: np.random.Generator,
-        tracker: Tracker,
-    ) -> Rollouts:
-        """The representative solver's rollouts (see `search.solvers.representative`): from each state one
-        without pushes and ``pushes`` under uniform pushes, each scored by what its clip visibly shows. Default:
-        through the coupled problem, each rollout's clip built as its summary (exact, at twice the steps)."""
-        from search.core.contrast import roll_out_problem
+    def play_states(
+        self, agents: Sequence[str], states: list[Any], reward: dict[str, Any], pushes: int, rng: np.random.Generator
+    ) -> Played:
+        """Every agent's rollouts for the representative solver and the representativeness check (see
+        `search.solvers.representative`): from each state one without pushes and ``pushes`` under uniform
+        pushes, all ``agents`` (two or more) in one coupled problem whose reward ends as ``finish = "last"``, each
+        agent's clip read as it ended (`search.core.contrast.Played`). Default: through the coupled problem, each
+        rollout's clip built as its summary (exact, at twice the steps)."""
+        from search.core.contrast import play_problem
 
-        return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker)
+        return play_problem([self.coupled(agents, s, reward) for s in states], pushes, rng)
 
     def shown(
         self, coupled: Coupled, row: int, steps: int, since: int, summary: Callable[[], Mapping[str, Any]]
@@ -290,43 +285,38 @@ def _choose(found: dict[str, dict[Domain, Claim]], where: str) -> Domain:
     raise ValueError(f"{', '.join(known)} could be in the worlds {names}: say which, add {keys} {where}")
 
 
-def roll_out_spread(
+def play_spread(
     domain: str,
     agents: Sequence[str],
     states: list[Any],
     reward: dict[str, Any],
     pushes: int,
     rng: np.random.Generator,
-    tracker: Tracker,
-    shown: Shown | None = None,
-) -> Rollouts:
-    """`roll_out_problem` of the world named ``domain``, the states over worker processes (search.core.workers):
-    every state's pushes are drawn here, in order, as `roll_out_problem` draws them, and each worker builds the
+    seen: Seen | None = None,
+) -> Played:
+    """`play_problem` of the world named ``domain``, the states over worker processes (search.core.workers):
+    every state's pushes are drawn here, in order, as `play_problem` draws them, and each worker builds the
     coupled problem of its states from the world's name, so the rollouts are the same whatever the number of
-    workers. ``shown`` must pickle (a module-level function)."""
-    from search.core.contrast import Rollouts, draw_pushes, roll_out_problem
+    workers. ``seen`` must pickle (a module-level function)."""
+    from search.core.contrast import Played, draw_pushes, play_problem
     from search.core.workers import in_order, workers
 
     coupled = [domain_named(domain).coupled(agents, state, reward) for state in states]
     if workers() <= 1 or len(states) < 2:
-        return roll_out_problem(coupled, pushes, rng, tracker, shown)
+        return play_problem(coupled, pushes, rng, seen)
     envs = [draw_pushes(found.problem, pushes, rng) for found in coupled]
     done = in_order(
-        _roll_out_state, [(domain, agents, state, reward, env, shown) for state, env in zip(states, envs, strict=True)]
+        _play_state, [(domain, agents, state, reward, env, seen) for state, env in zip(states, envs, strict=True)]
     )
-    parts = []
-    for index, (actions, contrast, steps) in enumerate(done):
-        tracker.count(steps)
-        parts.append(Rollouts(np.full(len(actions), index), actions, contrast))
-    return Rollouts.join(parts)
+    return Played.join([Played.of_state(index, *found) for index, found in enumerate(done)])
 
 
-def _roll_out_state(
-    domain: str, agents: Sequence[str], state: Any, reward: dict[str, Any], env: np.ndarray, shown: Shown | None
-) -> tuple[list[np.ndarray], np.ndarray, int]:
-    from search.core.contrast import roll_out_rows
+def _play_state(
+    domain: str, agents: Sequence[str], state: Any, reward: dict[str, Any], env: np.ndarray, seen: Seen | None
+) -> tuple[list[np.ndarray], np.ndarray, list[Any]]:
+    from search.core.contrast import play_rows
 
-    return roll_out_rows(domain_named(domain).coupled(agents, state, reward), env, shown)
+    return play_rows(domain_named(domain).coupled(agents, state, reward), env, seen)
 
 
 def _replay_candidate(world: str, *task: Any) -> tuple[float, dict[str, Any]]:

@@ -171,12 +171,12 @@ class CrowdDomain(Domain, Trainer):
             self.world(),
         )
 
-    def roll_out(self, agents, states, reward, pushes, rng, tracker):
+    def play_states(self, agents, states, reward, pushes, rng):
         """The crowd's fast path: every state's rollouts in one batched simulator, no replays."""
-        from search.crowd.rollouts import roll_out
+        from search.crowd.rollouts import play
         from search.solvers.reward import RewardConfig
 
-        return roll_out(self._policies(agents), states, RewardConfig.from_dict(reward), pushes, rng, tracker)
+        return play(self._policies(agents), states, RewardConfig.from_dict(reward), pushes, rng)
 
     def shown(self, coupled: Coupled, row: int, steps: int, since: int, summary=None) -> float:
         """Read from the simulator's final state (no replay)."""

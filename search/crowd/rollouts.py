@@ -1,6 +1,6 @@
-"""The crowd world's rollouts for the representative solver: every drawn state's rollouts stepped together in one
-batched coupled simulator, each scored by what its clip visibly shows, read from the final state without a
-replay (the crowd's fast path; `search.core.domain.Domain.roll_out` is the generic one)."""
+"""The crowd world's rollouts for the representative solver: every drawn state's rollouts of every robot stepped
+together in one batched coupled simulator, each robot's clip read from the state it finished in without a replay
+(the crowd's fast path; `search.core.domain.Domain.play_states` is the generic one)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,9 @@ import math
 import numpy as np
 
 from app.visible import VisibleClip, progress_towards
-from search.core.contrast import Rollouts, visible_contrast
+from search.core.contrast import Played, visible_contrast
 from search.core.outcomes import OUTCOME_NAMES
 from search.core.prior import ActionPrior
-from search.core.rollout import Tracker
 from search.crowd.problem import concat_snapshots
 from search.crowd.sim.coupled import CoupledSimulator
 from search.crowd.sim.observation import Policy
@@ -20,16 +19,16 @@ from search.crowd.sim.scenarios import Scenario
 from search.solvers.reward import DivergenceReward, RewardConfig
 
 
-def roll_out(
+def play(
     policies: list[Policy],
     scenarios: list[Scenario],
     reward_config: RewardConfig,
     pushes: int,
     rng: np.random.Generator,
-    tracker: Tracker,
-) -> Rollouts:
-    """One rollout without pushes and ``pushes`` under uniform pushes from each scenario, all in one batch, each
-    followed by its coda; scored by their visible contrast."""
+) -> Played:
+    """Every policy's rollouts: one without pushes and ``pushes`` under uniform pushes from each scenario, all in
+    one batch, each until every robot has finished or the horizon (the reward's ``finish = "last"``); each robot
+    read as it finished."""
     copies = pushes + 1
     sims = [CoupledSimulator(policies, scenario, batch=copies) for scenario in scenarios]
     sim, config = sims[0], sims[0].config
@@ -41,19 +40,17 @@ def roll_out(
     env[pushed] = rng.uniform(-config.env_action_bound, config.env_action_bound, (int(pushed.sum()), horizon, n, 2))
     events = DivergenceReward(reward_config, prior)
     searched = np.full(rows_total, horizon)  # steps until the search's end rule ended each rollout
-    in_search = np.ones(rows_total, dtype=bool)
-    final = {}  # row -> (outcome, event_time, min_clearance, robot_pos, time) when its clip ended
+    ends = np.zeros((rows_total, len(policies)), dtype=np.int64)  # the step each robot finished on (0: it ran on)
+    final = {}  # row -> (outcome, event_time, min_clearance, robot_pos, time) when its rollout ended
     rows = np.arange(rows_total)
     for t in range(1, horizon + 1):
-        _, _, newly_done = sim.advance(np.where(in_search[rows, None, None], env[rows, t - 1], 0.0))
-        tracker.count(rows.size)
+        _, _, newly_done = sim.advance(env[rows, t - 1])
         state = sim.state
         outcome, done = sim.gather(state.outcome), sim.gather(state.done)
+        ends[rows] = np.where(newly_done, t, ends[rows])
         goal, end = events.events(newly_done, outcome, done.all(axis=1), np.full(rows.size, t))
-        ended = in_search[rows] & (goal | end)
-        searched[rows[ended]] = t
-        in_search[rows[ended]] = False
-        over = done.all(axis=1) | (t >= horizon)
+        over = goal | end
+        searched[rows[over]] = t
         if over.any():
             event_time, clearance = sim.gather(state.event_time), sim.gather(state.min_clearance)
             robot_pos = sim.gather(state.robot_pos)
@@ -70,11 +67,11 @@ def roll_out(
             break
         sim.restore(sim.snapshot(keep))
         rows = rows[keep]
-    contrast = np.array([visible_contrast(_clip(scenarios[row // copies], *final[row])) for row in range(rows_total)])
-    return Rollouts(
+    return Played(
         state=np.arange(rows_total) // copies,
-        actions=[env[row, : searched[row]] for row in range(rows_total)],
-        contrast=contrast,
+        env=[env[row, : searched[row]] for row in range(rows_total)],
+        ends=ends,
+        clips=[_clip(scenarios[row // copies], *final[row]) for row in range(rows_total)],
     )
 
 

@@ -133,16 +133,16 @@ class GymDomain(Domain):
             adapter.world(),
         )
 
-    def roll_out(self, agents, states, reward, pushes, rng, tracker):
-        """Rollouts scored from the problem's own record of each agent's ending, as its summary would say it (no
+    def play_states(self, agents, states, reward, pushes, rng):
+        """Rollouts read from the problem's own record of each agent's ending, as its summary would say it (no
         replay; `tests/gym/test_any_world.py` checks it against the summaries); the states over worker processes
         unless the world steps them in one batch (``batched``)."""
-        from search.core.contrast import roll_out_problem
-        from search.core.domain import roll_out_spread
+        from search.core.contrast import play_problem
+        from search.core.domain import play_spread
 
         if self.batched:
-            return roll_out_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, tracker, shown)
-        return roll_out_spread(self.name, agents, states, reward, pushes, rng, tracker, shown)
+            return play_problem([self.coupled(agents, s, reward) for s in states], pushes, rng, seen)
+        return play_spread(self.name, agents, states, reward, pushes, rng, seen)
 
     def shown(self, coupled: Coupled, row: int, steps: int, since: int, summary=None) -> float:
         """Read from the problem's record of each agent's ending (no replay)."""
@@ -238,24 +238,38 @@ class GymDomain(Domain):
 
 
 def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
-    """The visible contrast of a row of a Gymnasium problem that just ended, its clip shown from the state after
-    step ``since``: each agent's event and its time, and its visible score's sum where the world shows one, as
-    `search.gym.summary.build_gym_summary` records them."""
+    """The visible contrast of a row of a Gymnasium problem of two agents that just ended, its clip shown from the
+    state after step ``since`` (`clip_of_row`)."""
     from search.core.contrast import visible_contrast
+
+    return visible_contrast(clip_of_row(coupled, row, steps, since))
+
+
+def seen(coupled: Coupled, row: int, steps: int) -> tuple[VisibleClip, list[int]]:
+    """A row's clip of every agent and the step each one's episode ended on (0: it ran on), as
+    `search.core.contrast.play_rows` reads a row the moment it ends."""
+    return clip_of_row(coupled, row, steps), [step for _, step in coupled.problem.endings(row)]
+
+
+def clip_of_row(coupled: Coupled, row: int, steps: int, since: int = 0) -> VisibleClip:
+    """The clip of every agent of a row of a Gymnasium problem that has taken ``steps`` steps, shown from the state
+    after step ``since``: each agent's event and its time, and its visible score's sum where the world shows one,
+    as `search.gym.summary.build_gym_summary` records them."""
     from search.core.outcomes import OUTCOME_NAMES
 
     dt = coupled.problem.adapter.dt
+    endings = coupled.problem.endings(row)
     outcomes = tuple(
         {
             "event": OUTCOME_NAMES[outcome],
             "time": float(max(step - since, 0) * dt) if step else None,
             "min_other_distance": None,
         }
-        for outcome, step in coupled.problem.endings(row)
+        for outcome, step in endings
     )
     end_s = max((steps - since) * dt, 1e-6)
     score = coupled.world.score
-    ends = [step for _, step in coupled.problem.endings(row)]  # a view and its readout stop where its run ended
+    ends = [step for _, step in endings]  # a view and its readout stop where its run ended
     summed = (
         ()
         if score is None
@@ -264,5 +278,5 @@ def shown(coupled: Coupled, row: int, steps: int, since: int = 0) -> float:
             for m, end in zip(coupled.problem.measured(row), ends, strict=True)
         )
     )
-    clip = VisibleClip(("first", "second"), outcomes, (0.0, 0.0), end_s, world=coupled.world, summed=summed)
-    return visible_contrast(clip)
+    labels = tuple(str(k) for k in range(len(endings)))
+    return VisibleClip(labels, outcomes, (0.0,) * len(endings), end_s, world=coupled.world, summed=summed)

@@ -3,8 +3,8 @@ truth (no evaluation result and no agent's identity is read).
 
 1. Draw M starting states from a scenario distribution (seeded).
 2. Roll each out once without pushes and R times under environment actions drawn uniformly within their bound,
-   under the search's end rules; each rollout's clip plays on without pushes after that end (its coda), as a
-   summary's clip does.
+   pushed until both agents' episodes have ended or the horizon (``finish = "last"``): so each agent's rollout is
+   its own, played once for every pair and part that reads it (`search.solvers.pool`).
 3. Score each clip's visible contrast with the viewer's rule (`app.visible.Observer`, no perception noise): the
    first agent's visible score minus the second's, none (0) under the observer's tie margin (by a world's visible
    score: where the two sums read the same on screen).
@@ -30,9 +30,9 @@ contrast that most states show (docs/search.md, "The representative solver").
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -41,11 +41,9 @@ from app.visible import one_decimal
 from search.core.contrast import ALPHA, RollOut, Rollouts, Vote, describe_vote, vote
 from search.core.rollout import Tracker
 from search.core.workers import workers
+from search.solvers.pool import Pool
 from search.solvers.reward import RewardConfig
 from search.solvers.solver import Comparison, OwnSummaries, register
-
-if TYPE_CHECKING:
-    from search.core.domain import Domain
 
 Replay = TypeVar("Replay")  # what a candidate's replay gives (a summary)
 
@@ -59,11 +57,14 @@ class RepresentativeConfig:
     # the longest clip it may choose where the vote at the reward's horizon is weak (`clip_lengths`); no longer than
     # the horizon (the default): the horizon's alone
     longest: int = field(default=0, metadata={"seconds": 0.0})
+    # clips of the same pair that a study shows before this one from the same vote (the ranking part's after the
+    # pairwise part's): this one comes from other states
+    earlier: int = 0
 
     def __post_init__(self) -> None:
-        if self.states < 1 or self.pushes < 0 or self.batch_states < 1 or self.longest < 0:
+        if self.states < 1 or self.pushes < 0 or self.batch_states < 1 or self.longest < 0 or self.earlier < 0:
             raise ValueError(
-                "invalid representative setting: states and batch_states must be >= 1, pushes and longest >= 0"
+                "invalid representative setting: states and batch_states must be >= 1, pushes, longest and earlier >= 0"
             )
         if not 0 < self.alpha < 1:
             raise ValueError("invalid representative setting: alpha must lie between 0 and 1")
@@ -108,7 +109,6 @@ def roll_out_states(
     roll_out: RollOut,
     scenarios: list[Any],
     config: RepresentativeConfig,
-    rng: np.random.Generator,
     tracker: Tracker,
     state_cost: int,
     enough: Callable[[Rollouts, int], bool] | None = None,
@@ -125,7 +125,7 @@ def roll_out_states(
         if count < 1:
             stopped = "budget"
             break
-        part = roll_out(scenarios[done_states : done_states + count], config.pushes, rng, tracker)
+        part = roll_out(scenarios[done_states : done_states + count], tracker)
         part.state += done_states
         parts.append(part)
         done_states += count
@@ -136,27 +136,21 @@ def roll_out_states(
 
 
 def how_representative(
-    roll_out: RollOut,
-    fixed: list[Any],
-    drawn: list[Any],
-    config: RepresentativeConfig,
-    rng: np.random.Generator,
+    drawn: Rollouts, states: int, fixed: list[tuple[str, Rollouts]], alpha: float = ALPHA
 ) -> list[dict[str, Any]]:
-    """How representative each fixed scenario is of the distribution ``drawn`` was drawn from, for two agents:
-    how often each agent looks better there under nominal pushes (one rollout without, ``pushes`` with uniform
-    pushes), what the distribution's states vote, and the scenario's percentile among those states by the share
-    of rollouts that agree with the vote (ties with a state count half: 50 where every state agrees as often).
-    Whether its rollouts decide that it shows something else than the vote is a test, not a majority: the exact
-    one-sided binomial test that fewer than half of them agree with the vote (``agreeing_p``, ``decided`` below
-    ``config.alpha``); a few rollouts that disagree leave it undecided."""
-    tracker = Tracker(2**62, 1)  # no budget: every drawn state votes, whatever it costs
-    rollouts, states, _ = roll_out_states(roll_out, drawn, config, rng, tracker, state_cost=1)
-    result = vote(rollouts, states)
-    signs = np.sign(rollouts.contrast)
-    agreement = np.array([(signs[rollouts.state == s] == result.direction).mean() for s in range(states)])
+    """How representative each fixed scenario is of the distribution whose ``states`` drawn states' rollouts are
+    ``drawn``, for two agents: how often each agent looks better there under nominal pushes (its rollouts: one
+    without pushes, the others under uniform pushes), what the distribution's states vote, and the scenario's
+    percentile among those states by the share of rollouts that agree with the vote (ties with a state count half:
+    50 where every state agrees as often). Whether its rollouts decide that it shows something else than the vote
+    is a test, not a majority: the exact one-sided binomial test that fewer than half of them agree with the vote
+    (``agreeing_p``, ``decided`` below ``alpha``); a few rollouts that disagree leave it undecided."""
+    result = vote(drawn, states)
+    signs = np.sign(drawn.contrast)
+    agreement = np.array([(signs[drawn.state == s] == result.direction).mean() for s in range(states)])
     reports: list[dict[str, Any]] = []
-    for scenario in fixed:
-        own = np.sign(roll_out([scenario], config.pushes, rng, tracker).contrast)
+    for name, rollouts in fixed:
+        own = np.sign(rollouts.contrast)
         share = float((own == result.direction).mean()) if result.direction else None
         percentile = None
         if share is not None:
@@ -164,17 +158,17 @@ def how_representative(
         agreeing_p = fewer_than_half(int((own == result.direction).sum()), len(own)) if result.direction else 1.0
         reports.append(
             {
-                "scenario": scenario.name,
+                "scenario": name,
                 "rollouts": len(own),
                 "first_looks_better": float((own > 0).mean()),
                 "second_looks_better": float((own < 0).mean()),
                 "no_difference": float((own == 0).mean()),
                 "majority": int(np.sign(own.sum())),
-                "distribution_vote": result.record(rollouts, config.alpha),
+                "distribution_vote": result.record(drawn, alpha),
                 "percentile": percentile,
                 "disagrees": bool(result.direction and np.sign(own.sum()) != result.direction),
                 "agreeing_p": agreeing_p,
-                "decided": agreeing_p < config.alpha,
+                "decided": agreeing_p < alpha,
             }
         )
     return reports
@@ -231,27 +225,33 @@ def longer_clip(record: dict[str, Any], agents: Sequence[str]) -> str | None:
 
 def representative(
     roll_out: Callable[[int], RollOut],
-    draw: Callable[[], list[Any]],
+    draw: Callable[[int], list[Any]],
     tracker: Tracker,
-    rng: np.random.Generator,
     config: RepresentativeConfig,
     replay: Callable[[int], Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Replay]]]],
     lengths: Sequence[int],
     ahead: int = 1,
 ) -> tuple[list[Replay], dict[str, Any]]:
-    """Vote at each clip length of ``lengths`` in turn (in steps, shortest first), each on states newly ``draw``n,
-    until a vote is decided or the budget fits no state of the next length (`vote_states`); then choose the top-K
-    clips of the first decided vote, or of the first length's where none is (`choose_clips`). Every look at every
-    length is planned before any state is drawn and tested at ``alpha`` over all of them, so trying a longer clip
-    holds the test as one vote does. ``roll_out(n)`` rolls out states to ``n`` steps; ``replay(n)([(scenario,
+    """Vote at each clip length of ``lengths`` in turn (in steps, shortest first), each on the states ``draw(n)``
+    draws for it, until a vote is decided or the budget fits no state of the next length (`vote_states`); then
+    choose the top-K clips of the first decided vote, or of the first length's where none is (`choose_clips`),
+    from states other than those of the ``config.earlier`` clips chosen before from the same vote. Every look at
+    every length is planned before any state is drawn and tested at ``alpha`` over all of them, so trying a longer
+    clip holds the test as one vote does. ``roll_out(n)`` rolls out states to ``n`` steps; ``replay(n)([(scenario,
     actions), ...])`` gives each exact replay's contrast and the replay (a summary) at ``n`` steps, ``ahead`` at a
     time, not counted against the budget, as no solver counts its summaries' replays. Returns the chosen replays
     in order and the record of the vote for run.json."""
-    tried = vote_lengths(roll_out, draw, tracker, rng, config, lengths)
+    tried = vote_lengths(roll_out, draw, tracker, config, lengths)
     n, scenarios, rollouts, result, record = next((one for one in tried if one[4]["decided"]), tried[0])
+    shown: set[int] = set()  # the states of the clips chosen before this one
+    for _ in range(config.earlier):
+        before, _, _ = choose_clips(rollouts, result, scenarios, replay(n), tracker.queue.k, ahead, shown)
+        shown |= {int(rollouts.state[i]) for i, _ in before}
     chosen, record["candidates"], record["selection"] = choose_clips(
-        rollouts, result, scenarios, replay(n), tracker.queue.k, ahead
+        rollouts, result, scenarios, replay(n), tracker.queue.k, ahead, shown
     )
+    if config.earlier:
+        record["earlier_states"] = sorted(shown)
     record["chosen"] = [
         {"state": int(rollouts.state[i]), "rollout": i, "contrast": float(rollouts.contrast[i])} for i, _ in chosen
     ]
@@ -261,51 +261,27 @@ def representative(
     return [summary for _, summary in chosen], record
 
 
-def drawn_states(
-    domain: Domain,
-    agents: Sequence[str],
-    scenario: str,
-    world: dict[str, Any],
-    reward: dict[str, Any],
-    states: int,
-    rng: np.random.Generator,
-) -> tuple[Callable[[int], RollOut], Callable[[], list[Any]]]:
-    """A search's rollouts at a clip length (``roll_out(n)``: its world's `Domain.roll_out` at ``n`` steps) and its
-    draw of ``states`` starting states from the distribution ``scenario``, both on ``rng``."""
-
-    def roll_out(horizon: int) -> RollOut:
-        def at(drawn: list[Any], pushes: int, rng: np.random.Generator, tracker: Tracker) -> Rollouts:
-            return domain.roll_out(agents, drawn, reward | {"horizon": horizon}, pushes, rng, tracker)
-
-        return at
-
-    def draw() -> list[Any]:
-        return domain.draw_states(scenario, world, rng, states)
-
-    return roll_out, draw
-
-
 Tried = tuple[int, list[Any], Rollouts, Vote, dict[str, Any]]  # a length, its states, rollouts, vote and record
 
 
 def vote_lengths(
     roll_out: Callable[[int], RollOut],
-    draw: Callable[[], list[Any]],
+    draw: Callable[[int], list[Any]],
     tracker: Tracker,
-    rng: np.random.Generator,
     config: RepresentativeConfig,
     lengths: Sequence[int],
 ) -> list[Tried]:
-    """The votes `representative` takes: at each length in turn, on newly drawn states, until one is decided or the
-    budget fits no state of the next length, every look of every length planned first and tested together."""
+    """The votes `representative` takes: at each length in turn, on the states drawn for it, until one is decided
+    or the budget fits no state of the next length, every look of every length planned first and tested
+    together."""
     fitting = [n for n in lengths if (config.pushes + 1) * n <= tracker.budget] or list(lengths[:1])
     looks = [planned_looks(config.states, tracker, config, n) for n in fitting]
     tried: list[Tried] = []
     for n, own in zip(fitting, looks, strict=True):
         if tried and tracker.remaining < (config.pushes + 1) * n:
             break
-        scenarios = draw()
-        tried.append((n, scenarios, *vote_states(roll_out(n), scenarios, tracker, rng, config, n, own, sum(looks))))
+        scenarios = draw(n)
+        tried.append((n, scenarios, *vote_states(roll_out(n), scenarios, tracker, config, n, own, sum(looks))))
         if tried[-1][4]["decided"]:
             break
     return tried
@@ -341,7 +317,6 @@ def vote_states(
     roll_out: RollOut,
     scenarios: list[Any],
     tracker: Tracker,
-    rng: np.random.Generator,
     config: RepresentativeConfig,
     horizon: int,
     looks: int,
@@ -357,7 +332,7 @@ def vote_states(
         early = states % config.batch_states == 0 and states < looks * config.batch_states
         return early and vote(found, states).p < config.alpha / all_looks
 
-    rollouts, done_states, stopped = roll_out_states(roll_out, scenarios, config, rng, tracker, state_cost, decided)
+    rollouts, done_states, stopped = roll_out_states(roll_out, scenarios, config, tracker, state_cost, decided)
     result = vote(rollouts, done_states)
     record = result.record(rollouts, config.alpha, all_looks) | {"stopped": stopped, "drawn": len(scenarios)}
     return rollouts, result, record
@@ -370,11 +345,16 @@ def choose_clips(
     replay: Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, Replay]]],
     top_k: int,
     ahead: int,
+    shown: Collection[int] = (),
 ) -> tuple[list[tuple[int, Replay]], int, str]:
-    """The vote's top-K clips (`candidates`, `choose`) as (rollout, replay), how many candidates it had, and how
-    they were chosen: a tied vote, or one none of whose candidates survives its replay, falls back to the largest
-    contrast either way."""
-    order, how = candidates(rollouts, result), "voted direction"
+    """The vote's top-K clips (`candidates`, `choose`) as (rollout, replay), from states not ``shown`` before, how
+    many candidates it had, and how they were chosen: a tied vote, or one none of whose candidates survives its
+    replay, falls back to the largest contrast either way."""
+
+    def unshown(order: list[int]) -> list[int]:
+        return [i for i in order if int(rollouts.state[i]) not in shown]
+
+    order, how = unshown(candidates(rollouts, result)), "voted direction"
 
     def replayed(chosen: list[int]) -> list[tuple[float, Replay]]:
         return replay([(scenarios[rollouts.state[i]], rollouts.actions[i]) for i in chosen])
@@ -386,7 +366,7 @@ def choose_clips(
             if not result.direction
             else "largest contrast (no candidate of the vote survived its replay)"
         )
-        everything = candidates(rollouts, Vote(result.state_weights, 0))
+        everything = unshown(candidates(rollouts, Vote(result.state_weights, 0)))
         chosen = choose(everything, 0, replayed, top_k, ahead)
     if not chosen:  # no rollout shows any visible difference: the nominal rollout of the first state
         how = "no visible contrast anywhere: the first state without pushes"
@@ -394,11 +374,32 @@ def choose_clips(
     return chosen, len(order), how
 
 
+def search_pool(
+    comparison: Comparison, agents: Sequence[str], config: RepresentativeConfig, rng: np.random.Generator
+) -> Pool:
+    """The pool of rollouts a search's votes read: its own pair's, or a study's agents' (the same draws for the
+    pair, `search.solvers.pool`), from the seed of ``rng``."""
+    return Pool(
+        comparison.domain,
+        agents,
+        comparison.scenario,
+        comparison.world_settings,
+        comparison.reward_settings,
+        config.states,
+        config.pushes,
+        config.batch_states,
+        rng,
+    )
+
+
 class Representative(OwnSummaries):
     """The representative solver: it draws its own starting states and records its vote under ``vote``."""
 
     name = "representative"
-    rules = 2  # 2: states weigh in by how plainly their clips show a difference
+    # 2: states weigh in by how plainly their clips show a difference; 3: every agent is pushed until each one's
+    # episode has ended (`search.solvers.pool`), each clip length's draws its own
+    rules = 3
+    pooled = True
     config_class = RepresentativeConfig
     starts = "distribution"
     record_key = "vote"
@@ -417,17 +418,25 @@ class Representative(OwnSummaries):
             )
         agents = comparison.pair(self.name, "solver votes which of two agents looks better")
         world = comparison.world_settings
-        roll_out, draw = drawn_states(domain, agents, scenario, world, reward_settings, config.states, rng)
+        pool = comparison.pool or search_pool(comparison, agents, config, rng)
+        if not {*agents} <= {*pool.agents} or (pool.scenario, pool.world) != (scenario, world):
+            raise ValueError(
+                f"a pool of {pool.agents} from {pool.scenario!r} holds no rollouts of {agents} from {scenario!r}"
+            )
+        played_before = pool.played_steps
 
         # a world without a batched fast path replays a candidate per worker at a time (Domain.replays)
         ahead = 1 if domain.batched else workers()
 
         def replay(horizon: int) -> Callable[[list[tuple[object, np.ndarray]]], list[tuple[float, dict[str, Any]]]]:
-            reward = reward_settings | {"horizon": horizon}
+            reward = pool.reward | {"horizon": horizon}
             return lambda candidates: domain.replays(agents, candidates, reward, comparison.entry)
 
         lengths = clip_lengths(RewardConfig.from_dict(reward_settings).horizon, config.longest)
-        summaries, vote = representative(roll_out, draw, tracker, rng, config, replay, lengths, ahead)
+        summaries, vote = representative(
+            lambda n: pool.rollouts(agents, n), pool.draw, tracker, config, replay, lengths, ahead
+        )
+        vote["played_steps"] = pool.played_steps - played_before  # what its agents played for it, each agent's own
         for entry in vote.get("lengths", []):  # each length tried, in seconds too, as the study gave them
             entry["seconds"] = entry["horizon"] * domain.step_seconds(scenario, world)
         warning = weak_vote(vote, agents)

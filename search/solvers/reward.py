@@ -6,10 +6,13 @@ Per step (step t = 1, 2, ... counts steps from the scenario's initial state):
   ends the trajectory with ``goal_bonus + alpha * d_s``, d_s the divergence of the agents' positions;
 - an **end** step without a goal ends it with ``horizon_offset + beta * h``, h a heuristic (default: d_s again):
   t reached the horizon T, or the agents' episodes ended as ``finish`` says. With ``finish = "all"`` an agent
-  that finished waits and the trajectory goes on until every agent has finished; with ``finish = "first"``
-  (the paper's Algorithm 1, CrowdNav's ``done``) it ends as soon as any agent's episode ends, so a collision
-  ends it too, without the goal's reward unless ``collision_is_goal``; with ``goal_needs_contrast`` a step on
-  which every agent has reached its goal is no goal step (nothing tells the agents apart there);
+  that finished without reaching its goal waits and the trajectory goes on until every agent has finished; with
+  ``finish = "first"`` (the paper's Algorithm 1, CrowdNav's ``done``) it ends as soon as any agent's episode
+  ends, so a collision ends it too, without the goal's reward unless ``collision_is_goal``; with
+  ``finish = "last"`` not even a goal ends it before every agent's episode has ended (or T), and the goal's
+  reward is given only on that last step (the representative solver's rollouts: each agent is pushed until its
+  own episode ends, whichever agent it is compared with); with ``goal_needs_contrast`` a step on which every
+  agent has reached its goal is no goal step (nothing tells the agents apart there);
 - any other step gives the action divergence d_a of the agents' actions;
 - every step adds ``plausibility * log p(a_env)`` under the environment action prior (0 by default).
 
@@ -40,6 +43,7 @@ from search.core.prior import PRIOR_KINDS, ActionPrior
 from search.core.settings import ConfigTable
 
 TERMS = ("action_divergence", "goal", "horizon", "plausibility")
+FINISHES = ("all", "first", "last")  # what ends a trajectory besides its horizon (`RewardConfig.finish`)
 
 
 @dataclass(frozen=True)
@@ -59,7 +63,9 @@ class RewardConfig(ConfigTable):
     horizon_offset: float = 0.0
     heuristic: str = "state_divergence"  # a name in HEURISTICS or module:attribute
     collision_is_goal: bool = False
-    finish: str = "all"  # the trajectory ends when "all" agents have finished, or when the "first" one has
+    # the trajectory ends at a goal or when "all" agents have finished, when the "first" one has, or only when the
+    # "last" one has (a goal included)
+    finish: str = "all"
     goal_needs_contrast: bool = False  # no goal term when every agent reaches its goal (they arrive together)
     plausibility: float = 0.0
     prior: str = "uniform"  # environment action prior: "uniform" or "gaussian"
@@ -71,9 +77,9 @@ class RewardConfig(ConfigTable):
             (self.norm in ("plain", "squared"), "norm must be 'plain' or 'squared'"),
             (self.combine in ("mean", "min"), "combine must be 'mean' or 'min'"),
             (
-                self.finish in ("all", "first"),
-                "finish must be 'all' (a finished agent waits until every "
-                "agent has finished) or 'first' (the first finish ends it)",
+                self.finish in FINISHES,
+                "finish must be 'all' (a goal, or every agent finished, ends it), 'first' (the first finish ends "
+                "it) or 'last' (only every agent finished ends it)",
             ),
             (self.prior in PRIOR_KINDS, f"prior must be one of {PRIOR_KINDS}"),
         ]
@@ -161,8 +167,11 @@ class DivergenceReward:
         goal = (newly_done & goal_outcome).any(axis=-1)
         if self.config.goal_needs_contrast:
             goal &= ~goal_outcome.all(axis=-1)
-        finished = all_done if self.config.finish == "all" else newly_done.any(axis=-1)
-        end = ~goal & ((t >= self.config.horizon) | finished)
+        finished = newly_done.any(axis=-1) if self.config.finish == "first" else all_done
+        over = (t >= self.config.horizon) | finished
+        if self.config.finish == "last":
+            goal &= over
+        end = ~goal & over
         return goal, end
 
     def divergence(

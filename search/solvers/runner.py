@@ -140,11 +140,12 @@ def refuse_before_work(job: SearchJob) -> None:
     require(domain.coupled(job.agents, state, job.reward_settings).problem, solver.needs, solver.name)
 
 
-def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
+def run_search(job: SearchJob, progress: bool = False, pool: Any = None) -> dict[str, str]:
     """Run one search in its agents' world and return its output files, name -> text: ``summary-001.json``, ...
     (best first, or in the order of a solver that chooses its own) and ``run.json``. Kept trajectories are
-    replayed at batch size 1 and ranked by that authoritative reward. Its callers refuse, once and before any work,
-    a search that cannot be what was meant (`refuse_before_work`)."""
+    replayed at batch size 1 and ranked by that authoritative reward. A solver that chooses its own summaries
+    reads rollouts it shares with other searches from ``pool`` (`search.solvers.pool.Pool`). Its callers
+    refuse, once and before any work, a search that cannot be what was meant (`refuse_before_work`)."""
     started = time.perf_counter()
     solver = solver_named(job.solver)
     domain = domain_for(job.agents, job.scenario, job.world)
@@ -163,7 +164,9 @@ def run_search(job: SearchJob, progress: bool = False) -> dict[str, str]:
             solver.run(coupled.problem, tracker, rng, job.solver_config)
         elif isinstance(solver, OwnSummaries):
             scenario_name = job.scenario
-            comparison = Comparison(job.agents, job.scenario, domain, job.world_settings, job.reward_settings, entry)
+            comparison = Comparison(
+                job.agents, job.scenario, domain, job.world_settings, job.reward_settings, entry, pool
+            )
             chosen = (solver.record_key, *solver.choose(comparison, tracker, rng, job.solver_config))
         else:
             raise TypeError(f"solver {job.solver!r} is a {type(solver).__name__}: a ProblemSearch or OwnSummaries runs")

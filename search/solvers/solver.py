@@ -40,6 +40,10 @@ class Solver(ABC):
     reels: bool = False  # its clips are a reel of moments per agent, not one clip of the pair
     needs: tuple[type, ...] = ()  # the capabilities of the problem it uses (search.core.problem)
     rules: int = 1  # raised when the same settings choose differently, so a bundle's cached searches are redone
+    # its votes read rollouts shared with a study's other searches of the same draws (a search.solvers.pool.Pool,
+    # through `Comparison.pool`), and its settings have ``states``, ``pushes``, ``batch_states``, ``longest`` and
+    # ``earlier`` (a clip from other states than the earlier ones of the same vote)
+    pooled: bool = False
 
     def warnings(self, record: dict[str, Any]) -> list[str]:
         """What a search's run.json record warns of, in words: the runner, `foil search` and the bundle print
@@ -110,6 +114,7 @@ class Comparison:
     world_settings: dict[str, Any]
     reward_settings: dict[str, Any]
     entry: dict[str, Any] = field(default_factory=dict)
+    pool: Any = None  # rollouts it shares with a study's other searches (a search.solvers.pool.Pool); None: its own
 
     def pair(self, solver: str, what: str) -> list[str]:
         """The two agents compared, refusing any other number."""

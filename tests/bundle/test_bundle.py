@@ -330,9 +330,9 @@ def test_shipped_study_files_build_and_serve(name):
 
 
 def test_each_part_draws_its_own_representative_clips():
-    """The demo's representative scheme draws its starting states at random: part one and the ranking round each
-    get a draw of their own (seeds 0 and 1), and every plan shows each part its own clips, so the round does not
-    replay part one's three clips."""
+    """The demo's representative scheme votes once per pair for both parts (one seed: one pool of rollouts), and
+    the ranking round's clip comes from another state of that vote (earlier = 1), so every plan shows each part its
+    own clips and the round does not replay part one's three clips."""
     import random
 
     from app.survey.assignment import conditions
@@ -343,7 +343,9 @@ def test_each_part_draws_its_own_representative_clips():
     spec, _ = load_build(ROOT / "studies" / "demo.toml")
     jobs = [job for job in plan_clips(spec) if job.scheme.name == "representative"]
     assert sorted(job.parts for job in jobs) == [("pairwise",)] * 3 + [("ranking",)] * 3
-    assert sorted(job.scheme.seed for job in jobs) == [0, 0, 0, 1, 1, 1]
+    assert {job.scheme.seed for job in jobs} == {0}
+    assert sorted(job.scheme.solver_config.earlier for job in jobs) == [0, 0, 0, 1, 1, 1]
+    assert all(job.scheme.solver_config.earlier == (job.parts == ("ranking",)) for job in jobs)
     assert len({json.dumps(search_inputs(search_job(job)), sort_keys=True) for job in jobs}) == 6
     study = load_study(ROOT / "studies" / "demo.toml")
     bundle = planned_bundle(plan_clips(spec), ROOT)

@@ -47,7 +47,7 @@ seed = 1
 [build.schemes.representative]
 solver = "representative"
 budget = 600
-seed = 1
+seed = 3  # its clip shows no difference: a misleading clip to mark
 settings = { states = 3, pushes = 3 }
 
 [[build.sets]]

@@ -177,20 +177,22 @@ class LastingTrack(TrackAdapter):
     rule = "survival"
 
 
+def middling(observations):
+    """Runs at half speed: reaches the wall in some starting states, runs out of time in others."""
+    return np.full((len(observations), 1), 0.5)
+
+
 @pytest.mark.parametrize("adapter", [ADAPTER, "tests.gym.test_any_world:LastingTrack"])
 def test_the_fast_rollouts_score_every_clip_as_its_summary_does(world, adapter):
     """The Gymnasium domain reads each rollout's ending from the problem; the interface's default builds each
-    rollout's summary. Both must see the same clips, by the adapter's own rule."""
-    from search.core.domain import Domain, domain_for
-    from search.core.rollout import Tracker
+    rollout's summary. Both must see the same clips, by the adapter's own rule, and each pair read from three
+    agents' rollouts must be the pair's own."""
+    from search.core.domain import domain_for
+    from tests.support.played import checked_rollouts
 
     (world / "starts.toml").write_text(f'adapter = "{adapter}"\n[distribution]\nseeds = [0, 100]\n')
-    domain = domain_for([FAST, SLOW], "starts.toml")
+    agents = [FAST, SLOW, "tests.gym.test_any_world:middling"]
+    domain = domain_for(agents, "starts.toml")
     states = domain.draw_states("starts.toml", {}, np.random.default_rng(0), 6)
-    fast, exact = (
-        roll_out(domain, [FAST, SLOW], states, {"horizon": 6}, 3, np.random.default_rng(1), Tracker(10**6, 1))
-        for roll_out in (type(domain).roll_out, Domain.roll_out)
-    )
-    assert np.array_equal(fast.contrast, exact.contrast) and np.array_equal(fast.state, exact.state)
-    assert all(np.array_equal(a, b) for a, b in zip(fast.actions, exact.actions, strict=True))
+    fast = checked_rollouts(domain, agents, states, 6, 3).pair(0, 1)[0]
     assert (fast.contrast < 0).all()  # the slow runner, which never hits the wall, looks better in every rollout

@@ -94,7 +94,8 @@ def test_the_plan_sizes_each_job_and_times_it_at_its_groups_rate(in_track):
     for study in ("study.toml", "doubled.toml"):
         evaluations, searches, checks, _ = plan_steps(prepare(study), Cache(folder / "nothing"))
         assert evaluations.work == [Work(FAST, 4), Work(SLOW, 4)]  # each agent's episodes, at its own rate
-        assert checks.work == [Work("check", (4 + 1) * (2 + 1) * 50)]  # (states + scenario) x (pushes + 1) x 50 steps
+        # 2 agents x (states + scenario) x (pushes + 1) x 50 steps
+        assert checks.work == [Work("check", 2 * (4 + 1) * (2 + 1) * 50)]
         planned[study] = searches
     budgets = {study: {work.group: work.units for work in step.work} for study, step in planned.items()}
     assert budgets["study.toml"] == {"nfirst": 60, "representative": 400, "disagreements": 200, "highlights": 300}

@@ -3,14 +3,13 @@ command line (determinism, `foil verify`, the vote in run.json, the refusals).""
 
 import json
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from search.cli import main
 from search.core.contrast import Rollouts, Vote, vote
-from search.solvers.representative import RepresentativeConfig, candidates, choose, how_representative
+from search.solvers.representative import candidates, choose, how_representative
 
 
 def rollouts(contrast_by_state: list[list[float]]) -> Rollouts:
@@ -75,7 +74,7 @@ def test_no_agreeing_candidate_leaves_an_empty_list_for_the_fallback():
     assert candidates(found, Vote(np.array([1, 1]), 1)) == [3, 4]
 
 
-def representative_search(out, seed="0", budget="4000", states="6", top_k="2", batch_states: str | None = "3"):
+def representative_search(out, seed="2", budget="4000", states="6", top_k="2", batch_states: str | None = "3"):
     """A small representative search of goal against orca from the training distribution, by the command line."""
     batch = ["--set", f"batch_states={batch_states}"] if batch_states else []
     return main(
@@ -183,22 +182,10 @@ def test_the_representative_solver_and_a_distribution_are_refused_where_they_do_
     assert "two agents" in capsys.readouterr().err
 
 
-def scripted_roll_out(contrasts: dict[str, list[float]]):
-    """A domain's rollouts as `how_representative` asks for them, each state's contrasts given by its name."""
-
-    def roll_out(states, pushes, rng, tracker):
-        return rollouts([contrasts[state.name] for state in states])
-
-    return roll_out
-
-
 def test_a_scenario_that_agrees_as_often_as_the_states_sits_mid_percentile_and_a_few_rollouts_decide_nothing():
-    named = [SimpleNamespace(name=f"s{i}") for i in range(4)]
-    drawn_agree = {"s0": [1.0] * 9, "s1": [1.0] * 9, "s2": [1.0] * 9, "s3": [1.0] * 9}  # all vote for the first
-    fixed = [SimpleNamespace(name="same"), SimpleNamespace(name="few"), SimpleNamespace(name="other")]
-    contrasts = drawn_agree | {"same": [1.0] * 9, "few": [-1.0, 1.0, -1.0], "other": [-1.0] * 9}
-    config = RepresentativeConfig(states=4, pushes=8, batch_states=4)
-    same, few, other = how_representative(scripted_roll_out(contrasts), fixed, named, config, np.random.default_rng(0))
+    drawn = rollouts([[1.0] * 9] * 4)  # 4 states, all vote for the first
+    fixed = [("same", rollouts([[1.0] * 9])), ("few", rollouts([[-1.0, 1.0, -1.0]])), ("other", rollouts([[-1.0] * 9]))]
+    same, few, other = how_representative(drawn, 4, fixed)
     assert same["percentile"] == 50.0 and not same["disagrees"]  # ties with every state count half
     assert few["disagrees"] and not few["decided"] and few["agreeing_p"] == 0.5  # 1 of 3 agree: no evidence
     assert other["disagrees"] and other["decided"] and other["agreeing_p"] == 1 / 2**9 and other["percentile"] == 0

@@ -52,6 +52,18 @@ def test_first_finish_ends_on_any_robots_end_and_a_collision_is_no_goal():
     assert goal.tolist() == [True, True, False] and end.tolist() == [False, False, False]
 
 
+def test_last_finish_ends_only_when_every_robot_has_and_gives_a_goal_there():
+    """finish="last": one robot's goal while the other runs is no end; the last robot's goal ends it with the goal
+    term, the last collision with the end term, and the horizon ends it as ever."""
+    newly = np.array([[True, False], [False, True], [True, False], [False, False]])
+    outcome = np.array([[SUCCESS, RUNNING], [SUCCESS, SUCCESS], [COLLISION, SUCCESS], [RUNNING, RUNNING]])
+    all_done = np.array([False, True, True, False])
+    t = np.array([3, 5, 5, 10])
+    goal, end = reward(horizon=10, finish="last").events(newly, outcome, all_done, t)
+    assert goal.tolist() == [False, True, False, False]
+    assert end.tolist() == [False, False, True, True]
+
+
 def test_a_goal_needs_contrast_when_asked():
     """Robots that reach their goals on the same step show no difference: with goal_needs_contrast that step ends
     the trajectory without the goal term; one robot arriving alone is still a goal."""
@@ -114,7 +126,7 @@ def test_gaussian_prior_samples_stay_in_bound():
         ({"norm": "cubed"}, "norm"),
         ({"combine": "max"}, "combine"),
         ({"horizon": 0}, "horizon"),
-        ({"finish": "last"}, "finish must be 'all'"),
+        ({"finish": "final"}, "finish must be 'all'"),
         ({"heuristic": "nope"}, "unknown heuristic"),
         ({"prior": "beta"}, "prior"),
     ],

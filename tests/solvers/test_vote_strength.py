@@ -40,6 +40,13 @@ def roll_out(states: list[int], pushes: int, rng: np.random.Generator, tracker: 
     return Rollouts(np.array(state), actions, np.array(contrast))
 
 
+def bound(config: RepresentativeConfig, seed: int = 0, flip: bool = False):
+    """`roll_out` as a pool reads it for a search of ``config`` (every state leaning to the second agent where
+    ``flip``), its rollouts' lengths drawn from ``seed``."""
+    rng = np.random.default_rng(seed)
+    return lambda states, tracker: roll_out([-1] * len(states) if flip else states, config.pushes, rng, tracker)
+
+
 def replay(candidates: list) -> list[tuple[float, dict]]:
     return [(float(np.sign(lean)), {"lean": int(lean), "steps": len(actions)}) for lean, actions in candidates]
 
@@ -48,7 +55,7 @@ def search(leans: list[int], budget: int = 10**6, seed: int = 0, **settings) -> 
     tracker = Tracker(budget, 1)
     config = RepresentativeConfig(states=len(leans), **({"pushes": 3, "batch_states": 2} | settings))
     chosen, record = representative(
-        lambda n: roll_out, lambda: leans, tracker, np.random.default_rng(seed), config, lambda n: replay, [HORIZON]
+        lambda n: bound(config, seed), lambda n: leans, tracker, config, lambda n: replay, [HORIZON]
     )
     return chosen, record, tracker
 
@@ -288,12 +295,6 @@ def test_a_weak_vote_tries_a_longer_clip_and_says_so():
     (as a crash that comes later in the drive would): the vote at the longer length decides, its clip is replayed at
     that length, every look of both lengths holds the test, and the warnings say the clip is longer and why."""
 
-    def at(n: int):
-        def roll(states, pushes, rng, tracker):
-            return roll_out([-1] * len(states) if n > HORIZON else states, pushes, rng, tracker)
-
-        return roll
-
     replayed_at = []
 
     def replay_at(n: int):
@@ -304,7 +305,12 @@ def test_a_weak_vote_tries_a_longer_clip_and_says_so():
     config = RepresentativeConfig(states=len(leans), pushes=3, batch_states=4)
     tracker = Tracker(10**6, 1)
     chosen, record = representative(
-        at, lambda: leans, tracker, np.random.default_rng(0), config, replay_at, clip_lengths(HORIZON, 2 * HORIZON)
+        lambda n: bound(config, flip=n > HORIZON),
+        lambda n: leans,
+        tracker,
+        config,
+        replay_at,
+        clip_lengths(HORIZON, 2 * HORIZON),
     )
     assert record["horizon"] == 2 * HORIZON and replayed_at == [2 * HORIZON] and record["decided"]
     first, longer = record["lengths"]
@@ -321,10 +327,9 @@ def test_a_weak_vote_tries_a_longer_clip_and_says_so():
 def test_a_weak_vote_at_every_length_keeps_the_studys_length_and_lists_each():
     config = RepresentativeConfig(states=8, pushes=1, batch_states=4)
     _, record = representative(
-        lambda n: roll_out,
-        lambda: [1, -1] * 4,
+        lambda n: bound(config),
+        lambda n: [1, -1] * 4,
         Tracker(10**6, 1),
-        np.random.default_rng(0),
         config,
         lambda n: replay,
         [HORIZON, 2 * HORIZON],
