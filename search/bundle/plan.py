@@ -26,7 +26,7 @@ from search.bundle.build import Prepared
 from search.bundle.clips import render_job
 from search.bundle.evaluations import eval_tasks, evaluation_job, evaluation_work
 from search.bundle.representativeness import check_job, check_tasks, check_work
-from search.bundle.searches import search_job_files, search_work
+from search.bundle.searches import ClipJob, group_work, search_groups, search_job_files
 from search.bundle.steps import Cache, Rate, Task, Work, duration, expected, input_key, makespan
 from search.clips.render import RenderOptions
 from search.core.workers import jobs
@@ -177,25 +177,26 @@ def plan_steps(prepared: Prepared, cache: Cache) -> list[Step]:
         {evaluation_work(task).group: _evaluation(task, cold=n == 0) for n, task in enumerate(todo)},
     )
 
-    searches: dict[str, tuple[Work, SearchJob, dict[str, Any]]] = {}  # one per input: clips may share a search
+    searches: dict[str, tuple[ClipJob, SearchJob, dict[str, Any]]] = {}  # one per input: clips may share a search
     for job, search, inputs in zip(prepared.jobs, prepared.searches, prepared.inputs, strict=True):
-        searches.setdefault(input_key(inputs), (search_work(job, search), search, inputs))
-    wanted = [
-        (work, search)
-        for work, search, inputs in searches.values()
+        searches.setdefault(input_key(inputs), (job, search, inputs))
+    wanted = {
+        key: (job, search)
+        for key, (job, search, inputs) in searches.items()
         if not cache.valid("search", inputs, "summary-001.json")
-    ]
+    }
+    groups = search_groups({key: search for key, (_, search) in wanted.items()})
     found: dict[str, bytes] = {}  # a summary a timed search found, to time a clip's rendering by
     probes: dict[str, Callable[[Call], Rate]] = {}
-    for work, search in wanted:
-        if work.group not in probes:  # a scheme's first search
-            probes[work.group] = _search(search, found, cold=not probes)
+    for job, search in wanted.values():
+        if job.scheme.name not in probes:  # a scheme's first search
+            probes[job.scheme.name] = _search(search, found, cold=not probes)
     budgets = sorted({search.budget for _, search, _ in searches.values()})
     search_step = Step(
         "searches",
         f"{len(searches)} of {budgets[0]:,}" + (f" to {budgets[-1]:,}" if len(budgets) > 1 else "") + " steps",
         len(searches) - len(wanted),
-        [work for work, _ in wanted],
+        [group_work([wanted[key] for key in keys]) for keys in groups.values()],
         probes,
     )
 
@@ -266,11 +267,12 @@ def _search(search: SearchJob, found: dict[str, bytes], cold: bool) -> Callable[
 
 def _check(task: Task, call: Call) -> Rate:
     """A distribution's check's rate in seconds per rollout step, on a few of its starting states."""
-    function, (domain, fixed, distribution, world, settings, reward) = task
+    function, (domain, fixed, distribution, world, settings, reward, workers) = task
 
     def run(states: int) -> Timed:
         fewer = settings.model_copy(update={"states": states})
-        return Timed(cast(float, call(function, domain, fixed, distribution, world, fewer, reward)[1]), states)
+        found = call(function, domain, fixed, distribution, world, fewer, reward, workers)
+        return Timed(cast(float, found[1]), states)
 
     return measured(run, 1, settings.states, lambda states: check_work(task, states).units)
 

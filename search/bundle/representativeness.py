@@ -31,7 +31,9 @@ def representativeness(
     for pair, (names, distribution, inputs) in checks.items():
         if not cache.valid("representativeness", inputs, "report.json"):
             todo.setdefault(distribution, {})[pair] = names
-    tasks = {distribution: check_job(study, distribution, pairs) for distribution, pairs in todo.items()}
+    tasks = {
+        distribution: check_job(study, distribution, pairs, backend.workers) for distribution, pairs in todo.items()
+    }
 
     def described(distribution: str) -> str:
         return f"representativeness {distribution}: {', '.join(f'{a}-{b}' for a, b in todo[distribution])}"
@@ -94,9 +96,9 @@ def check_tasks(study: Study) -> dict[tuple[str, str], tuple[list[str], str, dic
     return checks
 
 
-def check_job(study: Study, distribution: str, pairs: dict[tuple[str, str], list[str]]) -> Task:
-    """The job that checks ``pairs`` (each with its scenarios' names) against ``distribution``: every agent's
-    rollouts played once for all of them."""
+def check_job(study: Study, distribution: str, pairs: dict[tuple[str, str], list[str]], workers: int = 1) -> Task:
+    """The job that checks ``pairs`` (each with its scenarios' names) against ``distribution`` on ``workers``
+    processes: every agent's rollouts played once for all of them."""
     domain, world = study.domain, study.world_settings(distribution)
     fixed = {
         pair: [(name, domain.state(name, study.world_settings(name))) for name in names]
@@ -104,13 +106,13 @@ def check_job(study: Study, distribution: str, pairs: dict[tuple[str, str], list
     }
     reward = clip_reward(study, distribution, world)
     settings = study.spec.representativeness
-    return (representativeness_job, (domain.name, fixed, distribution, world, settings, reward))
+    return (representativeness_job, (domain.name, fixed, distribution, world, settings, reward, workers))
 
 
 def check_work(task: Task, states: int | None = None) -> Work:
     """A check's size in simulator steps, its rollouts' most: (``states`` drawn, by default its settings', and its
     scenarios) x (pushes + 1) rollouts of the reward's horizon, for each agent."""
-    _, (_, fixed, _, _, settings, reward) = task
+    _, (_, fixed, _, _, settings, reward, _) = task
     agents = {agent for pair in fixed for agent in pair}
     scenarios = {name for named in fixed.values() for name, _ in named}
     drawn = settings.states if states is None else states
@@ -136,15 +138,18 @@ def representativeness_job(
     world: dict[str, Any],
     settings: Representativeness,
     reward: dict[str, Any],
+    workers: int = 1,
 ) -> tuple[dict[tuple[str, str], list[dict[str, Any]]], float]:
     """The representativeness reports of every pair checked against one distribution (each with its fixed
     scenarios: name and state), and the seconds they took (in a worker process: the domain is found by name):
-    every agent plays each drawn state and each scenario once (`search.solvers.pool.Pool`), and each pair's
-    reports read the same whichever pairs are checked beside it."""
+    every agent plays each drawn state and each scenario once (`search.solvers.pool.Pool`), each batch of states
+    spread over ``workers`` processes where the world has no batched fast path, and each pair's reports read the
+    same whichever pairs are checked beside it and however many workers play them."""
     import numpy as np
 
     from search.core.contrast import Rollouts
     from search.core.rollout import Tracker
+    from search.core.workers import lent
     from search.solvers.pool import Pool
     from search.solvers.representative import RepresentativeConfig, how_representative, roll_out_states
 
@@ -154,14 +159,15 @@ def representativeness_job(
     rng = np.random.default_rng(settings.seed)
     pool = Pool(domain, agents, distribution, world, reward, config.states, config.pushes, config.batch_states, rng)
     horizon, found = reward["horizon"], {}
-    for pair, scenarios in fixed.items():
-        tracker = Tracker(2**62, 1)  # no budget: every drawn state votes, whatever it costs
-        drawn, states, _ = roll_out_states(pool.rollouts(pair, horizon), pool.draw(horizon), config, tracker, 1)
-        first, second = (agents.index(agent) for agent in pair)
-        own: list[tuple[str, Rollouts]] = [
-            (name, pool.fixed(name, state, horizon).pair(first, second)[0]) for name, state in scenarios
-        ]
-        found[pair] = how_representative(drawn, states, own, config.alpha)
+    with lent(workers):
+        for pair, scenarios in fixed.items():
+            tracker = Tracker(2**62, 1)  # no budget: every drawn state votes, whatever it costs
+            drawn, states, _ = roll_out_states(pool.rollouts(pair, horizon), pool.draw(horizon), config, tracker, 1)
+            first, second = (agents.index(agent) for agent in pair)
+            own: list[tuple[str, Rollouts]] = [
+                (name, pool.fixed(name, state, horizon).pair(first, second)[0]) for name, state in scenarios
+            ]
+            found[pair] = how_representative(drawn, states, own, config.alpha)
     return found, time.perf_counter() - started
 
 

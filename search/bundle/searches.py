@@ -195,11 +195,31 @@ def pool_key(search: SearchJob) -> str | None:
     )
 
 
-def search_group_files(searches: list[SearchJob]) -> tuple[list[dict[str, str]], float]:
+def search_groups(searches: dict[str, SearchJob]) -> dict[str, list[str]]:
+    """The jobs that run ``searches`` (by their keys): one for each `pool_key` of the searches that share a pool,
+    one for each other search, each job's key and its searches' keys."""
+    groups: dict[str, list[str]] = {}
+    for key, search in searches.items():
+        groups.setdefault(pool_key(search) or key, []).append(key)
+    return groups
+
+
+def group_work(searches: list[tuple[ClipJob, SearchJob]]) -> Work:
+    """A job's size, in its scheme's steps: a search's budget; for searches that share a pool, the most budget of
+    one scaled by the agents the pool plays over the two one search plays (each agent plays each state once)."""
+    agents = {agent for _, search in searches for agent in search.agents}
+    most = max(search_work(*one).units for one in searches)
+    return Work(searches[0][0].scheme.name, most * len(agents) // 2)
+
+
+def search_group_files(searches: list[SearchJob], workers: int = 1) -> tuple[list[dict[str, str]], float]:
     """The files of searches with one `pool_key` (`run_search`) and the seconds they took: one pool for each world
-    settings they resolve to (an agent may bring its own), playing every agent of its searches."""
+    settings they resolve to (an agent may bring its own), playing every agent of its searches, each batch of
+    states spread over ``workers`` processes where the world has no batched fast path (the job stands for searches
+    that would each have had a worker; the files are the same however many)."""
     import numpy as np
 
+    from search.core.workers import lent
     from search.solvers.pool import Pool
 
     started = time.perf_counter()
@@ -223,7 +243,8 @@ def search_group_files(searches: list[SearchJob]) -> tuple[list[dict[str, str]],
             config.batch_states,
             np.random.default_rng(first.seed),
         )
-    files = [run_search(search, pool=pools[key]) for search, key in zip(searches, settings, strict=True)]
+    with lent(workers):
+        files = [run_search(search, pool=pools[key]) for search, key in zip(searches, settings, strict=True)]
     return files, time.perf_counter() - started
 
 
@@ -237,19 +258,18 @@ def run_searches(
     for job, search, inputs in jobs:
         if input_key(inputs) not in todo and not _reusable(job, inputs, cache, log):
             todo[input_key(inputs)] = (job, search, inputs)
-    groups: dict[str, list[str]] = {}  # a job's key -> the searches it runs
-    for key, (_, search, _) in todo.items():
-        groups.setdefault(pool_key(search) or key, []).append(key)
+    groups = search_groups({key: search for key, (_, search, _) in todo.items()})
 
-    tasks = {group: (search_group_files, ([todo[key][1] for key in keys],)) for group, keys in groups.items()}
+    tasks = {
+        group: (search_group_files, ([todo[key][1] for key in keys], backend.workers)) for group, keys in groups.items()
+    }
 
     def described(group: str) -> str:
         named = [describe_search(todo[key][0]) for key in groups[group]]
         return named[0] if len(named) == 1 else f"{named[0]} and {len(named) - 1} more sharing its rollouts"
 
     def work(group: str) -> Work:
-        found = [search_work(*todo[key][:2]) for key in groups[group]]
-        return Work(found[0].group, sum(one.units for one in found))
+        return group_work([todo[key][:2] for key in groups[group]])
 
     for group, (files, seconds), progress in finished(tasks, backend, described, work):
         for key, found in zip(groups[group], files, strict=True):

@@ -99,11 +99,31 @@ def one_core() -> None:
     os.environ[JOBS] = "1"
 
 
+@contextmanager
+def lent(count: int) -> Iterator[None]:
+    """``count`` workers for a job that stands for several (a study's searches that share their rollouts), where
+    it runs in a worker process of its own: started on first use, and shut down when it ends, since a worker
+    process ends without running `atexit` and would wait for them for ever."""
+    with jobs(count):
+        try:
+            yield
+        finally:
+            if multiprocessing.parent_process() is not None and _pool.cache_info().currsize:
+                for pool in _POOLS:
+                    pool.shutdown(cancel_futures=True)
+                _POOLS.clear()
+                _pool.cache_clear()
+
+
+_POOLS: list[ProcessPoolExecutor] = []  # the pools `_pool` started
+
+
 @cache
 def _pool(count: int) -> ProcessPoolExecutor:
     # spawned, not forked: no fork of a process that holds numba's or torch's threads
     pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("spawn"), initializer=one_core)
     atexit.register(pool.shutdown, cancel_futures=True)
+    _POOLS.append(pool)
     return pool
 
 
