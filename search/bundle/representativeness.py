@@ -41,16 +41,16 @@ def representativeness(
     for distribution, (found, seconds), progress in finished(
         tasks, backend, described, lambda distribution: check_work(tasks[distribution])
     ):
-        for pair, reports in found.items():
+        for pair, measured in found.items():
             inputs = checks[pair][2]
             folder = cache.store("representativeness", inputs)
-            (folder / "report.json").write_text(json.dumps(reports, indent=1))
+            (folder / "report.json").write_text(json.dumps(measured, indent=1))
             cache.seal("representativeness", inputs)
         log(f"{described(distribution)}: {seconds:.1f} s {progress}")
     reports: list[dict[str, Any]] = []
     for pair, (names, distribution, inputs) in checks.items():
-        found = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
-        for name, one in zip(names, found, strict=True):
+        cached = json.loads((cache.path("representativeness", inputs) / "report.json").read_text())
+        for name, one in zip(names, cached, strict=True):
             report = {"agents": list(pair), "scenario": name, "distribution": distribution} | {
                 key: value for key, value in one.items() if key != "scenario"
             }

@@ -85,9 +85,8 @@ def pair_end_s(clip: VisibleClip, pair: tuple[int, int]) -> float:
     """When a pair's clip ends: where both agents' episodes ended, with the later of them; else at the horizon,
     where the rollout of every agent ended too."""
     times = [clip.outcomes[k].get("time") for k in pair]
-    if any(time is None for time in times):
-        return clip.end_s
-    return max(max(float(time) for time in times), 1e-6)
+    ended = [float(time) for time in times if time is not None]
+    return max(max(ended), 1e-6) if len(ended) == len(times) else clip.end_s
 
 
 @dataclass

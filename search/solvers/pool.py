@@ -5,7 +5,7 @@ checks read them.
 An agent's rollout from a state under a push sequence depends on no other agent (`search.core.contrast.Played`),
 so a pool plays all its agents together, a batch of states at a time, and a pair's rollouts are read from theirs
 (`Played.pair`). Everything a pool draws is its own and keyed, never a stream that pairs share in turn: the states
-and pushes at each clip length come from a generator of their own (`length_rng`), a batch's pushes are drawn in
+and pushes at each clip length come from a generator of their own (`keyed_rng`), a batch's pushes are drawn in
 order when the batch is first played, and a fixed scenario's from a generator named after it. So a pair's votes read
 the same whichever agents are pooled with it, however many states other pairs used, and alone as in a study.
 """
@@ -27,9 +27,9 @@ if TYPE_CHECKING:
 FIXED = 1 << 30  # spawn keys of fixed scenarios' generators start here, above every clip length's
 
 
-def length_rng(rng: np.random.Generator, key: int) -> np.random.Generator:
-    """The generator of ``rng``'s seed for one use (a clip length in steps, or a fixed scenario's name), the same
-    however much of ``rng`` has been drawn."""
+def keyed_rng(rng: np.random.Generator, key: int) -> np.random.Generator:
+    """The generator of ``rng``'s seed for one use, by its ``key`` (a clip length in steps, or a fixed scenario's
+    name's), the same however much of ``rng`` has been drawn."""
     seeds = rng.bit_generator.seed_seq
     assert isinstance(seeds, np.random.SeedSequence)
     return np.random.default_rng(np.random.SeedSequence(seeds.entropy, spawn_key=(*seeds.spawn_key, key)))
@@ -39,7 +39,7 @@ class Pool:
     """Every agent's rollouts of the states drawn from ``scenario`` (a distribution) in ``world``, and of any fixed
     state asked for, under ``reward`` (its end rule made ``finish = "last"``; its horizon set per clip length),
     ``pushes`` pushed rollouts besides one without per state, played ``batch_states`` states at a time. The
-    generators are ``rng``'s seed's (`length_rng`): a search's pool and a study's give the same draws."""
+    generators are ``rng``'s seed's (`keyed_rng`): a search's pool and a study's give the same draws."""
 
     def __init__(
         self,
@@ -66,7 +66,7 @@ class Pool:
     def draw(self, horizon: int) -> list[Any]:
         """The states drawn for clips of ``horizon`` steps (drawn once)."""
         if horizon not in self.drawn:
-            rng = length_rng(self.rng, horizon)
+            rng = keyed_rng(self.rng, horizon)
             self.drawn[horizon] = (self.domain.draw_states(self.scenario, self.world, rng, self.states), rng)
         return self.drawn[horizon][0]
 
@@ -109,11 +109,12 @@ class Pool:
         """Every agent's rollouts of one fixed state (a study's scenario ``name``), its pushes drawn from a
         generator named after it."""
         if (name, horizon) not in self.fixed_played:
-            rng = length_rng(self.rng, FIXED + zlib.crc32(f"{name}/{horizon}".encode()) % FIXED)
+            rng = keyed_rng(self.rng, FIXED + zlib.crc32(f"{name}/{horizon}".encode()) % FIXED)
             self.fixed_played[name, horizon] = self.play([state], horizon, rng)
         return self.fixed_played[name, horizon]
 
     def play(self, states: list[Any], horizon: int, rng: np.random.Generator) -> Played:
+        """Every agent's rollouts of ``states`` to ``horizon`` steps, pushes from ``rng``, their steps counted."""
         played = self.domain.play_states(self.agents, states, self.reward | {"horizon": horizon}, self.pushes, rng)
         self.played_steps += sum(
             int(np.where(ends > 0, ends, len(env)).sum()) for ends, env in zip(played.ends, played.env, strict=True)

@@ -65,3 +65,21 @@ def test_a_pooled_job_is_sized_by_the_agents_it_plays():
     clips = [(ClipJob("clip", scheme, job.scenario, job.agents, (1, 2), ("pairwise",)), job) for job in jobs]
     assert group_work(clips).units == 2_000 * 3 // 2  # 3 runners played, where one search plays 2
     assert group_work(clips[:1]).units == 2_000
+
+
+def test_each_pairs_check_reads_the_same_whichever_pairs_are_checked_beside_it():
+    """The representativeness check plays every agent once for all its pairs: each pair's reports are those of
+    the pair checked alone."""
+    from search.bundle.representativeness import representativeness_job
+    from search.bundle.spec import Representativeness
+    from search.core.domain import domain_named
+
+    domain, world = domain_named("crowd"), {"human_num": 5}
+    fixed = [("paper-bl-tr", domain.state("paper-bl-tr", world))]
+    pairs = [("goal", "orca"), ("goal", "social_force"), ("orca", "social_force")]
+    settings, reward = Representativeness(states=4, pushes=2), {"horizon": 40}
+    together, _ = representativeness_job("crowd", dict.fromkeys(pairs, fixed), "training", world, settings, reward)
+    for pair in pairs:
+        alone, _ = representativeness_job("crowd", {pair: fixed}, "training", world, settings, reward)
+        assert alone[pair] == together[pair]
+    assert together[pairs[0]] != together[pairs[1]]
