@@ -12,9 +12,6 @@ from search.solvers.runner import SearchJob, run_search
 from tests.bundle.test_distinct_reels import MIDDLING
 from tests.gym.test_any_world import FAST, SLOW, world  # noqa: F401  (the researcher's folder)
 
-RUNNERS = (FAST, MIDDLING, SLOW)
-
-
 def searches() -> list[SearchJob]:
     """Each pair's search for the pairwise part and for the ranking (another state of the same vote)."""
     return [
@@ -74,12 +71,12 @@ def test_each_pairs_check_reads_the_same_whichever_pairs_are_checked_beside_it()
     from search.bundle.spec import Representativeness
     from search.core.domain import domain_named
 
-    domain, world = domain_named("crowd"), {"human_num": 5}
-    fixed = [("paper-bl-tr", domain.state("paper-bl-tr", world))]
+    domain, crowd = domain_named("crowd"), {"human_num": 5}
+    fixed = [("paper-bl-tr", domain.state("paper-bl-tr", crowd))]
     pairs = [("goal", "orca"), ("goal", "social_force"), ("orca", "social_force")]
     settings, reward = Representativeness(states=4, pushes=2), {"horizon": 40}
-    together, _ = representativeness_job("crowd", dict.fromkeys(pairs, fixed), "training", world, settings, reward)
+    together, _ = representativeness_job("crowd", dict.fromkeys(pairs, fixed), "training", crowd, settings, reward)
     for pair in pairs:
-        alone, _ = representativeness_job("crowd", {pair: fixed}, "training", world, settings, reward)
+        alone, _ = representativeness_job("crowd", {pair: fixed}, "training", crowd, settings, reward)
         assert alone[pair] == together[pair]
     assert together[pairs[0]] != together[pairs[1]]
