@@ -12,6 +12,7 @@ from search.solvers.runner import SearchJob, run_search
 from tests.bundle.test_distinct_reels import MIDDLING
 from tests.gym.test_any_world import FAST, SLOW, world  # noqa: F401  (the researcher's folder)
 
+
 def searches() -> list[SearchJob]:
     """Each pair's search for the pairwise part and for the ranking (another state of the same vote)."""
     return [
