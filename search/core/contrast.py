@@ -13,8 +13,8 @@ have stopped it."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, fields
+from typing import Any, TypeVar
 
 import numpy as np
 from scipy.stats import permutation_test
@@ -55,12 +55,7 @@ class Played:
 
     @classmethod
     def join(cls, parts: list[Played]) -> Played:
-        return cls(
-            state=np.concatenate([p.state for p in parts]),
-            env=[e for p in parts for e in p.env],
-            ends=np.concatenate([p.ends for p in parts]),
-            clips=[c for p in parts for c in p.clips],
-        )
+        return joined(cls, parts)
 
     def states(self, start: int, end: int) -> Played:
         """The rows of states ``start`` to ``end`` (not included), each state counted from the first's index."""
@@ -99,11 +94,21 @@ class Rollouts:
 
     @classmethod
     def join(cls, parts: list[Rollouts]) -> Rollouts:
-        return cls(
-            state=np.concatenate([p.state for p in parts]),
-            actions=[a for p in parts for a in p.actions],
-            contrast=np.concatenate([p.contrast for p in parts]),
+        return joined(cls, parts)
+
+
+Rows = TypeVar("Rows", Played, Rollouts)
+
+
+def joined(cls: type[Rows], parts: list[Rows]) -> Rows:
+    """The rows of ``parts`` in order, as one: each field's arrays concatenated, its lists chained."""
+    chained = {}
+    for name in (field.name for field in fields(cls)):
+        values = [getattr(part, name) for part in parts]
+        chained[name] = (
+            [v for value in values for v in value] if isinstance(values[0], list) else np.concatenate(values)
         )
+    return cls(**chained)
 
 
 def weighted_test(weights: np.ndarray) -> float:

@@ -7,25 +7,16 @@ from __future__ import annotations
 import json
 
 from search.bundle.searches import group_work, search_group_files, search_groups
-from search.solvers.representative import RepresentativeConfig
 from search.solvers.runner import SearchJob, run_search
 from tests.bundle.test_distinct_reels import MIDDLING
 from tests.gym.test_any_world import FAST, SLOW, world  # noqa: F401  (the researcher's folder)
+from tests.solvers.test_pool import search
 
 
 def searches() -> list[SearchJob]:
     """Each pair's search for the pairwise part and for the ranking (another state of the same vote)."""
     return [
-        SearchJob(
-            agents=pair,
-            scenario="track-starts.toml",
-            solver="representative",
-            budget=2_000,
-            seed=0,
-            top_k=1,
-            solver_config=RepresentativeConfig(states=6, pushes=2, batch_states=2, earlier=earlier),
-            reward_settings={"horizon": 6},
-        )
+        search(pair, earlier, "track-starts.toml", horizon=6)
         for pair in ((FAST, MIDDLING), (FAST, SLOW), (MIDDLING, SLOW))
         for earlier in (0, 1)
     ]
@@ -61,8 +52,8 @@ def test_a_pooled_job_is_sized_by_the_agents_it_plays():
         "representative", "representative", 2_000, 0, 1, "reward", jobs[0].solver_config, RewardConfig(), {}
     )
     clips = [(ClipJob("clip", scheme, job.scenario, job.agents, (1, 2), ("pairwise",)), job) for job in jobs]
-    assert group_work(clips).units == 2_000 * 3 // 2  # 3 runners played, where one search plays 2
-    assert group_work(clips[:1]).units == 2_000
+    assert group_work(clips).units == 6_000 * 3 // 2  # 3 runners played, where one search plays 2
+    assert group_work(clips[:1]).units == 6_000
 
 
 def test_each_pairs_check_reads_the_same_whichever_pairs_are_checked_beside_it():

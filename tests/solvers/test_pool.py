@@ -21,17 +21,21 @@ def test_the_crowds_fast_rollouts_read_each_pair_as_its_summaries_and_as_the_pai
     assert (played.ends > 0).any() and played.ends.shape == (6, 3)
 
 
-def search(agents: tuple[str, str], earlier: int = 0) -> SearchJob:
+def search(
+    agents: tuple[str, str], earlier: int = 0, scenario: str = "training", horizon: int = 40, **world: int
+) -> SearchJob:
+    """A small representative search of ``agents`` (by default in a crowd of 5), its clip the ``earlier``-th
+    other state of the vote."""
     return SearchJob(
         agents=agents,
-        scenario="training",
+        scenario=scenario,
         solver="representative",
         budget=6_000,
         seed=3,
         top_k=1,
         solver_config=RepresentativeConfig(states=6, pushes=2, batch_states=2, earlier=earlier),
-        reward_settings={"horizon": 40},
-        world_settings={"human_num": 5},
+        reward_settings={"horizon": horizon},
+        world_settings=world if world or scenario != "training" else {"human_num": 5},
     )
 
 
