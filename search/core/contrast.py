@@ -102,7 +102,7 @@ Rows = TypeVar("Rows", Played, Rollouts)
 
 def joined(cls: type[Rows], parts: list[Rows]) -> Rows:
     """The rows of ``parts`` in order, as one: each field's arrays concatenated, its lists chained."""
-    chained = {}
+    chained: dict[str, Any] = {}
     for name in (field.name for field in fields(cls)):
         values = [getattr(part, name) for part in parts]
         chained[name] = (
