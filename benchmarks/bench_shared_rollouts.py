@@ -1,7 +1,9 @@
 """A build that the representative scheme dominates, step by step: `foil bundle --jobs 2` of the study in
 benchmarks/shared_rollouts/ (three snapshots of the CartPole example's training run, every pair in a pairwise part
 and all three in a ranking part, under the N-first and the representative scheme; six representative searches whose
-votes use all of their 128 starting states), from an empty folder. For each build it prints, per step
+votes use all of their 128 starting states), from an empty folder; with --study, another: highway-env/study.toml
+(the shipped highway agents in traffic the highway kernel does not cover, stepped by highway-env itself) or one of
+studies/. For each build it prints, per step
 (evaluations, searches by scheme, representativeness checks, renders), the job seconds the build's log reports
 summed over the step's jobs and the number of jobs, the whole build's wall seconds, and the simulator steps of the
 representative searches summed over their run.json files: `sim_steps` (the budget they used) and, where run.json
@@ -9,6 +11,7 @@ has it, `vote.played_steps` (the steps its agents newly played for it, counted o
 
     nice .venv/bin/python benchmarks/bench_shared_rollouts.py              # the working tree's code (2 to 4 min)
     nice .venv/bin/python benchmarks/bench_shared_rollouts.py --base HEAD  # a revision's first, then after / before
+    nice .venv/bin/python benchmarks/bench_shared_rollouts.py --base HEAD --study studies/demo.toml --keep /tmp/demo
 
 With --base REV, REV is checked out into a temporary `git worktree` and built first with PYTHONPATH pointing at it
 (its `search` and `app` packages, and the `foil.*` entry points, which name modules, resolve there), then the
@@ -56,13 +59,16 @@ def steps(log: list[str]) -> dict[str, list[tuple[float, int]]]:
 
 
 def build(code: Path, folder: Path, jobs: int, study: Path) -> dict:
-    """`foil bundle --jobs N` of ``study`` with the code in ``code`` into ``folder``/bundle: the benchmark's own
-    study in a fresh copy of the CartPole example's folder, a shipped study (studies/) from the code's folder. Its
-    steps' job seconds, its wall seconds and the representative searches' summed steps."""
-    if study == STUDY:
+    """`foil bundle --jobs N` of ``study`` with the code in ``code`` into ``folder``/bundle: a benchmark's own study
+    (benchmarks/shared_rollouts/) in a fresh copy of its folder beside the CartPole example's files, a shipped study
+    (studies/) from the code's folder. Its steps' job seconds, its wall seconds and the representative searches'
+    summed steps."""
+    if study.parent.is_relative_to(STUDY.parent):  # a benchmark's own study: from a copy of its folder
         shutil.copytree(EXAMPLE, folder, ignore=shutil.ignore_patterns("__pycache__", "bundle*"))
-        shutil.copy(STUDY, folder / "study.toml")
-        where, named = folder, "study.toml"
+        shutil.copytree(
+            study.parent, folder, ignore=shutil.ignore_patterns("__pycache__", "bundle*"), dirs_exist_ok=True
+        )
+        where, named = folder, study.name
     else:
         folder.mkdir(parents=True)
         where, named = code, str(study.relative_to(ROOT))
