@@ -12,7 +12,6 @@ per agent: seconds to minutes, against the build's evaluations, searches, checks
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -22,7 +21,7 @@ from scipy.stats import norm
 
 from search.bundle.build import Prepared
 from search.bundle.evaluations import evaluate_runs
-from search.bundle.searches import pool_key
+from search.bundle.searches import search_pools
 from search.bundle.steps import Cache
 from search.bundle.truth import paired_comparison
 from search.core.contrast import ALPHA, describe_vote
@@ -47,41 +46,9 @@ def pilot_lines(prepared: Prepared, cache: Cache, backend: Backend) -> Iterator[
     }
     if not searches:
         yield "pilot: no representative scheme to vote; ground truth only"
-    keyed = [(search, shared_key(search)) for search in searches.values()]
-    agents: dict[str, list[str]] = {}  # the agents of the searches that share a pool
-    for search, key in keyed:
-        agents.setdefault(key, []).extend(search.agents)
-    pools = {key: search_pool(next(s for s, own in keyed if own == key), agents[key]) for key in agents}
-    for search, key in keyed:
-        yield from vote_lines(search, pools[key])
+    for search, pool in zip(searches.values(), search_pools(list(searches.values())), strict=True):
+        yield from vote_lines(search, pool)
     yield from truth_lines(prepared, cache, backend)
-
-
-def shared_key(search: SearchJob) -> str:
-    """What the pool of a representative search depends on (`search.bundle.searches.pool_key`) and the world
-    settings its agents resolve to: searches with one key share a pool."""
-    domain = domain_for(search.agents, search.scenario, search.world)
-    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
-    return json.dumps([pool_key(search), world], sort_keys=True)
-
-
-def search_pool(search: SearchJob, agents: list[str]) -> Pool:
-    """The pool a study's representative searches share (`search.bundle.searches.search_group_files`), here for
-    ``agents``: the same draws as each search's own."""
-    domain = domain_for(search.agents, search.scenario, search.world)
-    world = domain.search_settings(search.agents, search.world_settings, search.scenario)
-    config: RepresentativeConfig = search.solver_config
-    return Pool(
-        domain,
-        list(dict.fromkeys(agents)),
-        search.scenario,
-        world,
-        search.reward_settings,
-        config.states,
-        config.pushes,
-        config.batch_states,
-        np.random.default_rng(search.seed),
-    )
 
 
 def vote_lines(search: SearchJob, pool: Pool) -> Iterator[str]:

@@ -212,39 +212,51 @@ def group_work(searches: list[tuple[ClipJob, SearchJob]]) -> Work:
     return Work(searches[0][0].scheme.name, most * len(agents) // 2)
 
 
-def search_group_files(searches: list[SearchJob], workers: int = 1) -> tuple[list[dict[str, str]], float]:
-    """The files of searches with one `pool_key` (`run_search`) and the seconds they took: one pool for each world
-    settings they resolve to (an agent may bring its own), playing every agent of its searches, each batch of
-    states spread over ``workers`` processes where the world has no batched fast path (the job stands for searches
-    that would each have had a worker; the files are the same however many)."""
+def search_pools(searches: list[SearchJob]) -> list[Any]:
+    """Each pooled search's pool (`search.solvers.pool.Pool`), shared by the searches with its `pool_key` whose
+    agents resolve to the same world settings (an agent may bring its own), each pool playing every agent of its
+    searches: the same draws as each search's own."""
     import numpy as np
 
-    from search.core.workers import lent
     from search.solvers.pool import Pool
 
-    started = time.perf_counter()
-    first = searches[0]
-    if pool_key(first) is None:
-        return [run_search(search) for search in searches], time.perf_counter() - started
-    domain = domain_for(first.agents, first.scenario, first.world)
-    settings = [json.dumps(domain.search_settings(s.agents, s.world_settings, s.scenario)) for s in searches]
+    keys: list[tuple[str, Any, dict[str, Any]]] = []
+    agents: dict[str, list[str]] = {}
+    for search in searches:
+        domain = domain_for(search.agents, search.scenario, search.world)
+        world = domain.search_settings(search.agents, search.world_settings, search.scenario)
+        key = json.dumps([pool_key(search), world], sort_keys=True)
+        keys.append((key, domain, world))
+        agents.setdefault(key, []).extend(search.agents)
     pools = {}
-    for key in dict.fromkeys(settings):
-        agents = dict.fromkeys(a for s, own in zip(searches, settings, strict=True) if own == key for a in s.agents)
-        config = first.solver_config
-        pools[key] = Pool(
-            domain,
-            list(agents),
-            first.scenario,
-            json.loads(key),
-            first.reward_settings,
-            config.states,
-            config.pushes,
-            config.batch_states,
-            np.random.default_rng(first.seed),
-        )
+    for search, (key, domain, world) in zip(searches, keys, strict=True):
+        if key not in pools:
+            config = search.solver_config
+            pools[key] = Pool(
+                domain,
+                list(dict.fromkeys(agents[key])),
+                search.scenario,
+                world,
+                search.reward_settings,
+                config.states,
+                config.pushes,
+                config.batch_states,
+                np.random.default_rng(search.seed),
+            )
+    return [pools[key] for key, _, _ in keys]
+
+
+def search_group_files(searches: list[SearchJob], workers: int = 1) -> tuple[list[dict[str, str]], float]:
+    """The files of searches with one `pool_key` (`run_search`) and the seconds they took, each reading its pool
+    (`search_pools`), each batch of states spread over ``workers`` processes where the world has no batched fast
+    path (the job stands for searches that would each have had a worker; the files are the same however many)."""
+    from search.core.workers import lent
+
+    started = time.perf_counter()
+    if pool_key(searches[0]) is None:
+        return [run_search(search) for search in searches], time.perf_counter() - started
     with lent(workers):
-        files = [run_search(search, pool=pools[key]) for search, key in zip(searches, settings, strict=True)]
+        files = [run_search(search, pool=pool) for search, pool in zip(searches, search_pools(searches), strict=True)]
     return files, time.perf_counter() - started
 
 

@@ -14,6 +14,7 @@ from app.formats import sha256_file
 from search.bundle.build import build_bundle
 from search.bundle.searches import plan_clips
 from search.bundle.spec import BuildError, parse_build
+from tests.gym.test_any_world import track_study
 
 FAST, SLOW = "tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"
 MIDDLING = "tests.bundle.test_distinct_reels:middling"
@@ -26,46 +27,10 @@ def middling(observations):
     return np.full((len(observations), 1), 0.45)
 
 
-STUDY = """
-[study]
-id = "track-reels"
-title = "Which runner is better?"
-platform = "none"
-assignment = "balanced"
-seed = 1
-estimated_minutes = 2
-
-[design]
-schemes = ["highlights"]
-scheme_factor = "within"
-scenarios = ["track.toml"]
-
-[texts]
-consent = "A test study."
-instructions = "Watch the clips."
-
-[completion]
-code = "TRACK"
-
-[[parts]]
-kind = "pairwise"
-title = "Which is better?"
-intro = "Watch each clip."
-pairs = PAIRS
-questions = ["better"]
-
-[questions.better]
-type = "choose"
-text = "Which is better?"
-
-[build]
-seed = 1
-
-[build.eval]
-episodes = 4
-seed = 0
-
-[build.render]
+STUDY = track_study(
+    'schemes = ["highlights"]\nscheme_factor = "within"\nscenarios = ["track.toml"]',
+    PAIRS,
+    """[build.render]
 speed = 4.0
 width = 320
 
@@ -81,7 +46,8 @@ parts = ["pairwise"]
 schemes = ["highlights"]
 scenarios = ["track.toml"]
 agents = RUNNERS
-""".replace("RUNNERS", RUNNERS).replace("PAIRS", PAIRS)
+""".replace("RUNNERS", RUNNERS),
+)
 
 
 def study(folder: Path, scheme: str = "") -> Path:

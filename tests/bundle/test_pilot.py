@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from search.bundle.build import prepare
-from search.bundle.pilot import pilot_votes, search_pool, states_needed
+from search.bundle.pilot import pilot_votes, states_needed
+from search.bundle.searches import search_pools
 from search.cli import main
 from search.solvers.reward import RewardConfig
 from search.solvers.runner import run_search
@@ -20,7 +21,7 @@ from tests.gym.test_any_world import FAST, SLOW, world  # noqa: F401  (the resea
 def test_the_pilot_votes_as_the_builds_search_does(world):  # noqa: F811
     [search] = [s for s in prepare("study.toml").searches if s.solver == "representative"]
     built = json.loads(run_search(search)["run.json"])["vote"]
-    pool = search_pool(search, list(search.agents))
+    [pool] = search_pools([search])
     [(_, _, _, result, piloted)] = pilot_votes(search, pool, [RewardConfig.from_dict(search.reward_settings).horizon])
     weights = result.state_weights
     same = ("states", "for_first", "for_second", "no_majority", "weight", "p", "decided", "looks", "stopped")

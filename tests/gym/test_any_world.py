@@ -20,7 +20,12 @@ from tests.support.survey import start, walk
 
 ADAPTER = "tests.gym.test_gym_clips:TrackAdapter"
 FAST, SLOW = "tests.gym.test_gym_clips:fast", "tests.gym.test_gym_clips:slow"
-STUDY = f"""
+
+
+def track_study(design: str, pairs: str, build: str) -> str:
+    """A study of runners on the tiny track, its pairwise part's ``pairs`` (a TOML list) asked which is better:
+    the ``[design]`` table's lines and the ``[build]`` table's after its seed and evaluation."""
+    return f"""
 [study]
 id = "track"
 title = "Which runner is better?"
@@ -30,12 +35,7 @@ seed = 1
 estimated_minutes = 2
 
 [design]
-schemes = ["nfirst", "representative", "disagreements", "highlights"]
-scheme_factor = "within"
-scenarios = ["track.toml"]
-
-[design.scheme_scenarios]
-representative = ["track-starts.toml"]
+{design}
 
 [texts]
 consent = "A test study."
@@ -48,7 +48,7 @@ code = "TRACK"
 kind = "pairwise"
 title = "Which is better?"
 intro = "Watch each clip."
-pairs = [["{FAST}", "{SLOW}"]]
+pairs = {pairs}
 questions = ["better"]
 
 [questions.better]
@@ -62,7 +62,18 @@ seed = 1
 episodes = 4
 seed = 0
 
-[build.representativeness]
+{build}"""
+
+
+STUDY = track_study(
+    """schemes = ["nfirst", "representative", "disagreements", "highlights"]
+scheme_factor = "within"
+scenarios = ["track.toml"]
+
+[design.scheme_scenarios]
+representative = ["track-starts.toml"]""",
+    f'[["{FAST}", "{SLOW}"]]',
+    f"""[build.representativeness]
 distribution = "track-starts.toml"
 states = 4
 pushes = 2
@@ -106,7 +117,8 @@ parts = ["pairwise"]
 schemes = ["representative"]
 scenarios = ["track-starts.toml"]
 agents = ["{FAST}", "{SLOW}"]
-"""
+""",
+)
 
 
 @pytest.fixture
